@@ -1,0 +1,157 @@
+"""Scanner angle conventions and angular windows.
+
+Conventions (fixed by the product's contracts):
+
+* ``phi``: azimuth, counter-clockwise from +x in the scanner's xy plane, degrees in [0, 360).
+* ``theta``: zenith angle from +z, degrees in [0, 180].
+
+A direction is ``(sin(theta) cos(phi), sin(theta) sin(phi), cos(theta))``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from lidar.errors import InputError
+
+
+def spherical_from_xyz(xyz_socs: np.ndarray, *, out_dtype=np.float64) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Zenith angle, azimuth and range of points in the scanner frame.
+
+    Parameters
+    ----------
+    xyz_socs : (N, 3) float64 array, metres.
+    out_dtype : dtype, keyword-only
+        dtype of the returned angles (float32 halves memory for reflectance maps). Default float64.
+
+    Returns
+    -------
+    theta_deg : (N,) zenith angles in [0, 180].
+    phi_deg : (N,) azimuths in [0, 360).
+    range_m : (N,) float64 distances from the scanner origin.
+    """
+    x = xyz_socs[:, 0]
+    y = xyz_socs[:, 1]
+    z = xyz_socs[:, 2]
+    horiz = np.hypot(x, y)
+    rng = np.hypot(horiz, z)
+    theta = np.degrees(np.arctan2(horiz, z)).astype(out_dtype, copy=False)
+    phi = np.degrees(np.arctan2(y, x)).astype(out_dtype, copy=False)
+    phi[phi < 0] += 360.0
+    phi[phi >= 360.0] -= 360.0
+    return theta, phi, rng
+
+
+def direction_from_angles(theta_deg, phi_deg) -> np.ndarray:
+    """(..., 3) unit vectors for zenith/azimuth angles in degrees."""
+    t = np.radians(np.asarray(theta_deg, dtype=np.float64))
+    p = np.radians(np.asarray(phi_deg, dtype=np.float64))
+    st = np.sin(t)
+    return np.stack([st * np.cos(p), st * np.sin(p), np.cos(t)], axis=-1)
+
+
+def wrap_phi(phi_deg):
+    """Azimuth wrapped into [0, 360)."""
+    return np.mod(phi_deg, 360.0)
+
+
+def phi_difference(a_deg, b_deg):
+    """Signed smallest azimuth difference a - b in (-180, 180]."""
+    d = np.mod(np.asarray(a_deg) - np.asarray(b_deg) + 180.0, 360.0) - 180.0
+    return np.where(d == -180.0, 180.0, d)
+
+
+@dataclass(frozen=True)
+class AngularWindow:
+    """A rectangular window of scanner angles, scanned on a regular grid.
+
+    ``phi_min_deg < phi_max_deg`` always; a window across the 0/360 seam starts
+    below 0 (e.g. -2 .. 3). Steps are the angular sampling intervals.
+    """
+
+    phi_min_deg: float
+    phi_max_deg: float
+    theta_min_deg: float
+    theta_max_deg: float
+    phi_step_deg: float
+    theta_step_deg: float
+
+    def __post_init__(self) -> None:
+        vals = (self.phi_min_deg, self.phi_max_deg, self.theta_min_deg, self.theta_max_deg,
+                self.phi_step_deg, self.theta_step_deg)
+        if not all(np.isfinite(v) for v in vals):
+            raise InputError(f"angular window has non-finite values: {vals}")
+        if not self.phi_min_deg < self.phi_max_deg:
+            raise InputError(f"angular window needs phi_min < phi_max, got {self.phi_min_deg} .. {self.phi_max_deg}")
+        if self.phi_max_deg - self.phi_min_deg > 360.0:
+            raise InputError("angular window spans more than 360 degrees of azimuth")
+        if not 0.0 <= self.theta_min_deg < self.theta_max_deg <= 180.0:
+            raise InputError(f"angular window needs 0 <= theta_min < theta_max <= 180, got "
+                             f"{self.theta_min_deg} .. {self.theta_max_deg}")
+        if self.phi_step_deg <= 0 or self.theta_step_deg <= 0:
+            raise InputError("angular window steps must be positive")
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(rows, cols) of the scanning grid: rows along theta, columns along phi."""
+        rows = int(np.floor((self.theta_max_deg - self.theta_min_deg) / self.theta_step_deg + 1e-9)) + 1
+        cols = int(np.floor((self.phi_max_deg - self.phi_min_deg) / self.phi_step_deg + 1e-9)) + 1
+        return rows, cols
+
+    @property
+    def n_directions(self) -> int:
+        rows, cols = self.shape
+        return rows * cols
+
+    def grid(self) -> tuple[np.ndarray, np.ndarray]:
+        """Flattened (theta_deg, phi_deg) of every grid direction, column by column (line scanning)."""
+        rows, cols = self.shape
+        theta = self.theta_min_deg + self.theta_step_deg * np.arange(rows)
+        phi = self.phi_min_deg + self.phi_step_deg * np.arange(cols)
+        pp, tt = np.meshgrid(phi, theta, indexing="ij")  # column-major: one vertical line per phi
+        return tt.ravel(), wrap_phi(pp.ravel())
+
+    def contains(self, theta_deg, phi_deg) -> np.ndarray:
+        """Boolean mask of directions inside the window (azimuth seam aware)."""
+        theta_deg = np.asarray(theta_deg)
+        phi_rel = np.mod(np.asarray(phi_deg) - self.phi_min_deg, 360.0)
+        return ((theta_deg >= self.theta_min_deg) & (theta_deg <= self.theta_max_deg)
+                & (phi_rel <= self.phi_max_deg - self.phi_min_deg))
+
+    @property
+    def centre(self) -> tuple[float, float]:
+        """(theta, phi) of the window centre, phi wrapped into [0, 360)."""
+        return (0.5 * (self.theta_min_deg + self.theta_max_deg),
+                float(wrap_phi(0.5 * (self.phi_min_deg + self.phi_max_deg))))
+
+
+def window_around(theta_deg: float, phi_deg: float, half_theta_deg: float, half_phi_deg: float,
+                  theta_step_deg: float, phi_step_deg: float) -> AngularWindow:
+    """Window centred on a direction; the azimuth range is kept continuous across 0/360."""
+    phi_c = float(wrap_phi(phi_deg))
+    lo, hi = phi_c - half_phi_deg, phi_c + half_phi_deg
+    if hi >= 360.0:
+        lo, hi = lo - 360.0, hi - 360.0
+    return AngularWindow(lo, hi, max(0.0, theta_deg - half_theta_deg), min(180.0, theta_deg + half_theta_deg),
+                         phi_step_deg, theta_step_deg)
+
+
+def bounding_window(theta_deg: np.ndarray, phi_deg: np.ndarray, *, margin_deg: float = 0.0,
+                    theta_step_deg: float, phi_step_deg: float) -> Optional[AngularWindow]:
+    """Smallest window (seam aware) holding all given directions, plus a margin."""
+    if len(theta_deg) == 0:
+        return None
+    phi = np.sort(wrap_phi(np.asarray(phi_deg, dtype=np.float64)))
+    gaps = np.diff(np.concatenate([phi, [phi[0] + 360.0]]))
+    k = int(np.argmax(gaps))  # the largest empty arc is outside the window
+    start = phi[(k + 1) % len(phi)]
+    width = 360.0 - gaps[k]
+    if start >= 180.0 and start + width >= 360.0:
+        start -= 360.0
+    lo, hi = start - margin_deg, start + width + margin_deg
+    if hi - lo > 360.0:
+        lo, hi = 0.0, 360.0
+    return AngularWindow(lo, hi, max(0.0, float(np.min(theta_deg)) - margin_deg),
+                         min(180.0, float(np.max(theta_deg)) + margin_deg), phi_step_deg, theta_step_deg)

@@ -1,0 +1,133 @@
+"""Helpers shared by the scan readers and writers."""
+from __future__ import annotations
+
+import contextlib
+import os
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+from lidar.errors import ScanFormatError
+from lidar.scan import Scan, normalise_intensity
+
+
+def check_readable(path: str | os.PathLike) -> Path:
+    """Raise ScanFormatError unless ``path`` is an existing, non-empty file."""
+    p = Path(path)
+    if not p.exists():
+        raise ScanFormatError(p, "no such file; check the path")
+    if not p.is_file():
+        raise ScanFormatError(p, "is not a file")
+    if p.stat().st_size == 0:
+        raise ScanFormatError(p, "the file is empty (0 bytes)")
+    return p
+
+
+def make_scan(
+    path: Path,
+    xyz: np.ndarray,
+    raw: Optional[np.ndarray],
+    *,
+    fmt: str,
+    limits: Optional[tuple[float, float]] = None,
+    pose: Optional[np.ndarray] = None,
+    name: str = "",
+    grid_index: Optional[np.ndarray] = None,
+    metadata: Optional[dict] = None,
+) -> Scan:
+    """Build a Scan from decoded arrays: drop non-finite points, normalise intensity.
+
+    Raises ScanFormatError when nothing valid is left.
+    """
+    meta = {"format": fmt, **(metadata or {})}
+    xyz = np.asarray(xyz, dtype=np.float64)
+    ok = np.isfinite(xyz).all(axis=1)
+    if raw is not None:
+        raw = np.asarray(raw)
+        if raw.dtype.kind == "f":
+            ok &= np.isfinite(raw)
+    dropped = int(ok.size - np.count_nonzero(ok))
+    if dropped:
+        xyz = xyz[ok]
+        raw = raw[ok] if raw is not None else None
+        grid_index = grid_index[ok] if grid_index is not None else None
+        meta["dropped_nonfinite_points"] = dropped
+    if xyz.shape[0] == 0:
+        raise ScanFormatError(path, "holds no valid points" + (f" ({dropped} were NaN/inf)" if dropped else ""))
+    intensity = normalise_intensity(raw, limits) if raw is not None else None
+    if raw is not None:
+        meta["intensity_limits"] = (
+            (float(limits[0]), float(limits[1])) if limits is not None else (float(raw.min()), float(raw.max()))
+        )
+    return Scan(
+        xyz_socs=np.ascontiguousarray(xyz),
+        intensity=intensity,
+        intensity_raw=raw,
+        pose=pose,
+        source=str(path),
+        name=name or path.stem,
+        grid_index=grid_index,
+        metadata=meta,
+    )
+
+
+def pose_from_quaternion(q_wxyz, t) -> np.ndarray:
+    """4x4 homogeneous transform from a unit quaternion (w, x, y, z) and a translation."""
+    w, x, y, z = (float(v) for v in q_wxyz)
+    n = np.sqrt(w * w + x * x + y * y + z * z)
+    if n == 0:
+        w, n = 1.0, 1.0
+    w, x, y, z = w / n, x / n, y / n, z / n
+    r = np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+    pose = np.eye(4)
+    pose[:3, :3] = r
+    pose[:3, 3] = np.asarray(t, dtype=np.float64)
+    return pose
+
+
+def quaternion_from_pose(pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(w, x, y, z) unit quaternion and translation of a rigid 4x4 transform."""
+    from scipy.spatial.transform import Rotation
+
+    x, y, z, w = Rotation.from_matrix(pose[:3, :3]).as_quat()
+    return np.array([w, x, y, z]), np.asarray(pose[:3, 3], dtype=np.float64)
+
+
+@contextlib.contextmanager
+def quiet_stderr():
+    """Silence C/C++ libraries that print diagnostics straight to file descriptor 2."""
+    try:
+        fd = os.dup(2)
+    except OSError:  # pragma: no cover - no stderr at all
+        yield
+        return
+    try:
+        with open(os.devnull, "wb") as devnull:
+            os.dup2(devnull.fileno(), 2)
+            yield
+    finally:
+        os.dup2(fd, 2)
+        os.close(fd)
+
+
+def raw_for_writing(scan: Scan) -> np.ndarray:
+    """Intensity values to store: the raw ones if present, else normalised scaled to uint16."""
+    if scan.intensity_raw is not None:
+        return scan.intensity_raw
+    if scan.intensity is not None:
+        return np.round(scan.intensity.astype(np.float64) * 65535).astype(np.uint16)
+    return np.zeros(len(scan), np.uint16)
+
+
+def atomic_target(path: str | os.PathLike) -> tuple[Path, Path]:
+    """(final, temporary) paths for writing a file by rename, so a crash never leaves half a file."""
+    final = Path(path)
+    tmp = final.with_name(f".{final.name}.part")
+    return final, tmp

@@ -1,0 +1,173 @@
+"""E57 reading (every scan in the file, with its pose) and writing, through pye57."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+from lidar.errors import ScanFormatError
+from lidar.io._common import (
+    atomic_target,
+    check_readable,
+    make_scan,
+    pose_from_quaternion,
+    quaternion_from_pose,
+    quiet_stderr,
+    raw_for_writing,
+)
+from lidar.progress import ProgressCallback, report
+from lidar.scan import Scan
+
+
+def _first_line(exc: BaseException) -> str:
+    for line in str(exc).splitlines():
+        if line.strip():
+            return line.strip()
+    return type(exc).__name__
+
+
+def _intensity_limits(node) -> Optional[tuple[float, float]]:
+    try:
+        if not node.isDefined("intensityLimits"):
+            return None
+        lim = node["intensityLimits"]
+        lo, hi = float(lim["intensityMinimum"].value()), float(lim["intensityMaximum"].value())
+        return (lo, hi) if hi > lo else None
+    except Exception:  # malformed limits: fall back to the data's own range
+        return None
+
+
+def _scan_name(node, index: int) -> str:
+    try:
+        if node.isDefined("name"):
+            return str(node["name"].value())
+    except Exception:
+        pass
+    return f"scan{index}"
+
+
+_WANTED = ("cartesianX", "cartesianY", "cartesianZ", "cartesianInvalidState", "sphericalRange",
+           "sphericalAzimuth", "sphericalElevation", "sphericalInvalidState", "intensity",
+           "rowIndex", "columnIndex")
+
+
+def read_e57(path: str | os.PathLike, *, progress: Optional[ProgressCallback] = None) -> list[Scan]:
+    """Read every scan of an E57 file.
+
+    Each scan keeps its points in its own frame (SOCS) with its pose (SOCS ->
+    file frame) from the E57 header; spherical coordinates are converted;
+    points flagged invalid are dropped. Intensity may be absent (then None).
+
+    Raises
+    ------
+    ScanFormatError
+        Not an E57 file, a checksum error, a scan without points, or no scans.
+    """
+    import pye57
+
+    p = check_readable(path)
+    scans: list[Scan] = []
+    try:
+        with quiet_stderr():
+            e57 = pye57.E57(str(p), mode="r")
+    except Exception as exc:
+        raise ScanFormatError(p, f"not a readable E57 file ({_first_line(exc)})") from exc
+    try:
+        count = e57.scan_count
+        if count == 0:
+            raise ScanFormatError(p, "the E57 file holds no scans")
+        for i in range(count):
+            scans.append(_read_one(e57, p, i))
+            report(progress, (i + 1) / count, f"E57 scan {i + 1}/{count}")
+    except ScanFormatError:
+        raise
+    except Exception as exc:
+        raise ScanFormatError(p, f"corrupt E57 data ({_first_line(exc)})") from exc
+    finally:
+        try:
+            e57.close()
+        except Exception:
+            pass
+    return scans
+
+
+def _read_one(e57, p: Path, i: int) -> Scan:
+    with quiet_stderr():
+        header = e57.get_header(i)
+        node = e57.data3d[i]
+        name = _scan_name(node, i)
+        if header.point_count == 0:
+            raise ScanFormatError(p, f"scan {i} ({name}) holds no points")
+        fields = set(header.point_fields)
+        # Read only what we use: other fields (colour, return counts...) may have value
+        # ranges pye57's fixed buffer types cannot hold.
+        wanted = [f for f in header.point_fields if f in _WANTED]
+        data, buffers = e57.make_buffers(wanted, header.point_count)
+        reader = header.points.reader(buffers)
+        try:
+            got = reader.read()
+        finally:
+            reader.close()
+        if got != header.point_count:
+            raise ScanFormatError(p, f"truncated: scan {i} declares {header.point_count} points, {got} could be read")
+    if {"cartesianX", "cartesianY", "cartesianZ"} <= data.keys():
+        xyz = np.column_stack([data["cartesianX"], data["cartesianY"], data["cartesianZ"]]).astype(np.float64)
+        invalid = data.get("cartesianInvalidState")
+    elif {"sphericalRange", "sphericalAzimuth", "sphericalElevation"} <= data.keys():
+        r = np.asarray(data["sphericalRange"], np.float64)
+        az = np.asarray(data["sphericalAzimuth"], np.float64)
+        el = np.asarray(data["sphericalElevation"], np.float64)
+        xyz = np.column_stack([r * np.cos(el) * np.cos(az), r * np.cos(el) * np.sin(az), r * np.sin(el)])
+        invalid = data.get("sphericalInvalidState")
+    else:
+        raise ScanFormatError(p, f"scan {i} ({name}) has neither cartesian nor spherical coordinates")
+    raw = np.asarray(data["intensity"]) if "intensity" in data else None
+    grid = None
+    if "rowIndex" in data and "columnIndex" in data:
+        grid = np.column_stack([data["rowIndex"], data["columnIndex"]]).astype(np.int32)
+    if invalid is not None:
+        keep = np.asarray(invalid) == 0
+        xyz = xyz[keep]
+        raw = raw[keep] if raw is not None else None
+        grid = grid[keep] if grid is not None else None
+    limits = _intensity_limits(node) if raw is not None else None
+    pose = pose_from_quaternion(header.rotation, header.translation)
+    return make_scan(
+        p, xyz, raw, fmt="E57", limits=limits, pose=pose, name=name, grid_index=grid,
+        metadata={"scan_index": i, "fields": sorted(fields)},
+    )
+
+
+def write_e57(scans: Scan | list[Scan], path: str | os.PathLike) -> Path:
+    """Write one or several scans (each with its pose) to an E57 file."""
+    import pye57
+
+    if isinstance(scans, Scan):
+        scans = [scans]
+    final, tmp = atomic_target(path)
+    try:
+        with quiet_stderr():
+            e57 = pye57.E57(str(tmp), mode="w")
+            try:
+                for scan in scans:
+                    data = {
+                        "cartesianX": scan.xyz_socs[:, 0].copy(),
+                        "cartesianY": scan.xyz_socs[:, 1].copy(),
+                        "cartesianZ": scan.xyz_socs[:, 2].copy(),
+                    }
+                    if scan.intensity is not None:
+                        data["intensity"] = raw_for_writing(scan).astype(np.float64)
+                    kwargs = {"name": scan.name or "scan"}
+                    if scan.pose is not None:
+                        q, t = quaternion_from_pose(scan.pose)
+                        kwargs.update(rotation=q, translation=t)
+                    e57.write_scan_raw(data, **kwargs)
+            finally:
+                e57.close()
+        os.replace(tmp, final)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return final

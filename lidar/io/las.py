@@ -1,0 +1,197 @@
+"""LAS and LAZ (1.2-1.4, every point format) reading and writing.
+
+Uncompressed LAS is memory-mapped and scaled chunk by chunk straight into the
+output arrays, so the peak memory is the output plus one chunk. LAZ is decoded
+in chunks by laspy's lazrs backend (parallel where available).
+"""
+from __future__ import annotations
+
+import os
+import struct
+from pathlib import Path
+from typing import Optional
+
+import laspy
+import numpy as np
+
+from lidar.errors import ScanFormatError
+from lidar.io._common import atomic_target, check_readable, make_scan, raw_for_writing
+from lidar.progress import ProgressCallback, report
+from lidar.scan import Scan
+
+#: VLR in which BridgeSurvey keeps the scanner pose (SOCS -> project frame) of a scan.
+POSE_VLR_USER_ID = "BridgeSurvey"
+POSE_VLR_RECORD_ID = 4401
+
+CHUNK_POINTS = 2_000_000
+
+
+def _laz_backend():
+    available = laspy.LazBackend.detect_available()
+    return available[0] if available else None
+
+
+def _pose_from_header(header) -> Optional[np.ndarray]:
+    for vlr in list(header.vlrs) + list(getattr(header, "evlrs", None) or []):
+        if getattr(vlr, "user_id", "") == POSE_VLR_USER_ID and getattr(vlr, "record_id", None) == POSE_VLR_RECORD_ID:
+            data = getattr(vlr, "record_data", b"")
+            if len(data) == 128:
+                return np.array(struct.unpack("<16d", data)).reshape(4, 4)
+    return None
+
+
+def read_las(path: str | os.PathLike, *, progress: Optional[ProgressCallback] = None,
+             chunk_points: int = CHUNK_POINTS) -> Scan:
+    """Read a LAS or LAZ file into a :class:`Scan`.
+
+    Parameters
+    ----------
+    path : path-like
+        The .las or .laz file.
+    progress : callable, optional
+        ``progress(fraction, message)``.
+    chunk_points : int, keyword-only
+        Points decoded per chunk (memory/speed trade-off). Default 2,000,000.
+
+    Returns
+    -------
+    Scan with float64 xyz in the file's frame (taken as SOCS), intensity
+    normalised over the file, the raw uint16 intensity, and the pose stored by
+    BridgeSurvey's own writer, if any.
+
+    Raises
+    ------
+    ScanFormatError
+        Not a LAS/LAZ file, corrupt or truncated, or without points.
+    """
+    p = check_readable(path)
+    try:
+        with laspy.open(p, laz_backend=_laz_backend()) as reader:
+            header = reader.header
+            n = int(header.point_count)
+            if n == 0:
+                raise ScanFormatError(p, "the LAS header declares 0 points; nothing to read")
+            scales = np.asarray(header.scales, dtype=np.float64)
+            offsets = np.asarray(header.offsets, dtype=np.float64)
+            xyz = np.empty((n, 3), dtype=np.float64)
+            raw = np.empty(n, dtype=np.uint16)
+            compressed = header.are_points_compressed
+            if compressed:
+                _decode_laz(reader, p, xyz, raw, scales, offsets, chunk_points, progress)
+            else:
+                _decode_las(p, header, xyz, raw, scales, offsets, chunk_points, progress)
+            pose = _pose_from_header(header)
+            meta = {
+                "version": str(header.version),
+                "point_format": int(header.point_format.id),
+                "scales": tuple(float(s) for s in scales),
+                "offsets": tuple(float(o) for o in offsets),
+                "compressed": bool(compressed),
+                "point_count": n,
+            }
+    except ScanFormatError:
+        raise
+    except (laspy.errors.LaspyException, ValueError, OSError, RuntimeError, struct.error) as exc:
+        raise ScanFormatError(p, f"not a readable LAS/LAZ file ({_one_line(exc)})") from exc
+    return make_scan(p, xyz, raw, fmt="LAZ" if compressed else "LAS", pose=pose, metadata=meta)
+
+
+def _one_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return text[0] if text else type(exc).__name__
+
+
+def _scale_into(xyz, raw, start, X, Y, Z, intensity, scales, offsets):
+    stop = start + len(X)
+    out = xyz[start:stop]
+    for k, arr in enumerate((X, Y, Z)):
+        col = out[:, k]
+        np.multiply(arr, scales[k], out=col, casting="unsafe")
+        col += offsets[k]
+    raw[start:stop] = intensity
+
+
+def _decode_las(p: Path, header, xyz, raw, scales, offsets, chunk_points, progress):
+    n = xyz.shape[0]
+    dtype = header.point_format.dtype()
+    need = int(header.offset_to_point_data) + n * dtype.itemsize
+    size = p.stat().st_size
+    if size < need:
+        have = max(0, (size - int(header.offset_to_point_data)) // dtype.itemsize)
+        raise ScanFormatError(p, f"truncated: the header declares {n} points but the file holds only {have}")
+    records = np.memmap(p, dtype=dtype, mode="r", offset=int(header.offset_to_point_data), shape=(n,))
+    try:
+        for start in range(0, n, chunk_points):
+            part = records[start:start + chunk_points]
+            _scale_into(xyz, raw, start, part["X"], part["Y"], part["Z"], part["intensity"], scales, offsets)
+            report(progress, min(n, start + chunk_points) / n, "reading LAS")
+    finally:
+        del records
+
+
+def _decode_laz(reader, p: Path, xyz, raw, scales, offsets, chunk_points, progress):
+    n = xyz.shape[0]
+    start = 0
+    for chunk in reader.chunk_iterator(chunk_points):
+        m = len(chunk)
+        if start + m > n:
+            raise ScanFormatError(p, "holds more points than its header declares")
+        arr = chunk.array
+        _scale_into(xyz, raw, start, arr["X"], arr["Y"], arr["Z"], arr["intensity"], scales, offsets)
+        start += m
+        report(progress, start / n, "decoding LAZ")
+    if start != n:
+        raise ScanFormatError(p, f"truncated: the header declares {n} points but only {start} could be decoded")
+
+
+def write_las(scan: Scan, path: str | os.PathLike, *, scale_m: Optional[float] = None) -> Path:
+    """Write a scan as LAS or LAZ (chosen by the suffix), LAS 1.4 point format 6.
+
+    Parameters
+    ----------
+    scan : Scan
+    path : path-like
+        Destination; ``.laz`` compresses. Written to a temporary name and renamed.
+    scale_m : float, optional, keyword-only
+        Coordinate resolution. Default 0.01 mm (1e-5 m), coarsened automatically
+        only if the extent would overflow the 32-bit integers.
+
+    Returns
+    -------
+    Path of the written file.
+    """
+    final, tmp = atomic_target(path)
+    xyz = scan.xyz_socs
+    lo = np.floor(xyz.min(axis=0)) if len(scan) else np.zeros(3)
+    extent = float(np.max(xyz.max(axis=0) - lo)) if len(scan) else 0.0
+    if scale_m is None:
+        scale_m = 1e-5
+        while extent / scale_m > 2.0e9:
+            scale_m *= 10
+    header = laspy.LasHeader(point_format=6, version="1.4")
+    header.offsets = lo
+    header.scales = np.array([scale_m] * 3)
+    if scan.pose is not None:
+        header.vlrs.append(
+            laspy.VLR(user_id=POSE_VLR_USER_ID, record_id=POSE_VLR_RECORD_ID,
+                      description="SOCS pose 4x4 float64",
+                      record_data=struct.pack("<16d", *np.asarray(scan.pose, dtype=np.float64).ravel()))
+        )
+    las = laspy.LasData(header)
+    las.x = xyz[:, 0]
+    las.y = xyz[:, 1]
+    las.z = xyz[:, 2]
+    raw = raw_for_writing(scan)
+    if raw.dtype != np.uint16:
+        raw64 = raw.astype(np.float64)
+        lo_i, hi_i = float(raw64.min()), float(raw64.max())
+        raw = np.round((raw64 - lo_i) / (hi_i - lo_i) * 65535 if hi_i > lo_i else raw64 * 0).astype(np.uint16)
+    las.intensity = raw
+    compress = final.suffix.lower() == ".laz"
+    try:
+        las.write(tmp, do_compress=compress, laz_backend=_laz_backend() if compress else None)
+        os.replace(tmp, final)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return final

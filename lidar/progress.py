@@ -1,0 +1,28 @@
+"""Progress reporting for long work.
+
+A progress callback is any callable ``progress(fraction, message)`` with
+``fraction`` in [0, 1]. It may raise :class:`lidar.errors.CancelledError` to
+stop the work; functions taking one let that exception through untouched.
+"""
+from __future__ import annotations
+
+from typing import Callable, Optional
+
+ProgressCallback = Callable[[float, str], None]
+
+
+def report(progress: Optional[ProgressCallback], fraction: float, message: str = "") -> None:
+    """Call ``progress`` if one was given, clamping ``fraction`` to [0, 1]."""
+    if progress is not None:
+        progress(min(1.0, max(0.0, float(fraction))), message)
+
+
+def scaled(progress: Optional[ProgressCallback], start: float, stop: float) -> Optional[ProgressCallback]:
+    """A callback mapping [0, 1] of a sub-task onto [start, stop] of the whole."""
+    if progress is None:
+        return None
+
+    def sub(fraction: float, message: str = "") -> None:
+        report(progress, start + (stop - start) * fraction, message)
+
+    return sub

@@ -1,0 +1,44 @@
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from lidar.angles import AngularWindow, bounding_window, direction_from_angles, phi_difference, spherical_from_xyz, window_around
+from lidar.errors import InputError
+
+
+@given(st.floats(0.5, 179.5), st.floats(0, 359.999), st.floats(0.1, 500))
+def test_angles_round_trip(theta, phi, r):
+    xyz = direction_from_angles(theta, phi)[None] * r
+    t, p, rr = spherical_from_xyz(xyz)
+    assert abs(t[0] - theta) < 1e-9 and abs(phi_difference(p[0], phi)) < 1e-8 and abs(rr[0] - r) < 1e-9
+    assert 0 <= p[0] < 360
+
+
+def test_conventions():
+    t, p, _ = spherical_from_xyz(np.array([[1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0], [0, -1.0, 0]]))
+    np.testing.assert_allclose(t, [90, 90, 0, 90])
+    np.testing.assert_allclose(p, [0, 90, 0, 270])
+
+
+def test_window_across_the_seam():
+    w = window_around(90.0, 359.5, 1.0, 1.0, 0.1, 0.1)
+    assert w.phi_min_deg < 0 < w.phi_max_deg
+    assert w.contains(90.0, 0.3) and w.contains(90.0, 359.0) and not w.contains(90.0, 180.0)
+    theta, phi = w.grid()
+    assert np.all((phi >= 0) & (phi < 360))
+    assert len(theta) == w.n_directions == 21 * 21
+
+
+def test_bounding_window_is_seam_aware():
+    w = bounding_window(np.array([80.0, 95.0]), np.array([358.0, 3.0]), theta_step_deg=0.1, phi_step_deg=0.1)
+    assert (w.phi_min_deg, w.phi_max_deg) == pytest.approx((-2.0, 3.0))
+
+
+def test_invalid_windows():
+    with pytest.raises(InputError):
+        AngularWindow(10, 5, 80, 90, 0.1, 0.1)
+    with pytest.raises(InputError):
+        AngularWindow(0, 5, 80, 190, 0.1, 0.1)
+    with pytest.raises(InputError):
+        AngularWindow(0, 5, 80, 90, float("nan"), 0.1)
