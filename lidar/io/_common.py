@@ -35,19 +35,23 @@ def make_scan(
     name: str = "",
     grid_index: Optional[np.ndarray] = None,
     metadata: Optional[dict] = None,
+    finite: bool = False,
 ) -> Scan:
     """Build a Scan from decoded arrays: drop non-finite points, normalise intensity.
 
-    Raises ScanFormatError when nothing valid is left.
+    ``finite=True`` tells that the values cannot be NaN/inf (integer formats)
+    and skips that check. Raises ScanFormatError when nothing valid is left.
     """
     meta = {"format": fmt, **(metadata or {})}
     xyz = np.asarray(xyz, dtype=np.float64)
-    ok = np.isfinite(xyz).all(axis=1)
     if raw is not None:
         raw = np.asarray(raw)
-        if raw.dtype.kind == "f":
+    dropped = 0
+    if not finite:
+        ok = np.isfinite(xyz).all(axis=1)
+        if raw is not None and raw.dtype.kind == "f":
             ok &= np.isfinite(raw)
-    dropped = int(ok.size - np.count_nonzero(ok))
+        dropped = int(ok.size - np.count_nonzero(ok))
     if dropped:
         xyz = xyz[ok]
         raw = raw[ok] if raw is not None else None
@@ -55,11 +59,12 @@ def make_scan(
         meta["dropped_nonfinite_points"] = dropped
     if xyz.shape[0] == 0:
         raise ScanFormatError(path, "holds no valid points" + (f" ({dropped} were NaN/inf)" if dropped else ""))
-    intensity = normalise_intensity(raw, limits) if raw is not None else None
+    intensity = None
     if raw is not None:
-        meta["intensity_limits"] = (
-            (float(limits[0]), float(limits[1])) if limits is not None else (float(raw.min()), float(raw.max()))
-        )
+        if limits is None:
+            limits = (float(raw.min()), float(raw.max()))
+        meta["intensity_limits"] = (float(limits[0]), float(limits[1]))
+        intensity = normalise_intensity(raw, limits)
     return Scan(
         xyz_socs=np.ascontiguousarray(xyz),
         intensity=intensity,

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import os
 import struct
+import threading
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Optional
 
@@ -23,7 +25,9 @@ from lidar.scan import Scan
 POSE_VLR_USER_ID = "BridgeSurvey"
 POSE_VLR_RECORD_ID = 4401
 
-CHUNK_POINTS = 2_000_000
+#: Points per chunk: small for LAS (buffers stay in cache), larger for LAZ (lazrs parallelises inside a chunk).
+LAS_CHUNK_POINTS = 262_144
+LAZ_CHUNK_POINTS = 1_000_000
 
 
 def _laz_backend():
@@ -41,7 +45,7 @@ def _pose_from_header(header) -> Optional[np.ndarray]:
 
 
 def read_las(path: str | os.PathLike, *, progress: Optional[ProgressCallback] = None,
-             chunk_points: int = CHUNK_POINTS) -> Scan:
+             chunk_points: Optional[int] = None) -> Scan:
     """Read a LAS or LAZ file into a :class:`Scan`.
 
     Parameters
@@ -51,7 +55,8 @@ def read_las(path: str | os.PathLike, *, progress: Optional[ProgressCallback] = 
     progress : callable, optional
         ``progress(fraction, message)``.
     chunk_points : int, keyword-only
-        Points decoded per chunk (memory/speed trade-off). Default 2,000,000.
+        Points decoded per chunk (memory/speed trade-off). Default 262,144 for
+        LAS and 1,000,000 for LAZ.
 
     Returns
     -------
@@ -77,8 +82,10 @@ def read_las(path: str | os.PathLike, *, progress: Optional[ProgressCallback] = 
             raw = np.empty(n, dtype=np.uint16)
             compressed = header.are_points_compressed
             if compressed:
+                chunk_points = chunk_points or LAZ_CHUNK_POINTS
                 _decode_laz(reader, p, xyz, raw, scales, offsets, chunk_points, progress)
             else:
+                chunk_points = chunk_points or LAS_CHUNK_POINTS
                 _decode_las(p, header, xyz, raw, scales, offsets, chunk_points, progress)
             pose = _pose_from_header(header)
             meta = {
@@ -93,7 +100,8 @@ def read_las(path: str | os.PathLike, *, progress: Optional[ProgressCallback] = 
         raise
     except (laspy.errors.LaspyException, ValueError, OSError, RuntimeError, struct.error) as exc:
         raise ScanFormatError(p, f"not a readable LAS/LAZ file ({_one_line(exc)})") from exc
-    return make_scan(p, xyz, raw, fmt="LAZ" if compressed else "LAS", pose=pose, metadata=meta)
+    # Scaled 32-bit integers are always finite: skip the (costly) finiteness scan.
+    return make_scan(p, xyz, raw, fmt="LAZ" if compressed else "LAS", pose=pose, metadata=meta, finite=True)
 
 
 def _one_line(exc: BaseException) -> str:
@@ -101,43 +109,68 @@ def _one_line(exc: BaseException) -> str:
     return text[0] if text else type(exc).__name__
 
 
-def _scale_into(xyz, raw, start, X, Y, Z, intensity, scales, offsets):
-    stop = start + len(X)
-    out = xyz[start:stop]
-    for k, arr in enumerate((X, Y, Z)):
-        col = out[:, k]
-        np.multiply(arr, scales[k], out=col, casting="unsafe")
-        col += offsets[k]
-    raw[start:stop] = intensity
+def _scale_into(xyz, raw, start, records: np.ndarray, scales, offsets):
+    """Scale the X, Y, Z integers of packed point records into ``xyz[start:]`` and copy the intensity.
+
+    Converting each field into a contiguous float64 temporary, scaling it there
+    and then storing it into the (strided) output column is about twice as fast
+    as letting numpy cast straight into the strided column.
+    """
+    m = records.shape[0]
+    out = xyz[start:start + m]
+    for k, name in enumerate(("X", "Y", "Z")):
+        tmp = records[name].astype(np.float64)
+        tmp *= scales[k]
+        tmp += offsets[k]
+        out[:, k] = tmp
+    raw[start:start + m] = records["intensity"]
 
 
 def _decode_las(p: Path, header, xyz, raw, scales, offsets, chunk_points, progress):
+    """Read point records chunk by chunk with two threads (I/O of one overlaps scaling of the other).
+
+    Peak memory is the output arrays plus one record buffer per thread.
+    """
     n = xyz.shape[0]
     dtype = header.point_format.dtype()
-    need = int(header.offset_to_point_data) + n * dtype.itemsize
+    first = int(header.offset_to_point_data)
     size = p.stat().st_size
-    if size < need:
-        have = max(0, (size - int(header.offset_to_point_data)) // dtype.itemsize)
+    if size < first + n * dtype.itemsize:
+        have = max(0, (size - first) // dtype.itemsize)
         raise ScanFormatError(p, f"truncated: the header declares {n} points but the file holds only {have}")
-    records = np.memmap(p, dtype=dtype, mode="r", offset=int(header.offset_to_point_data), shape=(n,))
+    local = threading.local()
+    fd = os.open(p, os.O_RDONLY)
+
+    def work(start: int) -> int:
+        m = min(chunk_points, n - start)
+        buf = getattr(local, "buf", None)
+        if buf is None or buf.size < chunk_points * dtype.itemsize:
+            buf = local.buf = np.empty(chunk_points * dtype.itemsize, np.uint8)
+        view = buf[: m * dtype.itemsize]
+        got = os.preadv(fd, [view], first + start * dtype.itemsize)
+        if got != view.size:
+            raise ScanFormatError(p, "truncated: the point records end early")
+        _scale_into(xyz, raw, start, view.view(dtype), scales, offsets)
+        return start + m
+
     try:
-        for start in range(0, n, chunk_points):
-            part = records[start:start + chunk_points]
-            _scale_into(xyz, raw, start, part["X"], part["Y"], part["Z"], part["intensity"], scales, offsets)
-            report(progress, min(n, start + chunk_points) / n, "reading LAS")
+        with ThreadPoolExecutor(max_workers=2) as pool:
+            for done in pool.map(work, range(0, n, chunk_points)):
+                report(progress, done / n, "reading LAS")
     finally:
-        del records
+        os.close(fd)
 
 
 def _decode_laz(reader, p: Path, xyz, raw, scales, offsets, chunk_points, progress):
+    """Decode LAZ chunk by chunk (lazrs decompresses each chunk on all cores, holding the GIL,
+    so a prefetch thread would gain nothing)."""
     n = xyz.shape[0]
     start = 0
     for chunk in reader.chunk_iterator(chunk_points):
         m = len(chunk)
         if start + m > n:
             raise ScanFormatError(p, "holds more points than its header declares")
-        arr = chunk.array
-        _scale_into(xyz, raw, start, arr["X"], arr["Y"], arr["Z"], arr["intensity"], scales, offsets)
+        _scale_into(xyz, raw, start, chunk.array, scales, offsets)
         start += m
         report(progress, start / n, "decoding LAZ")
     if start != n:
