@@ -107,6 +107,10 @@ class Scan:
     def __len__(self) -> int:
         return int(self.xyz_socs.shape[0])
 
+    def __reduce__(self):  # the read-only metadata proxy does not pickle; rebuild from a plain dict
+        return (Scan, (self.xyz_socs, self.intensity, self.intensity_raw, self.pose, self.source, self.name,
+                       self.grid_index, dict(self.metadata)))
+
     @property
     def has_intensity(self) -> bool:
         return self.intensity is not None

@@ -1,0 +1,1 @@
+"""The ``bridgesurvey`` command line."""

@@ -1,0 +1,62 @@
+"""Entry point of the ``bridgesurvey`` command.
+
+Every command is registered by a module of this package; errors the product
+raises on purpose (``SurveyError``) are printed as one line and give exit
+status 1; wrong arguments give status 2 (argparse).
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from typing import Optional, Sequence
+
+from lidar.errors import SurveyError
+
+EXIT_ERROR = 1
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from app.cli import commands_files
+
+    parser = argparse.ArgumentParser(
+        prog="bridgesurvey",
+        description="Long-term bridge displacement from weekly terrestrial laser scans of reflector targets.",
+        epilog="Run 'bridgesurvey COMMAND --help' for the options of a command.",
+    )
+    parser.add_argument("-v", "--verbose", action="store_true", help="log what is being done")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    for module in _command_modules():
+        module.register(sub)
+    commands_files.register(sub)
+    return parser
+
+
+def _command_modules():
+    mods = []
+    try:
+        from app.cli import commands_campaign
+        mods.append(commands_campaign)
+    except ImportError:  # pragma: no cover - during development of the campaign commands
+        pass
+    return mods
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
+                        format="%(levelname)s %(name)s: %(message)s")
+    try:
+        return int(args.func(args) or 0)
+    except SurveyError as exc:
+        print(f"bridgesurvey: error: {exc}", file=sys.stderr)
+        return EXIT_ERROR
+    except KeyboardInterrupt:
+        print("bridgesurvey: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

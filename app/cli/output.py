@@ -1,0 +1,49 @@
+"""Printing results: aligned tables for people, JSON for scripts."""
+from __future__ import annotations
+
+import json
+import math
+import sys
+from typing import Sequence
+
+
+def table(rows: Sequence[dict], columns: Sequence[str], out=None) -> None:
+    out = out or sys.stdout
+    if not rows:
+        out.write("(none)\n")
+        return
+    def fmt(v):
+        if isinstance(v, float):
+            return "-" if math.isnan(v) else f"{v:.4f}".rstrip("0").rstrip(".") if abs(v) < 1e5 else f"{v:.1f}"
+        if isinstance(v, (list, tuple)):
+            return ",".join(str(x) for x in v) or "-"
+        return "-" if v is None or v == "" else str(v)
+    cells = [[fmt(r.get(c)) for c in columns] for r in rows]
+    widths = [max(len(c), *(len(row[i]) for row in cells)) for i, c in enumerate(columns)]
+    out.write("  ".join(c.ljust(w) for c, w in zip(columns, widths)).rstrip() + "\n")
+    for row in cells:
+        out.write("  ".join(v.ljust(w) for v, w in zip(row, widths)).rstrip() + "\n")
+
+
+def dump_json(obj, out=None) -> None:
+    out = out or sys.stdout
+
+    def default(o):
+        import numpy as np
+
+        if isinstance(o, np.ndarray):
+            return o.tolist()
+        if isinstance(o, (np.floating, np.integer)):
+            return o.item()
+        raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+    def clean(o):
+        if isinstance(o, float) and not math.isfinite(o):
+            return None
+        if isinstance(o, dict):
+            return {k: clean(v) for k, v in o.items()}
+        if isinstance(o, (list, tuple)):
+            return [clean(v) for v in o]
+        return o
+
+    out.write(json.dumps(clean(obj), indent=2, default=default) + "\n")

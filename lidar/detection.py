@@ -1,0 +1,182 @@
+"""Reflector detection on a reflectance map: bright compact blobs of a target's angular size."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+from scipy import ndimage
+
+from lidar.errors import InputError
+from lidar.reflectance_map import ReflectanceMap
+
+
+@dataclass(frozen=True)
+class Detection:
+    """A bright blob that may be a reflector.
+
+    Attributes
+    ----------
+    theta_deg, phi_deg : float
+        Intensity-weighted blob centre (phi in [0, 360)).
+    range_m : float
+        Mean range of the blob's cells.
+    xyz_socs : (3,) tuple of float
+        Approximate 3-D position in the scanner frame, metres.
+    peak_intensity : float
+    n_cells : int
+    size_deg : float
+        Largest angular extent of the blob (azimuth extent scaled by sin(theta)).
+    expected_size_deg : float
+        Angular diameter of a face-on target of the campaign's diameter at this range.
+    score : float
+        In (0, 1]: brightness times agreement of size with the expected one.
+    """
+
+    theta_deg: float
+    phi_deg: float
+    range_m: float
+    xyz_socs: tuple[float, float, float]
+    peak_intensity: float
+    n_cells: int
+    size_deg: float
+    expected_size_deg: float
+    score: float
+
+
+@dataclass(frozen=True)
+class DetectionResult:
+    """Detections (best score first), blobs rejected as too large, and the threshold used."""
+
+    detections: tuple[Detection, ...]
+    rejected: tuple[Detection, ...]
+    threshold: float
+    map_step_deg: float
+
+    def xyz(self) -> np.ndarray:
+        return np.array([d.xyz_socs for d in self.detections], dtype=np.float64).reshape(-1, 3)
+
+
+def auto_threshold(values: np.ndarray) -> float:
+    """Brightness threshold separating retro-reflectors from the background of a map.
+
+    Halfway between the background median and the brightest cell, but at least
+    3 robust standard deviations above the background median.
+    """
+    v = values[np.isfinite(values)]
+    if v.size == 0:
+        raise InputError("the reflectance map is empty")
+    bg = float(np.median(v))
+    mad = float(np.median(np.abs(v - bg))) * 1.4826
+    top = float(np.max(v))
+    return max(bg + 3.0 * mad, bg + 0.5 * (top - bg))
+
+
+def detect_reflectors(rmap: ReflectanceMap, *, target_diameter_m: float = 0.05, threshold: Optional[float] = None,
+                      footprint_mrad: float = 0.3, max_size_factor: float = 1.6) -> DetectionResult:
+    """Find reflector candidates in a reflectance map.
+
+    Parameters
+    ----------
+    rmap : ReflectanceMap
+    target_diameter_m : float, keyword-only
+        Diameter of the campaign's targets. Default 0.05 m.
+    threshold : float, optional, keyword-only
+        Normalised intensity threshold; default :func:`auto_threshold`.
+    footprint_mrad : float, keyword-only
+        Beam divergence: blobs grow by the footprint at their range. Default 0.3 mrad.
+    max_size_factor : float, keyword-only
+        A blob larger than this factor times (expected size + footprint + 2 cells) is
+        rejected as not a target (a sign, a vest, a window). Default 1.6.
+
+    Returns
+    -------
+    DetectionResult
+    """
+    if not (np.isfinite(target_diameter_m) and target_diameter_m > 0):
+        raise InputError(f"target diameter must be positive, got {target_diameter_m}")
+    img = np.nan_to_num(rmap.max_intensity, nan=0.0)
+    thr = auto_threshold(rmap.max_intensity) if threshold is None else float(threshold)
+    mask = img >= thr
+    labels, n = ndimage.label(mask, structure=np.ones((3, 3), dtype=bool))
+    h, w = labels.shape
+    col_shift = np.zeros(n + 1)
+    if rmap.full_circle and n:
+        labels, col_shift = _merge_across_seam(labels, w)
+    if n == 0:
+        return DetectionResult((), (), thr, rmap.step_deg)
+    flat = labels.ravel()
+    sel = flat > 0
+    lab = flat[sel]
+    rows, cols = np.divmod(np.nonzero(sel)[0], w)
+    cols = cols + col_shift[lab]  # seam-merged blobs continue past the last column
+    weight = img.ravel()[sel] - thr * 0.9
+    nlab = int(labels.max()) + 1
+    sw = np.bincount(lab, weight, nlab)
+    n_cells = np.bincount(lab, minlength=nlab)
+    r_c = np.bincount(lab, weight * rows, nlab) / np.where(sw > 0, sw, 1)
+    c_c = np.bincount(lab, weight * cols, nlab) / np.where(sw > 0, sw, 1)
+    rng_vals = np.nan_to_num(rmap.range_m.ravel()[sel], nan=0.0)
+    valid_r = rng_vals > 0
+    rng = np.bincount(lab, rng_vals * valid_r, nlab) / np.maximum(np.bincount(lab, valid_r.astype(float), nlab), 1)
+    peak = np.zeros(nlab)
+    np.maximum.at(peak, lab, img.ravel()[sel])
+    row_lo = np.full(nlab, np.inf)
+    row_hi = np.full(nlab, -np.inf)
+    col_lo = np.full(nlab, np.inf)
+    col_hi = np.full(nlab, -np.inf)
+    np.minimum.at(row_lo, lab, rows)
+    np.maximum.at(row_hi, lab, rows)
+    np.minimum.at(col_lo, lab, cols)
+    np.maximum.at(col_hi, lab, cols)
+    theta, phi = rmap.cell_angles(r_c, c_c)
+    sin_t = np.sin(np.radians(theta))
+    size = np.maximum(row_hi - row_lo + 1, (col_hi - col_lo + 1) * sin_t) * rmap.step_deg
+    kept, rejected = [], []
+    for k in range(1, nlab):
+        if n_cells[k] == 0 or rng[k] <= 0:
+            continue
+        expected = float(np.degrees(target_diameter_m / rng[k]))
+        footprint = float(np.degrees(footprint_mrad * 1e-3 + 0.007 / rng[k]))
+        allowed = max_size_factor * (expected + footprint + 2 * rmap.step_deg)
+        fit = float(np.exp(-(max(0.0, size[k] - expected - footprint) / (expected + rmap.step_deg)) ** 2))
+        det = Detection(
+            theta_deg=float(theta[k]), phi_deg=float(phi[k]), range_m=float(rng[k]),
+            xyz_socs=tuple(float(v) for v in rmap.xyz_of(theta[k], phi[k], rng[k])),
+            peak_intensity=float(peak[k]), n_cells=int(n_cells[k]), size_deg=float(size[k]),
+            expected_size_deg=expected, score=float(min(1.0, peak[k]) * fit),
+        )
+        (kept if size[k] <= allowed else rejected).append(det)
+    kept.sort(key=lambda d: -d.score)
+    return DetectionResult(tuple(kept), tuple(rejected), thr, rmap.step_deg)
+
+
+def _merge_across_seam(labels: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """Join blobs touching both the first and last column of a full-circle map.
+
+    Returns relabelled labels and, per label, the column shift (0 or width) that
+    makes the merged blob's columns continuous.
+    """
+    n = int(labels.max())
+    parent = np.arange(n + 1)
+
+    def find(a):
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    first, last = labels[:, 0], labels[:, -1]
+    for r in range(labels.shape[0]):
+        for dr in (-1, 0, 1):
+            rr = r + dr
+            if 0 <= rr < labels.shape[0] and last[r] and first[rr]:
+                a, b = find(last[r]), find(first[rr])
+                if a != b:
+                    parent[b] = a
+    shift = np.zeros(n + 1)
+    roots = np.array([find(k) for k in range(n + 1)])
+    for k in range(1, n + 1):
+        if roots[k] != k:  # merged: its columns (near column 0) continue after the last column
+            shift[k] = width
+    return roots[labels], shift

@@ -1,0 +1,61 @@
+"""Figures of the LiDAR pipeline (matplotlib, no GUI toolkit): reflectance maps with detections and ROIs."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Optional, Sequence
+
+import numpy as np
+
+
+def reflectance_map_figure(rmap, *, detections=None, identification=None, rois: Optional[Sequence] = None,
+                           title: str = "Reflectance map"):
+    """A matplotlib Figure of the map (max intensity) with angle axes, a colour bar, detections and ROIs."""
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Rectangle
+
+    fig = Figure(figsize=(11, 4.8), dpi=110, layout="constrained")
+    ax = fig.add_subplot(1, 1, 1)
+    img = np.ma.masked_invalid(rmap.max_intensity)
+    extent = rmap.extent_deg
+    import matplotlib
+
+    cmap = matplotlib.colormaps["gray"].with_extremes(bad="#dfe9f5")  # light blue: no return (sky)
+    im = ax.imshow(img, cmap=cmap, vmin=0, vmax=1, extent=extent, aspect="auto", interpolation="nearest")
+    ax.invert_xaxis()  # azimuth grows counter-clockwise: to the left, as the scanner sees the scene
+    fig.colorbar(im, ax=ax, label="normalised intensity (max per cell)", pad=0.01)
+    ax.set_xlabel("azimuth phi [deg]")
+    ax.set_ylabel("zenith angle theta [deg]")
+    ax.set_title(title)
+
+    def unwrap(phi):  # into the map's continuous azimuth range
+        return rmap.phi0_deg + np.mod(np.asarray(phi) - rmap.phi0_deg, 360.0)
+
+    if detections is not None:
+        for k, d in enumerate(detections.detections):
+            ax.plot(unwrap(d.phi_deg), d.theta_deg, "o", mfc="none", mec="tab:orange", ms=9, mew=1.2)
+    if identification is not None:
+        for m in identification.matches:
+            from lidar.angles import spherical_from_xyz
+
+            t, p, _ = spherical_from_xyz(np.array([m.xyz_socs]))
+            colour = "tab:cyan" if m.group == "reference" else "tab:green"
+            ax.annotate(m.id + (" (pred.)" if m.predicted else ""), (unwrap(p[0]), t[0]), color=colour,
+                        fontsize=8, xytext=(4, -10), textcoords="offset points")
+            if m.predicted:
+                ax.plot(unwrap(p[0]), t[0], "x", color="tab:red", ms=8)
+    if rois:
+        for r in rois:
+            w = r.window
+            x0 = unwrap(w.phi_min_deg)
+            ax.add_patch(Rectangle((x0, w.theta_min_deg), w.phi_max_deg - w.phi_min_deg,
+                                   w.theta_max_deg - w.theta_min_deg, fill=False, ec="tab:red", lw=0.8))
+    return fig
+
+
+def save_figure(fig, path: str | os.PathLike) -> Path:
+    p = Path(path)
+    tmp = p.with_name(f".{p.stem}.part{p.suffix}")
+    fig.savefig(tmp)
+    os.replace(tmp, p)
+    return p

@@ -1,0 +1,175 @@
+"""Identification of detected reflectors against the campaign layout.
+
+Only rigid-invariant geometry is used: congruent triangles of pairwise
+distances propose a correspondence, a rigid fit (Kabsch) scores it by the
+number of layout reflectors it explains, and the best one is refined on all
+matches. The layout may be in any frame (design drawings, a total station).
+Unmatched detections and layout reflectors without a detection are reported;
+the latter get a position predicted from the fit, marked as predicted.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from itertools import combinations
+from typing import Optional
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from lidar.errors import InputError, ProcessingError
+from lidar.layout import Layout
+from lidar.rigid import apply, fit_rigid, pairwise_distances
+
+
+@dataclass(frozen=True)
+class TargetMatch:
+    """One layout reflector in this scan.
+
+    ``detection`` is the index of the matched detection, or None when the
+    position is ``predicted`` from the layout fit (not resolved or not seen).
+    """
+
+    id: str
+    group: str
+    xyz_socs: tuple[float, float, float]
+    detection: Optional[int]
+    residual_m: Optional[float]
+
+    @property
+    def predicted(self) -> bool:
+        return self.detection is None
+
+
+@dataclass(frozen=True, eq=False)
+class Identification:
+    """Result of matching detections to the layout.
+
+    Attributes
+    ----------
+    matches : tuple of TargetMatch, in layout order
+    rotation, translation : layout frame -> scanner frame
+    rms_m : float
+        RMS residual of the matched reflectors after the fit.
+    extra_detections : tuple of int
+        Detections that match no layout reflector (other bright objects).
+    """
+
+    matches: tuple[TargetMatch, ...]
+    rotation: np.ndarray
+    translation: np.ndarray
+    rms_m: float
+    extra_detections: tuple[int, ...]
+
+    @property
+    def missing(self) -> tuple[str, ...]:
+        return tuple(m.id for m in self.matches if m.predicted)
+
+    def match(self, reflector_id: str) -> TargetMatch:
+        for m in self.matches:
+            if m.id == reflector_id:
+                return m
+        raise InputError(f"unknown reflector {reflector_id!r}")
+
+
+def _seed_triangles(xyz: np.ndarray, limit: int) -> list[tuple[int, int, int]]:
+    """Well-conditioned layout triangles (large, not thin), best first."""
+    n = len(xyz)
+    scored = []
+    for a, b, c in combinations(range(n), 3):
+        ab, ac = xyz[b] - xyz[a], xyz[c] - xyz[a]
+        area = 0.5 * np.linalg.norm(np.cross(ab, ac))
+        per = np.linalg.norm(ab) + np.linalg.norm(ac) + np.linalg.norm(xyz[c] - xyz[b])
+        if per > 0:
+            scored.append((area / per ** 2, (a, b, c)))
+    scored.sort(key=lambda s: -s[0])
+    # spread the seeds over many reflectors so a few missing ones cannot spoil all of them
+    out, used = [], {}
+    for _, tri in scored:
+        if all(used.get(k, 0) < max(3, limit // max(n, 1) + 1) for k in tri):
+            out.append(tri)
+            for k in tri:
+                used[k] = used.get(k, 0) + 1
+        if len(out) >= limit:
+            break
+    return out
+
+
+def _assign(pred: np.ndarray, det: np.ndarray, tol: float) -> list[tuple[int, int, float]]:
+    """Unique layout->detection pairs closer than ``tol`` (optimal assignment)."""
+    d = np.linalg.norm(pred[:, None, :] - det[None, :, :], axis=2)
+    cost = np.where(d <= tol, d, 1e6)
+    rows, cols = linear_sum_assignment(cost)
+    return [(int(r), int(c), float(d[r, c])) for r, c in zip(rows, cols) if d[r, c] <= tol]
+
+
+def identify_reflectors(detections_xyz: np.ndarray, layout: Layout, *, tolerance_m: float = 0.15,
+                        max_seeds: int = 60) -> Identification:
+    """Match detections (scanner frame) to the layout (any frame).
+
+    Parameters
+    ----------
+    detections_xyz : (M, 3) float64 array
+        Approximate detection positions in the scanner frame, metres.
+    layout : Layout
+    tolerance_m : float, keyword-only
+        How far apart matched distances and positions may be (layout accuracy
+        plus detection accuracy). Default 0.15 m.
+    max_seeds : int, keyword-only
+        Layout triangles tried as seeds. Default 60.
+
+    Returns
+    -------
+    Identification
+
+    Raises
+    ------
+    ProcessingError
+        Fewer than 3 detections, or no three detections congruent with the layout.
+    """
+    det = np.asarray(detections_xyz, dtype=np.float64).reshape(-1, 3)
+    lay = layout.xyz
+    if not np.all(np.isfinite(det)):
+        raise InputError("detection positions must be finite")
+    if len(det) < 3:
+        raise ProcessingError(f"only {len(det)} reflector(s) detected; at least 3 are needed to identify them "
+                              "(check the coarse scan covers the bridge, or lower the detection threshold)")
+    d_det = pairwise_distances(det)
+    d_lay = pairwise_distances(lay)
+    best = None
+    iu = np.triu_indices(len(det), 1)
+    for a, b, c in _seed_triangles(lay, max_seeds):
+        ok_ab = np.abs(d_det[iu] - d_lay[a, b]) <= tolerance_m
+        for i0, j0 in zip(iu[0][ok_ab], iu[1][ok_ab]):
+            for i, j in ((i0, j0), (j0, i0)):
+                ks = np.nonzero((np.abs(d_det[i] - d_lay[a, c]) <= tolerance_m)
+                                & (np.abs(d_det[j] - d_lay[b, c]) <= tolerance_m))[0]
+                for k in ks:
+                    if k in (i, j):
+                        continue
+                    r, t = fit_rigid(lay[[a, b, c]], det[[i, j, k]])
+                    pairs = _assign(apply(r, t, lay), det, tolerance_m)
+                    score = (len(pairs), -sum(p[2] for p in pairs))
+                    if best is None or score > best[0]:
+                        best = (score, r, t)
+        if best is not None and best[0][0] >= min(len(lay), len(det)):
+            break
+    if best is None or best[0][0] < 3:
+        raise ProcessingError("the detections do not match the layout: no three detected reflectors have the "
+                              "layout's distances (check the layout coordinates, the target diameter and the coarse scan)")
+    _, r, t = best
+    for _ in range(4):  # refine on all matches
+        pairs = _assign(apply(r, t, lay), det, tolerance_m)
+        r, t = fit_rigid(lay[[p[0] for p in pairs]], det[[p[1] for p in pairs]])
+    pairs = _assign(apply(r, t, lay), det, tolerance_m)
+    by_layout = {p[0]: p for p in pairs}
+    pred = apply(r, t, lay)
+    matches = []
+    for k, rid in enumerate(layout.ids):
+        if k in by_layout:
+            _, di, res = by_layout[k]
+            matches.append(TargetMatch(rid, layout.groups[k], tuple(float(v) for v in det[di]), di, res))
+        else:
+            matches.append(TargetMatch(rid, layout.groups[k], tuple(float(v) for v in pred[k]), None, None))
+    used = {p[1] for p in pairs}
+    rms = float(np.sqrt(np.mean([p[2] ** 2 for p in pairs])))
+    return Identification(tuple(matches), r, t, rms, tuple(i for i in range(len(det)) if i not in used))

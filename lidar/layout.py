@@ -1,0 +1,152 @@
+"""The campaign's reflector layout: ids, groups and approximate coordinates (any frame)."""
+from __future__ import annotations
+
+import csv
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+from lidar.errors import InputError
+
+GROUPS = ("reference", "measurement")
+REQUIRED_COLUMNS = ("id", "group", "x", "y", "z")
+
+
+@dataclass(frozen=True, eq=False)
+class Layout:
+    """Reflector layout.
+
+    Attributes
+    ----------
+    ids : tuple of str
+    groups : tuple of {"reference", "measurement"}
+    xyz : (N, 3) float64 array
+        Approximate coordinates (a few cm) in any frame (design drawings, a total station...).
+    diameters_m : (N,) float64 array
+    """
+
+    ids: tuple[str, ...]
+    groups: tuple[str, ...]
+    xyz: np.ndarray
+    diameters_m: np.ndarray
+
+    def __post_init__(self) -> None:
+        n = len(self.ids)
+        xyz = np.asarray(self.xyz, dtype=np.float64).reshape(-1, 3)
+        if xyz.shape[0] != n or len(self.groups) != n or np.shape(self.diameters_m) != (n,):
+            raise InputError("layout: ids, groups, coordinates and diameters must have the same length")
+        if len(set(self.ids)) != n:
+            dup = sorted({i for i in self.ids if self.ids.count(i) > 1})
+            raise InputError(f"layout: duplicate reflector ids {dup}")
+        bad = [g for g in self.groups if g not in GROUPS]
+        if bad:
+            raise InputError(f"layout: group must be 'reference' or 'measurement', got {bad[0]!r}")
+        if not np.all(np.isfinite(xyz)):
+            raise InputError("layout: coordinates must be finite numbers")
+        object.__setattr__(self, "xyz", xyz)
+        object.__setattr__(self, "diameters_m", np.asarray(self.diameters_m, dtype=np.float64))
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    def index(self, reflector_id: str) -> int:
+        try:
+            return self.ids.index(reflector_id)
+        except ValueError:
+            raise InputError(f"unknown reflector {reflector_id!r}; the layout has {', '.join(self.ids)}") from None
+
+    def group_of(self, reflector_id: str) -> str:
+        return self.groups[self.index(reflector_id)]
+
+    def ids_in(self, group: str) -> tuple[str, ...]:
+        return tuple(i for i, g in zip(self.ids, self.groups) if g == group)
+
+    def subset(self, ids) -> "Layout":
+        idx = [self.index(i) for i in ids]
+        return Layout(tuple(self.ids[k] for k in idx), tuple(self.groups[k] for k in idx), self.xyz[idx],
+                      self.diameters_m[idx])
+
+    def to_rows(self) -> list[dict]:
+        return [{"id": i, "group": g, "x": float(p[0]), "y": float(p[1]), "z": float(p[2]),
+                 "diameter_mm": float(d * 1000)} for i, g, p, d in zip(self.ids, self.groups, self.xyz,
+                                                                       self.diameters_m)]
+
+
+def read_layout_csv(path: str | os.PathLike, *, default_diameter_m: float = 0.05) -> Layout:
+    """Read ``layout.csv``: columns ``id,group,x,y,z`` and optionally ``diameter_mm``.
+
+    Raises
+    ------
+    InputError
+        Naming the file, the line and the problem (missing column, bad group,
+        non-numeric or NaN coordinate, duplicate id, too few reflectors).
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"{p}: layout file not found")
+    try:
+        text = p.read_text(encoding="utf-8-sig")
+    except (UnicodeDecodeError, OSError) as exc:
+        raise InputError(f"{p}: cannot read the layout as text ({exc})") from exc
+    reader = csv.DictReader(text.splitlines())
+    fields = [f.strip().lower() for f in (reader.fieldnames or [])]
+    missing = [c for c in REQUIRED_COLUMNS if c not in fields]
+    if missing:
+        raise InputError(f"{p}: layout is missing column(s) {', '.join(missing)}; expected id,group,x,y,z[,diameter_mm]")
+    ids, groups, xyz, diam = [], [], [], []
+    for line_no, row in enumerate(reader, start=2):
+        row = {(k or "").strip().lower(): (v or "").strip() for k, v in row.items()}
+        if not any(row.values()):
+            continue
+        rid, group = row["id"], row["group"].lower()
+        if not rid:
+            raise InputError(f"{p}, line {line_no}: empty reflector id")
+        if group not in GROUPS:
+            raise InputError(f"{p}, line {line_no}: group must be 'reference' or 'measurement', got {row['group']!r}")
+        try:
+            coords = [float(row[c]) for c in ("x", "y", "z")]
+            d = float(row["diameter_mm"]) / 1000 if row.get("diameter_mm") else default_diameter_m
+        except ValueError:
+            raise InputError(f"{p}, line {line_no}: coordinates and diameter must be numbers") from None
+        if not np.all(np.isfinite(coords)) or not np.isfinite(d) or d <= 0:
+            raise InputError(f"{p}, line {line_no}: coordinates must be finite and the diameter positive")
+        if rid in ids:
+            raise InputError(f"{p}, line {line_no}: duplicate reflector id {rid!r}")
+        ids.append(rid)
+        groups.append(group)
+        xyz.append(coords)
+        diam.append(d)
+    layout = Layout(tuple(ids), tuple(groups), np.array(xyz, dtype=np.float64).reshape(-1, 3), np.array(diam))
+    check_layout(layout, source=str(p))
+    return layout
+
+
+def check_layout(layout: Layout, *, source: str = "layout") -> None:
+    """A usable layout has at least 2 reference and 3 measurement reflectors."""
+    n_ref = len(layout.ids_in("reference"))
+    n_meas = len(layout.ids_in("measurement"))
+    if n_ref < 2:
+        raise InputError(f"{source}: needs at least 2 reference reflectors (found {n_ref})")
+    if n_meas < 3:
+        raise InputError(f"{source}: needs at least 3 measurement reflectors to define the deck plane (found {n_meas})")
+
+
+def write_layout_csv(layout: Layout, path: str | os.PathLike) -> Path:
+    p = Path(path)
+    with open(p, "w", newline="", encoding="utf-8") as fh:
+        w = csv.DictWriter(fh, fieldnames=["id", "group", "x", "y", "z", "diameter_mm"])
+        w.writeheader()
+        for row in layout.to_rows():
+            w.writerow({k: (f"{v:.4f}" if isinstance(v, float) else v) for k, v in row.items()})
+    return p
+
+
+def layout_from_model(model, *, noise_m: float = 0.0, rng: Optional[np.random.Generator] = None) -> Layout:
+    """The layout of a simulated bridge, optionally with design-drawing-like errors."""
+    rng = rng or np.random.default_rng(0)
+    xyz = np.array([t.centre_m for t in model.targets]) + rng.normal(0, noise_m, (len(model.targets), 3))
+    return Layout(tuple(t.id for t in model.targets), tuple(t.group for t in model.targets), xyz,
+                  np.array([t.diameter_m for t in model.targets]))

@@ -1,0 +1,69 @@
+"""The reflector pipeline end to end for one epoch: coarse scan -> plan -> fine scans -> centroids.
+
+Each step is also available on its own in its module; these functions only chain them.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping, Optional
+
+import numpy as np
+
+from lidar.centroid import TargetCentroid, centroids_from_scan
+from lidar.detection import DetectionResult, detect_reflectors
+from lidar.errors import InputError
+from lidar.identification import Identification, identify_reflectors
+from lidar.layout import Layout
+from lidar.plan import PlanTarget, ScanPlan, incidence_from_map, plan_fine_scans
+from lidar.progress import ProgressCallback, report, scaled
+from lidar.reflectance_map import ReflectanceMap, reflectance_map
+from lidar.scan import Scan
+from lidar.scanner_profile import VZ1000, ScannerProfile
+
+
+@dataclass(frozen=True, eq=False)
+class CoarseAnalysis:
+    """What the coarse scan of an epoch tells: map, detections, identification, incidence per target."""
+
+    reflectance_map: ReflectanceMap
+    detections: DetectionResult
+    identification: Identification
+    incidence_cos: Mapping[str, Optional[float]]
+
+
+def _need_intensity(scan: Scan, what: str) -> None:
+    if scan.intensity is None:
+        raise InputError(f"{scan.source or scan.name}: the scan has no intensity values; {what} needs them "
+                         "(export the scan with intensity/reflectance)")
+
+
+def analyse_coarse(scan: Scan, layout: Layout, *, step_deg: Optional[float] = None, threshold: Optional[float] = None,
+                   tolerance_m: float = 0.15, progress: Optional[ProgressCallback] = None) -> CoarseAnalysis:
+    """Reflectance map, detection and identification of a coarse scan."""
+    _need_intensity(scan, "reflector detection")
+    rmap = reflectance_map(scan.xyz_socs, scan.intensity, step_deg=step_deg, progress=scaled(progress, 0, 0.8))
+    diameter = float(np.median(layout.diameters_m))
+    det = detect_reflectors(rmap, target_diameter_m=diameter, threshold=threshold)
+    report(progress, 0.9, "identifying reflectors")
+    ident = identify_reflectors(det.xyz(), layout, tolerance_m=tolerance_m)
+    inc = {m.id: incidence_from_map(rmap, m.xyz_socs) for m in ident.matches}
+    report(progress, 1.0, "coarse scan analysed")
+    return CoarseAnalysis(rmap, det, ident, inc)
+
+
+def plan_from_coarse(coarse: CoarseAnalysis, layout: Layout, *, epoch: str = "", profile: ScannerProfile = VZ1000,
+                     min_points: int = 1000, budget_seconds: float = 3600.0, margin_m: float = 0.10) -> ScanPlan:
+    """Fine-scan plan for every layout reflector (detected or predicted)."""
+    targets = [PlanTarget(m.id, m.group, m.xyz_socs, float(layout.diameters_m[layout.index(m.id)]), m.predicted,
+                          coarse.incidence_cos.get(m.id)) for m in coarse.identification.matches]
+    return plan_fine_scans(targets, epoch=epoch, profile=profile, min_points=min_points,
+                           budget_seconds=budget_seconds, margin_m=margin_m)
+
+
+def measure_targets(fine: Scan, plan: ScanPlan, layout: Optional[Layout] = None, *,
+                    profile: Optional[ScannerProfile] = None) -> dict[str, TargetCentroid]:
+    """Centroids of every planned target from the epoch's fine scans (concatenated)."""
+    _need_intensity(fine, "the target centroids")
+    diam = None if layout is None else {i: float(d) for i, d in zip(layout.ids, layout.diameters_m)}
+    return centroids_from_scan(fine.xyz_socs, fine.intensity, plan.rois, diameters_m=diam,
+                               profile=profile or plan.profile)

@@ -1,0 +1,294 @@
+"""Fine-scan planning: one angular window (ROI) per target, with steps that give it enough points.
+
+The plan JSON is a contract shared with other tools::
+
+    {"epoch": ..., "scanner_profile": ..., "total_seconds": ...,
+     "rois": [{"reflector", "group", "phi_min_deg", "phi_max_deg", "theta_min_deg", "theta_max_deg",
+               "phi_step_deg", "theta_step_deg", "range_m", "expected_points", "expected_seconds"}]}
+
+``phi_min_deg < phi_max_deg`` always (a window across 0 deg starts below 0).
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Optional, Sequence
+
+import numpy as np
+
+from lidar.angles import AngularWindow, spherical_from_xyz, window_around
+from lidar.errors import InputError
+from lidar.reflectance_map import ReflectanceMap
+from lidar.scanner_profile import VZ1000, ScannerProfile
+
+PLAN_FORMAT_VERSION = 1
+DEFAULT_INCIDENCE_COS = 0.6  # used when the surface around a target cannot be measured
+
+
+@dataclass(frozen=True)
+class PlanTarget:
+    """What the planner needs to know of one target (scanner frame)."""
+
+    id: str
+    group: str
+    xyz_socs: tuple[float, float, float]
+    diameter_m: float = 0.05
+    predicted: bool = False
+    incidence_cos: Optional[float] = None
+
+
+@dataclass(frozen=True)
+class RoiPlan:
+    """The fine-scan window of one target and what it is expected to deliver."""
+
+    reflector: str
+    group: str
+    window: AngularWindow
+    range_m: float
+    incidence_deg: float
+    expected_points: int
+    expected_target_points: int
+    expected_seconds: float
+    predicted: bool = False
+    notes: tuple[str, ...] = ()
+
+    def to_json(self) -> dict:
+        w = self.window
+        return {
+            "reflector": self.reflector, "group": self.group,
+            "phi_min_deg": round(w.phi_min_deg, 6), "phi_max_deg": round(w.phi_max_deg, 6),
+            "theta_min_deg": round(w.theta_min_deg, 6), "theta_max_deg": round(w.theta_max_deg, 6),
+            "phi_step_deg": w.phi_step_deg, "theta_step_deg": w.theta_step_deg,
+            "range_m": round(self.range_m, 4), "expected_points": int(self.expected_points),
+            "expected_seconds": round(self.expected_seconds, 2),
+            "expected_target_points": int(self.expected_target_points),
+            "incidence_deg": round(self.incidence_deg, 2), "predicted": self.predicted, "notes": list(self.notes),
+        }
+
+    @classmethod
+    def from_json(cls, d: dict) -> "RoiPlan":
+        try:
+            w = AngularWindow(float(d["phi_min_deg"]), float(d["phi_max_deg"]), float(d["theta_min_deg"]),
+                              float(d["theta_max_deg"]), float(d["phi_step_deg"]), float(d["theta_step_deg"]))
+            return cls(str(d["reflector"]), str(d.get("group", "")), w, float(d["range_m"]),
+                       float(d.get("incidence_deg", float("nan"))), int(d.get("expected_points", 0)),
+                       int(d.get("expected_target_points", 0)), float(d.get("expected_seconds", 0.0)),
+                       bool(d.get("predicted", False)), tuple(d.get("notes", ())))
+        except KeyError as exc:
+            raise InputError(f"plan ROI is missing the field {exc.args[0]!r}") from None
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"plan ROI has a malformed value ({exc})") from None
+
+
+@dataclass(frozen=True)
+class ScanPlan:
+    """Fine-scan plan of one epoch."""
+
+    epoch: str
+    profile: ScannerProfile
+    rois: tuple[RoiPlan, ...]
+    min_points: int
+    points_per_target: int
+    budget_seconds: float
+    warnings: tuple[str, ...] = ()
+
+    @property
+    def total_seconds(self) -> float:
+        return float(sum(r.expected_seconds for r in self.rois))
+
+    def roi(self, reflector: str) -> RoiPlan:
+        for r in self.rois:
+            if r.reflector == reflector:
+                return r
+        raise InputError(f"the plan has no window for reflector {reflector!r}")
+
+    def to_json(self) -> dict:
+        return {
+            "format_version": PLAN_FORMAT_VERSION, "epoch": self.epoch, "scanner_profile": self.profile.name,
+            "scanner": self.profile.to_dict(), "total_seconds": round(self.total_seconds, 2),
+            "budget_seconds": self.budget_seconds, "min_points": self.min_points,
+            "points_per_target": self.points_per_target, "warnings": list(self.warnings),
+            "rois": [r.to_json() for r in self.rois],
+        }
+
+    @classmethod
+    def from_json(cls, d: dict, *, source: str = "plan") -> "ScanPlan":
+        if not isinstance(d, dict) or "rois" not in d:
+            raise InputError(f"{source}: not a BridgeSurvey plan (no 'rois' list)")
+        version = int(d.get("format_version", 1))
+        if version > PLAN_FORMAT_VERSION:
+            raise InputError(f"{source}: plan format {version} is newer than this BridgeSurvey understands "
+                             f"({PLAN_FORMAT_VERSION}); update BridgeSurvey")
+        profile = ScannerProfile.from_dict(d["scanner"]) if isinstance(d.get("scanner"), dict) else VZ1000
+        try:
+            rois = tuple(RoiPlan.from_json(r) for r in d["rois"])
+        except InputError as exc:
+            raise InputError(f"{source}: {exc}") from None
+        return cls(str(d.get("epoch", "")), profile, rois, int(d.get("min_points", 1000)),
+                   int(d.get("points_per_target", d.get("min_points", 1000))),
+                   float(d.get("budget_seconds", 3600.0)), tuple(d.get("warnings", ())))
+
+    def save(self, path: str | os.PathLike) -> Path:
+        p = Path(path)
+        tmp = p.with_name(f".{p.name}.part")
+        tmp.write_text(json.dumps(self.to_json(), indent=2))
+        os.replace(tmp, p)
+        return p
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "ScanPlan":
+        p = Path(path)
+        try:
+            d = json.loads(p.read_text())
+        except FileNotFoundError:
+            raise InputError(f"{p}: plan file not found") from None
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise InputError(f"{p}: not a JSON plan ({exc})") from None
+        return cls.from_json(d, source=str(p))
+
+
+def incidence_from_map(rmap: ReflectanceMap, xyz_socs, *, radius_m: float = 0.35) -> Optional[float]:
+    """|cos| of the incidence angle at a target, from a plane fitted to the map's cells around it."""
+    xyz = np.asarray(xyz_socs, dtype=np.float64)
+    theta, phi, rng = spherical_from_xyz(xyz[None])
+    row, col = rmap.cells_of(theta, phi)
+    half = max(2, int(np.degrees(radius_m / rng[0]) / rmap.step_deg) + 1)
+    r0, c0 = int(round(row[0])), int(round(col[0]))
+    h, w = rmap.shape
+    rows = np.arange(max(0, r0 - half), min(h, r0 + half + 1))
+    cols = np.arange(max(0, c0 - 2 * half), min(w, c0 + 2 * half + 1))
+    if rows.size == 0 or cols.size == 0:
+        return None
+    rr, cc = np.meshgrid(rows, cols, indexing="ij")
+    ranges = rmap.range_m[rr, cc]
+    ok = np.isfinite(ranges)
+    if np.count_nonzero(ok) < 8:
+        return None
+    t, p = rmap.cell_angles(rr[ok], cc[ok])
+    pts = rmap.xyz_of(t, p, ranges[ok])
+    near = np.linalg.norm(pts - xyz, axis=1) <= radius_m
+    if np.count_nonzero(near) < 8:
+        return None
+    pts = pts[near]
+    _, _, vt = np.linalg.svd(pts - pts.mean(axis=0), full_matrices=False)
+    normal = vt[2]
+    view = xyz / np.linalg.norm(xyz)
+    return float(abs(normal @ view))
+
+
+def choose_steps(omega_sr: float, sin_theta: float, n_points: float, profile: ScannerProfile) -> tuple[float, float]:
+    """(theta_step, phi_step) in degrees giving ``n_points`` on a target of solid angle ``omega_sr``.
+
+    Sampling is made spatially even (``theta_step == phi_step * sin(theta)``)
+    within the instrument's finest steps; steps are rounded down to 0.0001 deg.
+    """
+    cell = omega_sr / max(n_points, 1.0)  # rad^2 per point: dtheta * dphi * sin(theta)
+    s = max(sin_theta, 1e-3)
+    min_t = math.radians(profile.min_theta_step_deg)
+    min_p = math.radians(profile.min_phi_step_deg)
+    dt = math.sqrt(cell)
+    dp = dt / s
+    if dp < min_p:
+        dp = min_p
+        dt = cell / (dp * s)
+    if dt < min_t:
+        dt = min_t
+        dp = max(min_p, cell / (dt * s))
+    def down(v_rad, floor_deg):
+        return max(floor_deg, math.floor(math.degrees(v_rad) * 1e4) / 1e4)
+    return down(dt, profile.min_theta_step_deg), down(dp, profile.min_phi_step_deg)
+
+
+def plan_roi(target: PlanTarget, *, n_points: float, profile: ScannerProfile = VZ1000,
+             margin_m: float = 0.10) -> RoiPlan:
+    """Window and steps for one target."""
+    xyz = np.asarray(target.xyz_socs, dtype=np.float64)
+    theta, phi, rng = spherical_from_xyz(xyz[None])
+    theta, phi, r = float(theta[0]), float(phi[0]), float(rng[0])
+    if not (np.isfinite(r) and r > 0.1):
+        raise InputError(f"reflector {target.id}: position {tuple(xyz)} is not a valid direction from the scanner")
+    notes = []
+    cos_inc = target.incidence_cos
+    if cos_inc is None:
+        cos_inc = DEFAULT_INCIDENCE_COS
+        notes.append("incidence unknown: assumed 53 deg")
+    cos_inc = float(np.clip(cos_inc, 0.05, 1.0))
+    radius = target.diameter_m / 2
+    omega = math.pi * radius ** 2 * cos_inc / r ** 2
+    sin_t = math.sin(math.radians(theta))
+    dt, dp = choose_steps(omega, sin_t, n_points, profile)
+    margin = margin_m * (2.5 if target.predicted else 1.0)
+    half_t = math.degrees(math.atan((radius + margin) / r))
+    half_p = half_t / max(sin_t, 1e-3)
+    window = window_around(theta, phi, half_t, half_p, dt, dp)
+    lo, hi = profile.theta_fov_deg
+    if window.theta_min_deg < lo or window.theta_max_deg > hi:
+        notes.append("window reaches outside the scanner's vertical field of view")
+    rows, cols = window.shape
+    expected_target = omega / (math.radians(dt) * math.radians(dp) * sin_t)
+    if expected_target < n_points * 0.999:
+        notes.append(f"finest steps give only {int(expected_target)} points on the target")
+    seconds = profile.window_seconds(window.phi_max_deg - window.phi_min_deg, dp, dt)
+    if target.predicted:
+        notes.append("position predicted from the layout (not resolved in the coarse scan)")
+    return RoiPlan(target.id, target.group, window, r, math.degrees(math.acos(cos_inc)), rows * cols,
+                   int(round(expected_target)), seconds, target.predicted, tuple(notes))
+
+
+def plan_fine_scans(targets: Sequence[PlanTarget], *, epoch: str = "", profile: ScannerProfile = VZ1000,
+                    min_points: int = 1000, budget_seconds: float = 3600.0, margin_m: float = 0.10) -> ScanPlan:
+    """Plan the fine scans of an epoch.
+
+    Parameters
+    ----------
+    targets : sequence of PlanTarget
+        Every target to scan, in the scanner frame.
+    epoch : str, keyword-only
+    profile : ScannerProfile, keyword-only
+        Default: Riegl VZ-1000.
+    min_points : int, keyword-only
+        Points each target should receive. Default 1000.
+    budget_seconds : float, keyword-only
+        Time available for the fine scans. Default 3600 s (60 min). When the
+        plan would take longer, the points per target are reduced evenly until
+        it fits, and the plan says so in its warnings.
+    margin_m : float, keyword-only
+        Background around each target inside its window (each side), metres;
+        2.5x for predicted targets. Default 0.10 m.
+
+    Returns
+    -------
+    ScanPlan
+    """
+    if min_points < 10:
+        raise InputError(f"min_points must be at least 10, got {min_points}")
+    if not budget_seconds > 0:
+        raise InputError("the time budget must be positive")
+    if not targets:
+        raise InputError("nothing to plan: no targets")
+    n = float(min_points)
+    warnings: list[str] = []
+    for _ in range(30):
+        rois = [plan_roi(t, n_points=n, profile=profile, margin_m=margin_m) for t in targets]
+        total = sum(r.expected_seconds for r in rois)
+        if total <= budget_seconds * 1.0001:
+            break
+        overhead = profile.window_overhead_s * len(rois)
+        if overhead >= budget_seconds:
+            warnings.append(f"the budget of {budget_seconds:.0f} s does not even cover moving between "
+                            f"{len(rois)} windows")
+            break
+        factor = (budget_seconds - overhead) / max(total - overhead, 1e-9)
+        new_n = max(50.0, n * factor * 0.98)
+        if new_n >= n - 0.5:
+            break
+        n = new_n
+    if n < min_points:
+        warnings.append(f"over the time budget with {min_points} points per target: reduced to about "
+                        f"{int(n)} points per target to fit {budget_seconds / 60:.0f} min")
+    if total > budget_seconds * 1.0001:
+        warnings.append(f"the plan takes {total / 60:.1f} min, over the budget of {budget_seconds / 60:.0f} min")
+    return ScanPlan(epoch, profile, tuple(rois), int(min_points), int(n), float(budget_seconds), tuple(warnings))
