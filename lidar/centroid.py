@@ -29,6 +29,12 @@ FLAG_SATURATED = "saturated"
 FLAG_LOW_SEPARABILITY = "low_separability"
 FLAG_SIZE = "size_mismatch"
 FLAG_OFF_EXPECTED = "off_expected_position"
+FLAG_LOW_CONTRAST = "no_bright_target"
+FLAG_NOT_COMPACT = "no_compact_target"
+
+#: A retro-reflector is several times brighter than its background; below this contrast
+#: ((bright - dark) / (bright + dark) of the class means) the window holds no target.
+MIN_CONTRAST = 0.3
 
 
 @dataclass(frozen=True, eq=False)
@@ -99,9 +105,13 @@ def otsu_threshold(values: np.ndarray, bins: int = 256) -> tuple[float, float]:
         between = (mt * w0 / w0[-1] - m0) ** 2 / (w0 * w1) * w0[-1]
     between = np.nan_to_num(between[:-1])
     k = int(np.argmax(between))
+    # An empty gap between the classes is a plateau of equal scores: take its middle, not its first bin.
+    end = k
+    while end + 1 < between.size and between[end + 1] >= between[k] * (1 - 1e-12):
+        end += 1
     total = float(np.var(v)) * v.size
     sep = float(between[k] / total) if total > 0 else 0.0
-    return float(edges[k + 1]), min(1.0, sep)
+    return float(0.5 * (edges[k + 1] + edges[end + 1])), min(1.0, sep)
 
 
 def _not_found(reflector: str, n_window: int, threshold=float("nan"), sep=0.0, extra=()) -> TargetCentroid:
@@ -166,14 +176,27 @@ def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: s
     bright = np.nonzero(inten > thr)[0]
     if bright.size < min_points:
         return _not_found(reflector, n_window, thr, sep)
+    hi, lo = float(inten[bright].mean()), float(inten[inten <= thr].mean()) if bright.size < n_window else 0.0
+    if (hi - lo) / max(hi + lo, 1e-9) < MIN_CONTRAST:
+        return _not_found(reflector, n_window, thr, sep, (FLAG_LOW_CONTRAST,))
     radius = diameter_m / 2
     pts = xyz[bright]
     rng = float(np.median(np.linalg.norm(pts, axis=1)))
-    # point spacing on the target, from nearest neighbours
-    d_nn = cKDTree(pts).query(pts[: min(len(pts), 2000)], k=2)[0][:, 1]
-    spacing = float(np.median(d_nn))
-    eps = float(np.clip(2.5 * spacing, 0.001, 0.02))
-    labels = _clusters(pts, eps)
+    # Cluster in the scanner's angular grid (scaled to metres at the target's range), where
+    # neighbours are one grid step apart whatever the incidence; on a grazing surface adjacent
+    # columns can be a centimetre apart in 3-D.
+    spacing = float(np.sqrt(np.pi * radius ** 2 / max(bright.size, 1)))
+    t_b, p_b, _ = spherical_from_xyz(pts)
+    t_c = float(np.median(t_b))
+    p_c = float(np.median(p_b))
+    uv = np.column_stack([np.radians(t_b - t_c) * rng,
+                          np.radians(np.mod(p_b - p_c + 180.0, 360.0) - 180.0) * np.sin(np.radians(t_c)) * rng])
+    if window is not None:
+        gap = rng * np.radians(max(window.theta_step_deg, window.phi_step_deg * np.sin(np.radians(t_c))))
+    else:
+        gap = 2.0 * float(np.sqrt(np.prod(np.ptp(uv, axis=0) + 1e-6) / bright.size))
+    eps = float(np.clip(2.5 * gap, 0.0005, 0.03))
+    labels = _clusters(uv, eps)
     expected = None if expected_xyz is None else np.asarray(expected_xyz, dtype=np.float64)
     best, best_key = None, None
     for lab in np.unique(labels):
@@ -228,6 +251,8 @@ def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: s
     # doubts
     near = np.linalg.norm(pts - centre, axis=1) <= 3 * diameter_m
     rejected = int(np.count_nonzero(near)) - n
+    if rejected > 2 * n:  # a bright surface, not a disc: the disc is only a cut-out of it
+        return _not_found(reflector, n_window, thr, sep, (FLAG_NOT_COMPACT,))
     if rejected > max(5, 0.03 * n):
         flags.append(FLAG_SECOND_OBJECT)
     if n < 100:

@@ -100,16 +100,17 @@ def detect_reflectors(rmap: ReflectanceMap, *, target_diameter_m: float = 0.05, 
     mask = img >= thr
     labels, n = ndimage.label(mask, structure=np.ones((3, 3), dtype=bool))
     h, w = labels.shape
-    col_shift = np.zeros(n + 1)
-    if rmap.full_circle and n:
-        labels, col_shift = _merge_across_seam(labels, w)
     if n == 0:
         return DetectionResult((), (), thr, rmap.step_deg)
+    original = labels
+    col_shift = np.zeros(n + 1)
+    if rmap.full_circle:
+        labels, col_shift = _merge_across_seam(labels, w)
     flat = labels.ravel()
     sel = flat > 0
     lab = flat[sel]
     rows, cols = np.divmod(np.nonzero(sel)[0], w)
-    cols = cols + col_shift[lab]  # seam-merged blobs continue past the last column
+    cols = cols + col_shift[original.ravel()[sel]]  # seam-merged blobs continue past the last column
     weight = img.ravel()[sel] - thr * 0.9
     nlab = int(labels.max()) + 1
     sw = np.bincount(lab, weight, nlab)

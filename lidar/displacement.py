@@ -36,6 +36,7 @@ FLAG_REFERENCE_MOVED = "reference_moved"
 FLAG_REFERENCE_MISSING = "reference_missing"
 FLAG_REFERENCE_INCONSISTENT = "reference_inconsistent"
 FLAG_NORMAL_FROM_EPOCH = "normal_refitted_in_epoch"
+FLAG_REFERENCE_AMBIGUOUS = "reference_change_ambiguous"
 
 
 @dataclass(frozen=True)
@@ -55,6 +56,7 @@ class ReferenceCheck:
     max_change_m: float
     moved: bool
     missing: bool
+    suspect: bool = False  # one of two targets that may have moved; left out of the reference point
 
 
 @dataclass(frozen=True)
@@ -124,6 +126,29 @@ def _pair_test(base, ep, a, b, tol_abs):
     return c, c > max(tol_abs, 4.0 * np.sqrt(var))
 
 
+def _consistency(base, ep, ids, measurement_ids) -> float:
+    """How well one rigid motion explains the reference targets ``ids`` (RMS residual, metres).
+
+    The motion fitted on the references must also leave the measurement targets
+    where they were across the bridge: the deck moves vertically (and along the
+    span with temperature) but not sideways. This tells a moved pier target from
+    a spurious rotation about the other pier that its move resembles.
+    """
+    a = np.array([base[r].xyz for r in ids])
+    b = np.array([ep[r].xyz for r in ids])
+    rot, t = fit_rigid(a, b)
+    res = [np.sum((a @ rot.T + t - b) ** 2, axis=1)]
+    meas = [m for m in measurement_ids if m in base and m in ep]
+    if len(meas) >= 3:
+        mb = np.array([base[m].xyz for m in meas])
+        me = np.array([ep[m].xyz for m in meas])
+        c = mb - mb.mean(axis=0)
+        _, vecs = np.linalg.eigh(c.T @ c)
+        across = rot @ vecs[:, 1]  # horizontal, across the span (the middle principal axis)
+        res.append(((mb @ rot.T + t - me) @ across) ** 2)
+    return float(np.sqrt(np.mean(np.concatenate(res))))
+
+
 def _loo_residual(base, ep, ids, k, tol_abs):
     """Residual of target ``k`` predicted by the rigid motion of the other reference targets, and its test."""
     others = [r for r in ids if r != k]
@@ -135,14 +160,14 @@ def _loo_residual(base, ep, ids, k, tol_abs):
 
 
 def check_references(baseline: Mapping[str, Observation], epoch: Mapping[str, Observation],
-                     reference_ids: Sequence[str], *, tolerance_m: Optional[float] = None
-                     ) -> tuple[tuple[ReferenceCheck, ...], tuple[str, ...], tuple[str, ...]]:
+                     reference_ids: Sequence[str], *, tolerance_m: Optional[float] = None,
+                     measurement_ids: Sequence[str] = ()) -> tuple[tuple[ReferenceCheck, ...], tuple[str, ...], tuple[str, ...]]:
     """Find reference targets that moved (or were replaced) since the baseline.
 
-    With four or more reference targets, each is predicted from the rigid
-    motion of the others (leave-one-out); the worst one beyond
-    ``max(tolerance, 4 sigma)`` is removed, and the test repeats while four or
-    more remain. With three, the pairwise distances decide (a target whose two
+    With four or more reference targets, the one whose removal leaves the
+    others most consistent with one rigid motion is predicted from them
+    (leave-one-out); if it misses by more than ``max(tolerance, 4 sigma)`` it
+    is removed, and the test repeats while four or more remain. With three, the pairwise distances decide (a target whose two
     distances changed while the third did not). Changes that cannot be pinned
     on one target flag the epoch ``reference_inconsistent``.
 
@@ -157,10 +182,23 @@ def check_references(baseline: Mapping[str, Observation], epoch: Mapping[str, Ob
     tol_abs = 0.001 if tolerance_m is None else float(tolerance_m)
     alive = list(present)
     moved: set[str] = set()
+    ambiguous: set[str] = set()
     while len(alive) >= 4:
-        tests = [(_loo_residual(baseline, epoch, alive, k, tol_abs), k) for k in alive]
-        (dist, bad), worst = max(tests, key=lambda t: t[0][0])
+        # The outlier is the target whose removal leaves the others most consistent with one rigid
+        # motion (its own residual alone can point at an innocent one whose fit it distorted).
+        scores = sorted((_consistency(baseline, epoch, [r for r in alive if r != k], measurement_ids), k)
+                        for k in alive)
+        worst = scores[0][1]
+        dist, bad = _loo_residual(baseline, epoch, alive, worst, tol_abs)
         if not bad:
+            break
+        runner_up = scores[1][1]
+        if scores[1][0] < 1.5 * max(scores[0][0], 1e-5) and _loo_residual(baseline, epoch, alive, runner_up,
+                                                                           tol_abs)[1]:
+            # Two targets explain the change equally well (e.g. a vertical move of one of two targets
+            # on a pier looks like a rotation about the other pier): trust neither.
+            ambiguous.update((worst, runner_up))
+            alive = [r for r in alive if r not in (worst, runner_up)]
             break
         moved.add(worst)
         alive.remove(worst)
@@ -182,21 +220,31 @@ def check_references(baseline: Mapping[str, Observation], epoch: Mapping[str, Ob
             checks.append(ReferenceCheck(r, float("nan"), float("nan"), False, True))
             continue
         ch = [_pair_test(baseline, epoch, r, o, tol_abs)[0] for o in present if o != r] or [float("nan")]
-        checks.append(ReferenceCheck(r, float(np.median(ch)), float(np.max(ch)), r in moved, False))
+        checks.append(ReferenceCheck(r, float(np.median(ch)), float(np.max(ch)), r in moved, False,
+                                     r in ambiguous))
     if any(c.missing for c in checks):
         flags.append(FLAG_REFERENCE_MISSING)
     if moved:
         flags.append(FLAG_REFERENCE_MOVED)
+    if ambiguous:
+        flags.append(FLAG_REFERENCE_AMBIGUOUS)
     return tuple(checks), tuple(alive), tuple(flags)
 
 
-def _vertical_positions(base: dict, ep: dict, refs, meas_base, meas, mode: str):
-    """h at baseline and epoch for ``meas`` ids, given position dicts id -> (3,) array."""
-    s1 = np.mean([base[r] for r in refs], axis=0)
-    sk = np.mean([ep[r] for r in refs], axis=0)
+def _vertical_positions(base: dict, ep: dict, refs, meas_base, meas, mode: str, w_ref: np.ndarray,
+                        w_rot: np.ndarray):
+    """h at baseline and epoch for ``meas`` ids, given position dicts id -> (3,) array.
+
+    The reference point is the same weighted mean of the same targets in both
+    epochs (weights fixed beforehand), so it is the same physical point.
+    """
+    b_ref = np.array([base[r] for r in refs])
+    e_ref = np.array([ep[r] for r in refs])
+    s1 = w_ref @ b_ref
+    sk = w_ref @ e_ref
     g1 = deck_normal(np.array([base[m] for m in meas_base]))
     if mode == "reference":
-        rot, _ = fit_rigid(np.array([base[r] for r in refs]), np.array([ep[r] for r in refs]))
+        rot, _ = fit_rigid(b_ref, e_ref, weights=w_rot)
         gk = rot @ g1
     else:
         gk = deck_normal(np.array([ep[m] for m in meas]))
@@ -206,9 +254,20 @@ def _vertical_positions(base: dict, ep: dict, refs, meas_base, meas, mode: str):
     return h1, hk, gk, sk
 
 
+def reference_weights(base: Mapping[str, Observation], ep: Mapping[str, Observation], refs: Sequence[str],
+                      up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Weights of the reference targets: for the reference point (inverse vertical variance over both
+    epochs) and for the rotation fit (inverse total variance). Each set sums to 1."""
+    var_up = np.array([up @ (base[r].cov + ep[r].cov) @ up for r in refs])
+    var_all = np.array([np.trace(base[r].cov + ep[r].cov) for r in refs])
+    w_ref = 1.0 / np.maximum(var_up, 1e-14)
+    w_rot = 1.0 / np.maximum(var_all, 1e-14)
+    return w_ref / w_ref.sum(), w_rot / w_rot.sum()
+
+
 def compute_displacements(baseline: Mapping[str, object], epoch: Mapping[str, object], groups: Mapping[str, str], *,
-                          normal_mode: str = "reference", moved_tolerance_m: Optional[float] = None
-                          ) -> EpochDisplacements:
+                          normal_mode: str = "reference", moved_tolerance_m: Optional[float] = None,
+                          weighted: bool = True) -> EpochDisplacements:
     """Vertical displacements of an epoch against the baseline epoch.
 
     Parameters
@@ -223,6 +282,9 @@ def compute_displacements(baseline: Mapping[str, object], epoch: Mapping[str, ob
     moved_tolerance_m : float, optional, keyword-only
         Smallest change of a reference distance taken as movement. Default 1 mm
         (or 4 sigma, whichever is larger).
+    weighted : bool, keyword-only
+        Weight the reference targets by their precision (the same weights in
+        both epochs). False gives the plain mean of the dissertation. Default True.
 
     Returns
     -------
@@ -238,7 +300,8 @@ def compute_displacements(baseline: Mapping[str, object], epoch: Mapping[str, ob
                 raise InputError(f"{name} observation of {k!r} must be a finite (3,) position with a (3, 3) covariance")
     ref_ids = [r for r, g in groups.items() if g == "reference"]
     meas_ids = [m for m, g in groups.items() if g == "measurement"]
-    checks, stable, flags = check_references(base, ep, ref_ids, tolerance_m=moved_tolerance_m)
+    checks, stable, flags = check_references(base, ep, ref_ids, tolerance_m=moved_tolerance_m,
+                                             measurement_ids=meas_ids)
     flags = list(flags)
     if not stable:
         raise ProcessingError("no reference target was measured in both this epoch and the baseline; "
@@ -256,6 +319,9 @@ def compute_displacements(baseline: Mapping[str, object], epoch: Mapping[str, ob
             flags.append(FLAG_NORMAL_FROM_EPOCH)
     if mode == "epoch" and len(meas) < 3:
         raise ProcessingError(f"only {len(meas)} measurement targets in this epoch; 3 are needed for the deck plane")
+    up = deck_normal(np.array([base[m].xyz for m in meas_base]))
+    w_ref, w_rot = reference_weights(base, ep, stable, up) if weighted else (
+        np.full(len(stable), 1.0 / len(stable)), np.full(len(stable), 1.0 / len(stable)))
     involved_b = sorted(set(stable) | set(meas_base))
     involved_e = sorted(set(stable) | set(meas))
     x0 = np.concatenate([base[k].xyz for k in involved_b] + [ep[k].xyz for k in involved_e])
@@ -264,7 +330,7 @@ def compute_displacements(baseline: Mapping[str, object], epoch: Mapping[str, ob
     def f(x):
         xb = {k: x[3 * i:3 * i + 3] for i, k in enumerate(involved_b)}
         xe = {k: x[3 * (nb + i):3 * (nb + i) + 3] for i, k in enumerate(involved_e)}
-        return _vertical_positions(xb, xe, stable, meas_base, meas, mode)
+        return _vertical_positions(xb, xe, stable, meas_base, meas, mode, w_ref, w_rot)
 
     h1, hk, gk, sk = f(x0)
     u0 = hk - h1

@@ -59,8 +59,8 @@ class RoiPlan:
         w = self.window
         return {
             "reflector": self.reflector, "group": self.group,
-            "phi_min_deg": round(w.phi_min_deg, 6), "phi_max_deg": round(w.phi_max_deg, 6),
-            "theta_min_deg": round(w.theta_min_deg, 6), "theta_max_deg": round(w.theta_max_deg, 6),
+            "phi_min_deg": float(w.phi_min_deg), "phi_max_deg": float(w.phi_max_deg),
+            "theta_min_deg": float(w.theta_min_deg), "theta_max_deg": float(w.theta_max_deg),
             "phi_step_deg": w.phi_step_deg, "theta_step_deg": w.theta_step_deg,
             "range_m": round(self.range_m, 4), "expected_points": int(self.expected_points),
             "expected_seconds": round(self.expected_seconds, 2),

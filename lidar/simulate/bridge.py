@@ -42,13 +42,17 @@ class Target:
         object.__setattr__(self, "centre_m", tuple(float(v) for v in self.centre_m))
 
 
-def _default_targets(span: float, pier_y: float, deck_bottom: float, diameter: float) -> tuple[Target, ...]:
-    face = -pier_y / 2.0 - 0.001  # glued on the access-side face of each pier, 1 mm proud
+def _default_targets(span: float, pier_length: float, deck_bottom: float, diameter: float) -> tuple[Target, ...]:
+    """Four reference targets on the piers' inner faces (looking into the span, where a scanner
+    between the piers sees them at moderate incidence), at two heights and two positions across the
+    bridge; five measurement targets under the deck, symmetric about midspan, on two girder lines."""
+    face1 = pier_length / 2 + 0.001  # pier 1's +x face, 1 mm proud
+    face2 = span - pier_length / 2 - 0.001  # pier 2's -x face
     ref = [
-        Target("R1", "reference", (-0.5, face, 2.0), (0, -1, 0), diameter),
-        Target("R2", "reference", (0.5, face, 5.0), (0, -1, 0), diameter),
-        Target("R3", "reference", (span - 0.5, face, 2.0), (0, -1, 0), diameter),
-        Target("R4", "reference", (span + 0.5, face, 5.0), (0, -1, 0), diameter),
+        Target("R1", "reference", (face1, -1.5, 2.0), (1, 0, 0), diameter),
+        Target("R2", "reference", (face1, 1.5, 5.0), (1, 0, 0), diameter),
+        Target("R3", "reference", (face2, 1.5, 2.0), (-1, 0, 0), diameter),
+        Target("R4", "reference", (face2, -1.5, 5.0), (-1, 0, 0), diameter),
     ]
     z = deck_bottom - 0.001
     fractions = (0.2, 0.35, 0.5, 0.65, 0.8)
@@ -81,7 +85,7 @@ class BridgeModel:
             raise InputError("bridge model dimensions must be positive")
         if not self.targets:
             object.__setattr__(self, "targets", _default_targets(
-                self.span_m, self.pier_width_m, self.deck_bottom_m, self.target_diameter_m))
+                self.span_m, self.pier_length_m, self.deck_bottom_m, self.target_diameter_m))
         ids = [t.id for t in self.targets]
         if len(set(ids)) != len(ids):
             raise InputError("bridge model: target ids must be unique")

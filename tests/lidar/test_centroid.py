@@ -1,0 +1,82 @@
+import numpy as np
+import pytest
+
+from lidar.angles import AngularWindow, spherical_from_xyz
+from lidar.centroid import (
+    FLAG_CLIPPED,
+    FLAG_NOT_FOUND,
+    FLAG_SATURATED,
+    FLAG_SECOND_OBJECT,
+    otsu_threshold,
+    target_centroid,
+)
+from lidar.simulate import BridgeScene, EpochConditions
+
+from tests.lidar.sim_helpers import LAB_POSITIONS, MODEL, plan_from_truth
+
+SETUP = LAB_POSITIONS[0]
+
+
+def window_scan(conditions, reflector, *, seed=0, shrink=None):
+    scene = BridgeScene(MODEL, conditions, SETUP)
+    plan = plan_from_truth(scene, rng=np.random.default_rng(seed))
+    roi = plan.roi(reflector)
+    w = roi.window
+    if shrink is not None:
+        w = shrink(w)
+    scan, truth = scene.scan(w, rng=np.random.default_rng(seed + 1))
+    return scan, truth, roi, w
+
+
+def test_otsu_on_a_bimodal_sample():
+    rng = np.random.default_rng(0)
+    v = np.concatenate([rng.normal(0.2, 0.03, 5000), rng.normal(0.9, 0.03, 500)])
+    thr, sep = otsu_threshold(v)
+    assert 0.35 < thr < 0.75 and sep > 0.9
+
+
+def test_clean_target_centroid_and_honest_covariance():
+    scan, truth, roi, w = window_scan(EpochConditions(), "M3")
+    c = target_centroid(scan.xyz_socs, scan.intensity, expected_xyz=truth.target("M3").centre_socs_m, window=w)
+    assert c.found and not c.flags
+    err = c.xyz_socs - truth.target("M3").centre_socs_m
+    assert np.linalg.norm(err) < 4 * np.sqrt(np.trace(c.cov))
+    assert c.sigma_range_m == pytest.approx(0.005, rel=0.15)
+    assert c.n_points >= 800
+
+
+def test_cable_tie_next_to_a_reference_target_does_not_move_the_centroid():
+    scan, truth, roi, w = window_scan(EpochConditions(cable_ties=("R1",)), "R1", seed=3)
+    true = np.asarray(truth.target("R1").centre_socs_m)
+    c = target_centroid(scan.xyz_socs, scan.intensity, expected_xyz=true, window=w)
+    assert FLAG_SECOND_OBJECT in c.flags
+    assert np.linalg.norm(c.xyz_socs - true) < 0.0002
+    thr, _ = otsu_threshold(scan.intensity)
+    plain = scan.xyz_socs[scan.intensity > thr].mean(axis=0)
+    assert np.linalg.norm(plain - true) > 0.001  # the plain Otsu centroid is off by millimetres
+
+
+def test_saturated_returns_are_flagged_but_measured():
+    scan, truth, roi, w = window_scan(EpochConditions(saturated=True), "M2", seed=5)
+    true = np.asarray(truth.target("M2").centre_socs_m)
+    c = target_centroid(scan.xyz_socs, scan.intensity, expected_xyz=true, window=w)
+    assert FLAG_SATURATED in c.flags
+    assert np.linalg.norm(c.xyz_socs - true) < 0.0005
+
+
+def test_target_clipped_by_the_window_is_flagged():
+    def cut(w):
+        mid = 0.5 * (w.phi_min_deg + w.phi_max_deg)
+        return AngularWindow(w.phi_min_deg, mid, w.theta_min_deg, w.theta_max_deg, w.phi_step_deg, w.theta_step_deg)
+
+    scan, truth, roi, w = window_scan(EpochConditions(), "M4", seed=7, shrink=cut)
+    c = target_centroid(scan.xyz_socs, scan.intensity, window=w)
+    assert FLAG_CLIPPED in c.flags
+
+
+def test_empty_or_dull_window_is_not_found():
+    scan, truth, roi, w = window_scan(EpochConditions(occluded=("M1",)), "M1", seed=9)
+    c = target_centroid(scan.xyz_socs, scan.intensity, expected_xyz=truth.target("M1").centre_socs_m, window=w)
+    assert not c.found and FLAG_NOT_FOUND in c.flags
+    c = target_centroid(np.zeros((5, 3)), np.zeros(5))
+    assert not c.found

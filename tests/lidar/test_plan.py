@@ -1,0 +1,91 @@
+import json
+
+import numpy as np
+import pytest
+
+from lidar.errors import InputError
+from lidar.plan import PlanTarget, ScanPlan, choose_steps, plan_fine_scans
+from lidar.scanner_profile import VZ1000, ScannerProfile
+from lidar.simulate import EpochConditions
+
+from tests.lidar.sim_helpers import LAB_POSITIONS, MODEL, fine_epoch
+
+CONTRACT_FIELDS = {"reflector", "group", "phi_min_deg", "phi_max_deg", "theta_min_deg", "theta_max_deg",
+                   "phi_step_deg", "theta_step_deg", "range_m", "expected_points", "expected_seconds"}
+
+
+def target(theta=80.0, phi=10.0, r=20.0, **kw):
+    t, p = np.radians(theta), np.radians(phi)
+    xyz = (r * np.sin(t) * np.cos(p), r * np.sin(t) * np.sin(p), r * np.cos(t))
+    return PlanTarget(kw.pop("id", "T1"), kw.pop("group", "measurement"), xyz, incidence_cos=kw.pop("cos", 1.0), **kw)
+
+
+def test_steps_respect_instrument_limits_and_point_target():
+    omega = np.pi * 0.025 ** 2 / 20 ** 2
+    dt, dp = choose_steps(omega, 1.0, 1000, VZ1000)
+    assert dt >= VZ1000.min_theta_step_deg and dp >= VZ1000.min_phi_step_deg
+    points = omega / (np.radians(dt) * np.radians(dp))
+    assert points >= 1000
+
+
+def test_plan_json_contract_and_round_trip(tmp_path):
+    plan = plan_fine_scans([target(id="A"), target(phi=0.01, id="B", group="reference")], epoch="2026-01-05")
+    path = plan.save(tmp_path / "plan.json")
+    d = json.loads(path.read_text())
+    assert {"epoch", "scanner_profile", "total_seconds", "rois"} <= d.keys()
+    for roi in d["rois"]:
+        assert CONTRACT_FIELDS <= roi.keys()
+        assert roi["phi_min_deg"] < roi["phi_max_deg"]
+    seam = d["rois"][1]
+    assert seam["phi_min_deg"] < 0 < seam["phi_max_deg"]  # a window across 0 deg starts below 0
+    assert d["total_seconds"] == pytest.approx(sum(r["expected_seconds"] for r in d["rois"]), abs=0.05)
+    back = ScanPlan.load(path)
+    assert [r.reflector for r in back.rois] == ["A", "B"]
+    assert back.rois[1].window == plan.rois[1].window
+
+
+def test_line_scanner_time_depends_on_lines_not_kept_points():
+    prof = ScannerProfile()
+    near = plan_fine_scans([target(r=10.0)]).rois[0]
+    assert near.expected_seconds == pytest.approx(
+        prof.window_seconds(near.window.phi_max_deg - near.window.phi_min_deg, near.window.phi_step_deg,
+                            near.window.theta_step_deg))
+
+
+def test_over_budget_trades_points_for_time_and_says_so():
+    targets = [target(phi=5 * k, id=f"T{k}") for k in range(12)]
+    full = plan_fine_scans(targets, min_points=1000, budget_seconds=1e6)
+    tight = plan_fine_scans(targets, min_points=1000, budget_seconds=full.total_seconds / 3)
+    assert tight.total_seconds <= full.total_seconds / 3 + 1e-6
+    assert tight.points_per_target < 1000
+    assert any("reduced" in w for w in tight.warnings)
+    assert not full.warnings
+
+
+def test_bad_plan_inputs(tmp_path):
+    with pytest.raises(InputError):
+        plan_fine_scans([])
+    with pytest.raises(InputError):
+        plan_fine_scans([target()], min_points=2)
+    (tmp_path / "p.json").write_text("{not json")
+    with pytest.raises(InputError, match="not a JSON plan"):
+        ScanPlan.load(tmp_path / "p.json")
+    (tmp_path / "q.json").write_text(json.dumps({"rois": [{"reflector": "A"}]}))
+    with pytest.raises(InputError, match="missing the field"):
+        ScanPlan.load(tmp_path / "q.json")
+    (tmp_path / "r.json").write_text(json.dumps({"format_version": 99, "rois": []}))
+    with pytest.raises(InputError, match="newer"):
+        ScanPlan.load(tmp_path / "r.json")
+
+
+@pytest.mark.slow
+def test_plan_expected_points_match_what_the_simulator_delivers():
+    cents, truth, plan, fine = fine_epoch(EpochConditions(), LAB_POSITIONS[0], seed=11)
+    from lidar.angles import spherical_from_xyz
+
+    theta, phi, _ = spherical_from_xyz(fine.xyz_socs)
+    for roi in plan.rois:
+        delivered_target = truth.target(roi.reflector).points_on_target
+        assert delivered_target == pytest.approx(roi.expected_target_points, rel=0.30), roi.reflector
+        in_window = np.count_nonzero(roi.window.contains(theta, phi))
+        assert in_window == pytest.approx(roi.expected_points, rel=0.30), roi.reflector

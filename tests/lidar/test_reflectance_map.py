@@ -1,0 +1,72 @@
+import numpy as np
+import pytest
+
+from lidar.angles import direction_from_angles
+from lidar.detection import detect_reflectors
+from lidar.errors import InputError
+from lidar.reflectance_map import estimate_step_deg, reflectance_map
+
+
+def grid_scan(theta_range, phi_range, step, bright=()):
+    t = np.arange(*theta_range, step)
+    p = np.arange(*phi_range, step)
+    tt, pp = np.meshgrid(t, p, indexing="ij")
+    tt, pp = tt.ravel(), np.mod(pp.ravel(), 360.0)
+    xyz = direction_from_angles(tt, pp) * 20.0
+    inten = np.full(len(tt), 0.2, np.float32)
+    for (tc, pc, r_deg) in bright:
+        d = np.hypot(tt - tc, (np.mod(pp - pc + 180, 360) - 180) * np.sin(np.radians(tc)))
+        inten[d <= r_deg] = 0.95
+    return xyz, inten
+
+
+def test_cells_hold_max_mean_range_and_count():
+    xyz, inten = grid_scan((80, 90), (10, 20), 0.05, bright=[(85, 15, 0.07)])
+    m = reflectance_map(xyz, inten, step_deg=0.1)
+    assert m.count.sum() == len(xyz)
+    assert np.nanmax(m.max_intensity) == pytest.approx(0.95)
+    assert np.nanmin(m.mean_intensity) == pytest.approx(0.2)
+    np.testing.assert_allclose(m.range_m[m.count > 0], 20.0, rtol=1e-6)
+
+
+def test_step_is_estimated_from_density():
+    xyz, inten = grid_scan((60, 100), (0, 40), 0.05)
+    from lidar.angles import spherical_from_xyz
+
+    t, p, _ = spherical_from_xyz(xyz)
+    assert estimate_step_deg(t, p) == pytest.approx(0.05, rel=0.15)
+
+
+def test_target_on_the_azimuth_seam_is_one_blob():
+    xyz, inten = grid_scan((80, 95), (-20, 20), 0.02, bright=[(88.0, 0.0, 0.08)])
+    m = reflectance_map(xyz, inten)
+    assert m.phi0_deg < 0 < m.phi0_deg + m.shape[1] * m.step_deg
+    det = detect_reflectors(m, target_diameter_m=0.056, threshold=0.6)
+    assert len(det.detections) == 1
+    d = det.detections[0]
+    assert abs((d.phi_deg + 180) % 360 - 180) < 0.01 and d.theta_deg == pytest.approx(88.0, abs=0.01)
+
+
+def test_full_circle_scan_merges_blobs_across_the_seam():
+    xyz, inten = grid_scan((85, 95), (0, 360), 0.05, bright=[(90.0, 0.0, 0.12)])
+    m = reflectance_map(xyz, inten, step_deg=0.05)
+    assert m.full_circle
+    det = detect_reflectors(m, target_diameter_m=0.08, threshold=0.6)
+    assert len(det.detections) == 1
+    assert abs((det.detections[0].phi_deg + 180) % 360 - 180) < 0.02
+
+
+def test_large_bright_patch_is_rejected_not_detected():
+    xyz, inten = grid_scan((80, 95), (0, 30), 0.02, bright=[(85, 10, 0.07), (88, 20, 1.5)])
+    det = detect_reflectors(reflectance_map(xyz, inten), target_diameter_m=0.05, threshold=0.6)
+    assert len(det.detections) == 1 and len(det.rejected) == 1
+    assert det.detections[0].phi_deg == pytest.approx(10, abs=0.02)
+
+
+def test_bad_input():
+    with pytest.raises(InputError):
+        reflectance_map(np.zeros((0, 3)), np.zeros(0))
+    with pytest.raises(InputError):
+        reflectance_map(np.ones((3, 3)), np.zeros(2))
+    with pytest.raises(InputError):
+        reflectance_map(np.ones((3, 3)), np.zeros(3), step_deg=float("nan"))
