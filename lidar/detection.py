@@ -63,12 +63,18 @@ def auto_threshold(values: np.ndarray) -> float:
     Halfway between the background median and the brightest cell, but at least
     3 robust standard deviations above the background median.
     """
-    v = values[np.isfinite(values)]
+    v = np.asarray(values).ravel()
+    v = v[np.isfinite(v)]
+    if v.size > 1_000_000:  # the background statistics need no more than a large sample
+        v_all_max = float(v.max())
+        v = v[:: v.size // 1_000_000]
+    else:
+        v_all_max = float(v.max()) if v.size else 0.0
     if v.size == 0:
         raise InputError("the reflectance map is empty")
     bg = float(np.median(v))
     mad = float(np.median(np.abs(v - bg))) * 1.4826
-    top = float(np.max(v))
+    top = v_all_max
     return max(bg + 3.0 * mad, bg + 0.5 * (top - bg))
 
 
@@ -95,33 +101,37 @@ def detect_reflectors(rmap: ReflectanceMap, *, target_diameter_m: float = 0.05, 
     """
     if not (np.isfinite(target_diameter_m) and target_diameter_m > 0):
         raise InputError(f"target diameter must be positive, got {target_diameter_m}")
-    img = np.nan_to_num(rmap.max_intensity, nan=0.0)
-    thr = auto_threshold(rmap.max_intensity) if threshold is None else float(threshold)
-    mask = img >= thr
-    labels, n = ndimage.label(mask, structure=np.ones((3, 3), dtype=bool))
-    h, w = labels.shape
+    # Work on the transposed (azimuth-major) view: the map is stored column by column, so this
+    # view is contiguous and no copy of the (possibly large) map is made.
+    img = rmap.max_intensity.T
+    thr = auto_threshold(img) if threshold is None else float(threshold)
+    mask = img >= thr  # NaN (empty cells) compares False
+    labels_t, n = ndimage.label(mask, structure=np.ones((3, 3), dtype=bool))
     if n == 0:
         return DetectionResult((), (), thr, rmap.step_deg)
-    original = labels
+    w, h = labels_t.shape  # (columns, rows)
     col_shift = np.zeros(n + 1)
+    labels_all = labels_t
     if rmap.full_circle:
-        labels, col_shift = _merge_across_seam(labels, w)
-    flat = labels.ravel()
-    sel = flat > 0
+        labels_all, col_shift = _merge_across_seam(labels_t.T, w)
+        labels_all = labels_all.T
+    flat = labels_all.reshape(-1)
+    sel = np.flatnonzero(flat)
     lab = flat[sel]
-    rows, cols = np.divmod(np.nonzero(sel)[0], w)
-    cols = cols + col_shift[original.ravel()[sel]]  # seam-merged blobs continue past the last column
-    weight = img.ravel()[sel] - thr * 0.9
-    nlab = int(labels.max()) + 1
+    cols, rows = np.divmod(sel, h)
+    cols = cols + col_shift[labels_t.reshape(-1)[sel]]  # seam-merged blobs continue past the last column
+    vals = img.reshape(-1)[sel]
+    weight = vals - thr * 0.9
+    nlab = int(labels_all.max()) + 1
     sw = np.bincount(lab, weight, nlab)
     n_cells = np.bincount(lab, minlength=nlab)
     r_c = np.bincount(lab, weight * rows, nlab) / np.where(sw > 0, sw, 1)
     c_c = np.bincount(lab, weight * cols, nlab) / np.where(sw > 0, sw, 1)
-    rng_vals = np.nan_to_num(rmap.range_m.ravel()[sel], nan=0.0)
+    rng_vals = np.nan_to_num(rmap.range_m.T.reshape(-1)[sel], nan=0.0)
     valid_r = rng_vals > 0
     rng = np.bincount(lab, rng_vals * valid_r, nlab) / np.maximum(np.bincount(lab, valid_r.astype(float), nlab), 1)
     peak = np.zeros(nlab)
-    np.maximum.at(peak, lab, img.ravel()[sel])
+    np.maximum.at(peak, lab, vals)
     row_lo = np.full(nlab, np.inf)
     row_hi = np.full(nlab, -np.inf)
     col_lo = np.full(nlab, np.inf)

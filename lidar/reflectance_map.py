@@ -19,6 +19,9 @@ from lidar.errors import InputError
 from lidar.progress import ProgressCallback, report
 
 CHUNK = 1_000_000
+#: The automatic cell size keeps maps below this many cells: a few cells across a target are enough
+#: to find it, and detection time and memory grow with the cell count.
+MAX_AUTO_CELLS = 4_000_000
 
 
 @dataclass(frozen=True, eq=False)
@@ -92,6 +95,13 @@ def _angles32(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return theta, phi, rng
 
 
+def occupied_area_deg2(theta_deg: np.ndarray, phi_deg: np.ndarray) -> float:
+    """Area (square degrees of the angle grid) of the directions a scan covers, in 0.5-degree cells."""
+    rows = np.clip((theta_deg / 0.5).astype(np.int32), 0, 359)
+    cols = np.clip((phi_deg / 0.5).astype(np.int32), 0, 719)
+    return float(np.count_nonzero(np.bincount(rows * 720 + cols, minlength=360 * 720))) * 0.25
+
+
 def estimate_step_deg(theta_deg: np.ndarray, phi_deg: np.ndarray, *, n_total: Optional[int] = None) -> float:
     """Angular sampling step of a scan from its point density over the occupied directions.
 
@@ -109,28 +119,6 @@ def estimate_step_deg(theta_deg: np.ndarray, phi_deg: np.ndarray, *, n_total: Op
     return float(np.round(step / mag, 1) * mag)
 
 
-def _azimuth_origin(phi_deg: np.ndarray) -> tuple[float, bool]:
-    """Start of the scan's azimuth coverage: the end of its largest empty gap (0.1-degree bins)."""
-    hist = np.bincount(np.clip((phi_deg * 10).astype(np.int32), 0, 3599), minlength=3600) > 0
-    if hist.all():
-        return 0.0, True
-    empty = ~hist
-    # longest circular run of empty bins
-    doubled = np.concatenate([empty, empty])
-    best_len, best_end, run = 0, 0, 0
-    for i, e in enumerate(doubled):
-        run = run + 1 if e else 0
-        if run > best_len:
-            best_len, best_end = run, i
-    if best_len >= 3600:
-        return 0.0, True
-    start_bin = (best_end + 1) % 3600
-    origin = start_bin / 10.0 - 0.1  # one bin of slack
-    if origin >= 180.0:
-        origin -= 360.0
-    return origin, False
-
-
 def reflectance_map(xyz_socs: np.ndarray, intensity: np.ndarray, *, step_deg: Optional[float] = None,
                     progress: Optional[ProgressCallback] = None) -> ReflectanceMap:
     """Bin a scan into a reflectance map.
@@ -143,12 +131,22 @@ def reflectance_map(xyz_socs: np.ndarray, intensity: np.ndarray, *, step_deg: Op
         Normalised intensity in [0, 1].
     step_deg : float, optional, keyword-only
         Cell size in degrees. Default: 1.2x the scan's own angular step,
-        estimated from its point density (so every cell of a surface gets a point).
+        estimated from its point density (so every cell of a surface gets a
+        point), coarsened if needed to stay below ``MAX_AUTO_CELLS`` cells.
     progress : callable, optional
 
     Returns
     -------
     ReflectanceMap
+
+    Notes
+    -----
+    Two passes over the points in chunks, recomputing the (cheap, float32)
+    angles rather than keeping them: the first finds the grid (zenith range,
+    azimuth origin, step), the second accumulates. Cells are indexed column
+    by column, so a chunk of a line scanner's points (a few vertical lines)
+    touches a compact range of cells. Extra memory is 16 bytes per cell plus
+    one chunk.
     """
     xyz_socs = np.asarray(xyz_socs)
     intensity = np.asarray(intensity)
@@ -159,63 +157,105 @@ def reflectance_map(xyz_socs: np.ndarray, intensity: np.ndarray, *, step_deg: Op
     if step_deg is not None and not (np.isfinite(step_deg) and 0 < step_deg <= 10):
         raise InputError(f"reflectance map step must be in (0, 10] degrees, got {step_deg}")
     n = xyz_socs.shape[0]
-    theta = np.empty(n, np.float32)
-    phi = np.empty(n, np.float32)
-    rng = np.empty(n, np.float32)
-    starts = range(0, n, CHUNK)
+    starts = list(range(0, n, CHUNK))
+    stride = max(1, n // 2_000_000)
 
-    def angles(start: int) -> None:
-        t, p, r = _angles32(xyz_socs[start:start + CHUNK])
-        theta[start:start + CHUNK], phi[start:start + CHUNK], rng[start:start + CHUNK] = t, p, r
+    def survey(start: int):
+        t, p, _ = _angles32(xyz_socs[start:start + CHUNK])
+        hist = np.bincount(np.clip((p * 10).astype(np.int32), 0, 3599), minlength=3600)
+        return float(t.min()), float(t.max()), hist, t[::stride], p[::stride]
 
     with ThreadPoolExecutor(max_workers=2) as pool:
-        list(pool.map(angles, starts))
-    report(progress, 0.3, "angles")
+        parts = list(pool.map(survey, starts))
+    report(progress, 0.25, "angles")
+    t_lo = min(x[0] for x in parts)
+    t_hi = max(x[1] for x in parts)
+    hist = np.sum([x[2] for x in parts], axis=0)
     if step_deg is None:
-        stride = max(1, n // 2_000_000)
-        step_deg = 1.2 * estimate_step_deg(theta[::stride], phi[::stride], n_total=n)
-    phi0, full = _azimuth_origin(phi)
-    theta0 = float(np.floor(theta.min() / step_deg) * step_deg)
-    height = int(np.floor((float(theta.max()) - theta0) / step_deg)) + 1
-    width = int(np.ceil(360.0 / step_deg)) if full else \
-        int(np.floor(float(np.max(np.mod(phi - np.float32(phi0), 360.0))) / step_deg)) + 1
-    if height * width > 60_000_000:
-        raise InputError(f"reflectance map of {height}x{width} cells is too large; use a coarser step than {step_deg} deg")
+        t_s, p_s = np.concatenate([x[3] for x in parts]), np.concatenate([x[4] for x in parts])
+        step_deg = 1.2 * estimate_step_deg(t_s, p_s, n_total=n)
+        floor = float(np.sqrt(occupied_area_deg2(t_s, p_s) / MAX_AUTO_CELLS))
+        if floor > step_deg:
+            step_deg = float(np.ceil(floor * 1e4) / 1e4)
+    del parts
+    phi0, full = _azimuth_origin_from_hist(hist)
+    theta0 = float(np.floor(t_lo / step_deg) * step_deg)
+    height = int(np.floor((t_hi - theta0) / step_deg)) + 1
+    width = int(np.ceil(360.0 / step_deg)) if full else int(np.ceil(_azimuth_span(hist, phi0) / step_deg)) + 1
+    if height * width > 80_000_000:
+        raise InputError(f"reflectance map of {height}x{width} cells is too large; use a coarser step than "
+                         f"{step_deg:.4f} deg")
     cells = height * width
-    count = np.zeros(cells, np.int64)
-    sum_i = np.zeros(cells, np.float64)
-    sum_r = np.zeros(cells, np.float64)
+    count = np.zeros(cells, np.int32)
+    sum_i = np.zeros(cells, np.float32)
+    sum_r = np.zeros(cells, np.float32)
     max_i = np.full(cells, -1.0, np.float32)
     inv = np.float32(1.0 / step_deg)
 
-    def cell_index(start: int) -> np.ndarray:
-        t = theta[start:start + CHUNK]
-        p = phi[start:start + CHUNK] - np.float32(phi0)
+    def cell_index(start: int):
+        t, p, r = _angles32(xyz_socs[start:start + CHUNK])
+        p -= np.float32(phi0)
         p[p < 0] += np.float32(360.0)
         p[p >= 360.0] -= np.float32(360.0)
         row = ((t - np.float32(theta0)) * inv).astype(np.int64)
         col = (p * inv).astype(np.int64)
         np.clip(row, 0, height - 1, out=row)
         np.clip(col, 0, width - 1, out=col)
-        return row * width + col
+        idx = col * height + row  # column-major: a few scan lines are a compact index range
+        lo = int(idx.min())
+        idx -= lo
+        return lo, idx, r
 
     with ThreadPoolExecutor(max_workers=2) as pool:
-        for k, idx in enumerate(pool.map(cell_index, starts)):
-            start = k * CHUNK
+        for k, (lo, idx, r) in enumerate(pool.map(cell_index, starts)):
+            start = starts[k]
             inten = intensity[start:start + CHUNK]
-            count += np.bincount(idx, minlength=cells)
-            sum_i += np.bincount(idx, weights=inten, minlength=cells)
-            sum_r += np.bincount(idx, weights=rng[start:start + CHUNK], minlength=cells)
-            np.maximum.at(max_i, idx, inten.astype(np.float32, copy=False))
-            report(progress, 0.3 + 0.7 * min(n, start + CHUNK) / n, "binning")
+            span = int(idx.max()) + 1
+            sl = slice(lo, lo + span)
+            count[sl] += np.bincount(idx, minlength=span).astype(np.int32)
+            sum_i[sl] += np.bincount(idx, weights=inten, minlength=span).astype(np.float32)
+            sum_r[sl] += np.bincount(idx, weights=r, minlength=span).astype(np.float32)
+            np.maximum.at(max_i[sl], idx, inten.astype(np.float32, copy=False))
+            report(progress, 0.25 + 0.75 * min(n, start + CHUNK) / n, "binning")
     empty = count == 0
     with np.errstate(invalid="ignore", divide="ignore"):
-        mean_i = (sum_i / count).astype(np.float32)
-        mean_r = (sum_r / count).astype(np.float32)
+        sum_i /= count  # in place: the sums become means
+        sum_r /= count
     max_i[empty] = np.nan
+
+    def grid(a):  # column-major storage -> (rows=theta, cols=phi) view
+        return a.reshape(width, height).T
+
     return ReflectanceMap(
         theta0_deg=theta0, phi0_deg=float(phi0), step_deg=float(step_deg),
-        max_intensity=max_i.reshape(height, width), mean_intensity=mean_i.reshape(height, width),
-        range_m=mean_r.reshape(height, width), count=count.reshape(height, width).astype(np.int32),
+        max_intensity=grid(max_i), mean_intensity=grid(sum_i), range_m=grid(sum_r), count=grid(count),
         full_circle=full, n_points=n,
     )
+
+
+def _azimuth_origin_from_hist(hist: np.ndarray) -> tuple[float, bool]:
+    """Start of the azimuth coverage: the end of the largest empty gap of a 0.1-degree histogram."""
+    occupied = hist > 0
+    if occupied.all():
+        return 0.0, True
+    empty = ~occupied
+    doubled = np.concatenate([empty, empty]).astype(np.int8)
+    # run lengths of empty bins, vectorised
+    edges = np.diff(np.concatenate([[0], doubled, [0]]))
+    starts = np.nonzero(edges == 1)[0]
+    ends = np.nonzero(edges == -1)[0]
+    lengths = ends - starts
+    k = int(np.argmax(lengths))
+    if lengths[k] >= 3600:
+        return 0.0, True
+    start_bin = ends[k] % 3600
+    origin = start_bin / 10.0 - 0.1  # one bin of slack
+    if origin >= 180.0:
+        origin -= 360.0
+    return origin, False
+
+
+def _azimuth_span(hist: np.ndarray, phi0: float) -> float:
+    """Azimuth extent (degrees) of the occupied bins measured from ``phi0``."""
+    centres = (np.nonzero(hist > 0)[0] + 1) / 10.0  # upper edge of each occupied bin
+    return float(np.max(np.mod(centres - phi0, 360.0))) + 0.1

@@ -134,5 +134,6 @@ def raw_for_writing(scan: Scan) -> np.ndarray:
 def atomic_target(path: str | os.PathLike) -> tuple[Path, Path]:
     """(final, temporary) paths for writing a file by rename, so a crash never leaves half a file."""
     final = Path(path)
-    tmp = final.with_name(f".{final.name}.part")
+    # keep the suffix: some writers (laspy) choose the encoding from it
+    tmp = final.with_name(f".{final.stem}.part{final.suffix}")
     return final, tmp

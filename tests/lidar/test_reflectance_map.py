@@ -44,7 +44,7 @@ def test_target_on_the_azimuth_seam_is_one_blob():
     det = detect_reflectors(m, target_diameter_m=0.056, threshold=0.6)
     assert len(det.detections) == 1
     d = det.detections[0]
-    assert abs((d.phi_deg + 180) % 360 - 180) < 0.01 and d.theta_deg == pytest.approx(88.0, abs=0.01)
+    assert abs((d.phi_deg + 180) % 360 - 180) < 0.5 * m.step_deg and d.theta_deg == pytest.approx(88.0, abs=0.5 * m.step_deg)
 
 
 def test_full_circle_scan_merges_blobs_across_the_seam():

@@ -41,7 +41,8 @@ def test_round_trip_keeps_tenth_of_millimetre_and_pose(tmp_path, small_scan, suf
     assert np.max(np.abs(back.xyz_socs - small_scan.xyz_socs)) < 1e-5
     np.testing.assert_array_equal(back.intensity_raw, small_scan.intensity_raw)
     np.testing.assert_allclose(back.pose, small_scan.pose)
-    assert not list(tmp_path.glob(".*part")), "temporary file left behind"
+    assert not list(tmp_path.glob(".*part*")), "temporary file left behind"
+    assert (path.read_bytes()[:4] == b"LASF") and (back.metadata["compressed"] == (suffix == ".laz"))
 
 
 @settings(max_examples=25, deadline=None)
