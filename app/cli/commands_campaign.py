@@ -1,0 +1,295 @@
+"""Campaign commands: init, add-epoch, add-fine, plan, process, displacements, status, reflector, limit, export, demo."""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from app.cli.output import dump_json, table
+from app.cli.progress import progress_bar
+
+
+def register(sub) -> None:
+    p = sub.add_parser("init", help="create a campaign for one bridge",
+                       description="Create a campaign folder with its reflector layout.")
+    p.add_argument("dir", type=Path)
+    p.add_argument("--name", required=True, help="structure / campaign name")
+    p.add_argument("--layout", type=Path, required=True, help="layout.csv: id,group,x,y,z[,diameter_mm]")
+    p.add_argument("--target-diameter-mm", type=float, default=50.0, help="diameter when the layout has none (50)")
+    p.add_argument("--span-m", type=float, default=None, help="span length, for span-fraction limits")
+    p.set_defaults(func=cmd_init)
+
+    p = sub.add_parser("add-epoch", help="import a visit: its coarse scan (and fine scans, if any)",
+                       description="Import the scans of one visit. Files are checked, copied into the campaign "
+                                   "once and never modified.")
+    p.add_argument("dir", type=Path)
+    p.add_argument("--date", required=True, help="ISO 8601 date or date-time of the visit")
+    p.add_argument("--coarse", type=Path, required=True)
+    p.add_argument("--fine", type=Path, nargs="*", default=[])
+    p.add_argument("--label", default=None, help="epoch label (default: the date)")
+    p.add_argument("--notes", default="", help="station notes")
+    p.set_defaults(func=cmd_add_epoch)
+
+    p = sub.add_parser("add-fine", help="import the fine scans of an epoch")
+    p.add_argument("dir", type=Path)
+    p.add_argument("--epoch", required=True)
+    p.add_argument("files", type=Path, nargs="+")
+    p.set_defaults(func=cmd_add_fine)
+
+    p = sub.add_parser("plan", help="plan the fine scans of an epoch from its coarse scan")
+    p.add_argument("dir", type=Path)
+    p.add_argument("--epoch", required=True)
+    p.add_argument("--out", type=Path, required=True, help="plan JSON to write")
+    p.set_defaults(func=cmd_plan)
+
+    p = sub.add_parser("process", help="bring epochs up to date: plans, centroids, displacements",
+                       description="Process new or changed epochs only; up-to-date ones are not recomputed.")
+    p.add_argument("dir", type=Path)
+    p.add_argument("--epoch", action="append", default=None, help="only this epoch (repeatable)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_process)
+
+    p = sub.add_parser("displacements", help="print or write the displacement history")
+    p.add_argument("dir", type=Path)
+    p.add_argument("--format", choices=("csv", "json"), default="csv")
+    p.add_argument("--out", type=Path, default=None, help="write to a file instead of the terminal")
+    p.set_defaults(func=cmd_displacements)
+
+    p = sub.add_parser("status", help="epochs, what is stale, and the alarm state of every target")
+    p.add_argument("dir", type=Path)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_status)
+
+    p = sub.add_parser("reflector", help="list, add, retire or replace reflectors")
+    p.add_argument("dir", type=Path)
+    rs = p.add_subparsers(dest="action", metavar="ACTION")
+    rs.required = True
+    q = rs.add_parser("list")
+    q.add_argument("--json", action="store_true")
+    q = rs.add_parser("add")
+    q.add_argument("id")
+    q.add_argument("--group", required=True, choices=("reference", "measurement"))
+    q.add_argument("--xyz", required=True, help="approximate x,y,z in the layout's frame (m)")
+    q.add_argument("--diameter-mm", type=float, default=50.0)
+    q.add_argument("--installed", default=None, help="ISO date from which scans should hold it")
+    q = rs.add_parser("retire")
+    q.add_argument("id")
+    q.add_argument("--date", required=True)
+    q = rs.add_parser("replace")
+    q.add_argument("old")
+    q.add_argument("new")
+    q.add_argument("--date", required=True)
+    q.add_argument("--xyz", default=None, help="new position if not the same place")
+    p.set_defaults(func=cmd_reflector)
+
+    p = sub.add_parser("limit", help="set warning/alarm limits",
+                       description="Rules: abs:WARN_MM,ALARM_MM | span:NW,NA (L/NW, L/NA) | kr-rail:0-200|200-270|270-350")
+    p.add_argument("dir", type=Path)
+    p.add_argument("--rule", required=True)
+    p.add_argument("--reflector", default="*", help="one target (default: every measurement target)")
+    p.set_defaults(func=cmd_limit)
+
+    p = sub.add_parser("export", help="export tables: .xlsx (everything) or .csv (displacements)")
+    p.add_argument("dir", type=Path)
+    p.add_argument("--out", type=Path, required=True)
+    p.set_defaults(func=cmd_export)
+
+    p = sub.add_parser("demo", help="build and process a simulated one-year demo campaign",
+                       description="Simulate a year of weekly visits of a 40 m bridge (scanner somewhere new each "
+                                   "week, dead-load steps, creep, seasonal swings, a cable tie, an occluded target), "
+                                   "import and process them like real data.")
+    p.add_argument("dir", type=Path)
+    p.add_argument("--weeks", type=int, default=52)
+    p.add_argument("--seed", type=int, default=2026)
+    p.set_defaults(func=cmd_demo)
+
+
+def _open(path: Path, writable: bool = True):
+    from projects.store import Campaign
+
+    return Campaign.open(path, writable=writable)
+
+
+def _validate(path: Path) -> None:
+    from lidar.io import read_scan
+
+    with progress_bar(f"checking {path.name}") as cb:
+        read_scan(path, progress=cb)
+
+
+def cmd_init(args) -> int:
+    from lidar.layout import read_layout_csv
+    from projects.store import Campaign
+
+    layout = read_layout_csv(args.layout, default_diameter_m=args.target_diameter_mm / 1000.0)
+    with Campaign.create(args.dir, name=args.name, layout=layout, span_m=args.span_m) as c:
+        print(f"created campaign '{c.name}' in {args.dir} with {len(layout)} reflectors "
+              f"({len(layout.ids_in('reference'))} reference, {len(layout.ids_in('measurement'))} measurement)")
+    return 0
+
+
+def cmd_add_epoch(args) -> int:
+    from projects.store import parse_datetime
+
+    when = parse_datetime(args.date)
+    label = args.label or when[:10]
+    with _open(args.dir) as c:
+        c.add_epoch(label, when, args.coarse, args.fine, notes=args.notes, validate=_validate)
+    print(f"added epoch {label} ({when}) with {1 + len(args.fine)} file(s)")
+    return 0
+
+
+def cmd_add_fine(args) -> int:
+    with _open(args.dir) as c:
+        c.epoch(args.epoch)
+        c.import_files(args.epoch, args.files, "fine", validate=_validate)
+    print(f"added {len(args.files)} fine scan file(s) to epoch {args.epoch}")
+    return 0
+
+
+def cmd_plan(args) -> int:
+    from projects.processing import plan_epoch
+
+    with _open(args.dir) as c:
+        with progress_bar("planning") as cb:
+            plan = plan_epoch(c, args.epoch, progress=cb)
+    plan.save(args.out)
+    print(f"wrote {args.out}: {len(plan.rois)} windows, {plan.total_seconds / 60:.1f} min")
+    for w in plan.warnings:
+        print(f"warning: {w}")
+    return 0
+
+
+def cmd_process(args) -> int:
+    from projects.processing import process
+
+    with _open(args.dir) as c:
+        with progress_bar("processing") as cb:
+            summary = process(c, args.epoch, progress=cb)
+    if args.json:
+        dump_json({"baseline": summary.baseline, "epochs": [o.__dict__ for o in summary.outcomes],
+                   "displacements_updated": summary.displacement_epochs})
+    else:
+        table([o.__dict__ for o in summary.outcomes], ["epoch", "action", "message"])
+        print(f"baseline: {summary.baseline or '(none yet)'}; displacements updated for "
+              f"{len(summary.displacement_epochs)} epoch(s)")
+    if summary.failed:
+        print(f"bridgesurvey: error: {len(summary.failed)} epoch(s) failed: " +
+              "; ".join(f"{o.epoch}: {o.message}" for o in summary.failed), file=sys.stderr)
+        return 1
+    return 0
+
+
+def cmd_displacements(args) -> int:
+    from projects.exports import displacement_table, to_csv, write_atomic
+
+    with _open(args.dir, writable=False) as c:
+        rows = displacement_table(c)
+    text = to_csv(rows) if args.format == "csv" else json.dumps(rows, indent=2)
+    if args.out:
+        write_atomic(args.out, text)
+        print(f"wrote {len(rows)} rows to {args.out}")
+    else:
+        sys.stdout.write(text if text.endswith("\n") else text + "\n")
+    return 0
+
+
+def status_data(c) -> dict:
+    from projects.exports import displacement_table
+    from projects.processing import baseline_epoch, stale_epochs
+
+    stale = stale_epochs(c)
+    epochs = []
+    for e in c.epochs():
+        res = c.result_row(e["label"])
+        ds = c.displacement_set(e["label"])
+        state = "imported" if res is None else res["stage"]
+        if ds is not None:
+            state = "processed"
+            if json.loads(ds["flags"]):
+                state = "flagged"
+        epochs.append({"epoch": e["label"], "datetime": e["datetime"][:16], "state": state,
+                       "stale": stale.get(e["label"], ""),
+                       "flags": ",".join(json.loads(ds["flags"])) if ds else ""})
+    latest = {}
+    for r in displacement_table(c):
+        latest[r["reflector"]] = r
+    return {"name": c.name, "span_m": c.span_m, "baseline": baseline_epoch(c), "epochs": epochs,
+            "targets": list(latest.values())}
+
+
+def cmd_status(args) -> int:
+    with _open(args.dir, writable=False) as c:
+        data = status_data(c)
+    if args.json:
+        dump_json(data)
+        return 0
+    print(f"campaign '{data['name']}', span {data['span_m'] or '?'} m, baseline {data['baseline'] or '-'}, "
+          f"{len(data['epochs'])} epoch(s)")
+    table(data["epochs"][-12:], ["epoch", "datetime", "state", "stale", "flags"])
+    print("latest displacement of each measurement target:")
+    table(data["targets"], ["reflector", "epoch", "displacement_mm", "sigma_mm", "state", "warning_mm", "alarm_mm",
+                            "flags"])
+    alarms = [t["reflector"] for t in data["targets"] if t["state"] == "alarm"]
+    if alarms:
+        print(f"ALARM: {', '.join(alarms)}")
+    return 0
+
+
+def _xyz(text: str):
+    from lidar.errors import InputError
+
+    try:
+        v = [float(x) for x in text.split(",")]
+        if len(v) != 3:
+            raise ValueError
+        return v
+    except ValueError:
+        raise InputError(f"--xyz expects x,y,z in metres, got {text!r}") from None
+
+
+def cmd_reflector(args) -> int:
+    with _open(args.dir, writable=args.action != "list") as c:
+        if args.action == "list":
+            rows = c.reflectors()
+            if args.json:
+                dump_json(rows)
+            else:
+                table(rows, ["id", "grp", "x", "y", "z", "diameter_m", "installed", "retired", "replaces"])
+        elif args.action == "add":
+            c.add_reflector(args.id, args.group, _xyz(args.xyz), diameter_m=args.diameter_mm / 1000.0,
+                            installed=args.installed)
+            print(f"added {args.group} reflector {args.id}")
+        elif args.action == "retire":
+            c.retire_reflector(args.id, args.date)
+            print(f"retired {args.id}")
+        else:
+            c.replace_reflector(args.old, args.new, args.date, xyz=_xyz(args.xyz) if args.xyz else None)
+            print(f"{args.new} replaces {args.old} from {args.date}; its history continues {args.old}'s")
+    return 0
+
+
+def cmd_limit(args) -> int:
+    with _open(args.dir) as c:
+        c.set_limit(args.reflector, args.rule)
+        lim = c.limit_for(args.reflector if args.reflector != "*" else "*")
+    print(f"limit for {args.reflector}: warning {lim.warning_mm:.2f} mm, alarm {lim.alarm_mm:.2f} mm ({lim.rule})")
+    return 0
+
+
+def cmd_export(args) -> int:
+    from projects.exports import export
+
+    with _open(args.dir, writable=False) as c:
+        path = export(c, args.out)
+    print(f"wrote {path}")
+    return 0
+
+
+def cmd_demo(args) -> int:
+    from projects.demo import build_demo
+
+    with progress_bar("demo campaign") as cb:
+        result = build_demo(args.dir, weeks=args.weeks, seed=args.seed, progress=cb)
+    print(result.summary())
+    return 0

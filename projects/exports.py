@@ -1,0 +1,108 @@
+"""Exports of a campaign: displacement table (CSV/JSON) and a workbook of everything (XLSX)."""
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from projects.store import Campaign
+
+DISPLACEMENT_COLUMNS = ["epoch", "datetime", "reflector", "displacement_mm", "sigma_mm", "flags", "state",
+                        "warning_mm", "alarm_mm", "baseline", "epoch_flags"]
+
+
+def displacement_table(c: Campaign) -> list[dict]:
+    """One row per processed epoch x measurement target (baseline = first epoch, positive up)."""
+    rows = []
+    for r in c.displacement_rows():
+        lim = c.limit_for(r["reflector"])
+        mm = None if r["displacement_m"] is None else r["displacement_m"] * 1000.0
+        rows.append({
+            "epoch": r["epoch"], "datetime": r["datetime"], "reflector": r["reflector"],
+            "displacement_mm": None if mm is None else round(mm, 4) + 0.0,
+            "sigma_mm": None if r["sigma_m"] is None else round(r["sigma_m"] * 1000.0, 4),
+            "flags": ";".join(json.loads(r["flags"])),
+            "state": lim.state(mm if mm is not None else float("nan")) if lim else ("unknown" if mm is None else "ok"),
+            "warning_mm": None if lim is None else lim.warning_mm, "alarm_mm": None if lim is None else lim.alarm_mm,
+            "baseline": r["baseline"], "epoch_flags": ";".join(json.loads(r["epoch_flags"])),
+        })
+    return rows
+
+
+def to_csv(rows: list[dict], columns=DISPLACEMENT_COLUMNS) -> str:
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=columns, extrasaction="ignore", lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: ("" if r.get(k) is None else r.get(k)) for k in columns})
+    return buf.getvalue()
+
+
+def write_atomic(path: str | os.PathLike, data: str | bytes) -> Path:
+    p = Path(path)
+    tmp = p.with_name(f".{p.stem}.part{p.suffix}")
+    if isinstance(data, str):
+        tmp.write_text(data, encoding="utf-8")
+    else:
+        tmp.write_bytes(data)
+    os.replace(tmp, p)
+    return p
+
+
+def tables(c: Campaign) -> dict[str, list[dict]]:
+    """Every table a surveyor may want, as lists of rows."""
+    cents = []
+    for e in c.epochs():
+        for rid, t in c.centroids(e["label"]).items():
+            sig = np.sqrt(np.clip(np.diag(t.cov), 0, None)) * 1000
+            cents.append({"epoch": e["label"], "reflector": rid, "found": t.found,
+                          "x_m": t.xyz_socs[0], "y_m": t.xyz_socs[1], "z_m": t.xyz_socs[2],
+                          "sx_mm": sig[0], "sy_mm": sig[1], "sz_mm": sig[2], "n_points": t.n_points,
+                          "threshold": t.threshold, "separability": t.separability, "flags": ";".join(t.flags)})
+    epochs = []
+    for e in c.epochs():
+        res = c.result_row(e["label"])
+        epochs.append({"epoch": e["label"], "datetime": e["datetime"], "notes": e["notes"],
+                       "coarse_files": len(c.files(e["label"], "coarse")), "fine_files": len(c.files(e["label"], "fine")),
+                       "stage": res["stage"] if res else "imported"})
+    return {"epochs": epochs, "reflectors": c.reflectors(), "centroids": cents,
+            "displacements": displacement_table(c),
+            "files": [f for e in c.epochs() for f in c.files(e["label"])], "log": c.log_rows()}
+
+
+def export(c: Campaign, path: str | os.PathLike) -> Path:
+    """Write every table: an XLSX workbook (one sheet each) or, for .csv, the displacement table."""
+    p = Path(path)
+    if p.suffix.lower() == ".csv":
+        return write_atomic(p, to_csv(displacement_table(c)))
+    if p.suffix.lower() != ".xlsx":
+        from lidar.errors import InputError
+
+        raise InputError(f"{p}: export writes .xlsx (all tables) or .csv (displacements)")
+    from openpyxl import Workbook
+
+    wb = Workbook()
+    wb.remove(wb.active)
+    for name, rows in tables(c).items():
+        ws = wb.create_sheet(name)
+        cols = list(rows[0].keys()) if rows else ["(empty)"]
+        ws.append(cols)
+        for r in rows:
+            ws.append([_cell(r.get(k)) for k in cols])
+    buf = io.BytesIO()
+    wb.save(buf)
+    return write_atomic(p, buf.getvalue())
+
+
+def _cell(v):
+    if isinstance(v, (np.floating, float)):
+        return None if not np.isfinite(v) else float(v)
+    if isinstance(v, (np.integer,)):
+        return int(v)
+    if isinstance(v, (np.bool_,)):
+        return bool(v)
+    return v

@@ -1,0 +1,287 @@
+"""Processing a campaign: plan, measure and compute displacements, incrementally.
+
+Stage 1 (per epoch): coarse scan -> plan; fine scans -> centroids. Its inputs
+hash covers the scan checksums, the reflectors expected at that date, the
+parameters and the pipeline version; an epoch whose hash is unchanged is not
+recomputed. Stage 2 (per epoch): displacements against the baseline, hashed on
+the stage-1 hashes of the epoch and of its baseline(s) and the displacement
+parameters. Adding epoch 100 therefore computes epoch 100 only; changing a
+parameter marks exactly the epochs it affects as stale.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+from dataclasses import dataclass, field
+from typing import Optional, Sequence
+
+import numpy as np
+
+from lidar.displacement import compute_displacements
+from lidar.errors import ProcessingError, SurveyError
+from lidar.io import read_scan
+from lidar.pipeline import analyse_coarse, measure_targets, plan_from_coarse
+from lidar.plan import ScanPlan
+from lidar.progress import ProgressCallback, report, scaled
+from lidar.scan import Scan
+from projects.store import Campaign
+
+log = logging.getLogger(__name__)
+
+PIPELINE_VERSION = "1"
+DEFAULTS = {
+    "min_points": 1000,
+    "budget_min": 60.0,
+    "normal_mode": "reference",
+    "weighted_references": True,
+    "map_step_deg": None,
+    "detection_threshold": None,
+    "identification_tolerance_m": 0.15,
+    "moved_tolerance_m": 0.001,
+}
+STAGE1_KEYS = ("min_points", "budget_min", "map_step_deg", "detection_threshold", "identification_tolerance_m")
+STAGE2_KEYS = ("normal_mode", "weighted_references", "moved_tolerance_m")
+FLAG_CHAINED = "chained_to_replaced_target"
+
+
+def parameters(c: Campaign) -> dict:
+    return {**DEFAULTS, **{k: v for k, v in c.settings().items() if k in DEFAULTS}}
+
+
+def _hash(obj) -> str:
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:32]
+
+
+@dataclass
+class EpochOutcome:
+    epoch: str
+    action: str  # planned, measured, up-to-date, failed
+    message: str = ""
+
+
+@dataclass
+class ProcessSummary:
+    outcomes: list[EpochOutcome] = field(default_factory=list)
+    displacement_epochs: list[str] = field(default_factory=list)
+    baseline: Optional[str] = None
+
+    @property
+    def failed(self) -> list[EpochOutcome]:
+        return [o for o in self.outcomes if o.action == "failed"]
+
+
+def _read(c: Campaign, rows: list[dict], progress=None) -> Scan:
+    scans = [read_scan(c.path_of(r), progress=progress) for r in rows]
+    return scans[0] if len(scans) == 1 else Scan.concatenate(scans)
+
+
+def plan_inputs(c: Campaign, label: str, params: dict) -> tuple[str, object]:
+    ep = c.epoch(label)
+    coarse = c.files(label, "coarse")
+    if not coarse:
+        raise ProcessingError(f"epoch {label} has no coarse scan")
+    layout = c.layout(ep["datetime"])
+    key = {"v": PIPELINE_VERSION, "coarse": [f["sha256"] for f in coarse],
+           "layout": layout.to_rows(), "params": {k: params[k] for k in STAGE1_KEYS},
+           "profile": c.profile.to_dict()}
+    return _hash(key), layout
+
+
+def plan_epoch(c: Campaign, label: str, *, progress: Optional[ProgressCallback] = None) -> ScanPlan:
+    """The fine-scan plan of an epoch, from its coarse scan (reused when its inputs are unchanged)."""
+    params = parameters(c)
+    h, layout = plan_inputs(c, label, params)
+    row = c.plan_row(label)
+    if row is not None and row["inputs_hash"] == h:
+        return ScanPlan.from_json(json.loads(row["json"]))
+    coarse = _read(c, c.files(label, "coarse"), scaled(progress, 0.0, 0.5))
+    analysis = analyse_coarse(coarse, layout, step_deg=params["map_step_deg"], threshold=params["detection_threshold"],
+                              tolerance_m=params["identification_tolerance_m"], progress=scaled(progress, 0.5, 0.95))
+    plan = plan_from_coarse(analysis, layout, epoch=label, profile=c.profile, min_points=int(params["min_points"]),
+                            budget_seconds=float(params["budget_min"]) * 60.0)
+    d = plan.to_json()
+    d["identification"] = {"missing": list(analysis.identification.missing),
+                           "extra_detections": len(analysis.identification.extra_detections),
+                           "fit_rms_m": analysis.identification.rms_m,
+                           "detections": len(analysis.detections.detections)}
+    c.save_plan(label, d, h)
+    report(progress, 1.0, "planned")
+    return plan
+
+
+def measure_inputs(c: Campaign, label: str, params: dict) -> str:
+    plan_h, _ = plan_inputs(c, label, params)
+    return _hash({"plan": plan_h, "fine": [f["sha256"] for f in c.files(label, "fine")]})
+
+
+def measure_epoch(c: Campaign, label: str, *, progress: Optional[ProgressCallback] = None) -> dict:
+    params = parameters(c)
+    plan = plan_epoch(c, label, progress=scaled(progress, 0.0, 0.4))
+    h = measure_inputs(c, label, params)
+    layout = c.layout(c.epoch(label)["datetime"])
+    fine = _read(c, c.files(label, "fine"), scaled(progress, 0.4, 0.8))
+    cents = measure_targets(fine, plan, layout, profile=c.profile)
+    c.save_centroids(label, cents, h, {k: params[k] for k in STAGE1_KEYS})
+    report(progress, 1.0, "measured")
+    return cents
+
+
+def stale_epochs(c: Campaign) -> dict[str, str]:
+    """Epochs whose stored stage-1 results no longer match their inputs: label -> reason."""
+    params = parameters(c)
+    out = {}
+    for e in c.epochs():
+        row = c.result_row(e["label"])
+        if not c.files(e["label"], "coarse"):
+            continue
+        if c.files(e["label"], "fine"):
+            want = measure_inputs(c, e["label"], params)
+            if row is None or row["stage"] != "measured":
+                out[e["label"]] = "not measured yet"
+            elif row["inputs_hash"] != want:
+                out[e["label"]] = "inputs or parameters changed"
+        else:
+            want, _ = plan_inputs(c, e["label"], params)
+            if row is None:
+                out[e["label"]] = "not planned yet"
+            elif row["inputs_hash"] != want and row["stage"] == "planned":
+                out[e["label"]] = "inputs or parameters changed"
+    return out
+
+
+def baseline_epoch(c: Campaign) -> Optional[str]:
+    chosen = c.settings().get("baseline")
+    if chosen:
+        return chosen
+    for e in c.epochs():
+        row = c.result_row(e["label"])
+        if row is not None and row["stage"] == "measured":
+            return e["label"]
+    return None
+
+
+def process(c: Campaign, labels: Optional[Sequence[str]] = None, *,
+            progress: Optional[ProgressCallback] = None) -> ProcessSummary:
+    """Bring the given epochs (default: all) up to date, then their displacements."""
+    epochs = c.epochs()
+    if labels:
+        for lab in labels:
+            c.epoch(lab)
+        wanted = set(labels)
+        todo = [e for e in epochs if e["label"] in wanted]
+    else:
+        todo = epochs
+    summary = ProcessSummary()
+    stale = stale_epochs(c)
+    for k, e in enumerate(todo):
+        lab = e["label"]
+        sub = scaled(progress, k / max(len(todo), 1), (k + 1) / max(len(todo), 1))
+        if lab not in stale:
+            summary.outcomes.append(EpochOutcome(lab, "up-to-date"))
+            continue
+        try:
+            if c.files(lab, "fine"):
+                cents = measure_epoch(c, lab, progress=sub)
+                found = sum(t.found for t in cents.values())
+                summary.outcomes.append(EpochOutcome(lab, "measured", f"{found}/{len(cents)} targets found"))
+            else:
+                plan = plan_epoch(c, lab, progress=sub)
+                summary.outcomes.append(EpochOutcome(lab, "planned", f"{len(plan.rois)} windows, "
+                                                     f"{plan.total_seconds / 60:.1f} min; add its fine scans"))
+        except SurveyError as exc:
+            log.warning("epoch %s: %s", lab, exc)
+            summary.outcomes.append(EpochOutcome(lab, "failed", str(exc)))
+    summary.baseline = baseline_epoch(c)
+    if summary.baseline is not None:
+        summary.displacement_epochs = update_displacements(c, summary.baseline)
+    report(progress, 1.0, "done")
+    return summary
+
+
+def _stage1_hash(c: Campaign, label: str) -> Optional[str]:
+    row = c.result_row(label)
+    return row["inputs_hash"] if row is not None and row["stage"] == "measured" else None
+
+
+def update_displacements(c: Campaign, baseline: str) -> list[str]:
+    """(Re)compute the displacements of every measured epoch whose inputs changed; returns those epochs."""
+    params = parameters(c)
+    refl = {r["id"]: r for r in c.reflectors()}
+    groups = {rid: r["grp"] for rid, r in refl.items()}
+    measured = [e["label"] for e in c.epochs() if _stage1_hash(c, e["label"])]
+    if baseline not in measured:
+        return []
+    found_cache: dict[str, dict] = {}
+
+    def found(label):
+        if label not in found_cache:
+            found_cache[label] = {k: v for k, v in c.centroids(label).items() if v.found}
+        return found_cache[label]
+
+    first_seen: dict[str, str] = {}
+    for lab in measured[measured.index(baseline):]:
+        for rid in found(lab):
+            first_seen.setdefault(rid, lab)
+    done = []
+    for lab in measured[measured.index(baseline):]:
+        cents = found(lab)
+        meas_here = [m for m in cents if groups.get(m) == "measurement"]
+        bases = sorted({first_seen[m] for m in meas_here} | {baseline}, key=measured.index)
+        key = {"v": PIPELINE_VERSION, "epoch": _stage1_hash(c, lab), "params": {k: params[k] for k in STAGE2_KEYS},
+               "bases": {b: _stage1_hash(c, b) for b in bases}, "reflectors": sorted((k, str(v)) for k, v in refl.items())}
+        h = _hash(key)
+        stored = c.displacement_set(lab)
+        if stored is not None and stored["inputs_hash"] == h:
+            continue
+        result = None
+        extra = []
+        for b in bases:
+            targets = [m for m in meas_here if first_seen[m] == b] if b != baseline else \
+                [m for m in groups if groups[m] == "measurement" and first_seen.get(m, baseline) == baseline]
+            if not targets:
+                continue
+            sub_groups = {r: g for r, g in groups.items() if g == "reference" or r in targets}
+            try:
+                res = compute_displacements(found(b), cents, sub_groups, normal_mode=params["normal_mode"],
+                                            moved_tolerance_m=params["moved_tolerance_m"],
+                                            weighted=bool(params["weighted_references"]))
+            except SurveyError as exc:
+                log.warning("epoch %s against %s: %s", lab, b, exc)
+                continue
+            if b == baseline:
+                result = res
+            else:
+                extra += [_chain(c, d, b, refl) for d in res.displacements]
+        if result is None:
+            continue
+        if lab == baseline:  # the baseline against itself: zero by definition, exactly known
+            from dataclasses import replace as _replace
+
+            result = _replace(result, displacements=tuple(
+                _replace(d, displacement_m=0.0, sigma_m=0.0) if np.isfinite(d.displacement_m) else d
+                for d in result.displacements))
+        if extra:
+            from dataclasses import replace
+
+            result = replace(result, displacements=tuple(result.displacements) + tuple(extra))
+        c.save_displacements(lab, baseline, result, h)
+        done.append(lab)
+    return done
+
+
+def _chain(c: Campaign, d, base_label: str, refl: dict):
+    """A target first measured after the baseline: continue the history of the target it replaced."""
+    from dataclasses import replace
+
+    old = refl[d.reflector]["replaces"]
+    if not old:
+        return d
+    row = c.conn.execute("SELECT displacement_m, sigma_m FROM displacements d JOIN epochs e ON e.label = d.epoch "
+                         "WHERE reflector = ? AND displacement_m IS NOT NULL AND e.datetime <= "
+                         "(SELECT datetime FROM epochs WHERE label = ?) ORDER BY e.datetime DESC LIMIT 1",
+                         (old, base_label)).fetchone()
+    if row is None or not np.isfinite(d.displacement_m):
+        return d
+    return replace(d, displacement_m=d.displacement_m + row[0], sigma_m=float(np.hypot(d.sigma_m, row[1])),
+                   flags=tuple(d.flags) + (FLAG_CHAINED,))

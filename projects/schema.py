@@ -1,0 +1,110 @@
+"""The campaign database schema, its version and the migrations from older versions."""
+from __future__ import annotations
+
+import sqlite3
+
+SCHEMA_VERSION = 1
+
+SCHEMA_V1 = """
+CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE reflectors (
+    id TEXT PRIMARY KEY,
+    grp TEXT NOT NULL CHECK (grp IN ('reference', 'measurement')),
+    x REAL NOT NULL, y REAL NOT NULL, z REAL NOT NULL,
+    diameter_m REAL NOT NULL CHECK (diameter_m > 0),
+    installed TEXT,                     -- ISO date-time from which it is expected in scans (NULL: from the start)
+    retired TEXT,                       -- ISO date-time after which it is no longer expected
+    replaces TEXT REFERENCES reflectors(id),
+    note TEXT NOT NULL DEFAULT ''
+);
+CREATE TABLE epochs (
+    label TEXT PRIMARY KEY,
+    datetime TEXT NOT NULL,
+    notes TEXT NOT NULL DEFAULT '',
+    created TEXT NOT NULL
+);
+CREATE TABLE files (
+    sha256 TEXT PRIMARY KEY,
+    epoch TEXT NOT NULL REFERENCES epochs(label) ON DELETE CASCADE,
+    role TEXT NOT NULL CHECK (role IN ('coarse', 'fine')),
+    stored_path TEXT NOT NULL UNIQUE,
+    original_path TEXT NOT NULL,
+    size INTEGER NOT NULL,
+    imported TEXT NOT NULL
+);
+CREATE TABLE plans (
+    epoch TEXT PRIMARY KEY REFERENCES epochs(label) ON DELETE CASCADE,
+    json TEXT NOT NULL,
+    inputs_hash TEXT NOT NULL,
+    created TEXT NOT NULL
+);
+CREATE TABLE centroids (
+    epoch TEXT NOT NULL REFERENCES epochs(label) ON DELETE CASCADE,
+    reflector TEXT NOT NULL REFERENCES reflectors(id),
+    found INTEGER NOT NULL,
+    x REAL, y REAL, z REAL,
+    cov TEXT NOT NULL,
+    n INTEGER NOT NULL,
+    threshold REAL, separability REAL, sigma_range_m REAL,
+    flags TEXT NOT NULL,
+    PRIMARY KEY (epoch, reflector)
+);
+CREATE TABLE epoch_results (
+    epoch TEXT PRIMARY KEY REFERENCES epochs(label) ON DELETE CASCADE,
+    stage TEXT NOT NULL CHECK (stage IN ('planned', 'measured')),
+    inputs_hash TEXT NOT NULL,
+    processed TEXT NOT NULL
+);
+CREATE TABLE displacement_sets (
+    epoch TEXT PRIMARY KEY REFERENCES epochs(label) ON DELETE CASCADE,
+    baseline TEXT NOT NULL REFERENCES epochs(label),
+    inputs_hash TEXT NOT NULL,
+    normal TEXT NOT NULL, reference_point TEXT NOT NULL, reference_ids TEXT NOT NULL,
+    normal_mode TEXT NOT NULL, flags TEXT NOT NULL,
+    processed TEXT NOT NULL
+);
+CREATE TABLE displacements (
+    epoch TEXT NOT NULL REFERENCES displacement_sets(epoch) ON DELETE CASCADE,
+    reflector TEXT NOT NULL REFERENCES reflectors(id),
+    displacement_m REAL, sigma_m REAL, vertical_m REAL, baseline_vertical_m REAL,
+    flags TEXT NOT NULL,
+    PRIMARY KEY (epoch, reflector)
+);
+CREATE TABLE reference_checks (
+    epoch TEXT NOT NULL REFERENCES displacement_sets(epoch) ON DELETE CASCADE,
+    reflector TEXT NOT NULL REFERENCES reflectors(id),
+    median_change_m REAL, max_change_m REAL, moved INTEGER NOT NULL, missing INTEGER NOT NULL,
+    suspect INTEGER NOT NULL,
+    PRIMARY KEY (epoch, reflector)
+);
+CREATE TABLE limits (
+    reflector TEXT PRIMARY KEY,         -- '*' holds the default for every measurement target
+    warning_mm REAL, alarm_mm REAL, rule TEXT NOT NULL
+);
+CREATE TABLE log (
+    id INTEGER PRIMARY KEY AUTOINCREMENT,
+    time TEXT NOT NULL, action TEXT NOT NULL, epoch TEXT, details TEXT NOT NULL
+);
+CREATE INDEX files_by_epoch ON files(epoch);
+"""
+
+# version -> SQL that upgrades the previous version to it
+MIGRATIONS: dict[int, str] = {}
+
+
+def create(conn: sqlite3.Connection) -> None:
+    conn.executescript(SCHEMA_V1)
+    conn.execute("INSERT INTO meta(key, value) VALUES ('schema_version', ?)", (str(SCHEMA_VERSION),))
+
+
+def version_of(conn: sqlite3.Connection) -> int:
+    row = conn.execute("SELECT value FROM meta WHERE key = 'schema_version'").fetchone()
+    return int(row[0])
+
+
+def migrate(conn: sqlite3.Connection, from_version: int) -> None:
+    """Upgrade an older campaign in place, one version at a time, in one transaction each."""
+    for v in range(from_version + 1, SCHEMA_VERSION + 1):
+        with conn:
+            conn.executescript(MIGRATIONS[v])
+            conn.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(v),))

@@ -1,0 +1,490 @@
+"""The campaign store: a folder with an SQLite database and the imported scan files.
+
+Layout of a campaign folder::
+
+    campaign.sqlite      schema-versioned database (WAL, foreign keys)
+    scans/               imported scan files, copied once, read-only, named by checksum
+    .lock                held by the process working on the campaign
+
+Every change is one transaction; files are written under a temporary name and
+renamed, so a process killed at any moment leaves a valid campaign, and
+running the same command again completes the work.
+"""
+from __future__ import annotations
+
+import contextlib
+import datetime as dt
+import fcntl
+import hashlib
+import json
+import os
+import shutil
+import sqlite3
+import uuid
+from pathlib import Path
+from typing import Iterable, Optional, Sequence
+
+import numpy as np
+
+from lidar.centroid import TargetCentroid
+from lidar.layout import Layout, check_layout
+from lidar.scanner_profile import VZ1000, ScannerProfile
+from projects import schema
+from projects.errors import CampaignError, CampaignLockedError, DuplicateImportError, InputError
+
+DB_NAME = "campaign.sqlite"
+SCANS_DIR = "scans"
+LOCK_NAME = ".lock"
+
+
+def now_iso() -> str:
+    return dt.datetime.now(dt.timezone.utc).replace(microsecond=0).isoformat()
+
+
+def parse_datetime(text: str) -> str:
+    """Normalise an ISO 8601 date or date-time; naive values are taken as UTC."""
+    try:
+        value = dt.datetime.fromisoformat(str(text).strip().replace("Z", "+00:00"))
+    except ValueError:
+        raise InputError(f"date {text!r} is not ISO 8601 (e.g. 2026-03-14 or 2026-03-14T09:30)") from None
+    if value.tzinfo is None:
+        value = value.replace(tzinfo=dt.timezone.utc)
+    return value.isoformat()
+
+
+def sha256_of(path: Path, chunk: int = 8 << 20) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while block := fh.read(chunk):
+            h.update(block)
+    return h.hexdigest()
+
+
+class Campaign:
+    """An open campaign. Use :meth:`create` or :meth:`open`, preferably as a context manager."""
+
+    def __init__(self, folder: Path, conn: sqlite3.Connection, lock_fh, *, writable: bool):
+        self.folder = folder
+        self.conn = conn
+        self._lock_fh = lock_fh
+        self.writable = writable
+
+    # ------------------------------------------------------------------ opening
+    @classmethod
+    def create(cls, folder: str | os.PathLike, *, name: str, layout: Layout, span_m: Optional[float] = None,
+               profile: ScannerProfile = VZ1000) -> "Campaign":
+        """Create a new campaign folder (which must not hold a campaign yet)."""
+        folder = Path(folder)
+        if not name.strip():
+            raise InputError("the campaign needs a name (--name)")
+        if span_m is not None and not (np.isfinite(span_m) and span_m > 0):
+            raise InputError(f"span length must be positive, got {span_m}")
+        check_layout(layout)
+        if (folder / DB_NAME).exists():
+            raise CampaignError(f"{folder}: already holds a campaign; open it instead of creating one")
+        if folder.exists() and not folder.is_dir():
+            raise CampaignError(f"{folder}: exists and is not a folder")
+        folder.mkdir(parents=True, exist_ok=True)
+        (folder / SCANS_DIR).mkdir(exist_ok=True)
+        tmp = folder / f".{DB_NAME}.{uuid.uuid4().hex}.part"
+        conn = sqlite3.connect(tmp)
+        try:
+            with conn:
+                schema.create(conn)
+                meta = {"name": name.strip(), "span_m": "" if span_m is None else repr(float(span_m)),
+                        "scanner_profile": json.dumps(profile.to_dict()), "created": now_iso(),
+                        "settings": json.dumps({})}
+                conn.executemany("INSERT INTO meta(key, value) VALUES (?, ?)", meta.items())
+                conn.executemany(
+                    "INSERT INTO reflectors(id, grp, x, y, z, diameter_m) VALUES (?, ?, ?, ?, ?, ?)",
+                    [(i, g, *map(float, p), float(d)) for i, g, p, d in
+                     zip(layout.ids, layout.groups, layout.xyz, layout.diameters_m)])
+                conn.execute("INSERT INTO log(time, action, epoch, details) VALUES (?, 'init', NULL, ?)",
+                             (now_iso(), json.dumps({"name": name, "reflectors": len(layout)})))
+        finally:
+            conn.close()
+        os.replace(tmp, folder / DB_NAME)
+        return cls.open(folder)
+
+    @classmethod
+    def open(cls, folder: str | os.PathLike, *, writable: bool = True) -> "Campaign":
+        """Open a campaign; a writer holds an exclusive lock, readers a shared one."""
+        folder = Path(folder)
+        db = folder / DB_NAME
+        if not db.is_file():
+            raise CampaignError(f"{folder}: no campaign here (no {DB_NAME}); create one with 'bridgesurvey init'")
+        lock_fh = open(folder / LOCK_NAME, "a+")
+        try:
+            fcntl.flock(lock_fh, (fcntl.LOCK_EX if writable else fcntl.LOCK_SH) | fcntl.LOCK_NB)
+        except BlockingIOError:
+            lock_fh.seek(0)
+            holder = lock_fh.read().strip() or "another process"
+            lock_fh.close()
+            raise CampaignLockedError(f"{folder}: the campaign is in use by {holder}; wait for it to finish "
+                                      "and try again") from None
+        if writable:
+            lock_fh.seek(0)
+            lock_fh.truncate()
+            lock_fh.write(f"BridgeSurvey process {os.getpid()}")
+            lock_fh.flush()
+        try:
+            conn = sqlite3.connect(db, timeout=30)
+            conn.row_factory = sqlite3.Row
+            conn.execute("PRAGMA foreign_keys = ON")
+            conn.execute("PRAGMA journal_mode = WAL")
+            conn.execute("PRAGMA synchronous = FULL")
+            version = schema.version_of(conn)
+        except sqlite3.DatabaseError as exc:
+            lock_fh.close()
+            raise CampaignError(f"{db}: not a readable campaign database ({exc})") from None
+        if version > schema.SCHEMA_VERSION:
+            conn.close()
+            lock_fh.close()
+            raise CampaignError(f"{folder}: written by a newer BridgeSurvey (schema {version}, this one reads up to "
+                                f"{schema.SCHEMA_VERSION}); update BridgeSurvey")
+        if version < schema.SCHEMA_VERSION:
+            if not writable:
+                conn.close()
+                lock_fh.close()
+                raise CampaignError(f"{folder}: needs an upgrade; open it once with a writing command")
+            schema.migrate(conn, version)
+        camp = cls(folder, conn, lock_fh, writable=writable)
+        if writable:
+            camp._clean_partial_files()
+        return camp
+
+    def close(self) -> None:
+        if self.conn is not None:
+            self.conn.close()
+            self.conn = None
+        if self._lock_fh is not None:
+            with contextlib.suppress(OSError):
+                fcntl.flock(self._lock_fh, fcntl.LOCK_UN)
+            self._lock_fh.close()
+            self._lock_fh = None
+
+    def __enter__(self) -> "Campaign":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    @contextlib.contextmanager
+    def transaction(self):
+        """One atomic change: everything inside commits together or not at all."""
+        if not self.writable:
+            raise CampaignError("the campaign is open read-only")
+        with self.conn:
+            yield self.conn
+
+    def _clean_partial_files(self) -> None:
+        """Remove what an interrupted import left: temporary copies and files no row refers to."""
+        scans = self.folder / SCANS_DIR
+        known = {r[0] for r in self.conn.execute("SELECT stored_path FROM files")}
+        for p in scans.iterdir() if scans.is_dir() else ():
+            rel = f"{SCANS_DIR}/{p.name}"
+            if p.name.startswith(".") or rel not in known:
+                with contextlib.suppress(OSError):
+                    p.chmod(0o644)
+                    p.unlink()
+        for p in self.folder.glob(f".{DB_NAME}.*.part"):
+            p.unlink()
+
+    # ------------------------------------------------------------------ metadata
+    def meta(self, key: str, default: Optional[str] = None) -> Optional[str]:
+        row = self.conn.execute("SELECT value FROM meta WHERE key = ?", (key,)).fetchone()
+        return default if row is None else row[0]
+
+    @property
+    def name(self) -> str:
+        return self.meta("name", "")
+
+    @property
+    def span_m(self) -> Optional[float]:
+        v = self.meta("span_m", "")
+        return float(v) if v else None
+
+    @property
+    def profile(self) -> ScannerProfile:
+        return ScannerProfile.from_dict(json.loads(self.meta("scanner_profile", "{}")))
+
+    def settings(self) -> dict:
+        return json.loads(self.meta("settings", "{}"))
+
+    def set_setting(self, key: str, value) -> None:
+        s = self.settings()
+        s[key] = value
+        with self.transaction() as c:
+            c.execute("UPDATE meta SET value = ? WHERE key = 'settings'", (json.dumps(s),))
+            self._log(c, "setting", None, {key: value})
+
+    def _log(self, conn, action: str, epoch: Optional[str], details: dict) -> None:
+        conn.execute("INSERT INTO log(time, action, epoch, details) VALUES (?, ?, ?, ?)",
+                     (now_iso(), action, epoch, json.dumps(details, default=str)))
+
+    def log_rows(self) -> list[dict]:
+        return [dict(r) for r in self.conn.execute("SELECT * FROM log ORDER BY id")]
+
+    # ------------------------------------------------------------------ reflectors
+    def reflectors(self) -> list[dict]:
+        return [dict(r) for r in self.conn.execute("SELECT * FROM reflectors ORDER BY grp DESC, id")]
+
+    def reflector(self, rid: str) -> dict:
+        row = self.conn.execute("SELECT * FROM reflectors WHERE id = ?", (rid,)).fetchone()
+        if row is None:
+            known = ", ".join(r["id"] for r in self.reflectors())
+            raise InputError(f"unknown reflector {rid!r}; the campaign has {known}")
+        return dict(row)
+
+    def layout(self, at: Optional[str] = None) -> Layout:
+        """Reflectors expected at a date-time (all active ones when None)."""
+        rows = []
+        for r in self.reflectors():
+            if at is not None and ((r["installed"] and r["installed"] > at) or (r["retired"] and r["retired"] <= at)):
+                continue
+            if at is None and r["retired"]:
+                continue
+            rows.append(r)
+        return Layout(tuple(r["id"] for r in rows), tuple(r["grp"] for r in rows),
+                      np.array([[r["x"], r["y"], r["z"]] for r in rows], dtype=float).reshape(-1, 3),
+                      np.array([r["diameter_m"] for r in rows], dtype=float))
+
+    def add_reflector(self, rid: str, group: str, xyz: Sequence[float], *, diameter_m: float = 0.05,
+                      installed: Optional[str] = None, replaces: Optional[str] = None, note: str = "") -> None:
+        if group not in ("reference", "measurement"):
+            raise InputError(f"group must be 'reference' or 'measurement', not {group!r}")
+        if not rid.strip():
+            raise InputError("a reflector needs an id")
+        if self.conn.execute("SELECT 1 FROM reflectors WHERE id = ?", (rid,)).fetchone():
+            raise InputError(f"reflector {rid!r} already exists; choose a new id")
+        xyz = [float(v) for v in xyz]
+        if len(xyz) != 3 or not np.all(np.isfinite(xyz)) or not (diameter_m > 0):
+            raise InputError("reflector coordinates must be three finite numbers and the diameter positive")
+        installed = parse_datetime(installed) if installed else None
+        with self.transaction() as c:
+            c.execute("INSERT INTO reflectors(id, grp, x, y, z, diameter_m, installed, replaces, note) "
+                      "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)", (rid, group, *xyz, diameter_m, installed, replaces, note))
+            self._log(c, "reflector-add", None, {"id": rid, "group": group, "replaces": replaces})
+
+    def retire_reflector(self, rid: str, when: str) -> None:
+        r = self.reflector(rid)
+        if r["retired"]:
+            raise InputError(f"reflector {rid!r} was already retired on {r['retired']}")
+        when = parse_datetime(when)
+        with self.transaction() as c:
+            c.execute("UPDATE reflectors SET retired = ? WHERE id = ?", (when, rid))
+            self._log(c, "reflector-retire", None, {"id": rid, "when": when})
+
+    def replace_reflector(self, old: str, new: str, when: str, *, xyz: Optional[Sequence[float]] = None) -> None:
+        """Retire ``old`` and install ``new`` at the same place (or at ``xyz``); the history continues."""
+        r = self.reflector(old)
+        when = parse_datetime(when)
+        with self.transaction() as c:
+            if self.conn.execute("SELECT 1 FROM reflectors WHERE id = ?", (new,)).fetchone():
+                raise InputError(f"reflector {new!r} already exists; choose a new id")
+            pos = [float(v) for v in (xyz if xyz is not None else (r["x"], r["y"], r["z"]))]
+            c.execute("UPDATE reflectors SET retired = ? WHERE id = ?", (when, old))
+            c.execute("INSERT INTO reflectors(id, grp, x, y, z, diameter_m, installed, replaces, note) "
+                      "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                      (new, r["grp"], *pos, r["diameter_m"], when, old, f"replaces {old}"))
+            self._log(c, "reflector-replace", None, {"old": old, "new": new, "when": when})
+
+    # ------------------------------------------------------------------ epochs and files
+    def epochs(self) -> list[dict]:
+        return [dict(r) for r in self.conn.execute("SELECT * FROM epochs ORDER BY datetime, label")]
+
+    def epoch(self, label: str) -> dict:
+        row = self.conn.execute("SELECT * FROM epochs WHERE label = ?", (label,)).fetchone()
+        if row is None:
+            labels = [e["label"] for e in self.epochs()]
+            hint = f"; epochs are {', '.join(labels[-8:])}" if labels else "; the campaign has no epochs yet"
+            raise InputError(f"no epoch {label!r} in {self.folder}{hint}")
+        return dict(row)
+
+    def files(self, epoch: str, role: Optional[str] = None) -> list[dict]:
+        q = "SELECT * FROM files WHERE epoch = ?" + (" AND role = ?" if role else "") + " ORDER BY imported, stored_path"
+        return [dict(r) for r in self.conn.execute(q, (epoch, role) if role else (epoch,))]
+
+    def path_of(self, file_row: dict) -> Path:
+        return self.folder / file_row["stored_path"]
+
+    def _copy_in(self, src: Path) -> tuple[str, str, int]:
+        """Copy a file into scans/ (temporary name, fsync, rename, read-only); returns (sha, rel path, size)."""
+        scans = self.folder / SCANS_DIR
+        scans.mkdir(exist_ok=True)
+        tmp = scans / f".import-{uuid.uuid4().hex}"
+        h = hashlib.sha256()
+        with open(src, "rb") as fin, open(tmp, "wb") as fout:
+            while block := fin.read(8 << 20):
+                h.update(block)
+                fout.write(block)
+            fout.flush()
+            os.fsync(fout.fileno())
+        sha = h.hexdigest()
+        safe = "".join(ch if ch.isalnum() or ch in "._-" else "_" for ch in src.name)
+        rel = f"{SCANS_DIR}/{sha[:16]}_{safe}"
+        final = self.folder / rel
+        if final.exists():
+            tmp.unlink()
+        else:
+            os.replace(tmp, final)
+            final.chmod(0o444)
+        return sha, rel, src.stat().st_size
+
+    def import_files(self, epoch: str, paths: Iterable[str | os.PathLike], role: str, *,
+                     validate=None, create_epoch: Optional[dict] = None) -> list[str]:
+        """Validate, copy in and register scan files of an epoch, all or nothing.
+
+        ``validate(path)`` must raise on an unreadable file (before anything is changed).
+        ``create_epoch`` (label, datetime, notes) creates the epoch in the same transaction.
+        """
+        paths = [Path(p) for p in paths]
+        for p in paths:
+            if not p.is_file():
+                raise InputError(f"{p}: no such file; check the path")
+        shas = [sha256_of(p) for p in paths]
+        if len(set(shas)) != len(shas):
+            raise DuplicateImportError("the same file is given twice")
+        for p, sha in zip(paths, shas):
+            row = self.conn.execute("SELECT epoch, original_path FROM files WHERE sha256 = ?", (sha,)).fetchone()
+            if row is not None:
+                raise DuplicateImportError(f"{p}: this file is already in the campaign (epoch {row['epoch']}, "
+                                           f"imported from {row['original_path']}); nothing was changed")
+        if validate is not None:
+            for p in paths:
+                validate(p)
+        copied = []
+        try:
+            for p in paths:
+                copied.append(self._copy_in(p))
+            with self.transaction() as c:
+                if create_epoch is not None:
+                    c.execute("INSERT INTO epochs(label, datetime, notes, created) VALUES (?, ?, ?, ?)",
+                              (create_epoch["label"], create_epoch["datetime"], create_epoch.get("notes", ""),
+                               now_iso()))
+                for p, (sha, rel, size) in zip(paths, copied):
+                    c.execute("INSERT INTO files(sha256, epoch, role, stored_path, original_path, size, imported) "
+                              "VALUES (?, ?, ?, ?, ?, ?, ?)", (sha, epoch, role, rel, str(p.resolve()), size, now_iso()))
+                self._log(c, "import", epoch, {"role": role, "files": [str(p) for p in paths], "sha256": shas})
+        except BaseException:
+            self._clean_partial_files()
+            raise
+        return shas
+
+    def add_epoch(self, label: str, when: str, coarse: str | os.PathLike, fines: Sequence = (), *, notes: str = "",
+                  validate=None) -> str:
+        if not label or not label.strip() or any(ch in label for ch in "/\\\n"):
+            raise InputError(f"epoch label {label!r} is not usable (no slashes or line breaks)")
+        when = parse_datetime(when)
+        if self.conn.execute("SELECT 1 FROM epochs WHERE label = ?", (label,)).fetchone():
+            raise InputError(f"epoch {label!r} already exists; use another --label or add-fine to add files to it")
+        self.import_files(label, [coarse], "coarse", validate=validate,
+                          create_epoch={"label": label, "datetime": when, "notes": notes})
+        if fines:
+            self.import_files(label, fines, "fine", validate=validate)
+        return label
+
+    # ------------------------------------------------------------------ results
+    def save_plan(self, epoch: str, plan_json: dict, inputs_hash: str) -> None:
+        with self.transaction() as c:
+            c.execute("INSERT OR REPLACE INTO plans(epoch, json, inputs_hash, created) VALUES (?, ?, ?, ?)",
+                      (epoch, json.dumps(plan_json), inputs_hash, now_iso()))
+            c.execute("INSERT OR REPLACE INTO epoch_results(epoch, stage, inputs_hash, processed) VALUES (?, ?, ?, ?)",
+                      (epoch, "planned", inputs_hash, now_iso()))
+            c.execute("DELETE FROM centroids WHERE epoch = ?", (epoch,))
+            self._log(c, "plan", epoch, {"inputs_hash": inputs_hash})
+
+    def plan_row(self, epoch: str) -> Optional[dict]:
+        row = self.conn.execute("SELECT * FROM plans WHERE epoch = ?", (epoch,)).fetchone()
+        return None if row is None else dict(row)
+
+    def result_row(self, epoch: str) -> Optional[dict]:
+        row = self.conn.execute("SELECT * FROM epoch_results WHERE epoch = ?", (epoch,)).fetchone()
+        return None if row is None else dict(row)
+
+    def save_centroids(self, epoch: str, cents: dict, inputs_hash: str, params: dict) -> None:
+        with self.transaction() as c:
+            c.execute("DELETE FROM centroids WHERE epoch = ?", (epoch,))
+            for rid, tc in cents.items():
+                xyz = [float(v) if np.isfinite(v) else None for v in tc.xyz_socs]
+                c.execute("INSERT INTO centroids VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                          (epoch, rid, int(tc.found), *xyz, json.dumps(np.nan_to_num(tc.cov, nan=0.0).tolist()),
+                           int(tc.n_points), _f(tc.threshold), _f(tc.separability), _f(tc.sigma_range_m),
+                           json.dumps(list(tc.flags))))
+            c.execute("INSERT OR REPLACE INTO epoch_results(epoch, stage, inputs_hash, processed) VALUES (?, ?, ?, ?)",
+                      (epoch, "measured", inputs_hash, now_iso()))
+            self._log(c, "measure", epoch, {"inputs_hash": inputs_hash, "params": params,
+                                             "found": sum(int(t.found) for t in cents.values())})
+
+    def centroids(self, epoch: str) -> dict[str, TargetCentroid]:
+        out = {}
+        for r in self.conn.execute("SELECT * FROM centroids WHERE epoch = ? ORDER BY reflector", (epoch,)):
+            xyz = np.array([np.nan if r[k] is None else r[k] for k in ("x", "y", "z")], dtype=float)
+            out[r["reflector"]] = TargetCentroid(
+                r["reflector"], xyz, np.array(json.loads(r["cov"]), dtype=float), int(r["n"]),
+                _nan(r["threshold"]), _nan(r["separability"]), tuple(json.loads(r["flags"])), int(r["n"]),
+                sigma_range_m=_nan(r["sigma_range_m"]))
+        return out
+
+    def save_displacements(self, epoch: str, baseline: str, res, inputs_hash: str) -> None:
+        with self.transaction() as c:
+            c.execute("DELETE FROM displacement_sets WHERE epoch = ?", (epoch,))
+            c.execute("INSERT INTO displacement_sets VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                      (epoch, baseline, inputs_hash, json.dumps(np.asarray(res.normal_socs).tolist()),
+                       json.dumps(np.asarray(res.reference_point_socs).tolist()), json.dumps(list(res.reference_ids)),
+                       res.normal_mode, json.dumps(list(res.flags)), now_iso()))
+            for d in res.displacements:
+                c.execute("INSERT INTO displacements VALUES (?, ?, ?, ?, ?, ?, ?)",
+                          (epoch, d.reflector, _f(d.displacement_m), _f(d.sigma_m), _f(d.vertical_m),
+                           _f(d.baseline_vertical_m), json.dumps(list(d.flags))))
+            for rc in res.reference_checks:
+                c.execute("INSERT INTO reference_checks VALUES (?, ?, ?, ?, ?, ?, ?)",
+                          (epoch, rc.reflector, _f(rc.median_change_m), _f(rc.max_change_m), int(rc.moved),
+                           int(rc.missing), int(rc.suspect)))
+            self._log(c, "displacements", epoch, {"baseline": baseline, "inputs_hash": inputs_hash})
+
+    def displacement_set(self, epoch: str) -> Optional[dict]:
+        row = self.conn.execute("SELECT * FROM displacement_sets WHERE epoch = ?", (epoch,)).fetchone()
+        return None if row is None else dict(row)
+
+    def displacement_rows(self) -> list[dict]:
+        q = """SELECT e.label AS epoch, e.datetime AS datetime, d.reflector, d.displacement_m, d.sigma_m,
+                      d.flags AS flags, s.flags AS epoch_flags, s.baseline
+               FROM displacements d JOIN displacement_sets s ON s.epoch = d.epoch
+               JOIN epochs e ON e.label = d.epoch ORDER BY e.datetime, e.label, d.reflector"""
+        return [dict(r) for r in self.conn.execute(q)]
+
+    def reference_check_rows(self, epoch: str) -> list[dict]:
+        return [dict(r) for r in self.conn.execute("SELECT * FROM reference_checks WHERE epoch = ?", (epoch,))]
+
+    # ------------------------------------------------------------------ limits
+    def set_limit(self, reflector: str, rule: str) -> None:
+        from projects.limits import parse_rule
+
+        lim = parse_rule(rule, self.span_m)
+        if reflector != "*":
+            self.reflector(reflector)
+        with self.transaction() as c:
+            c.execute("INSERT OR REPLACE INTO limits VALUES (?, ?, ?, ?)",
+                      (reflector, lim.warning_mm, lim.alarm_mm, rule))
+            self._log(c, "limit", None, {"reflector": reflector, "rule": rule})
+
+    def limit_for(self, reflector: str):
+        from projects.limits import Limit
+
+        row = self.conn.execute("SELECT * FROM limits WHERE reflector = ?", (reflector,)).fetchone() or \
+            self.conn.execute("SELECT * FROM limits WHERE reflector = '*'").fetchone()
+        return None if row is None else Limit(row["warning_mm"], row["alarm_mm"], row["rule"])
+
+    def integrity_check(self) -> str:
+        res = self.conn.execute("PRAGMA integrity_check").fetchone()[0]
+        fk = self.conn.execute("PRAGMA foreign_key_check").fetchall()
+        return res if not fk else f"foreign key violations: {len(fk)}"
+
+
+def _f(v) -> Optional[float]:
+    return float(v) if v is not None and np.isfinite(v) else None
+
+
+def _nan(v) -> float:
+    return float("nan") if v is None else float(v)
