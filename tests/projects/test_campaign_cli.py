@@ -1,0 +1,146 @@
+"""The campaign command line end to end on simulated visits, including every kind of bad input."""
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+import json
+import sqlite3
+from pathlib import Path
+
+import pytest
+
+from app.cli.main import main
+from projects.store import Campaign
+
+DATES = ("2026-03-02T09:00", "2026-03-09T10:00", "2026-03-16T08:30")
+
+
+def snapshot(folder: Path) -> dict:
+    """Everything a campaign holds: file checksums plus a dump of the database."""
+    out = {}
+    for p in sorted(folder.rglob("*")):
+        if p.is_file() and p.name not in (".lock",) and not p.name.endswith(("-wal", "-shm")):
+            if p.suffix == ".sqlite":
+                conn = sqlite3.connect(p)
+                out[str(p.relative_to(folder))] = "\n".join(conn.iterdump())
+                conn.close()
+            else:
+                out[str(p.relative_to(folder))] = hashlib.sha256(p.read_bytes()).hexdigest()
+    return out
+
+
+def add_visit(camp: Path, field: Path, k: int, capsys) -> str:
+    from lidar.plan import ScanPlan
+    from lidar.simulate.files import simulate_fine
+
+    label = DATES[k][:10]
+    assert main(["add-epoch", str(camp), "--date", DATES[k], "--coarse", str(field / f"v{k}" / "coarse.laz")]) == 0
+    plan_path = field / f"v{k}" / "plan.json"
+    assert main(["plan", str(camp), "--epoch", label, "--out", str(plan_path)]) == 0
+    if not (field / f"v{k}" / "fine.laz").exists():
+        simulate_fine(field / f"v{k}", ScanPlan.load(plan_path).rois)
+    assert main(["add-fine", str(camp), "--epoch", label, str(field / f"v{k}" / "fine.laz")]) == 0
+    capsys.readouterr()
+    return label
+
+
+@pytest.fixture
+def campaign(field_copy, tmp_path, capsys):
+    camp = tmp_path / "camp"
+    assert main(["init", str(camp), "--name", "Test bridge", "--layout", str(field_copy / "layout.csv"),
+                 "--span-m", "40"]) == 0
+    capsys.readouterr()
+    return camp
+
+
+def test_whole_flow_gives_true_displacements(campaign, field_copy, capsys):
+    for k in range(3):
+        add_visit(campaign, field_copy, k, capsys)
+    assert main(["process", str(campaign)]) == 0
+    assert main(["displacements", str(campaign), "--format", "csv"]) == 0
+    rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out.split("baseline:")[-1].split("\n", 1)[1])))
+    assert {"epoch", "datetime", "reflector", "displacement_mm", "sigma_mm", "flags"} <= set(rows[0])
+    assert len(rows) == 3 * 5
+    truth = {k: json.loads((field_copy / f"v{k}" / "truth.json").read_text()) for k in range(3)}
+    for r in rows:
+        k = [d[:10] for d in DATES].index(r["epoch"])
+        t = {x["id"]: x["vertical_displacement_m"] for x in truth[k]["targets"]}
+        t0 = {x["id"]: x["vertical_displacement_m"] for x in truth[0]["targets"]}
+        true_mm = (t[r["reflector"]] - t0[r["reflector"]]) * 1000
+        assert abs(float(r["displacement_mm"]) - true_mm) < max(0.35, 4 * float(r["sigma_mm"] or 0)), r
+    # incremental: nothing to do the second time, identical numbers
+    before = snapshot(campaign)
+    assert main(["process", str(campaign), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert all(e["action"] == "up-to-date" for e in out["epochs"]) and out["displacements_updated"] == []
+    after = snapshot(campaign)
+    strip = lambda s: {k: v for k, v in s.items() if not k.endswith(".sqlite")}
+    assert strip(before) == strip(after)
+    with Campaign.open(campaign, writable=False) as c:
+        assert c.integrity_check() == "ok"
+
+
+def test_limits_status_and_export(campaign, field_copy, capsys, tmp_path):
+    for k in range(2):
+        add_visit(campaign, field_copy, k, capsys)
+    assert main(["limit", str(campaign), "--rule", "abs:3,5"]) == 0
+    assert main(["process", str(campaign)]) == 0
+    capsys.readouterr()
+    assert main(["status", str(campaign), "--json"]) == 0
+    status = json.loads(capsys.readouterr().out)
+    states = {t["reflector"]: t["state"] for t in status["targets"]}
+    assert states["M3"] == "warning" and states["M1"] == "ok"  # -4 mm and -2.4 mm against 3 and 5 mm
+    assert main(["export", str(campaign), "--out", str(tmp_path / "all.xlsx")]) == 0
+    from openpyxl import load_workbook
+
+    wb = load_workbook(tmp_path / "all.xlsx")
+    assert {"epochs", "reflectors", "centroids", "displacements", "files", "log"} <= set(wb.sheetnames)
+
+
+def test_bad_inputs_leave_the_campaign_unchanged(campaign, field_copy, capsys, tmp_path):
+    add_visit(campaign, field_copy, 0, capsys)
+    before = snapshot(campaign)
+    truncated = tmp_path / "cut.laz"
+    blob = (field_copy / "v1" / "coarse.laz").read_bytes()
+    truncated.write_bytes(blob[: len(blob) // 3])
+    cases = [
+        (["add-epoch", str(campaign), "--date", "2026-04-01", "--coarse", str(truncated)], "cut.laz"),
+        (["add-epoch", str(campaign), "--date", "2026-04-01", "--coarse", str(tmp_path / "none.laz")], "no such file"),
+        (["add-epoch", str(campaign), "--date", "yesterday", "--coarse", str(field_copy / "v1" / "coarse.laz")],
+         "not ISO 8601"),
+        (["add-epoch", str(campaign), "--date", "2026-04-01", "--coarse", str(field_copy / "v0" / "coarse.laz")],
+         "already in the campaign"),
+        (["add-epoch", str(campaign), "--date", DATES[0], "--coarse", str(field_copy / "v1" / "coarse.laz")],
+         "already exists"),
+        (["add-fine", str(campaign), "--epoch", "1999-01-01", str(field_copy / "v1" / "coarse.laz")], "no epoch"),
+        (["process", str(campaign), "--epoch", "nope"], "no epoch 'nope'"),
+        (["reflector", str(campaign), "retire", "Q7", "--date", "2026-05-01"], "unknown reflector 'Q7'"),
+        (["limit", str(campaign), "--rule", "banana"], "not understood"),
+        (["export", str(campaign), "--out", str(tmp_path / "x.doc")], "export writes"),
+        (["process", str(tmp_path / "nowhere")], "no campaign here"),
+    ]
+    for argv, message in cases:
+        code = main(argv)
+        err = capsys.readouterr().err.strip()
+        assert code == 1, argv
+        assert message in err and len(err.splitlines()) == 1, (argv, err)
+        assert snapshot(campaign) == before, argv
+    bad_layout = tmp_path / "layout.csv"
+    bad_layout.write_text("id,group,x,y\nR1,reference,0,0\n")
+    assert main(["init", str(tmp_path / "c2"), "--name", "x", "--layout", str(bad_layout)]) == 1
+    assert "missing column(s) z" in capsys.readouterr().err
+    assert not (tmp_path / "c2").exists()
+
+
+def test_reflector_life_cycle(campaign, capsys):
+    assert main(["reflector", str(campaign), "add", "M6", "--group", "measurement", "--xyz", "20,0,7",
+                 "--installed", "2026-06-01"]) == 0
+    assert main(["reflector", str(campaign), "replace", "M2", "M2b", "--date", "2026-07-01"]) == 0
+    assert main(["reflector", str(campaign), "list", "--json"]) == 0
+    rows = {r["id"]: r for r in json.loads(capsys.readouterr().out.split("\n", 2)[-1])}
+    assert rows["M2"]["retired"].startswith("2026-07-01") and rows["M2b"]["replaces"] == "M2"
+    with Campaign.open(campaign, writable=False) as c:
+        assert "M2" in c.layout("2026-06-15T00:00:00+00:00").ids
+        ids = c.layout("2026-07-15T00:00:00+00:00").ids
+        assert "M2b" in ids and "M2" not in ids and "M6" in ids
