@@ -1,0 +1,80 @@
+"""Adding and processing epoch 100 of a campaign costs no more than epoch 2 (issue 4).
+
+One simulated visit is imported again and again as new epochs; each copy differs only in the LAS
+header's project GUID, so the checksums differ and the processing work is the same every time.
+Usage: ``./run bench bench_campaign [N_EPOCHS]`` (default 100).
+"""
+from __future__ import annotations
+
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from _harness import OUT  # noqa: E402
+
+
+def variant(src: Path, dst: Path, k: int) -> Path:
+    blob = bytearray(src.read_bytes())
+    blob[8:24] = k.to_bytes(16, "little")  # project GUID: not used by any reader
+    dst.write_bytes(bytes(blob))
+    return dst
+
+
+def main(n: int = 100) -> None:
+    from lidar.io import read_scan, write_scan
+    from lidar.layout import layout_from_model, write_layout_csv
+    from lidar.simulate import BridgeModel, EpochConditions, ScannerSetup
+    from lidar.simulate.files import simulate_coarse, simulate_fine
+    from projects.processing import plan_epoch, process
+    from projects.store import Campaign
+    from lidar.layout import read_layout_csv
+
+    work = Path(tempfile.mkdtemp(prefix="bench_campaign_", dir=OUT.parent if OUT.exists() else None))
+    field = work / "field"
+    simulate_coarse(field, setup=ScannerSetup((20.0, -12.0, 1.5), heading_deg=30.0),
+                    conditions=EpochConditions(midspan_displacement_m=-0.003), seed=1, coarse_step_deg=0.06)
+    write_scan(read_scan(field / "coarse.laz"), field / "coarse.las")
+    write_layout_csv(layout_from_model(BridgeModel(), noise_m=0.02), field / "layout.csv")
+    camp = Campaign.create(work / "camp", name="bench", layout=read_layout_csv(field / "layout.csv"), span_m=40)
+    times = {}
+    fine_las = None
+    try:
+        for k in range(1, n + 1):
+            label = f"E{k:03d}"
+            coarse = variant(field / "coarse.las", work / f"c{k}.las", k)
+            t0 = time.perf_counter()
+            camp.add_epoch(label, f"2026-01-01T00:00+00:00" if k == 1 else f"2026-01-{1 + (k % 28):02d}T{k % 24:02d}:00+00:00",
+                           coarse)
+            plan = plan_epoch(camp, label)
+            t_plan = time.perf_counter() - t0
+            if fine_las is None:
+                simulate_fine(field, plan.rois)
+                write_scan(read_scan(field / "fine.laz"), field / "fine.las")
+                fine_las = field / "fine.las"
+            fine = variant(fine_las, work / f"f{k}.las", k)
+            t1 = time.perf_counter()
+            camp.import_files(label, [fine], "fine")
+            summary = process(camp, [label])
+            times[k] = t_plan + time.perf_counter() - t1
+            coarse.unlink()
+            fine.unlink()
+            if k in (2, n) or k % 10 == 0:
+                print(f"epoch {k:3d}: add + plan + add fine + process {times[k]:.2f} s "
+                      f"({len(summary.displacement_epochs)} displacement set(s) computed)", flush=True)
+    finally:
+        camp.close()
+        shutil.rmtree(work, ignore_errors=True)
+    med_early = float(np.median([times[k] for k in (2, 3, 4)]))
+    med_late = float(np.median([times[k] for k in (n - 2, n - 1, n)]))
+    print(f"RESULT epoch {n} costs x{med_late / med_early:.2f} of epoch 2 (median of 3 around each; target <= 1.0 "
+          f"within noise)")
+
+
+if __name__ == "__main__":
+    main(int(sys.argv[1]) if len(sys.argv) > 1 else 100)
