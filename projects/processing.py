@@ -45,6 +45,41 @@ STAGE2_KEYS = ("normal_mode", "weighted_references", "moved_tolerance_m")
 FLAG_CHAINED = "chained_to_replaced_target"
 
 
+def set_parameter(c: Campaign, key: str, text: Optional[str]) -> None:
+    """Change one processing parameter from its text form (validated)."""
+    from lidar.errors import InputError
+
+    if key == "baseline":
+        if text:
+            c.epoch(text)
+        c.set_setting("baseline", text or None)
+        return
+    if key not in DEFAULTS:
+        raise InputError(f"unknown setting {key!r}; settings are {', '.join(list(DEFAULTS) + ['baseline'])}")
+    if text is None:
+        raise InputError(f"give a value for {key}")
+    try:
+        if key == "normal_mode":
+            if text not in ("reference", "epoch"):
+                raise ValueError
+            value = text
+        elif key == "weighted_references":
+            value = {"true": True, "1": True, "yes": True, "false": False, "0": False, "no": False}[text.lower()]
+        elif key == "min_points":
+            value = int(text)
+            if value < 10:
+                raise ValueError
+        elif text.lower() in ("none", "auto", "") and key in ("map_step_deg", "detection_threshold"):
+            value = None
+        else:
+            value = float(text)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError
+    except (ValueError, KeyError):
+        raise InputError(f"{key}: {text!r} is not a valid value") from None
+    c.set_setting(key, value)
+
+
 def parameters(c: Campaign) -> dict:
     return {**DEFAULTS, **{k: v for k, v in c.settings().items() if k in DEFAULTS}}
 

@@ -89,6 +89,17 @@ def register(sub) -> None:
     p.add_argument("--reflector", default="*", help="one target (default: every measurement target)")
     p.set_defaults(func=cmd_limit)
 
+    p = sub.add_parser("settings", help="show or change processing parameters (marks what becomes stale)",
+                       description="Without KEY: list the parameters. With KEY VALUE: change one; 'process' then "
+                                   "recomputes exactly the results it affects. Keys: " + ", ".join(
+                                       ["min_points", "budget_min", "normal_mode", "weighted_references",
+                                        "map_step_deg", "detection_threshold", "identification_tolerance_m",
+                                        "moved_tolerance_m", "baseline"]))
+    p.add_argument("dir", type=Path)
+    p.add_argument("key", nargs="?")
+    p.add_argument("value", nargs="?")
+    p.set_defaults(func=cmd_settings)
+
     p = sub.add_parser("export", help="export tables: .xlsx (everything) or .csv (displacements)")
     p.add_argument("dir", type=Path)
     p.add_argument("--out", type=Path, required=True)
@@ -274,6 +285,24 @@ def cmd_limit(args) -> int:
         c.set_limit(args.reflector, args.rule)
         lim = c.limit_for(args.reflector if args.reflector != "*" else "*")
     print(f"limit for {args.reflector}: warning {lim.warning_mm:.2f} mm, alarm {lim.alarm_mm:.2f} mm ({lim.rule})")
+    return 0
+
+
+def cmd_settings(args) -> int:
+    from projects.processing import DEFAULTS, parameters, stale_epochs, set_parameter
+
+    if args.key is None:
+        with _open(args.dir, writable=False) as c:
+            params = parameters(c)
+            params["baseline"] = c.settings().get("baseline")
+        table([{"key": k, "value": v, "default": DEFAULTS.get(k)} for k, v in params.items()],
+              ["key", "value", "default"])
+        return 0
+    with _open(args.dir) as c:
+        set_parameter(c, args.key, args.value)
+        stale = stale_epochs(c)
+    print(f"{args.key} = {args.value}; {len(stale)} epoch(s) need processing for their centroids "
+          "(displacements follow); run 'bridgesurvey process'")
     return 0
 
 

@@ -144,3 +144,22 @@ def test_reflector_life_cycle(campaign, capsys):
         assert "M2" in c.layout("2026-06-15T00:00:00+00:00").ids
         ids = c.layout("2026-07-15T00:00:00+00:00").ids
         assert "M2b" in ids and "M2" not in ids and "M6" in ids
+
+
+def test_changing_a_parameter_recomputes_exactly_what_it_affects(campaign, field_copy, capsys):
+    for k in range(2):
+        add_visit(campaign, field_copy, k, capsys)
+    assert main(["process", str(campaign)]) == 0
+    capsys.readouterr()
+    # a displacement parameter: no centroid is recomputed, every displacement set is
+    assert main(["settings", str(campaign), "normal_mode", "epoch"]) == 0
+    assert main(["process", str(campaign), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out.split("\n", 1)[1])
+    assert all(e["action"] == "up-to-date" for e in out["epochs"]) and len(out["displacements_updated"]) == 2
+    # a measurement parameter: every epoch is re-measured
+    assert main(["settings", str(campaign), "min_points", "800"]) == 0
+    assert main(["process", str(campaign), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out.split("\n", 1)[1])
+    assert [e["action"] for e in out["epochs"]] == ["measured", "measured"]
+    assert main(["settings", str(campaign), "min_points", "five"]) == 1
+    assert "not a valid value" in capsys.readouterr().err
