@@ -131,9 +131,18 @@ def raw_for_writing(scan: Scan) -> np.ndarray:
     return np.zeros(len(scan), np.uint16)
 
 
-def atomic_target(path: str | os.PathLike) -> tuple[Path, Path]:
-    """(final, temporary) paths for writing a file by rename, so a crash never leaves half a file."""
+@contextlib.contextmanager
+def atomic_output(path: str | os.PathLike):
+    """Yield a temporary path beside ``path``; on success it is renamed to ``path``, on failure removed.
+
+    A crash never leaves half a file under the final name. The temporary name
+    keeps the suffix: some writers (laspy) choose the encoding from it.
+    """
     final = Path(path)
-    # keep the suffix: some writers (laspy) choose the encoding from it
     tmp = final.with_name(f".{final.stem}.part{final.suffix}")
-    return final, tmp
+    try:
+        yield tmp
+        os.replace(tmp, final)
+    finally:
+        if tmp.exists():
+            tmp.unlink()

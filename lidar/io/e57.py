@@ -9,7 +9,7 @@ import numpy as np
 
 from lidar.errors import ScanFormatError
 from lidar.io._common import (
-    atomic_target,
+    atomic_output,
     check_readable,
     make_scan,
     pose_from_quaternion,
@@ -146,8 +146,8 @@ def write_e57(scans: Scan | list[Scan], path: str | os.PathLike) -> Path:
 
     if isinstance(scans, Scan):
         scans = [scans]
-    final, tmp = atomic_target(path)
-    try:
+    final = Path(path)
+    with atomic_output(final) as tmp:
         with quiet_stderr():
             e57 = pye57.E57(str(tmp), mode="w")
             try:
@@ -166,8 +166,4 @@ def write_e57(scans: Scan | list[Scan], path: str | os.PathLike) -> Path:
                     e57.write_scan_raw(data, **kwargs)
             finally:
                 e57.close()
-        os.replace(tmp, final)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return final

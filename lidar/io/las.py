@@ -17,7 +17,7 @@ import laspy
 import numpy as np
 
 from lidar.errors import ScanFormatError
-from lidar.io._common import atomic_target, check_readable, make_scan, raw_for_writing
+from lidar.io._common import atomic_output, check_readable, make_scan, raw_for_writing
 from lidar.progress import ProgressCallback, report
 from lidar.scan import Scan
 
@@ -193,7 +193,7 @@ def write_las(scan: Scan, path: str | os.PathLike, *, scale_m: Optional[float] =
     -------
     Path of the written file.
     """
-    final, tmp = atomic_target(path)
+    final = Path(path)
     xyz = scan.xyz_socs
     lo = np.floor(xyz.min(axis=0)) if len(scan) else np.zeros(3)
     extent = float(np.max(xyz.max(axis=0) - lo)) if len(scan) else 0.0
@@ -221,10 +221,6 @@ def write_las(scan: Scan, path: str | os.PathLike, *, scale_m: Optional[float] =
         raw = np.round((raw64 - lo_i) / (hi_i - lo_i) * 65535 if hi_i > lo_i else raw64 * 0).astype(np.uint16)
     las.intensity = raw
     compress = final.suffix.lower() == ".laz"
-    try:
+    with atomic_output(final) as tmp:
         las.write(tmp, do_compress=compress, laz_backend=_laz_backend() if compress else None)
-        os.replace(tmp, final)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return final

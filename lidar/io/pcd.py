@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from lidar.errors import ScanFormatError
-from lidar.io._common import atomic_target, check_readable, make_scan, pose_from_quaternion, quaternion_from_pose, raw_for_writing
+from lidar.io._common import atomic_output, check_readable, make_scan, pose_from_quaternion, quaternion_from_pose, raw_for_writing
 from lidar.scan import Scan
 
 _TYPES = {("F", 4): "f4", ("F", 8): "f8", ("U", 1): "u1", ("U", 2): "u2", ("U", 4): "u4", ("U", 8): "u8",
@@ -132,7 +132,7 @@ def read_pcd(path: str | os.PathLike) -> Scan:
 
 def write_pcd(scan: Scan, path: str | os.PathLike) -> Path:
     """Write a binary PCD with x, y, z as float64 and the raw intensity as float32."""
-    final, tmp = atomic_target(path)
+    final = Path(path)
     n = len(scan)
     raw = raw_for_writing(scan).astype(np.float32)
     rec = np.empty(n, dtype=[("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("intensity", "<f4")])
@@ -147,12 +147,8 @@ def write_pcd(scan: Scan, path: str | os.PathLike) -> Path:
         "# .PCD v0.7 - written by BridgeSurvey\nVERSION 0.7\nFIELDS x y z intensity\nSIZE 8 8 8 4\n"
         f"TYPE F F F F\nCOUNT 1 1 1 1\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT {viewpoint}\nPOINTS {n}\nDATA binary\n"
     )
-    try:
+    with atomic_output(final) as tmp:
         with open(tmp, "wb") as fh:
             fh.write(header.encode("ascii"))
             fh.write(rec.tobytes())
-        os.replace(tmp, final)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return final

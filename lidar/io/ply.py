@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from lidar.errors import ScanFormatError
-from lidar.io._common import atomic_target, check_readable, make_scan, raw_for_writing
+from lidar.io._common import atomic_output, check_readable, make_scan, raw_for_writing
 from lidar.scan import Scan
 
 #: Property names other tools use for intensity, in order of preference.
@@ -46,15 +46,11 @@ def write_ply(scan: Scan, path: str | os.PathLike, *, binary: bool = True) -> Pa
     """Write x, y, z (float64) and the raw intensity as a PLY vertex element."""
     from plyfile import PlyData, PlyElement
 
-    final, tmp = atomic_target(path)
+    final = Path(path)
     raw = raw_for_writing(scan)
     rec = np.empty(len(scan), dtype=[("x", "f8"), ("y", "f8"), ("z", "f8"), ("intensity", raw.dtype.str)])
     rec["x"], rec["y"], rec["z"] = scan.xyz_socs.T
     rec["intensity"] = raw
-    try:
+    with atomic_output(final) as tmp:
         PlyData([PlyElement.describe(rec, "vertex")], text=not binary).write(str(tmp))
-        os.replace(tmp, final)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return final

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from lidar.errors import ScanFormatError
-from lidar.io._common import atomic_target, check_readable, make_scan, raw_for_writing
+from lidar.io._common import atomic_output, check_readable, make_scan, raw_for_writing
 from lidar.scan import Scan
 
 
@@ -72,7 +72,7 @@ def read_ptx(path: str | os.PathLike) -> list[Scan]:
 
 def write_ptx(scan: Scan, path: str | os.PathLike) -> Path:
     """Write a scan as a single-column PTX grid (rows = points) with its pose."""
-    final, tmp = atomic_target(path)
+    final = Path(path)
     pose = scan.pose if scan.pose is not None else np.eye(4)
     raw = scan.intensity if scan.intensity is not None else raw_for_writing(scan).astype(np.float64)
     n = len(scan)
@@ -80,12 +80,8 @@ def write_ptx(scan: Scan, path: str | os.PathLike) -> Path:
     head += [" ".join(f"{v:.10g}" for v in pose[:3, k]) for k in range(3)]
     head += [" ".join(f"{v:.12g}" for v in row) for row in pose.T]
     table = np.column_stack([scan.xyz_socs, raw])
-    try:
+    with atomic_output(final) as tmp:
         with open(tmp, "w", encoding="ascii") as fh:
             fh.write("\n".join(head) + "\n")
             np.savetxt(fh, table, fmt="%.6f %.6f %.6f %.6f")
-        os.replace(tmp, final)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return final

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from lidar.errors import ScanFormatError
-from lidar.io._common import atomic_target, check_readable, make_scan, raw_for_writing
+from lidar.io._common import atomic_output, check_readable, make_scan, raw_for_writing
 from lidar.scan import Scan
 
 _SPLIT = re.compile(r"[\s,;]+")
@@ -66,14 +66,10 @@ def read_xyz(path: str | os.PathLike) -> Scan:
 
 def write_xyz(scan: Scan, path: str | os.PathLike) -> Path:
     """Write ``x y z intensity`` lines (0.01 mm, raw intensity) with a header line."""
-    final, tmp = atomic_target(path)
+    final = Path(path)
     raw = raw_for_writing(scan).astype(np.float64)
-    try:
+    with atomic_output(final) as tmp:
         with open(tmp, "w", encoding="utf-8") as fh:
             fh.write("//X Y Z Intensity\n")
             np.savetxt(fh, np.column_stack([scan.xyz_socs, raw]), fmt="%.5f %.5f %.5f %.6g")
-        os.replace(tmp, final)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return final
