@@ -242,8 +242,8 @@ def _vertical_positions(base: dict, ep: dict, refs, meas_base, meas, mode: str, 
     e_ref = np.array([ep[r] for r in refs])
     s1 = w_ref @ b_ref
     sk = w_ref @ e_ref
-    g1 = deck_normal(np.array([base[m] for m in meas_base]))
     if mode == "reference":
+        g1 = deck_normal(np.array([base[m] for m in meas_base]))
         rot, _ = fit_rigid(b_ref, e_ref, weights=w_rot)
         gk = rot @ g1
     else:
@@ -340,7 +340,9 @@ def compute_displacements(baseline: Mapping[str, object], epoch: Mapping[str, ob
         xp, xm = x0.copy(), x0.copy()
         xp[j] += step
         xm[j] -= step
-        jac[:, j] = ((f(xp)[1] - f(xp)[0]) - (f(xm)[1] - f(xm)[0])) / (2 * step)
+        hp1, hpk = f(xp)[:2]
+        hm1, hmk = f(xm)[:2]
+        jac[:, j] = ((hpk - hp1) - (hmk - hm1)) / (2 * step)
     cov = np.zeros((x0.size, x0.size))
     for i, k in enumerate(involved_b):
         cov[3 * i:3 * i + 3, 3 * i:3 * i + 3] = base[k].cov
