@@ -108,12 +108,7 @@ def estimate_step_deg(theta_deg: np.ndarray, phi_deg: np.ndarray, *, n_total: Op
     ``theta_deg``/``phi_deg`` may be a subsample of a scan of ``n_total`` points.
     """
     n = n_total or theta_deg.size
-    # Occupied 0.5-degree cells (sin(theta) corrects the azimuth spacing of a line scanner).
-    rows = np.clip((theta_deg / 0.5).astype(np.int32), 0, 359)
-    cols = np.clip((phi_deg / 0.5).astype(np.int32), 0, 719)
-    occupied = np.bincount(rows * 720 + cols, minlength=360 * 720) > 0
-    area = np.count_nonzero(occupied) * 0.25
-    step = float(np.sqrt(area / max(n, 1)))
+    step = float(np.sqrt(occupied_area_deg2(theta_deg, phi_deg) / max(n, 1)))
     # round to 2 significant digits
     mag = 10 ** np.floor(np.log10(step))
     return float(np.round(step / mag, 1) * mag)

@@ -12,6 +12,14 @@ from lidar.errors import ScanFormatError
 from lidar.scan import Scan, normalise_intensity
 
 
+def first_line(exc: BaseException) -> str:
+    """First non-empty line of an exception's message (libraries often add dumps after it)."""
+    for line in str(exc).splitlines():
+        if line.strip():
+            return line.strip()
+    return type(exc).__name__
+
+
 def check_readable(path: str | os.PathLike) -> Path:
     """Raise ScanFormatError unless ``path`` is an existing, non-empty file."""
     p = Path(path)

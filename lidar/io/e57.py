@@ -10,6 +10,7 @@ import numpy as np
 from lidar.errors import ScanFormatError
 from lidar.io._common import (
     atomic_output,
+    first_line,
     check_readable,
     make_scan,
     pose_from_quaternion,
@@ -19,13 +20,6 @@ from lidar.io._common import (
 )
 from lidar.progress import ProgressCallback, report
 from lidar.scan import Scan
-
-
-def _first_line(exc: BaseException) -> str:
-    for line in str(exc).splitlines():
-        if line.strip():
-            return line.strip()
-    return type(exc).__name__
 
 
 def _intensity_limits(node) -> Optional[tuple[float, float]]:
@@ -73,7 +67,7 @@ def read_e57(path: str | os.PathLike, *, progress: Optional[ProgressCallback] = 
         with quiet_stderr():
             e57 = pye57.E57(str(p), mode="r")
     except Exception as exc:
-        raise ScanFormatError(p, f"not a readable E57 file ({_first_line(exc)})") from exc
+        raise ScanFormatError(p, f"not a readable E57 file ({first_line(exc)})") from exc
     try:
         count = e57.scan_count
         if count == 0:
@@ -84,7 +78,7 @@ def read_e57(path: str | os.PathLike, *, progress: Optional[ProgressCallback] = 
     except ScanFormatError:
         raise
     except Exception as exc:
-        raise ScanFormatError(p, f"corrupt E57 data ({_first_line(exc)})") from exc
+        raise ScanFormatError(p, f"corrupt E57 data ({first_line(exc)})") from exc
     finally:
         try:
             e57.close()

@@ -17,7 +17,7 @@ import laspy
 import numpy as np
 
 from lidar.errors import ScanFormatError
-from lidar.io._common import atomic_output, check_readable, make_scan, raw_for_writing
+from lidar.io._common import atomic_output, first_line, check_readable, make_scan, raw_for_writing
 from lidar.progress import ProgressCallback, report
 from lidar.scan import Scan
 
@@ -99,14 +99,9 @@ def read_las(path: str | os.PathLike, *, progress: Optional[ProgressCallback] = 
     except ScanFormatError:
         raise
     except (laspy.errors.LaspyException, ValueError, OSError, RuntimeError, struct.error) as exc:
-        raise ScanFormatError(p, f"not a readable LAS/LAZ file ({_one_line(exc)})") from exc
+        raise ScanFormatError(p, f"not a readable LAS/LAZ file ({first_line(exc)})") from exc
     # Scaled 32-bit integers are always finite: skip the (costly) finiteness scan.
     return make_scan(p, xyz, raw, fmt="LAZ" if compressed else "LAS", pose=pose, metadata=meta, finite=True)
-
-
-def _one_line(exc: BaseException) -> str:
-    text = str(exc).strip().splitlines()
-    return text[0] if text else type(exc).__name__
 
 
 def _scale_into(xyz, raw, start, records: np.ndarray, scales, offsets):

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from lidar.errors import ScanFormatError
-from lidar.io._common import atomic_output, check_readable, make_scan, raw_for_writing
+from lidar.io._common import atomic_output, first_line, check_readable, make_scan, raw_for_writing
 from lidar.scan import Scan
 
 #: Property names other tools use for intensity, in order of preference.
@@ -33,7 +33,7 @@ def read_ply(path: str | os.PathLike) -> Scan:
     except KeyError as exc:
         raise ScanFormatError(p, "the PLY file has no 'vertex' element") from exc
     except Exception as exc:  # plyfile raises many types for malformed input
-        raise ScanFormatError(p, f"not a readable PLY file ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from exc
+        raise ScanFormatError(p, f"not a readable PLY file ({first_line(exc)})") from exc
     raw = None
     for name in INTENSITY_NAMES:
         if name in names:

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from lidar.errors import ScanFormatError
-from lidar.io._common import atomic_output, check_readable, make_scan, raw_for_writing
+from lidar.io._common import atomic_output, first_line, check_readable, make_scan, raw_for_writing
 from lidar.scan import Scan
 
 _SPLIT = re.compile(r"[\s,;]+")
@@ -51,7 +51,7 @@ def read_xyz(path: str | os.PathLike) -> Scan:
         table = np.loadtxt(io.StringIO("\n".join(lines[first:])), dtype=np.float64, delimiter=delim, ndmin=2,
                            comments=("#", "//"))
     except ValueError as exc:
-        raise ScanFormatError(p, f"malformed point line ({str(exc).splitlines()[0]})") from exc
+        raise ScanFormatError(p, f"malformed point line ({first_line(exc)})") from exc
     if table.size == 0:
         raise ScanFormatError(p, "the file holds no points")
     if table.shape[1] < 3:
