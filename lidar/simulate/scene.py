@@ -195,23 +195,32 @@ class BridgeScene:
         )
         return scan, self.truth(counts)
 
-    def _paint_disc(self, disc: _Disc, k: int, origin, d_world, t, hit, intensity, on_target) -> int:
-        to_c = disc.centre - origin
+    @staticmethod
+    def _plane_hits(centre, normal, reach_m: float, origin, d_world, t, hit):
+        """Rays that may hit a flat patch glued on the structure, where they meet its plane, and
+        whether it is visible there (facing the scanner, not behind anything the scene hit first).
+
+        Returns (candidate ray indices, hit points, distances along the rays, visible, cos incidence).
+        """
+        to_c = centre - origin
         dist = np.linalg.norm(to_c)
-        fp_max = self.profile.footprint_m(dist) * 3
-        cand = np.nonzero(d_world @ (to_c / dist) > np.cos(np.arctan2(disc.radius + fp_max, dist)))[0]
-        if cand.size == 0:
-            return 0
+        cand = np.nonzero(d_world @ (to_c / dist) > np.cos(np.arctan2(reach_m, dist)))[0]
         d = d_world[cand]
-        denom = d @ disc.normal
+        denom = d @ normal
         facing = denom < -1e-6
         t_d = np.full(cand.size, np.inf)
-        t_d[facing] = (to_c @ disc.normal) / denom[facing]
+        t_d[facing] = (to_c @ normal) / denom[facing]
         t_scene = np.where(hit[cand], t[cand], np.inf)
         visible = facing & (t_d > 0) & (t_d <= t_scene + 0.003)
         q = origin + d * t_d[:, None]
+        return cand, q, t_d, visible, np.clip(-denom, 1e-3, 1.0)
+
+    def _paint_disc(self, disc: _Disc, k: int, origin, d_world, t, hit, intensity, on_target) -> int:
+        reach = disc.radius + 3 * self.profile.footprint_m(np.linalg.norm(disc.centre - origin))
+        cand, q, t_d, visible, cos_inc = self._plane_hits(disc.centre, disc.normal, reach, origin, d_world, t, hit)
+        if cand.size == 0:
+            return 0
         r = np.linalg.norm(q - disc.centre, axis=1)
-        cos_inc = np.clip(-denom, 1e-3, 1.0)
         fp = self.profile.footprint_m(t_d) / np.sqrt(cos_inc)
         cover = np.clip((disc.radius + fp / 2 - r) / fp, 0.0, 1.0)
         cover[~visible] = 0.0
@@ -228,19 +237,10 @@ class BridgeScene:
         e1, e2 = in_plane_axes(disc.normal, up_hint=np.array([1.0, 0, 0]) if abs(disc.normal[2]) > 0.9 else None)
         centre = disc.centre - CABLE_TIE_OFFSET_M * e2  # below the target on a pier face
         half_w, half_l = CABLE_TIE_SIZE_M[0] / 2, CABLE_TIE_SIZE_M[1] / 2
-        to_c = centre - origin
-        dist = np.linalg.norm(to_c)
-        cand = np.nonzero(d_world @ (to_c / dist) > np.cos(np.arctan2(half_l + 0.05, dist)))[0]
+        cand, q, t_d, visible, _ = self._plane_hits(centre, disc.normal, half_l + 0.05, origin, d_world, t, hit)
         if cand.size == 0:
             return
-        d = d_world[cand]
-        denom = d @ disc.normal
-        facing = denom < -1e-6
-        t_d = np.full(cand.size, np.inf)
-        t_d[facing] = (to_c @ disc.normal) / denom[facing]
-        t_scene = np.where(hit[cand], t[cand], np.inf)
-        visible = facing & (t_d > 0) & (t_d <= t_scene + 0.003)
-        rel = origin + d * t_d[:, None] - centre
+        rel = q - centre
         u, v = np.abs(rel @ e2), np.abs(rel @ e1)
         fp = self.profile.footprint_m(t_d)
         cover = _overlap(u, half_w, fp) * _overlap(v, half_l, fp)
