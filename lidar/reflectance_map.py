@@ -254,3 +254,49 @@ def _azimuth_span(hist: np.ndarray, phi0: float) -> float:
     """Azimuth extent (degrees) of the occupied bins measured from ``phi0``."""
     centres = (np.nonzero(hist > 0)[0] + 1) / 10.0  # upper edge of each occupied bin
     return float(np.max(np.mod(centres - phi0, 360.0))) + 0.1
+
+
+def reduce_map(rmap: ReflectanceMap, *, max_cells: int = 1_000_000) -> ReflectanceMap:
+    """The same map on cells ``k`` times larger (the smallest integer ``k`` that fits ``max_cells``).
+
+    Maximum intensity keeps the brightest return of each block, so small
+    targets stay visible; mean intensity and range are count-weighted means.
+    Used to keep a map small enough to store with the epoch and draw fast.
+
+    Parameters
+    ----------
+    rmap : ReflectanceMap
+    max_cells : int, keyword-only
+        Upper bound on the reduced map's cell count (default one million).
+
+    Returns
+    -------
+    ReflectanceMap
+        ``rmap`` itself when it already fits.
+    """
+    if max_cells < 1:
+        raise InputError(f"max_cells must be positive, got {max_cells}")
+    h, w = rmap.shape
+    k = int(np.ceil(np.sqrt(h * w / max_cells)))
+    while k > 1 and -(-h // k) * -(-w // k) > max_cells:
+        k += 1
+    if k <= 1:
+        return rmap
+    hh, ww = -(-h // k) * k, -(-w // k) * k
+
+    def blocks(a, fill):
+        out = np.full((hh, ww), fill, dtype=a.dtype)
+        out[:h, :w] = a
+        return out.reshape(hh // k, k, ww // k, k)
+
+    count = blocks(rmap.count, 0).sum(axis=(1, 3), dtype=np.int64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mx = np.fmax.reduce(np.fmax.reduce(blocks(rmap.max_intensity, np.float32(np.nan)), axis=3), axis=1)
+        w_mean = blocks(np.nan_to_num(rmap.mean_intensity) * rmap.count, np.float32(0)).sum(axis=(1, 3)) / count
+        w_range = blocks(np.nan_to_num(rmap.range_m) * rmap.count, np.float32(0)).sum(axis=(1, 3)) / count
+    empty = count == 0
+    mx[empty] = np.nan
+    return ReflectanceMap(theta0_deg=rmap.theta0_deg, phi0_deg=rmap.phi0_deg, step_deg=rmap.step_deg * k,
+                          max_intensity=mx.astype(np.float32), mean_intensity=w_mean.astype(np.float32),
+                          range_m=w_range.astype(np.float32), count=count.astype(np.int32),
+                          full_circle=rmap.full_circle, n_points=rmap.n_points)

@@ -25,6 +25,7 @@ from lidar.pipeline import analyse_coarse, measure_targets, plan_from_coarse
 from lidar.plan import ScanPlan
 from lidar.progress import ProgressCallback, report, scaled
 from lidar.scan import Scan
+from projects.map_previews import encode_preview
 from projects.store import Campaign
 
 log = logging.getLogger(__name__)
@@ -140,7 +141,7 @@ def plan_epoch(c: Campaign, label: str, *, progress: Optional[ProgressCallback] 
                            "extra_detections": len(analysis.identification.extra_detections),
                            "fit_rms_m": analysis.identification.rms_m,
                            "detections": len(analysis.detections.detections)}
-    c.save_plan(label, d, h)
+    c.save_plan(label, d, h, preview=encode_preview(analysis))
     report(progress, 1.0, "planned")
     return plan
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import sqlite3
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 
 SCHEMA_V1 = """
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -88,13 +88,29 @@ CREATE TABLE log (
 CREATE INDEX files_by_epoch ON files(epoch);
 """
 
-# version -> SQL that upgrades the previous version to it
-MIGRATIONS: dict[int, str] = {}
+# version -> SQL that upgrades the previous version to it. A new campaign is created as version 1
+# and then upgraded through every migration, so new and migrated campaigns have the same schema.
+MIGRATIONS: dict[int, str] = {
+    # 2: what the report needs to show each epoch without re-reading its scans: a reduced reflectance
+    #    map with its detections, and the points each fine-scan window actually held.
+    2: """
+    ALTER TABLE centroids ADD COLUMN n_window INTEGER;
+    CREATE TABLE map_previews (
+        epoch TEXT PRIMARY KEY REFERENCES epochs(label) ON DELETE CASCADE,
+        inputs_hash TEXT NOT NULL,
+        arrays BLOB NOT NULL,           -- numpy .npz: reduced map arrays and geometry
+        annotations TEXT NOT NULL       -- JSON: detections and identified reflectors
+    );
+    """,
+}
 
 
 def create(conn: sqlite3.Connection) -> None:
     conn.executescript(SCHEMA_V1)
-    conn.execute("INSERT INTO meta(key, value) VALUES ('schema_version', ?)", (str(SCHEMA_VERSION),))
+    conn.execute("INSERT INTO meta(key, value) VALUES ('schema_version', '1')")
+    for v in range(2, SCHEMA_VERSION + 1):
+        conn.executescript(MIGRATIONS[v])
+    conn.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),))
 
 
 def version_of(conn: sqlite3.Connection) -> int:

@@ -143,11 +143,17 @@ class Campaign:
             raise CampaignError(f"{folder}: written by a newer BridgeSurvey (schema {version}, this one reads up to "
                                 f"{schema.SCHEMA_VERSION}); update BridgeSurvey")
         if version < schema.SCHEMA_VERSION:
-            if not writable:
+            try:
+                if not writable:  # upgrade under a brief exclusive lock, then share again
+                    fcntl.flock(lock_fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                schema.migrate(conn, version)
+                if not writable:
+                    fcntl.flock(lock_fh, fcntl.LOCK_SH | fcntl.LOCK_NB)
+            except BlockingIOError:
                 conn.close()
                 lock_fh.close()
-                raise CampaignError(f"{folder}: needs an upgrade; open it once with a writing command")
-            schema.migrate(conn, version)
+                raise CampaignLockedError(f"{folder}: the campaign needs a schema upgrade but another process is "
+                                          "using it; try again when it has finished") from None
         camp = cls(folder, conn, lock_fh, writable=writable)
         if writable:
             camp._clean_partial_files()
@@ -385,10 +391,15 @@ class Campaign:
         return label
 
     # ------------------------------------------------------------------ results
-    def save_plan(self, epoch: str, plan_json: dict, inputs_hash: str) -> None:
+    def save_plan(self, epoch: str, plan_json: dict, inputs_hash: str, preview: Optional[tuple[bytes, str]] = None
+                  ) -> None:
+        """Store an epoch's plan (and the encoded map preview it came from), dropping its old centroids."""
         with self.transaction() as c:
             c.execute("INSERT OR REPLACE INTO plans(epoch, json, inputs_hash, created) VALUES (?, ?, ?, ?)",
                       (epoch, json.dumps(plan_json), inputs_hash, now_iso()))
+            if preview is not None:
+                c.execute("INSERT OR REPLACE INTO map_previews(epoch, inputs_hash, arrays, annotations) "
+                          "VALUES (?, ?, ?, ?)", (epoch, inputs_hash, preview[0], preview[1]))
             c.execute("INSERT OR REPLACE INTO epoch_results(epoch, stage, inputs_hash, processed) VALUES (?, ?, ?, ?)",
                       (epoch, "planned", inputs_hash, now_iso()))
             c.execute("DELETE FROM centroids WHERE epoch = ?", (epoch,))
@@ -397,6 +408,13 @@ class Campaign:
     def plan_row(self, epoch: str) -> Optional[dict]:
         row = self.conn.execute("SELECT * FROM plans WHERE epoch = ?", (epoch,)).fetchone()
         return None if row is None else dict(row)
+
+    def map_preview(self, epoch: str):
+        """The stored :class:`projects.map_previews.MapPreview` of an epoch, or None."""
+        from projects.map_previews import decode_preview
+
+        row = self.conn.execute("SELECT arrays, annotations FROM map_previews WHERE epoch = ?", (epoch,)).fetchone()
+        return None if row is None else decode_preview(row[0], row[1])
 
     def result_row(self, epoch: str) -> Optional[dict]:
         row = self.conn.execute("SELECT * FROM epoch_results WHERE epoch = ?", (epoch,)).fetchone()
@@ -407,10 +425,11 @@ class Campaign:
             c.execute("DELETE FROM centroids WHERE epoch = ?", (epoch,))
             for rid, tc in cents.items():
                 xyz = [float(v) if np.isfinite(v) else None for v in tc.xyz_socs]
-                c.execute("INSERT INTO centroids VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                c.execute("INSERT INTO centroids(epoch, reflector, found, x, y, z, cov, n, threshold, separability, "
+                          "sigma_range_m, flags, n_window) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                           (epoch, rid, int(tc.found), *xyz, json.dumps(np.nan_to_num(tc.cov, nan=0.0).tolist()),
                            int(tc.n_points), _f(tc.threshold), _f(tc.separability), _f(tc.sigma_range_m),
-                           json.dumps(list(tc.flags))))
+                           json.dumps(list(tc.flags)), int(tc.n_window)))
             c.execute("INSERT OR REPLACE INTO epoch_results(epoch, stage, inputs_hash, processed) VALUES (?, ?, ?, ?)",
                       (epoch, "measured", inputs_hash, now_iso()))
             self._log(c, "measure", epoch, {"inputs_hash": inputs_hash, "params": params,
@@ -422,7 +441,8 @@ class Campaign:
             xyz = np.array([np.nan if r[k] is None else r[k] for k in ("x", "y", "z")], dtype=float)
             out[r["reflector"]] = TargetCentroid(
                 r["reflector"], xyz, np.array(json.loads(r["cov"]), dtype=float), int(r["n"]),
-                _nan(r["threshold"]), _nan(r["separability"]), tuple(json.loads(r["flags"])), int(r["n"]),
+                _nan(r["threshold"]), _nan(r["separability"]), tuple(json.loads(r["flags"])),
+                -1 if r["n_window"] is None else int(r["n_window"]),  # -1: not recorded (schema 1)
                 sigma_range_m=_nan(r["sigma_range_m"]))
         return out
 

@@ -70,3 +70,26 @@ def test_bad_input():
         reflectance_map(np.ones((3, 3)), np.zeros(2))
     with pytest.raises(InputError):
         reflectance_map(np.ones((3, 3)), np.zeros(3), step_deg=float("nan"))
+
+
+def test_reduce_map_keeps_small_bright_targets_and_geometry():
+    from lidar.reflectance_map import ReflectanceMap, reduce_map
+
+    h, w = 300, 1000
+    mx = np.full((h, w), 0.1, np.float32)
+    mx[:20] = np.nan  # sky
+    mx[151, 733] = 0.95  # one bright cell: a distant target
+    cnt = np.where(np.isnan(mx), 0, 2).astype(np.int32)
+    rng = np.where(cnt > 0, 20.0, np.nan).astype(np.float32)
+    rmap = ReflectanceMap(80.0, -10.0, 0.05, mx, np.where(cnt > 0, mx, np.nan), rng, cnt, False, int(cnt.sum()))
+    red = reduce_map(rmap, max_cells=20_000)
+    assert red.count.size <= 20_000 and red.count.sum() == cnt.sum()
+    k = round(red.step_deg / rmap.step_deg)
+    assert k > 1 and red.theta0_deg == 80.0 and red.phi0_deg == -10.0
+    assert np.nanmax(red.max_intensity) == np.float32(0.95)
+    r, c = np.unravel_index(np.nanargmax(red.max_intensity), red.shape)
+    t, p = red.cell_angles(r, c)
+    t0, p0 = rmap.cell_angles(151, 733)
+    assert abs(t - t0) <= red.step_deg and abs(p - p0) <= red.step_deg
+    assert np.isnan(red.max_intensity[0, 0]) and np.allclose(red.range_m[-1, :-1], 20.0)
+    assert reduce_map(rmap, max_cells=10 ** 7) is rmap

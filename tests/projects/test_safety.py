@@ -86,11 +86,39 @@ def test_newer_campaign_is_refused_and_garbage_is_not_a_campaign(campaign, tmp_p
 def test_older_campaign_is_migrated(campaign, monkeypatch):
     from projects import schema
 
-    monkeypatch.setattr(schema, "SCHEMA_VERSION", 2)
-    monkeypatch.setitem(schema.MIGRATIONS, 2, "ALTER TABLE epochs ADD COLUMN weather TEXT;")
-    with Campaign.open(campaign) as c:
-        assert schema.version_of(c.conn) == 2
+    nxt = schema.SCHEMA_VERSION + 1
+    monkeypatch.setattr(schema, "SCHEMA_VERSION", nxt)
+    monkeypatch.setitem(schema.MIGRATIONS, nxt, "ALTER TABLE epochs ADD COLUMN weather TEXT;")
+    with Campaign.open(campaign, writable=False) as c:  # readers upgrade too (briefly exclusive)
+        assert schema.version_of(c.conn) == nxt
         assert "weather" in [r[1] for r in c.conn.execute("PRAGMA table_info(epochs)")]
+
+
+def test_version_1_campaign_migrates_to_current_with_its_data(tmp_path):
+    """A campaign written by the first release (schema 1) opens, upgrades and keeps every row."""
+    import sqlite3
+
+    from projects import schema
+
+    folder = tmp_path / "old"
+    (folder / "scans").mkdir(parents=True)
+    conn = sqlite3.connect(folder / DB_NAME)
+    with conn:
+        conn.executescript(schema.SCHEMA_V1)
+        conn.execute("INSERT INTO meta VALUES ('schema_version', '1')")
+        conn.executemany("INSERT INTO meta VALUES (?, ?)", [("name", "Old bridge"), ("span_m", "40.0"),
+                                                            ("settings", "{}"), ("created", "2025-01-01T00:00:00")])
+        conn.execute("INSERT INTO reflectors(id, grp, x, y, z, diameter_m) VALUES ('M1', 'measurement', 1, 2, 3, 0.05)")
+        conn.execute("INSERT INTO epochs VALUES ('e1', '2025-01-06T09:00:00', '', '2025-01-06T10:00:00')")
+        conn.execute("INSERT INTO centroids VALUES ('e1', 'M1', 1, 1.0, 2.0, 3.0, '[[0,0,0],[0,0,0],[0,0,0]]', "
+                     "900, 0.5, 0.9, 0.005, '[]')")
+    conn.close()
+    with Campaign.open(folder) as c:
+        assert schema.version_of(c.conn) == schema.SCHEMA_VERSION
+        assert c.name == "Old bridge" and [e["label"] for e in c.epochs()] == ["e1"]
+        t = c.centroids("e1")["M1"]
+        assert t.n_points == 900 and t.n_window == -1  # not recorded before schema 2
+        assert c.map_preview("e1") is None
 
 
 def test_imported_files_are_read_only_copies(campaign, field_copy):
