@@ -46,11 +46,13 @@ class DemoResult:
     csv: Path
     xlsx: Path
     plot: Path
+    report: Path
     notes: list[str] = field(default_factory=list)
 
     def summary(self) -> str:
         lines = [f"demo campaign: {self.folder} ({self.epochs} weekly epochs, processed)",
                  f"  displacements: {self.csv}", f"  all tables:    {self.xlsx}", f"  history plot:  {self.plot}",
+                 f"  report:        {self.report}",
                  f"  field files:   {self.folder / 'field'} (ground truth of every week; the last week's scans)"]
         return "\n".join(lines + [f"  {n}" for n in self.notes])
 
@@ -112,6 +114,10 @@ def build_demo(folder: str | os.PathLike, *, weeks: int = 52, seed: int = 2026,
         csv_path = write_atomic(folder / "displacements.csv", to_csv(rows))
         xlsx = export(c, folder / "campaign.xlsx")
         plot = save_figure(displacement_history_figure(rows, title=c.name), folder / "displacement_history.png")
+        report(progress, 0.98, "report")
+        from projects.report import write_report
+
+        pdf = write_report(c, folder / "report.pdf", author="BridgeSurvey demo")
         notes = [f"week {CABLE_TIE_WEEK + 1}: a cable tie beside R1; week {OCCLUDED_WEEK + 1}: M2 occluded"]
         report(progress, 1.0, "done")
-        return DemoResult(folder, len(c.epochs()), csv_path, xlsx, plot, notes)
+        return DemoResult(folder, len(c.epochs()), csv_path, xlsx, plot, pdf, notes)

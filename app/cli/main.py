@@ -17,7 +17,7 @@ EXIT_ERROR = 1
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from app.cli import commands_files
+    from app.cli import commands_campaign, commands_files, commands_report
 
     parser = argparse.ArgumentParser(
         prog="bridgesurvey",
@@ -27,20 +27,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("-v", "--verbose", action="store_true", help="log what is being done")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
-    for module in _command_modules():
+    for module in (commands_campaign, commands_report, commands_files):
         module.register(sub)
-    commands_files.register(sub)
     return parser
-
-
-def _command_modules():
-    mods = []
-    try:
-        from app.cli import commands_campaign
-        mods.append(commands_campaign)
-    except ImportError:  # pragma: no cover - during development of the campaign commands
-        pass
-    return mods
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:

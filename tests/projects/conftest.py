@@ -34,3 +34,18 @@ def field_copy(field, tmp_path) -> Path:
     dst = tmp_path / "field"
     shutil.copytree(field, dst)
     return dst
+
+
+@pytest.fixture(scope="session")
+def processed(field, tmp_path_factory) -> Path:
+    """A campaign of the three visits, measured and processed (copy it before changing it)."""
+    from tests.projects.campaign_helpers import build_processed_campaign
+
+    return build_processed_campaign(field, tmp_path_factory.mktemp("processed") / "camp")
+
+
+@pytest.fixture
+def processed_copy(processed, tmp_path) -> Path:
+    dst = tmp_path / "camp"
+    shutil.copytree(processed, dst, ignore=shutil.ignore_patterns(".lock"))
+    return dst

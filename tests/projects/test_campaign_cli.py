@@ -12,22 +12,9 @@ import pytest
 
 from app.cli.main import main
 from projects.store import Campaign
+from tests.projects.campaign_helpers import snapshot
 
 DATES = ("2026-03-02T09:00", "2026-03-09T10:00", "2026-03-16T08:30")
-
-
-def snapshot(folder: Path) -> dict:
-    """Everything a campaign holds: file checksums plus a dump of the database."""
-    out = {}
-    for p in sorted(folder.rglob("*")):
-        if p.is_file() and p.name not in (".lock",) and not p.name.endswith(("-wal", "-shm")):
-            if p.suffix == ".sqlite":
-                conn = sqlite3.connect(p)
-                out[str(p.relative_to(folder))] = "\n".join(conn.iterdump())
-                conn.close()
-            else:
-                out[str(p.relative_to(folder))] = hashlib.sha256(p.read_bytes()).hexdigest()
-    return out
 
 
 def add_visit(camp: Path, field: Path, k: int, capsys) -> str:

@@ -1,0 +1,68 @@
+"""Survey reports: a PDF for the bridge owner (one visit, a period, or the whole campaign).
+
+``write_report`` is the entry point; :mod:`projects.report.content` gathers the
+facts, :mod:`projects.report.plots` draws the figures and
+:mod:`projects.report.pdf` lays out the document.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Optional
+
+from lidar.errors import InputError
+from lidar.progress import ProgressCallback, scaled
+from projects.report.content import ReportContent, ReportScope, gather
+from projects.store import Campaign
+
+__all__ = ["ReportContent", "ReportScope", "gather", "write_report"]
+
+
+def _check_output(path: Path) -> None:
+    if path.suffix.lower() != ".pdf":
+        raise InputError(f"{path}: the report is a PDF; give an output name ending in .pdf")
+    if not path.parent.is_dir():
+        raise InputError(f"{path}: the folder {path.parent} does not exist; create it first")
+    if path.is_dir():
+        raise InputError(f"{path}: is a folder; give a file name ending in .pdf")
+
+
+def _preview_from_scan(c: Campaign):
+    """For epochs planned before previews were stored: analyse the coarse scan again (slow, not saved)."""
+    def preview_of(label: str):
+        from projects.map_previews import decode_preview, encode_preview
+        from projects.processing import _read, parameters
+        from lidar.pipeline import analyse_coarse
+
+        coarse = c.files(label, "coarse")
+        if not coarse:
+            return None
+        p = parameters(c)
+        analysis = analyse_coarse(_read(c, coarse), c.layout(c.epoch(label)["datetime"]), step_deg=p["map_step_deg"],
+                                  threshold=p["detection_threshold"], tolerance_m=p["identification_tolerance_m"])
+        return decode_preview(*encode_preview(analysis))
+    return preview_of
+
+
+def write_report(c: Campaign, path: str | os.PathLike, scope: ReportScope = ReportScope(), *,
+                 author: Optional[str] = None, progress: Optional[ProgressCallback] = None) -> Path:
+    """Write the PDF report of ``scope`` (default: whole campaign) to ``path``.
+
+    Parameters
+    ----------
+    c : Campaign
+        An open campaign (read-only is enough; nothing is changed).
+    path : path-like
+        Output file, ``.pdf``; written through a temporary file.
+    scope : ReportScope, optional
+        One epoch (a visit report, with the history up to it) or a period.
+    author : str, optional, keyword-only
+        Who prepared the report (default: the login name).
+    progress : callable, optional, keyword-only
+    """
+    from projects.report.pdf import build_pdf
+
+    path = Path(path)
+    _check_output(path)
+    content = gather(c, scope, author=author)
+    return build_pdf(content, path, preview_of=_preview_from_scan(c), progress=scaled(progress, 0.05, 1.0))

@@ -1,0 +1,385 @@
+"""The survey report as a PDF (reportlab platypus; figures from matplotlib, line plots as vectors)."""
+from __future__ import annotations
+
+import io
+import json
+import os
+from pathlib import Path
+from typing import Callable, Optional, Sequence
+
+import numpy as np
+
+from lidar.progress import ProgressCallback, report
+from projects.report.content import FLAG_TEXT, EpochSection, ReportContent
+
+PAGE_MARGIN_MM = 16
+STATE_COLOURS = {"ok": "#c8e6c9", "warning": "#ffe0b2", "alarm": "#ffcdd2", "unknown": "#eeeeee"}
+
+
+# ----------------------------------------------------------------------------- styles and helpers
+def _fonts() -> tuple[str, str]:
+    """DejaVu Sans (shipped with matplotlib) so that σ, ±, ≤ print; registered once."""
+    from matplotlib import get_data_path
+    from reportlab.pdfbase import pdfmetrics
+    from reportlab.pdfbase.ttfonts import TTFont
+
+    if "DejaVuSans" not in pdfmetrics.getRegisteredFontNames():
+        ttf = Path(get_data_path()) / "fonts" / "ttf"
+        pdfmetrics.registerFont(TTFont("DejaVuSans", str(ttf / "DejaVuSans.ttf")))
+        pdfmetrics.registerFont(TTFont("DejaVuSans-Bold", str(ttf / "DejaVuSans-Bold.ttf")))
+        from reportlab.lib.fonts import addMapping
+
+        addMapping("DejaVuSans", 0, 0, "DejaVuSans")
+        addMapping("DejaVuSans", 1, 0, "DejaVuSans-Bold")
+    return "DejaVuSans", "DejaVuSans-Bold"
+
+
+def _styles():
+    from reportlab.lib.styles import ParagraphStyle, getSampleStyleSheet
+
+    regular, bold = _fonts()
+    ss = getSampleStyleSheet()
+    for name in ("Normal", "BodyText", "Title", "Heading1", "Heading2", "Heading3"):
+        ss[name].fontName = bold if name != "Normal" and name != "BodyText" else regular
+    ss["Normal"].fontSize = 9
+    ss["Normal"].leading = 12
+    ss.add(ParagraphStyle("Small", parent=ss["Normal"], fontSize=7.5, leading=9.5))
+    ss.add(ParagraphStyle("Cell", parent=ss["Normal"], fontSize=7, leading=8.5))
+    ss.add(ParagraphStyle("Mono", parent=ss["Normal"], fontName="Courier", fontSize=5.8, leading=8))
+    ss.add(ParagraphStyle("Big", parent=ss["Title"], fontSize=24, leading=30, alignment=0))
+    ss.add(ParagraphStyle("Sub", parent=ss["Normal"], fontSize=13, leading=17))
+    ss["Heading1"].fontSize = 15
+    ss["Heading2"].fontSize = 11.5
+    ss["Heading2"].spaceBefore = 8
+    return ss
+
+
+def _esc(text) -> str:
+    from xml.sax.saxutils import escape
+
+    return escape("" if text is None else str(text))
+
+
+def _num(v, fmt="{:.2f}") -> str:
+    return "–" if v is None or (isinstance(v, float) and not np.isfinite(v)) else fmt.format(v)
+
+
+def _table(rows: Sequence[Sequence], widths_mm: Sequence[float], ss, *, header_rows: int = 1,
+           cell_colours: Sequence[tuple[int, int, str]] = ()):
+    from reportlab.lib import colors
+    from reportlab.lib.units import mm
+    from reportlab.platypus import Paragraph, Table, TableStyle
+
+    data = [[c if not isinstance(c, str) else Paragraph(_esc(c), ss["Cell"]) for c in r] for r in rows]
+    t = Table(data, colWidths=[w * mm for w in widths_mm], repeatRows=header_rows)
+    style = [("GRID", (0, 0), (-1, -1), 0.25, colors.HexColor("#9e9e9e")),
+             ("BACKGROUND", (0, 0), (-1, header_rows - 1), colors.HexColor("#e3eaf3")),
+             ("VALIGN", (0, 0), (-1, -1), "TOP"),
+             ("TOPPADDING", (0, 0), (-1, -1), 1.5), ("BOTTOMPADDING", (0, 0), (-1, -1), 1.5)]
+    for r in range(header_rows, len(rows)):
+        if (r - header_rows) % 2:
+            style.append(("BACKGROUND", (0, r), (-1, r), colors.HexColor("#f6f6f6")))
+    for r, c, colour in cell_colours:
+        style.append(("BACKGROUND", (c, r), (c, r), colors.HexColor(colour)))
+    t.setStyle(TableStyle(style))
+    return t
+
+
+def figure_flowable(fig, width_mm: float, *, vector: bool = True, dpi: int = 150):
+    """A matplotlib Figure as a flowable ``width_mm`` wide: an SVG drawing (vector) or a PNG image."""
+    from reportlab.lib.units import mm
+
+    buf = io.BytesIO()
+    if vector:
+        from svglib.svglib import svg2rlg
+
+        fig.savefig(buf, format="svg")
+        buf.seek(0)
+        d = svg2rlg(buf)
+        f = width_mm * mm / d.width
+        d.scale(f, f)
+        d.width, d.height = d.width * f, d.height * f
+        return d
+    from reportlab.platypus import Image
+
+    fig.savefig(buf, format="png", dpi=dpi)
+    buf.seek(0)
+    w, h = fig.get_size_inches()
+    return Image(buf, width=width_mm * mm, height=width_mm * mm * h / w)
+
+
+class _Doc:
+    """A BaseDocTemplate whose level-1/2 headings become PDF bookmarks."""
+
+    def __new__(cls, path, content: ReportContent):
+        from reportlab.lib.pagesizes import A4
+        from reportlab.lib.units import mm
+        from reportlab.platypus import BaseDocTemplate, Frame, PageTemplate
+
+        regular, _ = _fonts()
+
+        class Doc(BaseDocTemplate):
+            def afterFlowable(self, flowable):
+                style = getattr(flowable, "style", None)
+                if style is not None and style.name in ("Heading1", "Heading2"):
+                    key = f"h{id(flowable)}"
+                    self.canv.bookmarkPage(key)
+                    self.canv.addOutlineEntry(flowable.getPlainText(), key, level=int(style.name[-1]) - 1)
+
+        def decorate(canv, doc):
+            canv.saveState()
+            canv.setFont(regular, 7)
+            canv.setFillGray(0.35)
+            w, h = A4
+            canv.drawString(PAGE_MARGIN_MM * mm, h - 10 * mm, f"{content.name} · {content.scope_text}")
+            canv.drawRightString(w - PAGE_MARGIN_MM * mm, 8 * mm, f"page {doc.page}")
+            canv.drawString(PAGE_MARGIN_MM * mm, 8 * mm,
+                            f"BridgeSurvey {content.versions.get('bridgesurvey', '')} · {content.generated}")
+            canv.restoreState()
+
+        doc = Doc(str(path), pagesize=A4, leftMargin=PAGE_MARGIN_MM * mm, rightMargin=PAGE_MARGIN_MM * mm,
+                  topMargin=16 * mm, bottomMargin=14 * mm, title=f"{content.name}: displacement survey report",
+                  author=content.author, subject=content.scope_text, creator="BridgeSurvey")
+        frame = Frame(doc.leftMargin, doc.bottomMargin, doc.width, doc.height, id="body")
+        doc.addPageTemplates([PageTemplate("title", [frame]), PageTemplate("body", [frame], onPage=decorate)])
+        return doc
+
+
+# ----------------------------------------------------------------------------- sections
+def title_page(content: ReportContent, ss) -> list:
+    from reportlab.platypus import NextPageTemplate, PageBreak, Paragraph, Spacer
+
+    p0, p1 = content.period
+    rows = [["Structure", content.name], ["Report covers", content.scope_text],
+            ["Period", f"{p0[:16].replace('T', ' ')}  to  {p1[:16].replace('T', ' ')}"],
+            ["Span", f"{content.span_m:g} m" if content.span_m else "not given"],
+            ["Scanner", content.scanner], ["Baseline epoch", content.baseline or "none yet"],
+            ["Campaign folder", content.folder], ["Prepared by", content.author], ["Generated", content.generated],
+            ["Software", f"BridgeSurvey {content.versions.get('bridgesurvey', '?')}, "
+                         f"pipeline {content.versions['pipeline']}"]]
+    return [Paragraph("Displacement survey report", ss["Sub"]), Spacer(1, 6), Paragraph(_esc(content.name), ss["Big"]),
+            Spacer(1, 18), _table([["", ""]] + rows, (45, 130), ss, header_rows=1), Spacer(1, 18),
+            Paragraph("Vertical displacements of the measurement targets under the deck, relative to the reference "
+                      "targets on the piers, from terrestrial laser scans; positive is up, against the baseline "
+                      "epoch. Uncertainties are one standard deviation propagated from every target centroid.",
+                      ss["Normal"]),
+            NextPageTemplate("body"), PageBreak()]
+
+
+def summary_section(content: ReportContent, ss) -> list:
+    from reportlab.platypus import Paragraph, Spacer
+
+    out = [Paragraph("Summary", ss["Heading1"])]
+    rows = content.displacements
+    latest = {}
+    for r in rows:
+        latest[r["reflector"]] = r
+    if not rows:
+        out.append(Paragraph("No displacements computed yet: the epochs in this report have not all been measured "
+                             "(see the epoch sections and 'bridgesurvey status').", ss["Normal"]))
+    else:
+        last_epoch = content.epochs[-1].label
+        out.append(Paragraph(f"{len(content.epochs)} epoch(s) in this report; displacements against baseline "
+                             f"epoch {_esc(content.baseline)}. Latest value of every measurement target "
+                             f"(epoch {last_epoch} unless noted):", ss["Normal"]))
+        table = [["Target", "Epoch", "Displacement [mm]", "σ [mm]", "Warning / alarm [mm]", "State", "Flags"]]
+        colours = []
+        for k, rid in enumerate(sorted(latest), start=1):
+            r = latest[rid]
+            table.append([rid, r["epoch"], _num(r["displacement_mm"]), _num(r["sigma_mm"], "{:.3f}"),
+                          f"{_num(r['warning_mm'], '{:.1f}')} / {_num(r['alarm_mm'], '{:.1f}')}", r["state"],
+                          r["flags"].replace(";", ", ") or "–"])
+            colours.append((k, 5, STATE_COLOURS.get(r["state"], "#ffffff")))
+        out += [Spacer(1, 4), _table(table, (18, 24, 26, 16, 30, 16, 48), ss, cell_colours=colours)]
+        valued = [r for r in rows if r["displacement_mm"] is not None]
+        if valued:
+            big = max(valued, key=lambda r: abs(r["displacement_mm"]))
+            out.append(Spacer(1, 6))
+            out.append(Paragraph(f"<b>Largest movement in this report:</b> {big['reflector']} at epoch {big['epoch']}: "
+                                 f"{big['displacement_mm']:+.2f} ± {big['sigma_mm'] or 0:.2f} mm "
+                                 f"(state {big['state']}).", ss["Normal"]))
+            alarms = sorted({(r["reflector"], r["state"]) for r in valued if r["state"] in ("warning", "alarm")})
+            if alarms:
+                out.append(Paragraph("Targets that reached a limit during the period: " +
+                                     ", ".join(f"{a} ({s})" for a, s in alarms) + ".", ss["Normal"]))
+    out.append(Paragraph("Limits in force", ss["Heading2"]))
+    if content.limits:
+        lim = [["Applies to", "Rule", "Warning [mm]", "Alarm [mm]"]]
+        for r in content.limits:
+            lim.append(["every measurement target" if r["reflector"] == "*" else r["reflector"], r["rule"],
+                        _num(r["warning_mm"], "{:.2f}"), _num(r["alarm_mm"], "{:.2f}")])
+        out.append(_table(lim, (50, 45, 30, 30), ss))
+        out.append(Paragraph("States compare |displacement| with the thresholds: warning at or above the warning "
+                             "value, alarm at or above the alarm value.", ss["Small"]))
+    else:
+        out.append(Paragraph("No limits set (bridgesurvey limit DIR --rule ...).", ss["Normal"]))
+    return out
+
+
+def layout_section(content: ReportContent, ss) -> list:
+    from reportlab.platypus import PageBreak, Paragraph
+
+    from projects.report.plots import layout_figure
+
+    out = [PageBreak(), Paragraph("Reflector layout and target state", ss["Heading1"]),
+           figure_flowable(layout_figure(content.reflectors, content.target_states, span_m=content.span_m), 170)]
+    table = [["Target", "Group", "x / y / z [m]", "In use", f"Epoch {content.epochs[-1].label}"]]
+    by_id = {r["id"]: r for r in content.reflectors}
+    colours = []
+    for k, s in enumerate(content.target_states, start=1):
+        r = by_id[s.reflector]
+        use = (f"from {s.installed[:10]}" if s.installed else "from start") + \
+              (f", retired {s.retired[:10]}" if s.retired else "")
+        found = "not measured" if s.found is None else ("found" if s.found else "NOT FOUND")
+        table.append([s.reflector, s.group, f"{r['x']:.2f} / {r['y']:.2f} / {r['z']:.2f}", use,
+                      "; ".join((found,) + s.remarks)])
+        if s.remarks or s.found is False:
+            colours.append((k, 4, "#fff3e0"))
+    out.append(_table(table, (16, 24, 38, 38, 62), ss, cell_colours=colours))
+    return out
+
+
+def history_section(content: ReportContent, ss) -> list:
+    from reportlab.platypus import PageBreak, Paragraph
+
+    from projects.report.plots import history_grid_figure
+
+    out = [PageBreak(), Paragraph("Displacement history", ss["Heading1"])]
+    targets = sorted({r["reflector"] for r in content.displacements})
+    if not targets:
+        return out + [Paragraph("No displacements yet.", ss["Normal"])]
+    out.append(Paragraph("Each panel is one measurement target. Flagged values (orange rings) carry a remark in "
+                         "the epoch sections.", ss["Small"]))
+    for k in range(0, len(targets), 6):
+        out.append(figure_flowable(history_grid_figure(content.displacements, targets=targets[k:k + 6]), 175))
+    return out
+
+
+def epoch_section(e: EpochSection, content: ReportContent, ss, *, preview_of: Optional[Callable] = None,
+                  new_page: bool = True) -> list:
+    from reportlab.platypus import PageBreak, Paragraph, Spacer
+
+    from projects.report.plots import epoch_map_figure
+
+    out = [PageBreak()] if new_page else []
+    out += [Paragraph(f"Epoch {_esc(e.label)} — {e.datetime[:16].replace('T', ' ')}", ss["Heading2"]),
+            Paragraph(f"State: {e.stage}. {_esc(e.notes)}", ss["Small"])]
+    preview = e.preview if e.preview is not None else (preview_of(e.label) if preview_of else None)
+    if preview is not None:
+        out.append(figure_flowable(epoch_map_figure(preview, e.plan, title=f"Reflectance map, epoch {e.label} "
+                                                    "(orange rings: detections; red boxes: planned fine windows)"),
+                                   178, vector=False, dpi=130))
+    else:
+        out.append(Paragraph("No coarse-scan map for this epoch.", ss["Small"]))
+    if e.plan:
+        ident = e.plan.get("identification", {})
+        out.append(Paragraph(f"Plan: {len(e.plan['rois'])} windows, {e.plan['total_seconds'] / 60:.1f} min planned; "
+                             f"{ident.get('detections', '?')} detections, layout fit RMS "
+                             f"{_num((ident.get('fit_rms_m') or float('nan')) * 100, '{:.1f}')} cm, "
+                             f"predicted (not seen): {', '.join(ident.get('missing', [])) or 'none'}.", ss["Small"]))
+        table = [["Target", "Steps φ×θ [°]", "Planned s", "Planned pts on target", "Points in window",
+                  "Points on target", "σx / σy / σz [mm]", "Flags"]]
+        colours = []
+        for k, r in enumerate(e.plan["rois"], start=1):
+            t = e.centroids.get(r["reflector"])
+            sig = "–" if t is None or not t.found else " / ".join(f"{v * 1000:.2f}" for v in t.sigma_m)
+            flags = "not scanned yet" if t is None else (", ".join(t.flags) or "–")
+            n_on = "–" if t is None else str(t.n_points)
+            table.append([r["reflector"], f"{r['phi_step_deg']:.4f}×{r['theta_step_deg']:.4f}",
+                          f"{r['expected_seconds']:.0f}", str(r.get("expected_target_points", "–")),
+                          "–" if t is None or t.n_window < 0 else str(t.n_window), n_on, sig, flags])
+            if t is not None and (t.flags or (r.get("expected_target_points") and
+                                              t.n_points < 0.5 * r["expected_target_points"])):
+                colours.append((k, 7, "#fff3e0"))
+        out += [Spacer(1, 3), _table(table, (14, 26, 14, 22, 20, 18, 30, 34), ss, cell_colours=colours)]
+    if e.reference_checks:
+        table = [["Reference", "Median distance change [mm]", "Max change [mm]", "Verdict"]]
+        for r in e.reference_checks:
+            verdict = "missing" if r["missing"] else ("MOVED, left out" if r["moved"] else
+                                                       ("suspect" if r["suspect"] else "stable"))
+            table.append([r["reflector"], _num(None if r["median_change_m"] is None else r["median_change_m"] * 1000),
+                          _num(None if r["max_change_m"] is None else r["max_change_m"] * 1000), verdict])
+        out += [Spacer(1, 4), Paragraph("Reference group check", ss["Small"]), _table(table, (20, 45, 30, 35), ss)]
+    rows = [r for r in content.displacements if r["epoch"] == e.label]
+    if rows:
+        table = [["Target", "Displacement [mm]", "σ [mm]", "State", "Flags"]]
+        for r in rows:
+            table.append([r["reflector"], _num(r["displacement_mm"]), _num(r["sigma_mm"], "{:.3f}"), r["state"],
+                          r["flags"].replace(";", ", ") or "–"])
+        flags = e.displacement_set and json.loads(e.displacement_set["flags"])
+        out += [Spacer(1, 4), Paragraph("Displacements" + (f" (epoch flags: {', '.join(flags)})" if flags else ""),
+                                        ss["Small"]), _table(table, (20, 30, 20, 20, 88), ss)]
+    return out
+
+
+def log_section(content: ReportContent, ss, *, max_log_rows: int = 400) -> list:
+    from reportlab.platypus import PageBreak, Paragraph
+
+    out = [PageBreak(), Paragraph("Processing log", ss["Heading1"]),
+           Paragraph("Everything needed to trace the numbers: software versions, processing parameters, the "
+                     "checksum of every scan file used, and the campaign's action log.", ss["Small"]),
+           Paragraph("Software", ss["Heading2"]),
+           _table([["Component", "Version"]] + [[k, v] for k, v in content.versions.items()], (50, 50), ss),
+           Paragraph("Processing parameters", ss["Heading2"]),
+           _table([["Parameter", "Value"]] + [[k, "auto" if v is None else str(v)]
+                                              for k, v in content.parameters.items()], (60, 50), ss),
+           Paragraph("Scan files (SHA-256, stored read-only in the campaign)", ss["Heading2"])]
+    files = [["Epoch", "Role", "Original file", "Size [MB]", "SHA-256"]]
+    for e in content.epochs:
+        for f in e.files:
+            files.append([e.label, f["role"], os.path.basename(f["original_path"]), f"{f['size'] / 1e6:.1f}",
+                          Paragraph(f["sha256"], ss["Mono"])])
+    out.append(_table(files, (20, 12, 40, 14, 92), ss))
+    out.append(Paragraph("Flags used in this report", ss["Heading2"]))
+    out.append(_table([["Flag", "Meaning"]] + [[k, v] for k, v in FLAG_TEXT.items()], (45, 133), ss))
+    out.append(Paragraph("Action log", ss["Heading2"]))
+    log = list(content.log)
+    if len(log) > max_log_rows:
+        out.append(Paragraph(f"The last {max_log_rows} of {len(log)} entries; export the campaign (xlsx) for "
+                             "all.", ss["Small"]))
+        log = log[-max_log_rows:]
+    rows = [["Time", "Action", "Epoch", "Details"]]
+    for r in log:
+        details = r["details"]
+        rows.append([r["time"][:19], r["action"], r["epoch"] or "", details[:160] + ("…" if len(details) > 160 else "")])
+    out.append(_table(rows, (32, 20, 22, 104), ss))
+    return out
+
+
+#: Optional sections contributed by other modules (comparison, camera cross-validation): name -> builder
+#: taking (content, ss) and returning flowables; called only when ``content.extras`` holds that name.
+EXTRA_SECTIONS: dict[str, Callable] = {}
+
+
+def build_pdf(content: ReportContent, path: str | os.PathLike, *, preview_of: Optional[Callable] = None,
+              progress: Optional[ProgressCallback] = None) -> Path:
+    """Write the report to ``path`` (through a temporary file, so a failure leaves no half PDF)."""
+    path = Path(path)
+    ss = _styles()
+    story = title_page(content, ss)
+    report(progress, 0.02, "summary")
+    story += summary_section(content, ss) + layout_section(content, ss) + history_section(content, ss)
+    for name, builder in EXTRA_SECTIONS.items():
+        if name in content.extras:
+            story += builder(content, ss)
+    if content.epochs:
+        from reportlab.platypus import PageBreak, Paragraph
+
+        story += [PageBreak(), Paragraph("Epochs", ss["Heading1"]),
+                  Paragraph("Per epoch: the coarse scan's reflectance map with detections and the planned fine-scan "
+                            "windows, the plan against what the fine scans held, the centroids with their "
+                            "uncertainty and flags, the reference check and the displacements.", ss["Small"])]
+        for k, e in enumerate(content.epochs):
+            report(progress, 0.1 + 0.75 * k / len(content.epochs), f"epoch {e.label}")
+            story += epoch_section(e, content, ss, preview_of=preview_of, new_page=k > 0)
+    story += log_section(content, ss)
+    report(progress, 0.9, "writing PDF")
+    tmp = path.with_name(f".{path.stem}.part.pdf")
+    try:
+        _Doc(tmp, content).build(story)
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    report(progress, 1.0, "report written")
+    return path
