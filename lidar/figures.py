@@ -9,13 +9,23 @@ import numpy as np
 
 
 def reflectance_map_figure(rmap, *, detections=None, identification=None, rois: Optional[Sequence] = None,
-                           title: str = "Reflectance map"):
-    """A matplotlib Figure of the map (max intensity) with angle axes, a colour bar, detections and ROIs."""
+                           title: str = "Reflectance map", figsize=(11, 4.8), fixed_layout: bool = False):
+    """A matplotlib Figure of the map (max intensity) with angle axes, a colour bar, detections and ROIs.
+
+    ``fixed_layout`` places the axes at fixed positions instead of running matplotlib's layout
+    engine: several times faster, for drawing many maps (reports).
+    """
     from matplotlib.figure import Figure
     from matplotlib.patches import Rectangle
 
-    fig = Figure(figsize=(11, 4.8), dpi=110, layout="constrained")
-    ax = fig.add_subplot(1, 1, 1)
+    if fixed_layout:
+        fig = Figure(figsize=figsize, dpi=110)
+        ax = fig.add_axes((0.085, 0.14, 0.80, 0.77))
+        cax = fig.add_axes((0.895, 0.14, 0.018, 0.77))
+    else:
+        fig = Figure(figsize=figsize, dpi=110, layout="constrained")
+        ax = fig.add_subplot(1, 1, 1)
+        cax = None
     img = np.ma.masked_invalid(rmap.max_intensity)
     extent = rmap.extent_deg
     import matplotlib
@@ -23,7 +33,10 @@ def reflectance_map_figure(rmap, *, detections=None, identification=None, rois: 
     cmap = matplotlib.colormaps["gray"].with_extremes(bad="#dfe9f5")  # light blue: no return (sky)
     im = ax.imshow(img, cmap=cmap, vmin=0, vmax=1, extent=extent, aspect="auto", interpolation="nearest")
     ax.invert_xaxis()  # azimuth grows counter-clockwise: to the left, as the scanner sees the scene
-    fig.colorbar(im, ax=ax, label="normalised intensity (max per cell)", pad=0.01)
+    if cax is not None:
+        fig.colorbar(im, cax=cax, label="normalised intensity (max per cell)")
+    else:
+        fig.colorbar(im, ax=ax, label="normalised intensity (max per cell)", pad=0.01)
     ax.set_xlabel("azimuth phi [deg]")
     ax.set_ylabel("zenith angle theta [deg]")
     ax.set_title(title)

@@ -195,6 +195,12 @@ def gather(c: Campaign, scope: ReportScope = ReportScope(), *, author: Optional[
     else:
         text = f"period {chosen[0]['label']} to {chosen[-1]['label']}, {len(chosen)} epochs"
     limits = [dict(r) for r in c.conn.execute("SELECT * FROM limits ORDER BY reflector")]
+    from projects.comparison import comparisons
+
+    extras = {}
+    cmp_ = comparisons(c, {s.label for s in sections} | ({baseline_epoch(c)} if scope.epoch else set()))
+    if cmp_:
+        extras["comparisons"] = cmp_
     log_rows = [r for r in c.log_rows() if r["epoch"] is None or r["epoch"] in {s.label for s in sections}]
     return ReportContent(
         name=c.name, folder=str(c.folder), span_m=c.span_m, scanner=c.profile.name,
@@ -202,4 +208,4 @@ def gather(c: Campaign, scope: ReportScope = ReportScope(), *, author: Optional[
         generated=dt.datetime.now(dt.timezone.utc).astimezone().isoformat(timespec="seconds"),
         scope=scope, scope_text=text, baseline=baseline_epoch(c), epochs=tuple(sections), displacements=tuple(rows),
         reflectors=tuple(c.reflectors()), target_states=tuple(_target_states(c, sections[-1])),
-        limits=tuple(limits), parameters=parameters(c), versions=versions(), log=tuple(log_rows), extras={})
+        limits=tuple(limits), parameters=parameters(c), versions=versions(), log=tuple(log_rows), extras=extras)

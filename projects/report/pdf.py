@@ -9,7 +9,7 @@ from typing import Callable, Optional, Sequence
 
 import numpy as np
 
-from lidar.progress import ProgressCallback, report
+from lidar.progress import ProgressCallback, report, scaled
 from projects.report.content import FLAG_TEXT, EpochSection, ReportContent
 
 PAGE_MARGIN_MM = 16
@@ -102,7 +102,8 @@ def figure_flowable(fig, width_mm: float, *, vector: bool = True, dpi: int = 150
         return d
     from reportlab.platypus import Image
 
-    fig.savefig(buf, format="png", dpi=dpi)
+    # JPEG goes into the PDF as it is; PNG would be decoded and compressed again (several times slower).
+    fig.savefig(buf, format="jpg", dpi=dpi, pil_kwargs={"quality": 88})
     buf.seek(0)
     w, h = fig.get_size_inches()
     return Image(buf, width=width_mm * mm, height=width_mm * mm * h / w)
@@ -112,8 +113,11 @@ class _Doc:
     """A BaseDocTemplate whose level-1/2 headings become PDF bookmarks."""
 
     def __new__(cls, path, content: ReportContent):
+        from reportlab import rl_config
         from reportlab.lib.pagesizes import A4
         from reportlab.lib.units import mm
+
+        rl_config.useA85 = 0  # binary streams: ASCII85 is slow in pure Python and makes files larger
         from reportlab.platypus import BaseDocTemplate, Frame, PageTemplate
 
         regular, _ = _fonts()
@@ -202,6 +206,12 @@ def summary_section(content: ReportContent, ss) -> list:
             if alarms:
                 out.append(Paragraph("Targets that reached a limit during the period: " +
                                      ", ".join(f"{a} ({s})" for a, s in alarms) + ".", ss["Normal"]))
+    if rows:
+        from projects.figures import displacement_history_figure
+
+        fig = displacement_history_figure(list(rows), title="All measurement targets (bars ±2σ)")
+        fig.set_size_inches(7.0, 3.3)
+        out += [Spacer(1, 6), figure_flowable(fig, 170)]
     out.append(Paragraph("Limits in force", ss["Heading2"]))
     if content.limits:
         lim = [["Applies to", "Rule", "Warning [mm]", "Alarm [mm]"]]
@@ -255,20 +265,73 @@ def history_section(content: ReportContent, ss) -> list:
     return out
 
 
-def epoch_section(e: EpochSection, content: ReportContent, ss, *, preview_of: Optional[Callable] = None,
-                  new_page: bool = True) -> list:
-    from reportlab.platypus import PageBreak, Paragraph, Spacer
+MAP_FIGSIZE = (7.0, 3.1)
 
+
+def render_map_jpeg(preview, plan: Optional[dict], label: str) -> bytes:
+    """An epoch's map figure as JPEG bytes (JPEG goes into the PDF as it is, without re-encoding)."""
     from projects.report.plots import epoch_map_figure
+
+    fig = epoch_map_figure(preview, plan, title=f"Reflectance map, epoch {label} "
+                                                "(orange rings: detections; red boxes: planned fine windows)")
+    buf = io.BytesIO()
+    fig.savefig(buf, format="jpg", dpi=130, pil_kwargs={"quality": 88})
+    return buf.getvalue()
+
+
+def _render_map_job(job) -> Optional[bytes]:
+    return render_map_jpeg(*job)
+
+
+def render_maps(sections: Sequence[EpochSection], preview_of: Optional[Callable] = None, *,
+                progress: Optional[ProgressCallback] = None, workers: Optional[int] = None) -> list[Optional[bytes]]:
+    """Map images of many epochs, drawn in parallel worker processes when there are enough of them."""
+    from lidar.reflectance_map import reduce_map
+    from projects.map_previews import MapPreview
+
+    jobs = []
+    for e in sections:
+        p = e.preview if e.preview is not None else (preview_of(e.label) if preview_of else None)
+        if p is not None:  # reduce before sending to a worker: the figure never needs more
+            p = MapPreview(reduce_map(p.reflectance_map, max_cells=300_000), p.detections, p.identification,
+                           p.full_step_deg)
+        jobs.append(None if p is None else (p, e.plan, e.label))
+    todo = [j for j in jobs if j is not None]
+    workers = workers or min(os.cpu_count() or 1, 4)
+    if len(todo) < 8 or workers < 2:
+        images = []
+        for k, j in enumerate(todo):
+            report(progress, k / max(len(todo), 1), f"map {j[2]}")
+            images.append(_render_map_job(j))
+    else:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        # spawn, not fork: safe inside the desktop application's threads
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+            images = []
+            for k, img in enumerate(pool.map(_render_map_job, todo, chunksize=2)):
+                report(progress, k / len(todo), "maps")
+                images.append(img)
+    it = iter(images)
+    return [None if j is None else next(it) for j in jobs]
+
+
+def epoch_section(e: EpochSection, content: ReportContent, ss, *, preview_of: Optional[Callable] = None,
+                  new_page: bool = True, map_jpeg: Optional[bytes] = None) -> list:
+    from reportlab.platypus import PageBreak, Paragraph, Spacer
 
     out = [PageBreak()] if new_page else []
     out += [Paragraph(f"Epoch {_esc(e.label)} — {e.datetime[:16].replace('T', ' ')}", ss["Heading2"]),
             Paragraph(f"State: {e.stage}. {_esc(e.notes)}", ss["Small"])]
-    preview = e.preview if e.preview is not None else (preview_of(e.label) if preview_of else None)
-    if preview is not None:
-        out.append(figure_flowable(epoch_map_figure(preview, e.plan, title=f"Reflectance map, epoch {e.label} "
-                                                    "(orange rings: detections; red boxes: planned fine windows)"),
-                                   178, vector=False, dpi=130))
+    if map_jpeg is None:
+        preview = e.preview if e.preview is not None else (preview_of(e.label) if preview_of else None)
+        map_jpeg = None if preview is None else render_map_jpeg(preview, e.plan, e.label)
+    if map_jpeg is not None:
+        from reportlab.lib.units import mm
+        from reportlab.platypus import Image
+
+        out.append(Image(io.BytesIO(map_jpeg), width=178 * mm, height=178 * mm * MAP_FIGSIZE[1] / MAP_FIGSIZE[0]))
     else:
         out.append(Paragraph("No coarse-scan map for this epoch.", ss["Small"]))
     if e.plan:
@@ -346,9 +409,49 @@ def log_section(content: ReportContent, ss, *, max_log_rows: int = 400) -> list:
     return out
 
 
-#: Optional sections contributed by other modules (comparison, camera cross-validation): name -> builder
-#: taking (content, ss) and returning flowables; called only when ``content.extras`` holds that name.
-EXTRA_SECTIONS: dict[str, Callable] = {}
+def comparison_section(content: ReportContent, ss) -> list:
+    from reportlab.platypus import PageBreak, Paragraph, Spacer
+
+    from projects.figures import span_profile_figure
+
+    out = [PageBreak(), Paragraph("Epoch comparison and span profile", ss["Heading1"]),
+           Paragraph("The conventional whole-scan approach, for context: both epochs registered into the campaign "
+                     "frame (reference targets as tie points, then ICP on the piers and the ground around them), "
+                     "their change computed point by point, and the mean height of the deck underside compared per "
+                     "bin along the girder lines. Compare its spread with the targets' uncertainty.", ss["Small"])]
+    for s in content.extras["comparisons"]:
+        out.append(Paragraph(f"{_esc(s['from'])} → {_esc(s['to'])} ({s['method'].upper()})", ss["Heading2"]))
+        lines = []
+        for lab, reg in s["registration"].items():
+            if "targets" not in reg:
+                continue
+            text = f"{lab}: target registration RMS {reg['targets']['rms_mm']:.2f} mm"
+            if "icp" in reg:
+                i = reg["icp"]
+                text += (f"; ICP fitness {i['fitness']:.2f}, RMS {i['rms_mm']:.1f} mm, iterations "
+                         f"{'/'.join(map(str, i['iterations']))}, changed the pose by {i['change_from_targets_mm']:.2f} mm")
+            lines.append(text + "".join(f" — warning: {w}" for w in reg["targets"]["warnings"]))
+        out += [Paragraph(_esc(t), ss["Small"]) for t in lines]
+        table = [["Part", "Points", "Median [mm]", "Std [mm]", "95 % |d| [mm]", "Median LoD [mm]"]]
+        for part, name in (("stable_parts", "piers and ground (stable)"), ("deck", "deck underside near targets"),
+                           ("all", "everything compared")):
+            st = s["change"][part]
+            table.append([name, str(st["n"]), _num(st.get("median_mm")), _num(st.get("std_mm")),
+                          _num(st.get("p95_abs_mm")), _num(st.get("median_lod_mm"))])
+        out += [Spacer(1, 3), _table(table, (50, 20, 25, 22, 25, 28), ss), Spacer(1, 4)]
+        if s["span_profile"]["bins"]:
+            out.append(figure_flowable(span_profile_figure(s), 172))
+            spread = [np.hypot(b["std_from_mm"], b["std_to_mm"]) / np.sqrt(2) for b in s["span_profile"]["bins"]]
+            tsig = [t["sigma_mm"] for t in s["targets"]]
+            out.append(Paragraph(f"Height spread of the scan points per {s['span_profile']['bin_m']:g} m bin: median "
+                                 f"{np.median(spread):.1f} mm; target displacement σ: median "
+                                 f"{np.median(tsig) if tsig else float('nan'):.2f} mm.", ss["Small"]))
+    return out
+
+
+#: Optional sections: name -> builder taking (content, ss) and returning flowables; called only when
+#: ``content.extras`` holds that name.
+EXTRA_SECTIONS: dict[str, Callable] = {"comparisons": comparison_section}
 
 
 def build_pdf(content: ReportContent, path: str | os.PathLike, *, preview_of: Optional[Callable] = None,
@@ -369,9 +472,10 @@ def build_pdf(content: ReportContent, path: str | os.PathLike, *, preview_of: Op
                   Paragraph("Per epoch: the coarse scan's reflectance map with detections and the planned fine-scan "
                             "windows, the plan against what the fine scans held, the centroids with their "
                             "uncertainty and flags, the reference check and the displacements.", ss["Small"])]
-        for k, e in enumerate(content.epochs):
-            report(progress, 0.1 + 0.75 * k / len(content.epochs), f"epoch {e.label}")
-            story += epoch_section(e, content, ss, preview_of=preview_of, new_page=k > 0)
+        maps = render_maps(content.epochs, preview_of, progress=scaled(progress, 0.1, 0.6))
+        for k, (e, jpeg) in enumerate(zip(content.epochs, maps)):
+            report(progress, 0.6 + 0.2 * k / len(content.epochs), f"epoch {e.label}")
+            story += epoch_section(e, content, ss, new_page=k > 0, map_jpeg=jpeg)
     story += log_section(content, ss)
     report(progress, 0.9, "writing PDF")
     tmp = path.with_name(f".{path.stem}.part.pdf")

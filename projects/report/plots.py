@@ -73,12 +73,12 @@ def history_grid_figure(rows: Sequence[dict], *, targets: Optional[Sequence[str]
                 ax.legend(fontsize=6, loc="lower left")
         w, a = lims.get(rid, (None, None))
         lo, hi = ax.get_ylim() if pts else (-1.0, 1.0)
-        span = max(hi - lo, 1.0)
+        reach = max(abs(lo), abs(hi), 1.0)
         off_scale = []
         for v, style, colour, name in ((w, ":", "tab:orange", "warning"), (a, "--", "tab:red", "alarm")):
             if not v:
                 continue
-            if -v >= lo - 1.5 * span:  # near the data: draw it and keep it in view
+            if v <= 2.0 * reach:  # near the data: draw it and keep it in view
                 ax.axhline(-v, color=colour, ls=style, lw=0.9)
                 lo = min(lo, -1.08 * v)
             else:  # far below the data: a line would squash the history flat
@@ -103,10 +103,9 @@ def epoch_map_figure(preview, plan: Optional[dict], *, title: str):
     from lidar.reflectance_map import reduce_map
 
     rois = [RoiPlan.from_json(r) for r in plan["rois"]] if plan else None
-    fig = reflectance_map_figure(reduce_map(preview.reflectance_map, max_cells=450_000),
+    fig = reflectance_map_figure(reduce_map(preview.reflectance_map, max_cells=300_000),
                                  detections=preview.detections, identification=preview.identification, rois=rois,
-                                 title=title)
-    fig.set_size_inches(7.0, 3.1)
+                                 title=title, figsize=(7.0, 3.1), fixed_layout=True)
     for ax in fig.axes:
         ax.tick_params(labelsize=7)
         ax.xaxis.label.set_size(8)
