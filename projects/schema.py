@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import sqlite3
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 
 SCHEMA_V1 = """
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -100,6 +100,17 @@ MIGRATIONS: dict[int, str] = {
         inputs_hash TEXT NOT NULL,
         arrays BLOB NOT NULL,           -- numpy .npz: reduced map arrays and geometry
         annotations TEXT NOT NULL       -- JSON: detections and identified reflectors
+    );
+    """,
+    # 3: whole-scan comparisons of two epochs (registration, change statistics, span profile) for reports.
+    3: """
+    CREATE TABLE comparisons (
+        from_epoch TEXT NOT NULL REFERENCES epochs(label) ON DELETE CASCADE,
+        to_epoch TEXT NOT NULL REFERENCES epochs(label) ON DELETE CASCADE,
+        method TEXT NOT NULL,
+        summary TEXT NOT NULL,          -- JSON, see projects.comparison
+        created TEXT NOT NULL,
+        PRIMARY KEY (from_epoch, to_epoch, method)
     );
     """,
 }

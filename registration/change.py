@@ -1,0 +1,169 @@
+"""Change between two registered clouds: cloud-to-cloud distance and M3C2 (py4dgeo)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional, Sequence
+
+import numpy as np
+
+from lidar.progress import ProgressCallback, report
+from registration.errors import InputError
+
+METHODS = ("c2c", "m3c2")
+
+
+@dataclass(frozen=True, eq=False)
+class ChangeResult:
+    """Distances from a reference cloud to a compared cloud, at ``points`` (campaign frame).
+
+    Attributes
+    ----------
+    method : {"c2c", "m3c2"}
+    points : (K, 3) float64 array, metres
+        Where the change is given: the compared cloud's points (c2c) or the core points (m3c2).
+    distance_m : (K,) float64 array
+        c2c: unsigned nearest-neighbour distance; m3c2: signed distance along ``normals``
+        (positive where the compared epoch lies on the normal's side). NaN where not computable.
+    lod_m : (K,) float64 array or None
+        M3C2 level of detection at 95 %, including the registration error.
+    normals : (K, 3) array or None
+    registration_error_m : float
+    parameters : dict
+    """
+
+    method: str
+    points: np.ndarray
+    distance_m: np.ndarray
+    lod_m: Optional[np.ndarray]
+    normals: Optional[np.ndarray]
+    registration_error_m: float
+    parameters: dict
+
+    @property
+    def significant(self) -> np.ndarray:
+        """(K,) bool: |distance| above the level of detection (c2c: above the registration error)."""
+        lod = self.lod_m if self.lod_m is not None else np.full(len(self.distance_m), self.registration_error_m)
+        with np.errstate(invalid="ignore"):
+            return np.abs(self.distance_m) > lod
+
+    def summary(self, mask: Optional[np.ndarray] = None) -> dict:
+        """Statistics over all points or a subset (mm)."""
+        d = self.distance_m if mask is None else self.distance_m[mask]
+        ok = np.isfinite(d)
+        out = {"n": int(ok.sum())}
+        if ok.any():
+            dd = d[ok] * 1e3
+            out.update(mean_mm=float(dd.mean()), median_mm=float(np.median(dd)), std_mm=float(dd.std()),
+                       p95_abs_mm=float(np.percentile(np.abs(dd), 95)))
+            if self.lod_m is not None:
+                lod = (self.lod_m if mask is None else self.lod_m[mask])[ok] * 1e3
+                out.update(median_lod_mm=float(np.nanmedian(lod)) if np.isfinite(lod).any() else None,
+                           significant_share=float(np.mean(np.abs(dd) > lod)))
+        return out
+
+
+def _check(name: str, a) -> np.ndarray:
+    a = np.asarray(a, dtype=np.float64)
+    if a.ndim != 2 or a.shape[1] != 3 or len(a) == 0:
+        raise InputError(f"{name}: needs an (N, 3) array of points, got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise InputError(f"{name}: coordinates hold NaN or infinite values")
+    return a
+
+
+def cloud_to_cloud(reference_xyz: np.ndarray, compared_xyz: np.ndarray, *, max_distance_m: float = 1.0,
+                   registration_error_m: float = 0.0) -> ChangeResult:
+    """Nearest-neighbour distance from every compared point to the reference cloud (unsigned, metres).
+
+    Distances beyond ``max_distance_m`` (default 1 m: no counterpart) are NaN.
+    """
+    from scipy.spatial import cKDTree
+
+    ref = _check("reference cloud", reference_xyz)
+    cmp_ = _check("compared cloud", compared_xyz)
+    off = ref.mean(axis=0)
+    d, _ = cKDTree(ref - off).query(cmp_ - off, distance_upper_bound=max_distance_m, workers=-1)
+    d[~np.isfinite(d)] = np.nan
+    return ChangeResult("c2c", cmp_, d, None, None, float(registration_error_m),
+                        {"max_distance_m": max_distance_m})
+
+
+def m3c2(reference_xyz: np.ndarray, compared_xyz: np.ndarray, core_points: np.ndarray, *,
+         normal_radius_m: float = 0.5, cylinder_radius_m: float = 0.25, max_distance_m: float = 0.5,
+         registration_error_m: float = 0.0, orientation: Sequence[float] = (0.0, 0.0, 1.0),
+         progress: Optional[ProgressCallback] = None) -> ChangeResult:
+    """M3C2 distances (py4dgeo) at ``core_points`` with the level of detection.
+
+    Parameters
+    ----------
+    reference_xyz, compared_xyz : (N, 3), (M, 3) float64 arrays, metres, same frame
+    core_points : (K, 3) array
+        Where to measure (e.g. the reference cloud thinned to a grid, see :func:`core_points_grid`).
+    normal_radius_m : float, keyword-only
+        Radius of the normal estimate (default 0.5 m).
+    cylinder_radius_m : float, keyword-only
+        Projection cylinder radius (default 0.25 m).
+    max_distance_m : float, keyword-only
+        Cylinder half-length (default 0.5 m).
+    registration_error_m : float, keyword-only
+        Added to the level of detection (py4dgeo's ``registration_error``).
+    orientation : (3,) sequence
+        Normals are turned towards this direction (default up: positive distance = the surface rose).
+
+    Returns
+    -------
+    ChangeResult
+        ``lod_m`` is py4dgeo's ``lodetection``.
+    """
+    import py4dgeo
+
+    ref = _check("reference cloud", reference_xyz)
+    cmp_ = _check("compared cloud", compared_xyz)
+    core = _check("core points", core_points)
+    for name, v in (("normal radius", normal_radius_m), ("cylinder radius", cylinder_radius_m),
+                    ("max distance", max_distance_m)):
+        if not (np.isfinite(v) and v > 0):
+            raise InputError(f"M3C2 {name} must be positive, got {v}")
+    off = ref.mean(axis=0)  # py4dgeo works in double, but reduced coordinates keep the search trees well-conditioned
+    report(progress, 0.05, "M3C2: search trees")
+    import logging
+
+    logging.getLogger("py4dgeo").setLevel(logging.WARNING)
+    e1 = py4dgeo.Epoch(ref - off)
+    e2 = py4dgeo.Epoch(cmp_ - off)
+    algo = py4dgeo.M3C2(epochs=(e1, e2), corepoints=core - off, normal_radii=(float(normal_radius_m),),
+                        cyl_radius=float(cylinder_radius_m), max_distance=float(max_distance_m),
+                        registration_error=float(registration_error_m),
+                        orientation_vector=np.asarray(orientation, dtype=np.float64))
+    report(progress, 0.2, "M3C2: distances")
+    import logging
+
+    lg = logging.getLogger("py4dgeo")
+    level = lg.level
+    lg.setLevel(logging.WARNING)  # py4dgeo logs every search tree at INFO on stderr
+    try:
+        d, unc = algo.run()
+    finally:
+        lg.setLevel(level)
+    normals = np.asarray(algo.directions(), dtype=np.float64)
+    report(progress, 1.0, "M3C2 done")
+    return ChangeResult("m3c2", core, np.asarray(d, dtype=np.float64), np.asarray(unc["lodetection"], np.float64),
+                        normals if normals.shape == core.shape else np.broadcast_to(normals, core.shape).copy(),
+                        float(registration_error_m),
+                        {"normal_radius_m": normal_radius_m, "cylinder_radius_m": cylinder_radius_m,
+                         "max_distance_m": max_distance_m})
+
+
+def core_points_grid(xyz: np.ndarray, spacing_m: float = 0.25) -> np.ndarray:
+    """One point per occupied cube of ``spacing_m`` (the one nearest the cube's centre)."""
+    xyz = _check("cloud", xyz)
+    if not spacing_m > 0:
+        raise InputError(f"core point spacing must be positive, got {spacing_m}")
+    off = xyz.min(axis=0)
+    cell = np.floor((xyz - off) / spacing_m).astype(np.int64)
+    centre_dist = np.sum(((xyz - off) / spacing_m - cell - 0.5) ** 2, axis=1)
+    key = (cell[:, 0] * 1_000_003 + cell[:, 1]) * 1_000_033 + cell[:, 2]
+    order = np.lexsort((centre_dist, key))
+    first = np.ones(len(order), bool)
+    first[1:] = key[order][1:] != key[order][:-1]
+    return xyz[order[first]]

@@ -1,0 +1,9 @@
+"""Errors of the registration layer (all under the product's one root, ``SurveyError``)."""
+from lidar.errors import InputError, ProcessingError, SurveyError
+
+
+class RegistrationError(ProcessingError):
+    """Two epochs could not be registered (too few tie points, ICP diverged, ...)."""
+
+
+__all__ = ["InputError", "ProcessingError", "RegistrationError", "SurveyError"]
