@@ -1,6 +1,8 @@
 """Change between two registered clouds: cloud-to-cloud distance and M3C2 (py4dgeo)."""
 from __future__ import annotations
 
+import contextlib
+import logging
 from dataclasses import dataclass
 from typing import Optional, Sequence
 
@@ -60,6 +62,24 @@ class ChangeResult:
                 out.update(median_lod_mm=float(np.nanmedian(lod)) if np.isfinite(lod).any() else None,
                            significant_share=float(np.mean(np.abs(dd) > lod)))
         return out
+
+
+@contextlib.contextmanager
+def _quiet_py4dgeo():
+    """py4dgeo logs every search tree at INFO and appends to ./py4dgeo.log in the user's folder:
+    keep warnings only, and no log file, while we call it."""
+    lg = logging.getLogger("py4dgeo")
+    level = lg.level
+    files = [h for h in lg.handlers if isinstance(h, logging.FileHandler)]
+    lg.setLevel(logging.WARNING)
+    for h in files:
+        lg.removeHandler(h)
+    try:
+        yield
+    finally:
+        for h in files:
+            lg.addHandler(h)
+        lg.setLevel(level)
 
 
 def _check(name: str, a) -> np.ndarray:
@@ -126,25 +146,15 @@ def m3c2(reference_xyz: np.ndarray, compared_xyz: np.ndarray, core_points: np.nd
             raise InputError(f"M3C2 {name} must be positive, got {v}")
     off = ref.mean(axis=0)  # py4dgeo works in double, but reduced coordinates keep the search trees well-conditioned
     report(progress, 0.05, "M3C2: search trees")
-    import logging
-
-    logging.getLogger("py4dgeo").setLevel(logging.WARNING)
-    e1 = py4dgeo.Epoch(ref - off)
-    e2 = py4dgeo.Epoch(cmp_ - off)
-    algo = py4dgeo.M3C2(epochs=(e1, e2), corepoints=core - off, normal_radii=(float(normal_radius_m),),
-                        cyl_radius=float(cylinder_radius_m), max_distance=float(max_distance_m),
-                        registration_error=float(registration_error_m),
-                        orientation_vector=np.asarray(orientation, dtype=np.float64))
-    report(progress, 0.2, "M3C2: distances")
-    import logging
-
-    lg = logging.getLogger("py4dgeo")
-    level = lg.level
-    lg.setLevel(logging.WARNING)  # py4dgeo logs every search tree at INFO on stderr
-    try:
+    with _quiet_py4dgeo():
+        e1 = py4dgeo.Epoch(ref - off)
+        e2 = py4dgeo.Epoch(cmp_ - off)
+        algo = py4dgeo.M3C2(epochs=(e1, e2), corepoints=core - off, normal_radii=(float(normal_radius_m),),
+                            cyl_radius=float(cylinder_radius_m), max_distance=float(max_distance_m),
+                            registration_error=float(registration_error_m),
+                            orientation_vector=np.asarray(orientation, dtype=np.float64))
+        report(progress, 0.2, "M3C2: distances")
         d, unc = algo.run()
-    finally:
-        lg.setLevel(level)
     normals = np.asarray(algo.directions(), dtype=np.float64)
     report(progress, 1.0, "M3C2 done")
     return ChangeResult("m3c2", core, np.asarray(d, dtype=np.float64), np.asarray(unc["lodetection"], np.float64),
