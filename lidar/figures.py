@@ -67,8 +67,8 @@ def reflectance_map_figure(rmap, *, detections=None, identification=None, rois: 
 
 
 def save_figure(fig, path: str | os.PathLike) -> Path:
-    p = Path(path)
-    tmp = p.with_name(f".{p.stem}.part{p.suffix}")
-    fig.savefig(tmp)
-    os.replace(tmp, p)
-    return p
+    from lidar.files import atomic_output
+
+    with atomic_output(path) as tmp:
+        fig.savefig(tmp)
+    return Path(path)

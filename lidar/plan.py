@@ -132,11 +132,9 @@ class ScanPlan:
                    float(d.get("budget_seconds", 3600.0)), tuple(d.get("warnings", ())))
 
     def save(self, path: str | os.PathLike) -> Path:
-        p = Path(path)
-        tmp = p.with_name(f".{p.name}.part")
-        tmp.write_text(json.dumps(self.to_json(), indent=2))
-        os.replace(tmp, p)
-        return p
+        from lidar.files import write_atomic
+
+        return write_atomic(path, json.dumps(self.to_json(), indent=2))
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "ScanPlan":

@@ -18,6 +18,7 @@ from typing import Optional
 import numpy as np
 
 from lidar.errors import InputError
+from lidar.files import atomic_output
 from lidar.progress import ProgressCallback, report, scaled
 from projects.errors import CampaignError
 from projects.exports import displacement_table, write_atomic
@@ -232,9 +233,8 @@ def write_change_las(change: ChangeResult, path: Path) -> Path:
     lod = change.lod_m if change.lod_m is not None else np.full(len(change.points), change.registration_error_m)
     las["lod_mm"] = (lod * 1e3).astype(np.float32)
     las["significant"] = change.significant.astype(np.uint8)
-    tmp = path.with_name(f".{path.stem}.part{path.suffix}")
-    las.write(tmp)
-    os.replace(tmp, path)
+    with atomic_output(path) as tmp:
+        las.write(tmp)
     return path
 
 

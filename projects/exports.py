@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lidar.files import write_atomic  # noqa: F401  (part of this module's API)
 from projects.store import Campaign
 
 DISPLACEMENT_COLUMNS = ["epoch", "datetime", "reflector", "displacement_mm", "sigma_mm", "flags", "state",
@@ -40,17 +41,6 @@ def to_csv(rows: list[dict], columns=DISPLACEMENT_COLUMNS) -> str:
     for r in rows:
         w.writerow({k: ("" if r.get(k) is None else r.get(k)) for k in columns})
     return buf.getvalue()
-
-
-def write_atomic(path: str | os.PathLike, data: str | bytes) -> Path:
-    p = Path(path)
-    tmp = p.with_name(f".{p.stem}.part{p.suffix}")
-    if isinstance(data, str):
-        tmp.write_text(data, encoding="utf-8")
-    else:
-        tmp.write_bytes(data)
-    os.replace(tmp, p)
-    return p
 
 
 def tables(c: Campaign) -> dict[str, list[dict]]:

@@ -8,6 +8,7 @@ from typing import Optional
 
 import numpy as np
 
+from lidar.files import atomic_output  # noqa: F401  (used by every writer)
 from lidar.errors import ScanFormatError
 from lidar.scan import Scan, normalise_intensity
 
@@ -137,20 +138,3 @@ def raw_for_writing(scan: Scan) -> np.ndarray:
     if scan.intensity is not None:
         return np.round(scan.intensity.astype(np.float64) * 65535).astype(np.uint16)
     return np.zeros(len(scan), np.uint16)
-
-
-@contextlib.contextmanager
-def atomic_output(path: str | os.PathLike):
-    """Yield a temporary path beside ``path``; on success it is renamed to ``path``, on failure removed.
-
-    A crash never leaves half a file under the final name. The temporary name
-    keeps the suffix: some writers (laspy) choose the encoding from it.
-    """
-    final = Path(path)
-    tmp = final.with_name(f".{final.stem}.part{final.suffix}")
-    try:
-        yield tmp
-        os.replace(tmp, final)
-    finally:
-        if tmp.exists():
-            tmp.unlink()

@@ -478,12 +478,9 @@ def build_pdf(content: ReportContent, path: str | os.PathLike, *, preview_of: Op
             story += epoch_section(e, content, ss, new_page=k > 0, map_jpeg=jpeg)
     story += log_section(content, ss)
     report(progress, 0.9, "writing PDF")
-    tmp = path.with_name(f".{path.stem}.part.pdf")
-    try:
+    from lidar.files import atomic_output
+
+    with atomic_output(path) as tmp:
         _Doc(tmp, content).build(story)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     report(progress, 1.0, "report written")
     return path

@@ -1,0 +1,33 @@
+"""Writing output files safely: through a temporary file beside the target, renamed on success."""
+from __future__ import annotations
+
+import contextlib
+import os
+from pathlib import Path
+
+
+@contextlib.contextmanager
+def atomic_output(path: str | os.PathLike):
+    """Yield a temporary path beside ``path``; on success it is renamed to ``path``, on failure removed.
+
+    A crash never leaves half a file under the final name. The temporary name
+    keeps the suffix: some writers (laspy, matplotlib) choose the encoding from it.
+    """
+    final = Path(path)
+    tmp = final.with_name(f".{final.stem}.part{final.suffix}")
+    try:
+        yield tmp
+        os.replace(tmp, final)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def write_atomic(path: str | os.PathLike, data: str | bytes) -> Path:
+    """Write text (UTF-8) or bytes to ``path`` through :func:`atomic_output`."""
+    with atomic_output(path) as tmp:
+        if isinstance(data, str):
+            tmp.write_text(data, encoding="utf-8")
+        else:
+            tmp.write_bytes(data)
+    return Path(path)
