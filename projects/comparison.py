@@ -22,7 +22,7 @@ from lidar.files import atomic_output
 from lidar.progress import ProgressCallback, report, scaled
 from projects.errors import CampaignError
 from projects.exports import displacement_table, write_atomic
-from projects.processing import _read, baseline_epoch
+from projects.processing import baseline_epoch, read_files
 from projects.store import Campaign, now_iso
 from registration.change import METHODS, ChangeResult, cloud_to_cloud, core_points_grid, m3c2
 from registration.icp import IcpResult, refine_icp, stable_mask
@@ -51,34 +51,43 @@ def _centroid_arrays(c: Campaign, label: str, ids) -> tuple[np.ndarray, np.ndarr
     return xyz, sig
 
 
+def _below_deck_m(meas_xyz: np.ndarray) -> Optional[float]:
+    """Height limit of the stable parts: half a metre below the lowest deck target (None if none was seen)."""
+    z = meas_xyz[:, 2]
+    return float(np.nanmin(z) - 0.5) if np.isfinite(z).any() else None
+
+
 def bring_to_campaign_frame(c: Campaign, label: str, base: str, *, use_icp: bool = True, base_xyz=None,
                             progress: Optional[ProgressCallback] = None) -> EpochInFrame:
-    """Register epoch ``label`` onto the baseline epoch ``base`` (targets, then ICP on stable parts)."""
-    report(progress, 0.0, f"reading {label}")
-    scan = _read(c, c.files(label, "coarse"), scaled(progress, 0.0, 0.3))
+    """Register epoch ``label`` onto the baseline epoch ``base`` (targets, then ICP on stable parts).
+
+    ``base_xyz``, the baseline's coarse scan, is read here when not given.
+    """
+    if base_xyz is None and (label == base or use_icp):
+        base_xyz = read_files(c, c.files(base, "coarse")).xyz_socs
     if label == base:
-        return EpochInFrame(label, None, None, Transform.identity("campaign"), scan.xyz_socs)
-    layout = c.layout()
-    refs = [i for i, g in zip(layout.ids, layout.groups) if g == "reference"]
-    src, s1 = _centroid_arrays(c, label, refs)
-    dst, s2 = _centroid_arrays(c, base, refs)
+        return EpochInFrame(label, None, None, Transform.identity("campaign"), base_xyz)
     if not c.centroids(label) or not c.centroids(base):
         raise CampaignError(f"epochs {label} and {base} need measured targets for the registration; "
                             "add their fine scans and run 'bridgesurvey process'")
+    report(progress, 0.0, f"reading {label}")
+    scan = read_files(c, c.files(label, "coarse"), scaled(progress, 0.0, 0.3))
+    layout = c.layout()
+    refs = layout.ids_in("reference")
+    src, s1 = _centroid_arrays(c, label, refs)
+    dst, s2 = _centroid_arrays(c, base, refs)
     tr = register_targets(src, dst, refs, sigma_m=np.hypot(s1, s2), source_frame=f"socs:{label}",
                           target_frame="campaign")
     tf, icp = tr.transform, None
     if use_icp:
-        meas = [i for i, g in zip(layout.ids, layout.groups) if g == "measurement"]
-        m_src, _ = _centroid_arrays(c, label, meas)
-        m_dst, _ = _centroid_arrays(c, base, meas)
+        meas = layout.ids_in("measurement")
         used = np.isfinite(src[:, 0]) & np.isfinite(dst[:, 0])
-        below = lambda m: float(np.nanmin(m[:, 2]) - 0.5) if np.isfinite(m[:, 2]).any() else None  # noqa: E731
-        mask_src = stable_mask(scan.xyz_socs, src[used], exclude_above_m=below(m_src))
-        bx = base_xyz if base_xyz is not None else _read(c, c.files(base, "coarse")).xyz_socs
-        mask_dst = stable_mask(bx, dst[used], exclude_above_m=below(m_dst))
+        mask_src = stable_mask(scan.xyz_socs, src[used],
+                               exclude_above_m=_below_deck_m(_centroid_arrays(c, label, meas)[0]))
+        mask_dst = stable_mask(base_xyz, dst[used], exclude_above_m=_below_deck_m(_centroid_arrays(c, base, meas)[0]))
         report(progress, 0.4, "ICP on stable parts")
-        icp = refine_icp(scan.xyz_socs[mask_src], bx[mask_dst], tr.transform, progress=scaled(progress, 0.4, 0.95))
+        icp = refine_icp(scan.xyz_socs[mask_src], base_xyz[mask_dst], tr.transform,
+                         progress=scaled(progress, 0.4, 0.95))
         tf = icp.transform
     return EpochInFrame(label, tr, icp, tf, tf.apply(scan.xyz_socs))
 
@@ -110,16 +119,14 @@ def compare_epochs(c: Campaign, from_label: str, to_label: str, *, method: str =
     base = baseline_epoch(c)
     if base is None:
         raise CampaignError("no measured epoch yet: process the campaign first ('bridgesurvey process')")
-    base_xyz = _read(c, c.files(base, "coarse")).xyz_socs if base not in (from_label, to_label) else None
+    report(progress, 0.0, f"reading {base}")
+    base_xyz = read_files(c, c.files(base, "coarse")).xyz_socs  # once, for both epochs
     ea = bring_to_campaign_frame(c, from_label, base, use_icp=use_icp, base_xyz=base_xyz,
-                                 progress=scaled(progress, 0.0, 0.35))
-    if base_xyz is None and base == from_label:
-        base_xyz = ea.xyz
+                                 progress=scaled(progress, 0.05, 0.35))
     eb = bring_to_campaign_frame(c, to_label, base, use_icp=use_icp, base_xyz=base_xyz,
                                  progress=scaled(progress, 0.35, 0.7))
     layout = c.layout()
-    refs = [i for i, g in zip(layout.ids, layout.groups) if g == "reference"]
-    meas = [i for i, g in zip(layout.ids, layout.groups) if g == "measurement"]
+    refs, meas = layout.ids_in("reference"), layout.ids_in("measurement")
     ref_base, _ = _centroid_arrays(c, base, refs)
     meas_from, _ = _centroid_arrays(c, from_label, meas)
     meas_from = ea.transform.apply(meas_from)
@@ -139,8 +146,7 @@ def compare_epochs(c: Campaign, from_label: str, to_label: str, *, method: str =
                       progress=scaled(progress, 0.72, 0.92))
     else:
         change = cloud_to_cloud(xa, xb, registration_error_m=reg_err)
-    stable = stable_mask(change.points, ref_base[np.isfinite(ref_base[:, 0])],
-                         exclude_above_m=float(np.nanmin(meas_from[:, 2]) - 0.5))
+    stable = stable_mask(change.points, ref_base[np.isfinite(ref_base[:, 0])], exclude_above_m=_below_deck_m(meas_from))
     deck = _deck_mask(change.points, meas_from)
     report(progress, 0.93, "span profile")
     prof = span_profile(xa, xb, meas_from, bin_m=bin_m)

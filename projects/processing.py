@@ -107,7 +107,8 @@ class ProcessSummary:
         return [o for o in self.outcomes if o.action == "failed"]
 
 
-def _read(c: Campaign, rows: list[dict], progress=None) -> Scan:
+def read_files(c: Campaign, rows: list[dict], progress=None) -> Scan:
+    """The stored scan files of ``rows`` (from ``Campaign.files``) as one scan."""
     scans = [read_scan(c.path_of(r), progress=progress) for r in rows]
     return scans[0] if len(scans) == 1 else Scan.concatenate(scans)
 
@@ -124,6 +125,14 @@ def plan_inputs(c: Campaign, label: str, params: dict) -> tuple[str, object]:
     return _hash(key), layout
 
 
+def analyse_epoch_coarse(c: Campaign, label: str, layout, params: dict, *,
+                         progress: Optional[ProgressCallback] = None):
+    """Reflectance map, detections and identification of an epoch's coarse scan with the campaign's parameters."""
+    coarse = read_files(c, c.files(label, "coarse"), scaled(progress, 0.0, 0.5))
+    return analyse_coarse(coarse, layout, step_deg=params["map_step_deg"], threshold=params["detection_threshold"],
+                          tolerance_m=params["identification_tolerance_m"], progress=scaled(progress, 0.5, 1.0))
+
+
 def plan_epoch(c: Campaign, label: str, *, progress: Optional[ProgressCallback] = None) -> ScanPlan:
     """The fine-scan plan of an epoch, from its coarse scan (reused when its inputs are unchanged)."""
     params = parameters(c)
@@ -131,9 +140,7 @@ def plan_epoch(c: Campaign, label: str, *, progress: Optional[ProgressCallback] 
     row = c.plan_row(label)
     if row is not None and row["inputs_hash"] == h:
         return ScanPlan.from_json(json.loads(row["json"]))
-    coarse = _read(c, c.files(label, "coarse"), scaled(progress, 0.0, 0.5))
-    analysis = analyse_coarse(coarse, layout, step_deg=params["map_step_deg"], threshold=params["detection_threshold"],
-                              tolerance_m=params["identification_tolerance_m"], progress=scaled(progress, 0.5, 0.95))
+    analysis = analyse_epoch_coarse(c, label, layout, params, progress=scaled(progress, 0.0, 0.95))
     plan = plan_from_coarse(analysis, layout, epoch=label, profile=c.profile, min_points=int(params["min_points"]),
                             budget_seconds=float(params["budget_min"]) * 60.0)
     d = plan.to_json()
@@ -156,7 +163,7 @@ def measure_epoch(c: Campaign, label: str, *, progress: Optional[ProgressCallbac
     plan = plan_epoch(c, label, progress=scaled(progress, 0.0, 0.4))
     h = measure_inputs(c, label, params)
     layout = c.layout(c.epoch(label)["datetime"])
-    fine = _read(c, c.files(label, "fine"), scaled(progress, 0.4, 0.8))
+    fine = read_files(c, c.files(label, "fine"), scaled(progress, 0.4, 0.8))
     cents = measure_targets(fine, plan, layout, profile=c.profile)
     c.save_centroids(label, cents, h, {k: params[k] for k in STAGE1_KEYS})
     report(progress, 1.0, "measured")

@@ -31,15 +31,11 @@ def _preview_from_scan(c: Campaign):
     """For epochs planned before previews were stored: analyse the coarse scan again (slow, not saved)."""
     def preview_of(label: str):
         from projects.map_previews import decode_preview, encode_preview
-        from projects.processing import _read, parameters
-        from lidar.pipeline import analyse_coarse
+        from projects.processing import analyse_epoch_coarse, parameters
 
-        coarse = c.files(label, "coarse")
-        if not coarse:
+        if not c.files(label, "coarse"):
             return None
-        p = parameters(c)
-        analysis = analyse_coarse(_read(c, coarse), c.layout(c.epoch(label)["datetime"]), step_deg=p["map_step_deg"],
-                                  threshold=p["detection_threshold"], tolerance_m=p["identification_tolerance_m"])
+        analysis = analyse_epoch_coarse(c, label, c.layout(c.epoch(label)["datetime"]), parameters(c))
         return decode_preview(*encode_preview(analysis))
     return preview_of
 
