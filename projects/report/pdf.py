@@ -85,68 +85,59 @@ def _table(rows: Sequence[Sequence], widths_mm: Sequence[float], ss, *, header_r
     return t
 
 
-def figure_flowable(fig, width_mm: float, *, vector: bool = True, dpi: int = 150):
-    """A matplotlib Figure as a flowable ``width_mm`` wide: an SVG drawing (vector) or a PNG image."""
+def figure_flowable(fig, width_mm: float):
+    """A matplotlib Figure as a vector drawing ``width_mm`` wide (SVG through svglib).
+
+    Maps are raster images instead: see :func:`render_map_jpeg`.
+    """
     from reportlab.lib.units import mm
+    from svglib.svglib import svg2rlg
 
     buf = io.BytesIO()
-    if vector:
-        from svglib.svglib import svg2rlg
-
-        fig.savefig(buf, format="svg")
-        buf.seek(0)
-        d = svg2rlg(buf)
-        f = width_mm * mm / d.width
-        d.scale(f, f)
-        d.width, d.height = d.width * f, d.height * f
-        return d
-    from reportlab.platypus import Image
-
-    # JPEG goes into the PDF as it is; PNG would be decoded and compressed again (several times slower).
-    fig.savefig(buf, format="jpg", dpi=dpi, pil_kwargs={"quality": 88})
+    fig.savefig(buf, format="svg")
     buf.seek(0)
-    w, h = fig.get_size_inches()
-    return Image(buf, width=width_mm * mm, height=width_mm * mm * h / w)
+    d = svg2rlg(buf)
+    f = width_mm * mm / d.width
+    d.scale(f, f)
+    d.width, d.height = d.width * f, d.height * f
+    return d
 
 
-class _Doc:
-    """A BaseDocTemplate whose level-1/2 headings become PDF bookmarks."""
+def _make_doc(path, content: ReportContent):
+    """A BaseDocTemplate with header and footer, whose level-1/2 headings become PDF bookmarks."""
+    from reportlab import rl_config
+    from reportlab.lib.pagesizes import A4
+    from reportlab.lib.units import mm
+    from reportlab.platypus import BaseDocTemplate, Frame, PageTemplate
 
-    def __new__(cls, path, content: ReportContent):
-        from reportlab import rl_config
-        from reportlab.lib.pagesizes import A4
-        from reportlab.lib.units import mm
+    rl_config.useA85 = 0  # binary streams: ASCII85 is slow in pure Python and makes files larger
+    regular, _ = _fonts()
 
-        rl_config.useA85 = 0  # binary streams: ASCII85 is slow in pure Python and makes files larger
-        from reportlab.platypus import BaseDocTemplate, Frame, PageTemplate
+    class Doc(BaseDocTemplate):
+        def afterFlowable(self, flowable):
+            style = getattr(flowable, "style", None)
+            if style is not None and style.name in ("Heading1", "Heading2"):
+                key = f"h{id(flowable)}"
+                self.canv.bookmarkPage(key)
+                self.canv.addOutlineEntry(flowable.getPlainText(), key, level=int(style.name[-1]) - 1)
 
-        regular, _ = _fonts()
+    def decorate(canv, doc):
+        canv.saveState()
+        canv.setFont(regular, 7)
+        canv.setFillGray(0.35)
+        w, h = A4
+        canv.drawString(PAGE_MARGIN_MM * mm, h - 10 * mm, f"{content.name} · {content.scope_text}")
+        canv.drawRightString(w - PAGE_MARGIN_MM * mm, 8 * mm, f"page {doc.page}")
+        canv.drawString(PAGE_MARGIN_MM * mm, 8 * mm,
+                        f"BridgeSurvey {content.versions.get('bridgesurvey', '')} · {content.generated}")
+        canv.restoreState()
 
-        class Doc(BaseDocTemplate):
-            def afterFlowable(self, flowable):
-                style = getattr(flowable, "style", None)
-                if style is not None and style.name in ("Heading1", "Heading2"):
-                    key = f"h{id(flowable)}"
-                    self.canv.bookmarkPage(key)
-                    self.canv.addOutlineEntry(flowable.getPlainText(), key, level=int(style.name[-1]) - 1)
-
-        def decorate(canv, doc):
-            canv.saveState()
-            canv.setFont(regular, 7)
-            canv.setFillGray(0.35)
-            w, h = A4
-            canv.drawString(PAGE_MARGIN_MM * mm, h - 10 * mm, f"{content.name} · {content.scope_text}")
-            canv.drawRightString(w - PAGE_MARGIN_MM * mm, 8 * mm, f"page {doc.page}")
-            canv.drawString(PAGE_MARGIN_MM * mm, 8 * mm,
-                            f"BridgeSurvey {content.versions.get('bridgesurvey', '')} · {content.generated}")
-            canv.restoreState()
-
-        doc = Doc(str(path), pagesize=A4, leftMargin=PAGE_MARGIN_MM * mm, rightMargin=PAGE_MARGIN_MM * mm,
-                  topMargin=16 * mm, bottomMargin=14 * mm, title=f"{content.name}: displacement survey report",
-                  author=content.author, subject=content.scope_text, creator="BridgeSurvey")
-        frame = Frame(doc.leftMargin, doc.bottomMargin, doc.width, doc.height, id="body")
-        doc.addPageTemplates([PageTemplate("title", [frame]), PageTemplate("body", [frame], onPage=decorate)])
-        return doc
+    doc = Doc(str(path), pagesize=A4, leftMargin=PAGE_MARGIN_MM * mm, rightMargin=PAGE_MARGIN_MM * mm,
+              topMargin=16 * mm, bottomMargin=14 * mm, title=f"{content.name}: displacement survey report",
+              author=content.author, subject=content.scope_text, creator="BridgeSurvey")
+    frame = Frame(doc.leftMargin, doc.bottomMargin, doc.width, doc.height, id="body")
+    doc.addPageTemplates([PageTemplate("title", [frame]), PageTemplate("body", [frame], onPage=decorate)])
+    return doc
 
 
 # ----------------------------------------------------------------------------- sections
@@ -317,16 +308,14 @@ def render_maps(sections: Sequence[EpochSection], preview_of: Optional[Callable]
     return [None if j is None else next(it) for j in jobs]
 
 
-def epoch_section(e: EpochSection, content: ReportContent, ss, *, preview_of: Optional[Callable] = None,
-                  new_page: bool = True, map_jpeg: Optional[bytes] = None) -> list:
+def epoch_section(e: EpochSection, content: ReportContent, ss, *, new_page: bool = True,
+                  map_jpeg: Optional[bytes] = None) -> list:
+    """Flowables of one epoch; ``map_jpeg`` from :func:`render_maps` (None: the epoch has no map)."""
     from reportlab.platypus import PageBreak, Paragraph, Spacer
 
     out = [PageBreak()] if new_page else []
     out += [Paragraph(f"Epoch {_esc(e.label)} — {e.datetime[:16].replace('T', ' ')}", ss["Heading2"]),
             Paragraph(f"State: {e.stage}. {_esc(e.notes)}", ss["Small"])]
-    if map_jpeg is None:
-        preview = e.preview if e.preview is not None else (preview_of(e.label) if preview_of else None)
-        map_jpeg = None if preview is None else render_map_jpeg(preview, e.plan, e.label)
     if map_jpeg is not None:
         from reportlab.lib.units import mm
         from reportlab.platypus import Image
@@ -481,6 +470,6 @@ def build_pdf(content: ReportContent, path: str | os.PathLike, *, preview_of: Op
     from lidar.files import atomic_output
 
     with atomic_output(path) as tmp:
-        _Doc(tmp, content).build(story)
+        _make_doc(tmp, content).build(story)
     report(progress, 1.0, "report written")
     return path
