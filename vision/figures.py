@@ -1,0 +1,101 @@
+"""Figures of the camera cross-validation (matplotlib, no GUI toolkit)."""
+from __future__ import annotations
+
+import datetime as dt
+from typing import Optional
+
+import numpy as np
+
+from vision.crossval import CrossValidation
+from vision.series import CameraSeries
+
+
+def _dates(ns: np.ndarray):
+    return np.asarray(ns, dtype="datetime64[ns]").astype("datetime64[ms]").astype(dt.datetime)
+
+
+def _envelope(t_ns: np.ndarray, v: np.ndarray, bins: int = 4000):
+    """Min/max per time bin, so 800,000 samples plot as a faithful band quickly."""
+    if len(t_ns) <= 2 * bins:
+        return t_ns, v, v
+    edges = np.linspace(t_ns[0], t_ns[-1], bins + 1)
+    idx = np.clip(np.searchsorted(edges, t_ns, side="right") - 1, 0, bins - 1)
+    vmin = np.full(bins, np.inf)
+    vmax = np.full(bins, -np.inf)
+    ok = np.isfinite(v)
+    np.minimum.at(vmin, idx[ok], v[ok])
+    np.maximum.at(vmax, idx[ok], v[ok])
+    centres = ((edges[:-1] + edges[1:]) / 2).astype(np.int64)
+    empty = ~np.isfinite(vmin)
+    vmin[empty] = np.nan
+    vmax[empty] = np.nan
+    return centres, vmin, vmax
+
+
+def overlay_figure(cv: CrossValidation, camera: Optional[CameraSeries] = None, *, ax=None):
+    """Camera series (aligned) with the LiDAR epochs and their +-2 sigma error bars."""
+    import matplotlib.pyplot as plt
+
+    fig = None
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(10, 4.2), constrained_layout=True)
+    if camera is not None and len(camera):
+        t, lo, hi = _envelope(camera.time_ns, camera.value_mm + cv.offset_mm)
+        ax.fill_between(_dates(t), lo, hi, color="tab:orange", alpha=0.35, lw=0, label="camera (min-max)")
+        ax.plot(_dates(t), (lo + hi) / 2, color="tab:orange", lw=0.6)
+    p = [q for q in cv.pairs if np.isfinite(q.lidar_mm)]
+    tt = _dates(np.array([np.datetime64(q.datetime.replace("+00:00", "")) for q in p], "datetime64[ns]").astype(np.int64))
+    ax.errorbar(tt, [q.lidar_mm for q in p], yerr=[2 * q.lidar_sigma_mm for q in p], fmt="o", ms=3.5,
+                color="tab:blue", ecolor="tab:blue", capsize=2, lw=0.8, label="LiDAR (±2σ)")
+    ax.set_ylabel("vertical displacement (mm, up)")
+    ax.set_title(f"{cv.series or 'camera'} vs LiDAR {cv.reflector}: bias {cv.bias_mm:+.2f} mm, "
+                 f"RMSE {cv.rmse_mm:.2f} mm, r = {cv.correlation:.3f}")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    return fig or ax.figure
+
+
+def difference_figure(cv: CrossValidation, *, ax=None):
+    """LiDAR - camera at every pair over time, with +-2 sigma bars and the bias line."""
+    import matplotlib.pyplot as plt
+
+    fig = None
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(10, 3.2), constrained_layout=True)
+    p = [q for q in cv.pairs if np.isfinite(q.difference_mm)]
+    tt = _dates(np.array([np.datetime64(q.datetime.replace("+00:00", "")) for q in p], "datetime64[ns]").astype(np.int64))
+    ax.errorbar(tt, [q.difference_mm for q in p], yerr=[2 * q.sigma_mm for q in p], fmt="o", ms=3.5,
+                color="tab:purple", capsize=2, lw=0.8)
+    ax.axhline(0.0, color="k", lw=0.8)
+    ax.axhline(cv.bias_mm, color="tab:red", lw=1.0, ls="--", label=f"bias {cv.bias_mm:+.2f} mm")
+    ax.set_ylabel("LiDAR − camera (mm)")
+    ax.set_title(f"Differences ({cv.n_pairs} pairs, RMSE {cv.rmse_mm:.2f} mm, "
+                 f"{100 * cv.within_2sigma:.0f} % within 2σ)")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    return fig or ax.figure
+
+
+def scatter_figure(cv: CrossValidation, *, ax=None):
+    """LiDAR against camera at the pairs, with the 1:1 line."""
+    import matplotlib.pyplot as plt
+
+    fig = None
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(5, 5), constrained_layout=True)
+    p = [q for q in cv.pairs if np.isfinite(q.difference_mm)]
+    x = np.array([q.camera_mm for q in p])
+    y = np.array([q.lidar_mm for q in p])
+    ax.errorbar(x, y, yerr=[2 * q.lidar_sigma_mm for q in p], fmt="o", ms=3.5, color="tab:blue", capsize=2, lw=0.8)
+    lo, hi = float(min(x.min(), y.min())), float(max(x.max(), y.max()))
+    pad = 0.05 * (hi - lo or 1.0)
+    ax.plot([lo - pad, hi + pad], [lo - pad, hi + pad], "k--", lw=0.9, label="1:1")
+    ax.set_xlim(lo - pad, hi + pad)
+    ax.set_ylim(lo - pad, hi + pad)
+    ax.set_aspect("equal")
+    ax.set_xlabel("camera (mm, aligned)")
+    ax.set_ylabel("LiDAR (mm)")
+    ax.set_title(f"r = {cv.correlation:.3f}, slope {cv.slope:.3f}")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper left", fontsize=8)
+    return fig or ax.figure
