@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import sqlite3
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 
 SCHEMA_V1 = """
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -111,6 +111,25 @@ MIGRATIONS: dict[int, str] = {
         summary TEXT NOT NULL,          -- JSON, see projects.comparison
         created TEXT NOT NULL,
         PRIMARY KEY (from_epoch, to_epoch, method)
+    );
+    """,
+    # 4: displacement series of a dual-camera installation and their cross-validation with LiDAR.
+    4: """
+    CREATE TABLE camera_series (
+        name TEXT PRIMARY KEY,
+        reflector TEXT REFERENCES reflectors(id),   -- the LiDAR target the camera watches
+        sha256 TEXT NOT NULL UNIQUE,
+        stored_path TEXT NOT NULL UNIQUE,           -- the imported file, copied read-only into camera/
+        original_path TEXT NOT NULL,
+        imported TEXT NOT NULL,
+        options TEXT NOT NULL,                      -- JSON: how the file was read (column, unit, zone, sign)
+        summary TEXT NOT NULL,                      -- JSON: rows, period, sampling, gaps, bad rows
+        arrays BLOB NOT NULL                        -- numpy .npz: time_ns (UTC), value_mm (positive up)
+    );
+    CREATE TABLE crossvals (
+        series TEXT PRIMARY KEY REFERENCES camera_series(name) ON DELETE CASCADE,
+        summary TEXT NOT NULL,                      -- JSON, see vision.crossval.CrossValidation
+        created TEXT NOT NULL
     );
     """,
 }

@@ -4,6 +4,7 @@ Layout of a campaign folder::
 
     campaign.sqlite      schema-versioned database (WAL, foreign keys)
     scans/               imported scan files, copied once, read-only, named by checksum
+    camera/              imported camera displacement series, the same way
     .lock                held by the process working on the campaign
 
 Every change is one transaction; files are written under a temporary name and
@@ -34,6 +35,7 @@ from projects.errors import CampaignError, CampaignLockedError, DuplicateImportE
 
 DB_NAME = "campaign.sqlite"
 SCANS_DIR = "scans"
+CAMERA_DIR = "camera"
 LOCK_NAME = ".lock"
 
 
@@ -185,14 +187,14 @@ class Campaign:
 
     def _clean_partial_files(self) -> None:
         """Remove what an interrupted import left: temporary copies and files no row refers to."""
-        scans = self.folder / SCANS_DIR
-        known = {r[0] for r in self.conn.execute("SELECT stored_path FROM files")}
-        for p in scans.iterdir() if scans.is_dir() else ():
-            rel = f"{SCANS_DIR}/{p.name}"
-            if p.name.startswith(".") or rel not in known:
-                with contextlib.suppress(OSError):
-                    p.chmod(0o644)
-                    p.unlink()
+        for sub, table in ((SCANS_DIR, "files"), (CAMERA_DIR, "camera_series")):
+            folder = self.folder / sub
+            known = {r[0] for r in self.conn.execute(f"SELECT stored_path FROM {table}")}
+            for p in folder.iterdir() if folder.is_dir() else ():
+                if p.name.startswith(".") or f"{sub}/{p.name}" not in known:
+                    with contextlib.suppress(OSError):
+                        p.chmod(0o644)
+                        p.unlink()
         for p in self.folder.glob(f".{DB_NAME}.*.part"):
             p.unlink()
 
@@ -314,9 +316,9 @@ class Campaign:
     def path_of(self, file_row: dict) -> Path:
         return self.folder / file_row["stored_path"]
 
-    def _copy_in(self, src: Path) -> tuple[str, str, int]:
-        """Copy a file into scans/ (temporary name, fsync, rename, read-only); returns (sha, rel path, size)."""
-        scans = self.folder / SCANS_DIR
+    def _copy_in(self, src: Path, sub: str = SCANS_DIR) -> tuple[str, str, int]:
+        """Copy a file into scans/ (or ``sub``): temporary name, fsync, rename, read-only; returns (sha, rel path, size)."""
+        scans = self.folder / sub
         scans.mkdir(exist_ok=True)
         tmp = scans / f".import-{uuid.uuid4().hex}"
         h = hashlib.sha256()
@@ -328,7 +330,7 @@ class Campaign:
             os.fsync(fout.fileno())
         sha = h.hexdigest()
         safe = "".join(ch if ch.isalnum() or ch in "._-" else "_" for ch in src.name)
-        rel = f"{SCANS_DIR}/{sha[:16]}_{safe}"
+        rel = f"{sub}/{sha[:16]}_{safe}"
         final = self.folder / rel
         if final.exists():
             tmp.unlink()

@@ -157,6 +157,11 @@ def read_camera_series(path: str | os.PathLike, *, column: Optional[str] = None,
     import pandas as pd
 
     path = Path(path)
+    try:
+        pd.Timestamp("2026-01-01").tz_localize(_zone(timezone))
+    except Exception:  # pytz/zoneinfo raise several types for unknown zones
+        raise InputError(f"time zone {timezone!r} is not known; use an IANA name such as Europe/Berlin or an "
+                         "offset such as +09:00") from None
     if positive not in ("up", "down"):
         raise InputError(f"positive must be 'up' or 'down', not {positive!r}")
     if not path.is_file():
@@ -204,6 +209,9 @@ def read_camera_series(path: str | os.PathLike, *, column: Optional[str] = None,
     unit_col = _find(header, UNIT_NAMES)
     tz_col = _find(header, TZ_NAMES)
     used = {i for i in (t_unix, t_col, date_col, clock_col, unit_col, tz_col) if i is not None}
+    if t_unix is None and t_col is None:
+        raise SeriesFormatError(path, f"no time column (one of {', '.join(TIME_NAMES + UNIX_NAMES)}); "
+                                f"the columns are {', '.join(header)}")
     if column is not None:
         matches = [i for i, h in enumerate(header) if h == column or _norm(h) == _norm(column)]
         if not matches:
@@ -217,9 +225,6 @@ def read_camera_series(path: str | os.PathLike, *, column: Optional[str] = None,
                 raise InputError(f"{path}: cannot tell which column holds the displacement "
                                  f"({', '.join(header)}); name it with --column")
             v_col = candidates[0]
-    if t_unix is None and t_col is None:
-        raise SeriesFormatError(path, f"no time column (one of {', '.join(TIME_NAMES + UNIX_NAMES)}); "
-                                f"the columns are {', '.join(header)}")
 
     # ---- times (UTC ns)
     if t_unix is not None:
@@ -317,8 +322,8 @@ def _parse_times(raw, timezone: str, path) -> tuple[np.ndarray, np.ndarray]:
     if has_offset.any():
         p = pd.to_datetime(raw[has_offset], utc=True, errors="coerce", format="ISO8601")
         ok[has_offset] = p.notna().to_numpy()
-        t_ns[has_offset] = p.dt.as_unit("ns").astype("int64", copy=False).to_numpy() if ok[has_offset].all() else \
-            np.where(p.notna(), p.dt.as_unit("ns").fillna(pd.Timestamp(0, tz="UTC")).astype("int64"), 0)
+        t_ns[has_offset] = np.where(ok[has_offset], p.dt.as_unit("ns").fillna(pd.Timestamp(0, tz="UTC"))
+                                    .astype("int64").to_numpy(), 0)
     naive = ~has_offset
     if naive.any():
         p = pd.to_datetime(raw[naive], errors="coerce", format="ISO8601")

@@ -1,0 +1,119 @@
+"""Camera commands: import a dual-camera displacement series, list them, cross-validate with LiDAR."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from app.cli.output import dump_json, table
+
+
+def register(sub) -> None:
+    p = sub.add_parser("camera", help="import or list displacement series of a dual-camera installation",
+                       description="Displacement series written by an existing dual-camera system (CSV/TXT with "
+                                   "a time column and a displacement column).")
+    actions = p.add_subparsers(dest="action", metavar="ACTION")
+    actions.required = True
+    q = actions.add_parser("import", help="import a series file (copied into the campaign, never modified)",
+                           description="Columns are recognised by their names: time/timestamp/datetime (or "
+                                       "date + time, or unix seconds), displacement/disp/deflection/value (unit in "
+                                       "the name, e.g. displacement_mm), optional unit and tz columns. Bad rows are "
+                                       "left out and reported with their line numbers.")
+    q.add_argument("dir", type=Path)
+    q.add_argument("file", type=Path)
+    q.add_argument("--name", default=None, help="series name (default: the file name)")
+    q.add_argument("--reflector", default=None, help="LiDAR target the camera watches (default: the one at midspan)")
+    q.add_argument("--column", default=None, help="value column, when the file has several")
+    q.add_argument("--timezone", default="UTC", help="zone of times without an offset: IANA name or +hh:mm (UTC)")
+    q.add_argument("--unit", default=None, help="unit of the values when the file does not say (default mm)")
+    q.add_argument("--positive", choices=("up", "down"), default="up", help="the file's sign convention (up)")
+    q.add_argument("--json", action="store_true", help="print the import summary as JSON")
+    q.set_defaults(func=cmd_camera_import)
+    q = actions.add_parser("list", help="list the imported series")
+    q.add_argument("dir", type=Path)
+    q.add_argument("--json", action="store_true")
+    q.set_defaults(func=cmd_camera_list)
+
+    p = sub.add_parser("crossval", help="cross-validate a camera series against the LiDAR epochs",
+                       description="Pair each LiDAR epoch with the camera samples around its time, align the "
+                                   "camera's zero (at a date, or by least squares), and report bias, RMSE and "
+                                   "correlation. Writes crossval.json, crossval.csv, overlay.png, difference.png "
+                                   "and scatter.png.")
+    p.add_argument("dir", type=Path)
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--align-at", default=None, help="align both series at the epoch nearest this date")
+    p.add_argument("--series", default=None, help="camera series (when there are several)")
+    p.add_argument("--reflector", default=None, help="LiDAR target (default: the series' own)")
+    p.add_argument("--window-min", type=float, default=30.0, help="pairing window, +- minutes (30)")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.set_defaults(func=cmd_crossval)
+
+
+def cmd_camera_import(args) -> int:
+    from projects.camera import import_series
+    from projects.store import Campaign
+
+    with Campaign.open(args.dir) as c:
+        name, series = import_series(c, args.file, name=args.name, reflector=args.reflector, column=args.column,
+                                     timezone=args.timezone, unit=args.unit, positive=args.positive)
+        rid = c.conn.execute("SELECT reflector FROM camera_series WHERE name = ?", (name,)).fetchone()[0]
+    s = series.summary()
+    if args.json:
+        dump_json({"name": name, "reflector": rid, **s})
+        return 0
+    print(f"imported camera series '{name}' for {rid}: {s['rows']} rows from {s['start']} to {s['end']}, "
+          f"sampling {s['sampling_s']:.0f} s, column '{s['column']}' ({s['unit']})")
+    print(f"  missing values {s['missing_values']}, gaps {s['gaps']}, bad rows {s['bad_rows']}"
+          + (f", repeated times {s['duplicates_dropped']}" if s["duplicates_dropped"] else ""))
+    for line in s["first_bad_lines"]:
+        print(f"  left out: {line}")
+    for note in s["notes"]:
+        print(f"  note: {note}")
+    return 0
+
+
+def cmd_camera_list(args) -> int:
+    from projects.camera import series_rows
+    from projects.store import Campaign
+
+    with Campaign.open(args.dir, writable=False) as c:
+        rows = series_rows(c)
+    if args.json:
+        dump_json(rows)
+        return 0
+    table([{"name": r["name"], "reflector": r["reflector"], "rows": r["summary"]["rows"],
+            "start": r["summary"]["start"], "end": r["summary"]["end"], "bad_rows": r["summary"]["bad_rows"],
+            "file": r["original_path"]} for r in rows],
+          ["name", "reflector", "rows", "start", "end", "bad_rows", "file"])
+    return 0
+
+
+def cmd_crossval(args) -> int:
+    from projects.camera import crossvalidate, save_crossval, write_crossval_outputs
+    from projects.store import Campaign
+
+    with Campaign.open(args.dir) as c:
+        cv, cam = crossvalidate(c, series=args.series, reflector=args.reflector, align_at=args.align_at,
+                                window_min=args.window_min)
+        paths = write_crossval_outputs(cv, cam, args.out)
+        save_crossval(c, cv)
+    if args.json:
+        dump_json(cv.to_json())
+        return 0
+
+    def f(v, fmt):
+        return "-" if v is None or (isinstance(v, float) and math.isnan(v)) else fmt.format(v)
+
+    al = cv.alignment
+    how = (f"aligned at {al['epoch']} (nearest to {al['requested']})" if al["method"] == "at-date"
+           else "aligned by least squares")
+    print(f"camera '{cv.series}' vs LiDAR {cv.reflector}: {cv.n_pairs} pairs of {len(cv.pairs)} epochs, {how}, "
+          f"offset {cv.offset_mm:+.2f} mm")
+    print(f"  bias {f(cv.bias_mm, '{:+.3f}')} mm, RMSE {f(cv.rmse_mm, '{:.3f}')} mm, std {f(cv.std_mm, '{:.3f}')} mm, "
+          f"max |diff| {f(cv.max_abs_mm, '{:.3f}')} mm, correlation {f(cv.correlation, '{:.4f}')}, "
+          f"{100 * cv.within_2sigma:.0f} % within 2 sigma")
+    missing = [p.epoch for p in cv.pairs if "no-camera-data" in p.flags]
+    if missing:
+        print(f"  no camera data within +-{args.window_min:g} min of: {', '.join(missing[:10])}"
+              + (" ..." if len(missing) > 10 else ""))
+    print("wrote " + ", ".join(str(p) for p in paths))
+    return 0

@@ -1,0 +1,189 @@
+"""Camera displacement series in a campaign: import, storage and cross-validation with LiDAR."""
+from __future__ import annotations
+
+import datetime as dt
+import json
+import os
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+from lidar.files import write_atomic
+from lidar.errors import ProcessingError
+from projects.errors import DuplicateImportError, InputError
+from projects.store import CAMERA_DIR, Campaign, now_iso, parse_datetime, sha256_of
+from vision.crossval import CrossValidation, cross_validate
+from vision.series import CameraSeries, read_camera_series
+
+
+def midspan_reflector(c: Campaign) -> str:
+    """The measurement target nearest the middle between the piers (mean of the reference targets)."""
+    refl = [r for r in c.reflectors() if not r["retired"]]
+    refs = np.array([[r["x"], r["y"], r["z"]] for r in refl if r["grp"] == "reference"], float)
+    meas = [r for r in refl if r["grp"] == "measurement"]
+    if not meas:
+        raise InputError("the campaign has no measurement target to pair the camera with")
+    if len(refs) == 0:
+        return meas[0]["id"]
+    mid = refs.mean(axis=0)
+    return min(meas, key=lambda r: float(np.linalg.norm(np.array([r["x"], r["y"], r["z"]]) - mid)))["id"]
+
+
+def import_series(c: Campaign, path: str | os.PathLike, *, name: Optional[str] = None,
+                  reflector: Optional[str] = None, column: Optional[str] = None, timezone: str = "UTC",
+                  unit: Optional[str] = None, positive: str = "up") -> tuple[str, CameraSeries]:
+    """Read a camera series file, copy it into the campaign (read-only) and store the series.
+
+    Nothing changes in the campaign unless the whole file was read; a file already imported
+    (same checksum) or an existing name is refused.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such file; check the path")
+    name = (name or path.stem).strip()
+    if not name or any(ch in name for ch in "/\\\n"):
+        raise InputError(f"series name {name!r} is not usable")
+    if c.conn.execute("SELECT 1 FROM camera_series WHERE name = ?", (name,)).fetchone():
+        raise InputError(f"a camera series named {name!r} is already in the campaign; give another --name")
+    rid = reflector or midspan_reflector(c)
+    if c.reflector(rid)["grp"] != "measurement":
+        raise InputError(f"{rid} is a reference target; pair the camera with a measurement target")
+    sha = sha256_of(path)
+    row = c.conn.execute("SELECT name, original_path FROM camera_series WHERE sha256 = ?", (sha,)).fetchone()
+    if row is not None:
+        raise DuplicateImportError(f"{path}: this file is already in the campaign as series {row['name']!r} "
+                                   f"(from {row['original_path']}); nothing was changed")
+    series = read_camera_series(path, column=column, timezone=timezone, unit=unit, positive=positive)
+    options = {"column": series.column, "unit": series.unit, "timezone": timezone, "positive": positive}
+    summary = series.summary()
+    try:
+        sha2, rel, _ = c._copy_in(path, CAMERA_DIR)
+        if sha2 != sha:
+            raise InputError(f"{path}: the file changed while it was being imported; try again")
+        with c.transaction() as conn:
+            conn.execute("INSERT INTO camera_series(name, reflector, sha256, stored_path, original_path, imported, "
+                         "options, summary, arrays) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                         (name, rid, sha, rel, str(path.resolve()), now_iso(), json.dumps(options),
+                          json.dumps(summary), series.to_npz_bytes()))
+            c._log(conn, "camera-import", None, {"name": name, "file": str(path), "sha256": sha, "rows": len(series),
+                                                  "bad_rows": series.n_bad, "reflector": rid})
+    except BaseException:
+        c._clean_partial_files()
+        raise
+    return name, series
+
+
+def series_rows(c: Campaign) -> list[dict]:
+    """The imported camera series (without their arrays)."""
+    rows = []
+    for r in c.conn.execute("SELECT name, reflector, sha256, stored_path, original_path, imported, options, summary "
+                            "FROM camera_series ORDER BY imported, name"):
+        d = dict(r)
+        d["options"] = json.loads(d["options"])
+        d["summary"] = json.loads(d["summary"])
+        rows.append(d)
+    return rows
+
+
+def load_series(c: Campaign, name: Optional[str] = None) -> tuple[dict, CameraSeries]:
+    """One stored series (the only one when ``name`` is None)."""
+    rows = series_rows(c)
+    if not rows:
+        raise InputError(f"{c.folder}: no camera series yet; import one with 'bridgesurvey camera import'")
+    if name is None:
+        if len(rows) > 1:
+            raise InputError(f"the campaign has {len(rows)} camera series ({', '.join(r['name'] for r in rows)}); "
+                             "choose one with --series")
+        row = rows[0]
+    else:
+        match = [r for r in rows if r["name"] == name]
+        if not match:
+            raise InputError(f"no camera series {name!r}; the campaign has {', '.join(r['name'] for r in rows)}")
+        row = match[0]
+    blob = c.conn.execute("SELECT arrays FROM camera_series WHERE name = ?", (row["name"],)).fetchone()[0]
+    t, v = CameraSeries.arrays_from_npz(blob)
+    s = row["summary"]
+    return row, CameraSeries(time_ns=t, value_mm=v, source=row["original_path"], column=row["options"]["column"],
+                             unit=row["options"]["unit"], n_bad=s["bad_rows"], n_missing=s["missing_values"],
+                             sampling_s=s["sampling_s"] or float("nan"))
+
+
+def _to_ns(iso: str) -> int:
+    d = dt.datetime.fromisoformat(iso)
+    return int(round(d.timestamp() * 1e6)) * 1000
+
+
+def crossvalidate(c: Campaign, *, series: Optional[str] = None, reflector: Optional[str] = None,
+                  align_at: Optional[str] = None, window_min: float = 30.0) -> tuple[CrossValidation, CameraSeries]:
+    """Cross-validate a stored camera series with the LiDAR displacements of its reflector."""
+    row, cam = load_series(c, series)
+    rid = reflector or row["reflector"] or midspan_reflector(c)
+    c.reflector(rid)
+    if not (np.isfinite(window_min) and window_min > 0):
+        raise InputError(f"--window-min must be a positive number of minutes, got {window_min}")
+    lidar = [r for r in c.displacement_rows() if r["reflector"] == rid]
+    if not lidar:
+        raise ProcessingError(f"no LiDAR displacements of {rid} yet; run 'bridgesurvey process' first")
+    labels = [r["epoch"] for r in lidar]
+    t = np.array([_to_ns(r["datetime"]) for r in lidar], np.int64)
+    y = np.array([np.nan if r["displacement_m"] is None else r["displacement_m"] * 1e3 for r in lidar])
+    s = np.array([np.nan if r["sigma_m"] is None else r["sigma_m"] * 1e3 for r in lidar])
+    at = _to_ns(parse_datetime(align_at)) if align_at else None
+    return cross_validate(labels, t, y, s, cam, window_s=window_min * 60.0, align_at_ns=at, reflector=rid,
+                          series=row["name"]), cam
+
+
+def save_crossval(c: Campaign, cv: CrossValidation) -> None:
+    """Keep the cross-validation summary in the campaign (the report shows it)."""
+    with c.transaction() as conn:
+        conn.execute("INSERT OR REPLACE INTO crossvals(series, summary, created) VALUES (?, ?, ?)",
+                     (cv.series, json.dumps(_clean(cv.to_json())), now_iso()))
+        c._log(conn, "crossval", None, {"series": cv.series, "reflector": cv.reflector, "n_pairs": cv.n_pairs,
+                                        "bias_mm": cv.bias_mm, "rmse_mm": cv.rmse_mm})
+
+
+def crossval_summaries(c: Campaign) -> list[dict]:
+    return [json.loads(r[0]) for r in c.conn.execute("SELECT summary FROM crossvals ORDER BY series")]
+
+
+def _clean(o):
+    if isinstance(o, float) and not np.isfinite(o):
+        return None
+    if isinstance(o, dict):
+        return {k: _clean(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_clean(v) for v in o]
+    return o
+
+
+def write_crossval_outputs(cv: CrossValidation, camera: CameraSeries, out_dir: str | os.PathLike) -> list[Path]:
+    """``crossval.json``, ``crossval.csv`` and the overlay, difference and scatter plots (PNG)."""
+    import csv
+    import io
+
+    from lidar.figures import save_figure
+    from vision.figures import difference_figure, overlay_figure, scatter_figure
+
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{out}: exists and is not a folder")
+    out.mkdir(parents=True, exist_ok=True)
+    paths = [write_atomic(out / "crossval.json", json.dumps(_clean(cv.to_json()), indent=2) + "\n")]
+    buf = io.StringIO()
+    cols = ["epoch", "datetime", "lidar_mm", "lidar_sigma_mm", "camera_mm", "camera_raw_mm", "camera_sigma_mm",
+            "camera_n", "difference_mm", "sigma_mm", "flags"]
+    w = csv.DictWriter(buf, fieldnames=cols, lineterminator="\n")
+    w.writeheader()
+    for p in cv.pairs:
+        d = {k: getattr(p, k) for k in cols}
+        d["flags"] = ";".join(p.flags)
+        w.writerow({k: ("" if isinstance(v, float) and not np.isfinite(v) else v) for k, v in d.items()})
+    paths.append(write_atomic(out / "crossval.csv", buf.getvalue()))
+    for name, fig in (("overlay.png", overlay_figure(cv, camera)), ("difference.png", difference_figure(cv)),
+                      ("scatter.png", scatter_figure(cv))):
+        import matplotlib.pyplot as plt
+
+        paths.append(save_figure(fig, out / name))
+        plt.close(fig)
+    return paths
