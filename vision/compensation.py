@@ -37,11 +37,25 @@ class DualCalibration:
     Bbar : (N, 2, 3) pixels per metre; ``X_cs1`` : (N, 3) metres.
     residual_px : (N,) RMS misfit of each feature's model over the calibration motions.
     n_motions : number of rig motions used (H).
+    false_rms_px : RMS size of the false displacement over the calibration motions (the range
+        the model was fitted on; beyond it its error grows in proportion).
     """
     Bbar: np.ndarray
     X_cs1: np.ndarray
     residual_px: np.ndarray
     n_motions: int
+    false_rms_px: float = float("nan")
+
+    def prediction_sigma_px(self, false_px: np.ndarray) -> np.ndarray:
+        """Standard deviation (per image axis) of the predicted false displacement, from the fit's misfit.
+
+        The parameters of a least-squares fit of 9 unknowns to H motions carry about
+        ``misfit * sqrt(9 / H)`` of error into a prediction within the calibrated range, growing
+        in proportion beyond it. ``false_px`` (..., 2): the predicted false displacement.
+        """
+        size = np.linalg.norm(np.asarray(false_px, float), axis=-1)
+        scale = np.maximum(1.0, size / self.false_rms_px) if np.isfinite(self.false_rms_px) else 1.0
+        return float(np.mean(self.residual_px)) * np.sqrt(9.0 / max(self.n_motions, 9)) / np.sqrt(2.0) * scale
 
     def false_displacement_px(self, R: np.ndarray, T: np.ndarray) -> np.ndarray:
         """Predicted false displacement (n, N, 2) in pixels for motions ``R`` (n, 3, 3), ``T`` (n, 3)."""
@@ -108,7 +122,8 @@ def fit_false_displacement(main_uv: np.ndarray, motion: CameraMotion) -> DualCal
     duv = uv[ok] - uv[0]
     fits = [_fit_one_feature(duv[:, i], R, T) for i in range(uv.shape[1])]
     return DualCalibration(Bbar=np.stack([f[0] for f in fits]), X_cs1=np.stack([f[1] for f in fits]),
-                           residual_px=np.array([f[2] for f in fits]), n_motions=H)
+                           residual_px=np.array([f[2] for f in fits]), n_motions=H,
+                           false_rms_px=float(np.sqrt(np.mean(np.sum(duv.mean(axis=1) ** 2, axis=-1)))))
 
 
 @dataclass(frozen=True)
@@ -151,7 +166,8 @@ class DualCameraResult:
     Attributes
     ----------
     displacement_m : (n, 2) compensated (true) displacement, mean over the features.
-    sigma_m : (n, 2) its standard deviation: feature scatter and the sub-camera pose's uncertainty.
+    sigma_m : (n, 2) its standard deviation: feature scatter, the sub-camera pose's uncertainty and
+        the calibration's (from its misfit, growing beyond the calibrated range of motion).
     single_camera_m : (n, 2) what the main camera alone gives (false displacement included).
     false_displacement_m : (n, 2) the predicted false displacement that was removed.
     per_feature_m : (n, N, 2) compensated displacement of every feature.
@@ -234,7 +250,10 @@ def measure_dual_camera(setup: DualCameraSetup, main_uv: np.ndarray, sub_uv: Opt
         pose_sigma[k] = np.sqrt(np.clip(np.diag(J @ motion.pose_cov[k] @ J.T), 0, None))
         if progress is not None and k % 50 == 0:
             report(progress, k / n, f"frame {k + 1} of {n}")
-    sigma = np.sqrt(scatter ** 2 + pose_sigma ** 2)
+    mean_false = false_px.mean(axis=1)
+    cal_sigma = np.where(valid[:, None], (cal.prediction_sigma_px(mean_false) * setup.target.mm_per_px / 1e3)[..., None],
+                         np.nan)
+    sigma = np.sqrt(scatter ** 2 + pose_sigma ** 2 + cal_sigma ** 2)
     flags = tuple(tuple(f for f, bad in (("main-target-missing", not found[k]), ("sub-target-missing", not okm[k]))
                         if bad) for k in range(n))
     prov = {"calibration_motions": cal.n_motions, "calibration_misfit_px": cal.residual_px.tolist(),

@@ -62,6 +62,16 @@ class CrossValidation:
         d["pairs"] = [asdict(p) for p in self.pairs]
         return d
 
+    @classmethod
+    def from_json(cls, d: dict) -> "CrossValidation":
+        """Rebuild from :meth:`to_json` output (JSON null read back as NaN)."""
+        def num(v):
+            return float("nan") if v is None else v
+
+        pairs = tuple(Pair(**{k: (tuple(v) if k == "flags" else num(v)) for k, v in p.items()}) for p in d["pairs"])
+        fields = {k: num(v) for k, v in d.items() if k not in ("pairs", "alignment")}
+        return cls(pairs=pairs, alignment=dict(d["alignment"]), **fields)
+
 
 def _iso(ns: int) -> str:
     return dt.datetime.fromtimestamp(ns / 1e9, dt.timezone.utc).isoformat()

@@ -201,6 +201,11 @@ def gather(c: Campaign, scope: ReportScope = ReportScope(), *, author: Optional[
     cmp_ = comparisons(c, {s.label for s in sections} | ({baseline_epoch(c)} if scope.epoch else set()))
     if cmp_:
         extras["comparisons"] = cmp_
+    from projects.camera import crossval_summaries, load_series
+
+    cvs = crossval_summaries(c)
+    if cvs:
+        extras["crossvals"] = [(s, load_series(c, s["series"])[1]) for s in cvs]
     log_rows = [r for r in c.log_rows() if r["epoch"] is None or r["epoch"] in {s.label for s in sections}]
     return ReportContent(
         name=c.name, folder=str(c.folder), span_m=c.span_m, scanner=c.profile.name,

@@ -438,9 +438,39 @@ def comparison_section(content: ReportContent, ss) -> list:
     return out
 
 
+def crossval_section(content: ReportContent, ss) -> list:
+    from reportlab.platypus import PageBreak, Paragraph, Spacer
+
+    from vision.crossval import CrossValidation
+    from vision.figures import difference_figure, overlay_figure, scatter_figure
+
+    out = [PageBreak(), Paragraph("Cross-check with the dual-camera system", ss["Heading1"]),
+           Paragraph("The camera series of the midspan target (its own zero, set by the alignment below) against "
+                     "the LiDAR displacements: each epoch is paired with the median of the camera samples around "
+                     "its time.", ss["Small"])]
+    for summary, camera in content.extras["crossvals"]:
+        cv = CrossValidation.from_json(summary)
+        al = cv.alignment
+        how = (f"aligned at epoch {al['epoch']}" if al["method"] == "at-date" else "aligned by least squares")
+        out.append(Paragraph(f"{_esc(cv.series)} against LiDAR target {_esc(cv.reflector)}", ss["Heading2"]))
+        out.append(Paragraph(_esc(f"{len(camera):,} camera samples from {camera.summary()['start'][:10]} to "
+                                  f"{camera.summary()['end'][:10]}; pairing window ±{cv.window_s / 60:g} min; {how}, "
+                                  f"offset {cv.offset_mm:+.2f} mm."), ss["Small"]))
+        table = [["Pairs", "Bias [mm]", "RMSE [mm]", "Std [mm]", "Max |d| [mm]", "Correlation", "Within 2σ"],
+                 [f"{cv.n_pairs} of {len(cv.pairs)}", _num(cv.bias_mm, "{:+.2f}"), _num(cv.rmse_mm), _num(cv.std_mm),
+                  _num(cv.max_abs_mm), _num(cv.correlation, "{:.3f}"), f"{100 * cv.within_2sigma:.0f} %"]]
+        out += [Spacer(1, 3), _table(table, (24, 22, 22, 20, 24, 24, 22), ss), Spacer(1, 4),
+                figure_flowable(overlay_figure(cv, camera), 172), figure_flowable(difference_figure(cv), 172),
+                figure_flowable(scatter_figure(cv), 90)]
+        missing = [p.epoch for p in cv.pairs if "no-camera-data" in p.flags]
+        if missing:
+            out.append(Paragraph(_esc(f"No camera data around: {', '.join(missing)}."), ss["Small"]))
+    return out
+
+
 #: Optional sections: name -> builder taking (content, ss) and returning flowables; called only when
 #: ``content.extras`` holds that name.
-EXTRA_SECTIONS: dict[str, Callable] = {"comparisons": comparison_section}
+EXTRA_SECTIONS: dict[str, Callable] = {"comparisons": comparison_section, "crossvals": crossval_section}
 
 
 def build_pdf(content: ReportContent, path: str | os.PathLike, *, preview_of: Optional[Callable] = None,

@@ -6,7 +6,7 @@ from lidar.errors import InputError, ProcessingError
 from vision.compensation import calibrate_dual_camera, fit_false_displacement, measure_dual_camera
 from vision.main_camera import fit_affine_target
 from vision.simulate import RigGeometry, SyntheticRig, calibration_motions, table10_schedule
-from vision.simulate.motions import drift_motions
+from vision.simulate.motions import pan_tilt_drift
 from vision.sub_camera import calibrate_intrinsics, exact_intrinsics, motion_from_poses, solve_poses
 
 
@@ -85,7 +85,7 @@ def test_lab_size_false_displacement_is_reduced_below_the_dissertations_1_1_mm()
     intr = calibrate_intrinsics(g.board.object_points(), rig.zhang_views(12, quantise=False), g.resolution)
     setup = calibrate_dual_camera(main, sub, pattern_m=g.main_pattern_m, board_points_m=g.board.object_points(),
                                   intrinsics=intr)
-    P = drift_motions(12, max_rotation_rad=4.4e-3, max_translation_m=0.004)
+    P = pan_tilt_drift(12)
     truth = np.column_stack([np.zeros(len(P)), np.linspace(0, -0.004, len(P))])
     main, sub = detect(P, truth)
     res = measure_dual_camera(setup, main, sub)

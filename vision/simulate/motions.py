@@ -60,13 +60,11 @@ def calibration_motions(h: int = 21, *, rotation_rad: float = 2e-3, translation_
     return random_motions(h + 1, rotation_rad=rotation_rad, translation_m=translation_m, rng=rng)
 
 
-def drift_motions(n: int, *, max_rotation_rad: float, max_translation_m: float,
-                  rng: Optional[np.random.Generator] = None) -> np.ndarray:
-    """Slow, stepwise 6-DOF drift of the rig (like the lab's pan-tilt runs), reaching the bounds at the end."""
-    rng = rng or np.random.default_rng(1)
-    direction_r = rng.uniform(-1, 1, 3)
-    direction_t = rng.uniform(-1, 1, 3)
-    direction_r *= max_rotation_rad / np.abs(direction_r).max()
-    direction_t *= max_translation_m / np.abs(direction_t).max()
-    steps = np.floor(np.linspace(0, 10, n)) / 10.0  # stepwise, as a pan-tilt moves
-    return np.stack([rigid_from_rotvec(s * direction_r, s * direction_t) for s in steps])
+def pan_tilt_drift(n: int, *, pan_rad: float = 4.0e-3, tilt_rad: float = 1.0e-3, roll_rad: float = 0.5e-3,
+                   translation_m: float = 0.002) -> np.ndarray:
+    """Stepwise drift of a rig on a pan-tilt head (the lab's long-term motion): mostly pan (about the
+    vertical y axis), some tilt and roll, and small translations; reaches the bounds at the end."""
+    steps = np.floor(np.linspace(0, 10, n)) / 10.0
+    rot = np.array([tilt_rad, pan_rad, roll_rad])
+    tra = np.array([translation_m, -translation_m / 2, translation_m])
+    return np.stack([rigid_from_rotvec(s * rot, s * tra) for s in steps])
