@@ -138,7 +138,7 @@ def _plane(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: str = "",
                     expected_xyz: Optional[Sequence[float]] = None, diameter_m: float = 0.05,
                     window: Optional[AngularWindow] = None, profile: ScannerProfile = VZ1000,
-                    min_points: int = 30) -> TargetCentroid:
+                    min_points: int = 30, masks: Optional[dict] = None) -> TargetCentroid:
     """Robust centroid of the target in one fine-scan window.
 
     Parameters
@@ -158,6 +158,10 @@ def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: s
         Footprint model. Default VZ-1000.
     min_points : int, keyword-only
         Fewer disc points than this: not found. Default 30.
+    masks : dict, optional, keyword-only
+        When given, filled with (N,) boolean masks over the input points, for display:
+        ``bright`` (above the Otsu threshold), ``cluster`` (the compact cluster chosen) and
+        ``disc`` (the points the centroid was computed from).
 
     Returns
     -------
@@ -168,12 +172,17 @@ def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: s
     if xyz.ndim != 2 or xyz.shape[1] != 3 or inten.shape != (xyz.shape[0],):
         raise InputError("target_centroid needs (N, 3) points and (N,) intensities")
     ok = np.isfinite(xyz).all(axis=1) & np.isfinite(inten)
+    if masks is not None:
+        masks.update(bright=np.zeros(len(ok), bool), cluster=np.zeros(len(ok), bool), disc=np.zeros(len(ok), bool))
+    ok_idx = np.nonzero(ok)[0]
     xyz, inten = xyz[ok], inten[ok]
     n_window = len(xyz)
     if n_window < min_points:
         return _not_found(reflector, n_window)
     thr, sep = otsu_threshold(inten)
     bright = np.nonzero(inten > thr)[0]
+    if masks is not None:
+        masks["bright"][ok_idx[bright]] = True
     if bright.size < min_points:
         return _not_found(reflector, n_window, thr, sep)
     hi, lo = float(inten[bright].mean()), float(inten[inten <= thr].mean()) if bright.size < n_window else 0.0
@@ -230,6 +239,9 @@ def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: s
         centre = new
     disc = cluster[keep]
     n = len(disc)
+    if masks is not None:
+        masks["cluster"][ok_idx[bright[best]]] = True
+        masks["disc"][ok_idx[bright[best[keep]]]] = True
     flags = []
     if n < min_points:
         return _not_found(reflector, n_window, thr, sep)

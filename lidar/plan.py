@@ -13,13 +13,13 @@ from __future__ import annotations
 import json
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Optional, Sequence
 
 import numpy as np
 
-from lidar.angles import AngularWindow, spherical_from_xyz, window_around
+from lidar.angles import AngularWindow, direction_from_angles, spherical_from_xyz, window_around
 from lidar.errors import InputError
 from lidar.reflectance_map import ReflectanceMap
 from lidar.scanner_profile import VZ1000, ScannerProfile
@@ -290,3 +290,47 @@ def plan_fine_scans(targets: Sequence[PlanTarget], *, epoch: str = "", profile: 
     if total > budget_seconds * 1.0001:
         warnings.append(f"the plan takes {total / 60:.1f} min, over the budget of {budget_seconds / 60:.0f} min")
     return ScanPlan(epoch, profile, tuple(rois), int(min_points), int(n), float(budget_seconds), tuple(warnings))
+
+
+# ---------------------------------------------------------------------- editing a plan by hand
+EDITED_NOTE = "window edited by hand"
+
+
+def edit_roi(roi: RoiPlan, *, phi_min_deg: float, phi_max_deg: float, theta_min_deg: float, theta_max_deg: float,
+             profile: ScannerProfile = VZ1000) -> RoiPlan:
+    """The same target's window moved or resized; its steps stay, points and seconds follow.
+
+    The points expected on the target are unchanged while the target stays inside the window
+    (the steps decide them); the window's points and seconds are recomputed.
+    """
+    w = roi.window
+    window = AngularWindow(float(phi_min_deg), float(phi_max_deg), float(theta_min_deg), float(theta_max_deg),
+                           w.phi_step_deg, w.theta_step_deg)
+    rows, cols = window.shape
+    seconds = profile.window_seconds(window.phi_max_deg - window.phi_min_deg, w.phi_step_deg, w.theta_step_deg)
+    notes = tuple(n for n in roi.notes if n != EDITED_NOTE) + (EDITED_NOTE,)
+    return replace(roi, window=window, expected_points=rows * cols, expected_seconds=seconds, notes=notes)
+
+
+def new_roi(reflector: str, group: str, *, phi_min_deg: float, phi_max_deg: float, theta_min_deg: float,
+            theta_max_deg: float, range_m: float, diameter_m: float = 0.05, n_points: float = 1000,
+            profile: ScannerProfile = VZ1000) -> RoiPlan:
+    """A window drawn by hand around a target at ``range_m``: steps chosen for ``n_points`` on it."""
+    theta = 0.5 * (theta_min_deg + theta_max_deg)
+    phi = 0.5 * (phi_min_deg + phi_max_deg)
+    xyz = direction_from_angles(np.array([theta]), np.array([phi]))[0] * float(range_m)
+    base = plan_roi(PlanTarget(reflector, group, tuple(xyz), diameter_m), n_points=n_points, profile=profile)
+    return edit_roi(base, phi_min_deg=phi_min_deg, phi_max_deg=phi_max_deg, theta_min_deg=theta_min_deg,
+                    theta_max_deg=theta_max_deg, profile=profile)
+
+
+def with_rois(plan: ScanPlan, rois: Sequence[RoiPlan]) -> ScanPlan:
+    """The plan with another set of windows; the time budget is checked again."""
+    ids = [r.reflector for r in rois]
+    if len(set(ids)) != len(ids):
+        raise InputError("a plan holds one window per reflector; two windows name the same reflector")
+    total = sum(r.expected_seconds for r in rois)
+    warnings = [w for w in plan.warnings if "over the budget" not in w and not w.startswith("the plan takes")]
+    if total > plan.budget_seconds * 1.0001:
+        warnings.append(f"the plan takes {total / 60:.1f} min, over the budget of {plan.budget_seconds / 60:.0f} min")
+    return replace(plan, rois=tuple(rois), warnings=tuple(warnings))

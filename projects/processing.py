@@ -19,7 +19,7 @@ from typing import Optional, Sequence
 import numpy as np
 
 from lidar.displacement import compute_displacements
-from lidar.errors import ProcessingError, SurveyError
+from lidar.errors import InputError, ProcessingError, SurveyError
 from lidar.io import read_scan
 from lidar.pipeline import analyse_coarse, measure_targets, plan_from_coarse
 from lidar.plan import ScanPlan
@@ -328,3 +328,24 @@ def _chain(c: Campaign, d, base_label: str, refl: dict):
         return d
     return replace(d, displacement_m=d.displacement_m + row[0], sigma_m=float(np.hypot(d.sigma_m, row[1])),
                    flags=tuple(d.flags) + (FLAG_CHAINED,))
+
+
+def save_edited_plan(c: Campaign, label: str, plan: ScanPlan) -> None:
+    """Store a plan whose windows were edited by hand; it replaces the epoch's plan and its centroids.
+
+    The plan keeps the inputs hash of the plan it was edited from, so processing uses it as it is
+    (and measures the epoch again when fine scans exist); a new coarse scan, layout or parameter
+    plans the epoch afresh.
+    """
+    row = c.plan_row(label)
+    if row is None:
+        raise ProcessingError(f"epoch {label} has no plan to edit yet; plan it first")
+    if not plan.rois:
+        raise InputError("the edited plan has no windows; keep at least one")
+    old = json.loads(row["json"])
+    d = plan.to_json()
+    d["epoch"] = label
+    d["edited"] = True
+    if "identification" in old:
+        d["identification"] = old["identification"]
+    c.save_plan(label, d, row["inputs_hash"])

@@ -205,33 +205,11 @@ def cmd_displacements(args) -> int:
     return 0
 
 
-def status_data(c) -> dict:
-    from projects.exports import displacement_table
-    from projects.processing import baseline_epoch, stale_epochs
-
-    stale = stale_epochs(c)
-    epochs = []
-    for e in c.epochs():
-        res = c.result_row(e["label"])
-        ds = c.displacement_set(e["label"])
-        state = "imported" if res is None else res["stage"]
-        if ds is not None:
-            state = "processed"
-            if json.loads(ds["flags"]):
-                state = "flagged"
-        epochs.append({"epoch": e["label"], "datetime": e["datetime"][:16], "state": state,
-                       "stale": stale.get(e["label"], ""),
-                       "flags": ",".join(json.loads(ds["flags"])) if ds else ""})
-    latest = {}
-    for r in displacement_table(c):
-        latest[r["reflector"]] = r
-    return {"name": c.name, "span_m": c.span_m, "baseline": baseline_epoch(c), "epochs": epochs,
-            "targets": list(latest.values())}
-
-
 def cmd_status(args) -> int:
+    from projects.overview import campaign_status
+
     with _open(args.dir, writable=False) as c:
-        data = status_data(c)
+        data = campaign_status(c)
     if args.json:
         dump_json(data)
         return 0
