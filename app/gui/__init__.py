@@ -1,0 +1,1 @@
+"""The BridgeSurvey desktop application (PySide6): a thin layer over projects/, lidar/, registration/, vision/."""

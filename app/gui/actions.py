@@ -1,0 +1,168 @@
+"""What the GUI's commands do, as plain functions run in worker threads (no widgets touched here).
+
+Each takes the session (or plain values) and a ``progress(fraction, message)`` callback, opens the
+campaign for just as long as it needs it, and raises ``SurveyError`` with a message for the user.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Callable, Optional
+
+from lidar.errors import InputError
+from lidar.progress import scaled
+
+
+def build_demo(folder: Path, progress: Callable):
+    from projects.demo import build_demo as build
+
+    return build(folder, progress=progress)
+
+
+def create_campaign(*, folder: str, name: str, layout: str, span_m: Optional[float], diameter_mm: float) -> Path:
+    from lidar.layout import read_layout_csv
+    from projects.store import Campaign
+
+    if not folder:
+        raise InputError("choose a folder for the campaign")
+    if not layout:
+        raise InputError("choose the reflector layout file (id,group,x,y,z)")
+    lay = read_layout_csv(layout, default_diameter_m=diameter_mm / 1000.0)
+    Campaign.create(folder, name=name, layout=lay, span_m=span_m).close()
+    return Path(folder)
+
+
+def _validator(progress: Callable):
+    from lidar.io import read_scan
+
+    def validate(path):
+        read_scan(path, progress=scaled(progress, 0.0, 0.5))
+    return validate
+
+
+def add_epoch(session, v: dict, progress: Callable) -> str:
+    from projects.store import parse_datetime
+
+    if not v["coarse"]:
+        raise InputError("choose the coarse scan of the visit")
+    when = parse_datetime(v["datetime"])
+    with session.write() as c:
+        c.add_epoch(v["label"], when, v["coarse"], v["fines"], notes=v["notes"], validate=_validator(progress))
+    return v["label"]
+
+
+def add_fine(session, label: str, paths, progress: Callable) -> None:
+    with session.write() as c:
+        c.epoch(label)
+        c.import_files(label, paths, "fine", validate=_validator(progress))
+
+
+def plan(session, label: str, progress: Callable):
+    from projects.processing import plan_epoch
+
+    with session.write() as c:
+        return plan_epoch(c, label, progress=progress)
+
+
+def save_plan(session, label: str, scan_plan) -> None:
+    from projects.processing import save_edited_plan
+
+    with session.write() as c:
+        save_edited_plan(c, label, scan_plan)
+
+
+def window_from_rect(map_view, rect, rid: str, reflector: dict):
+    """A new plan window for ``rid`` from a rectangle drawn on the map (range from the map's cells)."""
+    import numpy as np
+
+    from lidar.plan import new_roi
+
+    g = map_view.geometry_
+    rmap = map_view.preview.reflectance_map
+    r0, r1 = int(max(rect.top(), 0)), int(min(rect.bottom() + 1, rmap.shape[0]))
+    c0, c1 = int(max(rect.left(), 0)), int(min(rect.right() + 1, rmap.shape[1]))
+    ranges = rmap.range_m[r0:r1, c0:c1]
+    if ranges.size == 0 or not np.isfinite(ranges).any():
+        raise InputError("the drawn window holds no scanned cell; draw it over the target")
+    w = g.window_of(rect)
+    return new_roi(rid, reflector["grp"], range_m=float(np.nanmedian(ranges)), diameter_m=reflector["diameter_m"],
+                   n_points=map_view.plan.min_points, profile=map_view.plan.profile, **w)
+
+
+def process(session, progress: Callable):
+    from projects.processing import process as run
+
+    with session.write() as c:
+        return run(c, progress=progress)
+
+
+def inspect(session, label: str, rid: str, progress: Callable):
+    from projects.inspection import inspect_target
+
+    with session.read() as c:
+        return inspect_target(c, label, rid, progress=progress)
+
+
+def epoch_cloud(session, label: str, progress: Callable):
+    from projects.inspection import epoch_cloud as cloud
+
+    with session.read() as c:
+        return cloud(c, label, progress=progress)
+
+
+def change_cloud(session, label: str, progress: Callable):
+    from projects.comparison import save_comparison
+    from projects.inspection import change_cloud as change
+    from projects.processing import baseline_epoch
+
+    with session.write() as c:
+        base = baseline_epoch(c)
+        if base is None:
+            raise InputError("no processed epoch yet to compare against; process the campaign first")
+        if base == label:
+            raise InputError(f"{label} is the baseline epoch; select another epoch to see its change")
+        cloud, summary = change(c, base, label, progress=progress)
+        save_comparison(c, summary)
+        return cloud
+
+
+def import_camera(session, v: dict, progress: Callable):
+    from projects.camera import import_series
+
+    if not v["file"]:
+        raise InputError("choose the camera series file")
+    progress(0.1, "reading the series")
+    with session.write() as c:
+        name, series = import_series(c, v["file"], name=v["name"], reflector=v["reflector"], timezone=v["timezone"],
+                                     positive=v["positive"])
+    return name, series.summary()
+
+
+def crossval(session, progress: Callable):
+    from projects.camera import crossvalidate, save_crossval
+
+    progress(0.1, "pairing LiDAR epochs with the camera")
+    with session.write() as c:
+        cv, _ = crossvalidate(c)
+        save_crossval(c, cv)
+    return cv
+
+
+def export_csv(session, path: Path) -> Path:
+    from projects.exports import displacement_table, to_csv, write_atomic
+
+    with session.read() as c:
+        return write_atomic(path, to_csv(displacement_table(c)))
+
+
+def export_xlsx(session, path: Path) -> Path:
+    from projects.exports import export
+
+    with session.read() as c:
+        return export(c, path)
+
+
+def report(session, path: Path, progress: Callable) -> Path:
+    from projects.report import write_report
+
+    with session.read() as c:
+        return write_report(c, path, progress=progress)

@@ -1,0 +1,155 @@
+"""Displacement histories: one target or all, with ±2σ bars, warning and alarm lines, hover values,
+and a click that selects the epoch."""
+from __future__ import annotations
+
+import datetime as dt
+import json
+
+import numpy as np
+from PySide6.QtCore import Signal
+from PySide6.QtWidgets import QCheckBox, QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
+
+from app.gui.views.mpl import PlotCanvas
+
+
+class DisplacementView(QWidget):
+    """Emits ``epochPicked(label)`` when the user clicks a point."""
+    epochPicked = Signal(str)
+
+    def __init__(self, parent=None):
+        super().__init__(parent)
+        self.canvas = PlotCanvas(self, figsize=(9, 5))
+        self.target = QComboBox()
+        self.target.currentTextChanged.connect(lambda _t: self.redraw())
+        self.limits = QCheckBox("limit lines")
+        self.limits.setChecked(True)
+        self.limits.toggled.connect(lambda _b: self.redraw())
+        self.hover = QLabel(" ")
+        bar = QHBoxLayout()
+        bar.addWidget(QLabel("Target"))
+        bar.addWidget(self.target)
+        bar.addWidget(self.limits)
+        bar.addStretch(1)
+        bar.addWidget(self.hover)
+        lay = QVBoxLayout(self)
+        lay.addLayout(bar)
+        lay.addWidget(self.canvas, 1)
+        self.rows: list[dict] = []
+        self.limit_of: dict = {}
+        self.selected_epoch = None
+        self._points = []  # (x, y, row) drawn, for hover and picking
+        self.canvas.mpl_connect("motion_notify_event", self._on_move)
+        self.canvas.mpl_connect("button_press_event", self._on_click)
+
+    def set_data(self, rows: list[dict], limits: dict) -> None:
+        """``rows`` from :meth:`Campaign.displacement_rows`; ``limits`` reflector -> Limit or None."""
+        self.rows = rows
+        self.limit_of = limits
+        targets = sorted({r["reflector"] for r in rows})
+        current = self.target.currentText()
+        self.target.blockSignals(True)
+        self.target.clear()
+        self.target.addItems(["all targets"] + targets)
+        if current in targets:
+            self.target.setCurrentText(current)
+        self.target.blockSignals(False)
+        self.redraw()
+
+    def show_target(self, rid: str) -> None:
+        if self.target.findText(rid) >= 0:
+            self.target.setCurrentText(rid)
+
+    def select_epoch(self, label) -> None:
+        self.selected_epoch = label
+        self.redraw()
+
+    def redraw(self) -> None:
+        fig = self.canvas.figure
+        fig.clear()
+        ax = fig.add_subplot(111)
+        self._points = []
+        which = self.target.currentText()
+        targets = sorted({r["reflector"] for r in self.rows}) if which in ("", "all targets") else [which]
+        if not self.rows:
+            ax.text(0.5, 0.5, "No displacements yet: add epochs and process them", ha="center", va="center",
+                    transform=ax.transAxes)
+            ax.set_axis_off()
+            self.canvas.draw_idle()
+            return
+        colours = {t: f"C{k % 10}" for k, t in enumerate(sorted({r["reflector"] for r in self.rows}))}
+        for rid in targets:
+            rs = [r for r in self.rows if r["reflector"] == rid and r["displacement_m"] is not None]
+            if not rs:
+                continue
+            x = [dt.datetime.fromisoformat(r["datetime"]) for r in rs]
+            y = np.array([r["displacement_m"] for r in rs]) * 1e3
+            s = np.array([r["sigma_m"] or 0.0 for r in rs]) * 1e3
+            ax.errorbar(x, y, yerr=2 * s, fmt="o-", ms=3.5, lw=1, capsize=2, color=colours[rid], label=rid)
+            flagged = [i for i, r in enumerate(rs) if json.loads(r["flags"])]
+            if flagged:
+                ax.plot([x[i] for i in flagged], y[flagged], "o", ms=9, mfc="none", mec="red")
+            self._points += [(x[i], y[i], rs[i]) for i in range(len(rs))]
+        if self.limits.isChecked():
+            drawn = set()
+            ys = [p[1] for p in self._points]
+            reach = 2.0 * max((abs(v) for v in ys), default=0.0) + 1.0
+            for rid in targets:
+                lim = self.limit_of.get(rid)
+                if lim is None or (lim.warning_mm, lim.alarm_mm) in drawn:
+                    continue
+                drawn.add((lim.warning_mm, lim.alarm_mm))
+                hidden = []
+                for v, colour, name in ((lim.warning_mm, "orange", "warning"), (lim.alarm_mm, "red", "alarm")):
+                    if v is None:
+                        continue
+                    if v <= reach:  # limits far beyond the data are named, not drawn: the data stay readable
+                        for sgn in (-1, 1):
+                            ax.axhline(sgn * v, color=colour, ls="--", lw=1)
+                    else:
+                        hidden.append(name)
+                ax.text(0.01, 0.02, f"limits: warning ±{lim.warning_mm:.1f} mm, alarm ±{lim.alarm_mm:.1f} mm "
+                                    f"({lim.rule})" + (f"; {' and '.join(hidden)} off the scale" if hidden else ""),
+                        transform=ax.transAxes, fontsize=8, color="0.3")
+        if self.selected_epoch:
+            sel = [p for p in self._points if p[2]["epoch"] == self.selected_epoch]
+            if sel:
+                ax.axvline(sel[0][0], color="0.4", lw=1, ls=":")
+        self._annot = ax.annotate("", xy=(0, 0), xytext=(12, 12), textcoords="offset points", fontsize=8,
+                                  bbox=dict(boxstyle="round", fc="lightyellow", alpha=0.9), visible=False)
+        ax.set_ylabel("vertical displacement (mm, positive up)")
+        ax.set_title("Displacement history (±2σ)" + ("" if len(targets) > 1 else f" of {targets[0]}"))
+        ax.grid(alpha=0.3)
+        ax.legend(loc="best", fontsize=8, ncol=2)
+        fig.autofmt_xdate()
+        self.canvas.draw_idle()
+
+    def _nearest(self, event):
+        if event.inaxes is None or not self._points:
+            return None
+        ax = event.inaxes
+        pix = ax.transData.transform([(ax.convert_xunits(p[0]), p[1]) for p in self._points])
+        d = np.hypot(pix[:, 0] - event.x, pix[:, 1] - event.y)
+        k = int(np.argmin(d))
+        return self._points[k] if d[k] < 10 else None
+
+    def _on_move(self, event) -> None:
+        p = self._nearest(event)
+        if p is None:
+            if getattr(self, "_annot", None) is not None and self._annot.get_visible():
+                self._annot.set_visible(False)
+                self.canvas.draw_idle()
+            return
+        r = p[2]
+        flags = ", ".join(json.loads(r["flags"]))
+        text = (f"{r['reflector']} {r['epoch']}: {r['displacement_m'] * 1e3:+.3f} ± {(r['sigma_m'] or 0) * 1e3:.3f} mm"
+                + (f" [{flags}]" if flags else ""))
+        self.hover.setText(text)
+        self._annot.xy = (p[0], p[1])
+        self._annot.set_text(text)
+        self._annot.set_visible(True)
+        self.canvas.draw_idle()
+
+    def _on_click(self, event) -> None:
+        p = self._nearest(event)
+        if p is not None:
+            self.epochPicked.emit(p[2]["epoch"])

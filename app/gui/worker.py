@@ -1,0 +1,124 @@
+"""Long work off the GUI thread: one job at a time, with progress, cancel and clean error messages."""
+from __future__ import annotations
+
+import logging
+import threading
+import traceback
+from typing import Callable, Optional
+
+from PySide6.QtCore import QObject, QThread, Signal
+
+from lidar.errors import CancelledError, SurveyError
+
+log = logging.getLogger(__name__)
+_PRELOADED = False
+
+
+def preload_native_modules() -> None:
+    """Import the native libraries jobs use in the GUI thread, once.
+
+    Open3D's extension loaded for the first time in a worker thread while VTK draws in the GUI
+    thread deadlocks in the dynamic loader; loaded here first, it is only looked up later.
+    """
+    global _PRELOADED
+    if _PRELOADED:
+        return
+    _PRELOADED = True
+    try:
+        import open3d  # noqa: F401
+    except Exception as exc:  # registration jobs will report it themselves
+        log.warning("Open3D could not be loaded: %s", exc)
+
+
+class _JobThread(QThread):
+    progressed = Signal(float, str)
+    succeeded = Signal(object)
+    failed = Signal(str, str)  # message, kind: "error" | "cancelled" | "bug"
+
+    def __init__(self, fn: Callable, parent=None):
+        super().__init__(parent)
+        self._fn = fn
+        self._cancel = threading.Event()
+
+    def cancel(self) -> None:
+        self._cancel.set()
+
+    def run(self) -> None:  # the worker thread
+        def progress(fraction: float, message: str = "") -> None:
+            if self._cancel.is_set():
+                raise CancelledError()
+            self.progressed.emit(float(fraction), str(message))
+
+        try:
+            result = self._fn(progress)
+        except CancelledError as exc:
+            self.failed.emit(str(exc), "cancelled")
+        except SurveyError as exc:
+            self.failed.emit(str(exc), "error")
+        except Exception as exc:  # a bug: say so plainly, keep the traceback in the log
+            log.error("unexpected error in a background job:\n%s", traceback.format_exc())
+            self.failed.emit(f"unexpected internal error ({type(exc).__name__}: {exc}); this is a bug, "
+                             "please report it with the log", "bug")
+        else:
+            self.succeeded.emit(result)
+
+
+class JobRunner(QObject):
+    """Runs ``fn(progress)`` in a worker thread; the GUI shows progress and can cancel.
+
+    Signals: ``started(title)``, ``progress(fraction, message)``, ``finished(title, ok)`` and
+    ``error(title, message, kind)`` (kind: error, cancelled or bug).
+    """
+    started = Signal(str)
+    progress = Signal(float, str)
+    finished = Signal(str, bool)
+    error = Signal(str, str, str)
+
+    def __init__(self, parent=None):
+        super().__init__(parent)
+        self._thread: Optional[_JobThread] = None
+        self._title = ""
+
+    @property
+    def busy(self) -> bool:
+        return self._thread is not None
+
+    def run(self, title: str, fn: Callable, on_done: Optional[Callable] = None) -> bool:
+        """Start a job; False (and nothing started) while another job runs."""
+        if self._thread is not None:
+            return False
+        preload_native_modules()
+        self._title = title
+        t = _JobThread(fn, self)
+        self._thread = t
+        t.progressed.connect(self.progress)
+
+        def ok(result):
+            self._thread = None
+            if on_done is not None:
+                try:
+                    on_done(result)
+                except SurveyError as exc:
+                    self.error.emit(title, str(exc), "error")
+            self.finished.emit(title, True)
+
+        def fail(message, kind):
+            self._thread = None
+            self.error.emit(title, message, kind)
+            self.finished.emit(title, False)
+
+        t.succeeded.connect(ok)
+        t.failed.connect(fail)
+        t.finished.connect(t.deleteLater)
+        self.started.emit(title)
+        t.start()
+        return True
+
+    def cancel(self) -> None:
+        if self._thread is not None:
+            self._thread.cancel()
+
+    def wait(self, ms: int = 600_000) -> None:
+        """Block until the running job's thread ends (tests and shutdown)."""
+        if self._thread is not None:
+            self._thread.wait(ms)
