@@ -480,10 +480,9 @@ class MainWindow(QMainWindow):
         self.run_job("Processing", lambda p: actions.process(self.session, p), self._processed)
 
     def _processed(self, summary) -> None:
-        failed = [o for o in summary.outcomes if o.status == "failed"]
         self._changed()
-        if failed:
-            show_error(self, "Processing", "\n".join(f"{o.epoch}: {o.detail}" for o in failed))
+        if summary.failed:
+            show_error(self, "Processing", "\n".join(f"{o.epoch}: {o.message}" for o in summary.failed))
 
     def show_fine(self) -> None:
         s = self.session

@@ -100,6 +100,10 @@ class JobRunner(QObject):
                     on_done(result)
                 except SurveyError as exc:
                     self.error.emit(title, str(exc), "error")
+                except Exception as exc:  # a bug in the GUI's own follow-up: report it, keep running
+                    log.error("unexpected error after %s:\n%s", title, traceback.format_exc())
+                    self.error.emit(title, f"unexpected internal error ({type(exc).__name__}: {exc}); this is a "
+                                           "bug, please report it with the log", "bug")
             self.finished.emit(title, True)
 
         def fail(message, kind):

@@ -82,20 +82,21 @@ class RoiItem(QGraphicsRectItem):
     def scene_rect(self) -> QRectF:
         return self.mapRectToScene(self.rect())
 
-    def _edges_at(self, pos: QPointF):
+    def _scale(self) -> float:
         view = self.scene().views()[0] if self.scene() and self.scene().views() else None
-        scale = view.transform().m11() if view else 1.0
-        tol = self.HANDLE_PX / max(scale, 1e-9)
+        return max(view.transform().m11(), 1e-9) if view else 1.0
+
+    def _edges_at(self, pos: QPointF):
+        """The edges (nearest one per axis) within a few screen pixels of ``pos``."""
+        tol = self.HANDLE_PX / self._scale()
         r = self.rect()
         edges = set()
-        if abs(pos.x() - r.left()) < tol:
-            edges.add("l")
-        if abs(pos.x() - r.right()) < tol:
-            edges.add("r")
-        if abs(pos.y() - r.top()) < tol:
-            edges.add("t")
-        if abs(pos.y() - r.bottom()) < tol:
-            edges.add("b")
+        dl, dr = abs(pos.x() - r.left()), abs(pos.x() - r.right())
+        if min(dl, dr) < tol:
+            edges.add("l" if dl < dr else "r")
+        dt, db = abs(pos.y() - r.top()), abs(pos.y() - r.bottom())
+        if min(dt, db) < tol:
+            edges.add("t" if dt < db else "b")
         return edges
 
     def hoverMoveEvent(self, event):
@@ -123,7 +124,7 @@ class RoiItem(QGraphicsRectItem):
         if self._edges:
             r = QRectF(self.rect())
             p = event.pos()
-            min_size = 1.0
+            min_size = 3.0 / self._scale()  # a few screen pixels
             if "l" in self._edges:
                 r.setLeft(min(p.x(), r.right() - min_size))
             if "r" in self._edges:
@@ -270,9 +271,14 @@ class MapView(QWidget):
             b.setEnabled(on)
 
     # ------------------------------------------------------------------ content
-    def show_message(self, text: str) -> None:
-        self.scene.clear()
+    def _clear_scene(self) -> None:
         self.items = []
+        self.scene.blockSignals(True)  # clearing deletes the items; no selection signals about them
+        self.scene.clear()
+        self.scene.blockSignals(False)
+
+    def show_message(self, text: str) -> None:
+        self._clear_scene()
         self.plan = self.stored_plan = None
         self.table.setRowCount(0)
         self.title.setText(text)
@@ -281,8 +287,7 @@ class MapView(QWidget):
 
     def load(self, label: str, preview, plan: Optional[ScanPlan]) -> None:
         """Show an epoch's stored map preview and plan (``plan`` may be None)."""
-        self.scene.clear()
-        self.items = []
+        self._clear_scene()
         rmap = preview.reflectance_map
         self.preview = preview
         self.geometry_ = g = MapGeometry(rmap.theta0_deg, rmap.phi0_deg, rmap.step_deg)
@@ -312,9 +317,9 @@ class MapView(QWidget):
         QTimer.singleShot(0, self.fit)  # again once the view has its final size
 
     def _set_plan(self, plan: Optional[ScanPlan]) -> None:
-        for it in self.items:
+        old, self.items = self.items, []
+        for it in old:
             self.scene.removeItem(it)
-        self.items = []
         self.plan = plan
         self.dirty = False
         if plan is not None:
@@ -346,9 +351,9 @@ class MapView(QWidget):
 
     def delete_selected(self) -> None:
         sel = [it for it in self.items if it.isSelected()]
+        self.items = [it for it in self.items if it not in sel]
         for it in sel:
             self.scene.removeItem(it)
-            self.items.remove(it)
         if sel:
             self.dirty = True
             self._rebuild_plan()

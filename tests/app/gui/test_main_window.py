@@ -1,0 +1,252 @@
+"""The main window driven like a user would: open, select, edit the plan, process, inspect, export."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from PySide6.QtCore import QEvent, QPointF, Qt
+from PySide6.QtGui import QMouseEvent
+
+from projects.store import Campaign
+from tests.app.gui.conftest import wait_job
+from tests.projects.campaign_helpers import snapshot
+
+pytestmark = pytest.mark.gui
+
+
+def _send(widget, kind, pos, buttons):
+    button = Qt.LeftButton if kind != QEvent.MouseMove else Qt.NoButton
+    ev = QMouseEvent(kind, QPointF(pos), widget.mapToGlobal(QPointF(pos)), button, buttons, Qt.NoModifier)
+    from PySide6.QtWidgets import QApplication
+
+    QApplication.sendEvent(widget, ev)
+
+
+def drag(view, start, end, steps=5):
+    """Press, move and release the left button in a graphics view's viewport (scene coordinates)."""
+    vp = view.viewport()
+    a, b = view.mapFromScene(start), view.mapFromScene(end)
+    _send(vp, QEvent.MouseButtonPress, a, Qt.LeftButton)
+    for k in range(1, steps + 1):
+        p = a + (b - a) * (k / steps)
+        _send(vp, QEvent.MouseMove, p, Qt.LeftButton)
+    _send(vp, QEvent.MouseButtonRelease, b, Qt.NoButton)
+
+
+def test_welcome_page_without_campaign_and_recent_list(window, processed_copy):
+    assert window.stack.currentWidget() is window.welcome
+    assert not window.act_process.isEnabled()
+    assert window.open_campaign(processed_copy)
+    assert window.stack.currentWidget() is window.tabs and window.act_process.isEnabled()
+    assert window.recent()[0] == str(processed_copy)
+    assert window.welcome.recent.item(0).text() == str(processed_copy)
+
+
+def test_tree_details_and_selection_follow_each_other(window, processed_copy, qtbot):
+    window.open_campaign(processed_copy)
+    t = window.tree
+    assert t.item_for("reflector", "M3") is not None and t.item_for("reflector", "R1") is not None
+    assert [t.item_for("epoch", e) is not None for e in ("2026-03-02", "2026-03-09", "2026-03-16")] == [True] * 3
+    assert t.item_for("epoch", "2026-03-16").text(1) == "processed"
+    t.select_key("reflector", "M3")
+    assert window.session.reflector == "M3"
+    assert "Reflector M3" in window.details.toPlainText() and "Latest" in window.details.toPlainText()
+    assert window.displacements.target.currentText() == "M3"
+    t.select_key("epoch", "2026-03-09")
+    assert window.session.epoch == "2026-03-09"
+    assert "Centroids" in window.details.toPlainText()
+
+
+def test_displacement_view_hover_values_and_click_selects_the_epoch(window, processed_copy, qtbot):
+    from matplotlib.backend_bases import MouseEvent
+
+    window.open_campaign(processed_copy)
+    v = window.displacements
+    v.show_target("M3")
+    v.canvas.draw()
+    x, y, row = v._points[1]
+    ax = v.canvas.figure.axes[0]
+    px, py = ax.transData.transform((ax.convert_xunits(x), y))
+    v.canvas.callbacks.process("motion_notify_event", MouseEvent("motion_notify_event", v.canvas, px, py))
+    assert v.hover.text().startswith(f"M3 {row['epoch']}: ") and "±" in v.hover.text()
+    v.canvas.callbacks.process("button_press_event", MouseEvent("button_press_event", v.canvas, px, py, button=1))
+    assert window.session.epoch == row["epoch"]
+
+
+def test_roi_move_resize_delete_add_and_save_then_process(window, processed_copy, qtbot, monkeypatch):
+    window.open_campaign(processed_copy)
+    window.tree.select_key("epoch", "2026-03-09")
+    window.tabs.setCurrentWidget(window.map_view)
+    mv = window.map_view
+    assert len(mv.items) == 9 and mv.table.rowCount() == 9
+    item = next(it for it in mv.items if it.roi.reflector == "M3")
+    zoom = 150.0 / item.scene_rect().width()  # the window ~150 px wide on screen
+    mv.view.resetTransform()
+    mv.view.scale(zoom, zoom)
+    mv.view.centerOn(item)
+    qtbot.wait(20)
+    before = item.roi
+    total_before = mv.plan.total_seconds
+    r = item.scene_rect()
+    drag(mv.view, r.center(), r.center() + QPointF(r.width() / 3, r.height() / 4))  # move
+    moved = item.roi
+    assert moved.window.phi_min_deg != before.window.phi_min_deg
+    assert moved.expected_target_points == before.expected_target_points  # steps unchanged
+    r = item.scene_rect()
+    edge = QPointF(r.right() - 2 / zoom, r.center().y())
+    drag(mv.view, edge, edge + QPointF(r.width() / 2, 0.0))           # widen by the right edge
+    wider = item.roi
+    assert wider.window.phi_max_deg - wider.window.phi_min_deg > moved.window.phi_max_deg - moved.window.phi_min_deg
+    assert wider.expected_points > moved.expected_points and mv.plan.total_seconds > total_before
+    assert "edited, not saved" in mv.total.text()
+    row = [mv.table.item(k, 0).text() for k in range(mv.table.rowCount())].index("M3")
+    assert mv.table.item(row, 6).text() == f"{wider.expected_seconds:.1f}"
+    # delete M5's window, then draw a new one for it
+    m5 = next(it for it in mv.items if it.roi.reflector == "M5")
+    m5_rect = m5.scene_rect()
+    mv.scene.clearSelection()
+    m5.setSelected(True)
+    mv.delete_selected()
+    assert len(mv.items) == 8
+    monkeypatch.setattr("app.gui.main_window.QInputDialog.getItem", lambda *a, **k: ("M5", True))
+    mv.view.resetTransform()
+    mv.view.scale(zoom, zoom)
+    mv.view.centerOn(m5_rect.center())
+    mv.draw_btn.setChecked(True)
+    drag(mv.view, m5_rect.topLeft(), m5_rect.bottomRight())
+    assert len(mv.items) == 9 and not mv.draw_btn.isChecked()
+    new_m5 = next(it for it in mv.items if it.roi.reflector == "M5").roi
+    assert new_m5.expected_target_points >= 500  # steps chosen for the target at the map's range
+    window.save_plan(mv.current_plan())
+    wait_job(qtbot, window)
+    with Campaign.open(processed_copy, writable=False) as c:
+        saved = json.loads(c.plan_row("2026-03-09")["json"])
+        assert saved["edited"] is True
+        m3 = next(r for r in saved["rois"] if r["reflector"] == "M3")
+        assert m3["phi_max_deg"] == pytest.approx(wider.window.phi_max_deg)
+        assert c.result_row("2026-03-09")["stage"] == "planned"  # measured again at the next processing
+    window.process()
+    wait_job(qtbot, window)
+    with Campaign.open(processed_copy, writable=False) as c:
+        assert c.result_row("2026-03-09")["stage"] == "measured"
+        assert c.centroids("2026-03-09")["M3"].found and c.centroids("2026-03-09")["M5"].found
+    assert window.tree.item_for("epoch", "2026-03-09").text(1) == "processed"
+
+
+def test_fine_scan_view_shows_the_split_cluster_and_centroid(window, processed_copy, qtbot):
+    window.open_campaign(processed_copy)
+    window.session.select(epoch="2026-03-16", reflector="M3")
+    window.show_fine()
+    wait_job(qtbot, window)
+    ins = window.fine_view.inspection
+    assert ins is not None and ins.centroid.found
+    assert ins.disc.sum() == ins.centroid.n_points and ins.bright.sum() >= ins.cluster.sum() >= ins.disc.sum()
+    assert np.linalg.norm(ins.centroid.xyz_socs - ins.stored.xyz_socs) < 1e-9  # the same computation as processing
+    assert "σx/σy/σz" in window.fine_view.info.text()
+    assert len(window.fine_view.canvas.figure.axes) >= 2
+
+
+def test_new_campaign_add_epoch_plan_and_a_bad_file(window, field_copy, tmp_path, qtbot, errors, monkeypatch):
+    from app.gui.dialogs import AddEpochDialog, NewCampaignDialog
+
+    camp = tmp_path / "new"
+    monkeypatch.setattr(NewCampaignDialog, "exec", lambda self: NewCampaignDialog.Accepted)
+    monkeypatch.setattr(NewCampaignDialog, "values", lambda self: {
+        "folder": str(camp), "name": "GUI bridge", "layout": str(field_copy / "layout.csv"), "span_m": 40.0,
+        "diameter_mm": 50.0})
+    window.new_campaign()
+    assert window.session is not None and window.session.name == "GUI bridge"
+    values = {"datetime": "2026-04-01T09:00:00Z", "label": "2026-04-01", "coarse": str(field_copy / "v0" / "coarse.laz"),
+              "fines": [], "notes": "from the GUI"}
+    monkeypatch.setattr(AddEpochDialog, "exec", lambda self: AddEpochDialog.Accepted)
+    monkeypatch.setattr(AddEpochDialog, "values", lambda self: dict(values))
+    window.add_epoch()
+    wait_job(qtbot, window)
+    assert window.tree.item_for("epoch", "2026-04-01").text(1) == "imported *"  # * : work to do (process)
+    window.plan_selected()
+    wait_job(qtbot, window)
+    assert window.tree.item_for("epoch", "2026-04-01").text(1) == "planned"
+    window.tabs.setCurrentWidget(window.map_view)
+    assert len(window.map_view.items) == 9
+    # a garbage scan: one message in a dialog, the campaign unchanged
+    bad = tmp_path / "broken.laz"
+    bad.write_bytes(b"LASF" + b"\0" * 50)
+    before = snapshot(camp)
+    values.update(label="2026-04-08", coarse=str(bad), datetime="2026-04-08T09:00:00Z")
+    window.add_epoch()
+    wait_job(qtbot, window)
+    assert errors and str(bad) in errors[-1][1] and "\n" not in errors[-1][1]
+    assert snapshot(camp) == before
+
+
+def test_camera_import_crossval_and_report_export(window, processed_copy, tmp_path, qtbot, monkeypatch, errors):
+    from app.gui.dialogs import ImportCameraDialog
+    from tests.projects.test_camera import _ns, truth
+    from vision.simulate.series import simulate_series, write_series_csv
+
+    t, v = simulate_series(_ns("2026-02-28T00:00"), _ns("2026-03-18T00:00"), truth, noise_mm=0.1, zero_offset_mm=5.0)
+    csv = write_series_csv(tmp_path / "cam.csv", t, v)
+    window.open_campaign(processed_copy)
+    monkeypatch.setattr(ImportCameraDialog, "exec", lambda self: ImportCameraDialog.Accepted)
+    monkeypatch.setattr(ImportCameraDialog, "values", lambda self: {"file": str(csv), "name": "cam", "reflector": "M3",
+                                                                   "timezone": "UTC", "positive": "up"})
+    window.import_camera()
+    wait_job(qtbot, window)
+    assert window.tree.item_for("series", "cam") is not None
+    window.crossval()
+    wait_job(qtbot, window)
+    cv = window.camera_view.result
+    assert cv is not None and cv.n_pairs == 3 and cv.rmse_mm < 0.5
+    assert window.tabs.currentWidget() is window.camera_view
+    out = tmp_path / "r.pdf"
+    monkeypatch.setattr("app.gui.main_window.ask_save_path", lambda *a: out)
+    window.write_report()
+    wait_job(qtbot, window)
+    assert out.stat().st_size > 10_000 and out.read_bytes()[:4] == b"%PDF"
+    csv_out = tmp_path / "d.csv"
+    monkeypatch.setattr("app.gui.main_window.ask_save_path", lambda *a: csv_out)
+    window.export_csv()
+    wait_job(qtbot, window)
+    assert csv_out.read_text().startswith("epoch,datetime,reflector,displacement_mm,sigma_mm,flags")
+    assert not errors
+
+
+def test_long_work_can_be_cancelled_and_errors_never_freeze(window, qtbot, errors):
+    import time
+
+    from lidar.errors import InputError
+
+    def slow(progress):
+        for k in range(1000):
+            progress(k / 1000, f"step {k}")
+            time.sleep(0.01)
+
+    window.run_job("Slow work", slow)
+    qtbot.waitUntil(lambda: window.progress.isVisible() and window.progress.value() > 0, timeout=5000)
+    assert window.cancel_btn.isVisible()
+    window.cancel_btn.click()
+    wait_job(qtbot, window, 5000)
+    assert not errors and "cancelled" in window.statusBar().currentMessage()
+    assert not window.progress.isVisible()
+
+    def fails(progress):
+        raise InputError("x.laz: not a scan; check the file")
+
+    window.run_job("Failing work", fails)
+    wait_job(qtbot, window, 5000)
+    assert errors[-1] == ("Failing work", "x.laz: not a scan; check the file")
+
+    def bug(progress):
+        raise ZeroDivisionError("oops")
+
+    window.run_job("Buggy work", bug)
+    wait_job(qtbot, window, 5000)
+    assert "bug" in errors[-1][1] and "Traceback" not in errors[-1][1]
+
+
+def test_3d_view_says_why_it_is_missing_offscreen(window):
+    from PySide6.QtGui import QGuiApplication
+
+    if QGuiApplication.platformName() == "offscreen":
+        assert not window.cloud_view.show_btn.isEnabled()
