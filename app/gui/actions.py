@@ -166,3 +166,25 @@ def report(session, path: Path, progress: Callable) -> Path:
 
     with session.read() as c:
         return write_report(c, path, progress=progress)
+
+
+def set_limit(session, reflector: str, rule: str) -> None:
+    with session.write() as c:
+        c.set_limit(reflector, rule)
+
+
+def retire_reflector(session, rid: str, when: str) -> None:
+    with session.write() as c:
+        c.retire_reflector(rid, when)
+
+
+def replace_reflector(session, old: str, new: str, when: str) -> None:
+    with session.write() as c:
+        c.replace_reflector(old, new, when)
+
+
+def set_parameter(session, key: str, text: str) -> None:
+    from projects.processing import set_parameter as setp
+
+    with session.write() as c:
+        setp(c, key, text)

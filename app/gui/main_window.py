@@ -145,6 +145,11 @@ class MainWindow(QMainWindow):
         self._action(m, "&Close campaign", self.close_campaign)
         m.addSeparator()
         self._action(m, "&Quit", self.close, "Ctrl+Q", False)
+        m = mb.addMenu("C&ampaign")
+        self._action(m, "Set &limit…", self.set_limit)
+        self._action(m, "&Retire the selected reflector…", self.retire_reflector)
+        self._action(m, "Re&place the selected reflector…", self.replace_reflector)
+        self._action(m, "Processing &parameter…", self.set_parameter)
         m = mb.addMenu("&Epoch")
         self.act_add_epoch = self._action(m, "&Add epoch…", self.add_epoch, "Ctrl+E")
         self._action(m, "Add &fine scans to the selected epoch…", self.add_fine)
@@ -507,6 +512,59 @@ class MainWindow(QMainWindow):
         else:
             self.run_job(f"Comparing {label} with the baseline", lambda p: actions.change_cloud(s, label, p),
                          lambda r: (self.cloud_view.set_cloud(r), self._changed()))
+
+    # ------------------------------------------------------------------ campaign settings
+    def _ask(self, title: str, label: str, text: str = "") -> Optional[str]:
+        value, ok = QInputDialog.getText(self, title, label, text=text)
+        return value.strip() if ok and value.strip() else None
+
+    def _quick(self, title: str, fn: Callable) -> None:
+        """Small changes run in the GUI thread; errors are shown, the campaign is left as it was."""
+        try:
+            fn()
+        except SurveyError as exc:
+            show_error(self, title, str(exc))
+            return
+        self._changed()
+
+    def set_limit(self) -> None:
+        rid = self.session.reflector or "*"
+        rule = self._ask("Set limit", f"Limit rule for {'every measurement target' if rid == '*' else rid} "
+                                      "(kr-rail:0-200, abs:10,15 mm or span:1000,500):", "kr-rail:0-200")
+        if rule:
+            self._quick("Set limit", lambda: actions.set_limit(self.session, rid, rule))
+
+    def retire_reflector(self) -> None:
+        rid = self.session.reflector
+        if not rid:
+            show_error(self, "Retire reflector", "Select a reflector in the campaign tree first.")
+            return
+        when = self._ask("Retire reflector", f"Retire {rid} from (ISO date):")
+        if when:
+            self._quick("Retire reflector", lambda: actions.retire_reflector(self.session, rid, when))
+
+    def replace_reflector(self) -> None:
+        rid = self.session.reflector
+        if not rid:
+            show_error(self, "Replace reflector", "Select a reflector in the campaign tree first.")
+            return
+        new = self._ask("Replace reflector", f"New id of the target replacing {rid}:", f"{rid}b")
+        when = new and self._ask("Replace reflector", f"{new} replaces {rid} from (ISO date):")
+        if new and when:
+            self._quick("Replace reflector", lambda: actions.replace_reflector(self.session, rid, new, when))
+
+    def set_parameter(self) -> None:
+        from projects.processing import DEFAULTS, parameters
+
+        with self.session.read() as c:
+            current = parameters(c)
+        keys = list(DEFAULTS) + ["baseline"]
+        key, ok = QInputDialog.getItem(self, "Processing parameter", "Parameter:", keys, 0, False)
+        if not ok:
+            return
+        text = self._ask("Processing parameter", f"New value of {key} (now {current.get(key)}):")
+        if text is not None:
+            self._quick("Processing parameter", lambda: actions.set_parameter(self.session, key, text))
 
     # ------------------------------------------------------------------ camera
     def _load_camera(self) -> None:

@@ -6,13 +6,14 @@ provides one with Xvfb).
 from __future__ import annotations
 
 import sys
+import time
 from pathlib import Path
 
 
 def wait_jobs(app, win) -> None:
-    while win.jobs.busy:
+    while win.jobs.busy:  # sleep (it releases the GIL) and let the finished signals arrive
+        time.sleep(0.02)
         app.processEvents()
-        win.jobs.wait(50)
     for _ in range(20):
         app.processEvents()
 

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 import traceback
 from typing import Callable, Optional
 
@@ -11,23 +12,6 @@ from PySide6.QtCore import QObject, QThread, Signal
 from lidar.errors import CancelledError, SurveyError
 
 log = logging.getLogger(__name__)
-_PRELOADED = False
-
-
-def preload_native_modules() -> None:
-    """Import the native libraries jobs use in the GUI thread, once.
-
-    Open3D's extension loaded for the first time in a worker thread while VTK draws in the GUI
-    thread deadlocks in the dynamic loader; loaded here first, it is only looked up later.
-    """
-    global _PRELOADED
-    if _PRELOADED:
-        return
-    _PRELOADED = True
-    try:
-        import open3d  # noqa: F401
-    except Exception as exc:  # registration jobs will report it themselves
-        log.warning("Open3D could not be loaded: %s", exc)
 
 
 class _JobThread(QThread):
@@ -87,7 +71,6 @@ class JobRunner(QObject):
         """Start a job; False (and nothing started) while another job runs."""
         if self._thread is not None:
             return False
-        preload_native_modules()
         self._title = title
         t = _JobThread(fn, self)
         self._thread = t
@@ -122,7 +105,14 @@ class JobRunner(QObject):
         if self._thread is not None:
             self._thread.cancel()
 
-    def wait(self, ms: int = 600_000) -> None:
-        """Block until the running job's thread ends (tests and shutdown)."""
-        if self._thread is not None:
-            self._thread.wait(ms)
+    def wait(self, ms: int = 600_000) -> bool:
+        """Block until the running job's thread ends (tests and shutdown); True when it did.
+
+        Polls with ``time.sleep``, which releases Python's GIL, so the job can run to its end
+        (``QThread.wait`` would hold the GIL and starve it).
+        """
+        t = self._thread
+        deadline = time.monotonic() + ms / 1000.0
+        while t is not None and t.isRunning() and time.monotonic() < deadline:
+            time.sleep(0.02)
+        return t is None or not t.isRunning()

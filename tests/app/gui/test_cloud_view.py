@@ -16,12 +16,15 @@ import pytest
 pytestmark = pytest.mark.gui
 
 SCRIPT = textwrap.dedent("""
+    import faulthandler
     import sys
+    import time
     import numpy as np
     from PySide6.QtCore import QSettings
     from PySide6.QtWidgets import QApplication
     from app.gui.main_window import MainWindow
 
+    faulthandler.dump_traceback_later(400, exit=True)  # a hang shows where it is instead of timing out
     QSettings.setPath(QSettings.IniFormat, QSettings.UserScope, sys.argv[2])
     app = QApplication([])
     win = MainWindow()
@@ -30,9 +33,9 @@ SCRIPT = textwrap.dedent("""
     assert win.open_campaign(sys.argv[1])
 
     def wait():
-        while win.jobs.busy:
+        while win.jobs.busy:  # sleep (it releases the GIL) and let the finished signals arrive
+            time.sleep(0.02)
             app.processEvents()
-            win.jobs.wait(20)
         for _ in range(20):
             app.processEvents()
 
@@ -65,5 +68,5 @@ def test_3d_view_in_an_x_window(processed_copy, tmp_path):
         pytest.skip("no X display (./run test provides one with Xvfb)")
     env = {**os.environ, "QT_QPA_PLATFORM": "xcb", "MPLBACKEND": "Agg"}
     res = subprocess.run([sys.executable, "-c", SCRIPT, str(processed_copy), str(tmp_path / "settings")], env=env,
-                         cwd=Path(__file__).resolve().parents[3], capture_output=True, text=True, timeout=600)
+                         cwd=Path(__file__).resolve().parents[3], capture_output=True, text=True, timeout=500)
     assert res.returncode == 0 and "OK" in res.stdout, res.stdout[-3000:] + res.stderr[-3000:]

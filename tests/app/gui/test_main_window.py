@@ -250,3 +250,24 @@ def test_3d_view_says_why_it_is_missing_offscreen(window):
 
     if QGuiApplication.platformName() == "offscreen":
         assert not window.cloud_view.show_btn.isEnabled()
+
+
+def test_limits_reflectors_and_parameters_from_the_menus(window, processed_copy, monkeypatch, errors):
+    answers = iter(["abs:3,5", "M5b", "2026-03-20", "2000", "not-a-date"])
+    monkeypatch.setattr("app.gui.main_window.QInputDialog.getText", lambda *a, **k: (next(answers), True))
+    monkeypatch.setattr("app.gui.main_window.QInputDialog.getItem", lambda *a, **k: ("min_points", True))
+    window.open_campaign(processed_copy)
+    window.tree.select_key("reflector", "M3")
+    window.set_limit()
+    window.tree.select_key("reflector", "M5")
+    window.replace_reflector()
+    window.set_parameter()
+    with Campaign.open(processed_copy, writable=False) as c:
+        assert c.limit_for("M3").rule == "abs:3,5"
+        assert c.reflector("M5b")["replaces"] == "M5" and c.reflector("M5")["retired"]
+        assert c.settings()["min_points"] == 2000
+    assert window.tree.item_for("reflector", "M5b") is not None
+    before = snapshot(processed_copy)
+    window.tree.select_key("reflector", "M4")
+    window.retire_reflector()  # "not-a-date"
+    assert "not ISO 8601" in errors[-1][1] and snapshot(processed_copy) == before
