@@ -9,7 +9,7 @@ from typing import Optional
 
 import numpy as np
 
-from lidar.files import write_atomic
+from lidar.files import json_safe, write_atomic
 from lidar.errors import ProcessingError
 from projects.errors import DuplicateImportError, InputError
 from projects.store import CAMERA_DIR, Campaign, now_iso, parse_datetime, sha256_of
@@ -138,23 +138,13 @@ def save_crossval(c: Campaign, cv: CrossValidation) -> None:
     """Keep the cross-validation summary in the campaign (the report shows it)."""
     with c.transaction() as conn:
         conn.execute("INSERT OR REPLACE INTO crossvals(series, summary, created) VALUES (?, ?, ?)",
-                     (cv.series, json.dumps(_clean(cv.to_json())), now_iso()))
+                     (cv.series, json.dumps(json_safe(cv.to_json())), now_iso()))
         c._log(conn, "crossval", None, {"series": cv.series, "reflector": cv.reflector, "n_pairs": cv.n_pairs,
                                         "bias_mm": cv.bias_mm, "rmse_mm": cv.rmse_mm})
 
 
 def crossval_summaries(c: Campaign) -> list[dict]:
     return [json.loads(r[0]) for r in c.conn.execute("SELECT summary FROM crossvals ORDER BY series")]
-
-
-def _clean(o):
-    if isinstance(o, float) and not np.isfinite(o):
-        return None
-    if isinstance(o, dict):
-        return {k: _clean(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [_clean(v) for v in o]
-    return o
 
 
 def write_crossval_outputs(cv: CrossValidation, camera: CameraSeries, out_dir: str | os.PathLike) -> list[Path]:
@@ -169,7 +159,7 @@ def write_crossval_outputs(cv: CrossValidation, camera: CameraSeries, out_dir: s
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: exists and is not a folder")
     out.mkdir(parents=True, exist_ok=True)
-    paths = [write_atomic(out / "crossval.json", json.dumps(_clean(cv.to_json()), indent=2) + "\n")]
+    paths = [write_atomic(out / "crossval.json", json.dumps(json_safe(cv.to_json()), indent=2) + "\n")]
     buf = io.StringIO()
     cols = ["epoch", "datetime", "lidar_mm", "lidar_sigma_mm", "camera_mm", "camera_raw_mm", "camera_sigma_mm",
             "camera_n", "difference_mm", "sigma_mm", "flags"]

@@ -32,6 +32,13 @@ def _envelope(t_ns: np.ndarray, v: np.ndarray, bins: int = 4000):
     return centres, vmin, vmax
 
 
+def _pairs_with(cv: CrossValidation, attr: str):
+    """The pairs whose ``attr`` is finite, and their times as datetimes."""
+    p = [q for q in cv.pairs if np.isfinite(getattr(q, attr))]
+    ns = np.array([np.datetime64(q.datetime.replace("+00:00", ""), "ns") for q in p], "datetime64[ns]")
+    return p, _dates(ns.astype(np.int64))
+
+
 def overlay_figure(cv: CrossValidation, camera: Optional[CameraSeries] = None, *, ax=None):
     """Camera series (aligned) with the LiDAR epochs and their +-2 sigma error bars."""
     import matplotlib.pyplot as plt
@@ -43,8 +50,7 @@ def overlay_figure(cv: CrossValidation, camera: Optional[CameraSeries] = None, *
         t, lo, hi = _envelope(camera.time_ns, camera.value_mm + cv.offset_mm)
         ax.fill_between(_dates(t), lo, hi, color="tab:orange", alpha=0.35, lw=0, label="camera (min-max)")
         ax.plot(_dates(t), (lo + hi) / 2, color="tab:orange", lw=0.6)
-    p = [q for q in cv.pairs if np.isfinite(q.lidar_mm)]
-    tt = _dates(np.array([np.datetime64(q.datetime.replace("+00:00", "")) for q in p], "datetime64[ns]").astype(np.int64))
+    p, tt = _pairs_with(cv, "lidar_mm")
     ax.errorbar(tt, [q.lidar_mm for q in p], yerr=[2 * q.lidar_sigma_mm for q in p], fmt="o", ms=3.5,
                 color="tab:blue", ecolor="tab:blue", capsize=2, lw=0.8, label="LiDAR (±2σ)")
     ax.set_ylabel("vertical displacement (mm, up)")
@@ -62,8 +68,7 @@ def difference_figure(cv: CrossValidation, *, ax=None):
     fig = None
     if ax is None:
         fig, ax = plt.subplots(figsize=(10, 3.2), constrained_layout=True)
-    p = [q for q in cv.pairs if np.isfinite(q.difference_mm)]
-    tt = _dates(np.array([np.datetime64(q.datetime.replace("+00:00", "")) for q in p], "datetime64[ns]").astype(np.int64))
+    p, tt = _pairs_with(cv, "difference_mm")
     ax.errorbar(tt, [q.difference_mm for q in p], yerr=[2 * q.sigma_mm for q in p], fmt="o", ms=3.5,
                 color="tab:purple", capsize=2, lw=0.8)
     ax.axhline(0.0, color="k", lw=0.8)

@@ -37,13 +37,6 @@ def dump_json(obj, out=None) -> None:
             return o.item()
         raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
-    def clean(o):
-        if isinstance(o, float) and not math.isfinite(o):
-            return None
-        if isinstance(o, dict):
-            return {k: clean(v) for k, v in o.items()}
-        if isinstance(o, (list, tuple)):
-            return [clean(v) for v in o]
-        return o
+    from lidar.files import json_safe
 
-    out.write(json.dumps(clean(obj), indent=2, default=default) + "\n")
+    out.write(json.dumps(json_safe(obj), indent=2, default=default) + "\n")

@@ -48,13 +48,17 @@ def test_nine_unknowns_are_recovered_without_quantisation():
     assert np.allclose(cal.X_cs1, rig.geometry.main_points_world(), atol=0.05)
 
 
+def exact_setup(rig, h):
+    """The calibration stage from exact projections of ``h`` rig motions (no quantisation)."""
+    g = rig.geometry
+    main, sub = rig.sequence(calibration_motions(h, rotation_rad=1e-3, translation_m=0.01))
+    return calibrate_dual_camera(main, sub, pattern_m=g.main_pattern_m, board_points_m=g.board.object_points(),
+                                 intrinsics=exact_intrinsics(g.K_sub, g.resolution))
+
+
 def test_compensation_removes_the_false_displacement_of_table10_motions():
     rig = SyntheticRig()
-    g = rig.geometry
-    poses = calibration_motions(21, rotation_rad=1e-3, translation_m=0.01)
-    main, sub = rig.sequence(poses)
-    setup = calibrate_dual_camera(main, sub, pattern_m=g.main_pattern_m, board_points_m=g.board.object_points(),
-                                  intrinsics=exact_intrinsics(g.K_sub, g.resolution))
+    setup = exact_setup(rig, 21)
     P = table10_schedule(frames_per_block=30)
     truth = np.column_stack([np.zeros(len(P)), -0.003 * np.sin(np.linspace(0, 3, len(P)))])
     main, sub = rig.sequence(P, truth)
@@ -99,12 +103,8 @@ def test_lab_size_false_displacement_is_reduced_below_the_dissertations_1_1_mm()
 
 def test_missing_frames_are_flagged_not_invented():
     rig = SyntheticRig()
-    g = rig.geometry
-    poses = calibration_motions(10, rotation_rad=1e-3, translation_m=0.01)
-    main, sub = rig.sequence(poses)
-    setup = calibrate_dual_camera(main, sub, pattern_m=g.main_pattern_m, board_points_m=g.board.object_points(),
-                                  intrinsics=exact_intrinsics(g.K_sub, g.resolution))
-    main, sub = rig.sequence(poses[:4])
+    setup = exact_setup(rig, 10)
+    main, sub = rig.sequence(calibration_motions(10, rotation_rad=1e-3, translation_m=0.01)[:4])
     main[1] = np.nan
     sub[2] = np.nan
     res = measure_dual_camera(setup, main, sub)
