@@ -17,7 +17,8 @@ EXIT_ERROR = 1
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from app.cli import commands_camera, commands_campaign, commands_compare, commands_files, commands_report
+    from app.cli import (commands_camera, commands_campaign, commands_compare, commands_dualcam, commands_files,
+                         commands_report)
 
     parser = argparse.ArgumentParser(
         prog="bridgesurvey",
@@ -27,7 +28,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("-v", "--verbose", action="store_true", help="log what is being done")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
-    for module in (commands_campaign, commands_compare, commands_camera, commands_report, commands_files):
+    for module in (commands_campaign, commands_compare, commands_camera, commands_dualcam, commands_report,
+                   commands_files):
         module.register(sub)
     return parser
 

@@ -172,23 +172,36 @@ class SyntheticRig:
         sub = np.stack([self.sub_image_points(P, quantise=quantise) for P in poses])
         return main, sub
 
-    def zhang_views(self, n: int = 15, *, max_tilt_rad: float = 0.5, quantise: bool = False,
+    def zhang_poses(self, n: int = 15, *, max_tilt_rad: float = 0.5,
                     rng: Optional[np.random.Generator] = None) -> list[np.ndarray]:
-        """Image points of the board held at ``n`` tilted poses before installation (for Zhang's method)."""
+        """``n`` poses ``B_WS->CS`` of the board held tilted in front of the sub-camera, wholly in view."""
         rng = rng or np.random.default_rng(11)
         g = self.geometry
-        obj = g.board.object_points() - g.board.centre_ws
-        views = []
-        while len(views) < n:
+        obj = g.board.object_points()
+        centre = rigid(np.eye(3), -g.board.centre_ws)
+        w, h = g.resolution
+        poses = []
+        while len(poses) < n:
             tilt = rng.uniform(-max_tilt_rad, max_tilt_rad, 3) * np.array([1, 1, 0.3])
             dist = g.sub_distance_m * rng.uniform(1.1, 1.6)
             shift = rng.uniform(-0.1, 0.1, 2) * g.sub_fov_m
-            B = rigid_from_rotvec(tilt, [shift[0], shift[1], dist])
+            B = rigid_from_rotvec(tilt, [shift[0], shift[1], dist]) @ centre
             uv = project_pinhole(g.K_sub, apply(B, obj))
-            w, h = g.resolution
-            if np.all((uv > 0) & (uv < [w - 1, h - 1])):
-                views.append(np.round(uv) if quantise else uv)
-        return views
+            if np.all((uv > 2) & (uv < [w - 3, h - 3])):
+                poses.append(B)
+        return poses
+
+    def zhang_views(self, n: int = 15, *, max_tilt_rad: float = 0.5, quantise: bool = False,
+                    rng: Optional[np.random.Generator] = None) -> list[np.ndarray]:
+        """Image points of the board held at ``n`` tilted poses before installation (for Zhang's method)."""
+        obj = self.geometry.board.object_points()
+        views = [project_pinhole(self.geometry.K_sub, apply(B, obj))
+                 for B in self.zhang_poses(n, max_tilt_rad=max_tilt_rad, rng=rng)]
+        return [np.round(v) if quantise else v for v in views]
+
+    def render_board_view(self, B_ws_to_cs: np.ndarray, **kw) -> np.ndarray:
+        """Sub-camera image of the board at pose ``B_ws_to_cs`` (e.g. from :meth:`zhang_poses`)."""
+        return self.render_sub(self.geometry.B_ws_to_world @ invert(B_ws_to_cs), **kw)
 
     # ---------------------------------------------------------------- rendered images
     def _rays_to_plane(self, K, B_cam_to_world, B_plane_to_world, u, v):
