@@ -118,7 +118,11 @@ def cross_validate(epochs: Sequence[str], time_ns: np.ndarray, lidar_mm: np.ndar
         raise ProcessingError(f"no LiDAR epoch has camera samples within +-{window_s / 60:.0f} min (camera "
                               f"{_iso(ct[0]) if len(ct) else '-'} to {_iso(ct[-1]) if len(ct) else '-'}); widen the "
                               "window or check the series' time zone")
-    s2 = np.where(np.isfinite(sy), sy, 0.0) ** 2 + np.where(np.isfinite(cam_s), cam_s, 0.0) ** 2
+    # The baseline epoch has sigma 0 by definition (its error is inside every other epoch's sigma);
+    # weighting it as exact would pin the alignment on it, so it counts like a typical epoch.
+    pos = sy[np.isfinite(sy) & (sy > 0)]
+    sy_w = np.where(np.isfinite(sy) & (sy > 0), sy, np.median(pos) if len(pos) else 0.0)
+    s2 = sy_w ** 2 + np.where(np.isfinite(cam_s), cam_s, 0.0) ** 2
     if align_at_ns is not None:
         cand = np.nonzero(paired)[0]
         k0 = cand[np.argmin(np.abs(t[cand] - int(align_at_ns)))]
