@@ -55,6 +55,7 @@ def main(argv=None) -> int:
     win.tabs.setCurrentWidget(win.map_view)
     shot("reflectance-map")
     win.session.select(reflector="M3")
+    shot("reflectance-map-M3")
     win.show_fine()
     wait_jobs(app, win)
     shot("fine-scan")

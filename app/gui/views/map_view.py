@@ -232,8 +232,8 @@ class MapView(QWidget):
         self.save_btn.clicked.connect(lambda: self.saveRequested.emit(self.current_plan()))
         self.export_btn = QPushButton("Export plan JSON…")
         self.export_btn.clicked.connect(lambda: self.exportRequested.emit(self.current_plan()))
-        fit = QPushButton("Fit")
-        fit.clicked.connect(self.fit)
+        fit = QPushButton("Show all")
+        fit.clicked.connect(lambda: self.fit(everything=True))
         bar = QHBoxLayout()
         for w in (self.title, self.draw_btn, self.delete_btn, self.reset_btn, self.save_btn, self.export_btn, fit):
             bar.addWidget(w)
@@ -339,8 +339,12 @@ class MapView(QWidget):
     def revert(self) -> None:
         self._set_plan(self.stored_plan)
 
-    def fit(self) -> None:
-        if self.items:
+    def fit(self, *, everything: bool = False) -> None:
+        """Zoom on the selected window (when one is selected), else on all windows."""
+        sel = [it for it in self.items if it.isSelected()]
+        if sel and not everything:
+            self._zoom_to(sel[0])
+        elif self.items:
             r = self.items[0].scene_rect()
             for it in self.items[1:]:
                 r = r.united(it.scene_rect())
@@ -421,8 +425,14 @@ class MapView(QWidget):
             it.setSelected(k in rows)
 
     def select_reflector(self, rid: Optional[str]) -> None:
+        """Select a target's window and zoom so that it shows with its surroundings."""
         for it in self.items:
             if it.roi.reflector == rid and not it.isSelected():
                 self.scene.clearSelection()
                 it.setSelected(True)
-                self.view.centerOn(it)
+                self._zoom_to(it)
+
+    def _zoom_to(self, item: "RoiItem") -> None:
+        r = item.scene_rect()
+        pad = max(r.width(), r.height()) * 6
+        self.view.fitInView(r.adjusted(-pad, -pad, pad, pad), Qt.KeepAspectRatio)
