@@ -271,3 +271,10 @@ def test_limits_reflectors_and_parameters_from_the_menus(window, processed_copy,
     window.tree.select_key("reflector", "M4")
     window.retire_reflector()  # "not-a-date"
     assert "not ISO 8601" in errors[-1][1] and snapshot(processed_copy) == before
+
+
+def test_welcome_opens_the_demo_campaign(window, processed_copy):
+    window.demo_dir = processed_copy  # a built demo campaign is opened directly
+    window.open_demo()
+    assert window.session is not None and window.session.folder == processed_copy
+    assert window.stack.currentWidget() is window.tabs
