@@ -172,8 +172,5 @@ def write_crossval_outputs(cv: CrossValidation, camera: CameraSeries, out_dir: s
     paths.append(write_atomic(out / "crossval.csv", buf.getvalue()))
     for name, fig in (("overlay.png", overlay_figure(cv, camera)), ("difference.png", difference_figure(cv)),
                       ("scatter.png", scatter_figure(cv))):
-        import matplotlib.pyplot as plt
-
         paths.append(save_figure(fig, out / name))
-        plt.close(fig)
     return paths

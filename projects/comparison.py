@@ -26,7 +26,7 @@ from projects.processing import baseline_epoch, read_files
 from projects.store import Campaign, now_iso
 from registration.change import METHODS, ChangeResult, cloud_to_cloud, core_points_grid, m3c2
 from registration.icp import IcpResult, refine_icp, stable_mask
-from registration.profile import SpanProfile, span_profile
+from registration.profile import span_profile
 from registration.targets import TargetRegistration, register_targets
 from registration.transform import Transform
 

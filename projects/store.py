@@ -19,7 +19,6 @@ import fcntl
 import hashlib
 import json
 import os
-import shutil
 import sqlite3
 import uuid
 from pathlib import Path

@@ -1,10 +1,11 @@
-"""Figures of the camera cross-validation (matplotlib, no GUI toolkit)."""
+"""Figures of the camera cross-validation (matplotlib Figure objects: no pyplot state, no GUI toolkit)."""
 from __future__ import annotations
 
 import datetime as dt
 from typing import Optional
 
 import numpy as np
+from matplotlib.figure import Figure
 
 from vision.crossval import CrossValidation
 from vision.series import CameraSeries
@@ -41,11 +42,10 @@ def _pairs_with(cv: CrossValidation, attr: str):
 
 def overlay_figure(cv: CrossValidation, camera: Optional[CameraSeries] = None, *, ax=None):
     """Camera series (aligned) with the LiDAR epochs and their +-2 sigma error bars."""
-    import matplotlib.pyplot as plt
-
     fig = None
     if ax is None:
-        fig, ax = plt.subplots(figsize=(10, 4.2), constrained_layout=True)
+        fig = Figure(figsize=(10, 4.2), layout="constrained")
+        ax = fig.add_subplot()
     if camera is not None and len(camera):
         t, lo, hi = _envelope(camera.time_ns, camera.value_mm + cv.offset_mm)
         ax.fill_between(_dates(t), lo, hi, color="tab:orange", alpha=0.35, lw=0, label="camera (min-max)")
@@ -63,11 +63,10 @@ def overlay_figure(cv: CrossValidation, camera: Optional[CameraSeries] = None, *
 
 def difference_figure(cv: CrossValidation, *, ax=None):
     """LiDAR - camera at every pair over time, with +-2 sigma bars and the bias line."""
-    import matplotlib.pyplot as plt
-
     fig = None
     if ax is None:
-        fig, ax = plt.subplots(figsize=(10, 3.2), constrained_layout=True)
+        fig = Figure(figsize=(10, 3.2), layout="constrained")
+        ax = fig.add_subplot()
     p, tt = _pairs_with(cv, "difference_mm")
     ax.errorbar(tt, [q.difference_mm for q in p], yerr=[2 * q.sigma_mm for q in p], fmt="o", ms=3.5,
                 color="tab:purple", capsize=2, lw=0.8)
@@ -83,11 +82,10 @@ def difference_figure(cv: CrossValidation, *, ax=None):
 
 def scatter_figure(cv: CrossValidation, *, ax=None):
     """LiDAR against camera at the pairs, with the 1:1 line."""
-    import matplotlib.pyplot as plt
-
     fig = None
     if ax is None:
-        fig, ax = plt.subplots(figsize=(5, 5), constrained_layout=True)
+        fig = Figure(figsize=(5, 5), layout="constrained")
+        ax = fig.add_subplot()
     p = [q for q in cv.pairs if np.isfinite(q.difference_mm)]
     x = np.array([q.camera_mm for q in p])
     y = np.array([q.lidar_mm for q in p])

@@ -1,7 +1,6 @@
 """The dual-camera commands: calibrate a set-up from images, measure displacements, simulate a data set."""
 from __future__ import annotations
 
-import datetime as dt
 from pathlib import Path
 
 import numpy as np

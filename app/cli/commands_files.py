@@ -1,7 +1,6 @@
 """Commands working on single scan files, outside any campaign: detect, plan-file, centroids, simulate."""
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import numpy as np

@@ -2,20 +2,20 @@
 progress and cancel. Every action that changes the campaign runs as a background job."""
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Callable, Optional
 
 from PySide6.QtCore import QSettings, Qt
 from PySide6.QtGui import QAction, QKeySequence
-from PySide6.QtWidgets import (QDockWidget, QFileDialog, QHBoxLayout, QInputDialog, QLabel, QListWidget,
+from PySide6.QtWidgets import (QDockWidget, QFileDialog, QHBoxLayout, QLabel, QListWidget,
                                QMainWindow, QMessageBox, QProgressBar, QPushButton, QStackedWidget, QTabWidget,
                                QVBoxLayout, QWidget)
 
 from app.gui import actions
 from app.gui.campaign_tree import CampaignTree
+from app.gui.commands import CommandsMixin
 from app.gui.details import DetailsPanel, campaign_html, epoch_html, reflector_html, series_html
-from app.gui.dialogs import AddEpochDialog, ImportCameraDialog, NewCampaignDialog, ask_save_path, show_error
+from app.gui.dialogs import NewCampaignDialog, show_error
 from app.gui.session import CampaignSession
 from app.gui.views.camera_view import CameraView
 from app.gui.views.cloud_view import CloudView
@@ -60,7 +60,7 @@ class WelcomePage(QWidget):
         self.recent.addItems(list(paths))
 
 
-class MainWindow(QMainWindow):
+class MainWindow(CommandsMixin, QMainWindow):
     def __init__(self, *, demo_dir: Optional[str] = None):
         super().__init__()
         self.setWindowTitle("BridgeSurvey")
@@ -385,241 +385,6 @@ class MainWindow(QMainWindow):
             self._load_map()
         elif w is self.camera_view:
             self._load_camera()
-
-    # ------------------------------------------------------------------ map and plan
-    def _load_map(self) -> None:
-        label = self.session.epoch or self._last_epoch()
-        if label is None:
-            self.map_view.show_message("No epoch yet: add one (Epoch ▸ Add epoch…).")
-            return
-        if self.map_view.plan is not None and getattr(self.map_view, "label", None) == label and self.map_view.dirty:
-            return  # keep unsaved edits
-        from lidar.plan import ScanPlan
-
-        with self.session.read() as c:
-            preview = c.map_preview(label)
-            row = c.plan_row(label)
-        if preview is None:
-            self.map_view.show_message(f"Epoch {label} has not been planned yet: Epoch ▸ Plan, or Process.")
-            return
-        self.map_view.label = label
-        self.map_view.load(label, preview, None if row is None else ScanPlan.from_json(json.loads(row["json"])))
-        if self.session.reflector:
-            self.map_view.select_reflector(self.session.reflector)
-
-    def _last_epoch(self) -> Optional[str]:
-        eps = getattr(self, "status_data", {}).get("epochs", [])
-        return eps[-1]["epoch"] if eps else None
-
-    def save_plan(self, plan) -> None:
-        label = getattr(self.map_view, "label", None)
-        if plan is None or label is None:
-            return
-
-        def done(_r):
-            self.map_view.dirty = False
-            self._changed()
-
-        self.run_job(f"Saving the plan of {label}", lambda p: actions.save_plan(self.session, label, plan), done)
-
-    def export_plan(self, plan) -> None:
-        if plan is None:
-            return
-        path = ask_save_path(self, "Export plan", f"plan-{plan.epoch}.json", "Plan (*.json)")
-        if path is not None:
-            try:
-                plan.save(path)
-                self.statusBar().showMessage(f"plan written to {path}", 8000)
-            except (SurveyError, OSError) as exc:
-                show_error(self, "Export plan", str(exc))
-
-    def add_window(self, rect) -> None:
-        """A window drawn on the map: ask which target it is for and add it with steps for that target."""
-        self.map_view.draw_btn.setChecked(False)
-        if self.map_view.plan is None:
-            return
-        with self.session.read() as c:
-            refl = {r["id"]: r for r in c.reflectors() if not r["retired"]}
-        taken = {it.roi.reflector for it in self.map_view.items}
-        free = [rid for rid in refl if rid not in taken]
-        if not free:
-            show_error(self, "Add window", "Every reflector has a window already; move or resize it instead.")
-            return
-        rid, ok = QInputDialog.getItem(self, "Add window", "Reflector:", free, 0, False)
-        if not ok:
-            return
-        try:
-            roi = actions.window_from_rect(self.map_view, rect, rid, refl[rid])
-        except SurveyError as exc:
-            show_error(self, "Add window", str(exc))
-            return
-        self.map_view.add_roi(roi)
-
-    # ------------------------------------------------------------------ epoch work
-    def add_epoch(self) -> None:
-        dlg = AddEpochDialog(self)
-        if dlg.exec() != AddEpochDialog.Accepted:
-            return
-        v = dlg.values()
-        self.run_job(f"Importing epoch {v['label']}", lambda p: actions.add_epoch(self.session, v, p),
-                     lambda label: (self._changed(), self.session.select(epoch=label)))
-
-    def add_fine(self) -> None:
-        label = self.session.epoch
-        if not label:
-            show_error(self, "Add fine scans", "Select an epoch in the campaign tree first.")
-            return
-        from app.gui.dialogs import SCAN_FILTER
-
-        paths, _ = QFileDialog.getOpenFileNames(self, f"Fine scans of {label}", "", SCAN_FILTER)
-        if paths:
-            self.run_job(f"Importing fine scans of {label}", lambda p: actions.add_fine(self.session, label, paths, p),
-                         self._changed)
-
-    def plan_selected(self) -> None:
-        label = self.session.epoch or self._last_epoch()
-        if label:
-            self.run_job(f"Planning {label}", lambda p: actions.plan(self.session, label, p), self._changed)
-
-    def process(self) -> None:
-        self.run_job("Processing", lambda p: actions.process(self.session, p), self._processed)
-
-    def _processed(self, summary) -> None:
-        self._changed()
-        if summary.failed:
-            show_error(self, "Processing", "\n".join(f"{o.epoch}: {o.message}" for o in summary.failed))
-
-    def show_fine(self) -> None:
-        s = self.session
-        label, rid = s.epoch or self._last_epoch(), s.reflector
-        if not label or not rid:
-            self.fine_view.show_message("Select an epoch and a target (tree, map or 3-D view) first.")
-            self.tabs.setCurrentWidget(self.fine_view)
-            return
-        self.tabs.setCurrentWidget(self.fine_view)
-        self.run_job(f"Reading the window of {rid} in {label}", lambda p: actions.inspect(s, label, rid, p),
-                     self.fine_view.set_inspection)
-
-    def show_cloud(self, mode: str) -> None:
-        s = self.session
-        label = s.epoch or self._last_epoch()
-        if not label:
-            return
-        self.cloud_view.mode.setCurrentIndex(0 if mode == "intensity" else 1)
-        if mode == "intensity":
-            self.run_job(f"Loading the scan of {label}", lambda p: actions.epoch_cloud(s, label, p),
-                         self.cloud_view.set_cloud)
-        else:
-            self.run_job(f"Comparing {label} with the baseline", lambda p: actions.change_cloud(s, label, p),
-                         lambda r: (self.cloud_view.set_cloud(r), self._changed()))
-
-    # ------------------------------------------------------------------ campaign settings
-    def _ask(self, title: str, label: str, text: str = "") -> Optional[str]:
-        value, ok = QInputDialog.getText(self, title, label, text=text)
-        return value.strip() if ok and value.strip() else None
-
-    def _quick(self, title: str, fn: Callable) -> None:
-        """Small changes run in the GUI thread; errors are shown, the campaign is left as it was."""
-        try:
-            fn()
-        except SurveyError as exc:
-            show_error(self, title, str(exc))
-            return
-        self._changed()
-
-    def set_limit(self) -> None:
-        rid = self.session.reflector or "*"
-        rule = self._ask("Set limit", f"Limit rule for {'every measurement target' if rid == '*' else rid} "
-                                      "(kr-rail:0-200, abs:10,15 mm or span:1000,500):", "kr-rail:0-200")
-        if rule:
-            self._quick("Set limit", lambda: actions.set_limit(self.session, rid, rule))
-
-    def retire_reflector(self) -> None:
-        rid = self.session.reflector
-        if not rid:
-            show_error(self, "Retire reflector", "Select a reflector in the campaign tree first.")
-            return
-        when = self._ask("Retire reflector", f"Retire {rid} from (ISO date):")
-        if when:
-            self._quick("Retire reflector", lambda: actions.retire_reflector(self.session, rid, when))
-
-    def replace_reflector(self) -> None:
-        rid = self.session.reflector
-        if not rid:
-            show_error(self, "Replace reflector", "Select a reflector in the campaign tree first.")
-            return
-        new = self._ask("Replace reflector", f"New id of the target replacing {rid}:", f"{rid}b")
-        when = new and self._ask("Replace reflector", f"{new} replaces {rid} from (ISO date):")
-        if new and when:
-            self._quick("Replace reflector", lambda: actions.replace_reflector(self.session, rid, new, when))
-
-    def set_parameter(self) -> None:
-        from projects.processing import DEFAULTS, parameters
-
-        with self.session.read() as c:
-            current = parameters(c)
-        keys = list(DEFAULTS) + ["baseline"]
-        key, ok = QInputDialog.getItem(self, "Processing parameter", "Parameter:", keys, 0, False)
-        if not ok:
-            return
-        text = self._ask("Processing parameter", f"New value of {key} (now {current.get(key)}):")
-        if text is not None:
-            self._quick("Processing parameter", lambda: actions.set_parameter(self.session, key, text))
-
-    # ------------------------------------------------------------------ camera
-    def _load_camera(self) -> None:
-        from projects.camera import crossval_summaries, load_series
-        from vision.crossval import CrossValidation
-
-        with self.session.read() as c:
-            sums = crossval_summaries(c)
-            cam = load_series(c, sums[0]["series"])[1] if sums else None
-        if sums:
-            self.camera_view.set_result(CrossValidation.from_json(sums[0]), cam)
-        else:
-            self.camera_view.show_message("No cross-validation yet: import a camera series, then Camera ▸ "
-                                          "Cross-validate with LiDAR.")
-
-    def import_camera(self) -> None:
-        from projects.camera import midspan_reflector
-
-        with self.session.read() as c:
-            meas = [r["id"] for r in c.reflectors() if r["grp"] == "measurement" and not r["retired"]]
-            try:
-                default = midspan_reflector(c)
-            except SurveyError:
-                default = None
-        dlg = ImportCameraDialog(meas, default, self)
-        if dlg.exec() != ImportCameraDialog.Accepted:
-            return
-        v = dlg.values()
-        self.run_job("Importing the camera series", lambda p: actions.import_camera(self.session, v, p),
-                     self._changed)
-
-    def crossval(self) -> None:
-        def done(_r):
-            self._changed()
-            self.tabs.setCurrentWidget(self.camera_view)
-            self._load_camera()
-
-        self.run_job("Cross-validating", lambda p: actions.crossval(self.session, p), done)
-
-    # ------------------------------------------------------------------ exports
-    def export_csv(self) -> None:
-        path = ask_save_path(self, "Export displacements", "displacements.csv", "CSV (*.csv)")
-        if path is not None:
-            self.run_job("Exporting displacements", lambda p: actions.export_csv(self.session, path))
-
-    def export_xlsx(self) -> None:
-        path = ask_save_path(self, "Export workbook", "campaign.xlsx", "Excel workbook (*.xlsx)")
-        if path is not None:
-            self.run_job("Exporting the workbook", lambda p: actions.export_xlsx(self.session, path))
-
-    def write_report(self) -> None:
-        path = ask_save_path(self, "Write report", "report.pdf", "PDF (*.pdf)")
-        if path is not None:
-            self.run_job("Writing the report", lambda p: actions.report(self.session, path, p),
-                         lambda r: self.statusBar().showMessage(f"report written to {r}", 10000))
 
     # ------------------------------------------------------------------ shutdown
     def closeEvent(self, event) -> None:

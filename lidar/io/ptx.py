@@ -76,7 +76,7 @@ def write_ptx(scan: Scan, path: str | os.PathLike) -> Path:
     pose = scan.pose if scan.pose is not None else np.eye(4)
     raw = scan.intensity if scan.intensity is not None else raw_for_writing(scan).astype(np.float64)
     n = len(scan)
-    head = [f"1", f"{n}", " ".join(f"{v:.10g}" for v in pose[:3, 3])]
+    head = ["1", f"{n}", " ".join(f"{v:.10g}" for v in pose[:3, 3])]
     head += [" ".join(f"{v:.10g}" for v in pose[:3, k]) for k in range(3)]
     head += [" ".join(f"{v:.12g}" for v in row) for row in pose.T]
     table = np.column_stack([scan.xyz_socs, raw])

@@ -109,7 +109,7 @@ def test_roi_move_resize_delete_add_and_save_then_process(window, processed_copy
     m5.setSelected(True)
     mv.delete_selected()
     assert len(mv.items) == 8
-    monkeypatch.setattr("app.gui.main_window.QInputDialog.getItem", lambda *a, **k: ("M5", True))
+    monkeypatch.setattr("app.gui.commands.QInputDialog.getItem", lambda *a, **k: ("M5", True))
     mv.view.resetTransform()
     mv.view.scale(zoom, zoom)
     mv.view.centerOn(m5_rect.center())
@@ -200,12 +200,12 @@ def test_camera_import_crossval_and_report_export(window, processed_copy, tmp_pa
     assert cv is not None and cv.n_pairs == 3 and cv.rmse_mm < 0.5
     assert window.tabs.currentWidget() is window.camera_view
     out = tmp_path / "r.pdf"
-    monkeypatch.setattr("app.gui.main_window.ask_save_path", lambda *a: out)
+    monkeypatch.setattr("app.gui.commands.ask_save_path", lambda *a: out)
     window.write_report()
     wait_job(qtbot, window)
     assert out.stat().st_size > 10_000 and out.read_bytes()[:4] == b"%PDF"
     csv_out = tmp_path / "d.csv"
-    monkeypatch.setattr("app.gui.main_window.ask_save_path", lambda *a: csv_out)
+    monkeypatch.setattr("app.gui.commands.ask_save_path", lambda *a: csv_out)
     window.export_csv()
     wait_job(qtbot, window)
     assert csv_out.read_text().startswith("epoch,datetime,reflector,displacement_mm,sigma_mm,flags")
@@ -254,8 +254,8 @@ def test_3d_view_says_why_it_is_missing_offscreen(window):
 
 def test_limits_reflectors_and_parameters_from_the_menus(window, processed_copy, monkeypatch, errors):
     answers = iter(["abs:3,5", "M5b", "2026-03-20", "2000", "not-a-date"])
-    monkeypatch.setattr("app.gui.main_window.QInputDialog.getText", lambda *a, **k: (next(answers), True))
-    monkeypatch.setattr("app.gui.main_window.QInputDialog.getItem", lambda *a, **k: ("min_points", True))
+    monkeypatch.setattr("app.gui.commands.QInputDialog.getText", lambda *a, **k: (next(answers), True))
+    monkeypatch.setattr("app.gui.commands.QInputDialog.getItem", lambda *a, **k: ("min_points", True))
     window.open_campaign(processed_copy)
     window.tree.select_key("reflector", "M3")
     window.set_limit()
