@@ -13,6 +13,28 @@ from lidar.errors import CancelledError, SurveyError
 
 log = logging.getLogger(__name__)
 
+#: Native extensions jobs load. Loading one for the first time in a worker thread while the GUI thread
+#: draws with OpenGL can deadlock (the dynamic loader's lock against the GIL: seen with Open3D under
+#: VTK), so they are all imported in the GUI thread before the first job starts.
+NATIVE_MODULES = ("open3d", "py4dgeo", "laspy", "lazrs", "pye57", "cv2", "scipy.spatial", "scipy.optimize",
+                  "scipy.ndimage", "pandas", "openpyxl", "reportlab.pdfgen.canvas")
+_preloaded = False
+
+
+def preload_native_modules() -> None:
+    """Import :data:`NATIVE_MODULES` in the calling (GUI) thread, once; a missing one is left to its job."""
+    global _preloaded
+    if _preloaded:
+        return
+    _preloaded = True
+    import importlib
+
+    for name in NATIVE_MODULES:
+        try:
+            importlib.import_module(name)
+        except Exception as exc:  # the job that needs it reports the problem in its own words
+            log.warning("could not load %s: %s", name, exc)
+
 
 class _JobThread(QThread):
     progressed = Signal(float, str)
@@ -71,6 +93,7 @@ class JobRunner(QObject):
         """Start a job; False (and nothing started) while another job runs."""
         if self._thread is not None:
             return False
+        preload_native_modules()
         self._title = title
         t = _JobThread(fn, self)
         self._thread = t

@@ -1,7 +1,9 @@
 """The 3-D view (pyvista in Qt): an epoch's scan coloured by intensity, or its change against the baseline,
 with the targets as labelled markers; picking near a marker selects that target everywhere.
 
-Large clouds are decimated for display only (level of detail); the computations use every point.
+Large clouds are decimated for display only, and drawn with two levels of detail: every displayed
+point when the view is still, a tenth of them or fewer while it is being rotated or zoomed (VTK
+picks the level from the time a frame may take); the computations use every point.
 """
 from __future__ import annotations
 
@@ -14,6 +16,34 @@ from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QPushButton, QVBox
 def opengl_available() -> bool:
     """False on Qt's offscreen platform, where VTK cannot get an OpenGL window."""
     return QGuiApplication.platformName() not in ("offscreen", "minimal")
+
+
+#: Points drawn while the view moves; more are drawn only when it is still.
+INTERACTIVE_POINTS = 150_000
+
+
+def with_interactive_lod(plotter, actor, points, *, max_points: int = INTERACTIVE_POINTS):
+    """Replace ``actor`` (a point cloud) by a level-of-detail actor with a decimated copy for interaction."""
+    import pyvista as pv
+    import vtk
+
+    n = points.n_points
+    if n <= max_points:
+        return actor
+    step = int(np.ceil(n / max_points))
+    sub = pv.PolyData(np.asarray(points.points)[::step].copy())
+    for name in points.point_data.keys():
+        sub.point_data[name] = np.asarray(points.point_data[name])[::step]
+    coarse = vtk.vtkPolyDataMapper()
+    coarse.ShallowCopy(actor.GetMapper())
+    coarse.SetInputData(sub)
+    lod = vtk.vtkLODActor()
+    lod.SetMapper(actor.GetMapper())
+    lod.SetProperty(actor.GetProperty())
+    lod.AddLODMapper(coarse)
+    plotter.remove_actor(actor, render=False)
+    plotter.add_actor(lod, name="cloud", reset_camera=False, render=False)
+    return lod
 
 
 class CloudView(QWidget):
@@ -71,13 +101,14 @@ class CloudView(QWidget):
                    title_font_size=12, label_font_size=11)
         if cloud.value_name == "intensity":
             lo, hi = np.nanpercentile(cloud.values, [1, 99.5]) if len(cloud.values) else (0, 1)
-            p.add_points(pts, scalars=cloud.value_name, cmap="cividis", point_size=2, clim=(lo, max(hi, lo + 1e-3)),
-                         scalar_bar_args=bar)
+            actor = p.add_points(pts, scalars=cloud.value_name, cmap="cividis", point_size=2,
+                                 clim=(lo, max(hi, lo + 1e-3)), scalar_bar_args=bar)
         else:  # signed change: diverging colours, symmetric about zero
             finite = np.isfinite(cloud.values)
             lim = float(np.nanpercentile(np.abs(cloud.values), 98)) if finite.any() else 1.0
-            p.add_points(pts, scalars=cloud.value_name, cmap="RdBu", point_size=5, clim=(-lim, lim),
-                         nan_color="grey", scalar_bar_args=bar)
+            actor = p.add_points(pts, scalars=cloud.value_name, cmap="RdBu", point_size=5, clim=(-lim, lim),
+                                 nan_color="grey", scalar_bar_args=bar)
+        self.actor = with_interactive_lod(p, actor, pts)
         self._draw_markers()
         p.view_vector((-0.45, -1.0, 0.35), viewup=(0, 0, 1))  # oblique, from the scanner's side, z up
         p.reset_camera()
