@@ -147,5 +147,5 @@ def change_cloud(c: Campaign, base: str, label: str, *, max_points: int = 1_500_
     ids, xyz = _targets_of(c, summary["baseline"])  # the baseline's scanner frame is the campaign frame
     report(progress, 1.0, "change ready")
     return DisplayCloud(ch.points[keep], (ch.distance_m[keep] * 1e3).astype(np.float32),
-                        f"M3C2 change {base} → {label} (mm)", len(ch.points), ids, xyz,
-                        f"campaign frame ({summary['baseline']}), core points"), summary
+                        "M3C2 change (mm)", len(ch.points), ids, xyz,
+                        f"M3C2 change {base} → {label} at core points, campaign frame ({summary['baseline']})"), summary
