@@ -24,7 +24,7 @@ class CommandsMixin:
         if label is None:
             self.map_view.show_message("No epoch yet: add one (Epoch ▸ Add epoch…).")
             return
-        if self.map_view.plan is not None and getattr(self.map_view, "label", None) == label and self.map_view.dirty:
+        if self.map_view.plan is not None and self.map_view.label == label and self.map_view.dirty:
             return  # keep unsaved edits
         from lidar.plan import ScanPlan
 
@@ -34,17 +34,16 @@ class CommandsMixin:
         if preview is None:
             self.map_view.show_message(f"Epoch {label} has not been planned yet: Epoch ▸ Plan, or Process.")
             return
-        self.map_view.label = label
         self.map_view.load(label, preview, None if row is None else ScanPlan.from_json(json.loads(row["json"])))
         if self.session.reflector:
             self.map_view.select_reflector(self.session.reflector)
 
     def _last_epoch(self) -> Optional[str]:
-        eps = getattr(self, "status_data", {}).get("epochs", [])
+        eps = self.status_data["epochs"]
         return eps[-1]["epoch"] if eps else None
 
     def save_plan(self, plan) -> None:
-        label = getattr(self.map_view, "label", None)
+        label = self.map_view.label
         if plan is None or label is None:
             return
 

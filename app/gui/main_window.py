@@ -66,6 +66,8 @@ class MainWindow(CommandsMixin, QMainWindow):
         self.setWindowTitle("BridgeSurvey")
         self.demo_dir = Path(demo_dir) if demo_dir else Path.cwd() / "demo-campaign"
         self.session: Optional[CampaignSession] = None
+        self.status_data: dict = {"epochs": []}          # projects.overview.campaign_status of the last refresh
+        self._details_for: tuple[str, str] = ("campaign", "")  # what the details panel shows
         self.jobs = JobRunner(self)
         self._build_views()
         self._build_docks()
@@ -349,7 +351,7 @@ class MainWindow(CommandsMixin, QMainWindow):
             self.map_view.select_reflector(s.reflector)
             self.cloud_view.select_target(s.reflector)
         self.displacements.select_epoch(s.epoch)
-        kind_key = ("reflector", s.reflector) if getattr(self, "_details_for", ("", ""))[0] == "reflector" \
+        kind_key = ("reflector", s.reflector) if self._details_for[0] == "reflector" \
             else ("epoch", s.epoch)
         if kind_key[1]:
             self.tree.select_key(*kind_key)
@@ -358,7 +360,7 @@ class MainWindow(CommandsMixin, QMainWindow):
     def _show_details(self) -> None:
         if self.session is None:
             return
-        kind, key = getattr(self, "_details_for", ("campaign", ""))
+        kind, key = self._details_for
         from projects.camera import series_rows
 
         try:

@@ -257,6 +257,7 @@ class MapView(QWidget):
         lay = QVBoxLayout(self)
         lay.addLayout(bar)
         lay.addWidget(split)
+        self.label: Optional[str] = None  # the epoch shown
         self.plan: Optional[ScanPlan] = None
         self.stored_plan: Optional[ScanPlan] = None
         self.geometry_: Optional[MapGeometry] = None
@@ -279,6 +280,7 @@ class MapView(QWidget):
 
     def show_message(self, text: str) -> None:
         self._clear_scene()
+        self.label = None
         self.plan = self.stored_plan = None
         self.table.setRowCount(0)
         self.title.setText(text)
@@ -288,6 +290,7 @@ class MapView(QWidget):
     def load(self, label: str, preview, plan: Optional[ScanPlan]) -> None:
         """Show an epoch's stored map preview and plan (``plan`` may be None)."""
         self._clear_scene()
+        self.label = label
         rmap = preview.reflectance_map
         self.preview = preview
         self.geometry_ = g = MapGeometry(rmap.theta0_deg, rmap.phi0_deg, rmap.step_deg)
