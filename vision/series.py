@@ -238,7 +238,7 @@ def read_camera_series(path: str | os.PathLike, *, column: Optional[str] = None,
         if tz_col is not None:
             t_ns, t_ok = _times_with_zone_column(raw, df[tz_col].str.strip())
         else:
-            t_ns, t_ok = _parse_times(raw, timezone, path)
+            t_ns, t_ok = _parse_times(raw, timezone)
     for j in np.nonzero(~t_ok)[0][:max(0, 1000 - len(bad))]:
         bad.append(BadRow(int(line_no[j]), f"time {df.iat[j, t_unix if t_unix is not None else t_col]!r} "
                                            "is not a date-time"))
@@ -307,7 +307,7 @@ def _is_number(s: str) -> bool:
         return False
 
 
-def _parse_times(raw, timezone: str, path) -> tuple[np.ndarray, np.ndarray]:
+def _parse_times(raw, timezone: str) -> tuple[np.ndarray, np.ndarray]:
     """Parse time strings to UTC ns; strings with an offset keep it, naive ones take ``timezone``."""
     import pandas as pd
 
@@ -358,7 +358,7 @@ def _times_with_zone_column(raw, zones) -> tuple[np.ndarray, np.ndarray]:
     for z in np.unique(zv):
         sel = zv == z
         try:
-            t, good = _parse_times(raw[sel], z or "UTC", "")
+            t, good = _parse_times(raw[sel], z or "UTC")
         except InputError:
             continue  # an unknown zone: those rows are bad
         t_ns[sel], ok[sel] = t, good
