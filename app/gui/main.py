@@ -16,9 +16,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     from PySide6.QtWidgets import QApplication
 
     from app.gui.main_window import MainWindow
+    from app.gui.worker import preload_native_modules
 
     app = QApplication.instance() or QApplication(sys.argv[:1])
     app.setApplicationName("BridgeSurvey")
+    preload_native_modules()  # ~3 s here rather than a freeze at the first action (see worker.NATIVE_MODULES)
     win = MainWindow(demo_dir=args.demo_dir)
     win.show()
     if args.campaign:
