@@ -5,7 +5,6 @@ inside a job), so the command line can work on the same campaign between the GUI
 """
 from __future__ import annotations
 
-import contextlib
 from pathlib import Path
 from typing import Optional
 
@@ -27,21 +26,13 @@ class CampaignSession(QObject):
         with self.read() as c:  # fails early (CampaignError) when the folder holds no campaign
             self.name = c.name
 
-    @contextlib.contextmanager
-    def read(self):
-        c = Campaign.open(self.folder, writable=False)
-        try:
-            yield c
-        finally:
-            c.close()
+    def read(self) -> Campaign:
+        """The campaign opened read-only (shared lock), for ``with session.read() as c``."""
+        return Campaign.open(self.folder, writable=False)
 
-    @contextlib.contextmanager
-    def write(self):
-        c = Campaign.open(self.folder, writable=True)
-        try:
-            yield c
-        finally:
-            c.close()
+    def write(self) -> Campaign:
+        """The campaign opened for a change (exclusive lock), for ``with session.write() as c``."""
+        return Campaign.open(self.folder, writable=True)
 
     def select(self, *, reflector: Optional[str] = ..., epoch: Optional[str] = ...) -> None:
         """Change the selection (arguments left out keep their value)."""
