@@ -22,6 +22,7 @@ from scipy.spatial.transform import Rotation
 
 from lidar.errors import InputError, ProcessingError
 from lidar.progress import ProgressCallback, report
+from vision.geometry import rigid_from_rotvec
 from vision.main_camera import AffineTargetModel, fit_affine_target
 from vision.sub_camera import CameraMotion, Intrinsics, solve_poses
 
@@ -193,13 +194,6 @@ def _pose_params(B: np.ndarray) -> np.ndarray:
     return np.concatenate([Rotation.from_matrix(B[:3, :3]).as_rotvec(), B[:3, 3]])
 
 
-def _pose_from(p: np.ndarray) -> np.ndarray:
-    B = np.eye(4)
-    B[:3, :3] = Rotation.from_rotvec(p[:3]).as_matrix()
-    B[:3, 3] = p[3:]
-    return B
-
-
 def measure_dual_camera(setup: DualCameraSetup, main_uv: np.ndarray, sub_uv: Optional[np.ndarray] = None, *,
                         motion: Optional[CameraMotion] = None,
                         progress: Optional[ProgressCallback] = None) -> DualCameraResult:
@@ -242,9 +236,9 @@ def measure_dual_camera(setup: DualCameraSetup, main_uv: np.ndarray, sub_uv: Opt
             h = 1e-6
             dp = np.zeros(6)
             dp[j] = h
-            M = _pose_from(p0 + dp) @ inv_ref
+            M = rigid_from_rotvec(p0[:3] + dp[:3], p0[3:] + dp[3:]) @ inv_ref
             f1 = cal.false_displacement_px(M[None, :3, :3], M[None, :3, 3])[0].mean(axis=0)
-            M = _pose_from(p0 - dp) @ inv_ref
+            M = rigid_from_rotvec(p0[:3] - dp[:3], p0[3:] - dp[3:]) @ inv_ref
             f0 = cal.false_displacement_px(M[None, :3, :3], M[None, :3, 3])[0].mean(axis=0)
             J[:, j] = Binv @ (f1 - f0) / (2 * h)
         pose_sigma[k] = np.sqrt(np.clip(np.diag(J @ motion.pose_cov[k] @ J.T), 0, None))
