@@ -44,3 +44,14 @@ def json_safe(obj):
     if isinstance(obj, (list, tuple)):
         return [json_safe(v) for v in obj]
     return obj
+
+
+def output_folder(path: str | os.PathLike) -> Path:
+    """A folder to write results into, created if missing; InputError when a file is in the way."""
+    from lidar.errors import InputError
+
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{out}: exists and is not a folder")
+    out.mkdir(parents=True, exist_ok=True)
+    return out

@@ -9,7 +9,7 @@ from typing import Optional
 
 import numpy as np
 
-from lidar.files import json_safe, write_atomic
+from lidar.files import json_safe, output_folder, write_atomic
 from lidar.errors import ProcessingError
 from projects.errors import DuplicateImportError, InputError
 from projects.store import CAMERA_DIR, Campaign, now_iso, parse_datetime, sha256_of
@@ -149,27 +149,17 @@ def crossval_summaries(c: Campaign) -> list[dict]:
 
 def write_crossval_outputs(cv: CrossValidation, camera: CameraSeries, out_dir: str | os.PathLike) -> list[Path]:
     """``crossval.json``, ``crossval.csv`` and the overlay, difference and scatter plots (PNG)."""
-    import csv
-    import io
-
     from lidar.figures import save_figure
+    from projects.exports import to_csv
     from vision.figures import difference_figure, overlay_figure, scatter_figure
 
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"{out}: exists and is not a folder")
-    out.mkdir(parents=True, exist_ok=True)
-    paths = [write_atomic(out / "crossval.json", json.dumps(json_safe(cv.to_json()), indent=2) + "\n")]
-    buf = io.StringIO()
+    out = output_folder(out_dir)
+    table = json_safe(cv.to_json())  # NaN -> None, which to_csv writes as an empty cell
+    paths = [write_atomic(out / "crossval.json", json.dumps(table, indent=2) + "\n")]
+    rows = [{**p, "flags": ";".join(p["flags"])} for p in table["pairs"]]
     cols = ["epoch", "datetime", "lidar_mm", "lidar_sigma_mm", "camera_mm", "camera_raw_mm", "camera_sigma_mm",
             "camera_n", "difference_mm", "sigma_mm", "flags"]
-    w = csv.DictWriter(buf, fieldnames=cols, lineterminator="\n")
-    w.writeheader()
-    for p in cv.pairs:
-        d = {k: getattr(p, k) for k in cols}
-        d["flags"] = ";".join(p.flags)
-        w.writerow({k: ("" if isinstance(v, float) and not np.isfinite(v) else v) for k, v in d.items()})
-    paths.append(write_atomic(out / "crossval.csv", buf.getvalue()))
+    paths.append(write_atomic(out / "crossval.csv", to_csv(rows, cols)))
     for name, fig in (("overlay.png", overlay_figure(cv, camera)), ("difference.png", difference_figure(cv)),
                       ("scatter.png", scatter_figure(cv))):
         paths.append(save_figure(fig, out / name))

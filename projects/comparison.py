@@ -18,7 +18,7 @@ from typing import Optional
 import numpy as np
 
 from lidar.errors import InputError
-from lidar.files import atomic_output
+from lidar.files import atomic_output, output_folder
 from lidar.progress import ProgressCallback, report, scaled
 from projects.errors import CampaignError
 from projects.exports import displacement_table, write_atomic
@@ -194,10 +194,7 @@ def _registration_json(e: EpochInFrame) -> dict:
 
 def write_outputs(summary: dict, out_dir: str | os.PathLike) -> list[Path]:
     """change.laz (distances as extra dimensions), summary.json, registration.csv, span_profile.csv/.png."""
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"{out}: exists and is not a folder")
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_folder(out_dir)
     arrays = summary["_arrays"]
     public = {k: v for k, v in summary.items() if k != "_arrays"}
     paths = [write_change_las(arrays["change"], out / "change.laz"),
