@@ -38,6 +38,7 @@ UNIX_NAMES = ("unix", "unix_s", "epoch_s", "posix", "unixtime")
 VALUE_NAMES = ("displacement", "disp", "deflection", "vertical", "dy", "uy", "value", "y")
 UNIT_NAMES = ("unit", "units")
 TZ_NAMES = ("tz", "timezone", "time_zone", "utc_offset", "offset")
+MAX_BAD_LISTED = 1000  # bad rows kept with their line numbers (all are counted)
 
 
 class SeriesFormatError(SurveyError):
@@ -62,7 +63,7 @@ class CameraSeries:
     time_ns : (n,) int64 UTC nanoseconds, increasing.
     value_mm : (n,) float64; NaN marks a gap value (the row was there but empty).
     source : the file it came from; ``column`` the value column used; ``unit`` the unit read.
-    bad_rows : rows left out, with line numbers (first 1000 kept), ``n_bad`` their count.
+    bad_rows : rows left out, with line numbers (the first ``MAX_BAD_LISTED``), ``n_bad`` their count.
     gaps : (start_ns, end_ns) of pauses longer than ``gap_factor`` sampling intervals.
     sampling_s : median sampling interval in seconds.
     """
@@ -190,9 +191,7 @@ def read_camera_series(path: str | os.PathLike, *, column: Optional[str] = None,
         ok_fields = counts == ncol - 1
     else:
         ok_fields = np.fromiter((len(ln.split()) == ncol for ln in body), dtype=bool, count=len(body))
-    for j in np.nonzero(~ok_fields)[0][:1000]:
-        bad.append(BadRow(body_lines[j] + 1, f"expected {ncol} fields"))
-    n_bad = int((~ok_fields).sum())
+    n_bad = _add_bad(bad, ~ok_fields, np.asarray(body_lines) + 1, lambda j: f"expected {ncol} fields")
     good_idx = np.nonzero(ok_fields)[0]
     data = "\n".join(body[j] for j in good_idx)
     try:
@@ -239,10 +238,8 @@ def read_camera_series(path: str | os.PathLike, *, column: Optional[str] = None,
             t_ns, t_ok = _times_with_zone_column(raw, df[tz_col].str.strip())
         else:
             t_ns, t_ok = _parse_times(raw, timezone)
-    for j in np.nonzero(~t_ok)[0][:max(0, 1000 - len(bad))]:
-        bad.append(BadRow(int(line_no[j]), f"time {df.iat[j, t_unix if t_unix is not None else t_col]!r} "
-                                           "is not a date-time"))
-    n_bad += int((~t_ok).sum())
+    t_of = t_unix if t_unix is not None else t_col
+    n_bad += _add_bad(bad, ~t_ok, line_no, lambda j: f"time {df.iat[j, t_of]!r} is not a date-time")
 
     # ---- values (mm)
     vraw = df[v_col].str.strip()
@@ -261,11 +258,8 @@ def read_camera_series(path: str | os.PathLike, *, column: Optional[str] = None,
         u_bad = ~np.isfinite(mapped) & t_ok & ~v_bad
         scale = np.where(np.isfinite(mapped), mapped, scale)
         file_unit = "per row (" + ", ".join(sorted(set(units[~u_bad].unique()) & set(UNITS_MM))) + ")"
-    for j in np.nonzero(v_bad)[0][:max(0, 1000 - len(bad))]:
-        bad.append(BadRow(int(line_no[j]), f"value {df.iat[j, v_col]!r} is not a number"))
-    for j in np.nonzero(u_bad)[0][:max(0, 1000 - len(bad))]:
-        bad.append(BadRow(int(line_no[j]), f"unit {df.iat[j, unit_col]!r} is not known"))
-    n_bad += int(v_bad.sum() + u_bad.sum())
+    n_bad += _add_bad(bad, v_bad, line_no, lambda j: f"value {df.iat[j, v_col]!r} is not a number")
+    n_bad += _add_bad(bad, u_bad, line_no, lambda j: f"unit {df.iat[j, unit_col]!r} is not known")
     good = t_ok & ~v_bad & ~u_bad
     n_rows = len(body)
     if good.sum() == 0:
@@ -294,9 +288,16 @@ def read_camera_series(path: str | os.PathLike, *, column: Optional[str] = None,
     if not np.all(np.diff(t_ns[good]) >= 0):
         notes.append("rows were not in time order; they were sorted")
     return CameraSeries(time_ns=t, value_mm=v, source=str(path), column=header[v_col], unit=file_unit,
-                        bad_rows=tuple(sorted(bad, key=lambda b: b.line)[:1000]), n_bad=n_bad,
+                        bad_rows=tuple(sorted(bad, key=lambda b: b.line)), n_bad=n_bad,
                         n_missing=int(np.isnan(v).sum()), n_duplicates=n_dup, gaps=gaps, sampling_s=sampling,
                         notes=tuple(notes))
+
+
+def _add_bad(bad: list, mask: np.ndarray, line_no: np.ndarray, reason) -> int:
+    """List the rows of ``mask`` as bad (up to :data:`MAX_BAD_LISTED` in all); returns how many there are."""
+    for j in np.nonzero(mask)[0][:max(0, MAX_BAD_LISTED - len(bad))]:
+        bad.append(BadRow(int(line_no[j]), reason(j)))
+    return int(np.count_nonzero(mask))
 
 
 def _is_number(s: str) -> bool:
