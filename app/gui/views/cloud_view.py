@@ -68,6 +68,8 @@ class CloudView(QWidget):
         self.lay.addLayout(bar)
         self.plotter = None
         self.cloud = None
+        self.offset = np.zeros(3)  # subtracted from the drawn points (float32 keeps millimetres near the bridge)
+        self.actor = None
         self.selected = None
         if not opengl_available():
             msg = QLabel("The 3-D view needs a display with OpenGL (it is not available on this platform).")
@@ -93,9 +95,8 @@ class CloudView(QWidget):
         self.cloud = cloud
         p = self._ensure_plotter()
         p.clear()
-        offset = np.median(cloud.xyz, axis=0) if len(cloud.xyz) else np.zeros(3)
-        self.offset = offset
-        pts = pv.PolyData((cloud.xyz - offset).astype(np.float32))
+        self.offset = np.median(cloud.xyz, axis=0) if len(cloud.xyz) else np.zeros(3)
+        pts = pv.PolyData((cloud.xyz - self.offset).astype(np.float32))
         pts[cloud.value_name] = cloud.values
         bar = dict(title=cloud.value_name, vertical=True, position_x=0.88, position_y=0.1, height=0.8, width=0.06,
                    title_font_size=12, label_font_size=11)

@@ -38,6 +38,7 @@ class DisplacementView(QWidget):
         self.limit_of: dict = {}
         self.selected_epoch = None
         self._points = []  # (x, y, row) drawn, for hover and picking
+        self._annot = None  # the hover label of the current plot
         self.canvas.mpl_connect("motion_notify_event", self._on_move)
         self.canvas.mpl_connect("button_press_event", self._on_click)
 
@@ -68,6 +69,7 @@ class DisplacementView(QWidget):
         fig.clear()
         ax = fig.add_subplot(111)
         self._points = []
+        self._annot = None
         which = self.target.currentText()
         targets = sorted({r["reflector"] for r in self.rows}) if which in ("", "all targets") else [which]
         if not self.rows:
@@ -135,7 +137,7 @@ class DisplacementView(QWidget):
     def _on_move(self, event) -> None:
         p = self._nearest(event)
         if p is None:
-            if getattr(self, "_annot", None) is not None and self._annot.get_visible():
+            if self._annot is not None and self._annot.get_visible():
                 self._annot.set_visible(False)
                 self.canvas.draw_idle()
             return
