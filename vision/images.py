@@ -60,11 +60,18 @@ def detect_sequence(main: Sequence[Path], sub: Sequence[Path], *, pattern_m: np.
     return uv, corners
 
 
-def detect_boards(paths: Sequence[Path], inner_corners: tuple[int, int]) -> list[np.ndarray]:
-    """Corners of every image where the whole board is found (for Zhang's calibration)."""
-    out = []
+def detect_boards(paths: Sequence[Path], inner_corners: tuple[int, int]) -> tuple[list[np.ndarray], tuple[int, int]]:
+    """Corners of every image where the whole board is found (for Zhang's calibration), and the
+    image size (width, height) they share."""
+    out, size = [], None
     for p in paths:
-        c = detect_checkerboard(read_gray(p), inner_corners)
+        img = read_gray(p)
+        if size is None:
+            size = img.shape[::-1]
+        elif img.shape[::-1] != size:
+            raise InputError(f"{p}: {img.shape[1]}x{img.shape[0]} pixels, the other views are {size[0]}x{size[1]}; "
+                             "Zhang's calibration needs one camera at one resolution")
+        c = detect_checkerboard(img, inner_corners)
         if c is not None:
             out.append(c)
-    return out
+    return out, size

@@ -78,13 +78,10 @@ def cmd_calibrate(args) -> int:
     pattern = _pattern(args.pattern)
     board = Checkerboard((corners[0] + 1, corners[1] + 1), args.square_mm / 1000.0)
     zhang = list_images(args.zhang)
-    views = detect_boards(zhang, corners)
+    views, size = detect_boards(zhang, corners)
     if len(views) < 3:
         raise ProcessingError(f"{args.zhang}: the board ({args.board} inner corners) was found in {len(views)} of "
                               f"{len(zhang)} images; Zhang's calibration needs at least 3")
-    from vision.images import read_gray
-
-    size = read_gray(zhang[0]).shape[::-1]
     intr = calibrate_intrinsics(board.object_points(), views, size)
     with progress_bar("calibration frames") as cb:
         uv, sub = detect_sequence(list_images(args.main), list_images(args.sub), pattern_m=pattern,
