@@ -23,7 +23,9 @@ class ScanFormatError(SurveyError):
 
     def __init__(self, path: str | os.PathLike, problem: str):
         self.path = os.fspath(path)
-        self.problem = problem
+        # Damaged files put control characters into quoted fragments: keep the message one printable line.
+        self.problem = "".join(c if c.isprintable() else "?" for c in problem)
+        problem = self.problem
         super().__init__(f"{self.path}: {problem}")
 
 

@@ -4,9 +4,10 @@
 (E57 and PTX files may hold several set-ups); :func:`read_scan` returns the one
 scan of a single-set-up file; :func:`write_scan` writes by file suffix.
 
-Supported: LAS/LAZ 1.2-1.4 (every point format), E57, PLY, PCD, PTX and ASCII
-XYZ with intensity. Anything unreadable raises :class:`~lidar.ScanFormatError`
-naming the file and the problem.
+Supported: LAS/LAZ 1.0-1.4 (every point format, COPC, EVLRs), E57, PLY, PCD,
+PTX, PTS and ASCII XYZ with intensity. Every header is checked against the
+file's size before anything is allocated; anything unreadable raises
+:class:`~lidar.ScanFormatError` naming the file and the problem.
 """
 from __future__ import annotations
 
@@ -21,13 +22,13 @@ from lidar.io.las import read_las, write_las
 from lidar.io.pcd import read_pcd, write_pcd
 from lidar.io.ply import read_ply, write_ply
 from lidar.io.ptx import read_ptx, write_ptx
-from lidar.io.xyz import read_xyz, write_xyz
+from lidar.io.xyz import read_xyz, write_pts, write_xyz
 from lidar.progress import ProgressCallback
 from lidar.scan import Scan
 
 READ_SUFFIXES = {".las": "las", ".laz": "las", ".e57": "e57", ".ply": "ply", ".pcd": "pcd", ".ptx": "ptx",
                  ".xyz": "xyz", ".txt": "xyz", ".asc": "xyz", ".pts": "xyz", ".csv": "xyz"}
-WRITE_SUFFIXES = (".las", ".laz", ".e57", ".ply", ".pcd", ".ptx", ".xyz", ".txt")
+WRITE_SUFFIXES = (".las", ".laz", ".e57", ".ply", ".pcd", ".ptx", ".pts", ".xyz", ".txt")
 
 
 def sniff_format(path: str | os.PathLike) -> str:
@@ -90,9 +91,11 @@ def write_scan(scan: Scan, path: str | os.PathLike) -> Path:
         return write_ptx(scan, path)
     if suffix in (".xyz", ".txt"):
         return write_xyz(scan, path)
+    if suffix == ".pts":
+        return write_pts(scan, path)
     raise InputError(f"{path}: cannot write '{suffix or '(no suffix)'}'; use one of {', '.join(WRITE_SUFFIXES)}")
 
 
 __all__ = ["read_scan", "read_scans", "write_scan", "sniff_format", "read_las", "write_las", "read_e57",
            "write_e57", "read_ply", "write_ply", "read_pcd", "write_pcd", "read_ptx", "write_ptx",
-           "read_xyz", "write_xyz"]
+           "read_xyz", "write_xyz", "write_pts"]

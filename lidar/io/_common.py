@@ -10,6 +10,7 @@ import numpy as np
 
 from lidar.files import atomic_output  # noqa: F401  (used by every writer)
 from lidar.errors import ScanFormatError
+from lidar.io.intensity import detect_convention
 from lidar.scan import Scan, normalise_intensity
 
 
@@ -49,7 +50,10 @@ def make_scan(
     """Build a Scan from decoded arrays: drop non-finite points, normalise intensity.
 
     ``finite=True`` tells that the values cannot be NaN/inf (integer formats)
-    and skips that check. Raises ScanFormatError when nothing valid is left.
+    and skips that check. ``limits`` is an intensity range the file declares;
+    without one the vendor convention is recognised from the values
+    (:mod:`lidar.io.intensity`). Raises ScanFormatError when nothing valid is
+    left or the header's pose is not a finite rigid transform.
     """
     meta = {"format": fmt, **(metadata or {})}
     xyz = np.asarray(xyz, dtype=np.float64)
@@ -70,10 +74,20 @@ def make_scan(
         raise ScanFormatError(path, "holds no valid points" + (f" ({dropped} were NaN/inf)" if dropped else ""))
     intensity = None
     if raw is not None:
+        convention, limits = detect_convention(raw, declared=limits)
         if limits is None:
             limits = (float(raw.min()), float(raw.max()))
+        meta["intensity_convention"] = convention
         meta["intensity_limits"] = (float(limits[0]), float(limits[1]))
         intensity = normalise_intensity(raw, limits)
+    if pose is not None:
+        pose = np.asarray(pose, dtype=np.float64)
+        if pose.shape != (4, 4) or not np.isfinite(pose).all():
+            raise ScanFormatError(path, "the scanner pose in the header is not a finite 4x4 transform")
+        rot = pose[:3, :3]
+        if not np.allclose(rot @ rot.T, np.eye(3), atol=1e-5) or not np.allclose(pose[3], (0, 0, 0, 1), atol=1e-9):
+            raise ScanFormatError(path, "the scanner pose in the header is not a rigid transform "
+                                        "(its rotation is not orthonormal)")
     return Scan(
         xyz_socs=np.ascontiguousarray(xyz),
         intensity=intensity,

@@ -18,6 +18,7 @@ from lidar.io._common import (
     quiet_stderr,
     raw_for_writing,
 )
+from lidar.io.e57_header import check_e57
 from lidar.progress import ProgressCallback, report
 from lidar.scan import Scan
 
@@ -62,6 +63,15 @@ def read_e57(path: str | os.PathLike, *, progress: Optional[ProgressCallback] = 
     import pye57
 
     p = check_readable(path)
+    facts = check_e57(p)  # pages, XML and point counts checked before libE57 allocates anything
+    if not facts.scans:
+        if facts.images:
+            raise ScanFormatError(p, f"the E57 file holds {facts.images} image(s) and no point scans; export the "
+                                     "point cloud from the scanner software")
+        raise ScanFormatError(p, "the E57 file holds no scans")
+    for k, s in enumerate(facts.scans):
+        if s.record_count == 0:
+            raise ScanFormatError(p, f"scan {k} ({s.name}) holds no points")
     scans: list[Scan] = []
     try:
         with quiet_stderr():
@@ -73,7 +83,7 @@ def read_e57(path: str | os.PathLike, *, progress: Optional[ProgressCallback] = 
         if count == 0:
             raise ScanFormatError(p, "the E57 file holds no scans")
         for i in range(count):
-            scans.append(_read_one(e57, p, i))
+            scans.append(_read_one(e57, p, i, facts.version))
             report(progress, (i + 1) / count, f"E57 scan {i + 1}/{count}")
     except ScanFormatError:
         raise
@@ -87,7 +97,7 @@ def read_e57(path: str | os.PathLike, *, progress: Optional[ProgressCallback] = 
     return scans
 
 
-def _read_one(e57, p: Path, i: int) -> Scan:
+def _read_one(e57, p: Path, i: int, version: str) -> Scan:
     with quiet_stderr():
         header = e57.get_header(i)
         node = e57.data3d[i]
@@ -130,7 +140,7 @@ def _read_one(e57, p: Path, i: int) -> Scan:
     pose = pose_from_quaternion(header.rotation, header.translation)
     return make_scan(
         p, xyz, raw, fmt="E57", limits=limits, pose=pose, name=name, grid_index=grid,
-        metadata={"scan_index": i, "fields": sorted(fields)},
+        metadata={"scan_index": i, "fields": sorted(fields), "version": version},
     )
 
 

@@ -18,6 +18,7 @@ import numpy as np
 
 from lidar.errors import ScanFormatError
 from lidar.io._common import atomic_output, first_line, check_readable, make_scan, raw_for_writing
+from lidar.io.las_header import check_las_header
 from lidar.progress import ProgressCallback, report
 from lidar.scan import Scan
 
@@ -70,10 +71,13 @@ def read_las(path: str | os.PathLike, *, progress: Optional[ProgressCallback] = 
         Not a LAS/LAZ file, corrupt or truncated, or without points.
     """
     p = check_readable(path)
+    facts = check_las_header(p)  # refuse lying headers before laspy allocates or loops on them
     try:
         with laspy.open(p, laz_backend=_laz_backend()) as reader:
             header = reader.header
             n = int(header.point_count)
+            if n != facts.point_count:
+                raise ScanFormatError(p, f"LAS point count unclear: {n} read, {facts.point_count} checked")
             if n == 0:
                 raise ScanFormatError(p, "the LAS header declares 0 points; nothing to read")
             scales = np.asarray(header.scales, dtype=np.float64)
@@ -210,7 +214,9 @@ def write_las(scan: Scan, path: str | os.PathLike, *, scale_m: Optional[float] =
     las.y = xyz[:, 1]
     las.z = xyz[:, 2]
     raw = raw_for_writing(scan)
-    if raw.dtype != np.uint16:
+    if raw.dtype != np.uint16 and raw.size and np.all((raw >= 0) & (raw <= 65535) & (raw == np.round(raw))):
+        raw = raw.astype(np.uint16)  # whole numbers in the 16-bit range are stored as they are
+    elif raw.dtype != np.uint16:
         raw64 = raw.astype(np.float64)
         lo_i, hi_i = float(raw64.min()), float(raw64.max())
         raw = np.round((raw64 - lo_i) / (hi_i - lo_i) * 65535 if hi_i > lo_i else raw64 * 0).astype(np.uint16)

@@ -1,133 +1,221 @@
-"""PCD (Point Cloud Library) files: ascii, binary and binary_compressed (LZF)."""
+"""PCD (Point Cloud Library) files: ascii, binary and binary_compressed (LZF).
+
+The header is parsed and checked here, so files written by PCL, PDAL, Open3D,
+CloudCompare and pypcd all open: field names in any case (``X Y Z Intensity``
+from PDAL), the usual intensity aliases, ASCII values separated by blanks,
+tabs or commas. Every count the header claims (``POINTS``, ``WIDTH`` x
+``HEIGHT``, the compressed and uncompressed sizes) is checked against the
+bytes present before anything is allocated. LZF blocks are decoded by the C
+codec PCL's own Python users rely on (``python-neo-lzf``, the ``lzf`` module
+pypcd4 uses).
+"""
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from lidar.errors import ScanFormatError
 from lidar.io._common import atomic_output, check_readable, make_scan, pose_from_quaternion, quaternion_from_pose, raw_for_writing
+from lidar.io.names import find_column
 from lidar.scan import Scan
 
-_TYPES = {("F", 4): "f4", ("F", 8): "f8", ("U", 1): "u1", ("U", 2): "u2", ("U", 4): "u4", ("U", 8): "u8",
-          ("I", 1): "i1", ("I", 2): "i2", ("I", 4): "i4", ("I", 8): "i8"}
+_TYPES = {("F", 4): "<f4", ("F", 8): "<f8", ("U", 1): "u1", ("U", 2): "<u2", ("U", 4): "<u4", ("U", 8): "<u8",
+          ("I", 1): "i1", ("I", 2): "<i2", ("I", 4): "<i4", ("I", 8): "<i8"}
+#: A PCD header is a few hundred bytes; more than this without a DATA line is not a PCD file.
+MAX_HEADER_BYTES = 65536
+#: Field counts (COUNT) above this are not point attributes (PCL's largest descriptor has 352).
+MAX_FIELD_COUNT = 4096
 
 
-def _parse_header(p: Path, blob: bytes) -> tuple[dict, int]:
-    header: dict[str, list[str]] = {}
+@dataclass(frozen=True)
+class PcdHeader:
+    fields: tuple[str, ...]
+    sizes: tuple[int, ...]
+    types: tuple[str, ...]
+    counts: tuple[int, ...]
+    points: int
+    viewpoint: tuple[float, ...]
+    mode: str
+    data_start: int
+
+    @property
+    def row_bytes(self) -> int:
+        return sum(s * c for s, c in zip(self.sizes, self.counts))
+
+
+def _ints(p: Path, key: str, values: list[str], n: int | None = None) -> list[int]:
+    try:
+        out = [int(v) for v in values]
+    except ValueError as exc:
+        raise ScanFormatError(p, f"PCD header field {key} is not a list of whole numbers ({' '.join(values)[:40]})") from exc
+    if n is not None and len(out) != n:
+        raise ScanFormatError(p, f"PCD header field {key} has {len(out)} entries for {n} fields")
+    if any(v < 0 for v in out):
+        raise ScanFormatError(p, f"PCD header field {key} is negative")
+    return out
+
+
+def parse_header(p: Path, head: bytes) -> PcdHeader:
+    """Parse and check a PCD header (the bytes up to and including the DATA line)."""
+    entries: dict[str, list[str]] = {}
     pos = 0
     while True:
-        end = blob.find(b"\n", pos)
+        end = head.find(b"\n", pos)
         if end < 0:
-            raise ScanFormatError(p, "PCD header ends before its DATA line")
-        line = blob[pos:end].decode("ascii", "replace").strip()
+            raise ScanFormatError(p, "not a PCD file or a damaged header (no DATA line)")
+        line = head[pos:end].decode("ascii", "replace").strip()
         pos = end + 1
         if not line or line.startswith("#"):
             continue
         key, *values = line.split()
-        header[key.upper()] = values
+        entries[key.upper()] = values
         if key.upper() == "DATA":
-            return header, pos
-        if len(header) > 32:
-            raise ScanFormatError(p, "not a PCD file (no DATA line in the header)")
-
-
-def lzf_decompress(data: bytes, size: int) -> bytes:
-    """Decompress an LZF block (the codec of PCD ``binary_compressed``)."""
-    out = bytearray(size)
-    i = o = 0
-    n = len(data)
-    while i < n:
-        ctrl = data[i]
-        i += 1
-        if ctrl < 32:  # literal run
-            length = ctrl + 1
-            out[o:o + length] = data[i:i + length]
-            i += length
-            o += length
-        else:  # back reference
-            length = ctrl >> 5
-            if length == 7:
-                length += data[i]
-                i += 1
-            ref = o - ((ctrl & 0x1F) << 8) - data[i] - 1
-            i += 1
-            length += 2
-            if ref < 0:
-                raise ValueError("corrupt LZF stream")
-            for k in range(length):  # may overlap: copy byte by byte
-                out[o + k] = out[ref + k]
-            o += length
-    if o != size:
-        raise ValueError(f"LZF stream decodes to {o} bytes, expected {size}")
-    return bytes(out)
+            break
+    for key in ("FIELDS", "SIZE", "TYPE"):
+        if key not in entries or not entries[key]:
+            raise ScanFormatError(p, f"the PCD header has no {key} line")
+    fields = tuple(entries["FIELDS"])
+    nf = len(fields)
+    sizes = _ints(p, "SIZE", entries["SIZE"], nf)
+    types = tuple(t.upper() for t in entries["TYPE"])
+    if len(types) != nf:
+        raise ScanFormatError(p, f"PCD header field TYPE has {len(types)} entries for {nf} fields")
+    counts = _ints(p, "COUNT", entries.get("COUNT", ["1"] * nf), nf)
+    for f, s, t, c in zip(fields, sizes, types, counts):
+        if (t, s) not in _TYPES:
+            raise ScanFormatError(p, f"PCD field {f} has an unsupported type {t}{s}")
+        if not 1 <= c <= MAX_FIELD_COUNT:
+            raise ScanFormatError(p, f"PCD field {f} has COUNT {c}; expected 1-{MAX_FIELD_COUNT}")
+    if "WIDTH" in entries and "HEIGHT" in entries:
+        width, height = _ints(p, "WIDTH", entries["WIDTH"], 1)[0], _ints(p, "HEIGHT", entries["HEIGHT"], 1)[0]
+        grid = width * height
+    else:
+        grid = None
+    if "POINTS" in entries:
+        points = _ints(p, "POINTS", entries["POINTS"], 1)[0]
+        if grid is not None and grid != points:
+            raise ScanFormatError(p, f"PCD header disagrees with itself: POINTS {points}, WIDTH x HEIGHT {grid}")
+    elif grid is not None:
+        points = grid
+    else:
+        raise ScanFormatError(p, "the PCD header has neither POINTS nor WIDTH and HEIGHT")
+    viewpoint: tuple[float, ...] = ()
+    if "VIEWPOINT" in entries:
+        try:
+            viewpoint = tuple(float(v) for v in entries["VIEWPOINT"])
+        except ValueError as exc:
+            raise ScanFormatError(p, "PCD VIEWPOINT is not 7 numbers") from exc
+        if len(viewpoint) != 7:
+            raise ScanFormatError(p, f"PCD VIEWPOINT has {len(viewpoint)} numbers; it needs 7 (tx ty tz qw qx qy qz)")
+    mode = (entries["DATA"] or [""])[0].lower()
+    if mode not in ("ascii", "binary", "binary_compressed"):
+        raise ScanFormatError(p, f"unsupported PCD DATA mode '{mode}' (ascii, binary or binary_compressed)")
+    return PcdHeader(fields, tuple(sizes), types, tuple(counts), points, viewpoint, mode, pos)
 
 
 def read_pcd(path: str | os.PathLike) -> Scan:
-    """Read a PCD file's x, y, z and intensity, and its VIEWPOINT as the pose."""
+    """Read a PCD file's x, y, z and intensity, and its VIEWPOINT as the pose.
+
+    Raises
+    ------
+    ScanFormatError
+        A malformed header, counts the file cannot hold, a damaged LZF block,
+        no x/y/z fields, or no valid points.
+    """
     p = check_readable(path)
-    blob = p.read_bytes()
-    try:
-        header, start = _parse_header(p, blob)
-        fields = header["FIELDS"]
-        sizes = [int(s) for s in header["SIZE"]]
-        types = header["TYPE"]
-        counts = [int(c) for c in header.get("COUNT", ["1"] * len(fields))]
-        n = int(header["POINTS"][0]) if "POINTS" in header else int(header["WIDTH"][0]) * int(header["HEIGHT"][0])
-        mode = header["DATA"][0].lower()
-    except ScanFormatError:
-        raise
-    except (KeyError, ValueError, IndexError) as exc:
-        raise ScanFormatError(p, f"not a PCD file or a malformed header ({exc})") from exc
-    if not {"x", "y", "z"} <= set(fields):
-        raise ScanFormatError(p, "the PCD file has no x, y, z fields")
-    if n == 0:
+    size = p.stat().st_size
+    with open(p, "rb") as fh:
+        head = fh.read(MAX_HEADER_BYTES)
+    h = parse_header(p, head)
+    cx, cy, cz = (find_column(h.fields, axis) for axis in ("x", "y", "z"))
+    if None in (cx, cy, cz):
+        raise ScanFormatError(p, f"the PCD file has no x, y, z fields (fields: {' '.join(h.fields)[:80]})")
+    ci = find_column(h.fields, "intensity")
+    if h.points == 0:
         raise ScanFormatError(p, "the PCD header declares 0 points; nothing to read")
-    try:
-        dtype = np.dtype([(f, _TYPES[(t.upper(), s)], (c,)) if c > 1 else (f, _TYPES[(t.upper(), s)])
-                          for f, s, t, c in zip(fields, sizes, types, counts)])
-    except KeyError as exc:
-        raise ScanFormatError(p, f"unsupported PCD field type {exc}") from exc
-    body = blob[start:]
-    try:
-        if mode == "ascii":
-            table = np.loadtxt(body.decode("ascii").splitlines(), dtype=np.float64, ndmin=2)
-            if table.shape[0] < n:
-                raise ScanFormatError(p, f"truncated: the header declares {n} points but the file holds {table.shape[0]}")
-            cols = {}
-            k = 0
-            for f, c in zip(fields, counts):
-                cols[f] = table[:n, k]
-                k += c
-        elif mode == "binary":
-            if len(body) < n * dtype.itemsize:
-                raise ScanFormatError(p, f"truncated: the header declares {n} points but the file holds {len(body) // dtype.itemsize}")
-            rec = np.frombuffer(body, dtype=dtype, count=n)
-            cols = {f: rec[f] for f in fields}
-        elif mode == "binary_compressed":
-            csize, usize = np.frombuffer(body[:8], dtype="<u4")
-            raw = lzf_decompress(body[8:8 + int(csize)], int(usize))
-            cols, off = {}, 0
-            for f, s, t, c in zip(fields, sizes, types, counts):  # column-major layout
-                width = s * c * n
-                cols[f] = np.frombuffer(raw[off:off + width], dtype=_TYPES[(t.upper(), s)]).reshape(n, c)[:, 0]
-                off += width
-        else:
-            raise ScanFormatError(p, f"unsupported PCD DATA mode '{mode}'")
-    except ScanFormatError:
-        raise
-    except (ValueError, IndexError) as exc:
-        raise ScanFormatError(p, f"corrupt PCD point data ({exc})") from exc
-    xyz = np.column_stack([cols["x"], cols["y"], cols["z"]]).astype(np.float64)
-    raw_i = next((np.asarray(cols[k]) for k in ("intensity", "Intensity", "reflectance") if k in cols), None)
+    body_bytes = size - h.data_start
+    if h.mode == "ascii":
+        cols = _read_ascii(p, h, body_bytes)
+    elif h.mode == "binary":
+        if h.points * h.row_bytes > body_bytes:
+            raise ScanFormatError(p, f"truncated or lying PCD header: it declares {h.points} points of "
+                                     f"{h.row_bytes} bytes, the file holds {body_bytes // max(h.row_bytes, 1)}")
+        rec = np.fromfile(p, dtype=_record_dtype(h), count=h.points, offset=h.data_start)
+        cols = [rec[f"f{k}"] if h.counts[k] == 1 else rec[f"f{k}"][:, 0] for k in range(len(h.fields))]
+    else:
+        cols = _read_compressed(p, h, body_bytes)
+    xyz = np.column_stack([cols[cx], cols[cy], cols[cz]]).astype(np.float64)
+    raw_i = np.asarray(cols[ci]) if ci is not None else None
     pose = None
-    if "VIEWPOINT" in header and len(header["VIEWPOINT"]) == 7:
-        v = [float(x) for x in header["VIEWPOINT"]]
-        pose = pose_from_quaternion(v[3:], v[:3])
+    if h.viewpoint:
+        pose = pose_from_quaternion(h.viewpoint[3:], h.viewpoint[:3])
         if np.allclose(pose, np.eye(4)):
             pose = None
-    return make_scan(p, xyz, raw_i, fmt="PCD", pose=pose, metadata={"pcd_data": mode})
+    return make_scan(p, xyz, raw_i, fmt="PCD", pose=pose,
+                     metadata={"pcd_data": h.mode, "fields": list(h.fields)})
+
+
+def _record_dtype(h: PcdHeader) -> np.dtype:
+    return np.dtype([(f"f{k}", _TYPES[(t, s)], (c,)) if c > 1 else (f"f{k}", _TYPES[(t, s)])
+                     for k, (s, t, c) in enumerate(zip(h.sizes, h.types, h.counts))])
+
+
+def _read_ascii(p: Path, h: PcdHeader, body_bytes: int) -> list[np.ndarray]:
+    ncols = sum(h.counts)
+    if h.points * (2 * ncols) > body_bytes + 1:  # each value needs at least a digit and a separator
+        raise ScanFormatError(p, f"truncated or lying PCD header: it declares {h.points} points, the ASCII data "
+                                 f"has room for at most {(body_bytes + 1) // (2 * ncols)}")
+    import pandas as pd
+
+    with open(p, "rb") as fh:
+        fh.seek(h.data_start)
+        first = fh.readline().decode("ascii", "replace")
+        fh.seek(h.data_start)
+        sep = "," if "," in first else r"\s+"
+        try:
+            table = pd.read_csv(fh, sep=sep, header=None, nrows=h.points, dtype=np.float64, engine="c",
+                                on_bad_lines="error", skip_blank_lines=True).to_numpy()
+        except (ValueError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
+            raise ScanFormatError(p, f"malformed PCD ASCII point line ({str(exc).splitlines()[0][:80]})") from exc
+    if table.shape[0] < h.points:
+        raise ScanFormatError(p, f"truncated: the PCD header declares {h.points} points, the file holds {table.shape[0]}")
+    if table.shape[1] < ncols:
+        raise ScanFormatError(p, f"PCD ASCII lines have {table.shape[1]} values; the header declares {ncols}")
+    starts = np.cumsum((0,) + h.counts[:-1])
+    return [table[:, s] for s in starts]
+
+
+def _read_compressed(p: Path, h: PcdHeader, body_bytes: int) -> list[np.ndarray]:
+    import lzf
+
+    if body_bytes < 8:
+        raise ScanFormatError(p, "truncated: the PCD compressed block has no size fields")
+    with open(p, "rb") as fh:
+        fh.seek(h.data_start)
+        csize, usize = (int(v) for v in np.frombuffer(fh.read(8), dtype="<u4"))
+        if csize > body_bytes - 8:
+            raise ScanFormatError(p, f"truncated: the PCD compressed block claims {csize} bytes, "
+                                     f"{body_bytes - 8} are present")
+        if usize != h.points * h.row_bytes:
+            raise ScanFormatError(p, f"PCD compressed block claims {usize} bytes once decompressed; "
+                                     f"{h.points} points of {h.row_bytes} bytes need {h.points * h.row_bytes}")
+        block = fh.read(csize)
+    try:
+        raw = lzf.decompress(block, usize) if usize else b""
+    except ValueError as exc:
+        raise ScanFormatError(p, f"damaged PCD compressed block ({exc})") from exc
+    if raw is None or len(raw) != usize:
+        raise ScanFormatError(p, f"damaged PCD compressed block (decodes to {0 if raw is None else len(raw)} "
+                                 f"bytes, expected {usize})")
+    cols, off = [], 0
+    for s, t, c in zip(h.sizes, h.types, h.counts):  # column-major: every value of a field, then the next
+        width = s * c * h.points
+        cols.append(np.frombuffer(raw, dtype=_TYPES[(t, s)], count=c * h.points, offset=off).reshape(h.points, c)[:, 0])
+        off += width
+    return cols
 
 
 def write_pcd(scan: Scan, path: str | os.PathLike) -> Path:

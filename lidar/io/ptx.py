@@ -60,7 +60,6 @@ def read_ptx(path: str | os.PathLike) -> list[Scan]:
         pose = mat.T
         scans.append(
             make_scan(p, xyz[valid], raw[valid] if raw is not None else None, fmt="PTX",
-                      limits=(0.0, 1.0) if raw is not None and raw.min() >= 0 and raw.max() <= 1 else None,
                       pose=pose, name=f"{p.stem}#{len(scans)}", grid_index=grid[valid],
                       metadata={"scan_index": len(scans), "rows": rows, "cols": cols})
         )
