@@ -26,6 +26,7 @@ from projects.processing import baseline_epoch, read_files
 from projects.store import Campaign, now_iso
 from registration.change import METHODS, ChangeResult, cloud_to_cloud, core_points_grid, m3c2
 from registration.icp import IcpResult, refine_icp, stable_mask
+from registration.ndt import refine_ndt
 from registration.profile import span_profile
 from registration.targets import TargetRegistration, register_targets
 from registration.transform import Transform
@@ -57,12 +58,24 @@ def _below_deck_m(meas_xyz: np.ndarray) -> Optional[float]:
     return float(np.nanmin(z) - 0.5) if np.isfinite(z).any() else None
 
 
-def bring_to_campaign_frame(c: Campaign, label: str, base: str, *, use_icp: bool = True, base_xyz=None,
-                            progress: Optional[ProgressCallback] = None) -> EpochInFrame:
-    """Register epoch ``label`` onto the baseline epoch ``base`` (targets, then ICP on stable parts).
+#: Refinements of the target registration on the stable parts.
+REFINEMENTS = ("icp", "ndt", "targets")
 
-    ``base_xyz``, the baseline's coarse scan, is read here when not given.
+
+def bring_to_campaign_frame(c: Campaign, label: str, base: str, *, use_icp: bool = True, base_xyz=None,
+                            refinement: Optional[str] = None,
+                            progress: Optional[ProgressCallback] = None) -> EpochInFrame:
+    """Register epoch ``label`` onto the baseline epoch ``base`` (targets, then ICP or NDT on stable parts).
+
+    ``refinement`` is ``icp`` (Open3D, the default), ``ndt`` (PCL's
+    pcl_ndt3d) or ``targets`` (no refinement); ``use_icp=False`` is the older
+    spelling of ``targets``. ``base_xyz``, the baseline's coarse scan, is read
+    here when not given.
     """
+    refinement = refinement or ("icp" if use_icp else "targets")
+    if refinement not in REFINEMENTS:
+        raise InputError(f"unknown registration refinement {refinement!r}; use {', '.join(REFINEMENTS)}")
+    use_icp = refinement != "targets"
     if base_xyz is None and (label == base or use_icp):
         base_xyz = read_files(c, c.files(base, "coarse")).xyz_socs
     if label == base:
@@ -85,9 +98,9 @@ def bring_to_campaign_frame(c: Campaign, label: str, base: str, *, use_icp: bool
         mask_src = stable_mask(scan.xyz_socs, src[used],
                                exclude_above_m=_below_deck_m(_centroid_arrays(c, label, meas)[0]))
         mask_dst = stable_mask(base_xyz, dst[used], exclude_above_m=_below_deck_m(_centroid_arrays(c, base, meas)[0]))
-        report(progress, 0.4, "ICP on stable parts")
-        icp = refine_icp(scan.xyz_socs[mask_src], base_xyz[mask_dst], tr.transform,
-                         progress=scaled(progress, 0.4, 0.95))
+        report(progress, 0.4, f"{refinement.upper()} on stable parts")
+        refine = refine_ndt if refinement == "ndt" else refine_icp
+        icp = refine(scan.xyz_socs[mask_src], base_xyz[mask_dst], tr.transform, progress=scaled(progress, 0.4, 0.95))
         tf = icp.transform
     return EpochInFrame(label, tr, icp, tf, tf.apply(scan.xyz_socs))
 
@@ -104,7 +117,7 @@ def _deck_mask(xyz: np.ndarray, targets: np.ndarray, radius_m: float = 1.0, band
 
 
 def compare_epochs(c: Campaign, from_label: str, to_label: str, *, method: str = "m3c2", use_icp: bool = True,
-                   bin_m: float = 2.5, core_spacing_m: float = 0.25,
+                   refinement: Optional[str] = None, bin_m: float = 2.5, core_spacing_m: float = 0.25,
                    progress: Optional[ProgressCallback] = None) -> dict:
     """Register two epochs into the campaign frame and compute their change and span profile.
 
@@ -121,9 +134,10 @@ def compare_epochs(c: Campaign, from_label: str, to_label: str, *, method: str =
         raise CampaignError("no measured epoch yet: process the campaign first ('bridgesurvey process')")
     report(progress, 0.0, f"reading {base}")
     base_xyz = read_files(c, c.files(base, "coarse")).xyz_socs  # once, for both epochs
-    ea = bring_to_campaign_frame(c, from_label, base, use_icp=use_icp, base_xyz=base_xyz,
+    refinement = refinement or ("icp" if use_icp else "targets")
+    ea = bring_to_campaign_frame(c, from_label, base, refinement=refinement, base_xyz=base_xyz,
                                  progress=scaled(progress, 0.05, 0.35))
-    eb = bring_to_campaign_frame(c, to_label, base, use_icp=use_icp, base_xyz=base_xyz,
+    eb = bring_to_campaign_frame(c, to_label, base, refinement=refinement, base_xyz=base_xyz,
                                  progress=scaled(progress, 0.35, 0.7))
     layout = c.layout()
     refs, meas = layout.ids_in("reference"), layout.ids_in("measurement")
@@ -186,7 +200,7 @@ def _registration_json(e: EpochInFrame) -> dict:
         from registration.transform import pose_difference
 
         dt_m, dr_deg = pose_difference(e.registration.transform, e.icp.transform)
-        out["icp"] = {"fitness": e.icp.fitness, "rms_mm": e.icp.rms_m * 1e3, "iterations": list(e.icp.iterations),
+        out["icp"] = {"method": e.icp.correction.method, "fitness": e.icp.fitness, "rms_mm": e.icp.rms_m * 1e3, "iterations": list(e.icp.iterations),
                       "voxels_m": list(e.icp.voxels_m), "points": [e.icp.n_source, e.icp.n_target],
                       "change_from_targets_mm": dt_m * 1e3, "change_from_targets_deg": dr_deg}
     return out

@@ -18,7 +18,10 @@ def register(sub) -> None:
     p.add_argument("--to", dest="end", required=True, help="second epoch")
     p.add_argument("--method", choices=("c2c", "m3c2"), default="m3c2")
     p.add_argument("--out", type=Path, required=True, help="output folder")
-    p.add_argument("--no-icp", action="store_true", help="register on the targets only")
+    p.add_argument("--registration", choices=("icp", "ndt", "targets"), default=None,
+                   help="refine the target registration on the stable parts with Open3D ICP (default), PCL's NDT "
+                        "(pcl_ndt3d, Debian pcl-tools) or not at all (targets)")
+    p.add_argument("--no-icp", action="store_true", help="register on the targets only (= --registration targets)")
     p.add_argument("--bin-m", type=float, default=2.5, help="span profile bin length (default 2.5 m)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=cmd_compare)
@@ -30,7 +33,8 @@ def cmd_compare(args) -> int:
 
     with Campaign.open(args.dir) as c:
         with progress_bar("comparing") as cb:
-            summary = compare_epochs(c, args.start, args.end, method=args.method, use_icp=not args.no_icp,
+            summary = compare_epochs(c, args.start, args.end, method=args.method,
+                                     refinement=args.registration or ("targets" if args.no_icp else "icp"),
                                      bin_m=args.bin_m, progress=cb)
         paths = write_outputs(summary, args.out)
         save_comparison(c, summary)
@@ -44,7 +48,7 @@ def cmd_compare(args) -> int:
         if "targets" in reg:
             icp = reg.get("icp")
             print(f"  {lab}: targets RMS {reg['targets']['rms_mm']:.2f} mm" +
-                  (f"; ICP fitness {icp['fitness']:.2f}, RMS {icp['rms_mm']:.1f} mm, iterations {icp['iterations']}, "
+                  (f"; {icp.get('method', 'icp').upper()} fitness {icp['fitness']:.2f}, RMS {icp['rms_mm']:.1f} mm, iterations {icp['iterations']}, "
                    f"moved the result {icp['change_from_targets_mm']:.2f} mm" if icp else ""))
             for w in reg["targets"]["warnings"]:
                 print(f"  warning: {w}")

@@ -1,15 +1,19 @@
 """PTX (Leica ASCII grid) files: one or several scans, each with its header pose and grid."""
 from __future__ import annotations
 
-import io
+import itertools
 import os
 from pathlib import Path
 
 import numpy as np
 
 from lidar.errors import ScanFormatError
-from lidar.io._common import atomic_output, check_readable, make_scan, raw_for_writing
+from lidar.io._common import atomic_output, check_readable, first_line, make_scan, raw_for_writing
 from lidar.scan import Scan
+
+
+#: Point lines parsed at a time (memory: the decoded arrays plus one chunk of text).
+CHUNK_LINES = 262_144
 
 
 def read_ptx(path: str | os.PathLike) -> list[Scan]:
@@ -19,54 +23,78 @@ def read_ptx(path: str | os.PathLike) -> list[Scan]:
     axes, and a 4x4 transform (stored transposed, translation in the last row);
     that transform becomes the scan's pose. Points are in the scanner's frame.
     Grid cells without a return ((0, 0, 0)) are dropped; each kept point keeps
-    its (row, col) grid index.
+    its (row, col) grid index. Point lines are ``x y z intensity`` with
+    optional ``r g b``; the rows x columns a header claims are checked against
+    the bytes left before any array is made.
     """
     p = check_readable(path)
-    try:
-        lines = p.read_text(encoding="ascii", errors="strict").splitlines()
-    except UnicodeDecodeError as exc:
-        raise ScanFormatError(p, "not a PTX file (binary content)") from exc
+    size = p.stat().st_size
     scans: list[Scan] = []
-    pos = 0
-    while pos < len(lines):
-        if not lines[pos].strip():
-            pos += 1
-            continue
-        try:
-            cols = int(lines[pos].split()[0])
-            rows = int(lines[pos + 1].split()[0])
-            mat = np.loadtxt(lines[pos + 6:pos + 10], dtype=np.float64, ndmin=2)
-            if cols <= 0 or rows <= 0 or mat.shape != (4, 4):
-                raise ValueError("bad header")
-        except (ValueError, IndexError) as exc:
-            raise ScanFormatError(p, f"not a PTX file or a malformed scan header at line {pos + 1}") from exc
-        n = rows * cols
-        start = pos + 10
-        body = lines[start:start + n]
-        if len(body) < n:
-            raise ScanFormatError(p, f"truncated: scan {len(scans)} declares {n} points but the file holds {len(body)}")
-        try:
-            table = np.loadtxt(io.StringIO("\n".join(body)), dtype=np.float64, ndmin=2)
-        except ValueError as exc:
-            raise ScanFormatError(p, f"corrupt point line in scan {len(scans)} ({exc})") from exc
-        if table.shape[1] < 3:
-            raise ScanFormatError(p, f"scan {len(scans)}: point lines need at least x y z")
-        xyz = table[:, :3]
-        raw = table[:, 3] if table.shape[1] >= 4 else None
-        # PTX is written column by column: point k is at column k // rows, row k % rows.
-        k = np.arange(n)
-        grid = np.column_stack([k % rows, k // rows]).astype(np.int32)
-        valid = np.any(xyz != 0.0, axis=1)
-        pose = mat.T
-        scans.append(
-            make_scan(p, xyz[valid], raw[valid] if raw is not None else None, fmt="PTX",
-                      pose=pose, name=f"{p.stem}#{len(scans)}", grid_index=grid[valid],
-                      metadata={"scan_index": len(scans), "rows": rows, "cols": cols})
-        )
-        pos = start + n
+    with open(p, "rb") as fh:
+        while True:
+            head = []
+            while len(head) < 10:
+                raw = fh.readline(4096)
+                if not raw:
+                    break
+                if b"\0" in raw:
+                    raise ScanFormatError(p, "not a PTX file (binary content)")
+                if raw.strip() or head:
+                    head.append(raw.decode("ascii", "replace"))
+            if not head:
+                break
+            k = len(scans)
+            try:
+                cols = int(head[0].split()[0])
+                rows = int(head[1].split()[0])
+                mat = np.array([[float(v) for v in ln.split()[:4]] for ln in head[6:10]], dtype=np.float64)
+                if cols <= 0 or rows <= 0 or mat.shape != (4, 4):
+                    raise ValueError("bad header")
+            except (ValueError, IndexError) as exc:
+                raise ScanFormatError(p, f"not a PTX file or a malformed header of scan {k}") from exc
+            n = rows * cols
+            left = size - fh.tell()
+            if n * 6 > left + 1:  # "0 0 0\n" is the shortest point line
+                raise ScanFormatError(p, f"truncated or lying PTX header: scan {k} declares {rows} x {cols} = {n} "
+                                         f"points, the file has room for at most {(left + 1) // 6}")
+            table = _read_points(p, fh, n, k)
+            xyz = table[:, :3]
+            raw_i = table[:, 3] if table.shape[1] >= 4 else None
+            # PTX is written column by column: point j is at column j // rows, row j % rows.
+            j = np.arange(n)
+            grid = np.column_stack([j % rows, j // rows]).astype(np.int32)
+            valid = np.any(xyz != 0.0, axis=1)
+            scans.append(
+                make_scan(p, xyz[valid], raw_i[valid] if raw_i is not None else None, fmt="PTX",
+                          pose=mat.T, name=f"{p.stem}#{k}", grid_index=grid[valid],
+                          metadata={"scan_index": k, "rows": rows, "cols": cols})
+            )
     if not scans:
         raise ScanFormatError(p, "the PTX file holds no scans")
     return scans
+
+
+def _read_points(p: Path, fh, n: int, k: int) -> np.ndarray:
+    """Parse the ``n`` point lines of scan ``k`` chunk by chunk into one array."""
+    table = None
+    done = 0
+    while done < n:
+        lines = list(itertools.islice(fh, min(CHUNK_LINES, n - done)))
+        if len(lines) < min(CHUNK_LINES, n - done):
+            raise ScanFormatError(p, f"truncated: scan {k} declares {n} points but the file holds {done + len(lines)}")
+        try:
+            chunk = np.loadtxt(lines, dtype=np.float64, ndmin=2)
+        except ValueError as exc:
+            raise ScanFormatError(p, f"corrupt point line in scan {k} ({first_line(exc)[:80]})") from exc
+        if table is None:
+            if chunk.shape[1] < 3:
+                raise ScanFormatError(p, f"scan {k}: point lines need at least x y z")
+            table = np.empty((n, min(chunk.shape[1], 4)), dtype=np.float64)
+        if chunk.shape[1] < table.shape[1]:
+            raise ScanFormatError(p, f"scan {k}: point lines change their number of values")
+        table[done:done + len(chunk)] = chunk[:, :table.shape[1]]
+        done += len(chunk)
+    return table
 
 
 def write_ptx(scan: Scan, path: str | os.PathLike) -> Path:

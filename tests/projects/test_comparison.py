@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 
 import laspy
 import numpy as np
@@ -47,6 +48,22 @@ def test_registration_recovers_the_relative_pose_and_icp_keeps_it(compared, fiel
     assert reg["icp"]["fitness"] > 0.5 and all(i >= 1 for i in reg["icp"]["iterations"])
     d = np.linalg.inv(truth) @ tf_targets
     assert np.degrees(np.arccos(np.clip((np.trace(d[:3, :3]) - 1) / 2, -1, 1))) <= 0.005
+
+
+@pytest.mark.skipif(shutil.which("pcl_ndt3d") is None, reason="PCL's pcl_ndt3d is not installed (pcl-tools)")
+def test_ndt_refinement_beside_icp_at_the_targets(processed, field):
+    from projects.comparison import bring_to_campaign_frame
+
+    truth = true_transform(field, 1, 0)
+    pts = load_scene(field / "v1")[0].to_socs(np.array([t.centre_m for t in MODEL.targets]))
+    errs = {}
+    with Campaign.open(processed, writable=False) as c:
+        for refinement in ("ndt", "icp"):
+            e = bring_to_campaign_frame(c, "2026-03-09", "2026-03-02", refinement=refinement)
+            errs[refinement] = np.abs(e.transform.apply(pts) - (pts @ truth[:3, :3].T + truth[:3, 3])).max()
+            assert e.icp.correction.method == refinement
+    assert errs["icp"] <= 1.0e-3, errs
+    assert errs["ndt"] <= 5.0e-3, errs  # NDT on 1 m cells: millimetres at the targets
 
 
 def test_target_registration_alone_within_half_a_millimetre(processed, field):
