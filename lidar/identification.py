@@ -52,6 +52,9 @@ class Identification:
         RMS residual of the matched reflectors after the fit.
     extra_detections : tuple of int
         Detections that match no layout reflector (other bright objects).
+    tilt_deg : float
+        Angle between the layout's up axis carried into the scanner frame and
+        the scanner's +z: how far from level the solution puts the scanner.
     """
 
     matches: tuple[TargetMatch, ...]
@@ -59,6 +62,7 @@ class Identification:
     translation: np.ndarray
     rms_m: float
     extra_detections: tuple[int, ...]
+    tilt_deg: float = float("nan")
 
     @property
     def missing(self) -> tuple[str, ...]:
@@ -102,8 +106,27 @@ def _assign(pred: np.ndarray, det: np.ndarray, tol: float) -> list[tuple[int, in
     return [(int(r), int(c), float(d[r, c])) for r, c in zip(rows, cols) if d[r, c] <= tol]
 
 
+#: Default largest scanner tilt a solution may imply and still count as levelled (degrees). Compensators
+#: hold a levelled scanner to hundredths of a degree; the rest is the layout's few centimetres of error.
+MAX_TILT_DEG = 2.0
+
+
+def tilt_deg(rotation: np.ndarray, up_layout=(0.0, 0.0, 1.0)) -> float:
+    """Angle (degrees) between the layout's up axis, rotated into the scanner frame, and the scanner's +z.
+
+    >>> round(tilt_deg(np.eye(3)), 6)
+    0.0
+    >>> round(tilt_deg(np.diag([1.0, -1.0, -1.0])), 6)  # upside down
+    180.0
+    """
+    up = np.asarray(up_layout, dtype=np.float64)
+    v = np.asarray(rotation) @ (up / np.linalg.norm(up))
+    return float(np.degrees(np.arccos(np.clip(v[2], -1.0, 1.0))))
+
+
 def identify_reflectors(detections_xyz: np.ndarray, layout: Layout, *, tolerance_m: float = 0.15,
-                        max_seeds: int = 60) -> Identification:
+                        max_seeds: int = 60, max_tilt_deg: Optional[float] = MAX_TILT_DEG,
+                        up_layout=(0.0, 0.0, 1.0)) -> Identification:
     """Match detections (scanner frame) to the layout (any frame).
 
     Parameters
@@ -116,6 +139,14 @@ def identify_reflectors(detections_xyz: np.ndarray, layout: Layout, *, tolerance
         plus detection accuracy). Default 0.15 m.
     max_seeds : int, keyword-only
         Layout triangles tried as seeds. Default 60.
+    max_tilt_deg : float or None, keyword-only
+        Terrestrial scanners are levelled: a solution implying a tilt beyond
+        this (default 2 degrees) loses against any levelled one, however well
+        it fits. This breaks the mirror ambiguity of coplanar, symmetric
+        reference targets (a 180-degree turn about an axis in their plane fits
+        them exactly as well). None for set-ups without a compensator.
+    up_layout : (3,) sequence, keyword-only
+        The layout's up axis (default +z).
 
     Returns
     -------
@@ -148,12 +179,13 @@ def identify_reflectors(detections_xyz: np.ndarray, layout: Layout, *, tolerance
                         continue
                     r, t = fit_rigid(lay[[a, b, c]], det[[i, j, k]])
                     pairs = _assign(apply(r, t, lay), det, tolerance_m)
-                    score = (len(pairs), -sum(p[2] for p in pairs))
+                    levelled = max_tilt_deg is None or tilt_deg(r, up_layout) <= max_tilt_deg
+                    score = (levelled, len(pairs), -sum(p[2] for p in pairs))
                     if best is None or score > best[0]:
                         best = (score, r, t)
-        if best is not None and best[0][0] >= min(len(lay), len(det)):
+        if best is not None and best[0][0] and best[0][1] >= min(len(lay), len(det)):
             break
-    if best is None or best[0][0] < 3:
+    if best is None or best[0][1] < 3:
         raise ProcessingError("the detections do not match the layout: no three detected reflectors have the "
                               "layout's distances (check the layout coordinates, the target diameter and the coarse scan)")
     _, r, t = best
@@ -172,4 +204,5 @@ def identify_reflectors(detections_xyz: np.ndarray, layout: Layout, *, tolerance
             matches.append(TargetMatch(rid, layout.groups[k], tuple(float(v) for v in pred[k]), None, None))
     used = {p[1] for p in pairs}
     rms = float(np.sqrt(np.mean([p[2] ** 2 for p in pairs])))
-    return Identification(tuple(matches), r, t, rms, tuple(i for i in range(len(det)) if i not in used))
+    return Identification(tuple(matches), r, t, rms, tuple(i for i in range(len(det)) if i not in used),
+                          tilt_deg(r, up_layout))

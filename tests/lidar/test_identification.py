@@ -54,3 +54,48 @@ def test_too_few_or_unrelated_detections():
     rng = np.random.default_rng(1)
     with pytest.raises(ProcessingError, match="do not match the layout"):
         identify_reflectors(rng.uniform(0, 0.5, (6, 3)), layout)
+
+
+def _twin_girder_layout():
+    """A 40 m span: two coplanar reference targets on each pier (0.5 m sideways, 1.5 m up), six deck targets."""
+    from lidar.layout import Layout
+
+    ids = ("R1", "R2", "R3", "R4", "M1", "M2", "M3", "M4", "M5", "M6")
+    groups = ("reference",) * 4 + ("measurement",) * 6
+    xyz = np.array([[0, 0, 0], [0, 0.5, 1.5], [40, 0, 0], [40, 0.5, 1.5],
+                    [10, -2.4, 6], [20, -2.4, 6], [30, -2.4, 6], [10, 1.2, 6], [20, 1.2, 6], [30, 1.2, 6]], float)
+    return Layout(ids=ids, groups=groups, xyz=xyz, diameters_m=np.full(10, 0.05))
+
+
+@pytest.mark.parametrize("heading", [0.0, 37.0, 90.0, 145.0, 200.0, 263.0, 311.0])
+def test_symmetric_coplanar_references_without_deck_targets_are_not_turned_upside_down(heading):
+    from lidar.identification import tilt_deg
+
+    layout = _twin_girder_layout()
+    rng = np.random.default_rng(int(heading))
+    rot = Rotation.from_euler("zyx", [heading, 0.01, -0.01], degrees=True).as_matrix()  # a levelled scanner
+    refs = layout.xyz[:4] @ rot.T + np.array([-20.0, 14.0, -1.5]) + rng.normal(0, 0.003, (4, 3))
+    # the mirror solution fits the four references exactly as well: the geometry alone cannot decide
+    axis = (layout.xyz[1] - layout.xyz[0]) / np.linalg.norm(layout.xyz[1] - layout.xyz[0])
+    flip = Rotation.from_rotvec(np.pi * axis).as_matrix()
+    c = layout.xyz[:4].mean(axis=0)
+    mirrored = (layout.xyz[:4] - c) @ flip.T + c
+    assert np.allclose(np.sort(np.linalg.norm(mirrored[:, None] - layout.xyz[None, :4], axis=2).min(axis=1)), 0,
+                       atol=1e-9)
+    assert tilt_deg(flip) > 30
+    ident = identify_reflectors(refs, layout)
+    for k, rid in enumerate(("R1", "R2", "R3", "R4")):
+        assert ident.match(rid).detection == k
+    assert ident.tilt_deg < 0.5
+    truth_m2 = layout.xyz[5] @ rot.T + np.array([-20.0, 14.0, -1.5])
+    assert np.linalg.norm(np.array(ident.match("M2").xyz_socs) - truth_m2) < 0.05  # windows go where the deck is
+
+
+def test_an_unlevelled_set_up_can_still_be_identified():
+    layout = _twin_girder_layout()
+    rot = Rotation.from_euler("zyx", [30, 25, 10], degrees=True).as_matrix()  # no compensator, tilted 27 deg
+    det = layout.xyz @ rot.T + 5.0
+    ident = identify_reflectors(det, layout, max_tilt_deg=None)
+    assert ident.rms_m < 1e-6 and ident.tilt_deg > 20
+    ident = identify_reflectors(det, layout)  # levelled solutions are preferred, none exists: the best fit stands
+    assert ident.rms_m < 1e-6

@@ -99,3 +99,18 @@ def test_convert_refusals(tmp_path, capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and words in err[0], err
     assert not (tmp_path / "y.las").exists()
+
+
+def test_a_closed_pipe_ends_quietly(tmp_path):
+    """'bridgesurvey info MANY | head -1': no BrokenPipe traceback, exit 141 like other CLIs."""
+    import subprocess
+    import sys
+
+    files = [str(GOOD[0])] * 300
+    proc = subprocess.Popen([sys.executable, "-m", "app.cli.main", "info", *files], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, cwd=Path(__file__).resolve().parents[3])
+    proc.stdout.readline()
+    proc.stdout.close()
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == 141
+    assert "Traceback" not in err and "BrokenPipe" not in err
