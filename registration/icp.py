@@ -63,6 +63,19 @@ def _capture_stdout():
         box["text"] = buf.getvalue()
 
 
+def check_clouds(source_xyz, target_xyz, what: str) -> tuple[np.ndarray, np.ndarray]:
+    """Source and target as float64 (N, 3) arrays of at least 100 finite points, or InputError."""
+    out = []
+    for name, a in (("source", source_xyz), ("target", target_xyz)):
+        a = np.asarray(a, dtype=np.float64)
+        if a.ndim != 2 or a.shape[1] != 3 or len(a) < 100:
+            raise InputError(f"{what} {name}: needs an (N, 3) array of at least 100 points, got {a.shape}")
+        if not np.all(np.isfinite(a)):
+            raise InputError(f"{what} {name}: coordinates hold NaN or infinite values")
+        out.append(a)
+    return out[0], out[1]
+
+
 def _cloud(xyz: np.ndarray):
     import open3d as o3d
 
@@ -99,13 +112,7 @@ def refine_icp(source_xyz: np.ndarray, target_xyz: np.ndarray, initial: Transfor
     import open3d as o3d
 
     reg = o3d.pipelines.registration
-    src = np.asarray(source_xyz, dtype=np.float64)
-    tgt = np.asarray(target_xyz, dtype=np.float64)
-    for name, a in (("source", src), ("target", tgt)):
-        if a.ndim != 2 or a.shape[1] != 3 or len(a) < 100:
-            raise InputError(f"ICP {name}: needs an (N, 3) array of at least 100 points, got {a.shape}")
-        if not np.all(np.isfinite(a)):
-            raise InputError(f"ICP {name}: coordinates hold NaN or infinite values")
+    src, tgt = check_clouds(source_xyz, target_xyz, "ICP")
     if not voxels_m or any(not (v > 0) for v in voxels_m):
         raise InputError("ICP voxel sizes must be positive")
     off = tgt.mean(axis=0) if offset is None else np.asarray(offset, dtype=np.float64)

@@ -21,7 +21,7 @@ import numpy as np
 
 from lidar.progress import ProgressCallback, report
 from registration.errors import InputError, RegistrationError
-from registration.icp import IcpResult
+from registration.icp import IcpResult, check_clouds
 from registration.transform import Transform
 
 PROGRAM = "pcl_ndt3d"
@@ -102,13 +102,7 @@ def refine_ndt(source_xyz: np.ndarray, target_xyz: np.ndarray, initial: Transfor
     if not ndt_available():
         raise RegistrationError(f"PCL's {PROGRAM} is not installed: install Debian's pcl-tools "
                                 "(./run setup does so as root) or use --registration icp")
-    src = np.asarray(source_xyz, dtype=np.float64)
-    tgt = np.asarray(target_xyz, dtype=np.float64)
-    for name, a in (("source", src), ("target", tgt)):
-        if a.ndim != 2 or a.shape[1] != 3 or len(a) < 100:
-            raise InputError(f"NDT {name}: needs an (N, 3) array of at least 100 points, got {a.shape}")
-        if not np.all(np.isfinite(a)):
-            raise InputError(f"NDT {name}: coordinates hold NaN or infinite values")
+    src, tgt = check_clouds(source_xyz, target_xyz, "NDT")
     if not (resolution_m > 0 and step_m > 0 and voxel_m > 0 and max_iterations > 0):
         raise InputError("NDT resolution, step, voxel and iterations must be positive")
     off = tgt.mean(axis=0) if offset is None else np.asarray(offset, dtype=np.float64)

@@ -55,6 +55,23 @@ def _u(fmt: str, blob: bytes, at: int):
     return struct.unpack_from("<" + fmt, blob, at)[0]
 
 
+def _records(p: Path, fh, kind: str, start: int, count: int, end: int):
+    """Walk a VLR or EVLR chain, each record inside [start, end); yield each record's header bytes."""
+    head_len, length_fmt = (VLR_HEADER, "H") if kind == "VLR" else (EVLR_HEADER, "Q")
+    pos = start
+    for k in range(count):
+        fh.seek(pos)
+        rh = fh.read(head_len)
+        if len(rh) < head_len:
+            raise ScanFormatError(p, f"LAS {kind} {k} is truncated")
+        length = _u(length_fmt, rh, 20)
+        if length > end - pos - head_len:
+            raise ScanFormatError(p, f"LAS {kind} {k} claims {length} bytes, running past "
+                                     f"{'the point data' if kind == 'VLR' else 'the end of the file'}")
+        yield rh
+        pos += head_len + length
+
+
 def check_las_header(path: str | Path) -> LasHeaderFacts:
     """Validate the header of a LAS/LAZ file against the file itself.
 
@@ -132,19 +149,8 @@ def check_las_header(path: str | Path) -> LasHeaderFacts:
         if vlr_count > room // VLR_HEADER:
             raise ScanFormatError(p, f"LAS header claims {vlr_count} VLRs; the {room} bytes before the point "
                                      f"data hold at most {room // VLR_HEADER}")
-        pos = header_size
-        laszip = False
-        for k in range(vlr_count):
-            fh.seek(pos)
-            vh = fh.read(VLR_HEADER)
-            if len(vh) < VLR_HEADER:
-                raise ScanFormatError(p, f"LAS VLR {k} is truncated")
-            length = _u("H", vh, 20)
-            if pos + VLR_HEADER + length > offset_points:
-                raise ScanFormatError(p, f"LAS VLR {k} claims {length} bytes, running past the point data")
-            if vh[2:18].rstrip(b"\0") == LASZIP_USER_ID and _u("H", vh, 18) == LASZIP_RECORD_ID:
-                laszip = True
-            pos += VLR_HEADER + length
+        laszip = any(vh[2:18].rstrip(b"\0") == LASZIP_USER_ID and _u("H", vh, 18) == LASZIP_RECORD_ID
+                     for vh in _records(p, fh, "VLR", header_size, vlr_count, offset_points))
         compressed = compressed_bit or laszip
         if compressed_bit and not laszip:
             raise ScanFormatError(p, "the point format says LAZ-compressed but the file has no LASzip VLR")
@@ -156,16 +162,8 @@ def check_las_header(path: str | Path) -> LasHeaderFacts:
             if evlr_count > (size - evlr_start) // EVLR_HEADER:
                 raise ScanFormatError(p, f"LAS header claims {evlr_count} EVLRs; the file holds at most "
                                          f"{(size - evlr_start) // EVLR_HEADER}")
-            pos = evlr_start
-            for k in range(evlr_count):
-                fh.seek(pos)
-                eh = fh.read(EVLR_HEADER)
-                if len(eh) < EVLR_HEADER:
-                    raise ScanFormatError(p, f"LAS EVLR {k} is truncated")
-                length = _u("Q", eh, 20)
-                if length > size - pos - EVLR_HEADER:
-                    raise ScanFormatError(p, f"LAS EVLR {k} claims {length} bytes, past the end of the file")
-                pos += EVLR_HEADER + length
+            for _ in _records(p, fh, "EVLR", evlr_start, evlr_count, size):
+                pass
             data_end = evlr_start
     data_bytes = data_end - offset_points
     if compressed:
