@@ -9,12 +9,22 @@ For epoch k (dissertation eqs. 4.1-4.6, in our own notation):
   upwards (+z of a levelled scanner);
 * ``h_i,k = g_k . p_i,k`` and ``u_i,k = h_i,k - h_i,1`` (positive up).
 
-``normal_mode="reference"`` (default) computes ``g`` once at the baseline and
-carries it into epoch k by the rotation that maps the baseline reference
-targets onto epoch k's: the normal then cannot tilt with the deck's own
-deflection, which otherwise leaks the targets' horizontal offsets into ``h``
-(an asymmetric layout under a 10 mm sag can err by a millimetre).
-``normal_mode="epoch"`` re-fits ``g_k`` in every epoch as in the dissertation.
+Which normal ``g_k``:
+
+* ``normal_mode="reference"`` computes ``g`` once at the baseline and carries
+  it into epoch k by the motion between the two scanner frames: the normal
+  then cannot tilt with the deck's own deflection, which otherwise leaks the
+  targets' horizontal offsets into ``h`` (an asymmetric layout under a 10 mm
+  sag can err by a millimetre). The motion is fitted on the reference targets
+  and on the deck targets' across-span coordinate (a deck does not move
+  sideways; :mod:`lidar.reference_motion`), so two pier targets a metre apart
+  are enough even on a 60 m span.
+* ``normal_mode="epoch"`` re-fits ``g_k`` in every epoch as in the dissertation.
+* ``normal_mode="auto"`` (default) propagates both normals' uncertainties; when
+  they agree within their noise (chi-square at 95 %) they are combined by
+  inverse covariance, otherwise the deck has deformed and the carried normal
+  is kept. ``normal_refitted_in_epoch`` (information) says when the epoch fit
+  had the larger share.
 
 Standard deviations are propagated from every centroid covariance of both
 epochs through the whole computation (reference mean, normal, rotation) by a
@@ -28,6 +38,7 @@ from typing import Mapping, Optional, Sequence
 import numpy as np
 
 from lidar.errors import InputError, ProcessingError
+from lidar.reference_motion import across_axis, fit_reference_motion
 from lidar.rigid import fit_rigid
 
 FLAG_MISSING = "missing"
@@ -37,6 +48,10 @@ FLAG_REFERENCE_MISSING = "reference_missing"
 FLAG_REFERENCE_INCONSISTENT = "reference_inconsistent"
 FLAG_NORMAL_FROM_EPOCH = "normal_refitted_in_epoch"
 FLAG_REFERENCE_AMBIGUOUS = "reference_change_ambiguous"
+#: 95 % quantile of chi-square with 2 degrees of freedom: the two deck normals agree within their noise.
+CHI2_2DOF_95 = 5.991
+#: How the epoch's deck normal is obtained (see the module notes).
+NORMAL_MODES = ("auto", "reference", "epoch")
 
 
 @dataclass(frozen=True)
@@ -231,27 +246,126 @@ def check_references(baseline: Mapping[str, Observation], epoch: Mapping[str, Ob
     return tuple(checks), tuple(alive), tuple(flags)
 
 
+@dataclass(frozen=True)
+class MotionWeights:
+    """Fixed weights of the frame-motion fit (computed once from the covariances)."""
+
+    ref_var: np.ndarray  # (n_ref,) per-coordinate variance of each reference target's difference, m^2
+    deck_ids: tuple[str, ...]  # deck targets found in both epochs
+    deck_var: np.ndarray  # (n_deck,) across-span variance of their differences, m^2
+    across: Optional[np.ndarray]  # unit across-span axis in the baseline frame, or None
+
+
+def _motion_rotation(base: dict, ep: dict, refs, mw: MotionWeights) -> np.ndarray:
+    b_ref = np.array([base[r] for r in refs])
+    e_ref = np.array([ep[r] for r in refs])
+    if mw.across is None or not mw.deck_ids:
+        rot, _ = fit_reference_motion(b_ref, e_ref, mw.ref_var)
+        return rot
+    rot, _ = fit_reference_motion(b_ref, e_ref, mw.ref_var, deck_base=np.array([base[m] for m in mw.deck_ids]),
+                                  deck_epoch=np.array([ep[m] for m in mw.deck_ids]), deck_var_across=mw.deck_var,
+                                  across_base=mw.across)
+    return rot
+
+
+def _normals(base: dict, ep: dict, refs, meas_base, meas, mw: MotionWeights) -> tuple[np.ndarray, np.ndarray,
+                                                                                   Optional[np.ndarray]]:
+    """(g1, g_ref, g_epoch): the baseline deck normal, carried into the epoch by the frame motion, and
+    re-fitted on the epoch's own deck targets (None with fewer than three)."""
+    g1 = deck_normal(np.array([base[m] for m in meas_base]))
+    g_ref = _motion_rotation(base, ep, refs, mw) @ g1 if len(refs) >= 3 else None
+    g_ep = deck_normal(np.array([ep[m] for m in meas])) if len(meas) >= 3 else None
+    return g1, g_ref, g_ep
+
+
 def _vertical_positions(base: dict, ep: dict, refs, meas_base, meas, mode: str, w_ref: np.ndarray,
-                        w_rot: np.ndarray):
+                        mw: MotionWeights, gain: Optional[np.ndarray] = None):
     """h at baseline and epoch for ``meas`` ids, given position dicts id -> (3,) array.
 
     The reference point is the same weighted mean of the same targets in both
-    epochs (weights fixed beforehand), so it is the same physical point.
+    epochs (weights fixed beforehand), so it is the same physical point. In
+    ``auto`` mode the epoch normal is ``g_ref + gain (g_epoch - g_ref)``,
+    normalised, with the 3x3 ``gain`` fixed beforehand by :func:`normal_gain`.
     """
     b_ref = np.array([base[r] for r in refs])
     e_ref = np.array([ep[r] for r in refs])
     s1 = w_ref @ b_ref
     sk = w_ref @ e_ref
-    if mode == "reference":
-        g1 = deck_normal(np.array([base[m] for m in meas_base]))
-        rot, _ = fit_rigid(b_ref, e_ref, weights=w_rot)
-        gk = rot @ g1
-    else:
-        gk = deck_normal(np.array([ep[m] for m in meas]))
+    if mode == "epoch":
         g1 = deck_normal(np.array([base[m] for m in meas]))
+        gk = deck_normal(np.array([ep[m] for m in meas]))
+    else:
+        g1, g_ref, g_ep = _normals(base, ep, refs, meas_base, meas, mw)
+        gk = g_ref
+        if mode == "auto" and gain is not None and g_ep is not None:
+            gk = g_ref + gain @ (g_ep - g_ref)
+            gk = gk / np.linalg.norm(gk)
     h1 = np.array([g1 @ (base[m] - s1) for m in meas])
     hk = np.array([gk @ (ep[m] - sk) for m in meas])
     return h1, hk, gk, sk
+
+
+def _tangent_basis(g: np.ndarray) -> np.ndarray:
+    """(2, 3) orthonormal basis of the plane perpendicular to unit vector ``g``."""
+    a = np.array([1.0, 0.0, 0.0]) if abs(g[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(g, a)
+    e1 /= np.linalg.norm(e1)
+    return np.vstack([e1, np.cross(g, e1)])
+
+
+def normal_gain(normals, x0: np.ndarray, cov: np.ndarray, step: float = 1e-6
+                ) -> tuple[Optional[np.ndarray], np.ndarray, float]:
+    """How far to move from the carried normal toward the epoch's own fit, by their uncertainties.
+
+    ``normals(x) -> (g_ref, g_epoch)``. Both normals' covariances are
+    propagated from the observations' (numerical Jacobian). When their
+    difference ``d`` is larger than that noise explains (chi-square test at
+    95 %), the deck's own deformation tilts the epoch fit and the carried
+    normal is kept alone. Otherwise both are combined by their inverse
+    covariances in the plane perpendicular to ``g_ref`` (in each direction the
+    better determined normal wins), and ``d`` itself bounds the deformation the
+    test could not see, for the sigmas.
+
+    Returns
+    -------
+    gain : (3, 3) array or None
+        ``g = g_ref + gain (g_epoch - g_ref)``; None when there is no epoch fit.
+    bias_cov : (3, 3) array
+        Covariance (rad^2) of the bias the combined normal still carries, for the sigmas.
+    weight_epoch : float
+        Share of the epoch fit in the combination (0 = carried normal only, 1 = epoch fit only).
+    """
+    g_ref, g_ep = normals(x0)
+    if g_ep is None or g_ref is None:
+        return None, np.zeros((3, 3)), 0.0 if g_ep is None else 1.0
+    jr = np.empty((3, x0.size))
+    je = np.empty((3, x0.size))
+    for j in range(x0.size):
+        xp, xm = x0.copy(), x0.copy()
+        xp[j] += step
+        xm[j] -= step
+        rp, ep_ = normals(xp)
+        rm, em = normals(xm)
+        jr[:, j] = (rp - rm) / (2 * step)
+        je[:, j] = (ep_ - em) / (2 * step)
+    e = _tangent_basis(g_ref)
+    cr = e @ jr @ cov @ jr.T @ e.T
+    ce = e @ je @ cov @ je.T @ e.T
+    d = e @ (g_ep - g_ref)
+    reg = 1e-18 * np.eye(2)
+    chi2 = float(d @ np.linalg.solve(cr + ce + reg, d))
+    if chi2 > CHI2_2DOF_95:
+        # The two normals disagree beyond their noise: the deck's own deformation tilts the epoch fit.
+        # Keep the carried normal, and let the sigmas carry what its own noise may still hide.
+        return np.zeros((3, 3)), np.zeros((3, 3)), 0.0
+    wr = np.linalg.inv(cr + reg)
+    we = np.linalg.inv(ce + reg)
+    k2 = np.linalg.solve(wr + we, we)
+    gain = e.T @ k2 @ e
+    # a deformation too small to be detected may still be there: at most the test's threshold
+    bias = np.outer(d, d)
+    bias_cov = e.T @ (k2 @ bias @ k2.T) @ e
+    return gain, bias_cov, float(np.trace(k2) / 2.0)
 
 
 def reference_weights(base: Mapping[str, Observation], ep: Mapping[str, Observation], refs: Sequence[str],
@@ -265,8 +379,23 @@ def reference_weights(base: Mapping[str, Observation], ep: Mapping[str, Observat
     return w_ref / w_ref.sum(), w_rot / w_rot.sum()
 
 
+def motion_weights(base: Mapping[str, Observation], ep: Mapping[str, Observation], refs: Sequence[str],
+                   meas: Sequence[str], up: np.ndarray, w_rot: Optional[np.ndarray]) -> MotionWeights:
+    """Variances for the frame-motion fit: each reference target's (isotropic) and each deck target's
+    across the span. ``w_rot=None`` weighs the reference targets equally (the dissertation's plain mean)."""
+    if w_rot is None:
+        ref_var = np.full(len(refs), 1e-8)
+    else:
+        ref_var = np.array([np.trace(base[r].cov + ep[r].cov) / 3.0 for r in refs])
+    across = across_axis(np.array([base[m].xyz for m in meas]), up) if len(meas) >= 2 else None
+    if across is None:
+        return MotionWeights(ref_var, (), np.zeros(0), None)
+    deck_var = np.array([across @ (base[m].cov + ep[m].cov) @ across for m in meas])
+    return MotionWeights(ref_var, tuple(meas), deck_var, across)
+
+
 def compute_displacements(baseline: Mapping[str, object], epoch: Mapping[str, object], groups: Mapping[str, str], *,
-                          normal_mode: str = "reference", moved_tolerance_m: Optional[float] = None,
+                          normal_mode: str = "auto", moved_tolerance_m: Optional[float] = None,
                           weighted: bool = True) -> EpochDisplacements:
     """Vertical displacements of an epoch against the baseline epoch.
 
@@ -277,8 +406,10 @@ def compute_displacements(baseline: Mapping[str, object], epoch: Mapping[str, ob
         (e.g. :class:`lidar.centroid.TargetCentroid`), each in its own epoch's
         scanner frame.
     groups : mapping reflector id -> "reference" | "measurement"
-    normal_mode : {"reference", "epoch"}, keyword-only
+    normal_mode : {"auto", "reference", "epoch"}, keyword-only
         How the deck normal of the epoch is obtained (see the module notes).
+        Default ``auto``: the carried and the re-fitted normals combined by
+        their propagated uncertainties.
     moved_tolerance_m : float, optional, keyword-only
         Smallest change of a reference distance taken as movement. Default 1 mm
         (or 4 sigma, whichever is larger).
@@ -290,8 +421,8 @@ def compute_displacements(baseline: Mapping[str, object], epoch: Mapping[str, ob
     -------
     EpochDisplacements
     """
-    if normal_mode not in ("reference", "epoch"):
-        raise InputError(f"normal_mode must be 'reference' or 'epoch', not {normal_mode!r}")
+    if normal_mode not in NORMAL_MODES:
+        raise InputError(f"normal_mode must be one of {', '.join(NORMAL_MODES)}, not {normal_mode!r}")
     base = {k: _as_obs(v) for k, v in baseline.items()}
     ep = {k: _as_obs(v) for k, v in epoch.items()}
     for name, d in (("baseline", base), ("epoch", ep)):
@@ -311,26 +442,41 @@ def compute_displacements(baseline: Mapping[str, object], epoch: Mapping[str, ob
     if len(meas_base) < 3:
         raise ProcessingError(f"the baseline has only {len(meas_base)} measurement targets; 3 are needed for the deck plane")
     mode = normal_mode
-    if mode == "reference":
-        ref_xyz = np.array([base[r].xyz for r in stable])
-        spread = np.linalg.svd(ref_xyz - ref_xyz.mean(axis=0), compute_uv=False) if len(stable) >= 3 else [0, 0, 0]
-        if len(stable) < 3 or spread[1] < 0.05 * max(spread[0], 1e-9):
-            mode = "epoch"
-            flags.append(FLAG_NORMAL_FROM_EPOCH)
+    if mode != "epoch" and len(stable) < 3:  # no rotation from fewer than three reference targets
+        mode = "epoch"
+        flags.append(FLAG_NORMAL_FROM_EPOCH)
     if mode == "epoch" and len(meas) < 3:
         raise ProcessingError(f"only {len(meas)} measurement targets in this epoch; 3 are needed for the deck plane")
     up = deck_normal(np.array([base[m].xyz for m in meas_base]))
     w_ref, w_rot = reference_weights(base, ep, stable, up) if weighted else (
         np.full(len(stable), 1.0 / len(stable)), np.full(len(stable), 1.0 / len(stable)))
+    mw = motion_weights(base, ep, stable, meas, up, w_rot if weighted else None)
     involved_b = sorted(set(stable) | set(meas_base))
     involved_e = sorted(set(stable) | set(meas))
     x0 = np.concatenate([base[k].xyz for k in involved_b] + [ep[k].xyz for k in involved_e])
     nb = len(involved_b)
 
-    def f(x):
+    def split(x):
         xb = {k: x[3 * i:3 * i + 3] for i, k in enumerate(involved_b)}
         xe = {k: x[3 * (nb + i):3 * (nb + i) + 3] for i, k in enumerate(involved_e)}
-        return _vertical_positions(xb, xe, stable, meas_base, meas, mode, w_ref, w_rot)
+        return xb, xe
+
+    cov = np.zeros((x0.size, x0.size))
+    for i, k in enumerate(involved_b):
+        cov[3 * i:3 * i + 3, 3 * i:3 * i + 3] = base[k].cov
+    for i, k in enumerate(involved_e):
+        j = nb + i
+        cov[3 * j:3 * j + 3, 3 * j:3 * j + 3] = ep[k].cov
+    gain, bias_cov, weight_epoch = None, np.zeros((3, 3)), 0.0
+    if mode == "auto":
+        gain, bias_cov, weight_epoch = normal_gain(lambda x: _normals(*split(x), stable, meas_base, meas, mw)[1:],
+                                                   x0, cov)
+        if weight_epoch > 0.5:
+            flags.append(FLAG_NORMAL_FROM_EPOCH)
+
+    def f(x):
+        xb, xe = split(x)
+        return _vertical_positions(xb, xe, stable, meas_base, meas, mode, w_ref, mw, gain)
 
     h1, hk, gk, sk = f(x0)
     u0 = hk - h1
@@ -343,13 +489,10 @@ def compute_displacements(baseline: Mapping[str, object], epoch: Mapping[str, ob
         hp1, hpk = f(xp)[:2]
         hm1, hmk = f(xm)[:2]
         jac[:, j] = ((hpk - hp1) - (hmk - hm1)) / (2 * step)
-    cov = np.zeros((x0.size, x0.size))
-    for i, k in enumerate(involved_b):
-        cov[3 * i:3 * i + 3, 3 * i:3 * i + 3] = base[k].cov
-    for i, k in enumerate(involved_e):
-        j = nb + i
-        cov[3 * j:3 * j + 3, 3 * j:3 * j + 3] = ep[k].cov
-    sigma = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", jac, cov, jac), 0.0))
+    var = np.einsum("ij,jk,ik->i", jac, cov, jac)
+    # the deformation bias the combined normal may still carry, through each target's lever p = b - s
+    var += np.array([(ep[m].xyz - sk) @ bias_cov @ (ep[m].xyz - sk) for m in meas])
+    sigma = np.sqrt(np.maximum(var, 0.0))
     out = []
     for m in meas_ids:
         if m in meas:

@@ -75,8 +75,9 @@ class Identification:
         raise InputError(f"unknown reflector {reflector_id!r}")
 
 
-def _seed_triangles(xyz: np.ndarray, limit: int) -> list[tuple[int, int, int]]:
-    """Well-conditioned layout triangles (large, not thin), best first."""
+def _seed_triangles(xyz: np.ndarray, limit: int, groups: Optional[tuple] = None) -> list[tuple[int, int, int]]:
+    """Well-conditioned layout triangles (large, not thin), best first; the pier (reference) targets'
+    own triangles always come first, since deck targets are the ones a coarse scan misses."""
     n = len(xyz)
     scored = []
     for a, b, c in combinations(range(n), 3):
@@ -95,6 +96,9 @@ def _seed_triangles(xyz: np.ndarray, limit: int) -> list[tuple[int, int, int]]:
                 used[k] = used.get(k, 0) + 1
         if len(out) >= limit:
             break
+    if groups is not None:
+        refs = [tri for _, tri in scored if all(groups[k] == "reference" for k in tri)]
+        out = refs[:max(4, limit // 4)] + [tri for tri in out if tri not in refs[:max(4, limit // 4)]]
     return out
 
 
@@ -109,6 +113,23 @@ def _assign(pred: np.ndarray, det: np.ndarray, tol: float) -> list[tuple[int, in
 #: Default largest scanner tilt a solution may imply and still count as levelled (degrees). Compensators
 #: hold a levelled scanner to hundredths of a degree; the rest is the layout's few centimetres of error.
 MAX_TILT_DEG = 2.0
+
+
+#: Seeds tried after a perfect levelled solution, to find an equally good rival.
+TIE_SEEDS = 6
+
+
+def _rival(best, candidates: dict, tolerance_m: float) -> Optional[str]:
+    """Describe another levelled solution as good as the best one (a different assignment), or None."""
+    (lev, count, neg_sum), _, _ = best
+    best_key = next(k for k, v in candidates.items() if v[0] == best[0])
+    for key, ((lev2, count2, neg_sum2), _, _) in candidates.items():
+        if key == best_key or lev2 != lev or count2 != count:
+            continue
+        if -neg_sum2 <= -neg_sum * 1.5 + 0.01 * count:
+            swapped = sorted(set(key) - set(best_key))
+            return f"{len(swapped)} reflector(s) would be assigned differently"
+    return None
 
 
 def tilt_deg(rotation: np.ndarray, up_layout=(0.0, 0.0, 1.0)) -> float:
@@ -167,8 +188,11 @@ def identify_reflectors(detections_xyz: np.ndarray, layout: Layout, *, tolerance
     d_det = pairwise_distances(det)
     d_lay = pairwise_distances(lay)
     best = None
+    candidates: dict[frozenset, tuple] = {}  # assignment -> (score, r, t): one entry per distinct solution
     iu = np.triu_indices(len(det), 1)
-    for a, b, c in _seed_triangles(lay, max_seeds):
+    perfect = min(len(lay), len(det))
+    extra_seeds = 0
+    for a, b, c in _seed_triangles(lay, max_seeds, tuple(layout.groups)):
         ok_ab = np.abs(d_det[iu] - d_lay[a, b]) <= tolerance_m
         for i0, j0 in zip(iu[0][ok_ab], iu[1][ok_ab]):
             for i, j in ((i0, j0), (j0, i0)):
@@ -181,13 +205,25 @@ def identify_reflectors(detections_xyz: np.ndarray, layout: Layout, *, tolerance
                     pairs = _assign(apply(r, t, lay), det, tolerance_m)
                     levelled = max_tilt_deg is None or tilt_deg(r, up_layout) <= max_tilt_deg
                     score = (levelled, len(pairs), -sum(p[2] for p in pairs))
+                    key = frozenset((p[0], p[1]) for p in pairs)
+                    if key not in candidates or score > candidates[key][0]:
+                        candidates[key] = (score, r, t)
                     if best is None or score > best[0]:
                         best = (score, r, t)
-        if best is not None and best[0][0] and best[0][1] >= min(len(lay), len(det)):
-            break
+        if best is not None and best[0][0] and best[0][1] >= perfect:
+            # every detection matched by a levelled solution: a few more seeds, to see a rival if there is one
+            extra_seeds += 1
+            if extra_seeds > TIE_SEEDS:
+                break
     if best is None or best[0][1] < 3:
         raise ProcessingError("the detections do not match the layout: no three detected reflectors have the "
                               "layout's distances (check the layout coordinates, the target diameter and the coarse scan)")
+    rival = _rival(best, candidates, tolerance_m)
+    if rival is not None:
+        raise ProcessingError(
+            f"two identifications fit the {best[0][1]} detected reflectors equally well (the layout is symmetric "
+            f"for what was detected: {rival}); refusing to guess. Scan so that a deck target is detected, add "
+            "an asymmetric target, or remove the wrong window by hand")
     _, r, t = best
     for _ in range(4):  # refine on all matches
         pairs = _assign(apply(r, t, lay), det, tolerance_m)

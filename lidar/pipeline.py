@@ -12,7 +12,7 @@ import numpy as np
 from lidar.centroid import TargetCentroid, centroids_from_scan
 from lidar.detection import DetectionResult, detect_reflectors
 from lidar.errors import InputError
-from lidar.identification import Identification, identify_reflectors
+from lidar.identification import MAX_TILT_DEG, Identification, identify_reflectors
 from lidar.layout import Layout
 from lidar.plan import PlanTarget, ScanPlan, incidence_from_map, plan_fine_scans
 from lidar.progress import ProgressCallback, report, scaled
@@ -38,14 +38,20 @@ def _need_intensity(scan: Scan, what: str) -> None:
 
 
 def analyse_coarse(scan: Scan, layout: Layout, *, step_deg: Optional[float] = None, threshold: Optional[float] = None,
-                   tolerance_m: float = 0.15, progress: Optional[ProgressCallback] = None) -> CoarseAnalysis:
-    """Reflectance map, detection and identification of a coarse scan."""
+                   tolerance_m: float = 0.15, max_tilt_deg: Optional[float] = MAX_TILT_DEG,
+                   up_layout=(0.0, 0.0, 1.0), progress: Optional[ProgressCallback] = None) -> CoarseAnalysis:
+    """Reflectance map, detection and identification of a coarse scan.
+
+    ``max_tilt_deg`` and ``up_layout`` go to :func:`lidar.identification.identify_reflectors`
+    (None for a scanner that was not levelled).
+    """
     _need_intensity(scan, "reflector detection")
     rmap = reflectance_map(scan.xyz_socs, scan.intensity, step_deg=step_deg, progress=scaled(progress, 0, 0.8))
     diameter = float(np.median(layout.diameters_m))
     det = detect_reflectors(rmap, target_diameter_m=diameter, threshold=threshold)
     report(progress, 0.9, "identifying reflectors")
-    ident = identify_reflectors(det.xyz(), layout, tolerance_m=tolerance_m)
+    ident = identify_reflectors(det.xyz(), layout, tolerance_m=tolerance_m, max_tilt_deg=max_tilt_deg,
+                                up_layout=up_layout)
     inc = {m.id: incidence_from_map(rmap, m.xyz_socs) for m in ident.matches}
     report(progress, 1.0, "coarse scan analysed")
     return CoarseAnalysis(rmap, det, ident, inc)

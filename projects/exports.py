@@ -13,11 +13,16 @@ from lidar.files import write_atomic  # noqa: F401  (part of this module's API)
 from projects.store import Campaign
 
 DISPLACEMENT_COLUMNS = ["epoch", "datetime", "reflector", "displacement_mm", "sigma_mm", "flags", "state",
-                        "warning_mm", "alarm_mm", "baseline", "epoch_flags"]
+                        "warning_mm", "alarm_mm", "baseline", "epoch_flags", "days_from_baseline", "severity"]
 
 
 def displacement_table(c: Campaign) -> list[dict]:
     """One row per processed epoch x measurement target (baseline = first epoch, positive up)."""
+    from datetime import datetime
+
+    from lidar.flags import worst
+
+    when = {e["label"]: datetime.fromisoformat(e["datetime"]) for e in c.epochs()}
     rows = []
     for r in c.displacement_rows():
         lim = c.limit_for(r["reflector"])
@@ -30,6 +35,10 @@ def displacement_table(c: Campaign) -> list[dict]:
             "state": lim.state(mm if mm is not None else float("nan")) if lim else ("unknown" if mm is None else "ok"),
             "warning_mm": None if lim is None else lim.warning_mm, "alarm_mm": None if lim is None else lim.alarm_mm,
             "baseline": r["baseline"], "epoch_flags": ";".join(json.loads(r["epoch_flags"])),
+            # negative for an epoch dated before the baseline
+            "days_from_baseline": round((when[r["epoch"]] - when[r["baseline"]]).total_seconds() / 86400.0, 4)
+            if r["baseline"] in when else None,
+            "severity": worst(json.loads(r["flags"]) + json.loads(r["epoch_flags"])) or "",
         })
     return rows
 

@@ -6,20 +6,42 @@ from __future__ import annotations
 
 import json
 
+from lidar.flags import count, worst
 from projects.store import Campaign
 
-#: Epoch stages, in the order work moves them along.
-EPOCH_STATES = ("imported", "planned", "scanned", "measured", "processed", "flagged")
+#: Epoch stages, in the order work moves them along; the last three are processed epochs by the
+#: most serious flag they carry (see :mod:`lidar.flags`): none or information only, a warning, a problem.
+EPOCH_STATES = ("imported", "planned", "scanned", "measured", "processed", "warning", "problem")
+
+
+def epoch_flags(c: Campaign, label: str) -> list[str]:
+    """The epoch's own flags, then its targets' (each distinct flag once); an ambiguous reference
+    change names its suspects."""
+    ds = c.displacement_set(label)
+    if ds is None:
+        return []
+    flags = list(json.loads(ds["flags"]))
+    if "reference_change_ambiguous" in flags:
+        suspects = [r["reflector"] for r in c.reference_check_rows(label) if r["suspect"]]
+        if suspects:
+            flags[flags.index("reference_change_ambiguous")] = \
+                f"reference_change_ambiguous: {' or '.join(suspects)} moved (both left out)"
+    for f in c.displacement_flags(label):
+        if f not in flags:
+            flags.append(f)
+    return flags
 
 
 def epoch_state(c: Campaign, label: str) -> tuple[str, list[str]]:
     """(state, flags) of one epoch: imported (coarse scan only), planned, scanned (fine scans not
-    measured yet), measured, processed (displacements computed) or flagged (processed with flags)."""
+    measured yet), measured, or - once its displacements are computed - processed, warning or
+    problem by its most serious flag."""
     res = c.result_row(label)
     ds = c.displacement_set(label)
     if ds is not None:
-        flags = json.loads(ds["flags"])
-        return ("flagged" if flags else "processed"), flags
+        flags = epoch_flags(c, label)
+        level = worst(flags)
+        return (level if level in ("warning", "problem") else "processed"), flags
     if res is None:
         return "imported", []
     if res["stage"] == "planned":
@@ -37,7 +59,8 @@ def campaign_status(c: Campaign) -> dict:
     for e in c.epochs():
         state, flags = epoch_state(c, e["label"])
         epochs.append({"epoch": e["label"], "datetime": e["datetime"][:16], "state": state,
-                       "stale": stale.get(e["label"], ""), "flags": ",".join(flags)})
+                       "stale": stale.get(e["label"], ""), "flags": "; ".join(flags), "flag_list": flags,
+                       "severity": count(flags)})
     latest = {}
     for r in displacement_table(c):
         latest[r["reflector"]] = r

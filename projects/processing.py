@@ -18,8 +18,10 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from lidar.displacement import compute_displacements
+from lidar.displacement import FLAG_MISSING, Displacement, EpochDisplacements, compute_displacements
+from lidar.flags import FLAG_DECK_NOT_MEASURED, FLAG_NO_DISPLACEMENT, FLAG_PIERS_NOT_MEASURED, PROBLEM, severity
 from lidar.errors import InputError, ProcessingError, SurveyError
+from lidar.identification import MAX_TILT_DEG
 from lidar.io import read_scan
 from lidar.pipeline import analyse_coarse, measure_targets, plan_from_coarse
 from lidar.plan import ScanPlan
@@ -34,14 +36,29 @@ PIPELINE_VERSION = "1"
 DEFAULTS = {
     "min_points": 1000,
     "budget_min": 60.0,
-    "normal_mode": "reference",
+    "normal_mode": "auto",
     "weighted_references": True,
     "map_step_deg": None,
     "detection_threshold": None,
     "identification_tolerance_m": 0.15,
     "moved_tolerance_m": 0.001,
+    # identification: the scanner was levelled (solutions implying a tilt lose), the layout's up axis
+    "levelled": True,
+    "layout_up": "0,0,1",
 }
-STAGE1_KEYS = ("min_points", "budget_min", "map_step_deg", "detection_threshold", "identification_tolerance_m")
+STAGE1_KEYS = ("min_points", "budget_min", "map_step_deg", "detection_threshold", "identification_tolerance_m",
+               "levelled", "layout_up")
+#: Stage-1 keys added later: they enter the input hash only when changed, so campaigns processed before
+#: they existed are not measured again for nothing.
+LATER_STAGE1_KEYS = ("levelled", "layout_up")
+
+
+def stage1_params(params: dict) -> dict:
+    return {k: params[k] for k in STAGE1_KEYS if k not in LATER_STAGE1_KEYS or params[k] != DEFAULTS[k]}
+
+
+def layout_up(params: dict) -> np.ndarray:
+    return np.array([float(v) for v in str(params["layout_up"]).split(",")])
 STAGE2_KEYS = ("normal_mode", "weighted_references", "moved_tolerance_m")
 FLAG_CHAINED = "chained_to_replaced_target"
 
@@ -61,10 +78,15 @@ def set_parameter(c: Campaign, key: str, text: Optional[str]) -> None:
         raise InputError(f"give a value for {key}")
     try:
         if key == "normal_mode":
-            if text not in ("reference", "epoch"):
+            if text not in ("auto", "reference", "epoch"):
                 raise ValueError
             value = text
-        elif key == "weighted_references":
+        elif key == "layout_up":
+            vec = [float(v) for v in text.split(",")]
+            if len(vec) != 3 or not np.all(np.isfinite(vec)) or np.linalg.norm(vec) == 0:
+                raise ValueError
+            value = ",".join(f"{v:g}" for v in vec)
+        elif key in ("weighted_references", "levelled"):
             value = {"true": True, "1": True, "yes": True, "false": False, "0": False, "no": False}[text.lower()]
         elif key == "min_points":
             value = int(text)
@@ -101,6 +123,7 @@ class ProcessSummary:
     outcomes: list[EpochOutcome] = field(default_factory=list)
     displacement_epochs: list[str] = field(default_factory=list)
     baseline: Optional[str] = None
+    problems: dict[str, str] = field(default_factory=dict)  # epoch -> its first problem flag
 
     @property
     def failed(self) -> list[EpochOutcome]:
@@ -120,7 +143,7 @@ def plan_inputs(c: Campaign, label: str, params: dict) -> tuple[str, object]:
         raise ProcessingError(f"epoch {label} has no coarse scan")
     layout = c.layout(ep["datetime"])
     key = {"v": PIPELINE_VERSION, "coarse": [f["sha256"] for f in coarse],
-           "layout": layout.to_rows(), "params": {k: params[k] for k in STAGE1_KEYS},
+           "layout": layout.to_rows(), "params": stage1_params(params),
            "profile": c.profile.to_dict()}
     return _hash(key), layout
 
@@ -130,7 +153,9 @@ def analyse_epoch_coarse(c: Campaign, label: str, layout, params: dict, *,
     """Reflectance map, detections and identification of an epoch's coarse scan with the campaign's parameters."""
     coarse = read_files(c, c.files(label, "coarse"), scaled(progress, 0.0, 0.5))
     return analyse_coarse(coarse, layout, step_deg=params["map_step_deg"], threshold=params["detection_threshold"],
-                          tolerance_m=params["identification_tolerance_m"], progress=scaled(progress, 0.5, 1.0))
+                          tolerance_m=params["identification_tolerance_m"],
+                          max_tilt_deg=MAX_TILT_DEG if params["levelled"] else None, up_layout=layout_up(params),
+                          progress=scaled(progress, 0.5, 1.0))
 
 
 def plan_epoch(c: Campaign, label: str, *, progress: Optional[ProgressCallback] = None) -> ScanPlan:
@@ -165,7 +190,7 @@ def measure_epoch(c: Campaign, label: str, *, progress: Optional[ProgressCallbac
     layout = c.layout(c.epoch(label)["datetime"])
     fine = read_files(c, c.files(label, "fine"), scaled(progress, 0.4, 0.8))
     cents = measure_targets(fine, plan, layout, profile=c.profile)
-    c.save_centroids(label, cents, h, {k: params[k] for k in STAGE1_KEYS})
+    c.save_centroids(label, cents, h, stage1_params(params))
     report(progress, 1.0, "measured")
     return cents
 
@@ -236,8 +261,19 @@ def process(c: Campaign, labels: Optional[Sequence[str]] = None, *,
             log.warning("epoch %s: %s", lab, exc)
             summary.outcomes.append(EpochOutcome(lab, "failed", str(exc)))
     summary.baseline = baseline_epoch(c)
+    if summary.baseline is not None and not c.settings().get("baseline"):
+        # The first measured epoch becomes the baseline once, for good: an epoch added later with an
+        # earlier date gets a negative time against it instead of silently re-referencing everything.
+        c.set_setting("baseline", summary.baseline)
     if summary.baseline is not None:
         summary.displacement_epochs = update_displacements(c, summary.baseline)
+    wanted = {e["label"] for e in todo}
+    for e in epochs:
+        ds = c.displacement_set(e["label"])
+        if e["label"] in wanted and ds is not None:
+            bad = [f for f in json.loads(ds["flags"]) if severity(f) == PROBLEM]
+            if bad:
+                summary.problems[e["label"]] = bad[0]
     report(progress, 1.0, "done")
     return summary
 
@@ -263,14 +299,18 @@ def update_displacements(c: Campaign, baseline: str) -> list[str]:
         return found_cache[label]
 
     first_seen: dict[str, str] = {}
-    for lab in measured[measured.index(baseline):]:
+    start = measured.index(baseline)
+    for lab in measured[start:]:
         for rid in found(lab):
             first_seen.setdefault(rid, lab)
     done = []
-    for lab in measured[measured.index(baseline):]:
+    for pos, lab in enumerate(measured):
         cents = found(lab)
         meas_here = [m for m in cents if groups.get(m) == "measurement"]
-        bases = sorted({first_seen[m] for m in meas_here} | {baseline}, key=measured.index)
+        if pos < start:  # dated before the baseline: negative time against it, never a new baseline
+            bases = [baseline]
+        else:
+            bases = sorted({first_seen[m] for m in meas_here} | {baseline}, key=measured.index)
         key = {"v": PIPELINE_VERSION, "epoch": _stage1_hash(c, lab), "params": {k: params[k] for k in STAGE2_KEYS},
                "bases": {b: _stage1_hash(c, b) for b in bases}, "reflectors": sorted((k, str(v)) for k, v in refl.items())}
         h = _hash(key)
@@ -279,8 +319,9 @@ def update_displacements(c: Campaign, baseline: str) -> list[str]:
             continue
         result = None
         extra = []
+        failure = None
         for b in bases:
-            targets = [m for m in meas_here if first_seen[m] == b] if b != baseline else \
+            targets = [m for m in meas_here if first_seen.get(m) == b] if b != baseline else \
                 [m for m in groups if groups[m] == "measurement" and first_seen.get(m, baseline) == baseline]
             if not targets:
                 continue
@@ -291,13 +332,23 @@ def update_displacements(c: Campaign, baseline: str) -> list[str]:
                                             weighted=bool(params["weighted_references"]))
             except SurveyError as exc:
                 log.warning("epoch %s against %s: %s", lab, b, exc)
+                if b == baseline:
+                    failure = str(exc).splitlines()[0].replace(";", ",")
                 continue
             if b == baseline:
                 result = res
             else:
                 extra += [_chain(c, d, b, refl) for d in res.displacements]
         if result is None:
-            continue
+            if failure is None:
+                continue
+            result = _failed_result(groups, found(baseline), cents, baseline, failure)
+        elif not any(np.isfinite(d.displacement_m) for d in result.displacements):
+            from dataclasses import replace
+
+            n_meas = sum(1 for g in groups.values() if g == "measurement")
+            result = replace(result, flags=tuple(result.flags) + (
+                f"{FLAG_DECK_NOT_MEASURED}: none of the {n_meas} deck targets was found in this epoch",))
         if lab == baseline:  # the baseline against itself: zero by definition, exactly known
             from dataclasses import replace as _replace
 
@@ -311,6 +362,24 @@ def update_displacements(c: Campaign, baseline: str) -> list[str]:
         c.save_displacements(lab, baseline, result, h)
         done.append(lab)
     return done
+
+
+def _failed_result(groups: dict, base: dict, cents: dict, baseline: str, reason: str) -> EpochDisplacements:
+    """An epoch with no displacement: every deck target missing, and a problem flag saying why."""
+    refs = [r for r, g in groups.items() if g == "reference"]
+    meas = [m for m, g in groups.items() if g == "measurement"]
+    both = [r for r in refs if r in base and r in cents]
+    found_meas = [m for m in meas if m in cents]
+    if not both:
+        flag = (f"{FLAG_PIERS_NOT_MEASURED}: no reference target was found in both this epoch and the baseline "
+                f"{baseline} ({len([r for r in refs if r in cents])} of {len(refs)} found here)")
+    elif len(found_meas) < 3:
+        flag = f"{FLAG_DECK_NOT_MEASURED}: {len(found_meas)} of {len(meas)} deck targets found, at least 3 needed"
+    else:
+        flag = f"{FLAG_NO_DISPLACEMENT}: {reason}"
+    nan = float("nan")
+    disp = tuple(Displacement(m, nan, nan, nan, nan, (FLAG_MISSING,)) for m in meas)
+    return EpochDisplacements(disp, (), (), np.full(3, nan), np.full(3, nan), "none", (flag,))
 
 
 def _chain(c: Campaign, d, base_label: str, refl: dict):

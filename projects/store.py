@@ -475,6 +475,11 @@ class Campaign:
                JOIN epochs e ON e.label = d.epoch ORDER BY e.datetime, e.label, d.reflector"""
         return [dict(r) for r in self.conn.execute(q)]
 
+    def displacement_flags(self, epoch: str) -> list[str]:
+        """Every per-target displacement flag of an epoch (one entry per target and flag)."""
+        rows = self.conn.execute("SELECT flags FROM displacements WHERE epoch = ?", (epoch,)).fetchall()
+        return [f for r in rows for f in json.loads(r[0])]
+
     def reference_check_rows(self, epoch: str) -> list[dict]:
         return [dict(r) for r in self.conn.execute("SELECT * FROM reference_checks WHERE epoch = ?", (epoch,))]
 

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from app.cli.output import dump_json, table
 from app.cli.progress import progress_bar
+from lidar.flags import describe, severity
 
 
 def register(sub) -> None:
@@ -94,7 +95,12 @@ def register(sub) -> None:
                                    "recomputes exactly the results it affects. Keys: " + ", ".join(
                                        ["min_points", "budget_min", "normal_mode", "weighted_references",
                                         "map_step_deg", "detection_threshold", "identification_tolerance_m",
-                                        "moved_tolerance_m", "baseline"]))
+                                        "moved_tolerance_m", "levelled", "layout_up", "baseline"]) +
+                                   ". normal_mode: auto (default: both deck normals by their uncertainty), "
+                                   "reference or epoch. levelled false: the scanner had no compensator "
+                                   "(identification then accepts tilted solutions). layout_up x,y,z: the "
+                                   "layout's up axis (default 0,0,1). Changing the baseline re-references "
+                                   "every displacement.")
     p.add_argument("dir", type=Path)
     p.add_argument("key", nargs="?")
     p.add_argument("value", nargs="?")
@@ -171,6 +177,10 @@ def cmd_plan(args) -> int:
     return 0
 
 
+#: Exit status of 'process' when an epoch was processed but carries a problem flag (no trustworthy result).
+EXIT_PROBLEM = 3
+
+
 def cmd_process(args) -> int:
     from projects.processing import process
 
@@ -188,6 +198,10 @@ def cmd_process(args) -> int:
         print(f"bridgesurvey: error: {len(summary.failed)} epoch(s) failed: " +
               "; ".join(f"{o.epoch}: {o.message}" for o in summary.failed), file=sys.stderr)
         return 1
+    if summary.problems:
+        print(f"bridgesurvey: {len(summary.problems)} epoch(s) without a trustworthy result: " +
+              "; ".join(f"{lab}: {flag}" for lab, flag in summary.problems.items()), file=sys.stderr)
+        return EXIT_PROBLEM
     return 0
 
 
@@ -215,7 +229,15 @@ def cmd_status(args) -> int:
         return 0
     print(f"campaign '{data['name']}', span {data['span_m'] or '?'} m, baseline {data['baseline'] or '-'}, "
           f"{len(data['epochs'])} epoch(s)")
-    table(data["epochs"][-12:], ["epoch", "datetime", "state", "stale", "flags"])
+    shown = data["epochs"][-12:]
+    table([{**e, "flags": describe(e["flag_list"])} for e in shown],
+          ["epoch", "datetime", "state", "stale", "flags"])
+    tally = {s: sum(e["severity"][s] > 0 for e in data["epochs"]) for s in ("problem", "warning", "info")}
+    print(f"epochs with problems: {tally['problem']}, with warnings: {tally['warning']}, "
+          f"with information flags: {tally['info']}")
+    for e in data["epochs"]:
+        if e["state"] == "problem":
+            print(f"PROBLEM in {e['epoch']}: " + "; ".join(f for f in e["flag_list"] if severity(f) == "problem"))
     print("latest displacement of each measurement target:")
     table(data["targets"], ["reflector", "epoch", "displacement_mm", "sigma_mm", "state", "warning_mm", "alarm_mm",
                             "flags"])
@@ -277,8 +299,13 @@ def cmd_settings(args) -> int:
               ["key", "value", "default"])
         return 0
     with _open(args.dir) as c:
+        old_baseline = c.settings().get("baseline")
         set_parameter(c, args.key, args.value)
         stale = stale_epochs(c)
+    if args.key == "baseline" and (args.value or None) != old_baseline:
+        print(f"warning: the baseline changes from {old_baseline or '(first measured epoch)'} to "
+              f"{args.value or '(first measured epoch)'}: every displacement of the campaign is re-referenced "
+              "at the next 'bridgesurvey process' (the change is in the campaign log)", file=sys.stderr)
     print(f"{args.key} = {args.value}; {len(stale)} epoch(s) need processing for their centroids "
           "(displacements follow); run 'bridgesurvey process'")
     return 0

@@ -6,7 +6,7 @@ from PySide6.QtGui import QBrush, QColor
 from PySide6.QtWidgets import QTreeWidget, QTreeWidgetItem
 
 STATE_COLOURS = {"imported": "#7f7f7f", "planned": "#1f77b4", "scanned": "#9467bd", "measured": "#17becf",
-                 "processed": "#2ca02c", "flagged": "#d62728", "ok": "#2ca02c", "warning": "#ff7f0e",
+                 "processed": "#2ca02c", "problem": "#d62728", "ok": "#2ca02c", "warning": "#ff7f0e",
                  "alarm": "#d62728", "unknown": "#7f7f7f"}
 KIND = Qt.UserRole
 KEY = Qt.UserRole + 1

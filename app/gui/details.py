@@ -7,6 +7,7 @@ import json
 import numpy as np
 from PySide6.QtWidgets import QTextBrowser
 
+from lidar.flags import describe
 from projects.overview import epoch_state
 
 
@@ -16,7 +17,7 @@ def _rows(pairs) -> str:
 
 
 def campaign_html(c, status: dict) -> str:
-    n_proc = sum(e["state"] in ("processed", "flagged") for e in status["epochs"])
+    n_proc = sum(e["state"] in ("processed", "warning", "problem") for e in status["epochs"])
     return (f"<h3>{html.escape(c.name)}</h3>" + _rows([
         ("Folder", str(c.folder)), ("Span", f"{c.span_m:g} m" if c.span_m else "-"), ("Scanner", c.profile.name),
         ("Epochs", f"{len(status['epochs'])} ({n_proc} processed)"), ("Baseline", status["baseline"] or "-"),
@@ -50,7 +51,7 @@ def epoch_html(c, label: str) -> str:
     state, flags = epoch_state(c, label)
     rows = [("Date", e["datetime"]), ("State", state), ("Notes", e["notes"] or "-")]
     if flags:
-        rows.append(("Flags", ", ".join(flags)))
+        rows.append(("Flags", describe(flags)))
     for f in c.files(label):
         rows.append((f"{f['role']} scan", f"{f['original_path'].rsplit('/', 1)[-1]} ({f['size'] / 1e6:.1f} MB, "
                                            f"sha256 {f['sha256'][:12]}…)"))

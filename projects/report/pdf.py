@@ -9,6 +9,7 @@ from typing import Callable, Optional, Sequence
 
 import numpy as np
 
+from lidar.flags import describe, severity
 from lidar.progress import ProgressCallback, report, scaled
 from projects.report.content import FLAG_TEXT, EpochSection, ReportContent
 
@@ -186,6 +187,16 @@ def summary_section(content: ReportContent, ss) -> list:
                           r["flags"].replace(";", ", ") or "–"])
             colours.append((k, 5, STATE_COLOURS.get(r["state"], "#ffffff")))
         out += [Spacer(1, 4), _table(table, (18, 24, 26, 16, 30, 16, 48), ss, cell_colours=colours)]
+        problem_epochs = []
+        for sec in content.epochs:
+            fl = json.loads(sec.displacement_set["flags"]) if sec.displacement_set else []
+            bad = [f for f in fl if severity(f) == "problem"]
+            if bad:
+                problem_epochs.append(f"{sec.label} ({bad[0]})")
+        if problem_epochs:
+            out.append(Spacer(1, 4))
+            out.append(Paragraph("<font color='#d62728'><b>Epochs without a trustworthy result:</b> " +
+                                 _esc("; ".join(problem_epochs)) + "</font>", ss["Normal"]))
         valued = [r for r in rows if r["displacement_mm"] is not None]
         if valued:
             big = max(valued, key=lambda r: abs(r["displacement_mm"]))
@@ -359,8 +370,12 @@ def epoch_section(e: EpochSection, content: ReportContent, ss, *, new_page: bool
             table.append([r["reflector"], _num(r["displacement_mm"]), _num(r["sigma_mm"], "{:.3f}"), r["state"],
                           r["flags"].replace(";", ", ") or "–"])
         flags = e.displacement_set and json.loads(e.displacement_set["flags"])
-        out += [Spacer(1, 4), Paragraph("Displacements" + (f" (epoch flags: {', '.join(flags)})" if flags else ""),
+        out += [Spacer(1, 4), Paragraph("Displacements" + (f" (epoch flags, {_esc(describe(flags))})" if flags else ""),
                                         ss["Small"]), _table(table, (20, 30, 20, 20, 88), ss)]
+        problems = [f for f in (flags or []) if severity(f) == "problem"]
+        if problems:
+            out.insert(0, Paragraph(f"<font color='#d62728'><b>PROBLEM:</b> {_esc('; '.join(problems))}</font>",
+                                    ss["Normal"]))
     return out
 
 

@@ -35,10 +35,14 @@ def test_exact_positions_give_exact_displacements_wherever_the_scanner_stood():
     base, bt = exact_epoch(LAB_POSITIONS[0])
     for setup in LAB_POSITIONS:
         ep, t = exact_epoch(setup, midspan_m=-0.008)
-        res = compute_displacements(base, ep, GROUPS)
+        res = compute_displacements(base, ep, GROUPS, normal_mode="reference")
         for d in res.displacements:
             assert d.displacement_m == pytest.approx(true_u(t, bt, d.reflector), abs=2e-6)
             assert 0 < d.sigma_m < 0.001
+        # the default combines both normals by their uncertainties: within its sigma of the truth
+        res = compute_displacements(base, ep, GROUPS)
+        for d in res.displacements:
+            assert abs(d.displacement_m - true_u(t, bt, d.reflector)) < max(d.sigma_m, 1e-6)
         assert res.normal_socs @ np.array([0, 0, 1.0]) > 0.99  # upward in a levelled scanner
 
 
@@ -48,8 +52,10 @@ def test_refitting_the_normal_per_epoch_leaks_deck_tilt():
     per_epoch = compute_displacements(base, ep, GROUPS, normal_mode="epoch")
     errs = [abs(d.displacement_m - true_u(t, bt, d.reflector)) for d in per_epoch.displacements]
     assert max(errs) > 0.0002  # the dissertation's formulation, on an asymmetric layout
-    carried = compute_displacements(base, ep, GROUPS)
+    carried = compute_displacements(base, ep, GROUPS, normal_mode="reference")
     assert max(abs(d.displacement_m - true_u(t, bt, d.reflector)) for d in carried.displacements) < 2e-6
+    auto = compute_displacements(base, ep, GROUPS)  # the deck's tilt is seen as a bias of the epoch fit
+    assert max(abs(d.displacement_m - true_u(t, bt, d.reflector)) for d in auto.displacements) < 0.2 * max(errs)
 
 
 def test_normal_sign_is_consistent():
@@ -63,7 +69,7 @@ def test_missing_targets_and_bad_input():
     base, bt = exact_epoch(LAB_POSITIONS[0])
     ep, t = exact_epoch(LAB_POSITIONS[1], midspan_m=-0.004)
     del ep["M2"], ep["R1"]
-    res = compute_displacements(base, ep, GROUPS)
+    res = compute_displacements(base, ep, GROUPS, normal_mode="reference")
     assert FLAG_MISSING in res.of("M2").flags and np.isnan(res.of("M2").displacement_m)
     assert res.of("M3").displacement_m == pytest.approx(true_u(t, bt, "M3"), abs=2e-6)
     assert "R1" not in res.reference_ids
@@ -78,7 +84,7 @@ def test_missing_targets_and_bad_input():
 def test_reference_moved_sideways_is_flagged_and_left_out():
     base, bt = exact_epoch(LAB_POSITIONS[0])
     ep, t = exact_epoch(LAB_POSITIONS[2], midspan_m=-0.005, moved={"R4": (0, 0.005, 0)})
-    res = compute_displacements(base, ep, GROUPS)
+    res = compute_displacements(base, ep, GROUPS, normal_mode="reference")
     assert FLAG_REFERENCE_MOVED in res.flags and "R4" not in res.reference_ids
     assert [c.reflector for c in res.reference_checks if c.moved] == ["R4"]
     for d in res.displacements:

@@ -99,3 +99,31 @@ def test_an_unlevelled_set_up_can_still_be_identified():
     assert ident.rms_m < 1e-6 and ident.tilt_deg > 20
     ident = identify_reflectors(det, layout)  # levelled solutions are preferred, none exists: the best fit stands
     assert ident.rms_m < 1e-6
+
+
+def test_a_genuine_tie_is_refused_not_guessed():
+    # the demo's pier targets alone are symmetric under a half turn about the vertical: a levelled scanner
+    # seeing only them cannot tell R1 from R3
+    layout = layout_from_model(MODEL, noise_m=0.0)
+    refs = [t for t in MODEL.targets if t.group == "reference"]
+    rot = Rotation.from_euler("z", 35, degrees=True).as_matrix()
+    det = np.array([t.centre_m for t in refs]) @ rot.T + np.array([5.0, -12.0, -1.5])
+    with pytest.raises(ProcessingError, match="two identifications fit the 4 detected reflectors equally well"):
+        identify_reflectors(det, layout)
+    # one deck target seen breaks the tie
+    m1 = np.array(MODEL.target("M1").centre_m) @ rot.T + np.array([5.0, -12.0, -1.5])
+    ident = identify_reflectors(np.vstack([det, m1]), layout)
+    assert ident.match("R1").detection == 0 and ident.match("M1").detection == 4
+
+
+def test_a_layout_with_another_up_axis_is_declared_and_levelled():
+    layout = _twin_girder_layout()
+    from lidar.layout import Layout
+
+    yup = Layout(ids=layout.ids, groups=layout.groups, xyz=layout.xyz[:, [0, 2, 1]] * np.array([1, 1, -1]),
+                 diameters_m=layout.diameters_m)  # a surveying frame with y up
+    rot = Rotation.from_euler("z", 200, degrees=True).as_matrix()
+    det = layout.xyz[:4] @ rot.T + 7.0  # only the four coplanar pier targets, levelled scanner
+    ident = identify_reflectors(det, yup, up_layout=(0.0, 1.0, 0.0))
+    assert ident.tilt_deg < 0.5
+    assert [ident.match(r).detection for r in ("R1", "R2", "R3", "R4")] == [0, 1, 2, 3]

@@ -1,0 +1,120 @@
+"""The motion between two epochs' scanner frames, from the reference targets and the deck's sideways stability.
+
+The pier (reference) targets fix the motion between the baseline's and an
+epoch's scanner frames, but pier targets sit close together: two targets 1.8 m
+apart on each pier of a 40 m span leave the rotation about the bridge axis
+weakly determined (a tenth of a millimetre of centroid noise over 1.8 m), and
+that rotation tilts the deck normal sideways. The deck targets help: a deck
+moves vertically under load and along the span with temperature, but not
+across it. Their across-span coordinate is therefore an observation of the
+frame motion with a lever of the deck's height above the piers, several metres.
+
+:func:`fit_reference_motion` finds the rigid motion that best maps the
+baseline reference targets onto the epoch's (all three coordinates) and the
+baseline deck targets onto the epoch's in the across-span direction only, each
+residual weighted by its variance.
+"""
+from __future__ import annotations
+
+from typing import Optional
+
+import numpy as np
+
+from lidar.rigid import fit_rigid
+
+#: The deck targets must spread at least this far along the span (m) for its axis to be known;
+#: below this the deck term is left out.
+MIN_ALONG_SPREAD_M = 1.0
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def _rotvec_matrix(w: np.ndarray) -> np.ndarray:
+    theta = float(np.linalg.norm(w))
+    if theta < 1e-15:
+        return np.eye(3) + _skew(w)
+    k = _skew(w / theta)
+    return np.eye(3) + np.sin(theta) * k + (1 - np.cos(theta)) * (k @ k)
+
+
+def across_axis(deck_xyz: np.ndarray, up: np.ndarray) -> Optional[np.ndarray]:
+    """Horizontal unit vector across the span (perpendicular to ``up`` and to the deck targets' long axis).
+
+    None when the deck targets do not spread along a direction (fewer than 2, or all within 1 m).
+    """
+    deck_xyz = np.asarray(deck_xyz, dtype=np.float64)
+    if len(deck_xyz) < 2:
+        return None
+    c = deck_xyz - deck_xyz.mean(axis=0)
+    c -= np.outer(c @ up, up)  # horizontal part
+    w, v = np.linalg.eigh(c.T @ c)
+    if np.sqrt(w[-1] / len(deck_xyz)) < MIN_ALONG_SPREAD_M / 2:
+        return None
+    a = np.cross(up, v[:, -1])
+    return a / np.linalg.norm(a)
+
+
+def fit_reference_motion(ref_base: np.ndarray, ref_epoch: np.ndarray, ref_var: np.ndarray, *,
+                         deck_base: Optional[np.ndarray] = None, deck_epoch: Optional[np.ndarray] = None,
+                         deck_var_across: Optional[np.ndarray] = None, across_base: Optional[np.ndarray] = None,
+                         iterations: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """Rigid motion (R, t) with ``epoch ~= R @ base + t`` from reference targets and deck sideways stability.
+
+    Parameters
+    ----------
+    ref_base, ref_epoch : (N, 3) float64 arrays, metres
+        The same reference targets in the baseline's and the epoch's scanner frames (N >= 3).
+    ref_var : (N,) array, m^2
+        Variance of one coordinate of each reference target's difference (both epochs together).
+    deck_base, deck_epoch : (M, 3) float64 arrays, optional
+        Deck (measurement) targets found in both epochs.
+    deck_var_across : (M,) array, m^2, optional
+        Variance of each deck target's across-span difference.
+    across_base : (3,) array, optional
+        Unit across-span axis in the baseline frame (:func:`across_axis`). Without it, or
+        without deck targets, the fit uses the reference targets alone.
+    iterations : int, keyword-only
+        Gauss-Newton steps from the reference-only Kabsch solution (default 3; it converges in 2).
+
+    Returns
+    -------
+    R : (3, 3) rotation, t : (3,) translation.
+    """
+    ref_base = np.asarray(ref_base, dtype=np.float64)
+    ref_epoch = np.asarray(ref_epoch, dtype=np.float64)
+    w_ref = 1.0 / np.maximum(np.asarray(ref_var, dtype=np.float64), 1e-16)
+    r0, t0 = fit_rigid(ref_base, ref_epoch, weights=w_ref)
+    use_deck = across_base is not None and deck_base is not None and len(deck_base) >= 1
+    if not use_deck:
+        return r0, t0
+    deck_base = np.asarray(deck_base, dtype=np.float64)
+    deck_epoch = np.asarray(deck_epoch, dtype=np.float64)
+    w_deck = 1.0 / np.maximum(np.asarray(deck_var_across, dtype=np.float64), 1e-16)
+    # Work about the reference targets' centroid for a well-conditioned system.
+    c = (w_ref @ ref_base) / w_ref.sum()
+    rot, t = r0, t0 + r0 @ c - c  # t now maps (x - c): epoch ~= rot (x - c) + c + t
+    for _ in range(iterations):
+        rows, rhs, wts = [], [], []
+        a = rot @ across_base
+        for b, e, w in zip(ref_base, ref_epoch, w_ref):
+            q = rot @ (b - c)
+            res = e - (q + c + t)
+            jw = -_skew(q)  # d(q)/d(omega) for rot <- (I + [omega]x) rot
+            for k in range(3):
+                rows.append(np.concatenate([jw[k], np.eye(3)[k]]))
+                rhs.append(res[k])
+                wts.append(w)
+        for b, e, w in zip(deck_base, deck_epoch, w_deck):
+            q = rot @ (b - c)
+            res = (e - (q + c + t)) @ a
+            rows.append(np.concatenate([a @ -_skew(q), a]))
+            rhs.append(res)
+            wts.append(w)
+        jac = np.array(rows)
+        sw = np.sqrt(np.array(wts))
+        step, *_ = np.linalg.lstsq(jac * sw[:, None], np.array(rhs) * sw, rcond=None)
+        rot = _rotvec_matrix(step[:3]) @ rot
+        t = t + step[3:]
+    return rot, t + c - rot @ c

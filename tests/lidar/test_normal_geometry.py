@@ -1,0 +1,88 @@
+"""The deck normal chosen by uncertainty on bridges unlike the demo (issue 17, point 3).
+
+Centroid-level simulation (lidar.simulate.centroids): spans of 20-60 m, pier-target
+separations of 0.5-3 m, symmetric and asymmetric twin-girder layouts, a levelled
+scanner somewhere new each epoch, a sag with a torsion of the cross-section and an
+off-centre load.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from lidar.displacement import FLAG_NORMAL_FROM_EPOCH, compute_displacements
+from lidar.reference_motion import across_axis, fit_reference_motion
+from lidar.simulate.centroids import BridgeGeometry, deflection, observe, random_station
+
+
+def errors(geometry, *, mode="auto", epochs=12, seed=0, girder_ratio=0.9, asymmetry_m=0.001):
+    rng = np.random.default_rng(seed)
+    ids, groups, xyz = geometry.targets()
+    base = observe(xyz, ids, scanner_xyz=random_station(geometry, rng), heading_deg=rng.uniform(0, 360), rng=rng)
+    errs, sig, flags = [], [], set()
+    for _ in range(epochs):
+        dz = deflection(xyz, groups, ids, geometry, midspan_m=-rng.uniform(0.002, 0.012), girder_ratio=girder_ratio,
+                        asymmetry_m=asymmetry_m * rng.uniform(-1, 1))
+        moved = xyz.copy()
+        moved[:, 2] += dz
+        ep = observe(moved, ids, scanner_xyz=random_station(geometry, rng), heading_deg=rng.uniform(0, 360), rng=rng)
+        res = compute_displacements(base, ep, groups, normal_mode=mode)
+        flags |= set(res.flags)
+        for d in res.displacements:
+            errs.append(d.displacement_m - dz[ids.index(d.reflector)])
+            sig.append(d.sigma_m)
+    return np.array(errs), np.array(sig), flags
+
+
+def test_the_reported_long_span_no_longer_falls_back_and_stays_at_a_tenth_of_a_millimetre():
+    # 40 m, two pier targets 1.8 m apart on each pier, asymmetric twin girder at -2.4 / +1.2 m
+    g = BridgeGeometry(span_m=40.0, pier_separation_m=1.8, girder_offsets_m=(-2.4, 1.2))
+    errs, sig, flags = errors(g, seed=3)
+    assert FLAG_NORMAL_FROM_EPOCH not in flags  # the carried normal is kept: its uncertainty is small
+    assert np.sqrt(np.mean(errs ** 2)) <= 0.0001
+    assert np.abs(errs).max() <= 0.0003
+    assert np.mean(np.abs(errs) <= 2 * sig) >= 0.9  # honest sigmas
+    epoch_errs, _, _ = errors(g, seed=3, mode="epoch")
+    assert np.sqrt(np.mean(epoch_errs ** 2)) > 3 * np.sqrt(np.mean(errs ** 2))  # what the old fallback gave
+
+
+@pytest.mark.parametrize("span, separation", [(20.0, 0.5), (20.0, 3.0), (60.0, 0.5), (60.0, 3.0)])
+@pytest.mark.parametrize("offsets", [(-1.8, 1.8), (-2.4, 1.2)])
+def test_other_geometries(span, separation, offsets):
+    errs, sig, _ = errors(BridgeGeometry(span_m=span, pier_separation_m=separation, girder_offsets_m=offsets),
+                          seed=int(span + 10 * separation))
+    assert np.sqrt(np.mean(errs ** 2)) <= 0.00013  # 20 m spans seen from 8 m: the centroids' own noise is ~0.1 mm
+    assert np.abs(errs).max() <= 0.0004
+
+
+def test_an_undeformed_deck_leans_on_the_epoch_fit_where_it_is_better_determined():
+    g = BridgeGeometry(span_m=20.0, pier_separation_m=0.5)
+    auto, _, _ = errors(g, girder_ratio=1.0, asymmetry_m=0.0, seed=5)
+    carried, _, _ = errors(g, girder_ratio=1.0, asymmetry_m=0.0, seed=5, mode="reference")
+    assert np.sqrt(np.mean(auto ** 2)) < np.sqrt(np.mean(carried ** 2))
+
+
+def test_reference_motion_is_exact_without_noise_and_uses_the_deck_sideways():
+    g = BridgeGeometry(span_m=40.0, pier_separation_m=0.5)
+    ids, groups, xyz = g.targets()
+    rot = Rotation.from_euler("zyx", [70, 0.01, -0.02], degrees=True).as_matrix()
+    ep = xyz @ rot.T + np.array([3.0, -2.0, 0.5])
+    refs = [k for k, r in enumerate(ids) if groups[r] == "reference"]
+    deck = [k for k, r in enumerate(ids) if groups[r] == "measurement"]
+    up = np.array([0.0, 0.0, 1.0])
+    across = across_axis(xyz[deck], up)
+    assert abs(abs(across[1]) - 1.0) < 1e-9
+    r, t = fit_reference_motion(xyz[refs], ep[refs], np.full(len(refs), 1e-8), deck_base=xyz[deck],
+                                deck_epoch=ep[deck], deck_var_across=np.full(len(deck), 1e-8), across_base=across)
+    np.testing.assert_allclose(r, rot, atol=1e-12)
+    # pier targets that say "rolled about the bridge axis" are overruled by a deck that did not move sideways
+    roll = Rotation.from_euler("x", 0.02, degrees=True).as_matrix()
+    bad = (xyz[refs] - xyz[refs].mean(axis=0)) @ roll.T + xyz[refs].mean(axis=0)
+    r_refs, _ = fit_reference_motion(xyz[refs], bad, np.full(len(refs), 1e-8))
+    r_both, _ = fit_reference_motion(xyz[refs], bad, np.full(len(refs), 1e-8), deck_base=xyz[deck],
+                                     deck_epoch=xyz[deck], deck_var_across=np.full(len(deck), 1e-10),
+                                     across_base=across)
+    angle = lambda m: np.degrees(np.arccos(np.clip((np.trace(m) - 1) / 2, -1, 1)))  # noqa: E731
+    assert angle(r_refs) == pytest.approx(0.02, rel=1e-6)
+    assert angle(r_both) < 0.002

@@ -1,0 +1,90 @@
+"""No silent empty epoch, flags by severity and an explicit baseline (issue 17, points 2, 5 and 6)."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from app.cli.main import main
+from lidar.simulate import EpochConditions, ScannerSetup
+from lidar.simulate.files import load_scene, save_scene, simulate_coarse, simulate_fine
+from projects.overview import campaign_status, epoch_state
+from projects.processing import plan_epoch
+from projects.store import Campaign
+from tests.projects.conftest import MODEL
+
+DECK = tuple(t.id for t in MODEL.targets if t.group == "measurement")
+
+
+def _visit(field, name, date, camp, conditions, seed, fine_conditions=None):
+    folder = field / name
+    simulate_coarse(folder, setup=ScannerSetup((22.0, -13.0, 1.5), heading_deg=120.0), conditions=conditions,
+                    model=MODEL, seed=seed, coarse_step_deg=0.06)
+    assert main(["add-epoch", str(camp), "--date", date, "--coarse", str(folder / "coarse.laz")]) == 0
+    with Campaign.open(camp) as c:
+        plan = plan_epoch(c, date[:10])
+    if fine_conditions is not None:  # something changed between the coarse and the fine scans
+        setup, _, seed_, step = load_scene(folder)
+        save_scene(folder, setup, fine_conditions, seed_, step)
+    fine, _ = simulate_fine(folder, plan.rois, model=MODEL, name="fine.laz")
+    assert main(["add-fine", str(camp), "--epoch", date[:10], str(fine)]) == 0
+
+
+@pytest.mark.slow
+def test_an_epoch_without_deck_targets_is_a_problem_not_a_silent_gap(processed_copy, field_copy, capsys):
+    # the deck targets were seen in the coarse scan, then hidden (e.g. a parked vehicle) for the fine scans
+    _visit(field_copy, "gone", "2026-03-23T09:00", processed_copy, EpochConditions(), seed=77,
+           fine_conditions=EpochConditions(occluded=DECK))
+    capsys.readouterr()
+    assert main(["process", str(processed_copy)]) == 3  # processed, but no trustworthy result
+    err = capsys.readouterr().err
+    assert "2026-03-23" in err and "deck_not_measured" in err
+    with Campaign.open(processed_copy, writable=False) as c:
+        state, flags = epoch_state(c, "2026-03-23")
+        assert state == "problem"
+        assert any(f.startswith("deck_not_measured") for f in flags)
+        status = campaign_status(c)
+        others = [e for e in status["epochs"] if e["epoch"] != "2026-03-23"]
+        assert all(e["state"] in ("processed", "warning") for e in others)  # the rest is not red
+    assert main(["status", str(processed_copy)]) == 0
+    out = capsys.readouterr().out
+    assert "PROBLEM in 2026-03-23" in out and "epochs with problems: 1" in out
+    assert main(["displacements", str(processed_copy), "--format", "json"]) == 0
+    rows = [r for r in json.loads(capsys.readouterr().out) if r["epoch"] == "2026-03-23"]
+    assert rows and all(r["displacement_mm"] is None and r["severity"] == "problem" for r in rows)
+
+
+@pytest.mark.slow
+def test_an_epoch_dated_before_the_baseline_gets_negative_time_not_a_new_baseline(processed_copy, field_copy,
+                                                                                     capsys):
+    with Campaign.open(processed_copy, writable=False) as c:
+        assert c.settings().get("baseline") == "2026-03-02"  # stored once, at the first processing
+        before = {(r["epoch"], r["reflector"]): r["displacement_m"] for r in c.displacement_rows()}
+    _visit(field_copy, "early", "2026-02-23T09:00", processed_copy, EpochConditions(midspan_displacement_m=0.002),
+           seed=78)
+    assert main(["process", str(processed_copy)]) == 0
+    capsys.readouterr()
+    assert main(["displacements", str(processed_copy), "--format", "json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert {r["baseline"] for r in rows} == {"2026-03-02"}
+    early = [r for r in rows if r["epoch"] == "2026-02-23"]
+    assert early and all(r["days_from_baseline"] == pytest.approx(-7.0) for r in early)
+    mid = [r for r in early if r["reflector"] == "M3"]
+    assert mid and mid[0]["displacement_mm"] == pytest.approx(2.0, abs=0.5)  # 2 mm up, against the baseline
+    with Campaign.open(processed_copy, writable=False) as c:
+        after = {(r["epoch"], r["reflector"]): r["displacement_m"] for r in c.displacement_rows()}
+    assert all(after[k] == before[k] for k in before)  # nothing else was re-referenced
+    assert main(["settings", str(processed_copy), "baseline", "2026-03-09"]) == 0
+    assert "re-referenced" in capsys.readouterr().err
+    with Campaign.open(processed_copy, writable=False) as c:
+        assert any(r["action"] == "setting" and "2026-03-09" in r["details"] for r in c.log_rows())
+
+
+def test_identification_settings_are_validated(processed_copy, capsys):
+    assert main(["settings", str(processed_copy), "levelled", "false"]) == 0
+    assert main(["settings", str(processed_copy), "layout_up", "0,1,0"]) == 0
+    for key, bad in (("levelled", "maybe"), ("layout_up", "0,0"), ("layout_up", "0,0,0"), ("normal_mode", "up")):
+        assert main(["settings", str(processed_copy), key, bad]) == 1
+        assert key in capsys.readouterr().err
+    with Campaign.open(processed_copy, writable=False) as c:
+        assert c.settings()["levelled"] is False and c.settings()["layout_up"] == "0,1,0"
