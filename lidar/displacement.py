@@ -433,7 +433,26 @@ def compute_displacements(baseline: Mapping[str, object], epoch: Mapping[str, ob
     meas_ids = [m for m, g in groups.items() if g == "measurement"]
     checks, stable, flags = check_references(base, ep, ref_ids, tolerance_m=moved_tolerance_m,
                                              measurement_ids=meas_ids)
-    flags = list(flags)
+
+    def solve(stable_ids, checks_, flags_):
+        return _solve(base, ep, meas_ids, list(stable_ids), checks_, list(flags_), normal_mode, weighted)
+
+    result = solve(stable, checks, flags)
+    # A moved pier target: the deck's shape (zero at the supports) tells which one it was.
+    from lidar.pier_moves import resolve_ambiguous_move, verify_single_move
+
+    if FLAG_REFERENCE_AMBIGUOUS in flags:
+        result = resolve_ambiguous_move(result, base, groups, solve,
+                                        lambda ids: _consistency(base, ep, ids, meas_ids))
+    elif FLAG_REFERENCE_MOVED in flags:
+        result = verify_single_move(result, base, groups, solve,
+                                    lambda ids: _consistency(base, ep, ids, meas_ids))
+    return result
+
+
+def _solve(base: dict, ep: dict, meas_ids: list, stable: list, checks, flags: list, normal_mode: str,
+           weighted: bool) -> EpochDisplacements:
+    """Displacements of ``meas_ids`` with the reference point and frame motion from ``stable``."""
     if not stable:
         raise ProcessingError("no reference target was measured in both this epoch and the baseline; "
                               "displacements cannot be referred to the piers")

@@ -21,7 +21,6 @@ import numpy as np
 from lidar.displacement import FLAG_MISSING, Displacement, EpochDisplacements, compute_displacements
 from lidar.flags import FLAG_DECK_NOT_MEASURED, FLAG_NO_DISPLACEMENT, FLAG_PIERS_NOT_MEASURED, PROBLEM, severity
 from lidar.errors import InputError, ProcessingError, SurveyError
-from lidar.identification import MAX_TILT_DEG
 from lidar.io import read_scan
 from lidar.pipeline import analyse_coarse, measure_targets, plan_from_coarse
 from lidar.plan import ScanPlan
@@ -44,13 +43,14 @@ DEFAULTS = {
     "moved_tolerance_m": 0.001,
     # identification: the scanner was levelled (solutions implying a tilt lose), the layout's up axis
     "levelled": True,
+    "max_tilt_deg": 2.0,
     "layout_up": "0,0,1",
 }
 STAGE1_KEYS = ("min_points", "budget_min", "map_step_deg", "detection_threshold", "identification_tolerance_m",
-               "levelled", "layout_up")
+               "levelled", "max_tilt_deg", "layout_up")
 #: Stage-1 keys added later: they enter the input hash only when changed, so campaigns processed before
 #: they existed are not measured again for nothing.
-LATER_STAGE1_KEYS = ("levelled", "layout_up")
+LATER_STAGE1_KEYS = ("levelled", "max_tilt_deg", "layout_up")
 
 
 def stage1_params(params: dict) -> dict:
@@ -154,7 +154,7 @@ def analyse_epoch_coarse(c: Campaign, label: str, layout, params: dict, *,
     coarse = read_files(c, c.files(label, "coarse"), scaled(progress, 0.0, 0.5))
     return analyse_coarse(coarse, layout, step_deg=params["map_step_deg"], threshold=params["detection_threshold"],
                           tolerance_m=params["identification_tolerance_m"],
-                          max_tilt_deg=MAX_TILT_DEG if params["levelled"] else None, up_layout=layout_up(params),
+                          max_tilt_deg=float(params["max_tilt_deg"]) if params["levelled"] else None, up_layout=layout_up(params),
                           progress=scaled(progress, 0.5, 1.0))
 
 

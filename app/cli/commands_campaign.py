@@ -95,10 +95,11 @@ def register(sub) -> None:
                                    "recomputes exactly the results it affects. Keys: " + ", ".join(
                                        ["min_points", "budget_min", "normal_mode", "weighted_references",
                                         "map_step_deg", "detection_threshold", "identification_tolerance_m",
-                                        "moved_tolerance_m", "levelled", "layout_up", "baseline"]) +
+                                        "moved_tolerance_m", "levelled", "max_tilt_deg", "layout_up", "baseline"]) +
                                    ". normal_mode: auto (default: both deck normals by their uncertainty), "
                                    "reference or epoch. levelled false: the scanner had no compensator "
-                                   "(identification then accepts tilted solutions). layout_up x,y,z: the "
+                                   "(identification then accepts tilted solutions); max_tilt_deg: the largest tilt a levelled "
+                                   "solution may imply (default 2, for the layout's few centimetres). layout_up x,y,z: the "
                                    "layout's up axis (default 0,0,1). Changing the baseline re-references "
                                    "every displacement.")
     p.add_argument("dir", type=Path)

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from lidar.displacement import FLAG_NORMAL_FROM_EPOCH, compute_displacements
+from lidar.displacement import FLAG_NORMAL_FROM_EPOCH, FLAG_REFERENCE_AMBIGUOUS, compute_displacements
 from lidar.reference_motion import across_axis, fit_reference_motion
 from lidar.simulate.centroids import BridgeGeometry, deflection, observe, random_station
 
@@ -86,3 +86,32 @@ def test_reference_motion_is_exact_without_noise_and_uses_the_deck_sideways():
     angle = lambda m: np.degrees(np.arccos(np.clip((np.trace(m) - 1) / 2, -1, 1)))  # noqa: E731
     assert angle(r_refs) == pytest.approx(0.02, rel=1e-6)
     assert angle(r_both) < 0.002
+
+
+@pytest.mark.parametrize("target, move", [("R2", (0, 0, 0.003)), ("R1", (0, 0, 0.003)), ("R4", (0, 0, -0.002))])
+@pytest.mark.parametrize("separation", [0.5, 1.8])
+def test_a_vertical_pier_target_move_is_pinned_by_the_deck_shape(target, move, separation):
+    """Issue 17, point 4: one of two stacked pier targets moved vertically; it is named and the error stays small."""
+    g = BridgeGeometry(span_m=40.0, pier_separation_m=separation, girder_offsets_m=(-2.4, 1.2))
+    ids, groups, xyz = g.targets()
+    named, errs = 0, []
+    for seed in range(20):
+        rng = np.random.default_rng(seed)
+        base = observe(xyz, ids, scanner_xyz=random_station(g, rng), heading_deg=rng.uniform(0, 360), rng=rng)
+        dz = deflection(xyz, groups, ids, g, midspan_m=-0.006, girder_ratio=0.9, asymmetry_m=0.0005)
+        moved = xyz.copy()
+        moved[:, 2] += dz
+        moved[ids.index(target)] += move
+        ep = observe(moved, ids, scanner_xyz=random_station(g, rng), heading_deg=rng.uniform(0, 360), rng=rng)
+        res = compute_displacements(base, ep, groups)
+        pinned = [c.reflector for c in res.reference_checks if c.moved]
+        suspects = [c.reflector for c in res.reference_checks if c.suspect]
+        assert pinned in ([target], [])  # never a wrong target named as moved
+        assert pinned or suspects
+        if pinned == [target]:
+            named += 1
+            errs += [d.displacement_m - dz[ids.index(d.reflector)] for d in res.displacements]
+        else:
+            assert FLAG_REFERENCE_AMBIGUOUS in res.flags  # left out both, and says so
+    assert named >= 16
+    assert np.sqrt(np.mean(np.square(errs))) <= 0.00015 and np.abs(errs).max() <= 0.0004

@@ -88,3 +88,21 @@ def test_identification_settings_are_validated(processed_copy, capsys):
         assert key in capsys.readouterr().err
     with Campaign.open(processed_copy, writable=False) as c:
         assert c.settings()["levelled"] is False and c.settings()["layout_up"] == "0,1,0"
+
+
+def test_status_names_the_suspects_of_an_ambiguous_pier_move(processed_copy, capsys):
+    import numpy as np
+
+    from lidar.displacement import Displacement, EpochDisplacements, ReferenceCheck
+
+    checks = (ReferenceCheck("R1", 0.003, 0.003, False, False, True), ReferenceCheck("R2", 0.003, 0.003, False, False, True),
+              ReferenceCheck("R3", 0.0, 0.0, False, False), ReferenceCheck("R4", 0.0, 0.0, False, False))
+    res = EpochDisplacements((Displacement("M1", -0.001, 0.0002, 1.0, 1.001),), ("R3", "R4"), checks,
+                             np.array([0, 0, 1.0]), np.zeros(3), "auto", ("reference_change_ambiguous",))
+    with Campaign.open(processed_copy) as c:
+        c.save_displacements("2026-03-16", "2026-03-02", res, "test")
+        state, flags = epoch_state(c, "2026-03-16")
+    assert state == "warning"
+    assert any("R1 or R2 moved" in f for f in flags)
+    assert main(["status", str(processed_copy)]) == 0
+    assert "R1 or R2 moved" in capsys.readouterr().out
