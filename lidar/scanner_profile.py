@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import Optional
 
 from lidar.errors import InputError
 
@@ -39,6 +40,11 @@ class ScannerProfile:
     beam_divergence_mrad, beam_exit_diameter_m : float
         Footprint model: diameter = exit + divergence * range.
     max_range_m : float
+    max_tilt_deg : float or None
+        Largest scanner tilt an identification of the coarse scan may imply.
+        The VZ-1000's inclination sensors hold a levelled set-up to about
+        0.01 deg; the default 2 deg leaves room for a layout's few centimetres of
+        error over a few metres. None for an instrument without compensator.
     """
 
     name: str = "Riegl VZ-1000"
@@ -52,10 +58,11 @@ class ScannerProfile:
     beam_divergence_mrad: float = 0.3
     beam_exit_diameter_m: float = 0.007
     max_range_m: float = 1400.0
+    max_tilt_deg: Optional[float] = 2.0
 
     def __post_init__(self) -> None:
         for k, v in asdict(self).items():
-            if k in ("name", "theta_fov_deg"):
+            if k in ("name", "theta_fov_deg") or (k == "max_tilt_deg" and v is None):
                 continue
             if not (isinstance(v, (int, float)) and v > 0):
                 raise InputError(f"scanner profile: {k} must be a positive number, got {v!r}")

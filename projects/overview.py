@@ -63,6 +63,7 @@ def campaign_status(c: Campaign) -> dict:
                        "severity": count(flags)})
     latest = {}
     for r in displacement_table(c):
-        latest[r["reflector"]] = r
+        if r["displacement_mm"] is not None or r["reflector"] not in latest:  # keep the last good value
+            latest[r["reflector"]] = r
     return {"name": c.name, "span_m": c.span_m, "baseline": baseline_epoch(c), "epochs": epochs,
             "targets": list(latest.values())}

@@ -43,7 +43,7 @@ DEFAULTS = {
     "moved_tolerance_m": 0.001,
     # identification: the scanner was levelled (solutions implying a tilt lose), the layout's up axis
     "levelled": True,
-    "max_tilt_deg": 2.0,
+    "max_tilt_deg": None,  # None: the scanner profile's
     "layout_up": "0,0,1",
 }
 STAGE1_KEYS = ("min_points", "budget_min", "map_step_deg", "detection_threshold", "identification_tolerance_m",
@@ -55,6 +55,21 @@ LATER_STAGE1_KEYS = ("levelled", "max_tilt_deg", "layout_up")
 
 def stage1_params(params: dict) -> dict:
     return {k: params[k] for k in STAGE1_KEYS if k not in LATER_STAGE1_KEYS or params[k] != DEFAULTS[k]}
+
+
+def _profile_key(profile) -> dict:
+    """The profile as it enters the input hash (a field added later only when it differs from its default)."""
+    d = profile.to_dict()
+    if d.get("max_tilt_deg") == 2.0:
+        del d["max_tilt_deg"]
+    return d
+
+
+def max_tilt(c: Campaign, params: dict) -> Optional[float]:
+    """Largest tilt an identification may imply: None when the scanner was not levelled."""
+    if not params["levelled"]:
+        return None
+    return float(params["max_tilt_deg"]) if params["max_tilt_deg"] is not None else c.profile.max_tilt_deg
 
 
 def layout_up(params: dict) -> np.ndarray:
@@ -92,7 +107,7 @@ def set_parameter(c: Campaign, key: str, text: Optional[str]) -> None:
             value = int(text)
             if value < 10:
                 raise ValueError
-        elif text.lower() in ("none", "auto", "") and key in ("map_step_deg", "detection_threshold"):
+        elif text.lower() in ("none", "auto", "") and key in ("map_step_deg", "detection_threshold", "max_tilt_deg"):
             value = None
         else:
             value = float(text)
@@ -144,7 +159,7 @@ def plan_inputs(c: Campaign, label: str, params: dict) -> tuple[str, object]:
     layout = c.layout(ep["datetime"])
     key = {"v": PIPELINE_VERSION, "coarse": [f["sha256"] for f in coarse],
            "layout": layout.to_rows(), "params": stage1_params(params),
-           "profile": c.profile.to_dict()}
+           "profile": _profile_key(c.profile)}
     return _hash(key), layout
 
 
@@ -154,7 +169,7 @@ def analyse_epoch_coarse(c: Campaign, label: str, layout, params: dict, *,
     coarse = read_files(c, c.files(label, "coarse"), scaled(progress, 0.0, 0.5))
     return analyse_coarse(coarse, layout, step_deg=params["map_step_deg"], threshold=params["detection_threshold"],
                           tolerance_m=params["identification_tolerance_m"],
-                          max_tilt_deg=float(params["max_tilt_deg"]) if params["levelled"] else None, up_layout=layout_up(params),
+                          max_tilt_deg=max_tilt(c, params), up_layout=layout_up(params),
                           progress=scaled(progress, 0.5, 1.0))
 
 

@@ -99,7 +99,7 @@ def register(sub) -> None:
                                    ". normal_mode: auto (default: both deck normals by their uncertainty), "
                                    "reference or epoch. levelled false: the scanner had no compensator "
                                    "(identification then accepts tilted solutions); max_tilt_deg: the largest tilt a levelled "
-                                   "solution may imply (default 2, for the layout's few centimetres). layout_up x,y,z: the "
+                                   "solution may imply (default: the scanner profile's, 2 deg for the VZ-1000). layout_up x,y,z: the "
                                    "layout's up axis (default 0,0,1). Changing the baseline re-references "
                                    "every displacement.")
     p.add_argument("dir", type=Path)

@@ -168,8 +168,9 @@ def summary_section(content: ReportContent, ss) -> list:
     out = [Paragraph("Summary", ss["Heading1"])]
     rows = content.displacements
     latest = {}
-    for r in rows:
-        latest[r["reflector"]] = r
+    for r in rows:  # the latest value of each target; an epoch without one does not hide the last good one
+        if r["displacement_mm"] is not None or r["reflector"] not in latest:
+            latest[r["reflector"]] = r
     if not rows:
         out.append(Paragraph("No displacements computed yet: the epochs in this report have not all been measured "
                              "(see the epoch sections and 'bridgesurvey status').", ss["Normal"]))

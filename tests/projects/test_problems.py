@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import json
+import shutil
+import subprocess
 
 import pytest
 
@@ -52,6 +54,12 @@ def test_an_epoch_without_deck_targets_is_a_problem_not_a_silent_gap(processed_c
     assert main(["displacements", str(processed_copy), "--format", "json"]) == 0
     rows = [r for r in json.loads(capsys.readouterr().out) if r["epoch"] == "2026-03-23"]
     assert rows and all(r["displacement_mm"] is None and r["severity"] == "problem" for r in rows)
+    pdf = processed_copy.parent / "problem.pdf"
+    assert main(["report", str(processed_copy), "--out", str(pdf)]) == 0
+    if shutil.which("pdftotext"):
+        text = subprocess.run(["pdftotext", str(pdf), "-"], capture_output=True, text=True, check=True).stdout
+        assert "Epochs without a trustworthy result" in text and "PROBLEM" in text
+        assert "deck_not_measured" in text
 
 
 @pytest.mark.slow
@@ -83,11 +91,19 @@ def test_an_epoch_dated_before_the_baseline_gets_negative_time_not_a_new_baselin
 def test_identification_settings_are_validated(processed_copy, capsys):
     assert main(["settings", str(processed_copy), "levelled", "false"]) == 0
     assert main(["settings", str(processed_copy), "layout_up", "0,1,0"]) == 0
-    for key, bad in (("levelled", "maybe"), ("layout_up", "0,0"), ("layout_up", "0,0,0"), ("normal_mode", "up")):
+    assert main(["settings", str(processed_copy), "max_tilt_deg", "1.5"]) == 0
+    assert main(["settings", str(processed_copy), "max_tilt_deg", "auto"]) == 0  # back to the scanner profile's
+    for key, bad in (("levelled", "maybe"), ("layout_up", "0,0"), ("layout_up", "0,0,0"), ("normal_mode", "up"),
+                     ("max_tilt_deg", "-1")):
         assert main(["settings", str(processed_copy), key, bad]) == 1
         assert key in capsys.readouterr().err
     with Campaign.open(processed_copy, writable=False) as c:
         assert c.settings()["levelled"] is False and c.settings()["layout_up"] == "0,1,0"
+        assert c.settings()["max_tilt_deg"] is None
+        from projects.processing import max_tilt, parameters
+
+        assert max_tilt(c, parameters(c)) is None  # not levelled: no limit
+        assert max_tilt(c, {**parameters(c), "levelled": True}) == c.profile.max_tilt_deg == 2.0
 
 
 def test_status_names_the_suspects_of_an_ambiguous_pier_move(processed_copy, capsys):
