@@ -119,14 +119,22 @@ def resolve_ambiguous_move(result, base: Mapping, groups: Mapping[str, str], sol
         flags = [f for f in result.flags if f != FLAG_REFERENCE_AMBIGUOUS]
         if FLAG_REFERENCE_MOVED not in flags:
             flags.append(FLAG_REFERENCE_MOVED)
-        try:
-            candidate = solve(stable, checks, flags)
-        except Exception:  # noqa: BLE001 - an explanation that cannot be computed is no explanation
-            continue
-        shape = deck_shape_chi2(candidate, base, groups)
-        if shape is not None:
-            fits.append((shape[0], shape[1], candidate))
+        fit = _explain(solve, stable, checks, flags, base, groups)
+        if fit is not None:
+            fits.append(fit)
     return _decisive(fits) or result
+
+
+def _explain(solve: Callable, stable: list, checks, flags: list, base: Mapping, groups: Mapping[str, str]):
+    """(chi-square, dof, result) of one explanation, or None when it cannot be computed or judged."""
+    from lidar.errors import SurveyError
+
+    try:
+        candidate = solve(stable, checks, flags)
+    except SurveyError:  # an explanation that cannot be computed is no explanation
+        return None
+    shape = deck_shape_chi2(candidate, base, groups)
+    return None if shape is None else (shape[0], shape[1], candidate)
 
 
 def _decisive(fits: list):
@@ -166,11 +174,7 @@ def verify_single_move(result, base: Mapping, groups: Mapping[str, str], solve: 
             continue
         checks = tuple(replace(c, moved=c.reflector == other if c.reflector in (other, named) else c.moved)
                        for c in result.reference_checks)
-        try:
-            candidate = solve(stable, checks, list(result.flags))
-        except Exception:  # noqa: BLE001 - an explanation that cannot be computed is no explanation
-            continue
-        alt = deck_shape_chi2(candidate, base, groups)
-        if alt is not None:
-            fits.append((alt[0], alt[1], candidate))
+        fit = _explain(solve, stable, checks, list(result.flags), base, groups)
+        if fit is not None:
+            fits.append(fit)
     return _decisive(fits) or result
