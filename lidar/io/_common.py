@@ -100,6 +100,40 @@ def make_scan(
     )
 
 
+def pose_to_text(pose: np.ndarray) -> str:
+    """A 4x4 pose as 16 numbers, row by row (the header line PLY and XYZ files carry it in)."""
+    return " ".join(f"{v:.15g}" for v in np.asarray(pose, dtype=np.float64).ravel())
+
+
+def pose_from_text(path: Path, words: list[str], what: str) -> np.ndarray:
+    """The 4x4 pose written by :func:`pose_to_text`; ScanFormatError naming ``what`` unless 16 numbers."""
+    try:
+        vals = np.array([float(v) for v in words])
+    except ValueError as exc:
+        raise ScanFormatError(path, f"the {what} is not 16 numbers") from exc
+    if vals.size != 16:
+        raise ScanFormatError(path, f"the {what} is not 16 numbers")
+    return vals.reshape(4, 4)
+
+
+def read_ascii_table(path: Path, fh, *, sep: str, nrows: Optional[int], what: str,
+                     ncols: Optional[int] = None) -> np.ndarray:
+    """Parse ASCII point lines from an open binary file at its current position (pandas' C reader).
+
+    ``sep`` is a separator or ``r"\\s+"``; ``ncols`` fixes the number of columns (longer lines are
+    an error); ``what`` names the lines in the ScanFormatError for a malformed one.
+    """
+    import pandas as pd
+
+    try:
+        return pd.read_csv(fh, sep=sep, header=None, dtype=np.float64, engine="c", skip_blank_lines=True,
+                           on_bad_lines="error", nrows=nrows,
+                           **({} if ncols is None else {"names": range(ncols), "comment": None})).to_numpy()
+    except (ValueError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ScanFormatError(path, f"malformed {what} ({msg[:100]})") from exc
+
+
 def pose_from_quaternion(q_wxyz, t) -> np.ndarray:
     """4x4 homogeneous transform from a unit quaternion (w, x, y, z) and a translation."""
     w, x, y, z = (float(v) for v in q_wxyz)

@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from lidar.errors import ScanFormatError
-from lidar.io._common import atomic_output, check_readable, make_scan, pose_from_quaternion, quaternion_from_pose, raw_for_writing
+from lidar.io._common import (atomic_output, check_readable, make_scan, pose_from_quaternion, quaternion_from_pose,
+                               raw_for_writing, read_ascii_table)
 from lidar.io.names import find_column
 from lidar.scan import Scan
 
@@ -168,18 +169,12 @@ def _read_ascii(p: Path, h: PcdHeader, body_bytes: int) -> list[np.ndarray]:
     if h.points * (2 * ncols) > body_bytes + 1:  # each value needs at least a digit and a separator
         raise ScanFormatError(p, f"truncated or lying PCD header: it declares {h.points} points, the ASCII data "
                                  f"has room for at most {(body_bytes + 1) // (2 * ncols)}")
-    import pandas as pd
-
     with open(p, "rb") as fh:
         fh.seek(h.data_start)
         first = fh.readline().decode("ascii", "replace")
         fh.seek(h.data_start)
-        sep = "," if "," in first else r"\s+"
-        try:
-            table = pd.read_csv(fh, sep=sep, header=None, nrows=h.points, dtype=np.float64, engine="c",
-                                on_bad_lines="error", skip_blank_lines=True).to_numpy()
-        except (ValueError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
-            raise ScanFormatError(p, f"malformed PCD ASCII point line ({str(exc).splitlines()[0][:80]})") from exc
+        table = read_ascii_table(p, fh, sep="," if "," in first else r"\s+", nrows=h.points,
+                                 what="PCD ASCII point line")
     if table.shape[0] < h.points:
         raise ScanFormatError(p, f"truncated: the PCD header declares {h.points} points, the file holds {table.shape[0]}")
     if table.shape[1] < ncols:

@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from lidar.errors import ScanFormatError
-from lidar.io._common import atomic_output, first_line, check_readable, make_scan, raw_for_writing
+from lidar.io._common import (atomic_output, check_readable, first_line, make_scan, pose_from_text, pose_to_text,
+                               raw_for_writing)
 from lidar.io.names import find_column
 from lidar.scan import Scan
 
@@ -144,13 +145,7 @@ def _pose_comment(p: Path, header: bytes):
     for line in header.decode("latin-1").split("\n"):
         words = line.split()
         if words[:2] == ["comment", POSE_COMMENT]:
-            try:
-                vals = [float(v) for v in words[2:]]
-            except ValueError as exc:
-                raise ScanFormatError(p, "the PLY pose comment is not 16 numbers") from exc
-            if len(vals) != 16:
-                raise ScanFormatError(p, "the PLY pose comment is not 16 numbers")
-            return np.array(vals).reshape(4, 4)
+            return pose_from_text(p, words[2:], "PLY pose comment")
     return None
 
 
@@ -165,7 +160,7 @@ def write_ply(scan: Scan, path: str | os.PathLike, *, binary: bool = True) -> Pa
     rec["intensity"] = raw
     comments = []
     if scan.pose is not None:
-        comments.append(POSE_COMMENT + " " + " ".join(f"{v:.15g}" for v in np.asarray(scan.pose).ravel()))
+        comments.append(POSE_COMMENT + " " + pose_to_text(scan.pose))
     with atomic_output(final) as tmp:
         PlyData([PlyfileElement.describe(rec, "vertex")], text=not binary, comments=comments).write(str(tmp))
     return final

@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from lidar.errors import ScanFormatError
-from lidar.io._common import atomic_output, check_readable, make_scan, raw_for_writing
+from lidar.io._common import (atomic_output, check_readable, make_scan, pose_from_text, pose_to_text, raw_for_writing,
+                               read_ascii_table)
 from lidar.io.names import find_column
 from lidar.scan import Scan
 
@@ -47,8 +48,6 @@ def read_xyz(path: str | os.PathLike) -> Scan:
         Binary content, no numeric lines, fewer than three columns, malformed
         lines, or a PTS count the file does not hold.
     """
-    import pandas as pd
-
     p = check_readable(path)
     names: list[str] | None = None
     declared: int | None = None
@@ -97,13 +96,7 @@ def read_xyz(path: str | os.PathLike) -> Scan:
         sep = "," if "," in sample else (";" if ";" in sample else r"\s+")
         ncols = len(_tokens(sample))
         fh.seek(offset)
-        try:
-            table = pd.read_csv(fh, sep=sep, header=None, dtype=np.float64, engine="c", comment=None,
-                                skip_blank_lines=True, names=range(ncols), on_bad_lines="error",
-                                nrows=declared).to_numpy()
-        except (ValueError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
-            msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-            raise ScanFormatError(p, f"malformed point line ({msg[:100]})") from exc
+        table = read_ascii_table(p, fh, sep=sep, nrows=declared, ncols=ncols, what="point line")
     if table.shape[0] == 0:
         raise ScanFormatError(p, "the file holds no points")
     if table.shape[1] < 3:
@@ -127,13 +120,7 @@ def read_xyz(path: str | os.PathLike) -> Scan:
 def _pose_line(p: Path, toks: list[str]) -> np.ndarray:
     """The 4x4 pose of a ``# pose`` header line written by :func:`write_xyz` (16 numbers, row by row)."""
     vals = [t for t in toks if t not in ("#", "//", "pose", "#pose", "//pose", "pose:")]
-    try:
-        arr = np.array([float(v) for v in vals])
-    except ValueError as exc:
-        raise ScanFormatError(p, "the pose header line is not 16 numbers") from exc
-    if arr.size != 16:
-        raise ScanFormatError(p, "the pose header line is not 16 numbers")
-    return arr.reshape(4, 4)
+    return pose_from_text(p, vals, "pose header line")
 
 
 def write_xyz(scan: Scan, path: str | os.PathLike) -> Path:
@@ -143,7 +130,7 @@ def write_xyz(scan: Scan, path: str | os.PathLike) -> Path:
     with atomic_output(final) as tmp:
         with open(tmp, "w", encoding="utf-8") as fh:
             if scan.pose is not None:
-                fh.write("# pose " + " ".join(f"{v:.15g}" for v in np.asarray(scan.pose).ravel()) + "\n")
+                fh.write("# pose " + pose_to_text(scan.pose) + "\n")
             fh.write("//X Y Z Intensity\n")
             np.savetxt(fh, np.column_stack([scan.xyz_socs, raw]), fmt="%.5f %.5f %.5f %.6g")
     return final
