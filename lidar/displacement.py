@@ -369,21 +369,19 @@ def normal_gain(normals, x0: np.ndarray, cov: np.ndarray, step: float = 1e-6
 
 
 def reference_weights(base: Mapping[str, Observation], ep: Mapping[str, Observation], refs: Sequence[str],
-                      up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Weights of the reference targets: for the reference point (inverse vertical variance over both
-    epochs) and for the rotation fit (inverse total variance). Each set sums to 1."""
+                      up: np.ndarray) -> np.ndarray:
+    """Weights of the reference targets for the reference point: inverse vertical variance over both
+    epochs, summing to 1 (the frame-motion fit weighs them by :func:`motion_weights`)."""
     var_up = np.array([up @ (base[r].cov + ep[r].cov) @ up for r in refs])
-    var_all = np.array([np.trace(base[r].cov + ep[r].cov) for r in refs])
     w_ref = 1.0 / np.maximum(var_up, 1e-14)
-    w_rot = 1.0 / np.maximum(var_all, 1e-14)
-    return w_ref / w_ref.sum(), w_rot / w_rot.sum()
+    return w_ref / w_ref.sum()
 
 
 def motion_weights(base: Mapping[str, Observation], ep: Mapping[str, Observation], refs: Sequence[str],
-                   meas: Sequence[str], up: np.ndarray, w_rot: Optional[np.ndarray]) -> MotionWeights:
+                   meas: Sequence[str], up: np.ndarray, weighted: bool) -> MotionWeights:
     """Variances for the frame-motion fit: each reference target's (isotropic) and each deck target's
-    across the span. ``w_rot=None`` weighs the reference targets equally (the dissertation's plain mean)."""
-    if w_rot is None:
+    across the span. ``weighted=False`` weighs the reference targets equally (the dissertation's plain mean)."""
+    if not weighted:
         ref_var = np.full(len(refs), 1e-8)
     else:
         ref_var = np.array([np.trace(base[r].cov + ep[r].cov) / 3.0 for r in refs])
@@ -467,9 +465,8 @@ def _solve(base: dict, ep: dict, meas_ids: list, stable: list, checks, flags: li
     if mode == "epoch" and len(meas) < 3:
         raise ProcessingError(f"only {len(meas)} measurement targets in this epoch; 3 are needed for the deck plane")
     up = deck_normal(np.array([base[m].xyz for m in meas_base]))
-    w_ref, w_rot = reference_weights(base, ep, stable, up) if weighted else (
-        np.full(len(stable), 1.0 / len(stable)), np.full(len(stable), 1.0 / len(stable)))
-    mw = motion_weights(base, ep, stable, meas, up, w_rot if weighted else None)
+    w_ref = reference_weights(base, ep, stable, up) if weighted else np.full(len(stable), 1.0 / len(stable))
+    mw = motion_weights(base, ep, stable, meas, up, weighted)
     involved_b = sorted(set(stable) | set(meas_base))
     involved_e = sorted(set(stable) | set(meas))
     x0 = np.concatenate([base[k].xyz for k in involved_b] + [ep[k].xyz for k in involved_e])

@@ -97,8 +97,8 @@ def _seed_triangles(xyz: np.ndarray, limit: int, groups: Optional[tuple] = None)
         if len(out) >= limit:
             break
     if groups is not None:
-        refs = [tri for _, tri in scored if all(groups[k] == "reference" for k in tri)]
-        out = refs[:max(4, limit // 4)] + [tri for tri in out if tri not in refs[:max(4, limit // 4)]]
+        refs = [tri for _, tri in scored if all(groups[k] == "reference" for k in tri)][:max(4, limit // 4)]
+        out = refs + [tri for tri in out if tri not in refs]
     return out
 
 
@@ -119,7 +119,7 @@ MAX_TILT_DEG = 2.0
 TIE_SEEDS = 6
 
 
-def _rival(best, candidates: dict, tolerance_m: float) -> Optional[str]:
+def _rival(best, candidates: dict) -> Optional[str]:
     """Describe another levelled solution as good as the best one (a different assignment), or None."""
     (lev, count, neg_sum), _, _ = best
     best_key = next(k for k, v in candidates.items() if v[0] == best[0])
@@ -218,7 +218,7 @@ def identify_reflectors(detections_xyz: np.ndarray, layout: Layout, *, tolerance
     if best is None or best[0][1] < 3:
         raise ProcessingError("the detections do not match the layout: no three detected reflectors have the "
                               "layout's distances (check the layout coordinates, the target diameter and the coarse scan)")
-    rival = _rival(best, candidates, tolerance_m)
+    rival = _rival(best, candidates)
     if rival is not None:
         raise ProcessingError(
             f"two identifications fit the {best[0][1]} detected reflectors equally well (the layout is symmetric "

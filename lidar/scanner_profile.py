@@ -5,6 +5,7 @@ from dataclasses import asdict, dataclass
 from typing import Optional
 
 from lidar.errors import InputError
+from lidar.identification import MAX_TILT_DEG
 
 
 @dataclass(frozen=True)
@@ -58,7 +59,7 @@ class ScannerProfile:
     beam_divergence_mrad: float = 0.3
     beam_exit_diameter_m: float = 0.007
     max_range_m: float = 1400.0
-    max_tilt_deg: Optional[float] = 2.0
+    max_tilt_deg: Optional[float] = MAX_TILT_DEG
 
     def __post_init__(self) -> None:
         for k, v in asdict(self).items():

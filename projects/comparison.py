@@ -62,21 +62,18 @@ def _below_deck_m(meas_xyz: np.ndarray) -> Optional[float]:
 REFINEMENTS = ("icp", "ndt", "targets")
 
 
-def bring_to_campaign_frame(c: Campaign, label: str, base: str, *, use_icp: bool = True, base_xyz=None,
-                            refinement: Optional[str] = None,
+def bring_to_campaign_frame(c: Campaign, label: str, base: str, *, refinement: str = "icp", base_xyz=None,
                             progress: Optional[ProgressCallback] = None) -> EpochInFrame:
     """Register epoch ``label`` onto the baseline epoch ``base`` (targets, then ICP or NDT on stable parts).
 
     ``refinement`` is ``icp`` (Open3D, the default), ``ndt`` (PCL's
-    pcl_ndt3d) or ``targets`` (no refinement); ``use_icp=False`` is the older
-    spelling of ``targets``. ``base_xyz``, the baseline's coarse scan, is read
-    here when not given.
+    pcl_ndt3d) or ``targets`` (no refinement). ``base_xyz``, the baseline's
+    coarse scan, is read here when not given.
     """
-    refinement = refinement or ("icp" if use_icp else "targets")
     if refinement not in REFINEMENTS:
         raise InputError(f"unknown registration refinement {refinement!r}; use {', '.join(REFINEMENTS)}")
-    use_icp = refinement != "targets"
-    if base_xyz is None and (label == base or use_icp):
+    refine = refinement != "targets"
+    if base_xyz is None and (label == base or refine):
         base_xyz = read_files(c, c.files(base, "coarse")).xyz_socs
     if label == base:
         return EpochInFrame(label, None, None, Transform.identity("campaign"), base_xyz)
@@ -92,15 +89,15 @@ def bring_to_campaign_frame(c: Campaign, label: str, base: str, *, use_icp: bool
     tr = register_targets(src, dst, refs, sigma_m=np.hypot(s1, s2), source_frame=f"socs:{label}",
                           target_frame="campaign")
     tf, icp = tr.transform, None
-    if use_icp:
+    if refine:
         meas = layout.ids_in("measurement")
         used = np.isfinite(src[:, 0]) & np.isfinite(dst[:, 0])
         mask_src = stable_mask(scan.xyz_socs, src[used],
                                exclude_above_m=_below_deck_m(_centroid_arrays(c, label, meas)[0]))
         mask_dst = stable_mask(base_xyz, dst[used], exclude_above_m=_below_deck_m(_centroid_arrays(c, base, meas)[0]))
         report(progress, 0.4, f"{refinement.upper()} on stable parts")
-        refine = refine_ndt if refinement == "ndt" else refine_icp
-        icp = refine(scan.xyz_socs[mask_src], base_xyz[mask_dst], tr.transform, progress=scaled(progress, 0.4, 0.95))
+        refine_fn = refine_ndt if refinement == "ndt" else refine_icp
+        icp = refine_fn(scan.xyz_socs[mask_src], base_xyz[mask_dst], tr.transform, progress=scaled(progress, 0.4, 0.95))
         tf = icp.transform
     return EpochInFrame(label, tr, icp, tf, tf.apply(scan.xyz_socs))
 
@@ -116,8 +113,8 @@ def _deck_mask(xyz: np.ndarray, targets: np.ndarray, radius_m: float = 1.0, band
     return out
 
 
-def compare_epochs(c: Campaign, from_label: str, to_label: str, *, method: str = "m3c2", use_icp: bool = True,
-                   refinement: Optional[str] = None, bin_m: float = 2.5, core_spacing_m: float = 0.25,
+def compare_epochs(c: Campaign, from_label: str, to_label: str, *, method: str = "m3c2", refinement: str = "icp",
+                   bin_m: float = 2.5, core_spacing_m: float = 0.25,
                    progress: Optional[ProgressCallback] = None) -> dict:
     """Register two epochs into the campaign frame and compute their change and span profile.
 
@@ -134,7 +131,6 @@ def compare_epochs(c: Campaign, from_label: str, to_label: str, *, method: str =
         raise CampaignError("no measured epoch yet: process the campaign first ('bridgesurvey process')")
     report(progress, 0.0, f"reading {base}")
     base_xyz = read_files(c, c.files(base, "coarse")).xyz_socs  # once, for both epochs
-    refinement = refinement or ("icp" if use_icp else "targets")
     ea = bring_to_campaign_frame(c, from_label, base, refinement=refinement, base_xyz=base_xyz,
                                  progress=scaled(progress, 0.05, 0.35))
     eb = bring_to_campaign_frame(c, to_label, base, refinement=refinement, base_xyz=base_xyz,

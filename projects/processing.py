@@ -13,7 +13,7 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Optional, Sequence
 
 import numpy as np
@@ -21,6 +21,7 @@ import numpy as np
 from lidar.displacement import FLAG_MISSING, Displacement, EpochDisplacements, compute_displacements
 from lidar.flags import FLAG_DECK_NOT_MEASURED, FLAG_NO_DISPLACEMENT, FLAG_PIERS_NOT_MEASURED, PROBLEM, severity
 from lidar.errors import InputError, ProcessingError, SurveyError
+from lidar.identification import MAX_TILT_DEG
 from lidar.io import read_scan
 from lidar.pipeline import analyse_coarse, measure_targets, plan_from_coarse
 from lidar.plan import ScanPlan
@@ -60,7 +61,7 @@ def stage1_params(params: dict) -> dict:
 def _profile_key(profile) -> dict:
     """The profile as it enters the input hash (a field added later only when it differs from its default)."""
     d = profile.to_dict()
-    if d.get("max_tilt_deg") == 2.0:
+    if d.get("max_tilt_deg") == MAX_TILT_DEG:
         del d["max_tilt_deg"]
     return d
 
@@ -282,10 +283,9 @@ def process(c: Campaign, labels: Optional[Sequence[str]] = None, *,
         c.set_setting("baseline", summary.baseline)
     if summary.baseline is not None:
         summary.displacement_epochs = update_displacements(c, summary.baseline)
-    wanted = {e["label"] for e in todo}
-    for e in epochs:
+    for e in todo:
         ds = c.displacement_set(e["label"])
-        if e["label"] in wanted and ds is not None:
+        if ds is not None:
             bad = [f for f in json.loads(ds["flags"]) if severity(f) == PROBLEM]
             if bad:
                 summary.problems[e["label"]] = bad[0]
@@ -359,20 +359,14 @@ def update_displacements(c: Campaign, baseline: str) -> list[str]:
                 continue
             result = _failed_result(groups, found(baseline), cents, baseline, failure)
         elif not any(np.isfinite(d.displacement_m) for d in result.displacements):
-            from dataclasses import replace
-
             n_meas = sum(1 for g in groups.values() if g == "measurement")
             result = replace(result, flags=tuple(result.flags) + (
                 f"{FLAG_DECK_NOT_MEASURED}: none of the {n_meas} deck targets was found in this epoch",))
         if lab == baseline:  # the baseline against itself: zero by definition, exactly known
-            from dataclasses import replace as _replace
-
-            result = _replace(result, displacements=tuple(
-                _replace(d, displacement_m=0.0, sigma_m=0.0) if np.isfinite(d.displacement_m) else d
+            result = replace(result, displacements=tuple(
+                replace(d, displacement_m=0.0, sigma_m=0.0) if np.isfinite(d.displacement_m) else d
                 for d in result.displacements))
         if extra:
-            from dataclasses import replace
-
             result = replace(result, displacements=tuple(result.displacements) + tuple(extra))
         c.save_displacements(lab, baseline, result, h)
         done.append(lab)
@@ -399,8 +393,6 @@ def _failed_result(groups: dict, base: dict, cents: dict, baseline: str, reason:
 
 def _chain(c: Campaign, d, base_label: str, refl: dict):
     """A target first measured after the baseline: continue the history of the target it replaced."""
-    from dataclasses import replace
-
     old = refl[d.reflector]["replaces"]
     if not old:
         return d

@@ -70,7 +70,7 @@ def test_target_registration_alone_within_half_a_millimetre(processed, field):
     from projects.comparison import bring_to_campaign_frame
 
     with Campaign.open(processed, writable=False) as c:
-        e = bring_to_campaign_frame(c, "2026-03-09", "2026-03-02", use_icp=False)
+        e = bring_to_campaign_frame(c, "2026-03-09", "2026-03-02", refinement="targets")
     truth = true_transform(field, 1, 0)
     pts = load_scene(field / "v1")[0].to_socs(np.array([t.centre_m for t in MODEL.targets]))
     err = np.abs(e.transform.apply(pts) - (pts @ truth[:3, :3].T + truth[:3, 3])).max()
