@@ -13,6 +13,7 @@ from lidar.errors import InputError
 
 GROUPS = ("reference", "measurement")
 REQUIRED_COLUMNS = ("id", "group", "x", "y", "z")
+NORMAL_COLUMNS = ("nx", "ny", "nz")
 
 
 @dataclass(frozen=True, eq=False)
@@ -26,12 +27,16 @@ class Layout:
     xyz : (N, 3) float64 array
         Approximate coordinates (a few cm) in any frame (design drawings, a total station...).
     diameters_m : (N,) float64 array
+    normals : (N, 3) float64 array, optional
+        Unit normal of each target (pointing away from the surface it is glued to), in the
+        layout's frame; NaN rows where the layout gives none (see :func:`target_normals`).
     """
 
     ids: tuple[str, ...]
     groups: tuple[str, ...]
     xyz: np.ndarray
     diameters_m: np.ndarray
+    normals: Optional[np.ndarray] = None
 
     def __post_init__(self) -> None:
         n = len(self.ids)
@@ -48,6 +53,16 @@ class Layout:
             raise InputError("layout: coordinates must be finite numbers")
         object.__setattr__(self, "xyz", xyz)
         object.__setattr__(self, "diameters_m", np.asarray(self.diameters_m, dtype=np.float64))
+        normals = np.full((n, 3), np.nan) if self.normals is None else \
+            np.asarray(self.normals, dtype=np.float64).reshape(-1, 3)
+        if normals.shape != (n, 3):
+            raise InputError("layout: one normal (or none) per reflector")
+        given = np.all(np.isfinite(normals), axis=1)
+        length = np.linalg.norm(normals[given], axis=1)
+        if np.any(length < 1e-9):
+            raise InputError("layout: a target normal must not be zero")
+        normals[given] = normals[given] / length[:, None]
+        object.__setattr__(self, "normals", normals)
 
     def __len__(self) -> int:
         return len(self.ids)
@@ -67,16 +82,21 @@ class Layout:
     def subset(self, ids) -> "Layout":
         idx = [self.index(i) for i in ids]
         return Layout(tuple(self.ids[k] for k in idx), tuple(self.groups[k] for k in idx), self.xyz[idx],
-                      self.diameters_m[idx])
+                      self.diameters_m[idx], self.normals[idx])
 
     def to_rows(self) -> list[dict]:
-        return [{"id": i, "group": g, "x": float(p[0]), "y": float(p[1]), "z": float(p[2]),
-                 "diameter_mm": float(d * 1000)} for i, g, p, d in zip(self.ids, self.groups, self.xyz,
-                                                                       self.diameters_m)]
+        rows = []
+        for i, g, p, d, nrm in zip(self.ids, self.groups, self.xyz, self.diameters_m, self.normals):
+            row = {"id": i, "group": g, "x": float(p[0]), "y": float(p[1]), "z": float(p[2]),
+                   "diameter_mm": float(d * 1000)}
+            if np.all(np.isfinite(nrm)):
+                row.update(nx=float(nrm[0]), ny=float(nrm[1]), nz=float(nrm[2]))
+            rows.append(row)
+        return rows
 
 
 def read_layout_csv(path: str | os.PathLike, *, default_diameter_m: float = 0.05) -> Layout:
-    """Read ``layout.csv``: columns ``id,group,x,y,z`` and optionally ``diameter_mm``.
+    """Read ``layout.csv``: columns ``id,group,x,y,z``, optionally ``diameter_mm`` and ``nx,ny,nz``.
 
     Raises
     ------
@@ -96,7 +116,10 @@ def read_layout_csv(path: str | os.PathLike, *, default_diameter_m: float = 0.05
     missing = [c for c in REQUIRED_COLUMNS if c not in fields]
     if missing:
         raise InputError(f"{p}: layout is missing column(s) {', '.join(missing)}; expected id,group,x,y,z[,diameter_mm]")
-    ids, groups, xyz, diam = [], [], [], []
+    has_normals = all(c in fields for c in NORMAL_COLUMNS)
+    if any(c in fields for c in NORMAL_COLUMNS) and not has_normals:
+        raise InputError(f"{p}: target normals need all three columns nx,ny,nz")
+    ids, groups, xyz, diam, normals = [], [], [], [], []
     for line_no, row in enumerate(reader, start=2):
         row = {(k or "").strip().lower(): (v or "").strip() for k, v in row.items()}
         if not any(row.values()):
@@ -115,13 +138,28 @@ def read_layout_csv(path: str | os.PathLike, *, default_diameter_m: float = 0.05
             raise InputError(f"{p}, line {line_no}: coordinates must be finite and the diameter positive")
         if rid in ids:
             raise InputError(f"{p}, line {line_no}: duplicate reflector id {rid!r}")
+        normals.append(_normal_of_row(row, has_normals, f"{p}, line {line_no}"))
         ids.append(rid)
         groups.append(group)
         xyz.append(coords)
         diam.append(d)
-    layout = Layout(tuple(ids), tuple(groups), np.array(xyz, dtype=np.float64).reshape(-1, 3), np.array(diam))
+    layout = Layout(tuple(ids), tuple(groups), np.array(xyz, dtype=np.float64).reshape(-1, 3), np.array(diam),
+                    np.array(normals, dtype=np.float64).reshape(-1, 3))
     check_layout(layout, source=str(p))
     return layout
+
+
+def _normal_of_row(row: dict, has_normals: bool, where: str) -> list[float]:
+    """The row's normal, or NaNs when the layout has none (an empty cell means unknown)."""
+    if not has_normals or not any(row.get(c) for c in NORMAL_COLUMNS):
+        return [float("nan")] * 3
+    try:
+        n = [float(row[c]) for c in NORMAL_COLUMNS]
+    except ValueError:
+        raise InputError(f"{where}: nx,ny,nz must be numbers (or all three empty)") from None
+    if not np.all(np.isfinite(n)) or np.linalg.norm(n) < 1e-9:
+        raise InputError(f"{where}: the target normal nx,ny,nz must be finite and not zero")
+    return n
 
 
 def check_layout(layout: Layout, *, source: str = "layout") -> None:
@@ -137,16 +175,61 @@ def check_layout(layout: Layout, *, source: str = "layout") -> None:
 def write_layout_csv(layout: Layout, path: str | os.PathLike) -> Path:
     p = Path(path)
     with open(p, "w", newline="", encoding="utf-8") as fh:
-        w = csv.DictWriter(fh, fieldnames=["id", "group", "x", "y", "z", "diameter_mm"])
+        fields = ["id", "group", "x", "y", "z", "diameter_mm"]
+        if np.any(np.all(np.isfinite(layout.normals), axis=1)):
+            fields += list(NORMAL_COLUMNS)
+        w = csv.DictWriter(fh, fieldnames=fields, restval="")
         w.writeheader()
         for row in layout.to_rows():
             w.writerow({k: (f"{v:.4f}" if isinstance(v, float) else v) for k, v in row.items()})
     return p
 
 
-def layout_from_model(model, *, noise_m: float = 0.0, rng: Optional[np.random.Generator] = None) -> Layout:
-    """The layout of a simulated bridge, optionally with design-drawing-like errors."""
+def layout_from_model(model, *, noise_m: float = 0.0, rng: Optional[np.random.Generator] = None,
+                      with_normals: bool = False) -> Layout:
+    """The layout of a simulated bridge, optionally with design-drawing-like errors and the targets' normals."""
     rng = rng or np.random.default_rng(0)
     xyz = np.array([t.centre_m for t in model.targets]) + rng.normal(0, noise_m, (len(model.targets), 3))
     return Layout(tuple(t.id for t in model.targets), tuple(t.group for t in model.targets), xyz,
-                  np.array([t.diameter_m for t in model.targets]))
+                  np.array([t.diameter_m for t in model.targets]),
+                  np.array([t.normal for t in model.targets]) if with_normals else None)
+
+
+def bridge_axis(layout: Layout, *, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """Unit horizontal direction along the bridge in the layout's frame (its sign is arbitrary).
+
+    The principal axis of every target's position projected on the horizontal plane: the targets
+    spread along the span far more than across it.
+    """
+    u = np.asarray(up, dtype=np.float64)
+    u = u / np.linalg.norm(u)
+    p = layout.xyz - layout.xyz.mean(axis=0)
+    p = p - np.outer(p @ u, u)
+    _, _, vt = np.linalg.svd(p, full_matrices=False)
+    a = vt[0] - (vt[0] @ u) * u
+    return a / np.linalg.norm(a)
+
+
+def target_normals(layout: Layout, *, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """(N, 3) unit normal of every target in the layout's frame.
+
+    The layout's own normals (``nx,ny,nz``) where given. Otherwise a measurement target faces
+    down (glued under the deck) and a reference target faces along the bridge axis, toward the
+    span (glued on the pier face looking into it).
+    """
+    u = np.asarray(up, dtype=np.float64)
+    u = u / np.linalg.norm(u)
+    out = layout.normals.copy()
+    missing = ~np.all(np.isfinite(out), axis=1)
+    if not np.any(missing):
+        return out
+    axis = bridge_axis(layout, up=u)
+    meas = np.array([g == "measurement" for g in layout.groups])
+    centre = layout.xyz[meas].mean(axis=0) if np.any(meas) else layout.xyz.mean(axis=0)
+    for k in np.nonzero(missing)[0]:
+        if layout.groups[k] == "measurement":
+            out[k] = -u
+        else:
+            along = float((centre - layout.xyz[k]) @ axis)
+            out[k] = axis if along >= 0 else -axis
+    return out

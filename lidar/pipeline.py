@@ -13,7 +13,7 @@ from lidar.centroid import TargetCentroid, centroids_from_scan
 from lidar.detection import DetectionResult, detect_reflectors
 from lidar.errors import InputError
 from lidar.identification import MAX_TILT_DEG, Identification, identify_reflectors
-from lidar.layout import Layout
+from lidar.layout import Layout, target_normals
 from lidar.plan import PlanTarget, ScanPlan, incidence_from_map, plan_fine_scans
 from lidar.progress import ProgressCallback, report, scaled
 from lidar.reflectance_map import ReflectanceMap, reflectance_map
@@ -57,11 +57,37 @@ def analyse_coarse(scan: Scan, layout: Layout, *, step_deg: Optional[float] = No
     return CoarseAnalysis(rmap, det, ident, inc)
 
 
+def layout_incidence(identification: Identification, layout: Layout, *,
+                     up_layout=(0.0, 0.0, 1.0)) -> dict[str, float]:
+    """|cos| of the incidence angle at every identified target, from the layout's normals.
+
+    The normals (``nx,ny,nz`` or the defaults of :func:`lidar.layout.target_normals`) are carried
+    into the scanner frame by the rotation fitted to the detected targets; the viewing direction
+    is the target's position (detected, or predicted from the layout). A target facing away from
+    the scanner gets 0.
+    """
+    normals = target_normals(layout, up=up_layout)
+    out = {}
+    for m in identification.matches:
+        n_socs = identification.rotation @ normals[layout.index(m.id)]
+        xyz = np.asarray(m.xyz_socs, dtype=np.float64)
+        view = -xyz / np.linalg.norm(xyz)
+        out[m.id] = float(max(0.0, n_socs @ view))
+    return out
+
+
 def plan_from_coarse(coarse: CoarseAnalysis, layout: Layout, *, epoch: str = "", profile: ScannerProfile = VZ1000,
-                     min_points: int = 1000, budget_seconds: float = 3600.0, margin_m: float = 0.10) -> ScanPlan:
-    """Fine-scan plan for every layout reflector (detected or predicted)."""
+                     min_points: int = 1000, budget_seconds: float = 3600.0, margin_m: float = 0.10,
+                     up_layout=(0.0, 0.0, 1.0)) -> ScanPlan:
+    """Fine-scan plan for every layout reflector (detected or predicted).
+
+    Incidence comes from the layout's target normals carried into the scanner frame
+    (:func:`layout_incidence`), for detected and predicted targets alike: the surface around a
+    target in a coarse map is often another face (a pier corner, the deck edge).
+    """
+    inc = layout_incidence(coarse.identification, layout, up_layout=up_layout)
     targets = [PlanTarget(m.id, m.group, m.xyz_socs, float(layout.diameters_m[layout.index(m.id)]), m.predicted,
-                          coarse.incidence_cos.get(m.id)) for m in coarse.identification.matches]
+                          max(inc[m.id], 0.05)) for m in coarse.identification.matches]
     return plan_fine_scans(targets, epoch=epoch, profile=profile, min_points=min_points,
                            budget_seconds=budget_seconds, margin_m=margin_m)
 

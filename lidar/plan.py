@@ -94,10 +94,28 @@ class ScanPlan:
     points_per_target: int
     budget_seconds: float
     warnings: tuple[str, ...] = ()
+    dome_seconds: float = 0.0
+    dome_step_deg: Optional[float] = None
 
     @property
     def total_seconds(self) -> float:
-        return float(sum(r.expected_seconds for r in self.rois))
+        """Windows plus, for a full-dome-only instrument, its one dome scan, seconds."""
+        return float(sum(r.expected_seconds for r in self.rois)) + self.dome_seconds
+
+    def instrument_window(self, roi: "RoiPlan") -> dict:
+        """A window in the instrument's own angles and resolution setting (see :class:`ScannerProfile`)."""
+        w = roi.window
+        p = self.profile
+        h0, v0 = p.instrument_angles(w.theta_min_deg, w.phi_min_deg)
+        h1, v1 = p.instrument_angles(w.theta_max_deg, w.phi_max_deg)
+        hs, he = (float(h0), float(h1)) if p.horizontal_direction == "ccw" else (float(h1), float(h0))
+        vs, ve = sorted((float(v0), float(v1)))
+        if p.step_presets:
+            res = p.preset_label(w.theta_step_deg)
+        else:
+            res = f"vertical {w.theta_step_deg:.4f} deg, horizontal {w.phi_step_deg:.4f} deg"
+        return {"h_start_deg": round(hs, 4), "h_end_deg": round(he, 4), "v_start_deg": round(vs, 4),
+                "v_end_deg": round(ve, 4), "vertical": p.vertical_reference, "resolution": res}
 
     def roi(self, reflector: str) -> RoiPlan:
         for r in self.rois:
@@ -111,7 +129,9 @@ class ScanPlan:
             "scanner": self.profile.to_dict(), "total_seconds": round(self.total_seconds, 2),
             "budget_seconds": self.budget_seconds, "min_points": self.min_points,
             "points_per_target": self.points_per_target, "warnings": list(self.warnings),
-            "rois": [r.to_json() for r in self.rois],
+            "windowed": self.profile.windowed, "dome_seconds": round(self.dome_seconds, 2),
+            "dome_step_deg": self.dome_step_deg, "angle_convention": self.profile.angle_convention(),
+            "rois": [dict(r.to_json(), instrument=self.instrument_window(r)) for r in self.rois],
         }
 
     @classmethod
@@ -122,14 +142,17 @@ class ScanPlan:
         if version > PLAN_FORMAT_VERSION:
             raise InputError(f"{source}: plan format {version} is newer than this BridgeSurvey understands "
                              f"({PLAN_FORMAT_VERSION}); update BridgeSurvey")
-        profile = ScannerProfile.from_dict(d["scanner"]) if isinstance(d.get("scanner"), dict) else VZ1000
+        profile = ScannerProfile.from_dict(d["scanner"], source=f"{source}: scanner") \
+            if isinstance(d.get("scanner"), dict) else VZ1000
         try:
             rois = tuple(RoiPlan.from_json(r) for r in d["rois"])
         except InputError as exc:
             raise InputError(f"{source}: {exc}") from None
+        dome_step = d.get("dome_step_deg")
         return cls(str(d.get("epoch", "")), profile, rois, int(d.get("min_points", 1000)),
                    int(d.get("points_per_target", d.get("min_points", 1000))),
-                   float(d.get("budget_seconds", 3600.0)), tuple(d.get("warnings", ())))
+                   float(d.get("budget_seconds", 3600.0)), tuple(d.get("warnings", ())),
+                   float(d.get("dome_seconds", 0.0) or 0.0), None if dome_step is None else float(dome_step))
 
     def save(self, path: str | os.PathLike) -> Path:
         from lidar.files import write_atomic
@@ -182,9 +205,15 @@ def choose_steps(omega_sr: float, sin_theta: float, n_points: float, profile: Sc
 
     Sampling is made spatially even (``theta_step == phi_step * sin(theta)``)
     within the instrument's finest steps; steps are rounded down to 0.0001 deg.
+    An instrument that offers only resolution presets gets the coarsest preset
+    that still gives ``n_points`` (the finest when none does), the same step in
+    both angles as its panel sets it.
     """
     cell = omega_sr / max(n_points, 1.0)  # rad^2 per point: dtheta * dphi * sin(theta)
     s = max(sin_theta, 1e-3)
+    if profile.step_presets:
+        step = profile.preset_for(math.degrees(math.sqrt(cell / s)))[1]
+        return step, step
     min_t = math.radians(profile.min_theta_step_deg)
     min_p = math.radians(profile.min_phi_step_deg)
     dt = math.sqrt(cell)
@@ -201,8 +230,12 @@ def choose_steps(omega_sr: float, sin_theta: float, n_points: float, profile: Sc
 
 
 def plan_roi(target: PlanTarget, *, n_points: float, profile: ScannerProfile = VZ1000,
-             margin_m: float = 0.10) -> RoiPlan:
-    """Window and steps for one target."""
+             margin_m: float = 0.10, step_deg: Optional[float] = None) -> RoiPlan:
+    """Window and steps for one target.
+
+    ``step_deg`` imposes one step in both angles (a full-dome scan's preset); the window is then
+    the part of that scan the target is measured from, and costs no time of its own.
+    """
     xyz = np.asarray(target.xyz_socs, dtype=np.float64)
     theta, phi, rng = spherical_from_xyz(xyz[None])
     theta, phi, r = float(theta[0]), float(phi[0]), float(rng[0])
@@ -217,7 +250,7 @@ def plan_roi(target: PlanTarget, *, n_points: float, profile: ScannerProfile = V
     radius = target.diameter_m / 2
     omega = math.pi * radius ** 2 * cos_inc / r ** 2
     sin_t = math.sin(math.radians(theta))
-    dt, dp = choose_steps(omega, sin_t, n_points, profile)
+    dt, dp = (step_deg, step_deg) if step_deg is not None else choose_steps(omega, sin_t, n_points, profile)
     margin = margin_m * (2.5 if target.predicted else 1.0)
     half_t = math.degrees(math.atan((radius + margin) / r))
     half_p = half_t / max(sin_t, 1e-3)
@@ -227,9 +260,13 @@ def plan_roi(target: PlanTarget, *, n_points: float, profile: ScannerProfile = V
         notes.append("window reaches outside the scanner's vertical field of view")
     rows, cols = window.shape
     expected_target = omega / (math.radians(dt) * math.radians(dp) * sin_t)
-    if expected_target < n_points * 0.999:
+    if expected_target < n_points * 0.999 and step_deg is None:
         notes.append(f"finest steps give only {int(expected_target)} points on the target")
-    seconds = profile.window_seconds(window.phi_max_deg - window.phi_min_deg, dp, dt)
+    if step_deg is None:
+        seconds = profile.window_seconds(window.phi_max_deg - window.phi_min_deg, dp, dt)
+    else:
+        seconds = 0.0
+        notes.append("cut from the full-dome scan")
     if target.predicted:
         notes.append("position predicted from the layout (not resolved in the coarse scan)")
     return RoiPlan(target.id, target.group, window, r, math.degrees(math.acos(cos_inc)), rows * cols,
@@ -267,6 +304,9 @@ def plan_fine_scans(targets: Sequence[PlanTarget], *, epoch: str = "", profile: 
         raise InputError("the time budget must be positive")
     if not targets:
         raise InputError("nothing to plan: no targets")
+    if not profile.windowed:
+        return _plan_full_dome(targets, epoch=epoch, profile=profile, min_points=min_points,
+                               budget_seconds=budget_seconds, margin_m=margin_m)
     n = float(min_points)
     warnings: list[str] = []
     for _ in range(30):
@@ -292,6 +332,40 @@ def plan_fine_scans(targets: Sequence[PlanTarget], *, epoch: str = "", profile: 
     return ScanPlan(epoch, profile, tuple(rois), int(min_points), int(n), float(budget_seconds), tuple(warnings))
 
 
+def _plan_full_dome(targets: Sequence[PlanTarget], *, epoch: str, profile: ScannerProfile, min_points: int,
+                    budget_seconds: float, margin_m: float) -> ScanPlan:
+    """One full-dome scan at the coarsest preset giving every target ``min_points`` (within the budget)."""
+    presets = sorted(profile.step_presets, key=lambda p: -p[1])  # coarse first
+    chosen, warnings = None, []
+    for label, step in presets:
+        rois = [plan_roi(t, n_points=min_points, profile=profile, margin_m=margin_m, step_deg=step) for t in targets]
+        if min(r.expected_target_points for r in rois) >= min_points * 0.999:
+            chosen = (label, step, rois)
+            break
+    if chosen is None:
+        label, step = presets[-1]
+        chosen = (label, step, [plan_roi(t, n_points=min_points, profile=profile, margin_m=margin_m, step_deg=step)
+                                for t in targets])
+        warnings.append(f"even the finest resolution ({label}) gives fewer than {min_points} points on some targets")
+    label, step, rois = chosen
+    dome = profile.full_dome_seconds(step)
+    if dome > budget_seconds * 1.0001:
+        fitting = [(lab, st) for lab, st in presets if profile.full_dome_seconds(st) <= budget_seconds]
+        if fitting:
+            lab2, st2 = fitting[-1]
+            warnings.append(f"the full-dome scan at {label} takes {dome / 60:.1f} min, over the budget of "
+                            f"{budget_seconds / 60:.0f} min: planned at {lab2} instead")
+            label, step = lab2, st2
+            rois = [plan_roi(t, n_points=min_points, profile=profile, margin_m=margin_m, step_deg=step) for t in targets]
+            dome = profile.full_dome_seconds(step)
+        else:
+            warnings.append(f"the plan takes {dome / 60:.1f} min, over the budget of {budget_seconds / 60:.0f} min")
+    warnings.append(f"{profile.name} scans full domes only: one scan at {label}; every window is cut from it")
+    points = min(r.expected_target_points for r in rois)
+    return ScanPlan(epoch, profile, tuple(rois), int(min_points), int(min(points, min_points)), float(budget_seconds),
+                    tuple(warnings), float(dome), float(step))
+
+
 # ---------------------------------------------------------------------- editing a plan by hand
 EDITED_NOTE = "window edited by hand"
 
@@ -307,7 +381,8 @@ def edit_roi(roi: RoiPlan, *, phi_min_deg: float, phi_max_deg: float, theta_min_
     window = AngularWindow(float(phi_min_deg), float(phi_max_deg), float(theta_min_deg), float(theta_max_deg),
                            w.phi_step_deg, w.theta_step_deg)
     rows, cols = window.shape
-    seconds = profile.window_seconds(window.phi_max_deg - window.phi_min_deg, w.phi_step_deg, w.theta_step_deg)
+    seconds = profile.window_seconds(window.phi_max_deg - window.phi_min_deg, w.phi_step_deg, w.theta_step_deg) \
+        if profile.windowed else 0.0
     notes = tuple(n for n in roi.notes if n != EDITED_NOTE) + (EDITED_NOTE,)
     return replace(roi, window=window, expected_points=rows * cols, expected_seconds=seconds, notes=notes)
 

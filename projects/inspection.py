@@ -68,7 +68,7 @@ def inspect_target(c: Campaign, label: str, reflector: str, *,
     masks: dict = {}
     diameter = c.reflector(reflector)["diameter_m"]
     cent = target_centroid(xyz, inten, reflector=reflector, expected_xyz=direction_from_angles(tc, pc) * roi.range_m,
-                           diameter_m=diameter, window=roi.window, profile=c.profile, masks=masks)
+                           diameter_m=diameter, window=roi.window, profile=plan.profile, masks=masks)
     report(progress, 1.0, "window read")
     return TargetInspection(label, reflector, roi, theta[inside].astype(np.float64), phi[inside].astype(np.float64),
                             inten, masks["bright"], masks["cluster"], masks["disc"], cent,

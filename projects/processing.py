@@ -58,19 +58,30 @@ def stage1_params(params: dict) -> dict:
     return {k: params[k] for k in STAGE1_KEYS if k not in LATER_STAGE1_KEYS or params[k] != DEFAULTS[k]}
 
 
+#: Profile fields added later: they enter the input hash only when they differ from their default.
+_LATER_PROFILE_FIELDS = {"max_tilt_deg": MAX_TILT_DEG, "kind": "line", "step_presets": [], "windowed": True,
+                         "horizontal_direction": "ccw", "horizontal_zero_deg": 0.0, "vertical_reference": "zenith",
+                         "resolution_label": "step"}
+
+
 def _profile_key(profile) -> dict:
-    """The profile as it enters the input hash (a field added later only when it differs from its default)."""
+    """The profile as it enters the input hash: what decides the plan and the centroids (a field added
+    later only when it differs from its default; sources and notes never)."""
     d = profile.to_dict()
-    if d.get("max_tilt_deg") == MAX_TILT_DEG:
-        del d["max_tilt_deg"]
+    for k, default in _LATER_PROFILE_FIELDS.items():
+        if d.get(k) == default:
+            del d[k]
+    for k in ("sources", "notes"):
+        d.pop(k, None)
     return d
 
 
-def max_tilt(c: Campaign, params: dict) -> Optional[float]:
+def max_tilt(c: Campaign, params: dict, label: Optional[str] = None) -> Optional[float]:
     """Largest tilt an identification may imply: None when the scanner was not levelled."""
     if not params["levelled"]:
         return None
-    return float(params["max_tilt_deg"]) if params["max_tilt_deg"] is not None else c.profile.max_tilt_deg
+    return float(params["max_tilt_deg"]) if params["max_tilt_deg"] is not None else \
+        c.profile_for(label).max_tilt_deg
 
 
 def layout_up(params: dict) -> np.ndarray:
@@ -160,7 +171,7 @@ def plan_inputs(c: Campaign, label: str, params: dict) -> tuple[str, object]:
     layout = c.layout(ep["datetime"])
     key = {"v": PIPELINE_VERSION, "coarse": [f["sha256"] for f in coarse],
            "layout": layout.to_rows(), "params": stage1_params(params),
-           "profile": _profile_key(c.profile)}
+           "profile": _profile_key(c.profile_for(label))}
     return _hash(key), layout
 
 
@@ -170,7 +181,7 @@ def analyse_epoch_coarse(c: Campaign, label: str, layout, params: dict, *,
     coarse = read_files(c, c.files(label, "coarse"), scaled(progress, 0.0, 0.5))
     return analyse_coarse(coarse, layout, step_deg=params["map_step_deg"], threshold=params["detection_threshold"],
                           tolerance_m=params["identification_tolerance_m"],
-                          max_tilt_deg=max_tilt(c, params), up_layout=layout_up(params),
+                          max_tilt_deg=max_tilt(c, params, label), up_layout=layout_up(params),
                           progress=scaled(progress, 0.5, 1.0))
 
 
@@ -182,8 +193,9 @@ def plan_epoch(c: Campaign, label: str, *, progress: Optional[ProgressCallback] 
     if row is not None and row["inputs_hash"] == h:
         return ScanPlan.from_json(json.loads(row["json"]))
     analysis = analyse_epoch_coarse(c, label, layout, params, progress=scaled(progress, 0.0, 0.95))
-    plan = plan_from_coarse(analysis, layout, epoch=label, profile=c.profile, min_points=int(params["min_points"]),
-                            budget_seconds=float(params["budget_min"]) * 60.0)
+    plan = plan_from_coarse(analysis, layout, epoch=label, profile=c.profile_for(label),
+                            min_points=int(params["min_points"]), budget_seconds=float(params["budget_min"]) * 60.0,
+                            up_layout=layout_up(params))
     d = plan.to_json()
     d["identification"] = {"missing": list(analysis.identification.missing),
                            "extra_detections": len(analysis.identification.extra_detections),
@@ -205,7 +217,7 @@ def measure_epoch(c: Campaign, label: str, *, progress: Optional[ProgressCallbac
     h = measure_inputs(c, label, params)
     layout = c.layout(c.epoch(label)["datetime"])
     fine = read_files(c, c.files(label, "fine"), scaled(progress, 0.4, 0.8))
-    cents = measure_targets(fine, plan, layout, profile=c.profile)
+    cents = measure_targets(fine, plan, layout, profile=plan.profile)
     c.save_centroids(label, cents, h, stage1_params(params))
     report(progress, 1.0, "measured")
     return cents

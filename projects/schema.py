@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import sqlite3
 
-SCHEMA_VERSION = 4
+SCHEMA_VERSION = 5
 
 SCHEMA_V1 = """
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -131,6 +131,12 @@ MIGRATIONS: dict[int, str] = {
         summary TEXT NOT NULL,                      -- JSON, see vision.crossval.CrossValidation
         created TEXT NOT NULL
     );
+    """,
+    # 5: target normals from layout.csv (nx,ny,nz; NULL when the layout gives none), for planning.
+    5: """
+    ALTER TABLE reflectors ADD COLUMN nx REAL;
+    ALTER TABLE reflectors ADD COLUMN ny REAL;
+    ALTER TABLE reflectors ADD COLUMN nz REAL;
     """,
 }
 

@@ -28,7 +28,7 @@ import numpy as np
 
 from lidar.centroid import TargetCentroid
 from lidar.layout import Layout, check_layout
-from lidar.scanner_profile import VZ1000, ScannerProfile
+from lidar.scanner_profile import ScannerProfile
 from projects import schema
 from projects.errors import CampaignError, CampaignLockedError, DuplicateImportError, InputError
 
@@ -61,6 +61,15 @@ def sha256_of(path: Path, chunk: int = 8 << 20) -> str:
     return h.hexdigest()
 
 
+def _normal_values(n) -> tuple:
+    """A layout normal as three SQL values (NULLs when unknown)."""
+    return tuple(float(v) for v in n) if np.all(np.isfinite(n)) else (None, None, None)
+
+
+def _nan(v) -> float:
+    return float("nan") if v is None else float(v)
+
+
 class Campaign:
     """An open campaign. Use :meth:`create` or :meth:`open`, preferably as a context manager."""
 
@@ -73,8 +82,15 @@ class Campaign:
     # ------------------------------------------------------------------ opening
     @classmethod
     def create(cls, folder: str | os.PathLike, *, name: str, layout: Layout, span_m: Optional[float] = None,
-               profile: ScannerProfile = VZ1000) -> "Campaign":
-        """Create a new campaign folder (which must not hold a campaign yet)."""
+               profile: Optional[ScannerProfile] = None) -> "Campaign":
+        """Create a new campaign folder (which must not hold a campaign yet).
+
+        ``profile`` is the scanner (default: the catalogue's Riegl VZ-1000, the dissertation's).
+        """
+        if profile is None:
+            from lidar.scanner_catalogue import DEFAULT_SCANNER, get_scanner
+
+            profile = get_scanner(DEFAULT_SCANNER)
         folder = Path(folder)
         if not name.strip():
             raise InputError("the campaign needs a name (--name)")
@@ -97,9 +113,9 @@ class Campaign:
                         "settings": json.dumps({})}
                 conn.executemany("INSERT INTO meta(key, value) VALUES (?, ?)", meta.items())
                 conn.executemany(
-                    "INSERT INTO reflectors(id, grp, x, y, z, diameter_m) VALUES (?, ?, ?, ?, ?, ?)",
-                    [(i, g, *map(float, p), float(d)) for i, g, p, d in
-                     zip(layout.ids, layout.groups, layout.xyz, layout.diameters_m)])
+                    "INSERT INTO reflectors(id, grp, x, y, z, diameter_m, nx, ny, nz) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    [(i, g, *map(float, p), float(d), *_normal_values(n)) for i, g, p, d, n in
+                     zip(layout.ids, layout.groups, layout.xyz, layout.diameters_m, layout.normals)])
                 conn.execute("INSERT INTO log(time, action, epoch, details) VALUES (?, 'init', NULL, ?)",
                              (now_iso(), json.dumps({"name": name, "reflectors": len(layout)})))
         finally:
@@ -215,6 +231,25 @@ class Campaign:
     def profile(self) -> ScannerProfile:
         return ScannerProfile.from_dict(json.loads(self.meta("scanner_profile", "{}")))
 
+    def profile_for(self, label: Optional[str]) -> ScannerProfile:
+        """The scanner of an epoch: its own when it has one (``add-epoch --scanner``), else the campaign's."""
+        own = self.settings().get("epoch_scanners", {}).get(label) if label else None
+        return ScannerProfile.from_dict(own, source=f"epoch {label} scanner") if own else self.profile
+
+    def set_profile(self, profile: ScannerProfile, *, epoch: Optional[str] = None) -> None:
+        """Set the campaign's scanner, or one epoch's (the epoch must exist)."""
+        if epoch is None:
+            with self.transaction() as c:
+                c.execute("UPDATE meta SET value = ? WHERE key = 'scanner_profile'", (json.dumps(profile.to_dict()),))
+                self._log(c, "scanner", None, {"name": profile.name})
+            return
+        self.epoch(epoch)
+        s = self.settings()
+        s.setdefault("epoch_scanners", {})[epoch] = profile.to_dict()
+        with self.transaction() as c:
+            c.execute("UPDATE meta SET value = ? WHERE key = 'settings'", (json.dumps(s),))
+            self._log(c, "scanner", epoch, {"name": profile.name})
+
     def settings(self) -> dict:
         return json.loads(self.meta("settings", "{}"))
 
@@ -254,7 +289,9 @@ class Campaign:
             rows.append(r)
         return Layout(tuple(r["id"] for r in rows), tuple(r["grp"] for r in rows),
                       np.array([[r["x"], r["y"], r["z"]] for r in rows], dtype=float).reshape(-1, 3),
-                      np.array([r["diameter_m"] for r in rows], dtype=float))
+                      np.array([r["diameter_m"] for r in rows], dtype=float),
+                      np.array([[_nan(r.get("nx")), _nan(r.get("ny")), _nan(r.get("nz"))] for r in rows],
+                               dtype=float).reshape(-1, 3))
 
     def add_reflector(self, rid: str, group: str, xyz: Sequence[float], *, diameter_m: float = 0.05,
                       installed: Optional[str] = None, replaces: Optional[str] = None, note: str = "") -> None:
@@ -291,9 +328,9 @@ class Campaign:
                 raise InputError(f"reflector {new!r} already exists; choose a new id")
             pos = [float(v) for v in (xyz if xyz is not None else (r["x"], r["y"], r["z"]))]
             c.execute("UPDATE reflectors SET retired = ? WHERE id = ?", (when, old))
-            c.execute("INSERT INTO reflectors(id, grp, x, y, z, diameter_m, installed, replaces, note) "
-                      "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                      (new, r["grp"], *pos, r["diameter_m"], when, old, f"replaces {old}"))
+            c.execute("INSERT INTO reflectors(id, grp, x, y, z, diameter_m, installed, replaces, note, nx, ny, nz) "
+                      "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                      (new, r["grp"], *pos, r["diameter_m"], when, old, f"replaces {old}", r["nx"], r["ny"], r["nz"]))
             self._log(c, "reflector-replace", None, {"old": old, "new": new, "when": when})
 
     # ------------------------------------------------------------------ epochs and files

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from app.cli.output import dump_json, table
 from app.cli.progress import progress_bar
+from lidar.errors import InputError
 from lidar.flags import describe, severity
 
 
@@ -18,6 +19,8 @@ def register(sub) -> None:
     p.add_argument("--layout", type=Path, required=True, help="layout.csv: id,group,x,y,z[,diameter_mm]")
     p.add_argument("--target-diameter-mm", type=float, default=50.0, help="diameter when the layout has none (50)")
     p.add_argument("--span-m", type=float, default=None, help="span length, for span-fraction limits")
+    p.add_argument("--scanner", default=None,
+                   help="scanner profile: a name from 'bridgesurvey scanners' or a profile .json (default Riegl VZ-1000)")
     p.set_defaults(func=cmd_init)
 
     p = sub.add_parser("add-epoch", help="import a visit: its coarse scan (and fine scans, if any)",
@@ -29,6 +32,8 @@ def register(sub) -> None:
     p.add_argument("--fine", type=Path, nargs="*", default=[])
     p.add_argument("--label", default=None, help="epoch label (default: the date)")
     p.add_argument("--notes", default="", help="station notes")
+    p.add_argument("--scanner", default=None, help="this visit's scanner when it is not the campaign's "
+                                                   "(a name from 'bridgesurvey scanners' or a profile .json)")
     p.set_defaults(func=cmd_add_epoch)
 
     p = sub.add_parser("add-fine", help="import the fine scans of an epoch")
@@ -41,6 +46,7 @@ def register(sub) -> None:
     p.add_argument("dir", type=Path)
     p.add_argument("--epoch", required=True)
     p.add_argument("--out", type=Path, required=True, help="plan JSON to write")
+    p.add_argument("--sheet", type=Path, default=None, help="also write the printable field sheet (PDF)")
     p.set_defaults(func=cmd_plan)
 
     p = sub.add_parser("process", help="bring epochs up to date: plans, centroids, displacements",
@@ -95,16 +101,19 @@ def register(sub) -> None:
                                    "recomputes exactly the results it affects. Keys: " + ", ".join(
                                        ["min_points", "budget_min", "normal_mode", "weighted_references",
                                         "map_step_deg", "detection_threshold", "identification_tolerance_m",
-                                        "moved_tolerance_m", "levelled", "max_tilt_deg", "layout_up", "baseline"]) +
+                                        "moved_tolerance_m", "levelled", "max_tilt_deg", "layout_up", "baseline",
+                                        "scanner"]) +
                                    ". normal_mode: auto (default: both deck normals by their uncertainty), "
                                    "reference or epoch. levelled false: the scanner had no compensator "
                                    "(identification then accepts tilted solutions); max_tilt_deg: the largest tilt a levelled "
                                    "solution may imply (default: the scanner profile's, 2 deg for the VZ-1000). layout_up x,y,z: the "
                                    "layout's up axis (default 0,0,1). Changing the baseline re-references "
-                                   "every displacement.")
+                                   "every displacement. scanner NAME|FILE.json: the campaign's instrument "
+                                   "(with --epoch: one visit's).")
     p.add_argument("dir", type=Path)
     p.add_argument("key", nargs="?")
     p.add_argument("value", nargs="?")
+    p.add_argument("--epoch", default=None, help="with 'scanner': set the scanner of this epoch only")
     p.set_defaults(func=cmd_settings)
 
     p = sub.add_parser("export", help="export tables: .xlsx (everything) or .csv (displacements)")
@@ -139,8 +148,11 @@ def cmd_init(args) -> int:
     from lidar.layout import read_layout_csv
     from projects.store import Campaign
 
+    from lidar.scanner_catalogue import DEFAULT_SCANNER, get_scanner
+
+    profile = get_scanner(args.scanner or DEFAULT_SCANNER)
     layout = read_layout_csv(args.layout, default_diameter_m=args.target_diameter_mm / 1000.0)
-    with Campaign.create(args.dir, name=args.name, layout=layout, span_m=args.span_m) as c:
+    with Campaign.create(args.dir, name=args.name, layout=layout, span_m=args.span_m, profile=profile) as c:
         print(f"created campaign '{c.name}' in {args.dir} with {len(layout)} reflectors "
               f"({len(layout.ids_in('reference'))} reference, {len(layout.ids_in('measurement'))} measurement)")
     return 0
@@ -149,10 +161,15 @@ def cmd_init(args) -> int:
 def cmd_add_epoch(args) -> int:
     from projects.store import parse_datetime
 
+    from lidar.scanner_catalogue import get_scanner
+
     when = parse_datetime(args.date)
     label = args.label or when[:10]
+    profile = get_scanner(args.scanner) if args.scanner else None
     with _open(args.dir) as c:
         c.add_epoch(label, when, args.coarse, args.fine, notes=args.notes, validate=_validate)
+        if profile is not None:
+            c.set_profile(profile, epoch=label)
     print(f"added epoch {label} ({when}) with {1 + len(args.fine)} file(s)")
     return 0
 
@@ -171,8 +188,14 @@ def cmd_plan(args) -> int:
     with _open(args.dir) as c:
         with progress_bar("planning") as cb:
             plan = plan_epoch(c, args.epoch, progress=cb)
+        if args.sheet is not None:
+            from projects.field_sheet import write_field_sheet
+
+            write_field_sheet(plan, args.sheet, campaign_name=c.name, preview=c.map_preview(args.epoch),
+                              epoch_date=c.epoch(args.epoch)["datetime"][:10])
     plan.save(args.out)
-    print(f"wrote {args.out}: {len(plan.rois)} windows, {plan.total_seconds / 60:.1f} min")
+    print(f"wrote {args.out}: {len(plan.rois)} windows, {plan.total_seconds / 60:.1f} min"
+          + (f"; field sheet {args.sheet}" if args.sheet else ""))
     for w in plan.warnings:
         print(f"warning: {w}")
     return 0
@@ -292,10 +315,15 @@ def cmd_limit(args) -> int:
 def cmd_settings(args) -> int:
     from projects.processing import DEFAULTS, parameters, stale_epochs, set_parameter
 
+    if args.key == "scanner":
+        return _set_scanner(args)
+    if args.epoch is not None:
+        raise InputError("--epoch goes with the 'scanner' setting only")
     if args.key is None:
         with _open(args.dir, writable=False) as c:
             params = parameters(c)
             params["baseline"] = c.settings().get("baseline")
+            params["scanner"] = c.profile.name
         table([{"key": k, "value": v, "default": DEFAULTS.get(k)} for k, v in params.items()],
               ["key", "value", "default"])
         return 0
@@ -309,6 +337,21 @@ def cmd_settings(args) -> int:
               "at the next 'bridgesurvey process' (the change is in the campaign log)", file=sys.stderr)
     print(f"{args.key} = {args.value}; {len(stale)} epoch(s) need processing for their centroids "
           "(displacements follow); run 'bridgesurvey process'")
+    return 0
+
+
+def _set_scanner(args) -> int:
+    from lidar.scanner_catalogue import get_scanner
+    from projects.processing import stale_epochs
+
+    if not args.value:
+        raise InputError("give the scanner: a name from 'bridgesurvey scanners' or a profile .json")
+    profile = get_scanner(args.value)
+    with _open(args.dir) as c:
+        c.set_profile(profile, epoch=args.epoch)
+        stale = stale_epochs(c)
+    where = f"epoch {args.epoch}" if args.epoch else "the campaign"
+    print(f"scanner of {where} = {profile.name}; {len(stale)} epoch(s) need processing; run 'bridgesurvey process'")
     return 0
 
 

@@ -1,0 +1,155 @@
+"""Field commands: scanners (the instrument catalogue), field-sheet, check (before leaving the site), stations."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from app.cli.output import dump_json, table
+from app.cli.progress import progress_bar
+from lidar.errors import InputError
+
+
+def register(sub) -> None:
+    p = sub.add_parser("scanners", help="the scanner catalogue: what each instrument offers, with sources",
+                       description="Without NAME: list the catalogue. With NAME (or a profile .json): every value "
+                                   "of that profile and where it came from. Choose one with 'init --scanner' or "
+                                   "'settings DIR scanner NAME'.")
+    p.add_argument("name", nargs="?")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_scanners)
+
+    p = sub.add_parser("field-sheet", help="printable PDF of an epoch's plan in the instrument's own terms",
+                       description="Each window with a map thumbnail, the angles and resolution to enter on the "
+                                   "instrument, expected points and seconds, and the total against the budget.")
+    p.add_argument("dir", type=Path)
+    p.add_argument("--epoch", required=True)
+    p.add_argument("--out", type=Path, required=True, help="PDF to write")
+    p.set_defaults(func=cmd_field_sheet)
+
+    p = sub.add_parser("check", help="before leaving the site: is every target found, with enough points?",
+                       description="Measures the epoch's fine scans and reports per target: found, points against "
+                                   "the plan, vertical centroid sigma against the goal (what the plan promised, "
+                                   "+30 %%). Writes a re-scan plan (plan JSON) for the targets that fall short. "
+                                   "Exit 0 when all are good, 3 when some fall short.")
+    p.add_argument("dir", type=Path)
+    p.add_argument("--epoch", required=True)
+    p.add_argument("--out", type=Path, default=None, help="re-scan plan JSON to write (when a target falls short)")
+    p.add_argument("--goal-mm", type=float, default=None, help="vertical centroid sigma goal (default: the plan's)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_check)
+
+    p = sub.add_parser("stations", help="where to stand: predicted sigma of every target from candidate positions",
+                       description="Evaluates scanner positions on a grid inside the allowed area and predicts, "
+                                   "for each, the sigma of every target's vertical displacement (range, incidence, "
+                                   "footprint and the points the plan would get), hidden targets and scan time.")
+    p.add_argument("dir", type=Path)
+    p.add_argument("--out", type=Path, required=True, help="stations JSON to write (best first)")
+    p.add_argument("--area", type=Path, default=None, help="area.csv: x,y polygon vertices in the layout frame "
+                                                           "(default: a 25 m band on both sides of the bridge)")
+    p.add_argument("--height-m", type=float, default=1.5, help="instrument height above the ground (1.5 m)")
+    p.add_argument("--grid-m", type=float, default=2.0, help="grid spacing (2 m)")
+    p.add_argument("--ground-z", type=float, default=None,
+                   help="ground height in the layout frame (default: from the last measured station)")
+    p.add_argument("--png", type=Path, default=None, help="also draw the station map")
+    p.add_argument("--top", type=int, default=5, help="stations to print (5)")
+    p.set_defaults(func=cmd_stations)
+
+
+def _open(path: Path, writable: bool = True):
+    from projects.store import Campaign
+
+    return Campaign.open(path, writable=writable)
+
+
+def cmd_scanners(args) -> int:
+    from lidar.scanner_catalogue import CATALOGUE, get_scanner
+
+    if args.name is None:
+        rows = [{"name": p.name, "kind": p.kind, "rate_pts_s": int(p.pulse_rate_hz),
+                 "range_noise_mm": p.range_noise_m * 1000, "windows": "yes" if p.windowed else "full dome only",
+                 "resolutions": ", ".join(lab for lab, _ in p.step_presets) or
+                 f"free, >= {p.min_theta_step_deg:g}/{p.min_phi_step_deg:g} deg"} for p in CATALOGUE.values()]
+        if args.json:
+            dump_json([p.to_dict() for p in CATALOGUE.values()])
+        else:
+            table(rows, ["name", "kind", "rate_pts_s", "range_noise_mm", "windows", "resolutions"])
+        return 0
+    prof = get_scanner(args.name)
+    if args.json:
+        dump_json(prof.to_dict())
+        return 0
+    src = dict(prof.sources)
+    d = prof.to_dict()
+    rows = [{"field": k, "value": v if not isinstance(v, list) else ", ".join(
+        x["label"] if isinstance(x, dict) else str(x) for x in v), "source": src.get(k, "")}
+        for k, v in d.items() if k not in ("sources", "notes")]
+    table(rows, ["field", "value", "source"])
+    print(f"angles: {prof.angle_convention()} ({src.get('angles', '')})")
+    if prof.notes:
+        print(prof.notes)
+    return 0
+
+
+def cmd_field_sheet(args) -> int:
+    from projects.field_sheet import write_field_sheet
+    from projects.processing import plan_epoch
+
+    with _open(args.dir) as c:
+        with progress_bar("planning") as cb:
+            plan = plan_epoch(c, args.epoch, progress=cb)
+        preview = c.map_preview(args.epoch)
+        ep = c.epoch(args.epoch)
+        path = write_field_sheet(plan, args.out, campaign_name=c.name, preview=preview, epoch_date=ep["datetime"][:10])
+    print(f"wrote {path}: {len(plan.rois)} windows, {plan.total_seconds / 60:.1f} min "
+          f"(budget {plan.budget_seconds / 60:.0f} min) on a {plan.profile.name}")
+    return 0
+
+
+EXIT_SHORT = 3
+
+
+def cmd_check(args) -> int:
+    from projects.check import check_epoch
+
+    with _open(args.dir) as c:
+        with progress_bar("measuring the fine scans") as cb:
+            result = check_epoch(c, args.epoch, goal_sigma_mm=args.goal_mm, progress=cb)
+    if args.out is not None and result.rescan is not None:
+        result.rescan.save(args.out)
+    if args.json:
+        dump_json(result.to_json())
+    else:
+        table([t.to_json() for t in result.targets],
+              ["reflector", "group", "status", "points", "planned_points", "points_ratio", "sigma_mm", "goal_sigma_mm",
+               "note"])
+        if not result.short:
+            print(f"epoch {args.epoch}: every target is good; the visit is complete")
+        else:
+            names = ", ".join(t.reflector for t in result.short)
+            where = f"wrote the re-scan plan {args.out}" if args.out else "give --out FILE for a re-scan plan"
+            print(f"epoch {args.epoch}: re-scan {names} before leaving "
+                  f"({result.rescan.total_seconds / 60:.1f} min); {where}")
+    return 0 if not result.short else EXIT_SHORT
+
+
+def cmd_stations(args) -> int:
+    from projects.stations import advise_stations, read_area_csv, station_map_figure
+    from lidar.figures import save_figure
+
+    area = read_area_csv(args.area) if args.area is not None else None
+    if args.top < 0:
+        raise InputError("--top must not be negative")
+    with _open(args.dir, writable=False) as c:
+        with progress_bar("evaluating stations") as cb:
+            advice = advise_stations(c, area_xy=area, height_m=args.height_m, grid_m=args.grid_m,
+                                     ground_z=args.ground_z, progress=cb)
+        layout = c.layout()
+    advice.save(args.out)
+    if args.png is not None:
+        save_figure(station_map_figure(advice, layout), args.png)
+    rows = [{"x": s.xyz_layout[0], "y": s.xyz_layout[1], "z": s.xyz_layout[2], "minutes": s.seconds / 60,
+             "worst_sigma_mm": s.worst_sigma_mm, "hidden": list(s.hidden)} for s in advice.stations[:args.top]]
+    table(rows, ["x", "y", "z", "minutes", "worst_sigma_mm", "hidden"])
+    print(f"wrote {args.out}: {len(advice.stations)} stations evaluated (ground z {advice.ground_z:.2f} m: "
+          f"{advice.ground_source})" + (f"; map {args.png}" if args.png else ""), file=sys.stderr)
+    return 0
