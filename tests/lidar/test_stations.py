@@ -1,0 +1,74 @@
+"""The station advisor on the layout alone: visibility, ranking and what drives the predicted sigma."""
+import math
+
+import numpy as np
+import pytest
+
+from lidar.errors import InputError
+from lidar.layout import layout_from_model
+from lidar.scanner_catalogue import CATALOGUE
+from lidar.simulate import BridgeModel
+from lidar.stations import default_area, grid_in_polygon, predict_station, survey_stations
+
+VZ = CATALOGUE["Riegl VZ-1000"]
+
+
+@pytest.fixture(scope="module")
+def layout():
+    return layout_from_model(BridgeModel())
+
+
+def test_a_side_station_sees_every_target(layout):
+    p = predict_station(layout, (20.0, -14.0, 1.5), profile=VZ)
+    assert not p.hidden and p.usable
+    assert set(p.predicted_sigma_mm) == {"M1", "M2", "M3", "M4", "M5"}
+    assert all(0.03 < s < 0.3 for s in p.predicted_sigma_mm.values())
+    assert all(n >= 900 for n in p.points.values())
+
+
+def test_hidden_targets_say_why(layout):
+    under = predict_station(layout, (20.0, 0.0, 1.5), profile=VZ)  # the VZ's field of view stops 30 deg from zenith
+    assert "M3" in under.hidden
+    assert "field of view" in under.reasons["M3"]
+    beyond = predict_station(layout, (-12.0, -3.0, 1.5), profile=VZ)  # outside the span, behind pier 1
+    assert beyond.reasons["R1"] == "faces away"
+    assert beyond.reasons["R3"] == "behind a pier"
+    panoramic = predict_station(layout, (20.0, 0.0, 1.5), profile=CATALOGUE["FARO Focus Premium"])
+    assert "M3" not in panoramic.hidden  # a panoramic scanner looks straight up
+
+
+def test_sigma_grows_with_distance_and_a_finer_instrument_does_better(layout):
+    near = predict_station(layout, (20.0, -12.0, 1.5), profile=VZ)
+    far = predict_station(layout, (20.0, -24.0, 1.5), profile=VZ, budget_seconds=36000)
+    # same points per target, so the farther station's cost is time and footprint, not sigma alone
+    assert far.seconds > near.seconds
+    quieter = predict_station(layout, (20.0, -12.0, 1.5), profile=CATALOGUE["Riegl VZ-400i"])
+    assert quieter.worst_sigma_mm < near.worst_sigma_mm and quieter.seconds < near.seconds
+    # a phase scanner's finest preset cannot put 1000 points on a 50 mm disc at 15 m: it says so
+    zf = predict_station(layout, (20.0, -12.0, 1.5), profile=CATALOGUE["Z+F IMAGER 5016"])
+    assert max(zf.points.values()) < 1000
+
+
+def test_survey_ranks_full_visibility_first_and_writes_the_contract(layout):
+    area = default_area(layout)
+    grid = grid_in_polygon(area, 8.0)
+    pos = np.column_stack([grid, np.full(len(grid), 1.5)])
+    res = survey_stations(layout, pos, profile=VZ, workers=1)
+    assert len(res) == len(pos)
+    keys = [s.rank_key() for s in res]
+    assert keys == sorted(keys)
+    best = res[0]
+    assert not best.hidden and math.isfinite(best.worst_sigma_mm)
+    d = best.to_json()
+    for k in ("x", "y", "z", "seconds", "worst_sigma_mm", "predicted_sigma_mm", "hidden"):
+        assert k in d
+    assert d["worst_sigma_mm"] == pytest.approx(max(d["predicted_sigma_mm"].values()), abs=1e-4)
+
+
+def test_bad_areas_and_grids_are_refused():
+    with pytest.raises(InputError, match="at least 3"):
+        grid_in_polygon(np.array([[0, 0], [1, 1]]), 1.0)
+    with pytest.raises(InputError, match="positive"):
+        grid_in_polygon(np.array([[0, 0], [10, 0], [0, 10]]), 0.0)
+    with pytest.raises(InputError, match="coarser"):
+        grid_in_polygon(np.array([[0, 0], [1e4, 0], [0, 1e4]]), 1.0)
