@@ -31,6 +31,9 @@ class Detection:
         Angular diameter of a face-on target of the campaign's diameter at this range.
     score : float
         In (0, 1]: brightness times agreement of size with the expected one.
+    guided : bool
+        Found by the guided second look at a position the layout predicts
+        (:func:`recover_predicted`), not by the blob search.
     """
 
     theta_deg: float
@@ -42,6 +45,7 @@ class Detection:
     size_deg: float
     expected_size_deg: float
     score: float
+    guided: bool = False
 
 
 @dataclass(frozen=True)

@@ -313,7 +313,7 @@ def _tangent_basis(g: np.ndarray) -> np.ndarray:
     return np.vstack([e1, np.cross(g, e1)])
 
 
-def normal_gain(normals, x0: np.ndarray, cov: np.ndarray, step: float = 1e-6
+def normal_gain(normals, x0: np.ndarray, cov: np.ndarray, step: float = 1e-6, *, expected: bool = False
                 ) -> tuple[Optional[np.ndarray], np.ndarray, float]:
     """How far to move from the carried normal toward the epoch's own fit, by their uncertainties.
 
@@ -325,6 +325,10 @@ def normal_gain(normals, x0: np.ndarray, cov: np.ndarray, step: float = 1e-6
     covariances in the plane perpendicular to ``g_ref`` (in each direction the
     better determined normal wins), and ``d`` itself bounds the deformation the
     test could not see, for the sigmas.
+
+    ``expected=True`` gives the sigmas expected before the epoch is measured (the
+    station advisor): no test, and ``d d^T`` replaced by its expectation under
+    noise alone, the sum of the two normals' covariances.
 
     Returns
     -------
@@ -354,7 +358,7 @@ def normal_gain(normals, x0: np.ndarray, cov: np.ndarray, step: float = 1e-6
     d = e @ (g_ep - g_ref)
     reg = 1e-18 * np.eye(2)
     chi2 = float(d @ np.linalg.solve(cr + ce + reg, d))
-    if chi2 > CHI2_2DOF_95:
+    if chi2 > CHI2_2DOF_95 and not expected:
         # The two normals disagree beyond their noise: the deck's own deformation tilts the epoch fit.
         # Keep the carried normal, and let the sigmas carry what its own noise may still hide.
         return np.zeros((3, 3)), np.zeros((3, 3)), 0.0
@@ -363,7 +367,7 @@ def normal_gain(normals, x0: np.ndarray, cov: np.ndarray, step: float = 1e-6
     k2 = np.linalg.solve(wr + we, we)
     gain = e.T @ k2 @ e
     # a deformation too small to be detected may still be there: at most the test's threshold
-    bias = np.outer(d, d)
+    bias = cr + ce if expected else np.outer(d, d)
     bias_cov = e.T @ (k2 @ bias @ k2.T) @ e
     return gain, bias_cov, float(np.trace(k2) / 2.0)
 
@@ -394,7 +398,7 @@ def motion_weights(base: Mapping[str, Observation], ep: Mapping[str, Observation
 
 def compute_displacements(baseline: Mapping[str, object], epoch: Mapping[str, object], groups: Mapping[str, str], *,
                           normal_mode: str = "auto", moved_tolerance_m: Optional[float] = None,
-                          weighted: bool = True) -> EpochDisplacements:
+                          weighted: bool = True, expected_sigmas: bool = False) -> EpochDisplacements:
     """Vertical displacements of an epoch against the baseline epoch.
 
     Parameters
@@ -414,6 +418,9 @@ def compute_displacements(baseline: Mapping[str, object], epoch: Mapping[str, ob
     weighted : bool, keyword-only
         Weight the reference targets by their precision (the same weights in
         both epochs). False gives the plain mean of the dissertation. Default True.
+    expected_sigmas : bool, keyword-only
+        The sigmas expected before the epoch is measured, for planning (see
+        :func:`normal_gain`); the displacements themselves are unchanged. Default False.
 
     Returns
     -------
@@ -433,7 +440,8 @@ def compute_displacements(baseline: Mapping[str, object], epoch: Mapping[str, ob
                                              measurement_ids=meas_ids)
 
     def solve(stable_ids, checks_, flags_):
-        return _solve(base, ep, meas_ids, list(stable_ids), checks_, list(flags_), normal_mode, weighted)
+        return _solve(base, ep, meas_ids, list(stable_ids), checks_, list(flags_), normal_mode, weighted,
+                      expected_sigmas)
 
     result = solve(stable, checks, flags)
     # A moved pier target: the deck's shape (zero at the supports) tells which one it was.
@@ -449,7 +457,7 @@ def compute_displacements(baseline: Mapping[str, object], epoch: Mapping[str, ob
 
 
 def _solve(base: dict, ep: dict, meas_ids: list, stable: list, checks, flags: list, normal_mode: str,
-           weighted: bool) -> EpochDisplacements:
+           weighted: bool, expected_sigmas: bool = False) -> EpochDisplacements:
     """Displacements of ``meas_ids`` with the reference point and frame motion from ``stable``."""
     if not stable:
         raise ProcessingError("no reference target was measured in both this epoch and the baseline; "
@@ -486,7 +494,7 @@ def _solve(base: dict, ep: dict, meas_ids: list, stable: list, checks, flags: li
     gain, bias_cov, weight_epoch = None, np.zeros((3, 3)), 0.0
     if mode == "auto":
         gain, bias_cov, weight_epoch = normal_gain(lambda x: _normals(*split(x), stable, meas_base, meas, mw)[1:],
-                                                   x0, cov)
+                                                   x0, cov, expected=expected_sigmas)
         if weight_epoch > 0.5:
             flags.append(FLAG_NORMAL_FROM_EPOCH)
 

@@ -12,6 +12,7 @@ import numpy as np
 from lidar.centroid import TargetCentroid, centroids_from_scan
 from lidar.detection import DetectionResult, detect_reflectors
 from lidar.errors import InputError
+from lidar.guided_detection import recover_predicted
 from lidar.identification import MAX_TILT_DEG, Identification, identify_reflectors
 from lidar.layout import Layout, target_normals
 from lidar.plan import PlanTarget, ScanPlan, incidence_from_map, plan_fine_scans
@@ -52,6 +53,7 @@ def analyse_coarse(scan: Scan, layout: Layout, *, step_deg: Optional[float] = No
     report(progress, 0.9, "identifying reflectors")
     ident = identify_reflectors(det.xyz(), layout, tolerance_m=tolerance_m, max_tilt_deg=max_tilt_deg,
                                 up_layout=up_layout)
+    det, ident = recover_predicted(rmap, det, ident, tolerance_m=tolerance_m)
     inc = {m.id: incidence_from_map(rmap, m.xyz_socs) for m in ident.matches}
     report(progress, 1.0, "coarse scan analysed")
     return CoarseAnalysis(rmap, det, ident, inc)

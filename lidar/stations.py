@@ -195,7 +195,7 @@ def predict_station(layout: Layout, station_layout: Sequence[float], *, profile:
         epoch = {k: Observation(carried.get(k, o.xyz), o.cov) for k, o in epoch.items()}
     groups = dict(zip(layout.ids, layout.groups))
     try:
-        res = compute_displacements(base, epoch, groups)
+        res = compute_displacements(base, epoch, groups, expected_sigmas=True)
     except SurveyError:
         return StationPrediction(tuple(float(v) for v in s), plan.total_seconds, {}, tuple(hidden), points, reasons,
                                  usable=False)

@@ -138,17 +138,23 @@ def station_map_figure(advice: StationAdvice, layout, *, title: str = ""):
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(9, 6.5), dpi=110)
-    ax = fig.add_subplot(111)
+    draw_station_map(fig.add_subplot(111), advice, layout, title=title)
+    fig.tight_layout()
+    return fig
+
+
+def draw_station_map(ax, advice: StationAdvice, layout, *, title: str = "") -> None:
+    """Draw the station map on a matplotlib Axes (the file export and the application share it)."""
     st = advice.stations
-    xy = np.array([s.xyz_layout[:2] for s in st])
+    xy = np.array([s.xyz_layout[:2] for s in st]).reshape(-1, 2)
     worst = np.array([s.worst_sigma_mm for s in st])
-    full = np.array([s.usable and not s.hidden for s in st])
+    full = np.array([s.usable and not s.hidden for s in st], dtype=bool)
     ok = np.isfinite(worst) & full
     if np.any(ok):
-        vmax = float(np.percentile(worst[ok], 95))
-        sc = ax.scatter(xy[ok, 0], xy[ok, 1], c=worst[ok], s=22, cmap="viridis_r", vmin=float(worst[ok].min()),
-                        vmax=max(vmax, float(worst[ok].min()) + 1e-3), marker="s")
-        fig.colorbar(sc, ax=ax, label="worst target's predicted σ (mm)")
+        lo = float(worst[ok].min())
+        hi = max(float(np.percentile(worst[ok], 95)), lo + 1e-3)
+        sc = ax.scatter(xy[ok, 0], xy[ok, 1], c=worst[ok], s=22, cmap="viridis_r", vmin=lo, vmax=hi, marker="s")
+        ax.figure.colorbar(sc, ax=ax, label="worst target's predicted σ (mm)")
     if np.any(~ok):
         ax.scatter(xy[~ok, 0], xy[~ok, 1], s=10, c="0.75", marker="x", label="a target hidden")
     for k, tid in enumerate(layout.ids):
@@ -159,14 +165,13 @@ def station_map_figure(advice: StationAdvice, layout, *, title: str = ""):
     ax.plot(poly[:, 0], poly[:, 1], "k--", lw=0.8)
     if st and st[0].usable:
         b = st[0].xyz_layout
-        ax.plot(b[0], b[1], marker="*", ms=16, color="gold", mec="k", label=f"best: σ ≤ {st[0].worst_sigma_mm:.3f} mm")
+        ax.plot(b[0], b[1], marker="*", ms=16, color="gold", mec="k", ls="none",
+                label=f"best: σ ≤ {st[0].worst_sigma_mm:.3f} mm")
     if advice.last_station is not None:
         ax.plot(advice.last_station[0], advice.last_station[1], marker="P", ms=11, color="tab:orange", mec="k",
-                label="last station")
+                ls="none", label="last station")
     ax.set_aspect("equal")
     ax.set_xlabel("x (m, layout frame)")
     ax.set_ylabel("y (m, layout frame)")
     ax.legend(loc="upper right", fontsize=8)
     ax.set_title(title or f"Where to stand ({advice.scanner}, instrument {advice.height_m:g} m above ground)")
-    fig.tight_layout()
-    return fig

@@ -188,3 +188,42 @@ def set_parameter(session, key: str, text: str) -> None:
 
     with session.write() as c:
         setp(c, key, text)
+
+
+def field_sheet(session, label: str, path: Path, progress: Callable) -> Path:
+    from projects.field_sheet import write_field_sheet
+    from projects.processing import plan_epoch
+
+    with session.write() as c:
+        plan = plan_epoch(c, label, progress=scaled(progress, 0.0, 0.8))
+        return write_field_sheet(plan, path, campaign_name=c.name, preview=c.map_preview(label),
+                                 epoch_date=c.epoch(label)["datetime"][:10])
+
+
+def check(session, label: str, progress: Callable):
+    from projects.check import check_epoch
+
+    with session.write() as c:
+        return check_epoch(c, label, progress=progress)
+
+
+def stations(session, grid_m: float, height_m: float, progress: Callable):
+    """The station advice and the layout it was made on."""
+    from projects.stations import advise_stations
+
+    with session.read() as c:
+        return advise_stations(c, grid_m=grid_m, height_m=height_m, progress=progress), c.layout()
+
+
+def scanner_names() -> list[str]:
+    from lidar.scanner_catalogue import CATALOGUE
+
+    return list(CATALOGUE)
+
+
+def set_scanner(session, name: str, epoch: Optional[str] = None) -> None:
+    from lidar.scanner_catalogue import get_scanner
+
+    profile = get_scanner(name)
+    with session.write() as c:
+        c.set_profile(profile, epoch=epoch)

@@ -11,7 +11,7 @@ from typing import Callable, Optional
 from PySide6.QtWidgets import QFileDialog, QInputDialog
 
 from app.gui import actions
-from app.gui.dialogs import AddEpochDialog, ImportCameraDialog, ask_save_path, show_error
+from app.gui.dialogs import AddEpochDialog, CheckDialog, ImportCameraDialog, ask_save_path, show_error
 from lidar.errors import SurveyError
 
 
@@ -119,6 +119,43 @@ class CommandsMixin:
         self._changed()
         if summary.failed:
             show_error(self, "Processing", "\n".join(f"{o.epoch}: {o.message}" for o in summary.failed))
+
+    def field_sheet(self) -> None:
+        label = self.session.epoch or self._last_epoch()
+        if not label:
+            show_error(self, "Field sheet", "Add an epoch (its coarse scan) first.")
+            return
+        path = ask_save_path(self, "Field sheet", f"field-sheet-{label}.pdf", "PDF (*.pdf)")
+        if path is not None:
+            self.run_job(f"Writing the field sheet of {label}", lambda p: actions.field_sheet(self.session, label, path, p),
+                         lambda r: (self._changed(), self.statusBar().showMessage(f"field sheet written to {r}", 10000)))
+
+    def check_selected(self) -> None:
+        label = self.session.epoch or self._last_epoch()
+        if not label:
+            show_error(self, "Check", "Select an epoch with fine scans first.")
+            return
+
+        def done(result):
+            self._changed()
+            self.check_dialog = CheckDialog(self, result)
+            self.check_dialog.show()
+
+        self.run_job(f"Checking the fine scans of {label}", lambda p: actions.check(self.session, label, p), done)
+
+    def evaluate_stations(self, grid_m: float = 2.0, height_m: float = 1.5) -> None:
+        self.tabs.setCurrentWidget(self.stations_view)
+        self.run_job("Evaluating scanner stations", lambda p: actions.stations(self.session, grid_m, height_m, p),
+                     lambda r: self.stations_view.show_advice(*r))
+
+    def choose_scanner(self) -> None:
+        with self.session.read() as c:
+            current = c.profile.name
+        names = actions.scanner_names()
+        name, ok = QInputDialog.getItem(self, "Scanner", "The campaign's scanner (planning and noise model):", names,
+                                        names.index(current) if current in names else 0, False)
+        if ok:
+            self._quick("Scanner", lambda: actions.set_scanner(self.session, name))
 
     def show_fine(self) -> None:
         s = self.session

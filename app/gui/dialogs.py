@@ -6,8 +6,10 @@ from typing import Optional
 
 from PySide6.QtCore import QDateTime, Qt, QTimeZone
 from PySide6.QtWidgets import (QComboBox, QDateTimeEdit, QDialog, QDialogButtonBox, QDoubleSpinBox, QFileDialog,
-                               QFormLayout, QHBoxLayout, QLineEdit, QListWidget, QMessageBox, QPushButton,
+                               QFormLayout, QHBoxLayout, QLabel, QLineEdit, QListWidget, QMessageBox, QPushButton,
                                QVBoxLayout, QWidget)
+
+from lidar.errors import SurveyError
 
 SCAN_FILTER = "Scans (*.las *.laz *.e57 *.ply *.pcd *.ptx *.xyz *.txt *.asc);;All files (*)"
 
@@ -153,3 +155,57 @@ class ImportCameraDialog(QDialog):
 def ask_save_path(parent, title: str, default: str, filter_: str) -> Optional[Path]:
     p, _ = QFileDialog.getSaveFileName(parent, title, default, filter_)
     return Path(p) if p else None
+
+
+class CheckDialog(QDialog):
+    """The on-site check of an epoch: one row per target, and a button to save the re-scan plan."""
+
+    def __init__(self, parent, result):
+        from PySide6.QtGui import QColor
+        from PySide6.QtWidgets import QPushButton, QTableWidget, QTableWidgetItem
+
+        super().__init__(parent)
+        self.result = result
+        self.setWindowTitle(f"Check of epoch {result.epoch}")
+        cols = ["target", "status", "points", "planned", "σ (mm)", "goal σ (mm)", "note"]
+        table = QTableWidget(len(result.targets), len(cols))
+        table.setHorizontalHeaderLabels(cols)
+        colours = {"ok": "#c8e6c9", "short": "#ffe0b2", "imprecise": "#ffe0b2", "not found": "#ffcdd2"}
+        for r, t in enumerate(result.targets):
+            vals = (t.reflector, t.status, str(t.points), str(t.planned_points),
+                    "–" if t.sigma_mm != t.sigma_mm else f"{t.sigma_mm:.3f}",
+                    "–" if t.goal_sigma_mm != t.goal_sigma_mm else f"{t.goal_sigma_mm:.3f}", t.note)
+            for c, v in enumerate(vals):
+                item = QTableWidgetItem(v)
+                if c == 1:
+                    item.setBackground(QColor(colours.get(t.status, "#eeeeee")))
+                table.setItem(r, c, item)
+        table.resizeColumnsToContents()
+        short = result.short
+        text = ("Every target is good: the visit is complete." if not short else
+                f"Re-scan {', '.join(t.reflector for t in short)} before leaving "
+                f"({result.rescan.total_seconds / 60:.1f} min).")
+        self.summary = QLabel(text)
+        self.save_btn = QPushButton("Save re-scan plan…")
+        self.save_btn.setEnabled(result.rescan is not None)
+        self.save_btn.clicked.connect(self._save)
+        close = QPushButton("Close")
+        close.clicked.connect(self.accept)
+        row = QHBoxLayout()
+        row.addWidget(self.save_btn)
+        row.addStretch(1)
+        row.addWidget(close)
+        lay = QVBoxLayout(self)
+        lay.addWidget(self.summary)
+        lay.addWidget(table)
+        lay.addLayout(row)
+        self.table = table
+        self.resize(820, 360)
+
+    def _save(self) -> None:
+        path = ask_save_path(self, "Save re-scan plan", f"rescan-{self.result.epoch}.json", "Plan (*.json)")
+        if path is not None:
+            try:
+                self.result.rescan.save(path)
+            except (SurveyError, OSError) as exc:
+                show_error(self, "Save re-scan plan", str(exc))

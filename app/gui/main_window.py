@@ -22,6 +22,7 @@ from app.gui.views.cloud_view import CloudView
 from app.gui.views.displacement_view import DisplacementView
 from app.gui.views.fine_view import FineScanView
 from app.gui.views.map_view import MapView
+from app.gui.views.stations_view import StationsView
 from app.gui.worker import JobRunner
 from lidar.errors import SurveyError
 
@@ -90,8 +91,10 @@ class MainWindow(CommandsMixin, QMainWindow):
         self.fine_view = FineScanView()
         self.cloud_view = CloudView()
         self.camera_view = CameraView()
+        self.stations_view = StationsView()
         for w, name in ((self.displacements, "Displacements"), (self.map_view, "Reflectance map"),
-                        (self.fine_view, "Fine scan"), (self.cloud_view, "3-D"), (self.camera_view, "Camera")):
+                        (self.fine_view, "Fine scan"), (self.cloud_view, "3-D"), (self.camera_view, "Camera"),
+                        (self.stations_view, "Stations")):
             self.tabs.addTab(w, name)
         self.welcome = WelcomePage(self)
         self.stack = QStackedWidget()
@@ -152,10 +155,14 @@ class MainWindow(CommandsMixin, QMainWindow):
         self._action(m, "&Retire the selected reflector…", self.retire_reflector)
         self._action(m, "Re&place the selected reflector…", self.replace_reflector)
         self._action(m, "Processing &parameter…", self.set_parameter)
+        self._action(m, "&Scanner…", self.choose_scanner)
+        self._action(m, "&Where to stand…", self.evaluate_stations)
         m = mb.addMenu("&Epoch")
         self.act_add_epoch = self._action(m, "&Add epoch…", self.add_epoch, "Ctrl+E")
         self._action(m, "Add &fine scans to the selected epoch…", self.add_fine)
         self._action(m, "&Plan the selected epoch", self.plan_selected)
+        self._action(m, "Field &sheet of the selected epoch (PDF)…", self.field_sheet)
+        self._action(m, "&Check the fine scans before leaving", self.check_selected)
         self.act_process = self._action(m, "P&rocess", self.process, "F5")
         self._action(m, "&Inspect the selected target's fine scan", self.show_fine)
         m = mb.addMenu("&Camera")
@@ -194,6 +201,7 @@ class MainWindow(CommandsMixin, QMainWindow):
         self.cloud_view.targetPicked.connect(lambda rid: self.session and self.session.select(reflector=rid))
         self.camera_view.crossvalRequested.connect(self.crossval)
         self.camera_view.importRequested.connect(self.import_camera)
+        self.stations_view.evaluateRequested.connect(self.evaluate_stations)
         self.tabs.currentChanged.connect(self._tab_changed)
 
     # ------------------------------------------------------------------ campaigns

@@ -278,3 +278,36 @@ def test_welcome_opens_the_demo_campaign(window, processed_copy):
     window.open_demo()
     assert window.session is not None and window.session.folder == processed_copy
     assert window.stack.currentWidget() is window.tabs
+
+
+def test_field_sheet_check_stations_and_scanner_from_the_menus(window, processed_copy, tmp_path, qtbot, monkeypatch,
+                                                               errors):
+    from app.gui import commands
+
+    window.open_campaign(processed_copy)
+    window.session.select(epoch="2026-03-09")
+    sheet = tmp_path / "sheet.pdf"
+    monkeypatch.setattr(commands, "ask_save_path", lambda *a, **k: sheet)
+    window.field_sheet()
+    wait_job(qtbot, window)
+    assert sheet.read_bytes().startswith(b"%PDF")
+    window.check_selected()
+    wait_job(qtbot, window)
+    dlg = window.check_dialog
+    assert dlg.table.rowCount() == 9 and "complete" in dlg.summary.text()
+    assert not dlg.save_btn.isEnabled()
+    dlg.close()
+    window.evaluate_stations(8.0, 1.5)
+    wait_job(qtbot, window)
+    view = window.stations_view
+    assert window.tabs.currentWidget() is view
+    assert view.advice is not None and view.table.rowCount() > 0
+    assert float(view.table.item(0, 3).text()) > 0
+    from PySide6.QtWidgets import QInputDialog
+
+    monkeypatch.setattr(QInputDialog, "getItem", staticmethod(lambda *a, **k: ("Trimble X7", True)))
+    window.choose_scanner()
+    wait_job(qtbot, window)
+    with Campaign.open(processed_copy, writable=False) as c:
+        assert c.profile.name == "Trimble X7"
+    assert not errors

@@ -1,0 +1,65 @@
+"""Where to stand: the station map over the layout, coloured by the worst target's predicted sigma, and
+the best candidates in a table."""
+from __future__ import annotations
+
+from PySide6.QtCore import Signal
+from PySide6.QtWidgets import (QDoubleSpinBox, QHBoxLayout, QLabel, QPushButton, QTableWidget, QTableWidgetItem,
+                               QVBoxLayout, QWidget)
+
+from app.gui.views.mpl import PlotCanvas
+
+TOP = 10
+
+
+class StationsView(QWidget):
+    """Emits ``evaluateRequested(grid_m, height_m)`` when the user asks for an evaluation."""
+    evaluateRequested = Signal(float, float)
+
+    def __init__(self, parent=None):
+        super().__init__(parent)
+        self.canvas = PlotCanvas(self, figsize=(8, 5.5))
+        self.grid = QDoubleSpinBox()
+        self.grid.setRange(0.5, 20.0)
+        self.grid.setValue(2.0)
+        self.grid.setSuffix(" m grid")
+        self.height = QDoubleSpinBox()
+        self.height.setRange(0.3, 10.0)
+        self.height.setValue(1.5)
+        self.height.setSuffix(" m instrument height")
+        self.run_btn = QPushButton("Evaluate stations")
+        self.run_btn.clicked.connect(lambda: self.evaluateRequested.emit(self.grid.value(), self.height.value()))
+        self.info = QLabel("Predicts, for scanner positions on a grid around the bridge, the sigma of every target's "
+                           "displacement and the scan time.")
+        self.info.setWordWrap(True)
+        self.table = QTableWidget(0, 5)
+        self.table.setHorizontalHeaderLabels(["x (m)", "y (m)", "minutes", "worst σ (mm)", "hidden"])
+        self.table.setMaximumHeight(220)
+        bar = QHBoxLayout()
+        for w in (self.grid, self.height, self.run_btn):
+            bar.addWidget(w)
+        bar.addStretch(1)
+        lay = QVBoxLayout(self)
+        lay.addLayout(bar)
+        lay.addWidget(self.info)
+        lay.addWidget(self.canvas, 1)
+        lay.addWidget(self.table)
+        self.advice = None
+
+    def show_advice(self, advice, layout) -> None:
+        """Draw a :class:`projects.stations.StationAdvice` over its layout."""
+        from projects.stations import draw_station_map
+
+        self.advice = advice
+        fig = self.canvas.figure
+        fig.clear()
+        draw_station_map(fig.add_subplot(111), advice, layout)
+        self.canvas.draw_idle()
+        best = advice.stations[:TOP]
+        self.table.setRowCount(len(best))
+        for r, s in enumerate(best):
+            worst = "–" if s.worst_sigma_mm == float("inf") else f"{s.worst_sigma_mm:.3f}"
+            for c, v in enumerate((f"{s.xyz_layout[0]:.1f}", f"{s.xyz_layout[1]:.1f}", f"{s.seconds / 60:.1f}", worst,
+                                   ", ".join(s.hidden) or "–")):
+                self.table.setItem(r, c, QTableWidgetItem(v))
+        self.info.setText(f"{len(advice.stations)} positions evaluated for a {advice.scanner}; ground at "
+                          f"z = {advice.ground_z:.2f} m ({advice.ground_source}). Best first.")
