@@ -22,7 +22,6 @@ Usage: ``./run bench plan_predictions`` (about 5 minutes on two cores).
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 
@@ -215,14 +214,12 @@ def report_time_model():
 
 
 def main():
-    t0 = time.perf_counter()
     print("Honest predictions: plan and station advisor against the simulated visits")
     points, sigmas, recall = run()
     report_points(points)
     report_sigma(sigmas)
     report_recall(recall)
     report_time_model()
-    print(f"\n({time.perf_counter() - t0:.0f} s)")
 
 
 if __name__ == "__main__":

@@ -111,7 +111,7 @@ class ScanPlan:
         hs, he = (float(h0), float(h1)) if p.horizontal_direction == "ccw" else (float(h1), float(h0))
         vs, ve = sorted((float(v0), float(v1)))
         if p.step_presets:
-            res = p.preset_label(w.theta_step_deg)
+            res = p.preset_label(w.theta_step_deg) + (f", quality {p.quality}" if p.quality else "")
         else:
             res = f"vertical {w.theta_step_deg:.4f} deg, horizontal {w.phi_step_deg:.4f} deg"
         return {"h_start_deg": round(hs, 4), "h_end_deg": round(he, 4), "v_start_deg": round(vs, 4),

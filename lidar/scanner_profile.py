@@ -74,6 +74,9 @@ class ScannerProfile:
         Whether the instrument shows vertical angles from the zenith or as elevation.
     resolution_label : str
         How the instrument's panel names a resolution ("step", "mm at 10 m", "pts/360 deg"...).
+    quality : str
+        The quality (noise-averaging) setting the rate assumes, for instruments that have one
+        ("4x" on a FARO); entered with every window.
     sources : tuple of (field, source)
         Where each value comes from.
     notes : str
@@ -98,6 +101,7 @@ class ScannerProfile:
     horizontal_zero_deg: float = 0.0
     vertical_reference: str = "zenith"
     resolution_label: str = "step"
+    quality: str = ""
     sources: tuple[tuple[str, str], ...] = ()
     notes: str = ""
 

@@ -61,7 +61,7 @@ def stage1_params(params: dict) -> dict:
 #: Profile fields added later: they enter the input hash only when they differ from their default.
 _LATER_PROFILE_FIELDS = {"max_tilt_deg": MAX_TILT_DEG, "kind": "line", "step_presets": [], "windowed": True,
                          "horizontal_direction": "ccw", "horizontal_zero_deg": 0.0, "vertical_reference": "zenith",
-                         "resolution_label": "step"}
+                         "resolution_label": "step", "quality": ""}
 
 
 def _profile_key(profile) -> dict:

@@ -34,6 +34,8 @@ def register(sub) -> None:
     p.add_argument("--budget-min", type=float, default=60.0, help="time available for the fine scans (60 min)")
     p.add_argument("--diameter-mm", type=float, default=None)
     p.add_argument("--png", type=Path, default=None, help="also save the map with the planned windows")
+    p.add_argument("--scanner", default="Riegl VZ-1000",
+                   help="scanner profile: a name from 'bridgesurvey scanners' or a profile .json (Riegl VZ-1000)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_plan_file)
 
@@ -130,9 +132,12 @@ def cmd_plan_file(args) -> int:
     from lidar.figures import reflectance_map_figure, save_figure
     from lidar.pipeline import plan_from_coarse
 
+    from lidar.scanner_catalogue import get_scanner
+
+    profile = get_scanner(args.scanner)
     layout, coarse = _analyse(args)
     plan = plan_from_coarse(coarse, layout, epoch=args.epoch, min_points=args.min_points,
-                            budget_seconds=args.budget_min * 60.0)
+                            budget_seconds=args.budget_min * 60.0, profile=profile)
     plan.save(args.out)
     if args.png:
         save_figure(reflectance_map_figure(coarse.reflectance_map, detections=coarse.detections,
