@@ -4,6 +4,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from app.cli.commands_campaign import _open
 from app.cli.output import dump_json, table
 from app.cli.progress import progress_bar
 from lidar.errors import InputError
@@ -53,12 +54,6 @@ def register(sub) -> None:
     p.add_argument("--png", type=Path, default=None, help="also draw the station map")
     p.add_argument("--top", type=int, default=5, help="stations to print (5)")
     p.set_defaults(func=cmd_stations)
-
-
-def _open(path: Path, writable: bool = True):
-    from projects.store import Campaign
-
-    return Campaign.open(path, writable=writable)
 
 
 def cmd_scanners(args) -> int:
