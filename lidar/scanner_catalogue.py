@@ -145,7 +145,7 @@ _add(ScannerProfile(
              ("max_range_m", _RTC + ": 0.5 to 130 m"),
              ("beam_divergence_mrad", "assumed: 0.5 mrad"), ("beam_exit_diameter_m", "assumed: 4 mm"),
              ("max_line_rate_hz", "assumed: 200 mirror turns/s"),
-             ("windowed", "assumed: full-dome scans only from the instrument (set windows: true in a profile "
+             ("windowed", "assumed: full-dome scans only from the instrument (set \"windowed\": true in a profile "
                           "file if your firmware limits the scan area)"),
              ("window_overhead_s", "assumed: 60 s to start a scan (no window to enter)"),
              ("angles", _THEODOLITE))))

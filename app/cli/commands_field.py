@@ -74,10 +74,22 @@ def cmd_scanners(args) -> int:
         dump_json(prof.to_dict())
         return 0
     src = dict(prof.sources)
+    if prof.step_presets:
+        for k in ("min_theta_step_deg", "min_phi_step_deg"):
+            src.setdefault(k, "the finest preset")
+    for k in ("horizontal_direction", "horizontal_zero_deg", "vertical_reference"):
+        if "angles" in src:
+            src.setdefault(k, src["angles"])
+    src.setdefault("max_tilt_deg", "assumed: a levelled set-up; 2 deg leaves room for the layout's errors")
     d = prof.to_dict()
-    rows = [{"field": k, "value": v if not isinstance(v, list) else ", ".join(
-        x["label"] if isinstance(x, dict) else str(x) for x in v), "source": src.get(k, "")}
-        for k, v in d.items() if k not in ("sources", "notes")]
+
+    def shown(k, v):
+        if k == "step_presets":
+            labels = [x["label"] for x in v]
+            return f"{len(labels)}: {labels[0]} ... {labels[-1]}" if len(labels) > 2 else ", ".join(labels) or "-"
+        return ", ".join(str(x) for x in v) if isinstance(v, list) else v
+    rows = [{"field": k, "value": shown(k, v), "source": src.get(k, "")} for k, v in d.items()
+            if k not in ("sources", "notes")]
     table(rows, ["field", "value", "source"])
     print(f"angles: {prof.angle_convention()} ({src.get('angles', '')})")
     if prof.notes:
