@@ -14,6 +14,7 @@ reference targets, up to the deck) stands between it and the station.
 """
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass, field
 from typing import Mapping, Optional, Sequence
@@ -28,6 +29,7 @@ from lidar.prediction import centroid_covariance
 from lidar.progress import ProgressCallback, report
 from lidar.scanner_profile import ScannerProfile
 
+log = logging.getLogger(__name__)
 MIN_INCIDENCE_COS = 0.1  # beyond about 84 deg a retro-reflective disc returns too few points to use
 
 
@@ -272,7 +274,9 @@ def survey_stations(layout: Layout, positions_layout: np.ndarray, *, profile: Sc
     """
     import os
     from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures.process import BrokenProcessPool
     from multiprocessing import get_context
+    from pickle import PicklingError
 
     pos = np.asarray(positions_layout, dtype=np.float64).reshape(-1, 3)
     if len(pos) == 0:
@@ -284,16 +288,23 @@ def survey_stations(layout: Layout, positions_layout: np.ndarray, *, profile: Sc
     chunk = 16
     jobs = [(layout, pos[i:i + chunk], kwargs) for i in range(0, len(pos), chunk)]
     out: list[StationPrediction] = []
-    if n_workers == 1 or len(jobs) < 3:
+    if n_workers > 1 and len(jobs) >= 3:
+        try:
+            # spawn, not fork: this may run in a GUI worker thread, where forking is unsafe
+            with ProcessPoolExecutor(n_workers, mp_context=get_context("spawn")) as ex:
+                futures = [ex.submit(_predict_chunk, job) for job in jobs]
+                for f in as_completed(futures):
+                    out.extend(f.result())
+                    report(progress, len(out) / len(pos), f"{len(out)} of {len(pos)} stations")
+        except (OSError, RuntimeError, BrokenProcessPool, PicklingError) as exc:
+            # no worker processes here (a frozen or embedded interpreter, a script without a main guard):
+            # the same work in this process
+            log.info("station survey without worker processes (%s)", exc)
+            out = []
+    if len(out) < len(pos):
+        out = []
         for k, job in enumerate(jobs):
             out.extend(_predict_chunk(job))
             report(progress, (k + 1) / len(jobs), f"{len(out)} of {len(pos)} stations")
-    else:
-        # spawn, not fork: this may run in a GUI worker thread, where forking is unsafe
-        with ProcessPoolExecutor(n_workers, mp_context=get_context("spawn")) as ex:
-            futures = [ex.submit(_predict_chunk, job) for job in jobs]
-            for f in as_completed(futures):
-                out.extend(f.result())
-                report(progress, len(out) / len(pos), f"{len(out)} of {len(pos)} stations")
     report(progress, 1.0, "stations evaluated")
     return tuple(sorted(out, key=StationPrediction.rank_key))

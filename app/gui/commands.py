@@ -143,8 +143,13 @@ class CommandsMixin:
 
         self.run_job(f"Checking the fine scans of {label}", lambda p: actions.check(self.session, label, p), done)
 
-    def evaluate_stations(self, grid_m: float = 2.0, height_m: float = 1.5) -> None:
-        self.tabs.setCurrentWidget(self.stations_view)
+    def evaluate_stations(self, grid_m: Optional[float] = None, height_m: Optional[float] = None) -> None:
+        view = self.stations_view
+        grid_m = view.grid.value() if grid_m is None else grid_m
+        height_m = view.height.value() if height_m is None else height_m
+        view.grid.setValue(grid_m)
+        view.height.setValue(height_m)
+        self.tabs.setCurrentWidget(view)
         self.run_job("Evaluating scanner stations", lambda p: actions.stations(self.session, grid_m, height_m, p),
                      lambda r: self.stations_view.show_advice(*r))
 

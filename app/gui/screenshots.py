@@ -70,6 +70,9 @@ def main(argv=None) -> int:
         shot("3d-change")
     win.tabs.setCurrentWidget(win.camera_view)
     shot("camera-crossval")
+    win.evaluate_stations(4.0, 1.5)
+    wait_jobs(app, win)
+    shot("stations")
     for p in shots:
         print(p)
     win.close()
