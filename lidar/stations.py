@@ -129,10 +129,45 @@ class _Piers:
         return False
 
 
+class Obstacles:
+    """Surfaces a previous scan saw, in the layout's frame: a line of sight passing through them is blocked.
+
+    Parameters
+    ----------
+    xyz_layout : (M, 3) array
+        Scan points carried into the layout's frame (decimated to a few centimetres is plenty).
+    radius_m : float
+        How close to the line of sight a point must be to block it. Default 0.03 m.
+    """
+
+    def __init__(self, xyz_layout: np.ndarray, *, radius_m: float = 0.03):
+        from scipy.spatial import cKDTree
+
+        pts = np.asarray(xyz_layout, dtype=np.float64).reshape(-1, 3)
+        self.radius_m = float(radius_m)
+        self.tree = cKDTree(pts[np.all(np.isfinite(pts), axis=1)]) if len(pts) else None
+
+    def blocks(self, station: np.ndarray, target: np.ndarray, *, clear_start_m: float = 0.5,
+               clear_end_m: float = 0.3) -> bool:
+        """Whether at least two samples of the segment (apart from its ends) lie on a seen surface."""
+        if self.tree is None:
+            return False
+        d = target - station
+        length = float(np.linalg.norm(d))
+        if length <= clear_start_m + clear_end_m:
+            return False
+        u = d / length
+        f = np.arange(clear_start_m, length - clear_end_m, self.radius_m * 1.5)
+        samples = station + f[:, None] * u
+        dist, _ = self.tree.query(samples, distance_upper_bound=self.radius_m)
+        return int(np.count_nonzero(np.isfinite(dist))) >= 2
+
+
 def predict_station(layout: Layout, station_layout: Sequence[float], *, profile: ScannerProfile,
                     min_points: int = 1000, budget_seconds: float = 3600.0, up=(0.0, 0.0, 1.0),
                     baseline: Optional[Mapping[str, Observation]] = None,
-                    normals: Optional[np.ndarray] = None, piers: Optional[_Piers] = None) -> StationPrediction:
+                    normals: Optional[np.ndarray] = None, piers: Optional[_Piers] = None,
+                    obstacles: Optional[Obstacles] = None) -> StationPrediction:
     """Predicted plan time, points and displacement sigma of every target from one station.
 
     Parameters
@@ -150,6 +185,8 @@ def predict_station(layout: Layout, station_layout: Sequence[float], *, profile:
         this same station (same covariances, independent noise).
     normals : (N, 3) array, optional, keyword-only
         Target normals in the layout frame (default :func:`lidar.layout.target_normals`).
+    obstacles : Obstacles, optional, keyword-only
+        Surfaces a previous scan saw (the last epoch's coarse scan): lines of sight through them are blocked.
     """
     u = np.asarray(up, dtype=np.float64)
     u = u / np.linalg.norm(u)
@@ -176,6 +213,8 @@ def predict_station(layout: Layout, station_layout: Sequence[float], *, profile:
             why = f"beyond the range ({r:.0f} m)"
         elif piers.blocks(s, layout.xyz[k]):
             why = "behind a pier"
+        elif obstacles is not None and obstacles.blocks(s, layout.xyz[k]):
+            why = "behind something the last scan saw"
         if why:
             hidden.append(tid)
             reasons[tid] = why
@@ -256,19 +295,25 @@ def grid_in_polygon(polygon_xy: np.ndarray, grid_m: float) -> np.ndarray:
 
 def _predict_chunk(args) -> list[StationPrediction]:
     layout, positions, kwargs = args
+    kwargs = dict(kwargs)
     u = np.asarray(kwargs["up"], dtype=np.float64)
     normals = target_normals(layout, up=u)
     piers = _Piers.from_layout(layout, u)
-    return [predict_station(layout, p, normals=normals, piers=piers, **kwargs) for p in positions]
+    seen = kwargs.pop("obstacles_xyz", None)
+    obstacles = Obstacles(seen) if seen is not None else None
+    return [predict_station(layout, p, normals=normals, piers=piers, obstacles=obstacles, **kwargs)
+            for p in positions]
 
 
 def survey_stations(layout: Layout, positions_layout: np.ndarray, *, profile: ScannerProfile,
                     min_points: int = 1000, budget_seconds: float = 3600.0, up=(0.0, 0.0, 1.0),
                     baseline: Optional[Mapping[str, Observation]] = None, workers: Optional[int] = None,
+                    obstacles_xyz: Optional[np.ndarray] = None,
                     progress: Optional[ProgressCallback] = None) -> tuple[StationPrediction, ...]:
     """:func:`predict_station` at every position of an (M, 3) array, best first.
 
     ``workers`` processes share the positions (default: one per core, at most 4; 1 runs here).
+    ``obstacles_xyz`` are scan points in the layout frame (see :class:`Obstacles`).
     Each station costs about 0.1-0.2 s (the displacement uncertainty is propagated exactly as
     processing does), so a 600-position grid takes about half a minute on two cores.
     """
@@ -284,8 +329,10 @@ def survey_stations(layout: Layout, positions_layout: np.ndarray, *, profile: Sc
     u = np.asarray(up, dtype=np.float64)
     u = u / np.linalg.norm(u)
     kwargs = dict(profile=profile, min_points=min_points, budget_seconds=budget_seconds, up=u, baseline=baseline)
+    if obstacles_xyz is not None:
+        kwargs["obstacles_xyz"] = np.asarray(obstacles_xyz, dtype=np.float32).reshape(-1, 3)
     n_workers = min(4, os.cpu_count() or 1) if workers is None else max(1, int(workers))
-    chunk = 16
+    chunk = 24
     jobs = [(layout, pos[i:i + chunk], kwargs) for i in range(0, len(pos), chunk)]
     out: list[StationPrediction] = []
     if n_workers > 1 and len(jobs) >= 3:

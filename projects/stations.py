@@ -17,7 +17,7 @@ import numpy as np
 from lidar.displacement import Observation
 from lidar.errors import InputError
 from lidar.files import write_atomic
-from lidar.progress import ProgressCallback
+from lidar.progress import ProgressCallback, scaled
 from lidar.rigid import fit_rigid
 from lidar.stations import StationPrediction, default_area, grid_in_polygon, survey_stations
 from projects.store import Campaign
@@ -39,6 +39,7 @@ class StationAdvice:
     scanner: str
     baseline: Optional[str]
     last_station: Optional[tuple[float, float, float]]
+    obstacles_from: Optional[str] = None
 
     def to_json(self) -> dict:
         return {"format_version": STATIONS_FORMAT_VERSION, "frame": "layout", "scanner": self.scanner,
@@ -47,7 +48,9 @@ class StationAdvice:
                 "area": [[float(x), float(y)] for x, y in self.area_xy],
                 "last_station": None if self.last_station is None else [round(v, 3) for v in self.last_station],
                 "visibility": "from the layout (target normals, the instrument's field of view and range, piers "
-                              "between the station and the target); obstacles the layout does not know are not seen",
+                              "between the station and the target)" + (
+                                  f" and the surfaces epoch {self.obstacles_from}'s coarse scan saw"
+                                  if self.obstacles_from else "; obstacles the layout does not know are not seen"),
                 "stations": [s.to_json() for s in self.stations]}
 
     def save(self, path: str | os.PathLike) -> Path:
@@ -80,9 +83,9 @@ def read_area_csv(path: str | os.PathLike) -> np.ndarray:
     return np.array(pts)
 
 
-def last_station(c: Campaign) -> tuple[Optional[str], Optional[np.ndarray]]:
-    """The last measured epoch and where its scanner stood, in the layout's frame (rigid fit of its
-    found centroids to the layout)."""
+def _last_fit(c: Campaign):
+    """(label, R, t) of the last measured epoch: its scanner frame = R @ layout + t (rigid fit of its
+    found centroids to the layout), or (None, None, None)."""
     for e in reversed(c.epochs()):
         cents = {k: v for k, v in c.centroids(e["label"]).items() if v.found}
         layout = c.layout(e["datetime"])
@@ -91,14 +94,39 @@ def last_station(c: Campaign) -> tuple[Optional[str], Optional[np.ndarray]]:
             continue
         r, t = fit_rigid(np.array([layout.xyz[layout.index(i)] for i in ids]),
                          np.array([cents[i].xyz_socs for i in ids]))
-        return e["label"], r.T @ (-t)
-    return None, None
+        return e["label"], r, t
+    return None, None, None
+
+
+def last_station(c: Campaign) -> tuple[Optional[str], Optional[np.ndarray]]:
+    """The last measured epoch and where its scanner stood, in the layout's frame."""
+    label, r, t = _last_fit(c)
+    return (None, None) if label is None else (label, r.T @ (-t))
+
+
+def seen_surfaces(c: Campaign, *, voxel_m: float = 0.05,
+                  progress: Optional[ProgressCallback] = None) -> tuple[Optional[str], Optional[np.ndarray]]:
+    """The last measured epoch's coarse scan in the layout's frame, one point per ``voxel_m`` cube."""
+    from projects.processing import read_files
+
+    label, r, t = _last_fit(c)
+    if label is None or not c.files(label, "coarse"):
+        return None, None
+    scan = read_files(c, c.files(label, "coarse"), progress)
+    xyz = (scan.xyz_socs - t) @ r  # R^T (x - t), row-wise
+    key = np.floor(xyz / voxel_m).astype(np.int64)
+    _, first = np.unique(key, axis=0, return_index=True)
+    return label, xyz[np.sort(first)].astype(np.float32)
 
 
 def advise_stations(c: Campaign, *, area_xy: Optional[np.ndarray] = None, height_m: float = DEFAULT_INSTRUMENT_HEIGHT_M,
-                    grid_m: float = 2.0, ground_z: Optional[float] = None,
+                    grid_m: float = 2.0, ground_z: Optional[float] = None, use_last_scan: bool = True,
                     progress: Optional[ProgressCallback] = None) -> StationAdvice:
-    """Evaluate scanner positions on a grid inside the allowed area (default: both sides of the bridge)."""
+    """Evaluate scanner positions on a grid inside the allowed area (default: both sides of the bridge).
+
+    With ``use_last_scan`` the last measured epoch's coarse scan adds what it saw (vegetation, site
+    huts, the deck's own edges) as obstacles to the lines of sight.
+    """
     from projects.processing import baseline_epoch, layout_up, parameters
 
     if not (np.isfinite(height_m) and 0 < height_m < 50):
@@ -122,12 +150,13 @@ def advise_stations(c: Campaign, *, area_xy: Optional[np.ndarray] = None, height
     if base_label is not None:
         baseline = {k: Observation(v.xyz_socs, v.cov) for k, v in c.centroids(base_label).items() if v.found}
         baseline = baseline or None
+    seen_label, seen = seen_surfaces(c, progress=scaled(progress, 0.0, 0.2)) if use_last_scan else (None, None)
     stations = survey_stations(layout, positions, profile=c.profile, min_points=int(params["min_points"]),
                                budget_seconds=float(params["budget_min"]) * 60.0, up=up, baseline=baseline,
-                               progress=progress)
+                               obstacles_xyz=seen, progress=scaled(progress, 0.2, 1.0))
     return StationAdvice(stations, area, gz, source, float(height_m), float(grid_m), c.profile.name,
                          base_label if baseline else None,
-                         None if station is None else tuple(float(v) for v in station))
+                         None if station is None else tuple(float(v) for v in station), seen_label)
 
 
 def station_map_figure(advice: StationAdvice, layout, *, title: str = ""):

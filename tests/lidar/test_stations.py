@@ -72,3 +72,22 @@ def test_bad_areas_and_grids_are_refused():
         grid_in_polygon(np.array([[0, 0], [10, 0], [0, 10]]), 0.0)
     with pytest.raises(InputError, match="coarser"):
         grid_in_polygon(np.array([[0, 0], [1e4, 0], [0, 1e4]]), 1.0)
+
+
+def test_surfaces_a_scan_saw_block_the_lines_of_sight_through_them(layout):
+    from lidar.stations import Obstacles
+
+    station = np.array([20.0, -14.0, 1.5])
+    m3 = layout.xyz[layout.index("M3")]
+    # a 1 m x 1 m panel (5 cm sampling) half-way to M3, across the line of sight
+    mid = station + 0.5 * (m3 - station)
+    g = np.arange(-0.5, 0.5, 0.05)
+    panel = np.array([[mid[0] + a, mid[1], mid[2] + b] for a in g for b in g])
+    blocked = predict_station(layout, station, profile=VZ, obstacles=Obstacles(panel))
+    assert blocked.reasons.get("M3") == "behind something the last scan saw"
+    assert "M1" not in blocked.hidden and "R1" not in blocked.hidden
+    aside = Obstacles(panel + np.array([0.0, 0.0, 3.0]))
+    assert "M3" not in predict_station(layout, station, profile=VZ, obstacles=aside).hidden
+    # the surface the target is glued on (the deck's underside around it) does not hide it
+    deck = np.array([[m3[0] + a, m3[1] + b, m3[2] + 0.002] for a in g for b in g])
+    assert "M3" not in predict_station(layout, station, profile=VZ, obstacles=Obstacles(deck)).hidden
