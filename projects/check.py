@@ -78,6 +78,7 @@ def check_epoch(c: Campaign, label: str, *, goal_sigma_mm: Optional[float] = Non
     """Measure the epoch's fine scans and judge every planned target (see the module notes)."""
     from projects.processing import measure_epoch
 
+    c.epoch(label)  # an unknown epoch says so
     if not c.files(label, "fine"):
         raise ProcessingError(f"epoch {label} has no fine scans yet; import them with 'bridgesurvey add-fine' first")
     if goal_sigma_mm is not None and not (math.isfinite(goal_sigma_mm) and goal_sigma_mm > 0):
