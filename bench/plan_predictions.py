@@ -28,12 +28,13 @@ import numpy as np
 from lidar.displacement import Observation, compute_displacements
 from lidar.layout import layout_from_model
 from lidar.pipeline import analyse_coarse, measure_targets, plan_from_coarse
-from lidar.plan import PlanTarget, plan_fine_scans
 from lidar.scan import Scan
 from lidar.scanner_catalogue import get_scanner
 from lidar.simulate import BridgeModel, BridgeScene, EpochConditions, ScannerSetup
 from lidar.simulate.bridge import Target
 from lidar.stations import predict_station
+
+from _dissertation import time_figures  # noqa: E402  (bench/ is on the path when run as a script)
 
 VZ = get_scanner("Riegl VZ-1000")
 STEPS = (0.03, 0.05, 0.08)
@@ -190,25 +191,15 @@ def report_time_model():
     """The dissertation's VZ-1000 field figures (section 4.3.2): 3 min for 1000 points on a pier target, 7 min for
     25,000 points at midspan, under an hour for the visit (10 targets). The scanner's position is not given: ranges
     of 15-30 m to the pier targets and 8-12 m to the midspan targets are assumed."""
+    f = time_figures(VZ)
     print("\n4. Time model (Riegl VZ-1000 profile) against the dissertation's field visit")
     print("| window | dissertation | ours (range) |")
     print("|---|---|---|")
-
-    def window_minutes(r, cos_inc, zenith, n):
-        x = r * math.sin(math.radians(zenith))
-        t = PlanTarget("T", "reference", (x, 0.0, r * math.cos(math.radians(zenith))), 0.05, False, cos_inc)
-        plan = plan_fine_scans([t], profile=VZ, min_points=n, budget_seconds=1e6)
-        return plan.rois[0].expected_seconds / 60, plan.rois[0].expected_target_points
-
-    pier = [window_minutes(r, 0.8, 88.0, 1000) for r in (15.0, 20.0, 30.0)]
-    mid = [window_minutes(r, 0.85, 35.0, 25000) for r in (8.0, 10.0, 12.0)]
-    print(f"| pier target, 1000 points | 3 min | {pier[0][0]:.1f}-{pier[-1][0]:.1f} min at 15-30 m (calibrated) |")
-    print(f"| midspan target, 25,000 points | 7 min | {mid[0][0]:.1f}-{mid[-1][0]:.1f} min at 8-12 m "
-          f"({min(m[1] for m in mid):,}-{max(m[1] for m in mid):,} points reachable) |")
-    visit = 4 * pier[1][0] + 6 * window_minutes(10.0, 0.85, 35.0, 1000)[0]
-    print(f"| visit, 4 pier + 6 deck targets at 1000 points | < 60 min | {visit:.0f} min |")
-    full = VZ.window_seconds(360.0, VZ.min_phi_step_deg, VZ.min_theta_step_deg) / 3600
-    print(f"| full-resolution scan of everything (0.001/0.006 deg, 360 deg) | > 10 h | {full:.0f} h |")
+    print(f"| pier target, 1000 points | 3 min | {f['pier_min'][0]:.1f}-{f['pier_min'][1]:.1f} min at 15-30 m (calibrated) |")
+    print(f"| midspan target, 25,000 points | 7 min | {f['mid_min'][0]:.1f}-{f['mid_min'][1]:.1f} min at 8-12 m "
+          f"({f['mid_points'][0]:,}-{f['mid_points'][1]:,} points reachable) |")
+    print(f"| visit, 4 pier + 6 deck targets at 1000 points | < 60 min | {f['visit_min']:.0f} min |")
+    print(f"| full-resolution scan of everything (0.001/0.006 deg, 360 deg) | > 10 h | {f['full_h']:.0f} h |")
     print("Matched: the pier figure (the per-window overhead of 120 s is calibrated on it) and the visit. "
           "The midspan figure depends on the unstated range; the finest steps cap what one window can give.")
 

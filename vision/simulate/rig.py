@@ -75,7 +75,10 @@ class RigGeometry:
     main_distance_m, sub_distance_m : camera-to-target distances (main target 10 m from the
         sub-target in total with the 80 mm between the cameras).
     baseline_m : distance between the two camera centres (back to back).
-    main_fov_m, sub_fov_m : field-of-view width at the target (height follows the aspect ratio).
+    main_fov_m, sub_fov_m : field-of-view width at the target.
+    main_fov_h_m, sub_fov_h_m : field-of-view height at the target; None (default): it follows the
+        image's aspect ratio (square pixels). Given, the pixels are not square (``fy != fx``), as a
+        200 x 150 mm field on a 16:10 sensor needs.
     resolution : (width, height) in pixels of both cameras.
     main_pattern_m : (N, 2) circle centres in WM; ``circle_radius_m`` their radius.
     board : the sub-target checkerboard.
@@ -87,6 +90,8 @@ class RigGeometry:
     main_fov_m: float = 0.20
     sub_fov_m: float = 0.15
     resolution: tuple[int, int] = (1920, 1200)
+    main_fov_h_m: Optional[float] = None
+    sub_fov_h_m: Optional[float] = None
     main_pattern_m: np.ndarray = field(default_factory=die_pattern)
     circle_radius_m: float = 0.004
     board: Checkerboard = Checkerboard()
@@ -105,13 +110,18 @@ class RigGeometry:
 
     @property
     def K_main(self) -> np.ndarray:
-        w, h = self.resolution
-        return intrinsic_matrix(w * self.main_distance_m / self.main_fov_m, w, h)
+        return self._K(self.main_distance_m, self.main_fov_m, self.main_fov_h_m)
 
     @property
     def K_sub(self) -> np.ndarray:
+        return self._K(self.sub_distance_m, self.sub_fov_m, self.sub_fov_h_m)
+
+    def _K(self, distance_m: float, fov_w_m: float, fov_h_m: Optional[float]) -> np.ndarray:
         w, h = self.resolution
-        return intrinsic_matrix(w * self.sub_distance_m / self.sub_fov_m, w, h)
+        K = intrinsic_matrix(w * distance_m / fov_w_m, w, h)
+        if fov_h_m is not None:
+            K[1, 1] = h * distance_m / fov_h_m
+        return K
 
     @property
     def B_body_to_main(self) -> np.ndarray:
