@@ -78,10 +78,7 @@ def _profile_key(profile) -> dict:
 
 def max_tilt(c: Campaign, params: dict, label: Optional[str] = None) -> Optional[float]:
     """Largest tilt an identification may imply: None when the scanner was not levelled."""
-    if not params["levelled"]:
-        return None
-    return float(params["max_tilt_deg"]) if params["max_tilt_deg"] is not None else \
-        c.profile_for(label).max_tilt_deg
+    return _tilt_limit(params, c.profile_for(label))
 
 
 def layout_up(params: dict) -> np.ndarray:
@@ -175,35 +172,119 @@ def plan_inputs(c: Campaign, label: str, params: dict) -> tuple[str, object]:
     return _hash(key), layout
 
 
+def _tilt_limit(params: dict, profile) -> Optional[float]:
+    if not params["levelled"]:
+        return None
+    return float(params["max_tilt_deg"]) if params["max_tilt_deg"] is not None else profile.max_tilt_deg
+
+
+def _analyse(coarse: Scan, layout, params: dict, profile, progress: Optional[ProgressCallback] = None):
+    return analyse_coarse(coarse, layout, step_deg=params["map_step_deg"], threshold=params["detection_threshold"],
+                          tolerance_m=params["identification_tolerance_m"],
+                          max_tilt_deg=_tilt_limit(params, profile), up_layout=layout_up(params), progress=progress)
+
+
 def analyse_epoch_coarse(c: Campaign, label: str, layout, params: dict, *,
                          progress: Optional[ProgressCallback] = None):
     """Reflectance map, detections and identification of an epoch's coarse scan with the campaign's parameters."""
     coarse = read_files(c, c.files(label, "coarse"), scaled(progress, 0.0, 0.5))
-    return analyse_coarse(coarse, layout, step_deg=params["map_step_deg"], threshold=params["detection_threshold"],
-                          tolerance_m=params["identification_tolerance_m"],
-                          max_tilt_deg=max_tilt(c, params, label), up_layout=layout_up(params),
-                          progress=scaled(progress, 0.5, 1.0))
+    return _analyse(coarse, layout, params, c.profile_for(label), scaled(progress, 0.5, 1.0))
+
+
+@dataclass(frozen=True, eq=False)
+class Stage1Job:
+    """Everything stage 1 of one epoch needs, as plain picklable values (no campaign handle): a worker
+    process or another machine can run it with :func:`run_stage1`; only the campaign's owner saves the
+    result (:func:`save_stage1`).
+
+    ``stored_plan`` is the epoch's plan JSON when its inputs are unchanged (it is reused, not
+    recomputed); ``measure_hash`` is None when the epoch has no fine scans yet.
+    """
+
+    folder: str
+    label: str
+    coarse_paths: tuple[str, ...]
+    fine_paths: tuple[str, ...]
+    layout: object
+    params: dict
+    profile: object
+    plan_hash: str
+    stored_plan: Optional[dict]
+    measure_hash: Optional[str]
+
+
+@dataclass(frozen=True, eq=False)
+class Stage1Result:
+    """What :func:`run_stage1` computed: a new plan (with its map preview) unless the stored one was reused,
+    and the centroids when the epoch has fine scans."""
+
+    job: Stage1Job
+    plan: ScanPlan
+    new_plan_json: Optional[dict]
+    preview: Optional[tuple[bytes, str]]
+    centroids: Optional[dict]
+
+
+def stage1_job(c: Campaign, label: str) -> Stage1Job:
+    params = parameters(c)
+    h, layout = plan_inputs(c, label, params)
+    row = c.plan_row(label)
+    stored = json.loads(row["json"]) if row is not None and row["inputs_hash"] == h else None
+    fine = c.files(label, "fine")
+    return Stage1Job(str(c.folder), label, tuple(str(c.path_of(r)) for r in c.files(label, "coarse")),
+                     tuple(str(c.path_of(r)) for r in fine), layout, params, c.profile_for(label), h, stored,
+                     measure_inputs(c, label, params) if fine else None)
+
+
+def _read_paths(paths, progress: Optional[ProgressCallback]) -> Scan:
+    scans = [read_scan(p, progress=scaled(progress, k / len(paths), (k + 1) / len(paths)))
+             for k, p in enumerate(paths)]
+    return scans[0] if len(scans) == 1 else Scan.concatenate(scans)
+
+
+def run_stage1(job: Stage1Job, *, progress: Optional[ProgressCallback] = None) -> Stage1Result:
+    """Plan (unless reused) and centroids of one epoch: pure computation on its files."""
+    new_plan, preview = None, None
+    if job.stored_plan is not None:
+        plan = ScanPlan.from_json(job.stored_plan)
+    else:
+        coarse = _read_paths(job.coarse_paths, scaled(progress, 0.0, 0.25))
+        analysis = _analyse(coarse, job.layout, job.params, job.profile, scaled(progress, 0.25, 0.4))
+        del coarse
+        plan = plan_from_coarse(analysis, job.layout, epoch=job.label, profile=job.profile,
+                                min_points=int(job.params["min_points"]),
+                                budget_seconds=float(job.params["budget_min"]) * 60.0, up_layout=layout_up(job.params))
+        new_plan = plan.to_json()
+        new_plan["identification"] = {"missing": list(analysis.identification.missing),
+                                      "extra_detections": len(analysis.identification.extra_detections),
+                                      "fit_rms_m": analysis.identification.rms_m,
+                                      "detections": len(analysis.detections.detections)}
+        preview = encode_preview(analysis)
+    cents = None
+    if job.fine_paths:
+        fine = _read_paths(job.fine_paths, scaled(progress, 0.4, 0.8))
+        cents = measure_targets(fine, plan, job.layout, profile=plan.profile)
+    report(progress, 1.0, "measured" if cents is not None else "planned")
+    return Stage1Result(job, plan, new_plan, preview, cents)
+
+
+def save_stage1(c: Campaign, result: Stage1Result) -> None:
+    """Store what :func:`run_stage1` computed (the campaign's single writer does this)."""
+    job = result.job
+    if result.new_plan_json is not None:
+        c.save_plan(job.label, result.new_plan_json, job.plan_hash, preview=result.preview)
+    if result.centroids is not None:
+        c.save_centroids(job.label, result.centroids, job.measure_hash, stage1_params(job.params))
 
 
 def plan_epoch(c: Campaign, label: str, *, progress: Optional[ProgressCallback] = None) -> ScanPlan:
     """The fine-scan plan of an epoch, from its coarse scan (reused when its inputs are unchanged)."""
-    params = parameters(c)
-    h, layout = plan_inputs(c, label, params)
-    row = c.plan_row(label)
-    if row is not None and row["inputs_hash"] == h:
-        return ScanPlan.from_json(json.loads(row["json"]))
-    analysis = analyse_epoch_coarse(c, label, layout, params, progress=scaled(progress, 0.0, 0.95))
-    plan = plan_from_coarse(analysis, layout, epoch=label, profile=c.profile_for(label),
-                            min_points=int(params["min_points"]), budget_seconds=float(params["budget_min"]) * 60.0,
-                            up_layout=layout_up(params))
-    d = plan.to_json()
-    d["identification"] = {"missing": list(analysis.identification.missing),
-                           "extra_detections": len(analysis.identification.extra_detections),
-                           "fit_rms_m": analysis.identification.rms_m,
-                           "detections": len(analysis.detections.detections)}
-    c.save_plan(label, d, h, preview=encode_preview(analysis))
-    report(progress, 1.0, "planned")
-    return plan
+    job = stage1_job(c, label)
+    if job.stored_plan is not None:
+        return ScanPlan.from_json(job.stored_plan)
+    result = run_stage1(replace(job, fine_paths=(), measure_hash=None), progress=progress)
+    save_stage1(c, result)
+    return result.plan
 
 
 def measure_inputs(c: Campaign, label: str, params: dict) -> str:
@@ -212,15 +293,13 @@ def measure_inputs(c: Campaign, label: str, params: dict) -> str:
 
 
 def measure_epoch(c: Campaign, label: str, *, progress: Optional[ProgressCallback] = None) -> dict:
-    params = parameters(c)
-    plan = plan_epoch(c, label, progress=scaled(progress, 0.0, 0.4))
-    h = measure_inputs(c, label, params)
-    layout = c.layout(c.epoch(label)["datetime"])
-    fine = read_files(c, c.files(label, "fine"), scaled(progress, 0.4, 0.8))
-    cents = measure_targets(fine, plan, layout, profile=plan.profile)
-    c.save_centroids(label, cents, h, stage1_params(params))
-    report(progress, 1.0, "measured")
-    return cents
+    """Plan (when needed) and centroids of an epoch with fine scans, saved; returns the centroids."""
+    job = stage1_job(c, label)
+    if not job.fine_paths:
+        raise ProcessingError(f"epoch {label} has no fine scans yet; import them with 'bridgesurvey add-fine' first")
+    result = run_stage1(job, progress=progress)
+    save_stage1(c, result)
+    return result.centroids
 
 
 def stale_epochs(c: Campaign) -> dict[str, str]:
@@ -288,6 +367,13 @@ def process(c: Campaign, labels: Optional[Sequence[str]] = None, *,
         except SurveyError as exc:
             log.warning("epoch %s: %s", lab, exc)
             summary.outcomes.append(EpochOutcome(lab, "failed", str(exc)))
+    finish_displacements(c, summary, [e["label"] for e in todo])
+    report(progress, 1.0, "done")
+    return summary
+
+
+def finish_displacements(c: Campaign, summary: ProcessSummary, labels: Sequence[str]) -> None:
+    """Stage 2 after stage 1: fix the baseline once, update the displacements, note the problems of ``labels``."""
     summary.baseline = baseline_epoch(c)
     if summary.baseline is not None and not c.settings().get("baseline"):
         # The first measured epoch becomes the baseline once, for good: an epoch added later with an
@@ -295,14 +381,12 @@ def process(c: Campaign, labels: Optional[Sequence[str]] = None, *,
         c.set_setting("baseline", summary.baseline)
     if summary.baseline is not None:
         summary.displacement_epochs = update_displacements(c, summary.baseline)
-    for e in todo:
-        ds = c.displacement_set(e["label"])
+    for lab in labels:
+        ds = c.displacement_set(lab)
         if ds is not None:
             bad = [f for f in json.loads(ds["flags"]) if severity(f) == PROBLEM]
             if bad:
-                summary.problems[e["label"]] = bad[0]
-    report(progress, 1.0, "done")
-    return summary
+                summary.problems[lab] = bad[0]
 
 
 def _stage1_hash(c: Campaign, label: str) -> Optional[str]:

@@ -227,3 +227,9 @@ def set_scanner(session, name: str, epoch: Optional[str] = None) -> None:
     profile = get_scanner(name)
     with session.write() as c:
         c.set_profile(profile, epoch=epoch)
+
+
+def fleet_status(folder: str) -> dict:
+    from projects.fleet import fleet_status as status
+
+    return status([folder])

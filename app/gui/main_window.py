@@ -145,6 +145,7 @@ class MainWindow(CommandsMixin, QMainWindow):
         self.act_new = self._action(m, "&New campaign…", self.new_campaign, "Ctrl+N", False)
         self.act_open = self._action(m, "&Open campaign…", self.open_dialog, "Ctrl+O", False)
         self._action(m, "Open the &demo campaign", self.open_demo, None, False)
+        self._action(m, "&Fleet (many bridges)…", self.open_fleet, None, False)
         self.recent_menu = m.addMenu("Open &recent")
         self.recent_menu.aboutToShow.connect(self._fill_recent_menu)
         self._action(m, "&Close campaign", self.close_campaign)
@@ -247,6 +248,23 @@ class MainWindow(CommandsMixin, QMainWindow):
     def _set_campaign_enabled(self, on: bool) -> None:
         for a in self._campaign_actions:
             a.setEnabled(on)
+
+    def open_fleet(self, folder: Optional[str] = None) -> None:
+        """List every campaign under a folder (worst state first) and open any of them."""
+        from app.gui import actions
+        from app.gui.views.fleet_view import FleetView
+
+        folder = folder or QFileDialog.getExistingDirectory(self, "Folder holding the campaigns")
+        if not folder:
+            return
+
+        def done(status):
+            self.fleet_view = FleetView(self)
+            self.fleet_view.openRequested.connect(lambda f: (self.open_campaign(f), self.fleet_view.close()))
+            self.fleet_view.show_status(status)
+            self.fleet_view.show()
+
+        self.run_job(f"Reading the campaigns under {folder}", lambda p: actions.fleet_status(folder), done)
 
     def open_dialog(self) -> None:
         folder = QFileDialog.getExistingDirectory(self, "Open campaign folder")

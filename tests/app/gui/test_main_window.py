@@ -311,3 +311,21 @@ def test_field_sheet_check_stations_and_scanner_from_the_menus(window, processed
     with Campaign.open(processed_copy, writable=False) as c:
         assert c.profile.name == "Trimble X7"
     assert not errors
+
+
+def test_fleet_page_lists_the_bridges_and_opens_one(window, processed_copy, tmp_path, qtbot, errors):
+    import shutil
+
+    root = tmp_path / "fleet"
+    root.mkdir()
+    shutil.copytree(processed_copy, root / "bridge-a", ignore=shutil.ignore_patterns(".lock"))
+    shutil.copytree(processed_copy, root / "bridge-b", ignore=shutil.ignore_patterns(".lock"))
+    window.open_fleet(str(root))
+    wait_job(qtbot, window)
+    view = window.fleet_view
+    assert view.table.rowCount() == 2 and "2 bridges" in view.summary.text()
+    assert view.table.item(0, 1).text() in ("ok", "warning", "alarm")
+    view.table.selectRow(1)
+    view.open_btn.click()
+    assert window.session is not None and str(window.session.folder).endswith(view.folders[1].split("/")[-1])
+    assert not errors
