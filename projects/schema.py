@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import sqlite3
 
-SCHEMA_VERSION = 5
+SCHEMA_VERSION = 6
 
 SCHEMA_V1 = """
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -137,6 +137,29 @@ MIGRATIONS: dict[int, str] = {
     ALTER TABLE reflectors ADD COLUMN nx REAL;
     ALTER TABLE reflectors ADD COLUMN ny REAL;
     ALTER TABLE reflectors ADD COLUMN nz REAL;
+    """,
+    # 6: what explains the displacements: environment series (temperature, sun, rain...) and events
+    #    (construction steps, loads, repairs).
+    6: """
+    CREATE TABLE env_series (
+        name TEXT PRIMARY KEY,
+        kind TEXT NOT NULL,                         -- temperature, structure-temperature, solar, rain, snow, humidity
+        sha256 TEXT NOT NULL UNIQUE,
+        stored_path TEXT NOT NULL UNIQUE,           -- the imported file, copied read-only into environment/
+        original_path TEXT NOT NULL,
+        imported TEXT NOT NULL,
+        options TEXT NOT NULL,                      -- JSON: column, unit, zone
+        summary TEXT NOT NULL,                      -- JSON: rows, period, sampling, gaps, bad rows
+        arrays BLOB NOT NULL                        -- numpy .npz: time_ns (UTC), values in the kind's unit
+    );
+    CREATE TABLE events (
+        id INTEGER PRIMARY KEY AUTOINCREMENT,
+        date TEXT NOT NULL,                         -- ISO 8601 UTC
+        kind TEXT NOT NULL CHECK (kind IN ('construction', 'load', 'repair', 'other')),
+        label TEXT NOT NULL,
+        load_kn_m REAL,
+        created TEXT NOT NULL
+    );
     """,
 }
 

@@ -35,6 +35,7 @@ from projects.errors import CampaignError, CampaignLockedError, DuplicateImportE
 DB_NAME = "campaign.sqlite"
 SCANS_DIR = "scans"
 CAMERA_DIR = "camera"
+ENV_DIR = "environment"
 LOCK_NAME = ".lock"
 
 
@@ -202,7 +203,7 @@ class Campaign:
 
     def _clean_partial_files(self) -> None:
         """Remove what an interrupted import left: temporary copies and files no row refers to."""
-        for sub, table in ((SCANS_DIR, "files"), (CAMERA_DIR, "camera_series")):
+        for sub, table in ((SCANS_DIR, "files"), (CAMERA_DIR, "camera_series"), (ENV_DIR, "env_series")):
             folder = self.folder / sub
             known = {r[0] for r in self.conn.execute(f"SELECT stored_path FROM {table}")}
             for p in folder.iterdir() if folder.is_dir() else ():

@@ -41,6 +41,23 @@ TZ_NAMES = ("tz", "timezone", "time_zone", "utc_offset", "offset")
 MAX_BAD_LISTED = 1000  # bad rows kept with their line numbers (all are counted)
 
 
+@dataclass(frozen=True)
+class Quantity:
+    """What a series file's value column holds, for the reader: column names to look for, units as
+    ``name -> (scale, offset)`` into the stored unit (``stored = value * scale + offset``), the default
+    unit, and a noun for messages."""
+
+    noun: str
+    value_names: tuple[str, ...]
+    units: dict
+    default_unit: str
+    stored_unit: str
+    signed: bool = True  # whether ``positive='down'`` may flip it
+
+
+DISPLACEMENT = Quantity("displacement", VALUE_NAMES, {k: (v, 0.0) for k, v in UNITS_MM.items()}, "mm", "mm")
+
+
 class SeriesFormatError(SurveyError):
     """A camera series file cannot be read."""
 
@@ -115,10 +132,11 @@ def _norm(name: str) -> str:
     return re.sub(r"[^a-z0-9µ]+", "_", name.strip().lower()).strip("_")
 
 
-def _unit_in_name(name: str) -> Optional[str]:
-    m = re.search(r"(?:[_\[\(\s]|^)(um|µm|mm|cm|m|in)(?:[\]\)\s]|$)", name.strip().lower())
+def _unit_in_name(name: str, units=UNITS_MM) -> Optional[str]:
+    alt = "|".join(sorted((re.escape(u) for u in units), key=len, reverse=True))
+    m = re.search(rf"(?:[_\[\(\s]|^)({alt})(?:[\]\)\s]|$)", name.strip().lower())
     if m is None:
-        m = re.search(r"_(um|µm|mm|cm|m|in)$", _norm(name))
+        m = re.search(rf"_({alt})$", _norm(name))
     return m.group(1) if m else None
 
 
@@ -142,8 +160,11 @@ def _sniff_separator(lines: list[str]) -> Optional[str]:
 
 def read_camera_series(path: str | os.PathLike, *, column: Optional[str] = None, timezone: str = "UTC",
                        unit: Optional[str] = None, positive: str = "up", gap_factor: float = 3.0,
-                       max_bad_fraction: float = 0.05) -> CameraSeries:
+                       max_bad_fraction: float = 0.05, quantity: Quantity = DISPLACEMENT) -> CameraSeries:
     """Read a displacement series file (see the module documentation for what is understood).
+
+    ``quantity`` makes the same reader take other series (temperature, radiation...): its value
+    column names and units; ``value_mm`` then holds the values in ``quantity.stored_unit``.
 
     Parameters
     ----------
@@ -247,17 +268,21 @@ def read_camera_series(path: str | os.PathLike, *, column: Optional[str] = None,
     vals = pd.to_numeric(vraw.str.replace(",", ".", regex=False) if sep != "," else vraw,
                          errors="coerce").to_numpy(float)
     v_bad = ~missing & ~np.isfinite(vals) & t_ok
-    file_unit = unit or _unit_in_name(header[v_col]) or "mm"
-    if file_unit.lower() not in UNITS_MM:
-        raise InputError(f"unknown unit {file_unit!r}; use one of {', '.join(UNITS_MM)}")
-    scale = np.full(len(df), UNITS_MM[file_unit.lower()])
+    table = quantity.units
+    file_unit = unit or _unit_in_name(header[v_col], table) or quantity.default_unit
+    if file_unit.lower() not in table:
+        raise InputError(f"unknown unit {file_unit!r} for a {quantity.noun}; use one of {', '.join(table)}")
+    scale = np.full(len(df), table[file_unit.lower()][0])
+    offset = np.full(len(df), table[file_unit.lower()][1])
     u_bad = np.zeros(len(df), bool)
     if unit_col is not None:
         units = df[unit_col].str.strip().str.lower()
-        mapped = units.map(UNITS_MM).to_numpy(float)
+        mapped = units.map({k: v[0] for k, v in table.items()}).to_numpy(float)
+        mapped_off = units.map({k: v[1] for k, v in table.items()}).to_numpy(float)
         u_bad = ~np.isfinite(mapped) & t_ok & ~v_bad
         scale = np.where(np.isfinite(mapped), mapped, scale)
-        file_unit = "per row (" + ", ".join(sorted(set(units[~u_bad].unique()) & set(UNITS_MM))) + ")"
+        offset = np.where(np.isfinite(mapped_off), mapped_off, offset)
+        file_unit = "per row (" + ", ".join(sorted(set(units[~u_bad].unique()) & set(table))) + ")"
     n_bad += _add_bad(bad, v_bad, line_no, lambda j: f"value {df.iat[j, v_col]!r} is not a number")
     n_bad += _add_bad(bad, u_bad, line_no, lambda j: f"unit {df.iat[j, unit_col]!r} is not known")
     good = t_ok & ~v_bad & ~u_bad
@@ -268,9 +293,9 @@ def read_camera_series(path: str | os.PathLike, *, column: Optional[str] = None,
     if n_bad > max_bad_fraction * n_rows:
         first = "; ".join(f"line {b.line}: {b.reason}" for b in sorted(bad, key=lambda b: b.line)[:3])
         raise SeriesFormatError(path, f"{n_bad} of {n_rows} rows are bad (more than {max_bad_fraction:.0%}); {first}")
-    sign = 1.0 if positive == "up" else -1.0
+    sign = 1.0 if positive == "up" or not quantity.signed else -1.0
     t = t_ns[good]
-    v = np.where(missing[good], np.nan, vals[good] * scale[good] * sign)
+    v = np.where(missing[good], np.nan, (vals[good] * scale[good] + offset[good]) * sign)
     order = np.argsort(t, kind="stable")
     t, v = t[order], v[order]
     dup = np.concatenate([[False], np.diff(t) == 0])

@@ -18,8 +18,8 @@ EXIT_ERROR = 1
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from app.cli import (commands_camera, commands_campaign, commands_compare, commands_dualcam, commands_field,
-                         commands_files, commands_fleet, commands_report, commands_scanfiles)
+    from app.cli import (commands_analysis, commands_camera, commands_campaign, commands_compare, commands_dualcam,
+                         commands_field, commands_files, commands_fleet, commands_report, commands_scanfiles)
 
     parser = argparse.ArgumentParser(
         prog="bridgesurvey",
@@ -30,7 +30,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for module in (commands_campaign, commands_compare, commands_camera, commands_dualcam, commands_report,
-                   commands_files, commands_scanfiles, commands_field, commands_fleet):
+                   commands_files, commands_scanfiles, commands_field, commands_fleet, commands_analysis):
         module.register(sub)
     return parser
 

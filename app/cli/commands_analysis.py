@@ -1,0 +1,134 @@
+"""Explaining the displacements: environment series, events, and the analysis."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from app.cli.commands_campaign import _open
+from app.cli.output import dump_json, table
+
+
+def register(sub) -> None:
+    from projects.environment import EVENT_KINDS, KINDS
+
+    p = sub.add_parser("env", help="environment series: temperature, sun, rain, snow, humidity")
+    es = p.add_subparsers(dest="env_command", metavar="ACTION")
+    es.required = True
+    q = es.add_parser("import", help="import a series (CSV/text; the file is kept read-only in the campaign)")
+    q.add_argument("dir", type=Path)
+    q.add_argument("file", type=Path)
+    q.add_argument("--kind", required=True, choices=list(KINDS))
+    q.add_argument("--name", default=None, help="series name (default: the file name)")
+    q.add_argument("--column", default=None, help="the value column when the header does not tell")
+    q.add_argument("--unit", default=None, help="the values' unit when the header does not tell (degC, degF, K, "
+                                                 "W/m2, mm, cm, %%...)")
+    q.add_argument("--timezone", default="UTC", help="for times without an offset (IANA name or +hh:mm)")
+    q.set_defaults(func=cmd_env_import)
+    q = es.add_parser("list", help="the imported series")
+    q.add_argument("dir", type=Path)
+    q.add_argument("--json", action="store_true")
+    q.set_defaults(func=cmd_env_list)
+
+    p = sub.add_parser("event", help="construction steps, loads, repairs: what the analysis explains")
+    vs = p.add_subparsers(dest="event_command", metavar="ACTION")
+    vs.required = True
+    q = vs.add_parser("add")
+    q.add_argument("dir", type=Path)
+    q.add_argument("--date", required=True, help="ISO 8601 date or date-time")
+    q.add_argument("--kind", required=True, choices=list(EVENT_KINDS))
+    q.add_argument("--label", required=True)
+    q.add_argument("--load-kn-m", type=float, default=None, help="distributed load added, kN/m")
+    q.set_defaults(func=cmd_event_add)
+    q = vs.add_parser("list")
+    q.add_argument("dir", type=Path)
+    q.add_argument("--json", action="store_true")
+    q.set_defaults(func=cmd_event_list)
+
+    p = sub.add_parser("analyse", help="temperature effect, event steps and creep, trend and projection per target",
+                       description="Fits every measurement target's history: a thermal coefficient (mm/degC, "
+                                   "window and lag chosen by AICc), each event's immediate step and the creep "
+                                   "that follows (ACI 209 time shape, creep coefficient with sigma), a trend, and "
+                                   "a projection to a horizon with the date the warning level is reached at this "
+                                   "rate. Writes OUTDIR/analysis.json and one figure per target.")
+    p.add_argument("dir", type=Path)
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--horizon-days", type=float, default=365.0, help="projection horizon after the last epoch (365)")
+    p.add_argument("--long-term-factor", type=float, default=None,
+                   help="design code's long-term factor on dead-load steps (the dissertation cites 2 for KDS)")
+    p.add_argument("--reference-temperature", type=float, default=None,
+                   help="temperature the corrected series refer to (default: the median at the epochs), degC")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_analyse)
+
+
+def cmd_env_import(args) -> int:
+    from projects.environment import import_env
+
+    with _open(args.dir) as c:
+        name, s = import_env(c, args.file, kind=args.kind, name=args.name, column=args.column, unit=args.unit,
+                             timezone=args.timezone)
+    summ = s.summary()
+    print(f"imported {args.kind} series {name!r}: {summ['rows']} rows from {summ['start']} to {summ['end']}, "
+          f"{summ['bad_rows']} bad row(s), {summ['gaps']} gap(s), {summ['missing_values']} missing value(s)")
+    for line in summ["first_bad_lines"][:3]:
+        print(f"  bad {line}")
+    return 0
+
+
+def cmd_env_list(args) -> int:
+    from projects.environment import env_rows
+
+    with _open(args.dir, writable=False) as c:
+        rows = env_rows(c)
+    if args.json:
+        dump_json(rows)
+        return 0
+    table([{"name": r["name"], "kind": r["kind"], "unit": r["options"]["unit"], "rows": r["summary"]["rows"],
+            "start": (r["summary"]["start"] or "")[:16], "end": (r["summary"]["end"] or "")[:16],
+            "bad_rows": r["summary"]["bad_rows"]} for r in rows], ["name", "kind", "unit", "rows", "start", "end",
+                                                                   "bad_rows"])
+    return 0
+
+
+def cmd_event_add(args) -> int:
+    from projects.environment import add_event
+
+    with _open(args.dir) as c:
+        eid = add_event(c, date=args.date, kind=args.kind, label=args.label, load_kn_m=args.load_kn_m)
+    print(f"event {eid} added: {args.kind} '{args.label}' on {args.date}")
+    return 0
+
+
+def cmd_event_list(args) -> int:
+    from projects.environment import events
+
+    with _open(args.dir, writable=False) as c:
+        rows = events(c)
+    if args.json:
+        dump_json(rows)
+    else:
+        table(rows, ["id", "date", "kind", "label", "load_kn_m"])
+    return 0
+
+
+def cmd_analyse(args) -> int:
+    from projects.analysis.run import write_analysis
+
+    with _open(args.dir, writable=False) as c:
+        doc, paths = write_analysis(c, args.out, horizon_days=args.horizon_days,
+                                    long_term_factor=args.long_term_factor,
+                                    reference_temperature=args.reference_temperature)
+    if args.json:
+        dump_json(doc)
+        return 0
+    rows = []
+    for t in doc["targets"]:
+        rows.append({"reflector": t["reflector"], "thermal_mm_per_degC": t["thermal_mm_per_degC"],
+                     "thermal_sigma": t["thermal_sigma"], "trend_mm_per_year": t["trend_mm_per_year"],
+                     "events": "; ".join(f"{e['label']}: {e['step_mm']} mm, phi {e['creep_coefficient']}"
+                                         for e in t["events"]) or "-",
+                     "projection": (t["projection"] or {}).get("warning", "-")})
+    table(rows, ["reflector", "thermal_mm_per_degC", "thermal_sigma", "trend_mm_per_year", "events", "projection"])
+    for w in doc["warnings"]:
+        print(f"warning: {w}")
+    print(f"wrote {len(paths)} file(s) to {args.out}")
+    return 0

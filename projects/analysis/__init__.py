@@ -1,0 +1,1 @@
+"""Explaining a displacement history: temperature, construction events with creep, trend and projection."""

@@ -1,0 +1,148 @@
+"""``analyse``: fit every measurement target of a campaign and write ``analysis.json`` and figures.
+
+Times are days from the baseline epoch. The temperature is the structure temperature when the
+campaign has one, else the air temperature.
+"""
+from __future__ import annotations
+
+import datetime as dt
+import json
+import math
+import os
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+from lidar.errors import InputError
+from lidar.files import write_atomic
+from projects.analysis.models import Event, TargetFit, first_crossing, fit_target
+from projects.environment import events as stored_events
+from projects.environment import load_env
+from projects.store import Campaign
+
+ANALYSIS_FORMAT_VERSION = 1
+DAY_NS = 86_400 * 10**9
+
+
+def _ns(iso: str) -> int:
+    return int(dt.datetime.fromisoformat(iso).timestamp() * 1e9)
+
+
+def _iso_day(origin_ns: int, t_days: float) -> Optional[str]:
+    if not math.isfinite(t_days):
+        return None
+    return dt.datetime.fromtimestamp((origin_ns + t_days * DAY_NS) / 1e9, dt.timezone.utc).date().isoformat()
+
+
+def _num(v, nd=4):
+    return None if v is None or not math.isfinite(v) else round(float(v), nd)
+
+
+def analyse_campaign(c: Campaign, *, horizon_days: float = 365.0, long_term_factor: Optional[float] = None,
+                     reference_temperature: Optional[float] = None) -> dict:
+    """The analysis of every measurement target (the ``analysis.json`` document)."""
+    from projects.processing import baseline_epoch
+
+    if not (math.isfinite(horizon_days) and 0 < horizon_days <= 36525):
+        raise InputError(f"the horizon must be between 1 day and 100 years, got {horizon_days} days")
+    if long_term_factor is not None and not (math.isfinite(long_term_factor) and long_term_factor >= 1):
+        raise InputError(f"the long-term factor must be at least 1, got {long_term_factor}")
+    rows = [r for r in c.displacement_rows() if r["baseline"]]
+    if not rows:
+        raise InputError(f"{c.folder}: no displacements yet; run 'bridgesurvey process' first")
+    base = baseline_epoch(c)
+    origin = _ns(c.epoch(base)["datetime"])
+    series = load_env(c, kind="structure-temperature") or load_env(c, kind="temperature")
+    temperature, temp_source = None, None
+    if series:
+        s = series[0]
+        temperature = ((s.time_ns - origin) / DAY_NS, s.value)
+        temp_source = f"{s.kind} series {s.name!r}"
+    evs = [Event((_ns(e["date"]) - origin) / DAY_NS, e["label"], e["kind"], e["date"][:10]) for e in stored_events(c)]
+    epoch_times = sorted({r["datetime"] for r in rows})
+    warnings = _aliasing_warnings(epoch_times, temperature, origin)
+    targets = []
+    for rid in sorted({r["reflector"] for r in rows}):
+        mine = [r for r in rows if r["reflector"] == rid and r["displacement_m"] is not None]
+        t = np.array([(_ns(r["datetime"]) - origin) / DAY_NS for r in mine])
+        d = np.array([r["displacement_m"] * 1000 for r in mine], dtype=float)
+        sg = np.array([(r["sigma_m"] or 0.0) * 1000 for r in mine], dtype=float)
+        sg = np.where(sg > 0, sg, np.nan)  # the baseline itself (sigma 0) carries no information
+        fit = fit_target(t, d, sg, temperature=temperature, events=evs, reference_temperature=reference_temperature)
+        lim = c.limit_for(rid)
+        targets.append(_target_json(rid, fit, t, origin, horizon_days, lim, long_term_factor))
+    return {"format_version": ANALYSIS_FORMAT_VERSION, "campaign": c.name, "baseline": base,
+            "time_origin": dt.datetime.fromtimestamp(origin / 1e9, dt.timezone.utc).isoformat(),
+            "temperature_source": temp_source, "events": stored_events(c), "warnings": warnings,
+            "horizon_days": horizon_days, "long_term_factor": long_term_factor, "targets": targets}
+
+
+def _aliasing_warnings(epoch_times: list[str], temperature, origin: int) -> list[str]:
+    out = []
+    hours = np.array([dt.datetime.fromisoformat(e).astimezone(dt.timezone.utc).hour +
+                      dt.datetime.fromisoformat(e).minute / 60 for e in epoch_times])
+    if len(hours) >= 3:
+        ang = hours / 24 * 2 * np.pi
+        spread = math.sqrt(-2 * math.log(max(math.hypot(np.cos(ang).mean(), np.sin(ang).mean()), 1e-9))) * 24 / (2 * np.pi)
+        if spread > 3.0:
+            out.append(f"the epochs were scanned at very different times of day (spread {spread:.1f} h): the daily "
+                       "temperature swing aliases into the weekly series")
+    if temperature is None:
+        out.append("no temperature series: the thermal effect cannot be separated (import one with 'env import')")
+    return out
+
+
+def _target_json(rid: str, fit: TargetFit, t: np.ndarray, origin: int, horizon: float, lim,
+                 long_term_factor: Optional[float]) -> dict:
+    ev = [{"date": e.date, "label": e.label, "kind": e.kind, "step_mm": _num(e.step_mm),
+           "step_sigma_mm": _num(e.step_sigma_mm), "creep_mm": _num(e.creep_mm),
+           "creep_final_mm": _num(e.creep_final_mm), "creep_coefficient": _num(e.creep_coefficient),
+           "creep_coefficient_sigma": _num(e.creep_coefficient_sigma), "note": e.note,
+           **({"long_term_mm": _num(long_term_factor * e.step_mm)} if long_term_factor and e.kind == "construction"
+              and math.isfinite(e.step_mm) else {})} for e in fit.events]
+    proj = None
+    if fit._predict is not None and len(t):
+        last = float(np.max(t))
+        v, s = fit.predict([last + horizon])
+        proj = {"date": _iso_day(origin, last + horizon), "displacement_mm": _num(v[0]), "sigma_mm": _num(s[0]),
+                "at_reference_temperature": fit.reference_temperature_degC is not None}
+        if lim is not None and lim.warning_mm:
+            level = -abs(lim.warning_mm) if v[0] < 0 else abs(lim.warning_mm)
+            cross = first_crossing(fit, last, last + 3652.5, level)
+            if cross is None:
+                proj["warning"] = f"the warning level ({lim.warning_mm:g} mm) is not reached within 10 years at this rate"
+            else:
+                c0, early, late = cross
+                proj.update(warning_level_mm=level, warning_date=_iso_day(origin, c0), warning_earliest=_iso_day(origin, early),
+                            warning_latest=_iso_day(origin, late))
+                proj["warning"] = (f"at this rate the warning level ({lim.warning_mm:g} mm) is reached on "
+                                   f"{proj['warning_date'] or 'no date (only the 2-sigma band reaches it)'}"
+                                   f" (2 sigma: from {proj['warning_earliest']})")
+    return {"reflector": rid, "epochs": fit.n_epochs, "thermal_mm_per_degC": _num(fit.thermal_mm_per_degC, 5),
+            "thermal_sigma": _num(fit.thermal_sigma, 5), "thermal_p_value": _num(fit.thermal_p_value, 6),
+            "thermal_significant": bool(math.isfinite(fit.thermal_p_value) and fit.thermal_p_value < 0.05),
+            "temperature_window_h": fit.temperature_window_h, "temperature_lag_h": fit.temperature_lag_h,
+            "reference_temperature_degC": _num(fit.reference_temperature_degC, 2), "events": ev,
+            "prediction_offset_mm": None, "prediction_residual_rms_mm": None,
+            "trend_mm_per_year": _num(fit.trend_mm_per_year), "trend_sigma": _num(fit.trend_sigma),
+            "seasonal_amplitude_mm": _num(fit.seasonal_amplitude_mm), "creep_d_days": fit.creep_d_days,
+            "sigma_scale": _num(fit.scale, 3), "rms_residual_mm": _num(fit.rms_residual_mm),
+            "corrected_mm": [_num(v) for v in fit.corrected_mm],
+            "corrected_sigma_mm": [_num(v) for v in fit.corrected_sigma_mm],
+            "temperature_at_epochs_degC": [_num(v, 2) for v in fit.temperature_at_epochs],
+            "epoch_days": [_num(v, 3) for v in fit.epoch_days], "projection": proj, "notes": list(fit.notes)}
+
+
+def write_analysis(c: Campaign, out_dir: str | os.PathLike, **kw) -> tuple[dict, list[Path]]:
+    """``analysis.json`` and one figure per target in ``out_dir``."""
+    doc = analyse_campaign(c, **kw)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = [write_atomic(out / "analysis.json", json.dumps(doc, indent=1))]
+    from lidar.figures import save_figure
+    from projects.analysis.figures import target_figure
+
+    for t in doc["targets"]:
+        paths.append(save_figure(target_figure(doc, t), out / f"analysis-{t['reflector']}.png"))
+    return doc, paths

@@ -1,0 +1,159 @@
+"""Environment series (air and structure temperature, sun, rain, snow, humidity) and events
+(construction steps, loads, repairs): what explains a displacement history.
+
+Series are read by the same robust importer as camera series (separators, units, time zones, gaps
+and bad rows reported) and kept read-only in the campaign's ``environment/`` folder.
+"""
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+from lidar.errors import InputError
+from projects.errors import DuplicateImportError
+from projects.store import ENV_DIR, Campaign, now_iso, parse_datetime, sha256_of
+from vision.series import CameraSeries, Quantity, read_camera_series
+
+_TEMP_UNITS = {"degc": (1.0, 0.0), "c": (1.0, 0.0), "°c": (1.0, 0.0), "celsius": (1.0, 0.0),
+               "degf": (5 / 9, -160 / 9), "f": (5 / 9, -160 / 9), "°f": (5 / 9, -160 / 9),
+               "fahrenheit": (5 / 9, -160 / 9), "k": (1.0, -273.15), "kelvin": (1.0, -273.15)}
+KINDS: dict[str, Quantity] = {
+    "temperature": Quantity("air temperature", ("temperature", "air_temperature", "temp", "t_air", "ta", "value"),
+                            _TEMP_UNITS, "degc", "°C", signed=False),
+    "structure-temperature": Quantity("structure temperature",
+                                      ("structure_temperature", "concrete_temperature", "t_struct", "temperature",
+                                       "temp", "value"), _TEMP_UNITS, "degc", "°C", signed=False),
+    "solar": Quantity("solar radiation", ("solar", "radiation", "irradiance", "ghi", "value"),
+                      {"w/m2": (1.0, 0.0), "w_m2": (1.0, 0.0), "wm2": (1.0, 0.0), "kw/m2": (1000.0, 0.0)},
+                      "w/m2", "W/m²", signed=False),
+    "rain": Quantity("rainfall", ("rain", "rainfall", "precipitation", "precip", "value"),
+                     {"mm": (1.0, 0.0), "cm": (10.0, 0.0), "in": (25.4, 0.0)}, "mm", "mm", signed=False),
+    "snow": Quantity("snow depth", ("snow", "snow_depth", "snowfall", "value"),
+                     {"cm": (1.0, 0.0), "mm": (0.1, 0.0), "m": (100.0, 0.0)}, "cm", "cm", signed=False),
+    "humidity": Quantity("relative humidity", ("humidity", "relative_humidity", "rh", "value"),
+                         {"%": (1.0, 0.0), "pct": (1.0, 0.0), "percent": (1.0, 0.0), "fraction": (100.0, 0.0)},
+                         "%", "%", signed=False),
+}
+EVENT_KINDS = ("construction", "load", "repair", "other")
+
+
+@dataclass(frozen=True)
+class EnvSeries:
+    """A stored environment series: values in its kind's unit at UTC times (NaN: a gap value)."""
+
+    name: str
+    kind: str
+    unit: str
+    time_ns: np.ndarray
+    value: np.ndarray
+
+
+def import_env(c: Campaign, path: str | os.PathLike, *, kind: str, name: Optional[str] = None,
+               column: Optional[str] = None, unit: Optional[str] = None, timezone: str = "UTC"
+               ) -> tuple[str, CameraSeries]:
+    """Read an environment series file, copy it into the campaign (read-only) and store it.
+
+    Nothing changes unless the whole file was read; the same file twice or a name in use is refused.
+    """
+    if kind not in KINDS:
+        raise InputError(f"unknown series kind {kind!r}; use one of {', '.join(KINDS)}")
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such file; check the path")
+    name = (name or path.stem).strip()
+    if not name or any(ch in name for ch in "/\\\n"):
+        raise InputError(f"series name {name!r} is not usable")
+    if c.conn.execute("SELECT 1 FROM env_series WHERE name = ?", (name,)).fetchone():
+        raise InputError(f"an environment series named {name!r} is already in the campaign; give another --name")
+    sha = sha256_of(path)
+    row = c.conn.execute("SELECT name, original_path FROM env_series WHERE sha256 = ?", (sha,)).fetchone()
+    if row is not None:
+        raise DuplicateImportError(f"{path}: this file is already in the campaign as series {row['name']!r} "
+                                   f"(from {row['original_path']}); nothing was changed")
+    q = KINDS[kind]
+    series = read_camera_series(path, column=column, timezone=timezone, unit=unit, quantity=q)
+    if not np.any(np.isfinite(series.value_mm)):
+        raise InputError(f"{path}: every {q.noun} value is missing")
+    options = {"column": series.column, "unit_read": series.unit, "unit": q.stored_unit, "timezone": timezone}
+    summary = series.summary()
+    summary["unit"] = q.stored_unit
+    try:
+        sha2, rel, _ = c._copy_in(path, ENV_DIR)
+        if sha2 != sha:
+            raise InputError(f"{path}: the file changed while it was being imported; try again")
+        with c.transaction() as conn:
+            conn.execute("INSERT INTO env_series(name, kind, sha256, stored_path, original_path, imported, options, "
+                         "summary, arrays) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                         (name, kind, sha, rel, str(path.resolve()), now_iso(), json.dumps(options),
+                          json.dumps(summary), series.to_npz_bytes()))
+            c._log(conn, "env-import", None, {"name": name, "kind": kind, "file": str(path), "sha256": sha,
+                                               "rows": len(series), "bad_rows": series.n_bad})
+    except BaseException:
+        c._clean_partial_files()
+        raise
+    return name, series
+
+
+def env_rows(c: Campaign) -> list[dict]:
+    rows = []
+    for r in c.conn.execute("SELECT name, kind, original_path, imported, options, summary FROM env_series "
+                            "ORDER BY kind, name"):
+        d = dict(r)
+        d["options"] = json.loads(d["options"])
+        d["summary"] = json.loads(d["summary"])
+        rows.append(d)
+    return rows
+
+
+def load_env(c: Campaign, *, kind: Optional[str] = None, name: Optional[str] = None) -> list[EnvSeries]:
+    """Stored series of a kind (or the one named), oldest import first."""
+    q = "SELECT name, kind, options, arrays FROM env_series"
+    args: tuple = ()
+    if name is not None:
+        q, args = q + " WHERE name = ?", (name,)
+    elif kind is not None:
+        q, args = q + " WHERE kind = ?", (kind,)
+    out = []
+    for r in c.conn.execute(q + " ORDER BY imported", args):
+        t, v = CameraSeries.arrays_from_npz(r["arrays"])
+        out.append(EnvSeries(r["name"], r["kind"], json.loads(r["options"])["unit"], t, v))
+    if name is not None and not out:
+        raise InputError(f"no environment series {name!r} in the campaign")
+    return out
+
+
+# ------------------------------------------------------------------------------------------- events
+def add_event(c: Campaign, *, date: str, kind: str, label: str, load_kn_m: Optional[float] = None) -> int:
+    """Record a construction step, load, repair... The date must fall within the campaign's epochs (or up to a
+    year after the last one, for an event whose effect is still to be measured)."""
+    if kind not in EVENT_KINDS:
+        raise InputError(f"unknown event kind {kind!r}; use one of {', '.join(EVENT_KINDS)}")
+    if not label.strip():
+        raise InputError("an event needs a --label")
+    if load_kn_m is not None and not (np.isfinite(load_kn_m) and load_kn_m >= 0):
+        raise InputError(f"--load-kn-m must be a non-negative number, got {load_kn_m}")
+    when = parse_datetime(date)
+    epochs = c.epochs()
+    if not epochs:
+        raise InputError("the campaign has no epoch yet; add the visits before the events between them")
+    first, last = epochs[0]["datetime"], epochs[-1]["datetime"]
+    import datetime as dt
+
+    limit = (dt.datetime.fromisoformat(last) + dt.timedelta(days=366)).isoformat()
+    if when < first or when > limit:
+        raise InputError(f"event date {when[:10]} is outside the campaign ({first[:10]} to {last[:10]}); its effect "
+                         "cannot be measured from these epochs")
+    with c.transaction() as conn:
+        cur = conn.execute("INSERT INTO events(date, kind, label, load_kn_m, created) VALUES (?, ?, ?, ?, ?)",
+                           (when, kind, label.strip(), load_kn_m, now_iso()))
+        c._log(conn, "event-add", None, {"id": cur.lastrowid, "date": when, "kind": kind, "label": label})
+    return int(cur.lastrowid)
+
+
+def events(c: Campaign) -> list[dict]:
+    return [dict(r) for r in c.conn.execute("SELECT id, date, kind, label, load_kn_m FROM events ORDER BY date, id")]
