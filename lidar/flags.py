@@ -46,6 +46,7 @@ SEVERITY: dict[str, str] = {
     "off_expected_position": WARNING,
     "no_bright_target": WARNING,
     "no_compact_target": WARNING,
+    "departs_from_prediction": WARNING,
     # no trustworthy result
     "reference_inconsistent": PROBLEM,
     FLAG_DECK_NOT_MEASURED: PROBLEM,

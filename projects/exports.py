@@ -13,7 +13,8 @@ from lidar.files import write_atomic  # noqa: F401  (part of this module's API)
 from projects.store import Campaign
 
 DISPLACEMENT_COLUMNS = ["epoch", "datetime", "reflector", "displacement_mm", "sigma_mm", "flags", "state",
-                        "warning_mm", "alarm_mm", "baseline", "epoch_flags", "days_from_baseline", "severity"]
+                        "warning_mm", "alarm_mm", "baseline", "epoch_flags", "days_from_baseline", "severity",
+                        "concrete_age_days", "predicted_mm", "departure_mm"]
 
 
 def displacement_table(c: Campaign) -> list[dict]:
@@ -22,7 +23,15 @@ def displacement_table(c: Campaign) -> list[dict]:
 
     from lidar.flags import worst
 
+    from projects.predictions import predictions
+
+    import numpy as np
+
     when = {e["label"]: datetime.fromisoformat(e["datetime"]) for e in c.epochs()}
+    settings = c.settings()
+    casting = datetime.fromisoformat(settings["casting_date"]) if settings.get("casting_date") else None
+    preds = predictions(c)
+    tols = settings.get("prediction_tolerance_mm") or {}
     rows = []
     for r in c.displacement_rows():
         lim = c.limit_for(r["reflector"])
@@ -39,7 +48,22 @@ def displacement_table(c: Campaign) -> list[dict]:
             "days_from_baseline": round((when[r["epoch"]] - when[r["baseline"]]).total_seconds() / 86400.0, 4)
             if r["baseline"] in when else None,
             "severity": worst(json.loads(r["flags"]) + json.loads(r["epoch_flags"])) or "",
+            "concrete_age_days": None if casting is None else
+            round((when[r["epoch"]] - casting).total_seconds() / 86400.0, 3),
+            "predicted_mm": None, "departure_mm": None,
         })
+        p = preds.get(r["reflector"])
+        t_ns = int(when[r["epoch"]].timestamp() * 1e9)
+        if p is not None and p[0][0] <= t_ns <= p[0][-1]:
+            pred = float(np.interp(t_ns, p[0], p[1]))
+            row = rows[-1]
+            row["predicted_mm"] = round(pred, 4)
+            if mm is not None:
+                row["departure_mm"] = round(mm - pred, 4)
+                tol = tols.get(r["reflector"], tols.get("*"))
+                if tol is not None and abs(mm - pred) > tol:
+                    row["flags"] = ";".join(f for f in (row["flags"], "departs_from_prediction") if f)
+                    row["severity"] = worst(row["flags"].split(";") + json.loads(r["epoch_flags"])) or ""
     return rows
 
 

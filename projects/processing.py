@@ -96,8 +96,14 @@ def set_parameter(c: Campaign, key: str, text: Optional[str]) -> None:
             c.epoch(text)
         c.set_setting("baseline", text or None)
         return
+    if key == "casting_date":  # concrete age axes and predictions by age
+        from projects.store import parse_datetime
+
+        c.set_setting("casting_date", parse_datetime(text) if text else None)
+        return
     if key not in DEFAULTS:
-        raise InputError(f"unknown setting {key!r}; settings are {', '.join(list(DEFAULTS) + ['baseline'])}")
+        raise InputError(f"unknown setting {key!r}; settings are "
+                         f"{', '.join(list(DEFAULTS) + ['baseline', 'casting_date', 'scanner'])}")
     if text is None:
         raise InputError(f"give a value for {key}")
     try:

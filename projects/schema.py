@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import sqlite3
 
-SCHEMA_VERSION = 6
+SCHEMA_VERSION = 7
 
 SCHEMA_V1 = """
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -159,6 +159,18 @@ MIGRATIONS: dict[int, str] = {
         label TEXT NOT NULL,
         load_kn_m REAL,
         created TEXT NOT NULL
+    );
+    """,
+    # 7: the design (finite-element) prediction of each target's displacement, aligned to the measurements.
+    7: """
+    CREATE TABLE predictions (
+        reflector TEXT PRIMARY KEY REFERENCES reflectors(id),
+        sha256 TEXT NOT NULL,                       -- the file (one file may hold every target)
+        stored_path TEXT NOT NULL,
+        original_path TEXT NOT NULL,
+        imported TEXT NOT NULL,
+        options TEXT NOT NULL,                      -- JSON: alignment (date or lsq), offset_mm, axis (date/age)
+        arrays BLOB NOT NULL                        -- numpy .npz: time_ns (UTC), value_mm (positive up, unaligned)
     );
     """,
 }

@@ -36,6 +36,7 @@ DB_NAME = "campaign.sqlite"
 SCANS_DIR = "scans"
 CAMERA_DIR = "camera"
 ENV_DIR = "environment"
+PREDICTION_DIR = "prediction"
 LOCK_NAME = ".lock"
 
 
@@ -203,7 +204,8 @@ class Campaign:
 
     def _clean_partial_files(self) -> None:
         """Remove what an interrupted import left: temporary copies and files no row refers to."""
-        for sub, table in ((SCANS_DIR, "files"), (CAMERA_DIR, "camera_series"), (ENV_DIR, "env_series")):
+        for sub, table in ((SCANS_DIR, "files"), (CAMERA_DIR, "camera_series"), (ENV_DIR, "env_series"),
+                           (PREDICTION_DIR, "predictions")):
             folder = self.folder / sub
             known = {r[0] for r in self.conn.execute(f"SELECT stored_path FROM {table}")}
             for p in folder.iterdir() if folder.is_dir() else ():

@@ -43,6 +43,20 @@ def register(sub) -> None:
     q.add_argument("--json", action="store_true")
     q.set_defaults(func=cmd_event_list)
 
+    p = sub.add_parser("prediction", help="the design prediction of each target, aligned to the measurements")
+    ps = p.add_subparsers(dest="prediction_command", metavar="ACTION")
+    ps.required = True
+    q = ps.add_parser("import", description="CSV with a 'date' (or 'age_days', with the casting date set) column "
+                                            "and one column per target id in mm positive up, or long form with "
+                                            "'reflector' and 'value_mm'. Aligned at a date or by least squares "
+                                            "(default). 'limit DIR --rule prediction:TOL_MM' flags departures.")
+    q.add_argument("dir", type=Path)
+    q.add_argument("file", type=Path)
+    g = q.add_mutually_exclusive_group()
+    g.add_argument("--align-at", default=None, help="align at the epoch nearest this date")
+    g.add_argument("--align", choices=("lsq",), default=None, help="align by weighted least squares")
+    q.set_defaults(func=cmd_prediction_import)
+
     p = sub.add_parser("analyse", help="temperature effect, event steps and creep, trend and projection per target",
                        description="Fits every measurement target's history: a thermal coefficient (mm/degC, "
                                    "window and lag chosen by AICc), each event's immediate step and the creep "
@@ -107,6 +121,17 @@ def cmd_event_list(args) -> int:
         dump_json(rows)
     else:
         table(rows, ["id", "date", "kind", "label", "load_kn_m"])
+    return 0
+
+
+def cmd_prediction_import(args) -> int:
+    from projects.predictions import import_prediction
+
+    with _open(args.dir) as c:
+        out = import_prediction(c, args.file, align_at=args.align_at, lsq=args.align == "lsq")
+    how = f"at {args.align_at}" if args.align_at else "by least squares"
+    table([{"reflector": k, **v} for k, v in sorted(out.items())], ["reflector", "offset_mm", "residual_rms_mm", "pairs"])
+    print(f"prediction imported for {len(out)} target(s), aligned {how}")
     return 0
 
 

@@ -102,7 +102,7 @@ def register(sub) -> None:
                                        ["min_points", "budget_min", "normal_mode", "weighted_references",
                                         "map_step_deg", "detection_threshold", "identification_tolerance_m",
                                         "moved_tolerance_m", "levelled", "max_tilt_deg", "layout_up", "baseline",
-                                        "scanner"]) +
+                                        "scanner", "casting_date"]) +
                                    ". normal_mode: auto (default: both deck normals by their uncertainty), "
                                    "reference or epoch. levelled false: the scanner had no compensator "
                                    "(identification then accepts tilted solutions); max_tilt_deg: the largest tilt a levelled "
@@ -305,10 +305,30 @@ def cmd_reflector(args) -> int:
 
 
 def cmd_limit(args) -> int:
+    if args.rule.startswith("prediction:"):
+        return _prediction_tolerance(args)
     with _open(args.dir) as c:
         c.set_limit(args.reflector, args.rule)
         lim = c.limit_for(args.reflector if args.reflector != "*" else "*")
     print(f"limit for {args.reflector}: warning {lim.warning_mm:.2f} mm, alarm {lim.alarm_mm:.2f} mm ({lim.rule})")
+    return 0
+
+
+def _prediction_tolerance(args) -> int:
+    try:
+        tol = float(args.rule.split(":", 1)[1])
+    except ValueError:
+        tol = float("nan")
+    if not (tol == tol and 0 < tol < 1e4):
+        raise InputError(f"limit rule {args.rule!r}: the tolerance must be a positive number of millimetres")
+    with _open(args.dir) as c:
+        if args.reflector != "*":
+            c.reflector(args.reflector)
+        tols = dict(c.settings().get("prediction_tolerance_mm") or {})
+        tols[args.reflector] = tol
+        c.set_setting("prediction_tolerance_mm", tols)
+    print(f"a displacement departing from the design prediction by more than {tol:g} mm is flagged "
+          f"(departs_from_prediction) for {'every target' if args.reflector == '*' else args.reflector}")
     return 0
 
 

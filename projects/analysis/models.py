@@ -143,7 +143,8 @@ def fit_target(t_days: Sequence[float], d_mm: Sequence[float], sigma_mm: Sequenc
     t, d, s = t[ok], d[ok], s[ok]
     n = len(t)
     if n < 4:
-        return TargetFit(n, notes=(f"only {n} epochs with a displacement: too few to fit (4 needed)",))
+        return TargetFit(n, epoch_days=t, corrected_mm=d, corrected_sigma_mm=s,
+                         notes=(f"only {n} epochs with a displacement: too few to fit (4 needed)",))
     notes: list[str] = []
     w = 1.0 / s ** 2
 
@@ -213,7 +214,8 @@ def fit_target(t_days: Sequence[float], d_mm: Sequence[float], sigma_mm: Sequenc
                     if dd not in per_d or aicc < per_d[dd]["aicc"] - 1e-9:
                         per_d[dd] = cand
     if best is None:
-        return TargetFit(n, notes=tuple(notes + ["the model cannot be fitted to these epochs"]))
+        return TargetFit(n, epoch_days=t, corrected_mm=d, corrected_sigma_mm=s,
+                         notes=tuple(notes + ["the model cannot be fitted to these epochs"]))
     coef, cov, names, use = best["coef"], best["cov"], best["names"], best["use"]
     dof = int(use.sum()) - len(coef)
     red = best["chi2"] / max(dof, 1)

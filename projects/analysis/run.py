@@ -61,6 +61,10 @@ def analyse_campaign(c: Campaign, *, horizon_days: float = 365.0, long_term_fact
         temp_source = f"{s.kind} series {s.name!r}"
     evs = [Event((_ns(e["date"]) - origin) / DAY_NS, e["label"], e["kind"], e["date"][:10]) for e in stored_events(c)]
     epoch_times = sorted({r["datetime"] for r in rows})
+    from projects.predictions import casting_ns, predictions
+
+    preds = predictions(c)
+    casting = casting_ns(c)
     warnings = _aliasing_warnings(epoch_times, temperature, origin)
     targets = []
     for rid in sorted({r["reflector"] for r in rows}):
@@ -71,10 +75,17 @@ def analyse_campaign(c: Campaign, *, horizon_days: float = 365.0, long_term_fact
         sg = np.where(sg > 0, sg, np.nan)  # the baseline itself (sigma 0) carries no information
         fit = fit_target(t, d, sg, temperature=temperature, events=evs, reference_temperature=reference_temperature)
         lim = c.limit_for(rid)
-        targets.append(_target_json(rid, fit, t, origin, horizon_days, lim, long_term_factor))
+        tj = _target_json(rid, fit, t, origin, horizon_days, lim, long_term_factor)
+        if rid in preds:
+            tj["prediction_offset_mm"] = _num(preds[rid][2]["offset_mm"])
+            tj["prediction_residual_rms_mm"] = _num(preds[rid][2]["residual_rms_mm"])
+            tj["prediction_alignment"] = preds[rid][2]["align_at"] or "least squares"
+        if casting is not None:
+            tj["concrete_age_days"] = [_num(v + (origin - casting) / DAY_NS, 2) for v in fit.epoch_days]
+        targets.append(tj)
     return {"format_version": ANALYSIS_FORMAT_VERSION, "campaign": c.name, "baseline": base,
             "time_origin": dt.datetime.fromtimestamp(origin / 1e9, dt.timezone.utc).isoformat(),
-            "temperature_source": temp_source, "events": stored_events(c), "warnings": warnings,
+            "temperature_source": temp_source, "casting_date": c.settings().get("casting_date"), "events": stored_events(c), "warnings": warnings,
             "horizon_days": horizon_days, "long_term_factor": long_term_factor, "targets": targets}
 
 

@@ -86,3 +86,47 @@ def test_analyse_before_processing_is_one_line(field_copy, tmp_path):
     _cli("init", camp, "--name", "x", "--layout", field_copy / "layout.csv")
     r = _cli("analyse", camp, "--out", tmp_path / "an")
     assert r.returncode == 1 and "no displacements yet" in r.stderr
+
+
+def _prediction_csv(path, ids, start="2026-02-20", days=40, offset=5.0):
+    t0 = dt.date.fromisoformat(start)
+    rows = ["date," + ",".join(ids)]
+    for k in range(0, days, 2):
+        rows.append(f"{t0 + dt.timedelta(days=k)}," + ",".join(f"{offset - 0.1 * k:.3f}" for _ in ids))
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+def test_prediction_import_aligns_flags_departures_and_refuses_unknown_targets(processed_copy, tmp_path):
+    from projects.exports import displacement_table
+    from projects.store import Campaign
+
+    before = snapshot(processed_copy)
+    bad = _prediction_csv(tmp_path / "bad.csv", ["M1", "M9"])
+    r = _cli("prediction", "import", processed_copy, bad)
+    assert r.returncode == 1 and "M9" in r.stderr and "not in the campaign" in r.stderr
+    age = tmp_path / "age.csv"
+    age.write_text("age_days,M1\n100,1\n200,2\n")
+    r = _cli("prediction", "import", processed_copy, age)
+    assert r.returncode == 1 and "casting date" in r.stderr
+    assert snapshot(processed_copy) == before
+    good = _prediction_csv(tmp_path / "fem.csv", ["M1", "M2", "M3", "M4", "M5"])
+    r = _cli("prediction", "import", processed_copy, good, "--align-at", "2026-03-02")
+    assert r.returncode == 0, r.stderr
+    with Campaign.open(processed_copy, writable=False) as c:
+        rows = {(x["epoch"], x["reflector"]): x for x in displacement_table(c)}
+    first = rows[("2026-03-02", "M3")]
+    assert first["departure_mm"] == 0.0  # aligned there
+    later = rows[("2026-03-16", "M3")]
+    assert later["predicted_mm"] == pytest.approx(first["predicted_mm"] - 1.4, abs=0.01)
+    assert _cli("limit", processed_copy, "--rule", "prediction:0.5").returncode == 0
+    with Campaign.open(processed_copy, writable=False) as c:
+        flagged = [x for x in displacement_table(c) if "departs_from_prediction" in x["flags"]]
+    assert flagged and all(abs(x["departure_mm"]) > 0.5 for x in flagged)
+    assert _cli("settings", processed_copy, "casting_date", "2025-06-01").returncode == 0
+    r = _cli("prediction", "import", processed_copy, age)
+    assert r.returncode == 1 and "does not overlap" in r.stderr  # ages 100-200 d: before the epochs
+    out = tmp_path / "an"
+    doc = json.loads(_cli("analyse", processed_copy, "--out", out, "--json").stdout)
+    m3 = [t for t in doc["targets"] if t["reflector"] == "M3"][0]
+    assert m3["prediction_offset_mm"] is not None and m3["concrete_age_days"][0] > 270

@@ -1,0 +1,178 @@
+"""The design prediction of each target's displacement (a finite-element model's curve), aligned to
+the measurements at a date or by least squares, and how far the measurements depart from it.
+
+File: CSV/text with a header. Time is a ``date`` (ISO 8601) column or an ``age_days`` column (days
+since casting; the campaign needs ``settings DIR casting_date ISO``). Values in mm, positive up:
+either one column per target named by its id (wide), or ``reflector`` and ``value_mm`` columns
+(long). Targets the campaign does not have are refused.
+"""
+from __future__ import annotations
+
+import datetime as dt
+import io
+import json
+import os
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+from lidar.errors import InputError
+from projects.store import PREDICTION_DIR, Campaign, now_iso, parse_datetime, sha256_of
+
+DAY_NS = 86_400 * 10**9
+FORMAT_VERSION = 1
+
+
+def casting_ns(c: Campaign) -> Optional[int]:
+    s = c.settings().get("casting_date")
+    return None if not s else int(dt.datetime.fromisoformat(s).timestamp() * 1e9)
+
+
+def read_prediction_file(path: Path, reflector_ids, casting: Optional[int]) -> tuple[dict, str]:
+    """``{reflector: (time_ns, value_mm)}`` and the time axis used (``date`` or ``age``)."""
+    import pandas as pd
+
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+        df = pd.read_csv(io.StringIO(text), sep=None, engine="python", comment="#")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: cannot read the prediction ({exc})") from None
+    except Exception as exc:  # pandas parser errors
+        raise InputError(f"{path}: not a table ({str(exc).splitlines()[0]})") from None
+    cols = {str(c).strip().lower(): c for c in df.columns}
+    if "date" in cols:
+        try:
+            t = pd.to_datetime(df[cols["date"]], utc=True).dt.tz_localize(None).to_numpy(
+                dtype="datetime64[ns]").astype(np.int64)
+        except (ValueError, TypeError):
+            raise InputError(f"{path}: the date column holds something that is not a date") from None
+        axis = "date"
+    elif "age_days" in cols:
+        if casting is None:
+            raise InputError(f"{path}: the prediction is by concrete age; set the casting date first "
+                             "('bridgesurvey settings DIR casting_date 2017-09-16')")
+        age = pd.to_numeric(df[cols["age_days"]], errors="coerce").to_numpy(float)
+        if not np.all(np.isfinite(age)):
+            raise InputError(f"{path}: age_days must be numbers")
+        t = (casting + age * DAY_NS).astype(np.int64)
+        axis = "age"
+    else:
+        raise InputError(f"{path}: no time column: name it 'date' (ISO 8601) or 'age_days' (days since casting)")
+    known = set(reflector_ids)
+    out = {}
+    if "reflector" in cols:
+        vcol = next((cols[k] for k in ("value_mm", "displacement_mm", "value") if k in cols), None)
+        if vcol is None:
+            raise InputError(f"{path}: a long table needs a value_mm column beside reflector")
+        groups = {str(r).strip(): idx for r, idx in df.groupby(cols["reflector"]).groups.items()}
+        wanted = groups
+    else:
+        wanted = {str(c).strip(): None for c in df.columns if str(c).strip().lower() not in ("date", "age_days")}
+        vcol = None
+    unknown = sorted(set(wanted) - known)
+    if unknown:
+        raise InputError(f"{path}: targets {', '.join(unknown)} are not in the campaign "
+                         f"({', '.join(sorted(known))}); rename the columns or remove them")
+    if not wanted:
+        raise InputError(f"{path}: no target column")
+    for rid, idx in wanted.items():
+        if vcol is None:
+            v = pd.to_numeric(df[next(c for c in df.columns if str(c).strip() == rid)], errors="coerce").to_numpy(float)
+            tt = t
+        else:
+            sub = df.loc[idx]
+            v = pd.to_numeric(sub[vcol], errors="coerce").to_numpy(float)
+            tt = t[np.asarray(idx)]
+        ok = np.isfinite(v)
+        if ok.sum() < 2:
+            raise InputError(f"{path}: target {rid} has fewer than two predicted values")
+        order = np.argsort(tt[ok])
+        out[rid] = (tt[ok][order].astype(np.int64), v[ok][order])
+    return out, axis
+
+
+def _measured(c: Campaign, rid: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    rows = [r for r in c.displacement_rows() if r["reflector"] == rid and r["displacement_m"] is not None]
+    t = np.array([int(dt.datetime.fromisoformat(r["datetime"]).timestamp() * 1e9) for r in rows], dtype=np.int64)
+    return t, np.array([r["displacement_m"] * 1000 for r in rows]), np.array([(r["sigma_m"] or 0) * 1000 for r in rows])
+
+
+def align(t_pred, v_pred, t_meas, d_meas, s_meas, *, at_ns: Optional[int] = None) -> tuple[float, float, int]:
+    """(offset_mm, residual RMS mm, pairs): measured = predicted + offset, at one date or by least squares."""
+    inside = (t_meas >= t_pred[0]) & (t_meas <= t_pred[-1])
+    if not np.any(inside):
+        raise InputError("the prediction does not overlap the measured epochs")
+    p = np.interp(t_meas[inside], t_pred, v_pred)
+    d, s = d_meas[inside], s_meas[inside]
+    if at_ns is not None:
+        k = int(np.argmin(np.abs(t_meas[inside] - at_ns)))
+        if abs(int(t_meas[inside][k]) - at_ns) > 14 * DAY_NS:
+            raise InputError("no measured epoch within two weeks of the alignment date")
+        offset = float(d[k] - p[k])
+    else:
+        w = 1.0 / np.maximum(s, 0.05) ** 2
+        offset = float(np.sum(w * (d - p)) / np.sum(w))
+    resid = d - (p + offset)
+    return offset, float(np.sqrt(np.mean(resid ** 2))), int(inside.sum())
+
+
+def import_prediction(c: Campaign, path: str | os.PathLike, *, align_at: Optional[str] = None,
+                      lsq: bool = False) -> dict:
+    """Read a prediction file, align every target in it, copy the file in and store the curves.
+
+    Aligned at the epoch nearest ``align_at`` (within two weeks), else by weighted least squares over
+    every epoch the prediction covers (also the default).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such file; check the path")
+    if align_at and lsq:
+        raise InputError("align at a date or by least squares, not both")
+    meas_ids = [r["id"] for r in c.reflectors() if r["grp"] == "measurement"]
+    curves, axis = read_prediction_file(path, meas_ids + [r["id"] for r in c.reflectors()], casting_ns(c))
+    at_ns = None
+    if align_at:
+        at_ns = int(dt.datetime.fromisoformat(parse_datetime(align_at)).timestamp() * 1e9)
+    out = {}
+    for rid, (t, v) in curves.items():
+        if rid not in meas_ids:
+            raise InputError(f"{path}: {rid} is a reference target; predictions are for deck targets")
+        tm, dm, sm = _measured(c, rid)
+        if not len(tm):
+            raise InputError(f"{path}: {rid} has no measured displacement yet; process the campaign first")
+        try:
+            offset, rms, n = align(t, v, tm, dm, sm, at_ns=at_ns)
+        except InputError as exc:
+            raise InputError(f"{path}: {rid}: {exc}") from None
+        out[rid] = {"offset_mm": offset, "residual_rms_mm": rms, "pairs": n}
+    sha = sha256_of(path)
+    try:
+        known = c.conn.execute("SELECT stored_path FROM predictions WHERE sha256 = ?", (sha,)).fetchone()
+        rel = known[0] if known else c._copy_in(path, PREDICTION_DIR)[1]
+        with c.transaction() as conn:
+            for rid, (t, v) in curves.items():
+                buf = io.BytesIO()
+                np.savez_compressed(buf, version=np.int64(FORMAT_VERSION), time_ns=t, value_mm=v)
+                options = {"axis": axis, "align_at": align_at, "lsq": lsq, **out[rid]}
+                conn.execute("INSERT OR REPLACE INTO predictions(reflector, sha256, stored_path, original_path, "
+                             "imported, options, arrays) VALUES (?, ?, ?, ?, ?, ?, ?)",
+                             (rid, sha, rel, str(path.resolve()), now_iso(), json.dumps(options), buf.getvalue()))
+            c._log(conn, "prediction-import", None, {"file": str(path), "sha256": sha, "targets": sorted(curves),
+                                                     "align_at": align_at, "lsq": lsq})
+    except BaseException:
+        c._clean_partial_files()
+        raise
+    return out
+
+
+def predictions(c: Campaign) -> dict:
+    """``{reflector: (time_ns, value_mm aligned, options)}``."""
+    out = {}
+    for r in c.conn.execute("SELECT reflector, options, arrays FROM predictions"):
+        with np.load(io.BytesIO(r["arrays"])) as z:
+            if int(z["version"]) > FORMAT_VERSION:
+                raise InputError("a prediction stored by a newer BridgeSurvey; update it")
+            opts = json.loads(r["options"])
+            out[r["reflector"]] = (z["time_ns"].astype(np.int64), z["value_mm"] + opts["offset_mm"], opts)
+    return out
