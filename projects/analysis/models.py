@@ -5,9 +5,12 @@
 * ``T_eff`` is the temperature averaged over a window ending a lag before the epoch; the window and lag
   are chosen by Akaike's information criterion (AICc), as is the creep time parameter and whether the
   trend ``r`` or, without any temperature, an annual sinusoid belongs in the model.
-* ``f(tau) = tau^0.6 / (d + tau^0.6)`` is the ACI 209 creep-time shape (tau in days, final value 1): an
-  event's immediate step is ``s_e`` and the creep that follows tends to ``k_e``, so its creep coefficient
-  is ``k_e / s_e``.
+* ``f`` is a creep-time law with final value 1: the ACI 209 shape ``tau^0.6 / (d + tau^0.6)`` or an
+  exponential approach ``1 - exp(-tau / tc)``, the law and its time parameter chosen by AICc and the
+  event figures averaged over the laws with Akaike weights (the choice is uncertain too). An event's
+  immediate step is ``s_e`` and the creep that follows tends to ``k_e``. The creep coefficient reported
+  is the creep developed by the last epoch over the step (as the dissertation's 8 mm / 6.3 mm = 1.3);
+  ``k_e / s_e``, the law's final value, is an extrapolation and given apart.
 * Sigmas come from the weighted fit's covariance scaled by the reduced chi-square when that exceeds 1
   (the measurement sigmas do not hold what the model leaves out: sun, traffic, wind).
 
@@ -25,15 +28,28 @@ import numpy as np
 from lidar.errors import InputError
 
 CREEP_PSI = 0.6
-CREEP_D_DAYS = (5.0, 10.0, 20.0, 40.0, 80.0)
+CREEP_D_DAYS = tuple(float(v) for v in np.round(np.geomspace(3.0, 200.0, 19), 1))
+CREEP_EXP_DAYS = tuple(float(v) for v in np.round(np.geomspace(5.0, 300.0, 19), 1))
+#: Creep-time laws the fit chooses among (AICc) and averages over: the ACI 209 shape for several time
+#: parameters, and an exponential approach 1 - exp(-t / tc) (a hyperbolic-like law with a different start).
+CREEP_LAWS = tuple(("aci", d) for d in CREEP_D_DAYS) + tuple(("exp", tc) for tc in CREEP_EXP_DAYS)
 WINDOWS_H = (1.0, 3.0, 6.0, 12.0, 24.0, 48.0, 168.0)
 LAGS_H = (0.0, 3.0, 6.0)
 YEAR_D = 365.25
 
 
-def creep_shape(tau_days, d_days: float) -> np.ndarray:
-    tau = np.clip(np.asarray(tau_days, dtype=np.float64), 0.0, None) ** CREEP_PSI
-    return tau / (d_days + tau)
+def creep_shape(tau_days, law) -> np.ndarray:
+    """The creep developed ``tau_days`` after loading as a share of the final creep (0 to 1).
+
+    ``law`` is ``("aci", d)``: ``tau^0.6 / (d + tau^0.6)`` (ACI 209), ``("exp", tc)``: ``1 - exp(-tau / tc)``,
+    or a bare number ``d`` for the ACI shape.
+    """
+    kind, p = ("aci", law) if not isinstance(law, tuple) else law
+    tau = np.clip(np.asarray(tau_days, dtype=np.float64), 0.0, None)
+    if kind == "exp":
+        return 1.0 - np.exp(-tau / p)
+    tau = tau ** CREEP_PSI
+    return tau / (p + tau)
 
 
 @dataclass(frozen=True)
@@ -52,9 +68,13 @@ class EventFit:
     step_mm: float = float("nan")
     step_sigma_mm: float = float("nan")
     creep_mm: float = float("nan")  # developed by the last epoch
-    creep_final_mm: float = float("nan")
-    creep_coefficient: float = float("nan")
+    creep_sigma_mm: float = float("nan")
+    creep_final_mm: float = float("nan")  # the fitted law's final value (an extrapolation)
+    creep_final_sigma_mm: float = float("nan")
+    creep_coefficient: float = float("nan")  # developed creep / immediate step, as the dissertation reports it
     creep_coefficient_sigma: float = float("nan")
+    creep_coefficient_final: float = float("nan")  # final creep / step: extrapolated, less certain
+    creep_coefficient_final_sigma: float = float("nan")
     note: str = ""
 
 
@@ -74,6 +94,7 @@ class TargetFit:
     trend_sigma: float = float("nan")
     seasonal_amplitude_mm: float = float("nan")
     creep_d_days: Optional[float] = None
+    creep_law: Optional[str] = None
     scale: float = 1.0  # sqrt of the reduced chi-square applied to the sigmas
     rms_residual_mm: float = float("nan")
     corrected_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -183,7 +204,7 @@ def fit_target(t_days: Sequence[float], d_mm: Sequence[float], sigma_mm: Sequenc
         t_ref = None
         if te is not None:
             t_ref = float(np.median(te[use])) if reference_temperature is None else float(reference_temperature)
-        for dd in CREEP_D_DAYS if any(c for _, c in ev_cols) else (None,):
+        for dd in CREEP_LAWS if any(c for _, c in ev_cols) else (None,):
             for trend in (False, True):
                 for annual in ((False, True) if te is None and span >= 300 else (False,)):
                     cols, names = [np.ones(n)], ["c"]
@@ -225,11 +246,25 @@ def fit_target(t_days: Sequence[float], d_mm: Sequence[float], sigma_mm: Sequenc
     idx = {k: i for i, k in enumerate(names) if isinstance(k, str)}
 
     out = dict(n_epochs=n, scale=scale, epoch_days=t, rms_residual_mm=float(np.sqrt(np.mean(best["resid"] ** 2))),
-               creep_d_days=best["dd"])
+               creep_d_days=None if best["dd"] is None else best["dd"][1],
+               creep_law=None if best["dd"] is None else f"{best['dd'][0]}:{best['dd'][1]:g}")
     if "b" in idx:
         from scipy import stats
 
         b, sb = float(coef[idx["b"]]), float(sig[idx["b"]])
+        if len(per_d) > 1:  # averaged over the creep laws, as the event figures are
+            ms = list(per_d.values())
+            a0 = min(m["aicc"] for m in ms)
+            ww = np.array([math.exp(-0.5 * (m["aicc"] - a0)) for m in ms])
+            ww /= ww.sum()
+            bs, vs = [], []
+            for m in ms:
+                pm = {n_: i for i, n_ in enumerate(m["names"])}
+                red_m = m["chi2"] / max(int(m["use"].sum()) - len(m["coef"]), 1)
+                bs.append(float(m["coef"][pm["b"]]))
+                vs.append(float(m["cov"][pm["b"], pm["b"]]) * (red_m if red_m > 1 else 1.0))
+            b = float(np.dot(ww, bs))
+            sb = float(math.sqrt(np.dot(ww, np.array(vs) + (np.array(bs) - b) ** 2)))
         out.update(thermal_mm_per_degC=b, thermal_sigma=sb,
                    thermal_p_value=float(2 * stats.t.sf(abs(b) / sb, max(dof, 1))) if sb > 0 else float("nan"),
                    temperature_window_h=best["wh"], temperature_lag_h=best["lh"],
@@ -272,11 +307,15 @@ def fit_target(t_days: Sequence[float], d_mm: Sequence[float], sigma_mm: Sequenc
         if ("k", e) in pm:
             i_k = pm[("k", e)]
             k = float(m["coef"][i_k])
-            g = np.array([-k / step ** 2, 1.0 / step]) if step != 0 else np.array([np.nan, np.nan])
+            f_last = float(creep_shape(t.max() - e.t_days, m["dd"]))
             c2 = cv[np.ix_([i_s, i_k], [i_s, i_k])]
             out_m["k"] = (k, float(cv[i_k, i_k]))
-            out_m["phi"] = (k / step if step != 0 else float("nan"), float(max(g @ c2 @ g, 0.0)))
-            out_m["creep_now"] = (k * float(creep_shape(t.max() - e.t_days, m["dd"])), 0.0)
+            # developed by the last epoch (what the dissertation reports) and the law's final value
+            for key, kk in (("phi", k * f_last), ("phi_final", k)):
+                scale_k = f_last if key == "phi" else 1.0
+                g = np.array([-kk / step ** 2, scale_k / step]) if step != 0 else np.array([np.nan, np.nan])
+                out_m[key] = (kk / step if step != 0 else float("nan"), float(max(g @ c2 @ g, 0.0)))
+            out_m["creep_now"] = (k * f_last, float(f_last ** 2 * cv[i_k, i_k]))
         return out_m
 
     def averaged(e, key):
@@ -291,13 +330,17 @@ def fit_target(t_days: Sequence[float], d_mm: Sequence[float], sigma_mm: Sequenc
         step, s_step = averaged(e, "s")
         fit = dict(step_mm=step, step_sigma_mm=s_step)
         if ("k", e) in pos:
-            k, _ = averaged(e, "k")
+            k, s_k = averaged(e, "k")
             phi, s_phi = averaged(e, "phi")
-            fit.update(creep_mm=averaged(e, "creep_now")[0], creep_final_mm=k, creep_coefficient=phi,
-                       creep_coefficient_sigma=s_phi)
+            phi_f, s_phi_f = averaged(e, "phi_final")
+            now, s_now = averaged(e, "creep_now")
+            fit.update(creep_mm=now, creep_sigma_mm=s_now, creep_final_mm=k, creep_final_sigma_mm=s_k,
+                       creep_coefficient=phi, creep_coefficient_sigma=s_phi, creep_coefficient_final=phi_f,
+                       creep_coefficient_final_sigma=s_phi_f)
             note = "" if abs(step) > 2 * s_step else "the step is within 2 sigma of zero: its creep coefficient is not determinable"
             if note:
-                fit.update(creep_coefficient=float("nan"), creep_coefficient_sigma=float("nan"))
+                fit.update(creep_coefficient=float("nan"), creep_coefficient_sigma=float("nan"),
+                           creep_coefficient_final=float("nan"), creep_coefficient_final_sigma=float("nan"))
         else:
             note = "creep not determinable: fewer than 3 epochs after the event"
         ev_fits.append(EventFit(e.label, e.date, e.kind, note=note, **fit))

@@ -108,8 +108,10 @@ def _target_json(rid: str, fit: TargetFit, t: np.ndarray, origin: int, horizon: 
                  long_term_factor: Optional[float]) -> dict:
     ev = [{"date": e.date, "label": e.label, "kind": e.kind, "step_mm": _num(e.step_mm),
            "step_sigma_mm": _num(e.step_sigma_mm), "creep_mm": _num(e.creep_mm),
-           "creep_final_mm": _num(e.creep_final_mm), "creep_coefficient": _num(e.creep_coefficient),
-           "creep_coefficient_sigma": _num(e.creep_coefficient_sigma), "note": e.note,
+           "creep_sigma_mm": _num(e.creep_sigma_mm), "creep_final_mm": _num(e.creep_final_mm),
+           "creep_coefficient": _num(e.creep_coefficient), "creep_coefficient_sigma": _num(e.creep_coefficient_sigma),
+           "creep_coefficient_final": _num(e.creep_coefficient_final),
+           "creep_coefficient_final_sigma": _num(e.creep_coefficient_final_sigma), "note": e.note,
            **({"long_term_mm": _num(long_term_factor * e.step_mm)} if long_term_factor and e.kind == "construction"
               and math.isfinite(e.step_mm) else {})} for e in fit.events]
     proj = None
@@ -137,7 +139,7 @@ def _target_json(rid: str, fit: TargetFit, t: np.ndarray, origin: int, horizon: 
             "reference_temperature_degC": _num(fit.reference_temperature_degC, 2), "events": ev,
             "prediction_offset_mm": None, "prediction_residual_rms_mm": None,
             "trend_mm_per_year": _num(fit.trend_mm_per_year), "trend_sigma": _num(fit.trend_sigma),
-            "seasonal_amplitude_mm": _num(fit.seasonal_amplitude_mm), "creep_d_days": fit.creep_d_days,
+            "seasonal_amplitude_mm": _num(fit.seasonal_amplitude_mm), "creep_d_days": fit.creep_d_days, "creep_law": fit.creep_law,
             "sigma_scale": _num(fit.scale, 3), "rms_residual_mm": _num(fit.rms_residual_mm),
             "corrected_mm": [_num(v) for v in fit.corrected_mm],
             "corrected_sigma_mm": [_num(v) for v in fit.corrected_sigma_mm],

@@ -28,7 +28,9 @@ def test_recovers_the_thermal_coefficient_steps_and_creep_coefficients():
     assert fit.thermal_p_value < 1e-6 and fit.temperature_window_h == 6.0
     slab, ballast = sorted(fit.events, key=lambda e: e.label, reverse=True)
     assert abs(slab.step_mm + 6.5) < 3 * slab.step_sigma_mm
-    assert abs(slab.creep_coefficient - 1.3) < 3 * slab.creep_coefficient_sigma
+    developed = 1.3 * float(creep_shape(t[-1] - 144.0, 20.0))
+    assert abs(slab.creep_coefficient - developed) < 3 * slab.creep_coefficient_sigma
+    assert abs(slab.creep_coefficient_final - 1.3) < 3 * slab.creep_coefficient_final_sigma
     assert abs(ballast.step_mm + 2.0) < 3 * ballast.step_sigma_mm
     assert fit.corrected_mm.size == t.size and np.all(fit.corrected_sigma_mm >= 0.1)
 
@@ -69,8 +71,9 @@ def test_sigmas_are_honest_over_many_histories():
         t, d, temp = synthetic(rng, b=b, steps=((144.0, s1), (333.0, s2)), phi=phi, noise=rng.uniform(0.08, 0.3))
         fit = fit_target(t, d, np.full(t.size, 0.1), temperature=temp, events=[Event(144.0, "a"), Event(333.0, "b")])
         a = [e for e in fit.events if e.label == "a"][0]
+        developed = phi * float(creep_shape(t[-1] - 144.0, 20.0))
         for est, sig, truth in ((fit.thermal_mm_per_degC, fit.thermal_sigma, b), (a.step_mm, a.step_sigma_mm, s1),
-                                (a.creep_coefficient, a.creep_coefficient_sigma, phi)):
+                                (a.creep_coefficient, a.creep_coefficient_sigma, developed)):
             inside += abs(est - truth) <= 2 * sig
             total += 1
     assert inside / total >= 0.9
