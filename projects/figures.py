@@ -7,8 +7,9 @@ from collections import defaultdict
 import numpy as np
 
 
-def displacement_history_figure(rows: list[dict], *, title: str = "Vertical displacement history"):
-    """Displacement of every measurement target over time with 2-sigma error bars and limit lines."""
+def displacement_history_figure(rows: list[dict], *, title: str = "Vertical displacement history", context=None):
+    """Displacement of every measurement target over time with 2-sigma error bars and limit lines (and the
+    events and an environment series of ``context``, a :class:`projects.context.PlotContext`)."""
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(11, 5), dpi=110, layout="constrained")
@@ -36,6 +37,9 @@ def displacement_history_figure(rows: list[dict], *, title: str = "Vertical disp
     ax.grid(alpha=0.3)
     if series:
         ax.legend(ncol=4, fontsize=8, loc="lower left")
+        from projects.context import draw_context
+
+        draw_context(ax, context)
     fig.autofmt_xdate()
     return fig
 

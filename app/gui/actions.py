@@ -233,3 +233,10 @@ def fleet_status(folder: str) -> dict:
     from projects.fleet import fleet_status as status
 
     return status([folder])
+
+
+def analyse(session) -> dict:
+    from projects.analysis.run import analyse_campaign
+
+    with session.read() as c:
+        return analyse_campaign(c)

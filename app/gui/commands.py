@@ -153,6 +153,11 @@ class CommandsMixin:
         self.run_job("Evaluating scanner stations", lambda p: actions.stations(self.session, grid_m, height_m, p),
                      lambda r: self.stations_view.show_advice(*r))
 
+    def run_analysis(self) -> None:
+        self.tabs.setCurrentWidget(self.analysis_view)
+        self.run_job("Analysing the displacements", lambda p: actions.analyse(self.session),
+                     self.analysis_view.show_analysis)
+
     def choose_scanner(self) -> None:
         with self.session.read() as c:
             current = c.profile.name

@@ -22,6 +22,7 @@ from app.gui.views.cloud_view import CloudView
 from app.gui.views.displacement_view import DisplacementView
 from app.gui.views.fine_view import FineScanView
 from app.gui.views.map_view import MapView
+from app.gui.views.analysis_view import AnalysisView
 from app.gui.views.stations_view import StationsView
 from app.gui.worker import JobRunner
 from lidar.errors import SurveyError
@@ -92,9 +93,10 @@ class MainWindow(CommandsMixin, QMainWindow):
         self.cloud_view = CloudView()
         self.camera_view = CameraView()
         self.stations_view = StationsView()
+        self.analysis_view = AnalysisView()
         for w, name in ((self.displacements, "Displacements"), (self.map_view, "Reflectance map"),
                         (self.fine_view, "Fine scan"), (self.cloud_view, "3-D"), (self.camera_view, "Camera"),
-                        (self.stations_view, "Stations")):
+                        (self.stations_view, "Stations"), (self.analysis_view, "Analysis")):
             self.tabs.addTab(w, name)
         self.welcome = WelcomePage(self)
         self.stack = QStackedWidget()
@@ -203,6 +205,7 @@ class MainWindow(CommandsMixin, QMainWindow):
         self.camera_view.crossvalRequested.connect(self.crossval)
         self.camera_view.importRequested.connect(self.import_camera)
         self.stations_view.evaluateRequested.connect(self.evaluate_stations)
+        self.analysis_view.runRequested.connect(self.run_analysis)
         self.tabs.currentChanged.connect(self._tab_changed)
 
     # ------------------------------------------------------------------ campaigns
@@ -334,6 +337,7 @@ class MainWindow(CommandsMixin, QMainWindow):
         if self.session is None:
             return
         from projects.camera import series_rows
+        from projects.context import plot_context
         from projects.overview import campaign_status
 
         try:
@@ -343,12 +347,13 @@ class MainWindow(CommandsMixin, QMainWindow):
                 series = series_rows(c)
                 rows = c.displacement_rows()
                 limits = {r["id"]: c.limit_for(r["id"]) for r in reflectors if r["grp"] == "measurement"}
+                context = plot_context(c)
         except SurveyError as exc:
             show_error(self, "Reload campaign", str(exc))
             return
         self.status_data = status
         self.tree.populate(status, reflectors, series)
-        self.displacements.set_data(rows, limits)
+        self.displacements.set_data(rows, limits, context)
         self._show_details()
         self._tab_changed(self.tabs.currentIndex())
 

@@ -11,7 +11,13 @@ def target_figure(doc: dict, target: dict):
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(9, 4.8), dpi=110)
-    ax = fig.add_subplot(111)
+    draw_target(fig.add_subplot(111), doc, target)
+    fig.tight_layout()
+    return fig
+
+
+def draw_target(ax, doc: dict, target: dict) -> None:
+    """Draw one target's analysis on a matplotlib Axes (the file export and the application share it)."""
     t = np.array([v if v is not None else np.nan for v in target["epoch_days"]], dtype=float)
     corr = np.array([v if v is not None else np.nan for v in target["corrected_mm"]], dtype=float)
     sig = np.array([v if v is not None else np.nan for v in target["corrected_sigma_mm"]], dtype=float)
@@ -42,5 +48,3 @@ def target_figure(doc: dict, target: dict):
     ax.set_title(title)
     if ax.get_legend_handles_labels()[0]:
         ax.legend(loc="lower left", fontsize=8)
-    fig.tight_layout()
-    return fig

@@ -9,16 +9,19 @@ from __future__ import annotations
 import datetime as dt
 import getpass
 import json
+import logging
 import platform
 from dataclasses import dataclass
 from importlib import metadata
 from typing import Optional
 
-from lidar.errors import InputError
+from lidar.errors import InputError, SurveyError
 from projects import schema
 from projects.exports import displacement_table
 from projects.processing import PIPELINE_VERSION, baseline_epoch, parameters
 from projects.store import Campaign
+
+log = logging.getLogger(__name__)
 
 #: Plain-language meaning of every flag a surveyor may meet in a report.
 FLAG_TEXT = {
@@ -206,6 +209,16 @@ def gather(c: Campaign, scope: ReportScope = ReportScope(), *, author: Optional[
     cvs = crossval_summaries(c)
     if cvs:
         extras["crossvals"] = [(s, load_series(c, s["series"])[1]) for s in cvs]
+    from projects.context import plot_context
+
+    extras["context"] = plot_context(c)
+    if len({r["epoch"] for r in rows}) >= 4:
+        from projects.analysis.run import analyse_campaign
+
+        try:
+            extras["analysis"] = analyse_campaign(c)
+        except SurveyError as exc:  # no displacements to analyse: the report says so elsewhere
+            log.info("no analysis section: %s", exc)
     log_rows = [r for r in c.log_rows() if r["epoch"] is None or r["epoch"] in {s.label for s in sections}]
     return ReportContent(
         name=c.name, folder=str(c.folder), span_m=c.span_m, scanner=c.profile.name,

@@ -263,8 +263,13 @@ def history_section(content: ReportContent, ss) -> list:
         return out + [Paragraph("No displacements yet.", ss["Normal"])]
     out.append(Paragraph("Each panel is one measurement target. Flagged values (orange rings) carry a remark in "
                          "the epoch sections.", ss["Small"]))
+    ctx = content.extras.get("context")
+    if ctx is not None and (ctx.events or ctx.series_name):
+        out.append(Paragraph("Dashed purple lines: events" + (f"; orange: {ctx.series_name}, daily means" if
+                                                              ctx.series_name else "") + ".", ss["Small"]))
     for k in range(0, len(targets), 6):
-        out.append(figure_flowable(history_grid_figure(content.displacements, targets=targets[k:k + 6]), 175))
+        out.append(figure_flowable(history_grid_figure(content.displacements, targets=targets[k:k + 6],
+                                                       context=ctx), 175))
     return out
 
 
@@ -485,8 +490,39 @@ def crossval_section(content: ReportContent, ss) -> list:
 
 
 #: Optional sections: name -> builder taking (content, ss) and returning flowables; called only when
+def analysis_section(content: ReportContent, ss) -> list:
+    """What explains the displacements: temperature effect, events with creep, trend and projection."""
+    from reportlab.platypus import PageBreak, Paragraph
+
+    doc = content.extras["analysis"]
+    out = [PageBreak(), Paragraph("Analysis: temperature, events, creep and projection", ss["Heading1"]),
+           Paragraph(_esc(f"Temperature: {doc['temperature_source'] or 'none imported'}. Times in days from the "
+                          f"baseline {doc['baseline']}" + (f"; concrete cast {doc['casting_date'][:10]}" if
+                                                            doc.get("casting_date") else "") + "."), ss["Small"])]
+    for w in doc["warnings"]:
+        out.append(Paragraph(_esc(f"⚠ {w}"), ss["Small"]))
+    rows = [["Target", "mm/°C (σ)", "trend mm/yr (σ)", "seasonal mm", "events: step (σ), creep coefficient (σ)",
+             "prediction offset / RMS", "projection"]]
+    for t in doc["targets"]:
+        ev = "; ".join(f"{e['label']}: {_num(e['step_mm'])} ({_num(e['step_sigma_mm'])}) mm, φ "
+                       f"{_num(e['creep_coefficient'])} ({_num(e['creep_coefficient_sigma'])})"
+                       + (f" [{e['note']}]" if e["note"] else "") for e in t["events"]) or "–"
+        proj = t["projection"] or {}
+        rows.append([t["reflector"], f"{_num(t['thermal_mm_per_degC'], '{:.3f}')} ({_num(t['thermal_sigma'], '{:.3f}')})",
+                     f"{_num(t['trend_mm_per_year'])} ({_num(t['trend_sigma'])})", _num(t["seasonal_amplitude_mm"]), ev,
+                     f"{_num(t['prediction_offset_mm'])} / {_num(t['prediction_residual_rms_mm'])}",
+                     proj.get("warning") or (f"{_num(proj.get('displacement_mm'))} ± {_num(proj.get('sigma_mm'))} mm on "
+                                             f"{proj.get('date')}" if proj else "–")])
+    out.append(_table(rows, [14, 22, 24, 16, 48, 22, 34], ss))
+    notes = sorted({n for t in doc["targets"] for n in t["notes"]})
+    for n in notes:
+        out.append(Paragraph(_esc(n), ss["Small"]))
+    return out
+
+
 #: ``content.extras`` holds that name.
-EXTRA_SECTIONS: dict[str, Callable] = {"comparisons": comparison_section, "crossvals": crossval_section}
+EXTRA_SECTIONS: dict[str, Callable] = {"comparisons": comparison_section, "crossvals": crossval_section,
+                                       "analysis": analysis_section}
 
 
 def build_pdf(content: ReportContent, path: str | os.PathLike, *, preview_of: Optional[Callable] = None,

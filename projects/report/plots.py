@@ -39,8 +39,10 @@ def layout_figure(reflectors: Sequence[dict], states: Sequence = (), *, span_m: 
     return fig
 
 
-def history_grid_figure(rows: Sequence[dict], *, targets: Optional[Sequence[str]] = None, max_points: int = 2000):
-    """One panel per measurement target: displacement with ±2σ bars, warning and alarm lines.
+def history_grid_figure(rows: Sequence[dict], *, targets: Optional[Sequence[str]] = None, max_points: int = 2000,
+                        context=None):
+    """One panel per measurement target: displacement with ±2σ bars, warning and alarm lines, and
+    (``context``, a :class:`projects.context.PlotContext`) the events and an environment series.
 
     Series longer than ``max_points`` are thinned for drawing only.
     """
@@ -88,6 +90,10 @@ def history_grid_figure(rows: Sequence[dict], *, targets: Optional[Sequence[str]
             ax.text(0.99, 0.04, "below the plot: " + ", ".join(off_scale), transform=ax.transAxes, ha="right",
                     va="bottom", fontsize=6, color="tab:red")
         ax.axhline(0, color="0.6", lw=0.6)
+        if context is not None and pts:
+            from projects.context import draw_context
+
+            draw_context(ax, context, label_events=ax is axes[0])
         ax.set_ylabel(f"{rid}\n[mm]", fontsize=8)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)

@@ -24,11 +24,16 @@ class DisplacementView(QWidget):
         self.limits = QCheckBox("limit lines")
         self.limits.setChecked(True)
         self.limits.toggled.connect(lambda _b: self.redraw())
+        self.context_box = QCheckBox("events and temperature")
+        self.context_box.setChecked(True)
+        self.context_box.toggled.connect(lambda _b: self.redraw())
+        self.context = None
         self.hover = QLabel(" ")
         bar = QHBoxLayout()
         bar.addWidget(QLabel("Target"))
         bar.addWidget(self.target)
         bar.addWidget(self.limits)
+        bar.addWidget(self.context_box)
         bar.addStretch(1)
         bar.addWidget(self.hover)
         lay = QVBoxLayout(self)
@@ -42,10 +47,12 @@ class DisplacementView(QWidget):
         self.canvas.mpl_connect("motion_notify_event", self._on_move)
         self.canvas.mpl_connect("button_press_event", self._on_click)
 
-    def set_data(self, rows: list[dict], limits: dict) -> None:
-        """``rows`` from :meth:`Campaign.displacement_rows`; ``limits`` reflector -> Limit or None."""
+    def set_data(self, rows: list[dict], limits: dict, context=None) -> None:
+        """``rows`` from :meth:`Campaign.displacement_rows`; ``limits`` reflector -> Limit or None;
+        ``context`` a :class:`projects.context.PlotContext` (events, an environment series) or None."""
         self.rows = rows
         self.limit_of = limits
+        self.context = context
         targets = sorted({r["reflector"] for r in rows})
         current = self.target.currentText()
         self.target.blockSignals(True)
@@ -122,13 +129,18 @@ class DisplacementView(QWidget):
         ax.set_title("Displacement history (±2σ)" + ("" if len(targets) > 1 else f" of {targets[0]}"))
         ax.grid(alpha=0.3)
         ax.legend(loc="best", fontsize=8, ncol=2)
+        self._ax = ax
+        if self.context_box.isChecked() and self.context is not None:
+            from projects.context import draw_context
+
+            draw_context(ax, self.context)
         fig.autofmt_xdate()
         self.canvas.draw_idle()
 
     def _nearest(self, event):
         if event.inaxes is None or not self._points:
             return None
-        ax = event.inaxes
+        ax = self._ax  # the displacement axes (an environment series lives on a twin axes above it)
         pix = ax.transData.transform([(ax.convert_xunits(p[0]), p[1]) for p in self._points])
         d = np.hypot(pix[:, 0] - event.x, pix[:, 1] - event.y)
         k = int(np.argmin(d))

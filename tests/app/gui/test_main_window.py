@@ -329,3 +329,18 @@ def test_fleet_page_lists_the_bridges_and_opens_one(window, processed_copy, tmp_
     view.open_btn.click()
     assert window.session is not None and str(window.session.folder).endswith(view.folders[1].split("/")[-1])
     assert not errors
+
+
+def test_analysis_tab_and_event_overlay(window, processed_copy, tmp_path, qtbot, errors):
+    from projects.environment import add_event
+
+    with Campaign.open(processed_copy) as c:
+        add_event(c, date="2026-03-12", kind="construction", label="slab")
+    window.open_campaign(processed_copy)
+    assert window.displacements.context is not None and len(window.displacements.context.events) == 1
+    window.run_analysis()
+    wait_job(qtbot, window)
+    view = window.analysis_view
+    assert window.tabs.currentWidget() is view and view.table.rowCount() == 5
+    assert "1 event" in view.info.text()
+    assert not errors
