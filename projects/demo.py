@@ -115,16 +115,88 @@ def build_demo(folder: str | os.PathLike, *, weeks: int = 52, seed: int = 2026,
         rows = displacement_table(c)
         csv_path = write_atomic(folder / "displacements.csv", to_csv(rows))
         xlsx = export(c, folder / "campaign.xlsx")
-        plot = save_figure(displacement_history_figure(rows, title=c.name), folder / "displacement_history.png")
         report(progress, 0.975, "camera series")
         cv_dir = add_demo_camera(c, folder, weeks=weeks, seed=seed)
+        report(progress, 0.978, "temperature, events, design prediction, analysis")
+        story = add_demo_story(c, folder, weeks=weeks, seed=seed)
         report(progress, 0.98, "report")
         from projects.report import write_report
 
+        from projects.context import plot_context
+
+        rows = displacement_table(c)
+        csv_path = write_atomic(folder / "displacements.csv", to_csv(rows))
+        plot = save_figure(displacement_history_figure(rows, title=c.name, context=plot_context(c)),
+                           folder / "displacement_history.png")
         pdf = write_report(c, folder / "report.pdf", author="BridgeSurvey demo")
-        notes = [f"week {CABLE_TIE_WEEK + 1}: a cable tie beside R1; week {OCCLUDED_WEEK + 1}: M2 occluded"]
+        notes = [f"week {CABLE_TIE_WEEK + 1}: a cable tie beside R1; week {OCCLUDED_WEEK + 1}: M2 occluded"] + story
         report(progress, 1.0, "done")
         return DemoResult(folder, len(c.epochs()), csv_path, xlsx, plot, pdf, cv_dir, notes)
+
+
+THERMAL_MM_PER_DEGC = 1.2 / 10.0  # the history's seasonal 1.2 mm at midspan over a +-10 degC swing
+DEAD_LOAD_WEEKS = ((6, "superstructure dead load", 3.0), (18, "track and ballast", 2.0))
+DESIGN_OFFSET_MM = 21.59  # the dissertation's alignment of its finite-element curve
+
+
+def demo_temperature(t_ns: np.ndarray) -> np.ndarray:
+    """Air temperature of the demo (degC): the seasonal swing the history follows and a daily one."""
+    t0 = np.datetime64(START.replace(tzinfo=None), "ns").astype(np.int64)
+    w = (t_ns - t0) / (7 * 86400 * 10 ** 9)
+    hour = (t_ns / 3.6e12) % 24
+    return 12.0 + 10.0 * np.sin(2 * np.pi * (w - 16) / 52.0) + 3.0 * np.sin(2 * np.pi * (hour - 9) / 24.0)
+
+
+def add_demo_story(c: Campaign, folder: Path, *, weeks: int, seed: int) -> list[str]:
+    """The field story: an hourly temperature series, the two dead-load events, the design prediction
+    (no temperature, offset by 21.59 mm) aligned at week 8, and the analysis in ``analysis/``."""
+    from projects.analysis.run import write_analysis
+    from projects.environment import add_event, env_rows, events, import_env
+    from projects.predictions import import_prediction, predictions
+
+    field = folder / "field"
+    field.mkdir(exist_ok=True)
+    t0 = np.datetime64(START.replace(tzinfo=None), "ns").astype(np.int64)
+    hour = 3600 * 10 ** 9
+    if not any(r["name"] == "air-temperature" for r in env_rows(c)):
+        t = np.arange(t0 - 7 * 24 * hour, t0 + (weeks + 1) * 7 * 24 * hour, hour)
+        temp = demo_temperature(t) + np.random.default_rng(seed + 11).normal(0, 0.3, t.size)
+        lines = ["time,temperature_degC"] + [
+            f"{np.datetime_as_string(np.datetime64(int(a), 'ns'), unit='m')}Z,{b:.2f}" for a, b in zip(t, temp)]
+        (field / "temperature.csv").write_text("\n".join(lines) + "\n")
+        import_env(c, field / "temperature.csv", kind="temperature", name="air-temperature")
+    if not events(c):
+        for w, label, _ in DEAD_LOAD_WEEKS:
+            if w < weeks - 2:
+                add_event(c, date=(START + dt.timedelta(weeks=w - 0.5)).isoformat(), kind="construction", label=label)
+    mid = max(2, min(8, weeks - 1))
+    if not predictions(c) and weeks > 10:
+        rows = ["date,M1,M2,M3,M4,M5"]
+        fractions = (0.2, 0.35, 0.5, 0.65, 0.8)
+        for day in range(0, weeks * 7 + 30, 7):
+            w = day / 7.0
+            u = DESIGN_OFFSET_MM
+            if w >= 6:
+                u -= 3.0 + 1.5 * (1 - math.exp(-(w - 6) / 15.0))
+            if w >= 18:
+                u -= 2.0
+            when = (START + dt.timedelta(days=day)).date().isoformat()
+            rows.append(when + "," + ",".join(f"{u * math.sin(math.pi * f):.3f}" for f in fractions))
+        (field / "design-prediction.csv").write_text("\n".join(rows) + "\n")
+        import_prediction(c, field / "design-prediction.csv",
+                          align_at=(START + dt.timedelta(weeks=mid)).date().isoformat())
+    notes = []
+    if c.limit_for("M3") is not None and len(c.epochs()) >= 4:
+        doc, _ = write_analysis(c, folder / "analysis")
+        m3 = next(t for t in doc["targets"] if t["reflector"] == "M3")
+        if m3["thermal_mm_per_degC"] is not None:
+            notes.append(f"analysis of M3: {m3['thermal_mm_per_degC']:.3f} ± {m3['thermal_sigma']:.3f} mm/°C "
+                         f"(simulated {THERMAL_MM_PER_DEGC:.3f}); "
+                         + "; ".join(f"{e['label']} {e['step_mm']} mm (simulated "
+                                     f"{-next(s for _, lab, s in DEAD_LOAD_WEEKS if lab == e['label']):.1f})"
+                                     for e in m3["events"] if e["step_mm"] is not None))
+        notes.append(f"analysis: {folder / 'analysis' / 'analysis.json'}")
+    return notes
 
 
 def add_demo_camera(c: Campaign, folder: Path, *, weeks: int, seed: int) -> Path:
