@@ -57,20 +57,15 @@ def import_series(c: Campaign, path: str | os.PathLike, *, name: Optional[str] =
     series = read_camera_series(path, column=column, timezone=timezone, unit=unit, positive=positive)
     options = {"column": series.column, "unit": series.unit, "timezone": timezone, "positive": positive}
     summary = series.summary()
-    try:
-        sha2, rel, _ = c._copy_in(path, CAMERA_DIR)
-        if sha2 != sha:
-            raise InputError(f"{path}: the file changed while it was being imported; try again")
-        with c.transaction() as conn:
-            conn.execute("INSERT INTO camera_series(name, reflector, sha256, stored_path, original_path, imported, "
-                         "options, summary, arrays) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                         (name, rid, sha, rel, str(path.resolve()), now_iso(), json.dumps(options),
-                          json.dumps(summary), series.to_npz_bytes()))
-            c._log(conn, "camera-import", None, {"name": name, "file": str(path), "sha256": sha, "rows": len(series),
-                                                  "bad_rows": series.n_bad, "reflector": rid})
-    except BaseException:
-        c._clean_partial_files()
-        raise
+    def record(conn, rel):
+        conn.execute("INSERT INTO camera_series(name, reflector, sha256, stored_path, original_path, imported, "
+                     "options, summary, arrays) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                     (name, rid, sha, rel, str(path.resolve()), now_iso(), json.dumps(options),
+                      json.dumps(summary), series.to_npz_bytes()))
+        c._log(conn, "camera-import", None, {"name": name, "file": str(path), "sha256": sha, "rows": len(series),
+                                              "bad_rows": series.n_bad, "reflector": rid})
+
+    c.import_file(path, sha, CAMERA_DIR, record)
     return name, series
 
 

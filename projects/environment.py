@@ -82,20 +82,15 @@ def import_env(c: Campaign, path: str | os.PathLike, *, kind: str, name: Optiona
     options = {"column": series.column, "unit_read": series.unit, "unit": q.stored_unit, "timezone": timezone}
     summary = series.summary()
     summary["unit"] = q.stored_unit
-    try:
-        sha2, rel, _ = c._copy_in(path, ENV_DIR)
-        if sha2 != sha:
-            raise InputError(f"{path}: the file changed while it was being imported; try again")
-        with c.transaction() as conn:
-            conn.execute("INSERT INTO env_series(name, kind, sha256, stored_path, original_path, imported, options, "
-                         "summary, arrays) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                         (name, kind, sha, rel, str(path.resolve()), now_iso(), json.dumps(options),
-                          json.dumps(summary), series.to_npz_bytes()))
-            c._log(conn, "env-import", None, {"name": name, "kind": kind, "file": str(path), "sha256": sha,
-                                               "rows": len(series), "bad_rows": series.n_bad})
-    except BaseException:
-        c._clean_partial_files()
-        raise
+    def record(conn, rel):
+        conn.execute("INSERT INTO env_series(name, kind, sha256, stored_path, original_path, imported, options, "
+                     "summary, arrays) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                     (name, kind, sha, rel, str(path.resolve()), now_iso(), json.dumps(options),
+                      json.dumps(summary), series.to_npz_bytes()))
+        c._log(conn, "env-import", None, {"name": name, "kind": kind, "file": str(path), "sha256": sha,
+                                           "rows": len(series), "bad_rows": series.n_bad})
+
+    c.import_file(path, sha, ENV_DIR, record)
     return name, series
 
 

@@ -147,22 +147,19 @@ def import_prediction(c: Campaign, path: str | os.PathLike, *, align_at: Optiona
             raise InputError(f"{path}: {rid}: {exc}") from None
         out[rid] = {"offset_mm": offset, "residual_rms_mm": rms, "pairs": n}
     sha = sha256_of(path)
-    try:
-        known = c.conn.execute("SELECT stored_path FROM predictions WHERE sha256 = ?", (sha,)).fetchone()
-        rel = known[0] if known else c._copy_in(path, PREDICTION_DIR)[1]
-        with c.transaction() as conn:
-            for rid, (t, v) in curves.items():
-                buf = io.BytesIO()
-                np.savez_compressed(buf, version=np.int64(FORMAT_VERSION), time_ns=t, value_mm=v)
-                options = {"axis": axis, "align_at": align_at, "lsq": lsq, **out[rid]}
-                conn.execute("INSERT OR REPLACE INTO predictions(reflector, sha256, stored_path, original_path, "
-                             "imported, options, arrays) VALUES (?, ?, ?, ?, ?, ?, ?)",
-                             (rid, sha, rel, str(path.resolve()), now_iso(), json.dumps(options), buf.getvalue()))
-            c._log(conn, "prediction-import", None, {"file": str(path), "sha256": sha, "targets": sorted(curves),
-                                                     "align_at": align_at, "lsq": lsq})
-    except BaseException:
-        c._clean_partial_files()
-        raise
+
+    def record(conn, rel):
+        for rid, (t, v) in curves.items():
+            buf = io.BytesIO()
+            np.savez_compressed(buf, version=np.int64(FORMAT_VERSION), time_ns=t, value_mm=v)
+            options = {"axis": axis, "align_at": align_at, "lsq": lsq, **out[rid]}
+            conn.execute("INSERT OR REPLACE INTO predictions(reflector, sha256, stored_path, original_path, "
+                         "imported, options, arrays) VALUES (?, ?, ?, ?, ?, ?, ?)",
+                         (rid, sha, rel, str(path.resolve()), now_iso(), json.dumps(options), buf.getvalue()))
+        c._log(conn, "prediction-import", None, {"file": str(path), "sha256": sha, "targets": sorted(curves),
+                                                 "align_at": align_at, "lsq": lsq})
+
+    c.import_file(path, sha, PREDICTION_DIR, record)
     return out
 
 

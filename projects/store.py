@@ -355,6 +355,20 @@ class Campaign:
     def path_of(self, file_row: dict) -> Path:
         return self.folder / file_row["stored_path"]
 
+    def import_file(self, src: Path, sha: str, sub: str, record) -> str:
+        """Copy ``src`` (whose checksum was ``sha`` when it was read) into ``sub`` read-only and, in one
+        transaction, ``record(conn, stored_path)``. On any failure nothing stays: no row, no copy."""
+        try:
+            sha2, rel, _ = self._copy_in(src, sub)
+            if sha2 != sha:
+                raise InputError(f"{src}: the file changed while it was being imported; try again")
+            with self.transaction() as conn:
+                record(conn, rel)
+        except BaseException:
+            self._clean_partial_files()
+            raise
+        return rel
+
     def _copy_in(self, src: Path, sub: str = SCANS_DIR) -> tuple[str, str, int]:
         """Copy a file into scans/ (or ``sub``): temporary name, fsync, rename, read-only; returns (sha, rel path, size)."""
         scans = self.folder / sub
