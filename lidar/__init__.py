@@ -7,7 +7,7 @@ Nothing here touches Qt, a database or global state.
 """
 import logging
 
-from lidar.errors import (
+from common.errors import (
     CancelledError,
     InputError,
     ProcessingError,

@@ -14,7 +14,7 @@ from typing import Optional
 
 import numpy as np
 
-from lidar.errors import InputError
+from common.errors import InputError
 
 
 def spherical_from_xyz(xyz_socs: np.ndarray, *, out_dtype=np.float64) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

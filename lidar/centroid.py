@@ -18,7 +18,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from lidar.angles import AngularWindow, spherical_from_xyz
-from lidar.errors import InputError
+from common.errors import InputError
 from lidar.scanner_profile import VZ1000, ScannerProfile
 
 FLAG_NOT_FOUND = "not_found"

@@ -7,7 +7,7 @@ from typing import Optional
 import numpy as np
 from scipy import ndimage
 
-from lidar.errors import InputError
+from common.errors import InputError
 from lidar.reflectance_map import ReflectanceMap
 
 

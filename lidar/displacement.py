@@ -37,9 +37,9 @@ from typing import Mapping, Optional, Sequence
 
 import numpy as np
 
-from lidar.errors import InputError, ProcessingError
+from common.errors import InputError, ProcessingError
 from lidar.reference_motion import across_axis, fit_reference_motion
-from lidar.rigid import fit_rigid
+from common.rigid import fit_rigid
 
 FLAG_MISSING = "missing"
 FLAG_MISSING_AT_BASELINE = "missing_at_baseline"

@@ -67,7 +67,7 @@ def reflectance_map_figure(rmap, *, detections=None, identification=None, rois: 
 
 
 def save_figure(fig, path: str | os.PathLike) -> Path:
-    from lidar.files import atomic_output
+    from common.files import atomic_output
 
     with atomic_output(path) as tmp:
         fig.savefig(tmp)

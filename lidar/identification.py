@@ -16,9 +16,9 @@ from typing import Optional
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from lidar.errors import InputError, ProcessingError
+from common.errors import InputError, ProcessingError
 from lidar.layout import Layout
-from lidar.rigid import apply, fit_rigid, pairwise_distances
+from common.rigid import apply, fit_rigid, pairwise_distances
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,7 @@ from typing import Optional
 
 import numpy as np
 
-from lidar.errors import InputError
+from common.errors import InputError
 
 GROUPS = ("reference", "measurement")
 REQUIRED_COLUMNS = ("id", "group", "x", "y", "z")

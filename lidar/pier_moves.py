@@ -127,7 +127,7 @@ def resolve_ambiguous_move(result, base: Mapping, groups: Mapping[str, str], sol
 
 def _explain(solve: Callable, stable: list, checks, flags: list, base: Mapping, groups: Mapping[str, str]):
     """(chi-square, dof, result) of one explanation, or None when it cannot be computed or judged."""
-    from lidar.errors import SurveyError
+    from common.errors import SurveyError
 
     try:
         candidate = solve(stable, checks, flags)

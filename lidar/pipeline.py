@@ -11,12 +11,12 @@ import numpy as np
 
 from lidar.centroid import TargetCentroid, centroids_from_scan
 from lidar.detection import DetectionResult, detect_reflectors
-from lidar.errors import InputError
+from common.errors import InputError
 from lidar.guided_detection import recover_predicted
 from lidar.identification import MAX_TILT_DEG, Identification, identify_reflectors
 from lidar.layout import Layout, target_normals
 from lidar.plan import PlanTarget, ScanPlan, incidence_from_map, plan_fine_scans
-from lidar.progress import ProgressCallback, report, scaled
+from common.progress import ProgressCallback, report, scaled
 from lidar.reflectance_map import ReflectanceMap, reflectance_map
 from lidar.scan import Scan
 from lidar.scanner_profile import VZ1000, ScannerProfile

@@ -20,7 +20,7 @@ from typing import Optional, Sequence
 import numpy as np
 
 from lidar.angles import AngularWindow, direction_from_angles, spherical_from_xyz, window_around
-from lidar.errors import InputError
+from common.errors import InputError
 from lidar.reflectance_map import ReflectanceMap
 from lidar.scanner_profile import VZ1000, ScannerProfile
 
@@ -155,7 +155,7 @@ class ScanPlan:
                    float(d.get("dome_seconds", 0.0) or 0.0), None if dome_step is None else float(dome_step))
 
     def save(self, path: str | os.PathLike) -> Path:
-        from lidar.files import write_atomic
+        from common.files import write_atomic
 
         return write_atomic(path, json.dumps(self.to_json(), indent=2))
 

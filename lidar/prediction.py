@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from lidar.errors import InputError
+from common.errors import InputError
 
 
 def disc_points(diameter_m: float, range_m: float, cos_incidence: float, theta_deg: float,

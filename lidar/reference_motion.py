@@ -20,7 +20,7 @@ from typing import Optional
 
 import numpy as np
 
-from lidar.rigid import fit_rigid
+from common.rigid import fit_rigid
 
 #: The deck targets must spread at least this far along the span (m) for its axis to be known;
 #: below this the deck term is left out.

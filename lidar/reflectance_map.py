@@ -15,8 +15,9 @@ from typing import Optional
 import numpy as np
 
 from lidar.angles import direction_from_angles, wrap_phi
-from lidar.errors import InputError
-from lidar.progress import ProgressCallback, report
+from common.validation import require_points
+from common.errors import InputError
+from common.progress import ProgressCallback, report
 
 CHUNK = 1_000_000
 #: The automatic cell size keeps maps below this many cells: a few cells across a target are enough
@@ -143,10 +144,8 @@ def reflectance_map(xyz_socs: np.ndarray, intensity: np.ndarray, *, step_deg: Op
     touches a compact range of cells. Extra memory is 16 bytes per cell plus
     one chunk.
     """
-    xyz_socs = np.asarray(xyz_socs)
+    xyz_socs = require_points(xyz_socs, "reflectance map", finite=False, dtype=None)
     intensity = np.asarray(intensity)
-    if xyz_socs.ndim != 2 or xyz_socs.shape[1] != 3 or xyz_socs.shape[0] == 0:
-        raise InputError(f"reflectance map needs an (N, 3) array of points, got shape {xyz_socs.shape}")
     if intensity.shape != (xyz_socs.shape[0],):
         raise InputError("reflectance map: intensity must have one value per point")
     if step_deg is not None and not (np.isfinite(step_deg) and 0 < step_deg <= 10):

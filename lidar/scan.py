@@ -12,7 +12,7 @@ from typing import Any, Mapping, Optional
 
 import numpy as np
 
-from lidar.errors import InputError
+from common.errors import InputError
 
 
 def normalise_intensity(raw: np.ndarray, limits: Optional[tuple[float, float]] = None) -> np.ndarray:

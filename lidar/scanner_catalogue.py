@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 from typing import Optional
 
-from lidar.errors import InputError
+from common.errors import InputError
 from lidar.scanner_profile import ScannerProfile, load_profile
 
 

@@ -12,7 +12,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Optional
 
-from lidar.errors import InputError
+from common.errors import InputError
 from lidar.identification import MAX_TILT_DEG
 
 

@@ -22,11 +22,11 @@ from typing import Mapping, Optional, Sequence
 import numpy as np
 
 from lidar.displacement import Observation, compute_displacements
-from lidar.errors import InputError, SurveyError
+from common.errors import InputError, SurveyError
 from lidar.layout import Layout, bridge_axis, target_normals
 from lidar.plan import PlanTarget, plan_fine_scans
 from lidar.prediction import centroid_covariance
-from lidar.progress import ProgressCallback, report
+from common.progress import ProgressCallback, report
 from lidar.scanner_profile import ScannerProfile
 
 log = logging.getLogger(__name__)
@@ -248,7 +248,7 @@ def predict_station(layout: Layout, station_layout: Sequence[float], *, profile:
 def _carry(base: Mapping[str, Observation], epoch: Mapping[str, Observation]) -> dict[str, np.ndarray]:
     """Epoch positions such that the epoch is the baseline seen from the station (no change): a rigid
     fit of the shared targets carries the baseline positions into the station's frame."""
-    from lidar.rigid import fit_rigid
+    from common.rigid import fit_rigid
 
     shared = [i for i in epoch if i in base]
     if len(shared) < 3:

@@ -9,8 +9,8 @@ from typing import Optional
 
 import numpy as np
 
-from lidar.files import json_safe, output_folder, write_atomic
-from lidar.errors import ProcessingError
+from common.files import json_safe, output_folder, write_atomic
+from common.errors import ProcessingError
 from projects.errors import DuplicateImportError, InputError
 from projects.store import CAMERA_DIR, Campaign, now_iso, parse_datetime, sha256_of
 from vision.crossval import CrossValidation, cross_validate

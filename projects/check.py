@@ -16,8 +16,8 @@ import numpy as np
 from lidar.angles import direction_from_angles
 from lidar.plan import PlanTarget, ScanPlan, plan_fine_scans
 from lidar.prediction import centroid_covariance
-from lidar.progress import ProgressCallback
-from lidar.errors import ProcessingError
+from common.progress import ProgressCallback
+from common.errors import ProcessingError
 from projects.store import Campaign
 
 POINTS_TOLERANCE = 0.7  # fewer than 70 % of the planned points: re-scan

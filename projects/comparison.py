@@ -17,9 +17,9 @@ from typing import Optional
 
 import numpy as np
 
-from lidar.errors import InputError
-from lidar.files import atomic_output, output_folder
-from lidar.progress import ProgressCallback, report, scaled
+from common.errors import InputError
+from common.files import atomic_output, output_folder
+from common.progress import ProgressCallback, report, scaled
 from projects.errors import CampaignError
 from projects.exports import displacement_table, write_atomic
 from projects.processing import baseline_epoch, read_files

@@ -12,7 +12,7 @@ import numpy as np
 
 from lidar.figures import save_figure
 from lidar.layout import layout_from_model
-from lidar.progress import ProgressCallback, report
+from common.progress import ProgressCallback, report
 from lidar.simulate import BridgeModel, EpochConditions, ScannerSetup
 from lidar.simulate.files import simulate_coarse, simulate_fine
 from projects.errors import CampaignError
@@ -64,7 +64,7 @@ def build_demo(folder: str | os.PathLike, *, weeks: int = 52, seed: int = 2026,
     """Build (or resume building) the demo campaign in ``folder``."""
     folder = Path(folder)
     if weeks < 2:
-        from lidar.errors import InputError
+        from common.errors import InputError
 
         raise InputError("the demo needs at least 2 weeks")
     model = BridgeModel()

@@ -14,7 +14,7 @@ from typing import Optional
 
 import numpy as np
 
-from lidar.errors import InputError
+from common.errors import InputError
 from projects.errors import DuplicateImportError
 from projects.store import ENV_DIR, Campaign, now_iso, parse_datetime, sha256_of
 from vision.series import CameraSeries, Quantity, read_camera_series

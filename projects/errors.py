@@ -1,5 +1,5 @@
 """Errors of the campaign store (all derive from the project's SurveyError)."""
-from lidar.errors import InputError, SurveyError
+from common.errors import InputError, SurveyError
 
 
 class CampaignError(SurveyError):

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lidar.files import write_atomic  # noqa: F401  (part of this module's API)
+from common.files import write_atomic  # noqa: F401  (part of this module's API)
 from projects.store import Campaign
 
 DISPLACEMENT_COLUMNS = ["epoch", "datetime", "reflector", "displacement_mm", "sigma_mm", "flags", "state",
@@ -103,7 +103,7 @@ def export(c: Campaign, path: str | os.PathLike) -> Path:
     if p.suffix.lower() == ".csv":
         return write_atomic(p, to_csv(displacement_table(c)))
     if p.suffix.lower() != ".xlsx":
-        from lidar.errors import InputError
+        from common.errors import InputError
 
         raise InputError(f"{p}: export writes .xlsx (all tables) or .csv (displacements)")
     from openpyxl import Workbook

@@ -14,7 +14,7 @@ from typing import Optional
 
 import numpy as np
 
-from lidar.files import atomic_output
+from common.files import atomic_output
 from lidar.plan import ScanPlan
 
 THUMB_HALF_DEG = 1.5

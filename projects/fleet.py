@@ -12,7 +12,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Iterable, Optional, Sequence
 
-from lidar.errors import InputError, SurveyError
+from common.errors import InputError, SurveyError
 from projects.store import DB_NAME, Campaign
 
 MAX_DEPTH = 8

@@ -20,8 +20,8 @@ import os
 from dataclasses import dataclass, field
 from typing import Optional, Sequence
 
-from lidar.errors import InputError, SurveyError
-from lidar.progress import ProgressCallback, report
+from common.errors import InputError, SurveyError
+from common.progress import ProgressCallback, report
 from projects.errors import CampaignLockedError
 from projects.fleet import find_campaigns
 from projects.processing import ProcessSummary, finish_displacements, run_stage1, save_stage1, stage1_job, stale_epochs

@@ -5,7 +5,7 @@ import datetime as dt
 import os
 from pathlib import Path
 
-from lidar.files import atomic_output
+from common.files import atomic_output
 
 STATE_COLOURS = {"ok": "#c8e6c9", "warning": "#ffe0b2", "alarm": "#ffcdd2", "unknown": "#eeeeee"}
 

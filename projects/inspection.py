@@ -9,9 +9,9 @@ import numpy as np
 
 from lidar.angles import direction_from_angles, spherical_from_xyz
 from lidar.centroid import TargetCentroid, target_centroid
-from lidar.errors import InputError, ProcessingError
+from common.errors import InputError, ProcessingError
 from lidar.plan import RoiPlan, ScanPlan
-from lidar.progress import ProgressCallback, report, scaled
+from common.progress import ProgressCallback, report, scaled
 from projects.processing import read_files
 from projects.store import Campaign
 

@@ -17,7 +17,7 @@ from typing import Optional
 
 import numpy as np
 
-from lidar.errors import InputError
+from common.errors import InputError
 
 # Span columns (upper bounds, m) and L/N denominators per speed class (km/h).
 KR_RAIL_SPANS = (20, 25, 30, 35, 40, 45, 50, 55, 75, 95, 120)

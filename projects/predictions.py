@@ -17,7 +17,7 @@ from typing import Optional
 
 import numpy as np
 
-from lidar.errors import InputError
+from common.errors import InputError
 from projects.store import PREDICTION_DIR, Campaign, now_iso, parse_datetime, sha256_of
 
 DAY_NS = 86_400 * 10**9

@@ -20,12 +20,12 @@ import numpy as np
 
 from lidar.displacement import FLAG_MISSING, Displacement, EpochDisplacements, compute_displacements
 from lidar.flags import FLAG_DECK_NOT_MEASURED, FLAG_NO_DISPLACEMENT, FLAG_PIERS_NOT_MEASURED, PROBLEM, severity
-from lidar.errors import InputError, ProcessingError, SurveyError
+from common.errors import InputError, ProcessingError, SurveyError
 from lidar.identification import MAX_TILT_DEG
 from lidar.io import read_scan
 from lidar.pipeline import analyse_coarse, measure_targets, plan_from_coarse
 from lidar.plan import ScanPlan
-from lidar.progress import ProgressCallback, report, scaled
+from common.progress import ProgressCallback, report, scaled
 from lidar.scan import Scan
 from projects.map_previews import encode_preview
 from projects.store import Campaign
@@ -89,7 +89,7 @@ FLAG_CHAINED = "chained_to_replaced_target"
 
 def set_parameter(c: Campaign, key: str, text: Optional[str]) -> None:
     """Change one processing parameter from its text form (validated)."""
-    from lidar.errors import InputError
+    from common.errors import InputError
 
     if key == "baseline":
         if text:

@@ -15,10 +15,10 @@ from typing import Optional
 import numpy as np
 
 from lidar.displacement import Observation
-from lidar.errors import InputError
-from lidar.files import write_atomic
-from lidar.progress import ProgressCallback, scaled
-from lidar.rigid import fit_rigid
+from common.errors import InputError
+from common.files import write_atomic
+from common.progress import ProgressCallback, scaled
+from common.rigid import fit_rigid
 from lidar.stations import StationPrediction, default_area, grid_in_polygon, survey_stations
 from projects.store import Campaign
 

@@ -8,7 +8,8 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from lidar.progress import ProgressCallback, report
+from common.progress import ProgressCallback, report
+from common.validation import require_points
 from registration.errors import InputError
 
 METHODS = ("c2c", "m3c2")
@@ -83,12 +84,7 @@ def _quiet_py4dgeo():
 
 
 def _check(name: str, a) -> np.ndarray:
-    a = np.asarray(a, dtype=np.float64)
-    if a.ndim != 2 or a.shape[1] != 3 or len(a) == 0:
-        raise InputError(f"{name}: needs an (N, 3) array of points, got shape {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise InputError(f"{name}: coordinates hold NaN or infinite values")
-    return a
+    return require_points(a, name)
 
 
 def cloud_to_cloud(reference_xyz: np.ndarray, compared_xyz: np.ndarray, *, max_distance_m: float = 1.0,

@@ -1,5 +1,5 @@
 """Errors of the registration layer (all under the product's one root, ``SurveyError``)."""
-from lidar.errors import InputError, ProcessingError, SurveyError
+from common.errors import InputError, ProcessingError, SurveyError
 
 
 class RegistrationError(ProcessingError):

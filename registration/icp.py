@@ -9,7 +9,8 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from lidar.progress import ProgressCallback, report
+from common.progress import ProgressCallback, report
+from common.validation import require_points
 from registration.errors import InputError, RegistrationError
 from registration.transform import Transform
 
@@ -67,12 +68,7 @@ def check_clouds(source_xyz, target_xyz, what: str) -> tuple[np.ndarray, np.ndar
     """Source and target as float64 (N, 3) arrays of at least 100 finite points, or InputError."""
     out = []
     for name, a in (("source", source_xyz), ("target", target_xyz)):
-        a = np.asarray(a, dtype=np.float64)
-        if a.ndim != 2 or a.shape[1] != 3 or len(a) < 100:
-            raise InputError(f"{what} {name}: needs an (N, 3) array of at least 100 points, got {a.shape}")
-        if not np.all(np.isfinite(a)):
-            raise InputError(f"{what} {name}: coordinates hold NaN or infinite values")
-        out.append(a)
+        out.append(require_points(a, f"{what} {name}", min_points=100))
     return out[0], out[1]
 
 

@@ -19,7 +19,7 @@ from typing import Optional
 
 import numpy as np
 
-from lidar.progress import ProgressCallback, report
+from common.progress import ProgressCallback, report
 from registration.errors import InputError, RegistrationError
 from registration.icp import IcpResult, check_clouds
 from registration.transform import Transform

@@ -6,7 +6,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from lidar.rigid import fit_rigid
+from common.rigid import fit_rigid
 from registration.errors import InputError, RegistrationError
 from registration.transform import Transform
 

@@ -20,8 +20,8 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from lidar.errors import InputError, ProcessingError
-from lidar.progress import ProgressCallback, report
+from common.errors import InputError, ProcessingError
+from common.progress import ProgressCallback, report
 from vision.geometry import rigid_from_rotvec
 from vision.main_camera import AffineTargetModel, fit_affine_target
 from vision.sub_camera import CameraMotion, Intrinsics, solve_poses

@@ -13,7 +13,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from lidar.errors import InputError, ProcessingError
+from common.errors import InputError, ProcessingError
 from vision.series import CameraSeries
 
 

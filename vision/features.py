@@ -12,7 +12,7 @@ from typing import Optional
 import cv2
 import numpy as np
 
-from lidar.errors import InputError, ProcessingError
+from common.errors import InputError, ProcessingError
 
 
 def _as_gray_u8(image: np.ndarray, what: str) -> np.ndarray:

@@ -7,8 +7,8 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from lidar.errors import InputError, ProcessingError
-from lidar.progress import ProgressCallback, report
+from common.errors import InputError, ProcessingError
+from common.progress import ProgressCallback, report
 from vision.features import detect_checkerboard, detect_main_target
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".pgm")

@@ -28,7 +28,7 @@ from typing import Optional
 
 import numpy as np
 
-from lidar.errors import InputError, SurveyError
+from common.errors import InputError, SurveyError
 
 SERIES_FORMAT_VERSION = 1
 NAN_TOKENS = {"", "nan", "na", "n/a", "null", "none", "-", "--"}

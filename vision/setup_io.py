@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from lidar.errors import InputError
-from lidar.files import write_atomic
+from common.errors import InputError
+from common.files import write_atomic
 from vision.compensation import DualCalibration, DualCameraSetup
 from vision.main_camera import AffineTargetModel
 from vision.sub_camera import Intrinsics

@@ -7,7 +7,7 @@ from typing import Optional, Sequence
 import cv2
 import numpy as np
 
-from lidar.errors import InputError, ProcessingError
+from common.errors import InputError, ProcessingError
 from vision.geometry import invert, rigid
 
 

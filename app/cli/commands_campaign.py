@@ -7,7 +7,7 @@ from pathlib import Path
 
 from app.cli.output import dump_json, table
 from app.cli.progress import progress_bar
-from lidar.errors import InputError
+from common.errors import InputError
 from lidar.flags import describe, severity
 
 
@@ -272,7 +272,7 @@ def cmd_status(args) -> int:
 
 
 def _xyz(text: str):
-    from lidar.errors import InputError
+    from common.errors import InputError
 
     try:
         v = [float(x) for x in text.split(",")]

@@ -40,7 +40,7 @@ def register(sub) -> None:
 
 
 def _board(text: str) -> tuple[int, int]:
-    from lidar.errors import InputError
+    from common.errors import InputError
 
     try:
         c, r = (int(v) for v in text.lower().split("x"))
@@ -52,7 +52,7 @@ def _board(text: str) -> tuple[int, int]:
 
 
 def _pattern(path: Path) -> np.ndarray:
-    from lidar.errors import InputError
+    from common.errors import InputError
 
     try:
         rows = [ln.split(",") for ln in path.read_text().splitlines()[1:] if ln.strip()]
@@ -67,7 +67,7 @@ def _pattern(path: Path) -> np.ndarray:
 
 
 def cmd_calibrate(args) -> int:
-    from lidar.errors import ProcessingError
+    from common.errors import ProcessingError
     from vision.compensation import calibrate_dual_camera
     from vision.images import detect_boards, detect_sequence, list_images
     from vision.setup_io import save_setup
@@ -101,7 +101,7 @@ def cmd_measure(args) -> int:
     import csv
     import io
 
-    from lidar.files import write_atomic
+    from common.files import write_atomic
     from vision.compensation import measure_dual_camera
     from vision.images import detect_sequence, list_images
     from vision.setup_io import load_setup
@@ -139,7 +139,7 @@ def _infer_board(setup) -> tuple[int, int]:
 
 
 def _times(path: Path, n: int) -> list[str]:
-    from lidar.errors import InputError
+    from common.errors import InputError
     from projects.store import parse_datetime
 
     try:

@@ -7,7 +7,7 @@ from pathlib import Path
 from app.cli.commands_campaign import _open
 from app.cli.output import dump_json, table
 from app.cli.progress import progress_bar
-from lidar.errors import InputError
+from common.errors import InputError
 
 
 def register(sub) -> None:

@@ -7,7 +7,7 @@ import numpy as np
 
 from app.cli.output import dump_json, table
 from app.cli.progress import progress_bar
-from lidar.errors import InputError
+from common.errors import InputError
 
 
 def register(sub) -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from app.cli.output import dump_json
-from lidar.errors import InputError
+from common.errors import InputError
 
 
 def register(sub) -> None:

@@ -12,7 +12,7 @@ import os
 import sys
 from typing import Optional, Sequence
 
-from lidar.errors import SurveyError
+from common.errors import SurveyError
 
 EXIT_ERROR = 1
 

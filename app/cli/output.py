@@ -37,6 +37,6 @@ def dump_json(obj, out=None) -> None:
             return o.item()
         raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
-    from lidar.files import json_safe
+    from common.files import json_safe
 
     out.write(json.dumps(json_safe(obj), indent=2, default=default) + "\n")

@@ -8,8 +8,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Callable, Optional
 
-from lidar.errors import InputError
-from lidar.progress import scaled
+from common.errors import InputError
+from common.progress import scaled
 
 
 def build_demo(folder: Path, progress: Callable):

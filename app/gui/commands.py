@@ -12,7 +12,7 @@ from PySide6.QtWidgets import QFileDialog, QInputDialog
 
 from app.gui import actions
 from app.gui.dialogs import AddEpochDialog, CheckDialog, ImportCameraDialog, ask_save_path, show_error
-from lidar.errors import SurveyError
+from common.errors import SurveyError
 
 
 class CommandsMixin:

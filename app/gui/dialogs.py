@@ -9,7 +9,7 @@ from PySide6.QtWidgets import (QComboBox, QDateTimeEdit, QDialog, QDialogButtonB
                                QFormLayout, QHBoxLayout, QLabel, QLineEdit, QListWidget, QMessageBox, QPushButton,
                                QVBoxLayout, QWidget)
 
-from lidar.errors import SurveyError
+from common.errors import SurveyError
 
 SCAN_FILTER = "Scans (*.las *.laz *.e57 *.ply *.pcd *.ptx *.xyz *.txt *.asc);;All files (*)"
 

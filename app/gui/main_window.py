@@ -25,7 +25,7 @@ from app.gui.views.map_view import MapView
 from app.gui.views.analysis_view import AnalysisView
 from app.gui.views.stations_view import StationsView
 from app.gui.worker import JobRunner
-from lidar.errors import SurveyError
+from common.errors import SurveyError
 
 MAX_RECENT = 8
 

@@ -9,7 +9,7 @@ from typing import Callable, Optional
 
 from PySide6.QtCore import QObject, QThread, Signal
 
-from lidar.errors import CancelledError, SurveyError
+from common.errors import CancelledError, SurveyError
 
 log = logging.getLogger(__name__)
 

@@ -15,7 +15,7 @@ import os
 from pathlib import Path
 from typing import Optional
 
-from lidar.errors import InputError, ScanFormatError
+from common.errors import InputError, ScanFormatError
 from lidar.io._common import check_readable
 from lidar.io.e57 import read_e57, write_e57
 from lidar.io.las import read_las, write_las
@@ -23,7 +23,7 @@ from lidar.io.pcd import read_pcd, write_pcd
 from lidar.io.ply import read_ply, write_ply
 from lidar.io.ptx import read_ptx, write_ptx
 from lidar.io.xyz import read_xyz, write_pts, write_xyz
-from lidar.progress import ProgressCallback
+from common.progress import ProgressCallback
 from lidar.scan import Scan
 
 READ_SUFFIXES = {".las": "las", ".laz": "las", ".e57": "e57", ".ply": "ply", ".pcd": "pcd", ".ptx": "ptx",

@@ -8,8 +8,8 @@ from typing import Optional
 
 import numpy as np
 
-from lidar.files import atomic_output  # noqa: F401  (used by every writer)
-from lidar.errors import ScanFormatError
+from common.files import atomic_output  # noqa: F401  (used by every writer)
+from common.errors import ScanFormatError
 from lidar.io.intensity import detect_convention
 from lidar.scan import Scan, normalise_intensity
 

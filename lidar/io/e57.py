@@ -7,7 +7,7 @@ from typing import Optional
 
 import numpy as np
 
-from lidar.errors import ScanFormatError
+from common.errors import ScanFormatError
 from lidar.io._common import (
     atomic_output,
     first_line,
@@ -19,7 +19,7 @@ from lidar.io._common import (
     raw_for_writing,
 )
 from lidar.io.e57_header import check_e57
-from lidar.progress import ProgressCallback, report
+from common.progress import ProgressCallback, report
 from lidar.scan import Scan
 
 

@@ -19,7 +19,7 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
-from lidar.errors import ScanFormatError
+from common.errors import ScanFormatError
 
 PAGE = 1024
 PAGE_DATA = 1020

@@ -16,10 +16,10 @@ from typing import Optional
 import laspy
 import numpy as np
 
-from lidar.errors import ScanFormatError
+from common.errors import ScanFormatError
 from lidar.io._common import atomic_output, first_line, check_readable, make_scan, raw_for_writing
 from lidar.io.las_header import check_las_header
-from lidar.progress import ProgressCallback, report
+from common.progress import ProgressCallback, report
 from lidar.scan import Scan
 
 #: VLR in which BridgeSurvey keeps the scanner pose (SOCS -> project frame) of a scan.

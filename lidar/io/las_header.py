@@ -19,7 +19,7 @@ import struct
 from dataclasses import dataclass
 from pathlib import Path
 
-from lidar.errors import ScanFormatError
+from common.errors import ScanFormatError
 
 #: Minimum public header size by minor version.
 HEADER_SIZES = {0: 227, 1: 227, 2: 227, 3: 235, 4: 375}

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lidar.errors import ScanFormatError
+from common.errors import ScanFormatError
 from lidar.io._common import (atomic_output, check_readable, make_scan, pose_from_quaternion, quaternion_from_pose,
                                raw_for_writing, read_ascii_table)
 from lidar.io.names import find_column

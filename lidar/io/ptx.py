@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lidar.errors import ScanFormatError
+from common.errors import ScanFormatError
 from lidar.io._common import atomic_output, check_readable, first_line, make_scan, raw_for_writing
 from lidar.scan import Scan
 

@@ -10,7 +10,7 @@ from typing import Optional
 
 import numpy as np
 
-from lidar.errors import InputError
+from common.errors import InputError
 
 
 @dataclass(frozen=True)

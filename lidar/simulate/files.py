@@ -15,7 +15,7 @@ from typing import Optional
 
 import numpy as np
 
-from lidar.errors import InputError
+from common.errors import InputError
 from lidar.io.las import write_las
 from lidar.scan import Scan
 from lidar.simulate.bridge import BridgeModel

@@ -8,7 +8,7 @@ from typing import Mapping, Optional
 import numpy as np
 
 from lidar.angles import AngularWindow, bounding_window, direction_from_angles, spherical_from_xyz
-from lidar.errors import InputError
+from common.errors import InputError
 from lidar.scan import Scan, normalise_intensity
 from lidar.scanner_profile import VZ1000, ScannerProfile
 from lidar.simulate.bridge import (

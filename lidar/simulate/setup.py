@@ -6,7 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from lidar.errors import InputError
+from common.errors import InputError
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from lidar.errors import InputError
+from common.errors import InputError
 
 CREEP_PSI = 0.6
 CREEP_D_DAYS = tuple(float(v) for v in np.round(np.geomspace(3.0, 200.0, 19), 1))

@@ -14,8 +14,8 @@ from typing import Optional
 
 import numpy as np
 
-from lidar.errors import InputError
-from lidar.files import write_atomic
+from common.errors import InputError
+from common.files import write_atomic
 from projects.analysis.models import Event, TargetFit, first_crossing, fit_target
 from projects.environment import events as stored_events
 from projects.environment import load_env

@@ -10,8 +10,8 @@ import os
 from pathlib import Path
 from typing import Optional
 
-from lidar.errors import InputError
-from lidar.progress import ProgressCallback, scaled
+from common.errors import InputError
+from common.progress import ProgressCallback, scaled
 from projects.report.content import ReportContent, ReportScope, gather
 from projects.store import Campaign
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from importlib import metadata
 from typing import Optional
 
-from lidar.errors import InputError, SurveyError
+from common.errors import InputError, SurveyError
 from projects import schema
 from projects.exports import displacement_table
 from projects.processing import PIPELINE_VERSION, baseline_epoch, parameters

@@ -10,7 +10,7 @@ from typing import Callable, Optional, Sequence
 import numpy as np
 
 from lidar.flags import describe, severity
-from lidar.progress import ProgressCallback, report, scaled
+from common.progress import ProgressCallback, report, scaled
 from projects.report.content import FLAG_TEXT, EpochSection, ReportContent
 
 PAGE_MARGIN_MM = 16
@@ -549,7 +549,7 @@ def build_pdf(content: ReportContent, path: str | os.PathLike, *, preview_of: Op
             story += epoch_section(e, content, ss, new_page=k > 0, map_jpeg=jpeg)
     story += log_section(content, ss)
     report(progress, 0.9, "writing PDF")
-    from lidar.files import atomic_output
+    from common.files import atomic_output
 
     with atomic_output(path) as tmp:
         _make_doc(tmp, content).build(story)

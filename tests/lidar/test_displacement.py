@@ -10,7 +10,7 @@ from lidar.displacement import (
     compute_displacements,
     deck_normal,
 )
-from lidar.errors import InputError, ProcessingError
+from common.errors import InputError, ProcessingError
 from lidar.simulate import EpochConditions, ScannerSetup
 
 from tests.lidar.sim_helpers import GROUPS, LAB_LOADS_MM, LAB_POSITIONS, MODEL, fine_epoch

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from lidar.errors import ProcessingError
+from common.errors import ProcessingError
 from lidar.identification import identify_reflectors
 from lidar.layout import layout_from_model
 from lidar.simulate import BridgeModel

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from lidar.errors import InputError
+from common.errors import InputError
 from lidar.layout import bridge_axis, layout_from_model, read_layout_csv, target_normals, write_layout_csv
 from lidar.simulate import BridgeModel
 

@@ -3,7 +3,7 @@ import json
 import numpy as np
 import pytest
 
-from lidar.errors import InputError
+from common.errors import InputError
 from lidar.plan import PlanTarget, ScanPlan, choose_steps, plan_fine_scans
 from lidar.scanner_profile import VZ1000, ScannerProfile
 from lidar.simulate import EpochConditions

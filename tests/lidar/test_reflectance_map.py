@@ -3,7 +3,7 @@ import pytest
 
 from lidar.angles import direction_from_angles
 from lidar.detection import detect_reflectors
-from lidar.errors import InputError
+from common.errors import InputError
 from lidar.reflectance_map import estimate_step_deg, reflectance_map
 
 

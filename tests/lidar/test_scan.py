@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from lidar.errors import InputError
+from common.errors import InputError
 from lidar.scan import Scan
 
 

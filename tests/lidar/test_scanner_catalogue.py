@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from lidar.errors import InputError
+from common.errors import InputError
 from lidar.plan import PlanTarget, ScanPlan, plan_fine_scans
 from lidar.scanner_catalogue import CATALOGUE, get_scanner
 from lidar.scanner_profile import ScannerProfile, load_profile

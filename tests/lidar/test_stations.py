@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from lidar.errors import InputError
+from common.errors import InputError
 from lidar.layout import layout_from_model
 from lidar.scanner_catalogue import CATALOGUE
 from lidar.simulate import BridgeModel

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from lidar.errors import InputError, ProcessingError
+from common.errors import InputError, ProcessingError
 from vision.compensation import calibrate_dual_camera, fit_false_displacement, measure_dual_camera
 from vision.main_camera import fit_affine_target
 from vision.simulate import RigGeometry, SyntheticRig, calibration_motions, table10_schedule

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from lidar.errors import ProcessingError
+from common.errors import ProcessingError
 from vision.crossval import cross_validate
 from vision.series import CameraSeries
 

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from lidar.errors import InputError, ProcessingError
+from common.errors import InputError, ProcessingError
 from vision.features import detect_checkerboard, detect_circles, match_pattern
 from vision.simulate import SyntheticRig
 from vision.simulate.rig import die_pattern

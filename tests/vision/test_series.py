@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from lidar.errors import InputError, SurveyError
+from common.errors import InputError, SurveyError
 from vision.series import CameraSeries, read_camera_series
 from vision.simulate.series import simulate_series, write_series_csv
 

@@ -16,8 +16,8 @@ from typing import Optional
 
 import numpy as np
 
-from lidar.files import write_atomic
-from lidar.progress import ProgressCallback, report
+from common.files import write_atomic
+from common.progress import ProgressCallback, report
 from vision.simulate.motions import calibration_motions, pan_tilt_drift
 from vision.simulate.rig import RigGeometry, SyntheticRig
 

@@ -7,7 +7,7 @@ from typing import Callable, Optional, Sequence
 
 import numpy as np
 
-from lidar.files import atomic_output
+from common.files import atomic_output
 
 
 def simulate_series(start_ns: int, end_ns: int, truth_mm: Callable[[np.ndarray], np.ndarray], *,

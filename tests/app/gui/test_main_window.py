@@ -215,7 +215,7 @@ def test_camera_import_crossval_and_report_export(window, processed_copy, tmp_pa
 def test_long_work_can_be_cancelled_and_errors_never_freeze(window, qtbot, errors):
     import time
 
-    from lidar.errors import InputError
+    from common.errors import InputError
 
     def slow(progress):
         for k in range(1000):

@@ -30,7 +30,7 @@ def tree_digest(folder: Path) -> str:
 
 
 def handle(req: dict) -> dict:
-    from lidar.errors import ScanFormatError, SurveyError
+    from common.errors import ScanFormatError, SurveyError
 
     path = req["path"]
     if req.get("campaign"):

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from lidar.errors import ScanFormatError
+from common.errors import ScanFormatError
 from lidar.io import read_scan, read_scans, write_scan
 
 

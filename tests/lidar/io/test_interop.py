@@ -8,7 +8,7 @@ import laspy
 import numpy as np
 import pytest
 
-from lidar.errors import ScanFormatError
+from common.errors import ScanFormatError
 from lidar.io import read_scan, read_scans, write_scan
 from tests.lidar.io.fuzz_cases import e57_with_xml, sample_scan
 

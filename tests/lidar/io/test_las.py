@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from lidar.errors import ScanFormatError
+from common.errors import ScanFormatError
 from lidar.io import read_scan, read_scans, write_scan
 from lidar.io.las import read_las
 from lidar.scan import Scan, normalise_intensity

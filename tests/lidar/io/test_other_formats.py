@@ -3,7 +3,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lidar.errors import InputError, ScanFormatError
+from common.errors import InputError, ScanFormatError
 from lidar.io import read_scan, read_scans, sniff_format, write_scan
 from lidar.io.ptx import write_ptx
 from lidar.scan import Scan

@@ -1,7 +1,7 @@
 """Progress reporting for long work.
 
 A progress callback is any callable ``progress(fraction, message)`` with
-``fraction`` in [0, 1]. It may raise :class:`lidar.errors.CancelledError` to
+``fraction`` in [0, 1]. It may raise :class:`common.errors.CancelledError` to
 stop the work; functions taking one let that exception through untouched.
 """
 from __future__ import annotations

@@ -48,7 +48,7 @@ def json_safe(obj):
 
 def output_folder(path: str | os.PathLike) -> Path:
     """A folder to write results into, created if missing; InputError when a file is in the way."""
-    from lidar.errors import InputError
+    from common.errors import InputError
 
     out = Path(path)
     if out.exists() and not out.is_dir():

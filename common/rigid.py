@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lidar.errors import InputError
+from common.errors import InputError
 
 
 def fit_rigid(src: np.ndarray, dst: np.ndarray, weights=None) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,13 @@
+"""The examples in the docstrings run and give what they show."""
+import doctest
+import importlib
+
+import pytest
+
+MODULES = ["common.validation", "lidar.flags", "lidar.identification", "lidar.io.names", "lidar.io.intensity"]
+
+
+@pytest.mark.parametrize("name", MODULES)
+def test_docstring_examples(name):
+    result = doctest.testmod(importlib.import_module(name), optionflags=doctest.ELLIPSIS)
+    assert result.attempted > 0 and result.failed == 0
