@@ -18,7 +18,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from lidar.displacement import compute_displacements  # noqa: E402
 from lidar.simulate import EpochConditions, ScannerSetup  # noqa: E402
-from tests.lidar.sim_helpers import GROUPS, LAB_LOADS_MM, LAB_POSITIONS, fine_epoch  # noqa: E402
+from lidar.simulate.epochs import GROUPS, LAB_LOADS_MM, LAB_POSITIONS, fine_epoch  # noqa: E402
 
 
 def errors(base, base_truth, ep, ep_truth, **kw):

@@ -239,7 +239,7 @@ def stage1_job(c: Campaign, label: str) -> Stage1Job:
     fine = c.files(label, "fine")
     return Stage1Job(str(c.folder), label, tuple(str(c.path_of(r)) for r in c.files(label, "coarse")),
                      tuple(str(c.path_of(r)) for r in fine), layout, params, c.profile_for(label), h, stored,
-                     measure_inputs(c, label, params) if fine else None)
+                     measure_inputs(c, label, params, h) if fine else None)
 
 
 def _read_paths(paths, progress: Optional[ProgressCallback]) -> Scan:
@@ -293,8 +293,9 @@ def plan_epoch(c: Campaign, label: str, *, progress: Optional[ProgressCallback] 
     return result.plan
 
 
-def measure_inputs(c: Campaign, label: str, params: dict) -> str:
-    plan_h, _ = plan_inputs(c, label, params)
+def measure_inputs(c: Campaign, label: str, params: dict, plan_hash: Optional[str] = None) -> str:
+    """Stage 1's input hash of an epoch with fine scans (``plan_hash`` when already computed)."""
+    plan_h = plan_hash if plan_hash is not None else plan_inputs(c, label, params)[0]
     return _hash({"plan": plan_h, "fine": [f["sha256"] for f in c.files(label, "fine")]})
 
 
