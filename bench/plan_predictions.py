@@ -152,7 +152,7 @@ def report_points(rows):
 def report_sigma(rows):
     print("\n2. Predicted sigma of each deck target's displacement against the sigma processing reports")
     q = np.array([r[3] / r[4] for r in rows])
-    print(f"| targets | median predicted/reported | within ±30 % | 5-95 % |")
+    print("| targets | median predicted/reported | within ±30 % | 5-95 % |")
     print("|---|---|---|---|")
     print(f"| {len(q)} | {np.median(q):.2f} | {np.mean(np.abs(q - 1) <= 0.3) * 100:.0f} % | "
           f"{np.percentile(q, 5):.2f}-{np.percentile(q, 95):.2f} |")

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from lidar.angles import AngularWindow, spherical_from_xyz
+from lidar.angles import AngularWindow
 from lidar.centroid import (
     FLAG_CLIPPED,
     FLAG_NOT_FOUND,

@@ -2,10 +2,8 @@
 from __future__ import annotations
 
 import csv
-import hashlib
 import io
 import json
-import sqlite3
 from pathlib import Path
 
 import pytest

@@ -43,7 +43,7 @@ def test_rigid_registration_recovers_the_pose_and_flags_a_moved_target():
 
 
 def test_yaw_and_similarity_variants():
-    rng = np.random.default_rng(4)
+
     yaw = Transform(Rotation.from_euler("z", 37.0, degrees=True).as_matrix(), np.array([3.0, -2.0, 0.4]))
     res = register_targets(REFS[:2], yaw.apply(REFS[:2]), IDS[:2], mode="yaw")
     assert pose_difference(yaw, res.transform)[0] < 1e-9

@@ -1,4 +1,3 @@
-import struct
 
 import laspy
 import numpy as np

@@ -6,7 +6,6 @@ from hypothesis import strategies as st
 from common.errors import InputError, ScanFormatError
 from lidar.io import read_scan, read_scans, sniff_format, write_scan
 from lidar.io.ptx import write_ptx
-from lidar.scan import Scan
 
 
 @pytest.mark.parametrize("suffix", [".ply", ".pcd", ".xyz", ".ptx"])

@@ -1,6 +1,5 @@
 """The displacement model against synthetic histories with known temperature effect, steps and creep."""
 import numpy as np
-import pytest
 
 from projects.analysis.models import Event, creep_shape, effective_temperature, first_crossing, fit_target
 
