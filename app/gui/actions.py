@@ -71,21 +71,12 @@ def save_plan(session, label: str, scan_plan) -> None:
 
 
 def window_from_rect(map_view, rect, rid: str, reflector: dict):
-    """A new plan window for ``rid`` from a rectangle drawn on the map (range from the map's cells)."""
-    import numpy as np
+    """A new plan window for ``rid`` from a rectangle drawn on the map (see
+    :func:`app.gui.state.map_geometry.window_from_cells`; ``rect`` has left/top/width/height methods)."""
+    from app.gui.state.map_geometry import CellRect, window_from_cells
 
-    from lidar.plan import new_roi
-
-    g = map_view.geometry_
-    rmap = map_view.preview.reflectance_map
-    r0, r1 = int(max(rect.top(), 0)), int(min(rect.bottom() + 1, rmap.shape[0]))
-    c0, c1 = int(max(rect.left(), 0)), int(min(rect.right() + 1, rmap.shape[1]))
-    ranges = rmap.range_m[r0:r1, c0:c1]
-    if ranges.size == 0 or not np.isfinite(ranges).any():
-        raise InputError("the drawn window holds no scanned cell; draw it over the target")
-    w = g.window_of(rect)
-    return new_roi(rid, reflector["grp"], range_m=float(np.nanmedian(ranges)), diameter_m=reflector["diameter_m"],
-                   n_points=map_view.plan.min_points, profile=map_view.plan.profile, **w)
+    cells = CellRect(rect.left(), rect.top(), rect.width(), rect.height())
+    return window_from_cells(map_view.preview, map_view.plan, cells, rid, reflector)
 
 
 def process(session, progress: Callable):

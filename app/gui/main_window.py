@@ -14,7 +14,8 @@ from PySide6.QtWidgets import (QDockWidget, QFileDialog, QHBoxLayout, QLabel, QL
 from app.gui import actions
 from app.gui.campaign_tree import CampaignTree
 from app.gui.commands import CommandsMixin
-from app.gui.details import DetailsPanel, campaign_html, epoch_html, reflector_html, series_html
+from app.gui.details import DetailsPanel
+from app.gui.html import campaign_html, epoch_html, reflector_html, series_html
 from app.gui.dialogs import NewCampaignDialog, show_error
 from app.gui.session import CampaignSession
 from app.gui.views.camera_view import CameraView

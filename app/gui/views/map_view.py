@@ -15,6 +15,7 @@ from PySide6.QtWidgets import (QAbstractItemView, QGraphicsEllipseItem, QGraphic
                                QGraphicsScene, QGraphicsSimpleTextItem, QGraphicsView, QHBoxLayout, QLabel,
                                QPushButton, QSplitter, QTableWidget, QTableWidgetItem, QVBoxLayout, QWidget)
 
+from app.gui.state.map_geometry import CellRect, window_of_cells
 from lidar.plan import RoiPlan, ScanPlan, edit_roi, with_rois
 
 GROUP_COLOURS = {"reference": QColor("#ff9f1c"), "measurement": QColor("#2ec4b6"), "": QColor("#e71d36")}
@@ -27,6 +28,11 @@ def map_image(max_intensity: np.ndarray) -> QImage:
     h, w = max_intensity.shape
     img = QImage(np.ascontiguousarray(rgba).data, w, h, 4 * w, QImage.Format_RGBA8888)
     return img.copy()  # own the pixels
+
+
+def cells(rect: QRectF) -> CellRect:
+    """A scene rectangle as plain map-cell values."""
+    return CellRect(rect.left(), rect.top(), rect.width(), rect.height())
 
 
 class MapGeometry:
@@ -42,14 +48,7 @@ class MapGeometry:
         return QRectF(x0, y0, (w.phi_max_deg - w.phi_min_deg) / self.step, (w.theta_max_deg - w.theta_min_deg) / self.step)
 
     def window_of(self, rect: QRectF) -> dict:
-        phi_min = float(np.mod(self.phi0 + rect.left() * self.step, 360.0))
-        width = rect.width() * self.step
-        if phi_min + width > 360.0:
-            phi_min -= 360.0  # a window across 0 deg starts below 0 (the plan contract)
-        t0 = self.theta0 + rect.top() * self.step
-        return {"phi_min_deg": round(phi_min, 6), "phi_max_deg": round(phi_min + width, 6),
-                "theta_min_deg": round(max(t0, 0.0), 6), "theta_max_deg": round(min(t0 + rect.height() * self.step,
-                                                                                      180.0), 6)}
+        return window_of_cells(cells(rect), self.theta0, self.phi0, self.step)
 
     def point_of(self, theta: float, phi: float) -> QPointF:
         return QPointF(np.mod(phi - self.phi0, 360.0) / self.step, (theta - self.theta0) / self.step)

@@ -1,0 +1,79 @@
+"""HTML of the details panel: the campaign, a reflector, an epoch, a camera series (no Qt here)."""
+from __future__ import annotations
+
+import html
+import json
+
+import numpy as np
+
+from lidar.flags import describe
+from projects.overview import epoch_state
+
+
+def _rows(pairs) -> str:
+    return "<table cellspacing=2>" + "".join(
+        f"<tr><td><b>{html.escape(str(k))}</b></td><td>{html.escape(str(v))}</td></tr>" for k, v in pairs) + "</table>"
+
+
+def campaign_html(c, status: dict) -> str:
+    n_proc = sum(e["state"] in ("processed", "warning", "problem") for e in status["epochs"])
+    return (f"<h3>{html.escape(c.name)}</h3>" + _rows([
+        ("Folder", str(c.folder)), ("Span", f"{c.span_m:g} m" if c.span_m else "-"), ("Scanner", c.profile.name),
+        ("Epochs", f"{len(status['epochs'])} ({n_proc} processed)"), ("Baseline", status["baseline"] or "-"),
+        ("Reflectors", len(c.reflectors()))]))
+
+
+def reflector_html(c, rid: str) -> str:
+    r = c.reflector(rid)
+    rows = [("Group", r["grp"]), ("Layout position", f"{r['x']:.3f}, {r['y']:.3f}, {r['z']:.3f} m"),
+            ("Diameter", f"{r['diameter_m'] * 1000:.0f} mm")]
+    for k in ("installed", "retired", "replaces"):
+        if r[k]:
+            rows.append((k.capitalize(), r[k]))
+    lim = c.limit_for(rid) if r["grp"] == "measurement" else None
+    if lim is not None:
+        rows.append(("Limits", f"warning {lim.warning_mm:.2f} mm, alarm {lim.alarm_mm:.2f} mm ({lim.rule})"))
+    hist = [d for d in c.displacement_rows() if d["reflector"] == rid and d["displacement_m"] is not None]
+    if hist:
+        last = hist[-1]
+        rows.append(("Latest", f"{last['displacement_m'] * 1e3:+.3f} ± {last['sigma_m'] * 1e3:.3f} mm "
+                               f"({last['epoch']})"))
+        vals = np.array([d["displacement_m"] for d in hist]) * 1e3
+        rows.append(("Range", f"{vals.min():+.2f} .. {vals.max():+.2f} mm over {len(hist)} epochs"))
+        if json.loads(last["flags"]):
+            rows.append(("Flags", ", ".join(json.loads(last["flags"]))))
+    return f"<h3>Reflector {html.escape(rid)}</h3>" + _rows(rows)
+
+
+def epoch_html(c, label: str) -> str:
+    e = c.epoch(label)
+    state, flags = epoch_state(c, label)
+    rows = [("Date", e["datetime"]), ("State", state), ("Notes", e["notes"] or "-")]
+    if flags:
+        rows.append(("Flags", describe(flags)))
+    for f in c.files(label):
+        rows.append((f"{f['role']} scan", f"{f['original_path'].rsplit('/', 1)[-1]} ({f['size'] / 1e6:.1f} MB, "
+                                           f"sha256 {f['sha256'][:12]}…)"))
+    plan = c.plan_row(label)
+    if plan is not None:
+        p = json.loads(plan["json"])
+        rows.append(("Plan", f"{len(p['rois'])} windows, {p['total_seconds'] / 60:.1f} min"
+                             + (" (edited by hand)" if p.get("edited") else "")))
+    out = f"<h3>Epoch {html.escape(label)}</h3>" + _rows(rows)
+    cents = c.centroids(label)
+    if cents:
+        out += "<h4>Centroids</h4><table cellspacing=3><tr><th>target</th><th>n</th><th>σ [mm]</th><th>flags</th></tr>"
+        for rid, t in cents.items():
+            sig = float(np.sqrt(np.trace(t.cov))) * 1e3 if t.found else float("nan")
+            out += (f"<tr><td>{rid}</td><td>{t.n_points}</td><td>{sig:.3f}</td>"
+                    f"<td>{html.escape(', '.join(t.flags)) or '-'}</td></tr>")
+        out += "</table>"
+    return out
+
+
+def series_html(row: dict) -> str:
+    s = row["summary"]
+    return (f"<h3>Camera series {html.escape(row['name'])}</h3>" + _rows([
+        ("Target", row["reflector"] or "-"), ("Rows", f"{s['rows']:,}"), ("Period", f"{s['start']} .. {s['end']}"),
+        ("Sampling", f"{s['sampling_s']:.0f} s"), ("Gaps", s["gaps"]), ("Missing values", s["missing_values"]),
+        ("Bad rows", s["bad_rows"]), ("File", row["original_path"]), ("sha256", row["sha256"][:16] + "…")]))

@@ -1,0 +1,1 @@
+"""The application's state and logic that need no Qt: tested without a display."""
