@@ -135,11 +135,32 @@ def _plane(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return c, vt[2], vt[:2]
 
 
+@dataclass(frozen=True, eq=False)
+class CentroidTrace:
+    """How a centroid was found, for display: (N,) masks over the window's points.
+
+    ``bright`` above Otsu's threshold, ``cluster`` the compact bright cluster kept, ``disc`` the points
+    averaged (the cluster trimmed symmetrically around the centre in the disc plane).
+    """
+
+    bright: np.ndarray
+    cluster: np.ndarray
+    disc: np.ndarray
+
+    @classmethod
+    def empty(cls, n: int) -> "CentroidTrace":
+        return cls(np.zeros(n, bool), np.zeros(n, bool), np.zeros(n, bool))
+
+
 def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: str = "",
                     expected_xyz: Optional[Sequence[float]] = None, diameter_m: float = 0.05,
                     window: Optional[AngularWindow] = None, profile: ScannerProfile = VZ1000,
-                    min_points: int = 30, masks: Optional[dict] = None) -> TargetCentroid:
+                    min_points: int = 30, trace: bool = False):
     """Robust centroid of the target in one fine-scan window.
+
+    Stages: Otsu's split of the intensities (:func:`_bright`), the compact bright cluster nearest
+    the expected position (:func:`_pick_cluster`), symmetric trimming in the disc plane
+    (:func:`_trim_disc`), the covariance (:func:`_covariance`) and the doubts (:func:`_doubts`).
 
     Parameters
     ----------
@@ -158,43 +179,41 @@ def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: s
         Footprint model. Default VZ-1000.
     min_points : int, keyword-only
         Fewer disc points than this: not found. Default 30.
-    masks : dict, optional, keyword-only
-        When given, filled with (N,) boolean masks over the input points, for display:
-        ``bright`` (above the Otsu threshold), ``cluster`` (the compact cluster chosen) and
-        ``disc`` (the points the centroid was computed from).
+    trace : bool, keyword-only
+        Also return a :class:`CentroidTrace` (the masks of each stage, for display). Default False.
 
     Returns
     -------
-    TargetCentroid (``found`` is False with FLAG_NOT_FOUND when there is no usable disc).
+    TargetCentroid, or (TargetCentroid, CentroidTrace) with ``trace=True``
+        ``found`` is False with FLAG_NOT_FOUND when there is no usable disc.
     """
     xyz = np.asarray(xyz_socs, dtype=np.float64)
     inten = np.asarray(intensity, dtype=np.float64)
     if xyz.ndim != 2 or xyz.shape[1] != 3 or inten.shape != (xyz.shape[0],):
         raise InputError("target_centroid needs (N, 3) points and (N,) intensities")
     ok = np.isfinite(xyz).all(axis=1) & np.isfinite(inten)
-    if masks is not None:
-        masks.update(bright=np.zeros(len(ok), bool), cluster=np.zeros(len(ok), bool), disc=np.zeros(len(ok), bool))
-    ok_idx = np.nonzero(ok)[0]
-    xyz, inten = xyz[ok], inten[ok]
-    n_window = len(xyz)
-    if n_window < min_points:
-        return _not_found(reflector, n_window)
+    tr = CentroidTrace.empty(len(ok))
+    result = _centroid_stages(xyz[ok], inten[ok], np.nonzero(ok)[0], tr, reflector=reflector,
+                              expected_xyz=expected_xyz, diameter_m=diameter_m, window=window, profile=profile,
+                              min_points=min_points)
+    return (result, tr) if trace else result
+
+
+def _bright(inten: np.ndarray) -> tuple[float, float, np.ndarray]:
+    """Otsu's threshold, its separability and the indices above it."""
     thr, sep = otsu_threshold(inten)
-    bright = np.nonzero(inten > thr)[0]
-    if masks is not None:
-        masks["bright"][ok_idx[bright]] = True
-    if bright.size < min_points:
-        return _not_found(reflector, n_window, thr, sep)
-    hi, lo = float(inten[bright].mean()), float(inten[inten <= thr].mean()) if bright.size < n_window else 0.0
-    if (hi - lo) / max(hi + lo, 1e-9) < MIN_CONTRAST:
-        return _not_found(reflector, n_window, thr, sep, (FLAG_LOW_CONTRAST,))
-    radius = diameter_m / 2
-    pts = xyz[bright]
-    rng = float(np.median(np.linalg.norm(pts, axis=1)))
-    # Cluster in the scanner's angular grid (scaled to metres at the target's range), where
-    # neighbours are one grid step apart whatever the incidence; on a grazing surface adjacent
-    # columns can be a centimetre apart in 3-D.
-    spacing = float(np.sqrt(np.pi * radius ** 2 / max(bright.size, 1)))
+    return thr, sep, np.nonzero(inten > thr)[0]
+
+
+def _pick_cluster(pts: np.ndarray, rng: float, radius: float, window, expected, diameter_m: float,
+                  min_points: int, n_bright: int) -> tuple[Optional[np.ndarray], float]:
+    """The compact bright cluster nearest the expected position (largest first); also the point spacing.
+
+    Clustering runs in the scanner's angular grid (scaled to metres at the target's range), where
+    neighbours are one grid step apart whatever the incidence; on a grazing surface adjacent columns
+    can be a centimetre apart in 3-D.
+    """
+    spacing = float(np.sqrt(np.pi * radius ** 2 / max(n_bright, 1)))
     t_b, p_b, _ = spherical_from_xyz(pts)
     t_c = float(np.median(t_b))
     p_c = float(np.median(p_b))
@@ -203,10 +222,9 @@ def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: s
     if window is not None:
         gap = rng * np.radians(max(window.theta_step_deg, window.phi_step_deg * np.sin(np.radians(t_c))))
     else:
-        gap = 2.0 * float(np.sqrt(np.prod(np.ptp(uv, axis=0) + 1e-6) / bright.size))
+        gap = 2.0 * float(np.sqrt(np.prod(np.ptp(uv, axis=0) + 1e-6) / n_bright))
     eps = float(np.clip(2.5 * gap, 0.0005, 0.03))
     labels = _clusters(uv, eps)
-    expected = None if expected_xyz is None else np.asarray(expected_xyz, dtype=np.float64)
     best, best_key = None, None
     for lab in np.unique(labels):
         members = np.nonzero(labels == lab)[0]
@@ -217,18 +235,13 @@ def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: s
         key = (dist > max(0.1, 3 * diameter_m), -members.size)
         if best_key is None or key < best_key:
             best, best_key = members, key
-    if best is None:
-        return _not_found(reflector, n_window, thr, sep)
-    cluster = pts[best]
-    _, normal, axes = _plane(cluster)
-    view = -cluster.mean(axis=0) / np.linalg.norm(cluster.mean(axis=0))
-    if normal @ view < 0:
-        normal = -normal
-    cos_inc = float(abs(normal @ view))
-    footprint = profile.footprint_m(rng) / np.sqrt(max(cos_inc, 0.1))
-    r_trim = radius + float(np.clip(footprint / 2, 0.002, 0.012))
-    # symmetric trimming around the disc centre, in the disc plane
+    return best, spacing
+
+
+def _trim_disc(cluster: np.ndarray, axes: np.ndarray, r_trim: float) -> tuple[np.ndarray, np.ndarray]:
+    """Centre and kept-point mask of the cluster trimmed symmetrically around its centre in the disc plane."""
     centre = np.median(cluster, axis=0)
+    keep = np.ones(len(cluster), bool)
     for _ in range(50):
         inplane = (cluster - centre) @ axes.T
         keep = np.einsum("ij,ij->i", inplane, inplane) <= r_trim ** 2
@@ -237,14 +250,15 @@ def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: s
             centre = new
             break
         centre = new
-    disc = cluster[keep]
+    return centre, keep
+
+
+def _covariance(disc: np.ndarray, view: np.ndarray, radius: float, spacing: float
+                ) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
+    """(cov, sigma_range, disc normal, in-plane axes): range noise along the view over n, plus the rim
+    term in the disc plane (each of the ~2 pi R / spacing rim points is in or out -- threshold noise,
+    mixed pixels -- moving the centroid by about R / n each)."""
     n = len(disc)
-    if masks is not None:
-        masks["cluster"][ok_idx[bright[best]]] = True
-        masks["disc"][ok_idx[bright[best[keep]]]] = True
-    flags = []
-    if n < min_points:
-        return _not_found(reflector, n_window, thr, sep)
     c_plane, normal2, axes2 = _plane(disc)
     if normal2 @ view < 0:
         normal2 = -normal2
@@ -255,26 +269,23 @@ def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: s
     cos_a = max(abs(float(normal2 @ mean_dir)), 0.1)
     sigma_r = float(np.std(resid, ddof=3) / cos_a)
     cov = sigma_r ** 2 / n * np.outer(mean_dir, mean_dir)
-    # In the disc plane the rim decides: each of the ~2 pi R / spacing rim points is in or out
-    # (threshold noise, mixed pixels), moving the centroid by about R / n each.
     n_rim = 2 * np.pi * radius / max(spacing, 1e-4)
     var_ip = (radius / n) ** 2 * n_rim / 6.0
     cov += var_ip * (axes2.T @ axes2)
-    # doubts
-    near = np.linalg.norm(pts - centre, axis=1) <= 3 * diameter_m
-    rejected = int(np.count_nonzero(near)) - n
-    if rejected > 2 * n:  # a bright surface, not a disc: the disc is only a cut-out of it
-        return _not_found(reflector, n_window, thr, sep, (FLAG_NOT_COMPACT,))
+    return cov, sigma_r, normal2, axes2
+
+
+def _doubts(*, n: int, rejected: int, sep: float, saturated: int, rms_r: float, radius: float, footprint: float,
+            centre, expected, diameter_m: float, window, disc: np.ndarray) -> list[str]:
+    flags = []
     if rejected > max(5, 0.03 * n):
         flags.append(FLAG_SECOND_OBJECT)
     if n < 100:
         flags.append(FLAG_FEW_POINTS)
     if sep < 0.6:
         flags.append(FLAG_LOW_SEPARABILITY)
-    top = float(inten.max())
-    if np.count_nonzero(inten[bright][best][keep] >= top - 1e-6) > 0.2 * n:
+    if saturated > 0.2 * n:
         flags.append(FLAG_SATURATED)
-    rms_r = float(np.sqrt(np.mean(np.sum(((disc - centre) @ axes2.T) ** 2, axis=1))))
     if not 0.6 * radius / np.sqrt(2) <= rms_r <= 1.4 * (radius + footprint / 2) / np.sqrt(2):
         flags.append(FLAG_SIZE)
     if expected is not None and np.linalg.norm(centre - expected) > max(0.05, 1.5 * diameter_m):
@@ -287,6 +298,54 @@ def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: s
         if (t.min() < window.theta_min_deg + tol_t or t.max() > window.theta_max_deg - tol_t
                 or p_rel.min() < tol_p or p_rel.max() > width - tol_p):
             flags.append(FLAG_CLIPPED)
+    return flags
+
+
+def _centroid_stages(xyz: np.ndarray, inten: np.ndarray, ok_idx: np.ndarray, tr: CentroidTrace, *, reflector,
+                     expected_xyz, diameter_m, window, profile, min_points) -> TargetCentroid:
+    n_window = len(xyz)
+    if n_window < min_points:
+        return _not_found(reflector, n_window)
+    thr, sep, bright = _bright(inten)
+    tr.bright[ok_idx[bright]] = True
+    if bright.size < min_points:
+        return _not_found(reflector, n_window, thr, sep)
+    hi, lo = float(inten[bright].mean()), float(inten[inten <= thr].mean()) if bright.size < n_window else 0.0
+    if (hi - lo) / max(hi + lo, 1e-9) < MIN_CONTRAST:
+        return _not_found(reflector, n_window, thr, sep, (FLAG_LOW_CONTRAST,))
+    radius = diameter_m / 2
+    pts = xyz[bright]
+    rng = float(np.median(np.linalg.norm(pts, axis=1)))
+    expected = None if expected_xyz is None else np.asarray(expected_xyz, dtype=np.float64)
+    best, spacing = _pick_cluster(pts, rng, radius, window, expected, diameter_m, min_points, bright.size)
+    if best is None:
+        return _not_found(reflector, n_window, thr, sep)
+    cluster = pts[best]
+    _, normal, axes = _plane(cluster)
+    view = -cluster.mean(axis=0) / np.linalg.norm(cluster.mean(axis=0))
+    if normal @ view < 0:
+        normal = -normal
+    cos_inc = float(abs(normal @ view))
+    footprint = profile.footprint_m(rng) / np.sqrt(max(cos_inc, 0.1))
+    r_trim = radius + float(np.clip(footprint / 2, 0.002, 0.012))
+    centre, keep = _trim_disc(cluster, axes, r_trim)
+    disc = cluster[keep]
+    n = len(disc)
+    tr.cluster[ok_idx[bright[best]]] = True
+    tr.disc[ok_idx[bright[best[keep]]]] = True
+    if n < min_points:
+        return _not_found(reflector, n_window, thr, sep)
+    cov, sigma_r, normal2, axes2 = _covariance(disc, view, radius, spacing)
+    near = np.linalg.norm(pts - centre, axis=1) <= 3 * diameter_m
+    rejected = int(np.count_nonzero(near)) - n
+    if rejected > 2 * n:  # a bright surface, not a disc: the disc is only a cut-out of it
+        return _not_found(reflector, n_window, thr, sep, (FLAG_NOT_COMPACT,))
+    top = float(inten.max())
+    saturated = int(np.count_nonzero(inten[bright][best][keep] >= top - 1e-6))
+    rms_r = float(np.sqrt(np.mean(np.sum(((disc - centre) @ axes2.T) ** 2, axis=1))))
+    flags = _doubts(n=n, rejected=rejected, sep=sep, saturated=saturated, rms_r=rms_r, radius=radius,
+                    footprint=footprint, centre=centre, expected=expected, diameter_m=diameter_m, window=window,
+                    disc=disc)
     return TargetCentroid(reflector, centre, cov, n, thr, sep, tuple(flags), n_window, max(0, rejected),
                           sigma_r, normal2)
 

@@ -65,13 +65,13 @@ def inspect_target(c: Campaign, label: str, reflector: str, *,
     xyz = scan.xyz_socs[inside]
     inten = scan.intensity[inside].astype(np.float64)
     tc, pc = roi.window.centre
-    masks: dict = {}
     diameter = c.reflector(reflector)["diameter_m"]
-    cent = target_centroid(xyz, inten, reflector=reflector, expected_xyz=direction_from_angles(tc, pc) * roi.range_m,
-                           diameter_m=diameter, window=roi.window, profile=plan.profile, masks=masks)
+    cent, trace = target_centroid(xyz, inten, reflector=reflector,
+                                  expected_xyz=direction_from_angles(tc, pc) * roi.range_m,
+                                  diameter_m=diameter, window=roi.window, profile=plan.profile, trace=True)
     report(progress, 1.0, "window read")
     return TargetInspection(label, reflector, roi, theta[inside].astype(np.float64), phi[inside].astype(np.float64),
-                            inten, masks["bright"], masks["cluster"], masks["disc"], cent,
+                            inten, trace.bright, trace.cluster, trace.disc, cent,
                             c.centroids(label).get(reflector), float(diameter))
 
 

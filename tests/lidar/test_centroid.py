@@ -80,3 +80,16 @@ def test_empty_or_dull_window_is_not_found():
     assert not c.found and FLAG_NOT_FOUND in c.flags
     c = target_centroid(np.zeros((5, 3)), np.zeros(5))
     assert not c.found
+
+
+def test_the_trace_shows_each_stage():
+    scan, truth, roi, w = window_scan(EpochConditions(cable_ties=("M3",)), "M3")
+    c, tr = target_centroid(scan.xyz_socs, scan.intensity, expected_xyz=truth.target("M3").centre_socs_m, window=w,
+                            trace=True)
+    plain = target_centroid(scan.xyz_socs, scan.intensity, expected_xyz=truth.target("M3").centre_socs_m, window=w)
+    assert np.array_equal(c.xyz_socs, plain.xyz_socs) and c.flags == plain.flags
+    assert tr.bright.shape == tr.cluster.shape == tr.disc.shape == (len(scan.xyz_socs),)
+    assert np.all(tr.bright[tr.cluster]) and np.all(tr.cluster[tr.disc])
+    assert int(tr.disc.sum()) == c.n_points
+    assert tr.bright.sum() > tr.disc.sum()  # the cable tie is bright but not part of the disc
+    assert np.allclose(scan.xyz_socs[tr.disc].mean(axis=0), c.xyz_socs)
