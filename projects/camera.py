@@ -11,8 +11,8 @@ import numpy as np
 
 from common.files import json_safe, output_folder, write_atomic
 from common.errors import ProcessingError
-from projects.errors import DuplicateImportError, InputError
-from projects.store import CAMERA_DIR, Campaign, now_iso, parse_datetime, sha256_of
+from projects.errors import InputError
+from projects.store import CAMERA_DIR, Campaign, json_rows, now_iso, parse_datetime
 from vision.crossval import CrossValidation, cross_validate
 from vision.series import CameraSeries, read_camera_series
 
@@ -38,25 +38,15 @@ def import_series(c: Campaign, path: str | os.PathLike, *, name: Optional[str] =
     Nothing changes in the campaign unless the whole file was read; a file already imported
     (same checksum) or an existing name is refused.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: no such file; check the path")
-    name = (name or path.stem).strip()
-    if not name or any(ch in name for ch in "/\\\n"):
-        raise InputError(f"series name {name!r} is not usable")
-    if c.conn.execute("SELECT 1 FROM camera_series WHERE name = ?", (name,)).fetchone():
-        raise InputError(f"a camera series named {name!r} is already in the campaign; give another --name")
+    path, name = c.new_series("camera_series", path, name, "a camera series")
     rid = reflector or midspan_reflector(c)
     if c.reflector(rid)["grp"] != "measurement":
         raise InputError(f"{rid} is a reference target; pair the camera with a measurement target")
-    sha = sha256_of(path)
-    row = c.conn.execute("SELECT name, original_path FROM camera_series WHERE sha256 = ?", (sha,)).fetchone()
-    if row is not None:
-        raise DuplicateImportError(f"{path}: this file is already in the campaign as series {row['name']!r} "
-                                   f"(from {row['original_path']}); nothing was changed")
+    sha = c.checksum_if_new("camera_series", path)
     series = read_camera_series(path, column=column, timezone=timezone, unit=unit, positive=positive)
     options = {"column": series.column, "unit": series.unit, "timezone": timezone, "positive": positive}
     summary = series.summary()
+
     def record(conn, rel):
         conn.execute("INSERT INTO camera_series(name, reflector, sha256, stored_path, original_path, imported, "
                      "options, summary, arrays) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
@@ -71,14 +61,8 @@ def import_series(c: Campaign, path: str | os.PathLike, *, name: Optional[str] =
 
 def series_rows(c: Campaign) -> list[dict]:
     """The imported camera series (without their arrays)."""
-    rows = []
-    for r in c.conn.execute("SELECT name, reflector, sha256, stored_path, original_path, imported, options, summary "
-                            "FROM camera_series ORDER BY imported, name"):
-        d = dict(r)
-        d["options"] = json.loads(d["options"])
-        d["summary"] = json.loads(d["summary"])
-        rows.append(d)
-    return rows
+    return json_rows(c.conn.execute("SELECT name, reflector, sha256, stored_path, original_path, imported, options, "
+                                    "summary FROM camera_series ORDER BY imported, name"))
 
 
 def load_series(c: Campaign, name: Optional[str] = None) -> tuple[dict, CameraSeries]:

@@ -9,14 +9,12 @@ from __future__ import annotations
 import json
 import os
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Optional
 
 import numpy as np
 
 from common.errors import InputError
-from projects.errors import DuplicateImportError
-from projects.store import ENV_DIR, Campaign, now_iso, parse_datetime, sha256_of
+from projects.store import ENV_DIR, Campaign, json_rows, now_iso, parse_datetime
 from vision.series import CameraSeries, Quantity, read_camera_series
 
 _TEMP_UNITS = {"degc": (1.0, 0.0), "c": (1.0, 0.0), "°c": (1.0, 0.0), "celsius": (1.0, 0.0),
@@ -62,19 +60,8 @@ def import_env(c: Campaign, path: str | os.PathLike, *, kind: str, name: Optiona
     """
     if kind not in KINDS:
         raise InputError(f"unknown series kind {kind!r}; use one of {', '.join(KINDS)}")
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: no such file; check the path")
-    name = (name or path.stem).strip()
-    if not name or any(ch in name for ch in "/\\\n"):
-        raise InputError(f"series name {name!r} is not usable")
-    if c.conn.execute("SELECT 1 FROM env_series WHERE name = ?", (name,)).fetchone():
-        raise InputError(f"an environment series named {name!r} is already in the campaign; give another --name")
-    sha = sha256_of(path)
-    row = c.conn.execute("SELECT name, original_path FROM env_series WHERE sha256 = ?", (sha,)).fetchone()
-    if row is not None:
-        raise DuplicateImportError(f"{path}: this file is already in the campaign as series {row['name']!r} "
-                                   f"(from {row['original_path']}); nothing was changed")
+    path, name = c.new_series("env_series", path, name, "an environment series")
+    sha = c.checksum_if_new("env_series", path)
     q = KINDS[kind]
     series = read_camera_series(path, column=column, timezone=timezone, unit=unit, quantity=q)
     if not np.any(np.isfinite(series.value_mm)):
@@ -95,14 +82,8 @@ def import_env(c: Campaign, path: str | os.PathLike, *, kind: str, name: Optiona
 
 
 def env_rows(c: Campaign) -> list[dict]:
-    rows = []
-    for r in c.conn.execute("SELECT name, kind, original_path, imported, options, summary FROM env_series "
-                            "ORDER BY kind, name"):
-        d = dict(r)
-        d["options"] = json.loads(d["options"])
-        d["summary"] = json.loads(d["summary"])
-        rows.append(d)
-    return rows
+    return json_rows(c.conn.execute("SELECT name, kind, original_path, imported, options, summary FROM env_series "
+                                    "ORDER BY kind, name"))
 
 
 def load_env(c: Campaign, *, kind: Optional[str] = None, name: Optional[str] = None) -> list[EnvSeries]:

@@ -63,6 +63,17 @@ def sha256_of(path: Path, chunk: int = 8 << 20) -> str:
     return h.hexdigest()
 
 
+def json_rows(cursor, columns=("options", "summary")) -> list[dict]:
+    """Rows as dicts with the JSON text of ``columns`` decoded."""
+    rows = []
+    for r in cursor:
+        d = dict(r)
+        for col in columns:
+            d[col] = json.loads(d[col])
+        rows.append(d)
+    return rows
+
+
 def _normal_values(n) -> tuple:
     """A layout normal as three SQL values (NULLs when unknown)."""
     return tuple(float(v) for v in n) if np.all(np.isfinite(n)) else (None, None, None)
@@ -354,6 +365,28 @@ class Campaign:
 
     def path_of(self, file_row: dict) -> Path:
         return self.folder / file_row["stored_path"]
+
+    def new_series(self, table: str, path: str | os.PathLike, name: Optional[str], what: str) -> tuple[Path, str]:
+        """The file and the name of a series about to be imported into ``table`` (``camera_series``,
+        ``env_series``): the file exists and the name (default: the file's stem) is usable and free."""
+        path = Path(path)
+        if not path.is_file():
+            raise InputError(f"{path}: no such file; check the path")
+        name = (name or path.stem).strip()
+        if not name or any(ch in name for ch in "/\\\n"):
+            raise InputError(f"series name {name!r} is not usable")
+        if self.conn.execute(f"SELECT 1 FROM {table} WHERE name = ?", (name,)).fetchone():
+            raise InputError(f"{what} named {name!r} is already in the campaign; give another --name")
+        return path, name
+
+    def checksum_if_new(self, table: str, path: Path) -> str:
+        """The file's sha256, refusing a file already imported into ``table`` under some series name."""
+        sha = sha256_of(path)
+        row = self.conn.execute(f"SELECT name, original_path FROM {table} WHERE sha256 = ?", (sha,)).fetchone()
+        if row is not None:
+            raise DuplicateImportError(f"{path}: this file is already in the campaign as series {row['name']!r} "
+                                       f"(from {row['original_path']}); nothing was changed")
+        return sha
 
     def import_file(self, src: Path, sha: str, sub: str, record) -> str:
         """Copy ``src`` (whose checksum was ``sha`` when it was read) into ``sub`` read-only and, in one
