@@ -248,23 +248,30 @@ def fit_target(t_days: Sequence[float], d_mm: Sequence[float], sigma_mm: Sequenc
     out = dict(n_epochs=n, scale=scale, epoch_days=t, rms_residual_mm=float(np.sqrt(np.mean(best["resid"] ** 2))),
                creep_d_days=None if best["dd"] is None else best["dd"][1],
                creep_law=None if best["dd"] is None else f"{best['dd'][0]}:{best['dd'][1]:g}")
+    # Akaike weights over the creep laws: their choice is uncertain too, and the thermal and event figures
+    # carry that (model averaging, between-model spread added to the variances)
+    models = list(per_d.values()) if len(per_d) > 1 else [best]
+    a_min = min(m["aicc"] for m in models)
+    wts = np.array([math.exp(-0.5 * (m["aicc"] - a_min)) for m in models])
+    wts /= wts.sum()
+    for m in models:  # each model's covariance scaled by its own reduced chi-square, and its column index
+        red_m = m["chi2"] / max(int(m["use"].sum()) - len(m["coef"]), 1)
+        m["scaled_cov"] = m["cov"] * (red_m if red_m > 1 else 1.0)
+        m["pos"] = {n_: i for i, n_ in enumerate(m["names"])}
+
+    def averaged(vals) -> tuple[float, float]:
+        """Akaike-weighted mean and sigma of per-model (value, variance) pairs (NaN when a model lacks it)."""
+        if any(v is None for v in vals):
+            return float("nan"), float("nan")
+        mean = float(sum(w_ * v[0] for w_, v in zip(wts, vals)))
+        var = float(sum(w_ * (v[1] + (v[0] - mean) ** 2) for w_, v in zip(wts, vals)))
+        return mean, math.sqrt(var)
+
     if "b" in idx:
         from scipy import stats
 
-        b, sb = float(coef[idx["b"]]), float(sig[idx["b"]])
-        if len(per_d) > 1:  # averaged over the creep laws, as the event figures are
-            ms = list(per_d.values())
-            a0 = min(m["aicc"] for m in ms)
-            ww = np.array([math.exp(-0.5 * (m["aicc"] - a0)) for m in ms])
-            ww /= ww.sum()
-            bs, vs = [], []
-            for m in ms:
-                pm = {n_: i for i, n_ in enumerate(m["names"])}
-                red_m = m["chi2"] / max(int(m["use"].sum()) - len(m["coef"]), 1)
-                bs.append(float(m["coef"][pm["b"]]))
-                vs.append(float(m["cov"][pm["b"], pm["b"]]) * (red_m if red_m > 1 else 1.0))
-            b = float(np.dot(ww, bs))
-            sb = float(math.sqrt(np.dot(ww, np.array(vs) + (np.array(bs) - b) ** 2)))
+        b, sb = averaged([(float(m["coef"][m["pos"]["b"]]), float(m["scaled_cov"][m["pos"]["b"], m["pos"]["b"]]))
+                          for m in models])
         out.update(thermal_mm_per_degC=b, thermal_sigma=sb,
                    thermal_p_value=float(2 * stats.t.sf(abs(b) / sb, max(dof, 1))) if sb > 0 else float("nan"),
                    temperature_window_h=best["wh"], temperature_lag_h=best["lh"],
@@ -272,15 +279,13 @@ def fit_target(t_days: Sequence[float], d_mm: Sequence[float], sigma_mm: Sequenc
         dT = np.nan_to_num(best["te"] - best["t_ref"])
         out["corrected_mm"] = d - b * dT
         out["corrected_sigma_mm"] = np.sqrt((s * scale) ** 2 + (dT * sb) ** 2)
-        if span >= 300:
-            day = np.floor(temperature[0]).astype(int) if temperature is not None else None
-            if day is not None:
-                tt, tv = (np.asarray(a, dtype=np.float64) for a in temperature)
-                okk = np.isfinite(tv)
-                A = np.column_stack([np.ones(okk.sum()), np.sin(2 * np.pi * tt[okk] / YEAR_D),
-                                     np.cos(2 * np.pi * tt[okk] / YEAR_D)])
-                ca, *_ = np.linalg.lstsq(A, tv[okk], rcond=None)
-                out["seasonal_amplitude_mm"] = float(abs(b) * math.hypot(ca[1], ca[2]))
+        if span >= 300 and temperature is not None:
+            tt, tv = (np.asarray(a, dtype=np.float64) for a in temperature)
+            okk = np.isfinite(tv)
+            A = np.column_stack([np.ones(okk.sum()), np.sin(2 * np.pi * tt[okk] / YEAR_D),
+                                 np.cos(2 * np.pi * tt[okk] / YEAR_D)])
+            ca, *_ = np.linalg.lstsq(A, tv[okk], rcond=None)
+            out["seasonal_amplitude_mm"] = float(abs(b) * math.hypot(ca[1], ca[2]))
     else:
         out["corrected_mm"] = d
         out["corrected_sigma_mm"] = s * scale
@@ -289,18 +294,10 @@ def fit_target(t_days: Sequence[float], d_mm: Sequence[float], sigma_mm: Sequenc
     if "as" in idx:
         out["seasonal_amplitude_mm"] = float(math.hypot(coef[idx["as"]], coef[idx["ac"]]))
     pos = {n_: i for i, n_ in enumerate(names)}
-    # Akaike weights over the creep-time parameter: its choice is uncertain too, and the event figures
-    # carry that (model averaging, between-model spread added to the variances)
-    models = list(per_d.values()) if len(per_d) > 1 else [best]
-    a_min = min(m["aicc"] for m in models)
-    wts = np.array([math.exp(-0.5 * (m["aicc"] - a_min)) for m in models])
-    wts /= wts.sum()
 
-    def event_params(m, e):
-        pm = {n_: i for i, n_ in enumerate(m["names"])}
-        dof_m = int(m["use"].sum()) - len(m["coef"])
-        red_m = m["chi2"] / max(dof_m, 1)
-        cv = m["cov"] * (red_m if red_m > 1 else 1.0)
+    def event_params(m, e) -> dict:
+        """One model's (value, variance) of the event's step, creep and creep coefficients."""
+        pm, cv = m["pos"], m["scaled_cov"]
         i_s = pm[("s", e)]
         step = float(m["coef"][i_s])
         out_m = {"s": (step, float(cv[i_s, i_s]))}
@@ -318,22 +315,15 @@ def fit_target(t_days: Sequence[float], d_mm: Sequence[float], sigma_mm: Sequenc
             out_m["creep_now"] = (k * f_last, float(f_last ** 2 * cv[i_k, i_k]))
         return out_m
 
-    def averaged(e, key):
-        vals = [event_params(m, e).get(key) for m in models]
-        if any(v is None for v in vals):
-            return float("nan"), float("nan")
-        mean = float(sum(w_ * v[0] for w_, v in zip(wts, vals)))
-        var = float(sum(w_ * (v[1] + (v[0] - mean) ** 2) for w_, v in zip(wts, vals)))
-        return mean, math.sqrt(var)
-
     for e, creep in ev_cols:
-        step, s_step = averaged(e, "s")
+        per_model = [event_params(m, e) for m in models]
+        step, s_step = averaged([p.get("s") for p in per_model])
         fit = dict(step_mm=step, step_sigma_mm=s_step)
         if ("k", e) in pos:
-            k, s_k = averaged(e, "k")
-            phi, s_phi = averaged(e, "phi")
-            phi_f, s_phi_f = averaged(e, "phi_final")
-            now, s_now = averaged(e, "creep_now")
+            k, s_k = averaged([p.get("k") for p in per_model])
+            phi, s_phi = averaged([p.get("phi") for p in per_model])
+            phi_f, s_phi_f = averaged([p.get("phi_final") for p in per_model])
+            now, s_now = averaged([p.get("creep_now") for p in per_model])
             fit.update(creep_mm=now, creep_sigma_mm=s_now, creep_final_mm=k, creep_final_sigma_mm=s_k,
                        creep_coefficient=phi, creep_coefficient_sigma=s_phi, creep_coefficient_final=phi_f,
                        creep_coefficient_final_sigma=s_phi_f)
