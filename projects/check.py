@@ -76,15 +76,16 @@ class EpochCheck:
 def check_epoch(c: Campaign, label: str, *, goal_sigma_mm: Optional[float] = None,
                 progress: Optional[ProgressCallback] = None) -> EpochCheck:
     """Measure the epoch's fine scans and judge every planned target (see the module notes)."""
-    from projects.processing import measure_epoch
+    from projects.processing import run_stage1, save_stage1, stage1_job
 
     c.epoch(label)  # an unknown epoch says so
     if not c.files(label, "fine"):
         raise ProcessingError(f"epoch {label} has no fine scans yet; import them with 'bridgesurvey add-fine' first")
     if goal_sigma_mm is not None and not (math.isfinite(goal_sigma_mm) and goal_sigma_mm > 0):
         raise ProcessingError(f"the sigma goal must be a positive number of millimetres, got {goal_sigma_mm}")
-    cents = measure_epoch(c, label, progress=progress)
-    plan = _stored_plan(c, label)
+    result = run_stage1(stage1_job(c, label), progress=progress)  # the plan it measured with, and the centroids
+    save_stage1(c, result)
+    cents, plan = result.centroids, result.plan
     layout = c.layout(c.epoch(label)["datetime"])
     diam = {i: float(d) for i, d in zip(layout.ids, layout.diameters_m)}
     rows, retry = [], []
@@ -118,15 +119,6 @@ def check_epoch(c: Campaign, label: str, *, goal_sigma_mm: Optional[float] = Non
         if status != "ok":
             retry.append((roi, cent, ratio))
     return EpochCheck(label, tuple(rows), _rescan_plan(plan, retry, diam) if retry else None)
-
-
-def _stored_plan(c: Campaign, label: str) -> ScanPlan:
-    import json
-
-    row = c.plan_row(label)
-    if row is None:
-        raise ProcessingError(f"epoch {label} has no plan; run 'bridgesurvey process' first")
-    return ScanPlan.from_json(json.loads(row["json"]))
 
 
 def _rescan_plan(plan: ScanPlan, retry, diam: dict) -> ScanPlan:
