@@ -92,8 +92,9 @@ def read_prediction_file(path: Path, reflector_ids, casting: Optional[int]) -> t
     return out, axis
 
 
-def _measured(c: Campaign, rid: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    rows = [r for r in c.displacement_rows() if r["reflector"] == rid and r["displacement_m"] is not None]
+def _measured(all_rows: list[dict], rid: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Times (ns), displacements and sigmas (mm) of one target from the campaign's displacement rows."""
+    rows = [r for r in all_rows if r["reflector"] == rid and r["displacement_m"] is not None]
     t = np.array([int(dt.datetime.fromisoformat(r["datetime"]).timestamp() * 1e9) for r in rows], dtype=np.int64)
     return t, np.array([r["displacement_m"] * 1000 for r in rows]), np.array([(r["sigma_m"] or 0) * 1000 for r in rows])
 
@@ -129,16 +130,18 @@ def import_prediction(c: Campaign, path: str | os.PathLike, *, align_at: Optiona
         raise InputError(f"{path}: no such file; check the path")
     if align_at and lsq:
         raise InputError("align at a date or by least squares, not both")
-    meas_ids = [r["id"] for r in c.reflectors() if r["grp"] == "measurement"]
-    curves, axis = read_prediction_file(path, meas_ids + [r["id"] for r in c.reflectors()], casting_ns(c))
+    reflectors = c.reflectors()
+    meas_ids = [r["id"] for r in reflectors if r["grp"] == "measurement"]
+    curves, axis = read_prediction_file(path, [r["id"] for r in reflectors], casting_ns(c))
     at_ns = None
     if align_at:
         at_ns = int(dt.datetime.fromisoformat(parse_datetime(align_at)).timestamp() * 1e9)
     out = {}
+    rows = c.displacement_rows()
     for rid, (t, v) in curves.items():
         if rid not in meas_ids:
             raise InputError(f"{path}: {rid} is a reference target; predictions are for deck targets")
-        tm, dm, sm = _measured(c, rid)
+        tm, dm, sm = _measured(rows, rid)
         if not len(tm):
             raise InputError(f"{path}: {rid} has no measured displacement yet; process the campaign first")
         try:
