@@ -14,7 +14,6 @@ from typing import Optional
 
 import numpy as np
 
-from common.files import atomic_output
 from lidar.plan import ScanPlan
 
 THUMB_HALF_DEG = 1.5
@@ -55,11 +54,10 @@ def _thumbnail_png(preview, roi) -> Optional[bytes]:
 def write_field_sheet(plan: ScanPlan, path: str | os.PathLike, *, campaign_name: str = "", preview=None,
                       epoch_date: str = "") -> Path:
     """Write the field sheet of ``plan`` to a PDF (``preview``: the epoch's stored map, for thumbnails)."""
-    from reportlab.lib.pagesizes import A4, landscape
     from reportlab.lib.units import mm
-    from reportlab.platypus import Image, Paragraph, SimpleDocTemplate, Spacer
+    from reportlab.platypus import Image, Paragraph, Spacer
 
-    from projects.report.pdf import _esc, _styles, _table
+    from projects.report.pdf import _esc, _styles, _table, write_landscape_pdf
 
     ss = _styles()
     p = plan.profile
@@ -106,8 +104,4 @@ def write_field_sheet(plan: ScanPlan, path: str | os.PathLike, *, campaign_name:
         "Tick each window when scanned. Import the fine scans before leaving and run "
         "'bridgesurvey check DIR --epoch L' (or Epoch ▸ Check fine scans in the application): it lists "
         "targets that came out short and writes a re-scan plan."), ss["Small"]))
-    with atomic_output(path) as tmp:
-        doc = SimpleDocTemplate(str(tmp), pagesize=landscape(A4), leftMargin=10 * mm, rightMargin=10 * mm,
-                                topMargin=10 * mm, bottomMargin=10 * mm, title=f"Field sheet {plan.epoch}")
-        doc.build(story)
-    return Path(path)
+    return write_landscape_pdf(story, path, title=f"Field sheet {plan.epoch}")

@@ -5,18 +5,16 @@ import datetime as dt
 import os
 from pathlib import Path
 
-from common.files import atomic_output
 
 STATE_COLOURS = {"ok": "#c8e6c9", "warning": "#ffe0b2", "alarm": "#ffcdd2", "unknown": "#eeeeee"}
 
 
 def write_fleet_report(status: dict, path: str | os.PathLike, *, title: str = "Bridge fleet") -> Path:
     """Write :func:`projects.fleet.fleet_status` output as a PDF."""
-    from reportlab.lib.pagesizes import A4, landscape
     from reportlab.lib.units import mm
-    from reportlab.platypus import Paragraph, SimpleDocTemplate, Spacer
+    from reportlab.platypus import Paragraph, Spacer
 
-    from projects.report.pdf import _esc, _num, _styles, _table
+    from projects.report.pdf import _esc, _num, _styles, _table, write_landscape_pdf
 
     ss = _styles()
     ov = status["overview"]
@@ -44,8 +42,4 @@ def write_fleet_report(status: dict, path: str | os.PathLike, *, title: str = "B
                      str(b["problems"]), cv, b["folder"]])
         colours.append((k, 1, STATE_COLOURS.get(b["state"], "#eeeeee")))
     story.append(_table(rows, [38, 18, 18, 22, 20, 34, 14, 14, 15, 40, 44], ss, cell_colours=colours))
-    with atomic_output(path) as tmp:
-        doc = SimpleDocTemplate(str(tmp), pagesize=landscape(A4), leftMargin=10 * mm, rightMargin=10 * mm,
-                                topMargin=10 * mm, bottomMargin=10 * mm, title=title)
-        doc.build(story)
-    return Path(path)
+    return write_landscape_pdf(story, path, title=title)

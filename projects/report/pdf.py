@@ -104,6 +104,20 @@ def figure_flowable(fig, width_mm: float):
     return d
 
 
+def write_landscape_pdf(story: list, path: str | os.PathLike, *, title: str) -> Path:
+    """A one-off landscape A4 document (field sheet, fleet summary), written through a temporary file."""
+    from reportlab.lib.pagesizes import A4, landscape
+    from reportlab.lib.units import mm
+    from reportlab.platypus import SimpleDocTemplate
+
+    from common.files import atomic_output
+
+    with atomic_output(path) as tmp:
+        SimpleDocTemplate(str(tmp), pagesize=landscape(A4), leftMargin=10 * mm, rightMargin=10 * mm,
+                          topMargin=10 * mm, bottomMargin=10 * mm, title=title).build(story)
+    return Path(path)
+
+
 def _make_doc(path, content: ReportContent):
     """A BaseDocTemplate with header and footer, whose level-1/2 headings become PDF bookmarks."""
     from reportlab import rl_config
