@@ -24,7 +24,8 @@ from common.errors import InputError, SurveyError
 from common.progress import ProgressCallback, report
 from projects.errors import CampaignLockedError
 from projects.fleet import find_campaigns
-from projects.processing import ProcessSummary, finish_displacements, run_stage1, save_stage1, stage1_job, stale_epochs
+from projects.processing import (EpochOutcome, ProcessSummary, finish_displacements, run_stage1, save_stage1,
+                                 stage1_job, stale_epochs)
 from projects.store import Campaign
 
 log = logging.getLogger(__name__)
@@ -129,9 +130,9 @@ def fleet_process(roots: Sequence[str | os.PathLike], *, scheduler: Optional[str
                 if e["label"] in stale:
                     try:
                         jobs.append((cr, stage1_job(c, e["label"])))
+                        cr.tasks += 1
                     except SurveyError as exc:
-                        cr.summary.outcomes.append(_outcome(e["label"], "failed", str(exc)))
-            cr.tasks = sum(1 for r, _ in jobs if r is cr)
+                        cr.summary.outcomes.append(EpochOutcome(e["label"], "failed", str(exc)))
         run.tasks = len(jobs)
         if jobs or scheduler:  # a scheduler given is checked even when there is nothing to do
             client, run.cluster = stack.enter_context(_client(scheduler, workers))
@@ -143,16 +144,10 @@ def fleet_process(roots: Sequence[str | os.PathLike], *, scheduler: Optional[str
                 continue
             labels = [e["label"] for e in c.epochs()]
             done = {o.epoch for o in cr.summary.outcomes}
-            cr.summary.outcomes += [_outcome(lab, "up-to-date") for lab in labels if lab not in done]
+            cr.summary.outcomes += [EpochOutcome(lab, "up-to-date") for lab in labels if lab not in done]
             finish_displacements(c, cr.summary, labels)
     report(progress, 1.0, f"{run.tasks} epoch(s) on {len(folders)} campaign(s)")
     return run
-
-
-def _outcome(label, action, message=""):
-    from projects.processing import EpochOutcome
-
-    return EpochOutcome(label, action, message)
 
 
 def _run_tasks(client, jobs, open_campaigns, run: FleetRun, progress) -> None:
@@ -173,16 +168,16 @@ def _run_tasks(client, jobs, open_campaigns, run: FleetRun, progress) -> None:
                 save_stage1(c, result)
                 if result.centroids is not None:
                     found = sum(t.found for t in result.centroids.values())
-                    cr.summary.outcomes.append(_outcome(job.label, "measured",
+                    cr.summary.outcomes.append(EpochOutcome(job.label, "measured",
                                                         f"{found}/{len(result.centroids)} targets found"))
                 else:
-                    cr.summary.outcomes.append(_outcome(job.label, "planned", f"{len(result.plan.rois)} windows"))
+                    cr.summary.outcomes.append(EpochOutcome(job.label, "planned", f"{len(result.plan.rois)} windows"))
             except SurveyError as exc:
                 run.failed += 1
-                cr.summary.outcomes.append(_outcome(job.label, "failed", str(exc).splitlines()[0]))
+                cr.summary.outcomes.append(EpochOutcome(job.label, "failed", str(exc).splitlines()[0]))
             except KilledWorker:
                 run.failed += 1
-                cr.summary.outcomes.append(_outcome(job.label, "failed", "the workers running this epoch died "
+                cr.summary.outcomes.append(EpochOutcome(job.label, "failed", "the workers running this epoch died "
                                                     "repeatedly (out of memory?); run 'bridgesurvey process' on it"))
             done += 1
             report(progress, 0.95 * done / len(futures), f"{done} of {len(futures)} epochs ({cr.name} {job.label})")
