@@ -83,9 +83,22 @@ def read_area_csv(path: str | os.PathLike) -> np.ndarray:
     return np.array(pts)
 
 
-def _last_fit(c: Campaign):
-    """(label, R, t) of the last measured epoch: its scanner frame = R @ layout + t (rigid fit of its
-    found centroids to the layout), or (None, None, None)."""
+@dataclass(frozen=True)
+class LastStation:
+    """Where the last measured epoch's scanner stood: its frame is ``rotation @ layout + translation``
+    (rigid fit of its found centroids to the layout)."""
+
+    label: str
+    rotation: np.ndarray
+    translation: np.ndarray
+
+    @property
+    def position_layout(self) -> np.ndarray:
+        return self.rotation.T @ (-self.translation)
+
+
+def last_station(c: Campaign) -> Optional[LastStation]:
+    """The last epoch with at least three found targets, and its station (None before any)."""
     for e in reversed(c.epochs()):
         cents = {k: v for k, v in c.centroids(e["label"]).items() if v.found}
         layout = c.layout(e["datetime"])
@@ -94,29 +107,22 @@ def _last_fit(c: Campaign):
             continue
         r, t = fit_rigid(np.array([layout.xyz[layout.index(i)] for i in ids]),
                          np.array([cents[i].xyz_socs for i in ids]))
-        return e["label"], r, t
-    return None, None, None
+        return LastStation(e["label"], r, t)
+    return None
 
 
-def last_station(c: Campaign) -> tuple[Optional[str], Optional[np.ndarray]]:
-    """The last measured epoch and where its scanner stood, in the layout's frame."""
-    label, r, t = _last_fit(c)
-    return (None, None) if label is None else (label, r.T @ (-t))
-
-
-def seen_surfaces(c: Campaign, *, voxel_m: float = 0.05,
-                  progress: Optional[ProgressCallback] = None) -> tuple[Optional[str], Optional[np.ndarray]]:
-    """The last measured epoch's coarse scan in the layout's frame, one point per ``voxel_m`` cube."""
+def seen_surfaces(c: Campaign, last: LastStation, *, voxel_m: float = 0.05,
+                  progress: Optional[ProgressCallback] = None) -> Optional[np.ndarray]:
+    """The epoch's coarse scan in the layout's frame, one point per ``voxel_m`` cube (None without one)."""
     from projects.processing import read_files
 
-    label, r, t = _last_fit(c)
-    if label is None or not c.files(label, "coarse"):
-        return None, None
-    scan = read_files(c, c.files(label, "coarse"), progress)
-    xyz = (scan.xyz_socs - t) @ r  # R^T (x - t), row-wise
+    if not c.files(last.label, "coarse"):
+        return None
+    scan = read_files(c, c.files(last.label, "coarse"), progress)
+    xyz = (scan.xyz_socs - last.translation) @ last.rotation  # R^T (x - t), row-wise
     key = np.floor(xyz / voxel_m).astype(np.int64)
     _, first = np.unique(key, axis=0, return_index=True)
-    return label, xyz[np.sort(first)].astype(np.float32)
+    return xyz[np.sort(first)].astype(np.float32)
 
 
 def advise_stations(c: Campaign, *, area_xy: Optional[np.ndarray] = None, height_m: float = DEFAULT_INSTRUMENT_HEIGHT_M,
@@ -136,12 +142,13 @@ def advise_stations(c: Campaign, *, area_xy: Optional[np.ndarray] = None, height
     layout = c.layout()
     area = default_area(layout, up=up) if area_xy is None else np.asarray(area_xy, dtype=np.float64)
     grid = grid_in_polygon(area, grid_m)
-    label, station = last_station(c)
+    last = last_station(c)
+    station = None if last is None else last.position_layout
     if ground_z is not None:
         gz, source = float(ground_z), "given"
     elif station is not None:
         gz, source = float(station[2]) - DEFAULT_INSTRUMENT_HEIGHT_M, \
-            f"epoch {label}'s station minus {DEFAULT_INSTRUMENT_HEIGHT_M} m"
+            f"epoch {last.label}'s station minus {DEFAULT_INSTRUMENT_HEIGHT_M} m"
     else:
         gz, source = 0.0, "assumed 0 (no measured epoch yet; pass --ground-z)"
     positions = np.column_stack([grid, np.full(len(grid), gz + height_m)])
@@ -150,7 +157,8 @@ def advise_stations(c: Campaign, *, area_xy: Optional[np.ndarray] = None, height
     if base_label is not None:
         baseline = {k: Observation(v.xyz_socs, v.cov) for k, v in c.centroids(base_label).items() if v.found}
         baseline = baseline or None
-    seen_label, seen = seen_surfaces(c, progress=scaled(progress, 0.0, 0.2)) if use_last_scan else (None, None)
+    seen = seen_surfaces(c, last, progress=scaled(progress, 0.0, 0.2)) if use_last_scan and last else None
+    seen_label = None if seen is None else last.label
     stations = survey_stations(layout, positions, profile=c.profile, min_points=int(params["min_points"]),
                                budget_seconds=float(params["budget_min"]) * 60.0, up=up, baseline=baseline,
                                obstacles_xyz=seen, progress=scaled(progress, 0.2, 1.0))
