@@ -160,10 +160,16 @@ class ProcessSummary:
         return [o for o in self.outcomes if o.action == "failed"]
 
 
+def read_paths(paths, progress: Optional[ProgressCallback] = None) -> Scan:
+    """Scan files as one scan (each file's share of the progress in turn)."""
+    scans = [read_scan(p, progress=scaled(progress, k / len(paths), (k + 1) / len(paths)))
+             for k, p in enumerate(paths)]
+    return scans[0] if len(scans) == 1 else Scan.concatenate(scans)
+
+
 def read_files(c: Campaign, rows: list[dict], progress=None) -> Scan:
     """The stored scan files of ``rows`` (from ``Campaign.files``) as one scan."""
-    scans = [read_scan(c.path_of(r), progress=progress) for r in rows]
-    return scans[0] if len(scans) == 1 else Scan.concatenate(scans)
+    return read_paths([c.path_of(r) for r in rows], progress)
 
 
 def plan_inputs(c: Campaign, label: str, params: dict) -> tuple[str, object]:
@@ -242,19 +248,13 @@ def stage1_job(c: Campaign, label: str) -> Stage1Job:
                      measure_inputs(c, label, params, h) if fine else None)
 
 
-def _read_paths(paths, progress: Optional[ProgressCallback]) -> Scan:
-    scans = [read_scan(p, progress=scaled(progress, k / len(paths), (k + 1) / len(paths)))
-             for k, p in enumerate(paths)]
-    return scans[0] if len(scans) == 1 else Scan.concatenate(scans)
-
-
 def run_stage1(job: Stage1Job, *, progress: Optional[ProgressCallback] = None) -> Stage1Result:
     """Plan (unless reused) and centroids of one epoch: pure computation on its files."""
     new_plan, preview = None, None
     if job.stored_plan is not None:
         plan = ScanPlan.from_json(job.stored_plan)
     else:
-        coarse = _read_paths(job.coarse_paths, scaled(progress, 0.0, 0.25))
+        coarse = read_paths(job.coarse_paths, scaled(progress, 0.0, 0.25))
         analysis = _analyse(coarse, job.layout, job.params, job.profile, scaled(progress, 0.25, 0.4))
         del coarse
         plan = plan_from_coarse(analysis, job.layout, epoch=job.label, profile=job.profile,
@@ -268,7 +268,7 @@ def run_stage1(job: Stage1Job, *, progress: Optional[ProgressCallback] = None) -
         preview = encode_preview(analysis)
     cents = None
     if job.fine_paths:
-        fine = _read_paths(job.fine_paths, scaled(progress, 0.4, 0.8))
+        fine = read_paths(job.fine_paths, scaled(progress, 0.4, 0.8))
         cents = measure_targets(fine, plan, job.layout, profile=plan.profile)
     report(progress, 1.0, "measured" if cents is not None else "planned")
     return Stage1Result(job, plan, new_plan, preview, cents)
