@@ -335,19 +335,20 @@ def plan_fine_scans(targets: Sequence[PlanTarget], *, epoch: str = "", profile: 
 def _plan_full_dome(targets: Sequence[PlanTarget], *, epoch: str, profile: ScannerProfile, min_points: int,
                     budget_seconds: float, margin_m: float) -> ScanPlan:
     """One full-dome scan at the coarsest preset giving every target ``min_points`` (within the budget)."""
-    presets = sorted(profile.step_presets, key=lambda p: -p[1])  # coarse first
-    chosen, warnings = None, []
-    for label, step in presets:
-        rois = [plan_roi(t, n_points=min_points, profile=profile, margin_m=margin_m, step_deg=step) for t in targets]
+    presets = profile.step_presets[::-1]  # coarse first (the profile keeps them finest first)
+
+    def rois_at(step):
+        return [plan_roi(t, n_points=min_points, profile=profile, margin_m=margin_m, step_deg=step) for t in targets]
+
+    warnings = []
+    label, step = presets[-1]
+    for lab, st in presets:
+        rois = rois_at(st)
         if min(r.expected_target_points for r in rois) >= min_points * 0.999:
-            chosen = (label, step, rois)
+            label, step = lab, st
             break
-    if chosen is None:
-        label, step = presets[-1]
-        chosen = (label, step, [plan_roi(t, n_points=min_points, profile=profile, margin_m=margin_m, step_deg=step)
-                                for t in targets])
+    else:  # none does: the finest, the last tried
         warnings.append(f"even the finest resolution ({label}) gives fewer than {min_points} points on some targets")
-    label, step, rois = chosen
     dome = profile.full_dome_seconds(step)
     if dome > budget_seconds * 1.0001:
         fitting = [(lab, st) for lab, st in presets if profile.full_dome_seconds(st) <= budget_seconds]
@@ -356,7 +357,7 @@ def _plan_full_dome(targets: Sequence[PlanTarget], *, epoch: str, profile: Scann
             warnings.append(f"the full-dome scan at {label} takes {dome / 60:.1f} min, over the budget of "
                             f"{budget_seconds / 60:.0f} min: planned at {lab2} instead")
             label, step = lab2, st2
-            rois = [plan_roi(t, n_points=min_points, profile=profile, margin_m=margin_m, step_deg=step) for t in targets]
+            rois = rois_at(step)
             dome = profile.full_dome_seconds(step)
         else:
             warnings.append(f"the plan takes {dome / 60:.1f} min, over the budget of {budget_seconds / 60:.0f} min")
