@@ -25,8 +25,6 @@ def displacement_table(c: Campaign) -> list[dict]:
 
     from projects.predictions import predictions
 
-    import numpy as np
-
     when = {e["label"]: datetime.fromisoformat(e["datetime"]) for e in c.epochs()}
     settings = c.settings()
     casting = datetime.fromisoformat(settings["casting_date"]) if settings.get("casting_date") else None
