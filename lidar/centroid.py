@@ -253,6 +253,13 @@ def _trim_disc(cluster: np.ndarray, axes: np.ndarray, r_trim: float) -> tuple[np
     return centre, keep
 
 
+def rim_variance(radius_m: float, n_points: float, spacing_m: float) -> float:
+    """In-plane variance (m^2, per axis) of a disc centroid from its rim: each of the ~2 pi R / spacing rim
+    points is in or out (threshold noise, mixed pixels), moving the centroid by about R / n each."""
+    n_rim = 2 * np.pi * radius_m / max(spacing_m, 1e-4)
+    return (radius_m / n_points) ** 2 * n_rim / 6.0
+
+
 def _covariance(disc: np.ndarray, view: np.ndarray, radius: float, spacing: float
                 ) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
     """(cov, sigma_range, disc normal, in-plane axes): range noise along the view over n, plus the rim
@@ -269,9 +276,7 @@ def _covariance(disc: np.ndarray, view: np.ndarray, radius: float, spacing: floa
     cos_a = max(abs(float(normal2 @ mean_dir)), 0.1)
     sigma_r = float(np.std(resid, ddof=3) / cos_a)
     cov = sigma_r ** 2 / n * np.outer(mean_dir, mean_dir)
-    n_rim = 2 * np.pi * radius / max(spacing, 1e-4)
-    var_ip = (radius / n) ** 2 * n_rim / 6.0
-    cov += var_ip * (axes2.T @ axes2)
+    cov += rim_variance(radius, n, spacing) * (axes2.T @ axes2)
     return cov, sigma_r, normal2, axes2
 
 

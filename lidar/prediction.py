@@ -12,6 +12,7 @@ import math
 import numpy as np
 
 from common.errors import InputError
+from lidar.centroid import rim_variance
 
 
 def disc_points(diameter_m: float, range_m: float, cos_incidence: float, theta_deg: float,
@@ -60,7 +61,5 @@ def centroid_covariance(xyz_socs, normal_socs, n_points: float, *, diameter_m: f
     nrm = nrm / np.linalg.norm(nrm)
     cov = range_noise_m ** 2 / n * np.outer(view, view)
     spacing = math.sqrt(math.pi * radius ** 2 / n)
-    n_rim = 2 * math.pi * radius / max(spacing, 1e-4)
-    var_ip = (radius / n) ** 2 * n_rim / 6.0
-    cov += var_ip * (np.eye(3) - np.outer(nrm, nrm))
+    cov += rim_variance(radius, n, spacing) * (np.eye(3) - np.outer(nrm, nrm))
     return cov
