@@ -43,7 +43,7 @@ def tables(root: Path):
     out = {}
     for db in sorted(root.rglob("campaign.sqlite")):
         with Campaign.open(db.parent, writable=False) as c:
-            out[db.parent.name] = c.displacement_rows()
+            out[db.parent.name] = c.displacements()
     return out
 
 

@@ -31,7 +31,7 @@ def main(n: int = 100) -> None:
             from matplotlib.figure import Figure
             from projects.store import Campaign
             c = Campaign.open({str(camp)!r}, writable=False)
-            labels = [e["label"] for e in c.epochs()]
+            labels = [e.label for e in c.epochs()]
         """, """
             for lab in labels:
                 m = c.map_preview(lab).reflectance_map

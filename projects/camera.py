@@ -12,6 +12,7 @@ import numpy as np
 from common.files import json_safe, output_folder, write_atomic
 from common.errors import ProcessingError
 from projects.errors import InputError
+from projects.history import histories
 from projects.store import CAMERA_DIR, Campaign, json_rows, now_iso, parse_datetime
 from vision.crossval import CrossValidation, cross_validate
 from vision.series import CameraSeries, read_camera_series
@@ -19,15 +20,15 @@ from vision.series import CameraSeries, read_camera_series
 
 def midspan_reflector(c: Campaign) -> str:
     """The measurement target nearest the middle between the piers (mean of the reference targets)."""
-    refl = [r for r in c.reflectors() if not r["retired"]]
-    refs = np.array([[r["x"], r["y"], r["z"]] for r in refl if r["grp"] == "reference"], float)
-    meas = [r for r in refl if r["grp"] == "measurement"]
+    refl = [r for r in c.reflectors() if not r.retired]
+    refs = np.array([r.xyz_layout for r in refl if r.is_reference], float)
+    meas = [r for r in refl if not r.is_reference]
     if not meas:
         raise InputError("the campaign has no measurement target to pair the camera with")
     if len(refs) == 0:
-        return meas[0]["id"]
+        return meas[0].id
     mid = refs.mean(axis=0)
-    return min(meas, key=lambda r: float(np.linalg.norm(np.array([r["x"], r["y"], r["z"]]) - mid)))["id"]
+    return min(meas, key=lambda r: float(np.linalg.norm(np.array(r.xyz_layout) - mid))).id
 
 
 def import_series(c: Campaign, path: str | os.PathLike, *, name: Optional[str] = None,
@@ -40,7 +41,7 @@ def import_series(c: Campaign, path: str | os.PathLike, *, name: Optional[str] =
     """
     path, name = c.new_series("camera_series", path, name, "a camera series")
     rid = reflector or midspan_reflector(c)
-    if c.reflector(rid)["grp"] != "measurement":
+    if c.reflector(rid).is_reference:
         raise InputError(f"{rid} is a reference target; pair the camera with a measurement target")
     sha = c.checksum_if_new("camera_series", path)
     series = read_camera_series(path, column=column, timezone=timezone, unit=unit, positive=positive)
@@ -101,15 +102,11 @@ def crossvalidate(c: Campaign, *, series: Optional[str] = None, reflector: Optio
     c.reflector(rid)
     if not (np.isfinite(window_min) and window_min > 0):
         raise InputError(f"--window-min must be a positive number of minutes, got {window_min}")
-    lidar = [r for r in c.displacement_rows() if r["reflector"] == rid]
-    if not lidar:
+    h = histories(c, targets=[rid]).get(rid)
+    if h is None:
         raise ProcessingError(f"no LiDAR displacements of {rid} yet; run 'bridgesurvey process' first")
-    labels = [r["epoch"] for r in lidar]
-    t = np.array([_to_ns(r["datetime"]) for r in lidar], np.int64)
-    y = np.array([np.nan if r["displacement_m"] is None else r["displacement_m"] * 1e3 for r in lidar])
-    s = np.array([np.nan if r["sigma_m"] is None else r["sigma_m"] * 1e3 for r in lidar])
     at = _to_ns(parse_datetime(align_at)) if align_at else None
-    return cross_validate(labels, t, y, s, cam, window_s=window_min * 60.0, align_at_ns=at, reflector=rid,
+    return cross_validate(list(h.epochs), h.time_ns, h.displacement_mm, h.sigma_mm, cam, window_s=window_min * 60.0, align_at_ns=at, reflector=rid,
                           series=row["name"]), cam
 
 

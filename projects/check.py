@@ -86,7 +86,7 @@ def check_epoch(c: Campaign, label: str, *, goal_sigma_mm: Optional[float] = Non
     result = run_stage1(stage1_job(c, label), progress=progress)  # the plan it measured with, and the centroids
     save_stage1(c, result)
     cents, plan = result.centroids, result.plan
-    layout = c.layout(c.epoch(label)["datetime"])
+    layout = c.layout(c.epoch(label).datetime)
     diam = {i: float(d) for i, d in zip(layout.ids, layout.diameters_m)}
     rows, retry = [], []
     for roi in plan.rois:

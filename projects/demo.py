@@ -18,6 +18,7 @@ from lidar.simulate.files import simulate_coarse, simulate_fine
 from projects.errors import CampaignError
 from projects.exports import displacement_table, export, to_csv, write_atomic
 from projects.figures import displacement_history_figure
+from projects.history import histories
 from projects.processing import plan_epoch, process
 from projects.store import DB_NAME, Campaign
 
@@ -82,13 +83,13 @@ def build_demo(folder: str | os.PathLike, *, weeks: int = 52, seed: int = 2026,
         c.set_limit("*", "kr-rail:0-200")
     with c:
         field_dir = folder / "field"
-        done = {e["label"] for e in c.epochs()}
+        done = {e.label for e in c.epochs()}
         for w in range(weeks):
             when = START + dt.timedelta(weeks=w)
             label = when.date().isoformat()
             report(progress, w / weeks, f"week {w + 1}/{weeks}")
-            row = c.result_row(label) if label in done else None
-            if row is not None and row["stage"] == "measured":
+            res = c.result(label) if label in done else None
+            if res is not None and res.stage == "measured":
                 continue
             rng = np.random.default_rng(seed * 1000 + w)
             setup = ScannerSetup.random(rng, span_m=model.span_m)
@@ -126,7 +127,7 @@ def build_demo(folder: str | os.PathLike, *, weeks: int = 52, seed: int = 2026,
 
         rows = displacement_table(c)
         csv_path = write_atomic(folder / "displacements.csv", to_csv(rows))
-        plot = save_figure(displacement_history_figure(rows, title=c.name, context=plot_context(c)),
+        plot = save_figure(displacement_history_figure(histories(c), title=c.name, context=plot_context(c)),
                            folder / "displacement_history.png")
         pdf = write_report(c, folder / "report.pdf", author="BridgeSurvey demo")
         notes = [f"week {CABLE_TIE_WEEK + 1}: a cable tie beside R1; week {OCCLUDED_WEEK + 1}: M2 occluded"] + story

@@ -117,7 +117,7 @@ def add_event(c: Campaign, *, date: str, kind: str, label: str, load_kn_m: Optio
     epochs = c.epochs()
     if not epochs:
         raise InputError("the campaign has no epoch yet; add the visits before the events between them")
-    first, last = epochs[0]["datetime"], epochs[-1]["datetime"]
+    first, last = epochs[0].datetime, epochs[-1].datetime
     import datetime as dt
 
     limit = (dt.datetime.fromisoformat(last) + dt.timedelta(days=366)).isoformat()

@@ -25,43 +25,44 @@ def displacement_table(c: Campaign) -> list[dict]:
 
     from projects.predictions import predictions
 
-    when = {e["label"]: datetime.fromisoformat(e["datetime"]) for e in c.epochs()}
+    when = {e.label: e.when for e in c.epochs()}
     settings = c.settings()
     casting = datetime.fromisoformat(settings["casting_date"]) if settings.get("casting_date") else None
     preds = predictions(c)
     tols = settings.get("prediction_tolerance_mm") or {}
     rows = []
-    for r in c.displacement_rows():
-        lim = c.limit_for(r["reflector"])
-        mm = None if r["displacement_m"] is None else r["displacement_m"] * 1000.0
+    limits: dict = {}
+    for r in c.displacements():
+        lim = limits[r.reflector] if r.reflector in limits else limits.setdefault(r.reflector, c.limit_for(r.reflector))
+        mm = None if r.displacement_m is None else r.displacement_m * 1000.0
         rows.append({
-            "epoch": r["epoch"], "datetime": r["datetime"], "reflector": r["reflector"],
+            "epoch": r.epoch, "datetime": r.datetime, "reflector": r.reflector,
             "displacement_mm": None if mm is None else round(mm, 4) + 0.0,
-            "sigma_mm": None if r["sigma_m"] is None else round(r["sigma_m"] * 1000.0, 4),
-            "flags": ";".join(json.loads(r["flags"])),
+            "sigma_mm": None if r.sigma_m is None else round(r.sigma_m * 1000.0, 4),
+            "flags": ";".join(r.flags),
             "state": lim.state(mm if mm is not None else float("nan")) if lim else ("unknown" if mm is None else "ok"),
             "warning_mm": None if lim is None else lim.warning_mm, "alarm_mm": None if lim is None else lim.alarm_mm,
-            "baseline": r["baseline"], "epoch_flags": ";".join(json.loads(r["epoch_flags"])),
+            "baseline": r.baseline, "epoch_flags": ";".join(r.epoch_flags),
             # negative for an epoch dated before the baseline
-            "days_from_baseline": round((when[r["epoch"]] - when[r["baseline"]]).total_seconds() / 86400.0, 4)
-            if r["baseline"] in when else None,
-            "severity": worst(json.loads(r["flags"]) + json.loads(r["epoch_flags"])) or "",
+            "days_from_baseline": round((when[r.epoch] - when[r.baseline]).total_seconds() / 86400.0, 4)
+            if r.baseline in when else None,
+            "severity": worst(r.flags + r.epoch_flags) or "",
             "concrete_age_days": None if casting is None else
-            round((when[r["epoch"]] - casting).total_seconds() / 86400.0, 3),
+            round((when[r.epoch] - casting).total_seconds() / 86400.0, 3),
             "predicted_mm": None, "departure_mm": None,
         })
-        p = preds.get(r["reflector"])
-        t_ns = int(when[r["epoch"]].timestamp() * 1e9)
+        p = preds.get(r.reflector)
+        t_ns = int(when[r.epoch].timestamp() * 1e9)
         if p is not None and p[0][0] <= t_ns <= p[0][-1]:
             pred = float(np.interp(t_ns, p[0], p[1]))
             row = rows[-1]
             row["predicted_mm"] = round(pred, 4)
             if mm is not None:
                 row["departure_mm"] = round(mm - pred, 4)
-                tol = tols.get(r["reflector"], tols.get("*"))
+                tol = tols.get(r.reflector, tols.get("*"))
                 if tol is not None and abs(mm - pred) > tol:
                     row["flags"] = ";".join(f for f in (row["flags"], "departs_from_prediction") if f)
-                    row["severity"] = worst(row["flags"].split(";") + json.loads(r["epoch_flags"])) or ""
+                    row["severity"] = worst(row["flags"].split(";") + list(r.epoch_flags)) or ""
     return rows
 
 
@@ -77,22 +78,24 @@ def to_csv(rows: list[dict], columns=DISPLACEMENT_COLUMNS) -> str:
 def tables(c: Campaign) -> dict[str, list[dict]]:
     """Every table a surveyor may want, as lists of rows."""
     cents = []
-    for e in c.epochs():
-        for rid, t in c.centroids(e["label"]).items():
+    epochs = c.epochs()
+    for e in epochs:
+        for rid, t in c.centroids(e.label).items():
             sig = np.sqrt(np.clip(np.diag(t.cov), 0, None)) * 1000
-            cents.append({"epoch": e["label"], "reflector": rid, "found": t.found,
+            cents.append({"epoch": e.label, "reflector": rid, "found": t.found,
                           "x_m": t.xyz_socs[0], "y_m": t.xyz_socs[1], "z_m": t.xyz_socs[2],
                           "sx_mm": sig[0], "sy_mm": sig[1], "sz_mm": sig[2], "n_points": t.n_points,
                           "threshold": t.threshold, "separability": t.separability, "flags": ";".join(t.flags)})
-    epochs = []
-    for e in c.epochs():
-        res = c.result_row(e["label"])
-        epochs.append({"epoch": e["label"], "datetime": e["datetime"], "notes": e["notes"],
-                       "coarse_files": len(c.files(e["label"], "coarse")), "fine_files": len(c.files(e["label"], "fine")),
-                       "stage": res["stage"] if res else "imported"})
-    return {"epochs": epochs, "reflectors": c.reflectors(), "centroids": cents,
+    epoch_rows = []
+    for e in epochs:
+        res = c.result(e.label)
+        epoch_rows.append({"epoch": e.label, "datetime": e.datetime, "notes": e.notes,
+                           "coarse_files": len(c.files(e.label, "coarse")), "fine_files": len(c.files(e.label, "fine")),
+                           "stage": res.stage if res else "imported"})
+    log = [{**entry.to_dict(), "details": json.dumps(entry.details, default=str)} for entry in c.log()]
+    return {"epochs": epoch_rows, "reflectors": [r.to_dict() for r in c.reflectors()], "centroids": cents,
             "displacements": displacement_table(c),
-            "files": [f for e in c.epochs() for f in c.files(e["label"])], "log": c.log_rows()}
+            "files": [f.to_dict() for e in epochs for f in c.files(e.label)], "log": log}
 
 
 def export(c: Campaign, path: str | os.PathLike) -> Path:

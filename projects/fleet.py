@@ -6,7 +6,6 @@ relative to the file; ``#`` starts a comment.
 from __future__ import annotations
 
 import datetime as dt
-import json
 import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -95,6 +94,7 @@ def _days_since(iso: str, today: dt.date) -> int:
 
 def bridge_status(folder: str | os.PathLike, *, today: Optional[dt.date] = None) -> BridgeStatus:
     """Summary of one campaign, read-only; an unreadable campaign gets its one-line error instead."""
+    from projects.camera import crossval_summaries
     from projects.overview import campaign_status
 
     folder = Path(folder)
@@ -102,9 +102,8 @@ def bridge_status(folder: str | os.PathLike, *, today: Optional[dt.date] = None)
     try:
         with Campaign.open(folder, writable=False) as c:
             data = campaign_status(c)
-            crossval = [{"series": r["series"], **{k: v for k, v in json.loads(r["summary"]).items()
-                                                   if k in ("bias_mm", "rmse_mm", "correlation", "n_pairs")}}
-                        for r in c.conn.execute("SELECT series, summary FROM crossvals")]
+            crossval = [{k: v for k, v in s.items() if k in ("series", "bias_mm", "rmse_mm", "correlation", "n_pairs")}
+                        for s in crossval_summaries(c)]
     except SurveyError as exc:
         return BridgeStatus(str(folder), folder.name, error=str(exc).splitlines()[0])
     epochs = data["epochs"]

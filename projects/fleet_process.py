@@ -127,12 +127,12 @@ def fleet_process(roots: Sequence[str | os.PathLike], *, scheduler: Optional[str
             open_campaigns[cr.folder] = c
             stale = stale_epochs(c)
             for e in c.epochs():
-                if e["label"] in stale:
+                if e.label in stale:
                     try:
-                        jobs.append((cr, stage1_job(c, e["label"])))
+                        jobs.append((cr, stage1_job(c, e.label)))
                         cr.tasks += 1
                     except SurveyError as exc:
-                        cr.summary.outcomes.append(EpochOutcome(e["label"], "failed", str(exc)))
+                        cr.summary.outcomes.append(EpochOutcome(e.label, "failed", str(exc)))
         run.tasks = len(jobs)
         if jobs or scheduler:  # a scheduler given is checked even when there is nothing to do
             client, run.cluster = stack.enter_context(_client(scheduler, workers))
@@ -142,7 +142,7 @@ def fleet_process(roots: Sequence[str | os.PathLike], *, scheduler: Optional[str
             c = open_campaigns.get(cr.folder)
             if c is None:
                 continue
-            labels = [e["label"] for e in c.epochs()]
+            labels = [e.label for e in c.epochs()]
             done = {o.epoch for o in cr.summary.outcomes}
             cr.summary.outcomes += [EpochOutcome(lab, "up-to-date") for lab in labels if lab not in done]
             finish_displacements(c, cr.summary, labels)

@@ -1,7 +1,6 @@
 """What the desktop application shows of one epoch: a target's fine-scan window and a display cloud."""
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from typing import Optional
 
@@ -10,7 +9,7 @@ import numpy as np
 from lidar.angles import direction_from_angles, spherical_from_xyz
 from lidar.centroid import TargetCentroid, target_centroid
 from common.errors import InputError, ProcessingError
-from lidar.plan import RoiPlan, ScanPlan
+from lidar.plan import RoiPlan
 from common.progress import ProgressCallback, report, scaled
 from projects.processing import read_files
 from projects.store import Campaign
@@ -49,10 +48,9 @@ class TargetInspection:
 def inspect_target(c: Campaign, label: str, reflector: str, *,
                    progress: Optional[ProgressCallback] = None) -> TargetInspection:
     """Read an epoch's fine scans and redo the centroid of ``reflector`` with its masks kept."""
-    row = c.plan_row(label)
-    if row is None:
+    plan = c.plan(label)
+    if plan is None:
         raise ProcessingError(f"epoch {label} has no plan yet; plan it first")
-    plan = ScanPlan.from_json(json.loads(row["json"]))
     roi = plan.roi(reflector)
     files = c.files(label, "fine")
     if not files:
@@ -65,7 +63,7 @@ def inspect_target(c: Campaign, label: str, reflector: str, *,
     xyz = scan.xyz_socs[inside]
     inten = scan.intensity[inside].astype(np.float64)
     tc, pc = roi.window.centre
-    diameter = c.reflector(reflector)["diameter_m"]
+    diameter = c.reflector(reflector).diameter_m
     cent, trace = target_centroid(xyz, inten, reflector=reflector,
                                   expected_xyz=direction_from_angles(tc, pc) * roi.range_m,
                                   diameter_m=diameter, window=roi.window, profile=plan.profile, trace=True)
@@ -128,10 +126,9 @@ def _targets_of(c: Campaign, label: str) -> tuple[tuple, np.ndarray]:
     cents = {k: v for k, v in c.centroids(label).items() if v.found}
     if cents:
         return tuple(cents), np.array([v.xyz_socs for v in cents.values()])
-    row = c.plan_row(label)
-    if row is None:
+    plan = c.plan(label)
+    if plan is None:
         return (), np.zeros((0, 3))
-    plan = ScanPlan.from_json(json.loads(row["json"]))
     pts = [direction_from_angles(*r.window.centre) * r.range_m for r in plan.rois]
     return tuple(r.reflector for r in plan.rois), np.array(pts).reshape(-1, 3)
 

@@ -4,8 +4,6 @@ Shared by ``bridgesurvey status`` and the desktop application's campaign tree.
 """
 from __future__ import annotations
 
-import json
-
 from lidar.flags import count, worst
 from projects.store import Campaign
 
@@ -20,9 +18,9 @@ def epoch_flags(c: Campaign, label: str) -> list[str]:
     ds = c.displacement_set(label)
     if ds is None:
         return []
-    flags = list(json.loads(ds["flags"]))
+    flags = list(ds.flags)
     if "reference_change_ambiguous" in flags:
-        suspects = [r["reflector"] for r in c.reference_check_rows(label) if r["suspect"]]
+        suspects = [r.reflector for r in c.reference_checks(label) if r.suspect]
         if suspects:
             flags[flags.index("reference_change_ambiguous")] = \
                 f"reference_change_ambiguous: {' or '.join(suspects)} moved (both left out)"
@@ -36,7 +34,7 @@ def epoch_state(c: Campaign, label: str) -> tuple[str, list[str]]:
     """(state, flags) of one epoch: imported (coarse scan only), planned, scanned (fine scans not
     measured yet), measured, or - once its displacements are computed - processed, warning or
     problem by its most serious flag."""
-    res = c.result_row(label)
+    res = c.result(label)
     ds = c.displacement_set(label)
     if ds is not None:
         flags = epoch_flags(c, label)
@@ -44,7 +42,7 @@ def epoch_state(c: Campaign, label: str) -> tuple[str, list[str]]:
         return (level if level in ("warning", "problem") else "processed"), flags
     if res is None:
         return "imported", []
-    if res["stage"] == "planned":
+    if res.stage == "planned":
         return ("scanned" if c.files(label, "fine") else "planned"), []
     return "measured", []
 
@@ -57,9 +55,9 @@ def campaign_status(c: Campaign) -> dict:
     stale = stale_epochs(c)
     epochs = []
     for e in c.epochs():
-        state, flags = epoch_state(c, e["label"])
-        epochs.append({"epoch": e["label"], "datetime": e["datetime"][:16], "state": state,
-                       "stale": stale.get(e["label"], ""), "flags": "; ".join(flags), "flag_list": flags,
+        state, flags = epoch_state(c, e.label)
+        epochs.append({"epoch": e.label, "datetime": e.datetime[:16], "state": state,
+                       "stale": stale.get(e.label, ""), "flags": "; ".join(flags), "flag_list": flags,
                        "severity": count(flags)})
     latest = {}
     for r in displacement_table(c):

@@ -18,6 +18,7 @@ from typing import Optional
 import numpy as np
 
 from common.errors import InputError
+from projects.history import histories
 from projects.store import PREDICTION_DIR, Campaign, now_iso, parse_datetime, sha256_of
 
 DAY_NS = 86_400 * 10**9
@@ -92,13 +93,6 @@ def read_prediction_file(path: Path, reflector_ids, casting: Optional[int]) -> t
     return out, axis
 
 
-def _measured(all_rows: list[dict], rid: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Times (ns), displacements and sigmas (mm) of one target from the campaign's displacement rows."""
-    rows = [r for r in all_rows if r["reflector"] == rid and r["displacement_m"] is not None]
-    t = np.array([int(dt.datetime.fromisoformat(r["datetime"]).timestamp() * 1e9) for r in rows], dtype=np.int64)
-    return t, np.array([r["displacement_m"] * 1000 for r in rows]), np.array([(r["sigma_m"] or 0) * 1000 for r in rows])
-
-
 def align(t_pred, v_pred, t_meas, d_meas, s_meas, *, at_ns: Optional[int] = None) -> tuple[float, float, int]:
     """(offset_mm, residual RMS mm, pairs): measured = predicted + offset, at one date or by least squares."""
     inside = (t_meas >= t_pred[0]) & (t_meas <= t_pred[-1])
@@ -131,17 +125,18 @@ def import_prediction(c: Campaign, path: str | os.PathLike, *, align_at: Optiona
     if align_at and lsq:
         raise InputError("align at a date or by least squares, not both")
     reflectors = c.reflectors()
-    meas_ids = [r["id"] for r in reflectors if r["grp"] == "measurement"]
-    curves, axis = read_prediction_file(path, [r["id"] for r in reflectors], casting_ns(c))
+    meas_ids = [r.id for r in reflectors if not r.is_reference]
+    curves, axis = read_prediction_file(path, [r.id for r in reflectors], casting_ns(c))
     at_ns = None
     if align_at:
         at_ns = int(dt.datetime.fromisoformat(parse_datetime(align_at)).timestamp() * 1e9)
     out = {}
-    rows = c.displacement_rows()
+    measured = {rid: h.measured() for rid, h in histories(c).items()}
     for rid, (t, v) in curves.items():
         if rid not in meas_ids:
             raise InputError(f"{path}: {rid} is a reference target; predictions are for deck targets")
-        tm, dm, sm = _measured(rows, rid)
+        h = measured.get(rid)
+        tm, dm, sm = (h.time_ns, h.displacement_mm, h.sigma_mm) if h is not None else (np.zeros(0),) * 3
         if not len(tm):
             raise InputError(f"{path}: {rid} has no measured displacement yet; process the campaign first")
         try:

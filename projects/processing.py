@@ -28,6 +28,7 @@ from lidar.plan import ScanPlan
 from common.progress import ProgressCallback, report, scaled
 from lidar.scan import Scan
 from projects.map_previews import encode_preview
+from projects.records import ScanFile
 from projects.store import Campaign
 
 log = logging.getLogger(__name__)
@@ -167,9 +168,9 @@ def read_paths(paths, progress: Optional[ProgressCallback] = None) -> Scan:
     return scans[0] if len(scans) == 1 else Scan.concatenate(scans)
 
 
-def read_files(c: Campaign, rows: list[dict], progress=None) -> Scan:
-    """The stored scan files of ``rows`` (from ``Campaign.files``) as one scan."""
-    return read_paths([c.path_of(r) for r in rows], progress)
+def read_files(c: Campaign, files: Sequence[ScanFile], progress=None) -> Scan:
+    """The stored scan files ``files`` (from ``Campaign.files``) as one scan."""
+    return read_paths([c.path_of(f) for f in files], progress)
 
 
 def plan_inputs(c: Campaign, label: str, params: dict) -> tuple[str, object]:
@@ -177,8 +178,8 @@ def plan_inputs(c: Campaign, label: str, params: dict) -> tuple[str, object]:
     coarse = c.files(label, "coarse")
     if not coarse:
         raise ProcessingError(f"epoch {label} has no coarse scan")
-    layout = c.layout(ep["datetime"])
-    key = {"v": PIPELINE_VERSION, "coarse": [f["sha256"] for f in coarse],
+    layout = c.layout(ep.datetime)
+    key = {"v": PIPELINE_VERSION, "coarse": [f.sha256 for f in coarse],
            "layout": layout.to_rows(), "params": stage1_params(params),
            "profile": _profile_key(c.profile_for(label))}
     return _hash(key), layout
@@ -240,8 +241,8 @@ class Stage1Result:
 def stage1_job(c: Campaign, label: str) -> Stage1Job:
     params = parameters(c)
     h, layout = plan_inputs(c, label, params)
-    row = c.plan_row(label)
-    stored = json.loads(row["json"]) if row is not None and row["inputs_hash"] == h else None
+    sp = c.stored_plan(label)
+    stored = sp.plan_json if sp is not None and sp.inputs_hash == h else None
     fine = c.files(label, "fine")
     return Stage1Job(str(c.folder), label, tuple(str(c.path_of(r)) for r in c.files(label, "coarse")),
                      tuple(str(c.path_of(r)) for r in fine), layout, params, c.profile_for(label), h, stored,
@@ -296,7 +297,7 @@ def plan_epoch(c: Campaign, label: str, *, progress: Optional[ProgressCallback] 
 def measure_inputs(c: Campaign, label: str, params: dict, plan_hash: Optional[str] = None) -> str:
     """Stage 1's input hash of an epoch with fine scans (``plan_hash`` when already computed)."""
     plan_h = plan_hash if plan_hash is not None else plan_inputs(c, label, params)[0]
-    return _hash({"plan": plan_h, "fine": [f["sha256"] for f in c.files(label, "fine")]})
+    return _hash({"plan": plan_h, "fine": [f.sha256 for f in c.files(label, "fine")]})
 
 
 def measure_epoch(c: Campaign, label: str, *, progress: Optional[ProgressCallback] = None) -> dict:
@@ -314,21 +315,21 @@ def stale_epochs(c: Campaign) -> dict[str, str]:
     params = parameters(c)
     out = {}
     for e in c.epochs():
-        row = c.result_row(e["label"])
-        if not c.files(e["label"], "coarse"):
+        res = c.result(e.label)
+        if not c.files(e.label, "coarse"):
             continue
-        if c.files(e["label"], "fine"):
-            want = measure_inputs(c, e["label"], params)
-            if row is None or row["stage"] != "measured":
-                out[e["label"]] = "not measured yet"
-            elif row["inputs_hash"] != want:
-                out[e["label"]] = "inputs or parameters changed"
+        if c.files(e.label, "fine"):
+            want = measure_inputs(c, e.label, params)
+            if res is None or res.stage != "measured":
+                out[e.label] = "not measured yet"
+            elif res.inputs_hash != want:
+                out[e.label] = "inputs or parameters changed"
         else:
-            want, _ = plan_inputs(c, e["label"], params)
-            if row is None:
-                out[e["label"]] = "not planned yet"
-            elif row["inputs_hash"] != want and row["stage"] == "planned":
-                out[e["label"]] = "inputs or parameters changed"
+            want, _ = plan_inputs(c, e.label, params)
+            if res is None:
+                out[e.label] = "not planned yet"
+            elif res.inputs_hash != want and res.stage == "planned":
+                out[e.label] = "inputs or parameters changed"
     return out
 
 
@@ -337,9 +338,8 @@ def baseline_epoch(c: Campaign) -> Optional[str]:
     if chosen:
         return chosen
     for e in c.epochs():
-        row = c.result_row(e["label"])
-        if row is not None and row["stage"] == "measured":
-            return e["label"]
+        if _stage1_hash(c, e.label):
+            return e.label
     return None
 
 
@@ -351,13 +351,13 @@ def process(c: Campaign, labels: Optional[Sequence[str]] = None, *,
         for lab in labels:
             c.epoch(lab)
         wanted = set(labels)
-        todo = [e for e in epochs if e["label"] in wanted]
+        todo = [e for e in epochs if e.label in wanted]
     else:
         todo = epochs
     summary = ProcessSummary()
     stale = stale_epochs(c)
     for k, e in enumerate(todo):
-        lab = e["label"]
+        lab = e.label
         sub = scaled(progress, k / max(len(todo), 1), (k + 1) / max(len(todo), 1))
         if lab not in stale:
             summary.outcomes.append(EpochOutcome(lab, "up-to-date"))
@@ -374,7 +374,7 @@ def process(c: Campaign, labels: Optional[Sequence[str]] = None, *,
         except SurveyError as exc:
             log.warning("epoch %s: %s", lab, exc)
             summary.outcomes.append(EpochOutcome(lab, "failed", str(exc)))
-    finish_displacements(c, summary, [e["label"] for e in todo])
+    finish_displacements(c, summary, [e.label for e in todo])
     report(progress, 1.0, "done")
     return summary
 
@@ -391,22 +391,22 @@ def finish_displacements(c: Campaign, summary: ProcessSummary, labels: Sequence[
     for lab in labels:
         ds = c.displacement_set(lab)
         if ds is not None:
-            bad = [f for f in json.loads(ds["flags"]) if severity(f) == PROBLEM]
+            bad = [f for f in ds.flags if severity(f) == PROBLEM]
             if bad:
                 summary.problems[lab] = bad[0]
 
 
 def _stage1_hash(c: Campaign, label: str) -> Optional[str]:
-    row = c.result_row(label)
-    return row["inputs_hash"] if row is not None and row["stage"] == "measured" else None
+    res = c.result(label)
+    return res.inputs_hash if res is not None and res.stage == "measured" else None
 
 
 def update_displacements(c: Campaign, baseline: str) -> list[str]:
     """(Re)compute the displacements of every measured epoch whose inputs changed; returns those epochs."""
     params = parameters(c)
-    refl = {r["id"]: r for r in c.reflectors()}
-    groups = {rid: r["grp"] for rid, r in refl.items()}
-    measured = [e["label"] for e in c.epochs() if _stage1_hash(c, e["label"])]
+    refl = {r.id: r for r in c.reflectors()}
+    groups = {rid: r.group for rid, r in refl.items()}
+    measured = [e.label for e in c.epochs() if _stage1_hash(c, e.label)]
     if baseline not in measured:
         return []
     found_cache: dict[str, dict] = {}
@@ -430,10 +430,10 @@ def update_displacements(c: Campaign, baseline: str) -> list[str]:
         else:
             bases = sorted({first_seen[m] for m in meas_here} | {baseline}, key=measured.index)
         key = {"v": PIPELINE_VERSION, "epoch": _stage1_hash(c, lab), "params": {k: params[k] for k in STAGE2_KEYS},
-               "bases": {b: _stage1_hash(c, b) for b in bases}, "reflectors": sorted((k, str(v)) for k, v in refl.items())}
+               "bases": {b: _stage1_hash(c, b) for b in bases}, "reflectors": sorted((k, repr(v)) for k, v in refl.items())}
         h = _hash(key)
         stored = c.displacement_set(lab)
-        if stored is not None and stored["inputs_hash"] == h:
+        if stored is not None and stored.inputs_hash == h:
             continue
         result = None
         extra = []
@@ -496,16 +496,14 @@ def _failed_result(groups: dict, base: dict, cents: dict, baseline: str, reason:
 
 def _chain(c: Campaign, d, base_label: str, refl: dict):
     """A target first measured after the baseline: continue the history of the target it replaced."""
-    old = refl[d.reflector]["replaces"]
+    old = refl[d.reflector].replaces
     if not old:
         return d
-    row = c.conn.execute("SELECT displacement_m, sigma_m FROM displacements d JOIN epochs e ON e.label = d.epoch "
-                         "WHERE reflector = ? AND displacement_m IS NOT NULL AND e.datetime <= "
-                         "(SELECT datetime FROM epochs WHERE label = ?) ORDER BY e.datetime DESC LIMIT 1",
-                         (old, base_label)).fetchone()
-    if row is None or not np.isfinite(d.displacement_m):
+    last = c.last_displacement(old, at_or_before=base_label)
+    if last is None or not np.isfinite(d.displacement_m):
         return d
-    return replace(d, displacement_m=d.displacement_m + row[0], sigma_m=float(np.hypot(d.sigma_m, row[1])),
+    return replace(d, displacement_m=d.displacement_m + last.displacement_m,
+                   sigma_m=float(np.hypot(d.sigma_m, last.sigma_m)),
                    flags=tuple(d.flags) + (FLAG_CHAINED,))
 
 
@@ -516,15 +514,15 @@ def save_edited_plan(c: Campaign, label: str, plan: ScanPlan) -> None:
     (and measures the epoch again when fine scans exist); a new coarse scan, layout or parameter
     plans the epoch afresh.
     """
-    row = c.plan_row(label)
-    if row is None:
+    stored = c.stored_plan(label)
+    if stored is None:
         raise ProcessingError(f"epoch {label} has no plan to edit yet; plan it first")
     if not plan.rois:
         raise InputError("the edited plan has no windows; keep at least one")
-    old = json.loads(row["json"])
+    old = stored.plan_json
     d = plan.to_json()
     d["epoch"] = label
     d["edited"] = True
     if "identification" in old:
         d["identification"] = old["identification"]
-    c.save_plan(label, d, row["inputs_hash"])
+    c.save_plan(label, d, stored.inputs_hash)

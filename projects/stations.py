@@ -100,14 +100,14 @@ class LastStation:
 def last_station(c: Campaign) -> Optional[LastStation]:
     """The last epoch with at least three found targets, and its station (None before any)."""
     for e in reversed(c.epochs()):
-        cents = {k: v for k, v in c.centroids(e["label"]).items() if v.found}
-        layout = c.layout(e["datetime"])
+        cents = {k: v for k, v in c.centroids(e.label).items() if v.found}
+        layout = c.layout(e.datetime)
         ids = [i for i in layout.ids if i in cents]
         if len(ids) < 3:
             continue
         r, t = fit_rigid(np.array([layout.xyz[layout.index(i)] for i in ids]),
                          np.array([cents[i].xyz_socs for i in ids]))
-        return LastStation(e["label"], r, t)
+        return LastStation(e.label, r, t)
     return None
 
 

@@ -31,6 +31,8 @@ from lidar.layout import Layout, check_layout
 from lidar.scanner_profile import ScannerProfile
 from projects import schema
 from projects.errors import CampaignError, CampaignLockedError, DuplicateImportError, InputError
+from projects.records import (DisplacementRecord, DisplacementSet, Epoch, EpochResult, LimitRecord, LogEntry,
+                              Reflector, ReferenceCheck, ScanFile, StoredPlan)
 
 DB_NAME = "campaign.sqlite"
 SCANS_DIR = "scans"
@@ -278,34 +280,30 @@ class Campaign:
         conn.execute("INSERT INTO log(time, action, epoch, details) VALUES (?, ?, ?, ?)",
                      (now_iso(), action, epoch, json.dumps(details, default=str)))
 
-    def log_rows(self) -> list[dict]:
-        return [dict(r) for r in self.conn.execute("SELECT * FROM log ORDER BY id")]
+    def log(self) -> list[LogEntry]:
+        """The campaign's log, oldest first."""
+        return [LogEntry(r["id"], r["time"], r["action"], r["epoch"], json.loads(r["details"]))
+                for r in self.conn.execute("SELECT * FROM log ORDER BY id")]
 
     # ------------------------------------------------------------------ reflectors
-    def reflectors(self) -> list[dict]:
-        return [dict(r) for r in self.conn.execute("SELECT * FROM reflectors ORDER BY grp DESC, id")]
+    def reflectors(self) -> list[Reflector]:
+        """Every reflector, retired ones included: reference targets first, then by id."""
+        return [_reflector(r) for r in self.conn.execute("SELECT * FROM reflectors ORDER BY grp DESC, id")]
 
-    def reflector(self, rid: str) -> dict:
+    def reflector(self, rid: str) -> Reflector:
         row = self.conn.execute("SELECT * FROM reflectors WHERE id = ?", (rid,)).fetchone()
         if row is None:
-            known = ", ".join(r["id"] for r in self.reflectors())
+            known = ", ".join(r.id for r in self.reflectors())
             raise InputError(f"unknown reflector {rid!r}; the campaign has {known}")
-        return dict(row)
+        return _reflector(row)
 
     def layout(self, at: Optional[str] = None) -> Layout:
         """Reflectors expected at a date-time (all active ones when None)."""
-        rows = []
-        for r in self.reflectors():
-            if at is not None and ((r["installed"] and r["installed"] > at) or (r["retired"] and r["retired"] <= at)):
-                continue
-            if at is None and r["retired"]:
-                continue
-            rows.append(r)
-        return Layout(tuple(r["id"] for r in rows), tuple(r["grp"] for r in rows),
-                      np.array([[r["x"], r["y"], r["z"]] for r in rows], dtype=float).reshape(-1, 3),
-                      np.array([r["diameter_m"] for r in rows], dtype=float),
-                      np.array([[_nan(r.get("nx")), _nan(r.get("ny")), _nan(r.get("nz"))] for r in rows],
-                               dtype=float).reshape(-1, 3))
+        rows = [r for r in self.reflectors() if r.expected_at(at)]
+        return Layout(tuple(r.id for r in rows), tuple(r.group for r in rows),
+                      np.array([r.xyz_layout for r in rows], dtype=float).reshape(-1, 3),
+                      np.array([r.diameter_m for r in rows], dtype=float),
+                      np.array([r.normal_layout for r in rows], dtype=float).reshape(-1, 3))
 
     def add_reflector(self, rid: str, group: str, xyz: Sequence[float], *, diameter_m: float = 0.05,
                       installed: Optional[str] = None, replaces: Optional[str] = None, note: str = "") -> None:
@@ -326,8 +324,8 @@ class Campaign:
 
     def retire_reflector(self, rid: str, when: str) -> None:
         r = self.reflector(rid)
-        if r["retired"]:
-            raise InputError(f"reflector {rid!r} was already retired on {r['retired']}")
+        if r.retired:
+            raise InputError(f"reflector {rid!r} was already retired on {r.retired}")
         when = parse_datetime(when)
         with self.transaction() as c:
             c.execute("UPDATE reflectors SET retired = ? WHERE id = ?", (when, rid))
@@ -340,31 +338,35 @@ class Campaign:
         with self.transaction() as c:
             if self.conn.execute("SELECT 1 FROM reflectors WHERE id = ?", (new,)).fetchone():
                 raise InputError(f"reflector {new!r} already exists; choose a new id")
-            pos = [float(v) for v in (xyz if xyz is not None else (r["x"], r["y"], r["z"]))]
+            pos = [float(v) for v in (xyz if xyz is not None else r.xyz_layout)]
             c.execute("UPDATE reflectors SET retired = ? WHERE id = ?", (when, old))
             c.execute("INSERT INTO reflectors(id, grp, x, y, z, diameter_m, installed, replaces, note, nx, ny, nz) "
                       "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                      (new, r["grp"], *pos, r["diameter_m"], when, old, f"replaces {old}", r["nx"], r["ny"], r["nz"]))
+                      (new, r.group, *pos, r.diameter_m, when, old, f"replaces {old}", *_normal_values(r.normal_layout)))
             self._log(c, "reflector-replace", None, {"old": old, "new": new, "when": when})
 
     # ------------------------------------------------------------------ epochs and files
-    def epochs(self) -> list[dict]:
-        return [dict(r) for r in self.conn.execute("SELECT * FROM epochs ORDER BY datetime, label")]
+    def epochs(self) -> list[Epoch]:
+        """Every epoch, oldest first."""
+        return [Epoch(**dict(r)) for r in self.conn.execute("SELECT * FROM epochs ORDER BY datetime, label")]
 
-    def epoch(self, label: str) -> dict:
+    def epoch(self, label: str) -> Epoch:
+        """One epoch; an unknown label is an :class:`InputError` naming the epochs there are."""
         row = self.conn.execute("SELECT * FROM epochs WHERE label = ?", (label,)).fetchone()
         if row is None:
-            labels = [e["label"] for e in self.epochs()]
+            labels = [e.label for e in self.epochs()]
             hint = f"; epochs are {', '.join(labels[-8:])}" if labels else "; the campaign has no epochs yet"
             raise InputError(f"no epoch {label!r} in {self.folder}{hint}")
-        return dict(row)
+        return Epoch(**dict(row))
 
-    def files(self, epoch: str, role: Optional[str] = None) -> list[dict]:
+    def files(self, epoch: str, role: Optional[str] = None) -> list[ScanFile]:
+        """An epoch's scan files (``role`` ``"coarse"`` or ``"fine"``, or both), in import order."""
         q = "SELECT * FROM files WHERE epoch = ?" + (" AND role = ?" if role else "") + " ORDER BY imported, stored_path"
-        return [dict(r) for r in self.conn.execute(q, (epoch, role) if role else (epoch,))]
+        return [ScanFile(**dict(r)) for r in self.conn.execute(q, (epoch, role) if role else (epoch,))]
 
-    def path_of(self, file_row: dict) -> Path:
-        return self.folder / file_row["stored_path"]
+    def path_of(self, file: ScanFile) -> Path:
+        """Where a stored scan file is on disk."""
+        return self.folder / file.stored_path
 
     def new_series(self, table: str, path: str | os.PathLike, name: Optional[str], what: str) -> tuple[Path, str]:
         """The file and the name of a series about to be imported into ``table`` (``camera_series``,
@@ -493,9 +495,20 @@ class Campaign:
             c.execute("DELETE FROM centroids WHERE epoch = ?", (epoch,))
             self._log(c, "plan", epoch, {"inputs_hash": inputs_hash})
 
-    def plan_row(self, epoch: str) -> Optional[dict]:
+    def stored_plan(self, epoch: str) -> Optional[StoredPlan]:
+        """An epoch's plan with the inputs hash it was made from, or None when it has none."""
+        from lidar.plan import ScanPlan
+
         row = self.conn.execute("SELECT * FROM plans WHERE epoch = ?", (epoch,)).fetchone()
-        return None if row is None else dict(row)
+        if row is None:
+            return None
+        doc = json.loads(row["json"])
+        return StoredPlan(epoch, ScanPlan.from_json(doc), doc, row["inputs_hash"], row["created"])
+
+    def plan(self, epoch: str):
+        """An epoch's :class:`lidar.plan.ScanPlan`, or None when it has none."""
+        stored = self.stored_plan(epoch)
+        return None if stored is None else stored.plan
 
     def map_preview(self, epoch: str):
         """The stored :class:`projects.map_previews.MapPreview` of an epoch, or None."""
@@ -504,9 +517,10 @@ class Campaign:
         row = self.conn.execute("SELECT arrays, annotations FROM map_previews WHERE epoch = ?", (epoch,)).fetchone()
         return None if row is None else decode_preview(row[0], row[1])
 
-    def result_row(self, epoch: str) -> Optional[dict]:
+    def result(self, epoch: str) -> Optional[EpochResult]:
+        """How far processing has taken an epoch, or None when it has not started."""
         row = self.conn.execute("SELECT * FROM epoch_results WHERE epoch = ?", (epoch,)).fetchone()
-        return None if row is None else dict(row)
+        return None if row is None else EpochResult(**dict(row))
 
     def save_centroids(self, epoch: str, cents: dict, inputs_hash: str, params: dict) -> None:
         with self.transaction() as c:
@@ -551,24 +565,50 @@ class Campaign:
                            int(rc.missing), int(rc.suspect)))
             self._log(c, "displacements", epoch, {"baseline": baseline, "inputs_hash": inputs_hash})
 
-    def displacement_set(self, epoch: str) -> Optional[dict]:
-        row = self.conn.execute("SELECT * FROM displacement_sets WHERE epoch = ?", (epoch,)).fetchone()
-        return None if row is None else dict(row)
+    def displacement_set(self, epoch: str) -> Optional[DisplacementSet]:
+        """What an epoch's displacements were computed with, or None before they are."""
+        r = self.conn.execute("SELECT * FROM displacement_sets WHERE epoch = ?", (epoch,)).fetchone()
+        if r is None:
+            return None
+        return DisplacementSet(r["epoch"], r["baseline"], r["inputs_hash"], np.array(json.loads(r["normal"]), float),
+                               np.array(json.loads(r["reference_point"]), float), tuple(json.loads(r["reference_ids"])),
+                               r["normal_mode"], tuple(json.loads(r["flags"])), r["processed"])
 
-    def displacement_rows(self) -> list[dict]:
-        q = """SELECT e.label AS epoch, e.datetime AS datetime, d.reflector, d.displacement_m, d.sigma_m,
+    def displacements(self, *, where: str = "", args: tuple = (), order: str = "ASC",
+                      limit: Optional[int] = None) -> list[DisplacementRecord]:
+        """Every stored displacement, by epoch date then target (see :func:`projects.history.histories`).
+
+        ``where`` (SQL over ``d`` displacements and ``e`` epochs, with ``args``), ``order`` and ``limit``
+        are for the store's own narrower queries.
+        """
+        if order not in ("ASC", "DESC"):
+            raise ValueError(f"order must be ASC or DESC, not {order!r}")
+        q = f"""SELECT e.label AS epoch, e.datetime AS datetime, d.reflector, d.displacement_m, d.sigma_m,
                       d.flags AS flags, s.flags AS epoch_flags, s.baseline
                FROM displacements d JOIN displacement_sets s ON s.epoch = d.epoch
-               JOIN epochs e ON e.label = d.epoch ORDER BY e.datetime, e.label, d.reflector"""
-        return [dict(r) for r in self.conn.execute(q)]
+               JOIN epochs e ON e.label = d.epoch {'WHERE ' + where if where else ''}
+               ORDER BY e.datetime {order}, e.label {order}, d.reflector""" + (f" LIMIT {int(limit)}" if limit else "")
+        return [DisplacementRecord(r["epoch"], r["datetime"], r["reflector"], r["displacement_m"], r["sigma_m"],
+                                   tuple(json.loads(r["flags"])), tuple(json.loads(r["epoch_flags"])), r["baseline"])
+                for r in self.conn.execute(q, args)]
+
+    def last_displacement(self, reflector: str, *, at_or_before: str) -> Optional[DisplacementRecord]:
+        """A target's latest displacement with a value, in an epoch dated no later than epoch ``at_or_before``."""
+        rows = self.displacements(where="d.reflector = ? AND d.displacement_m IS NOT NULL AND e.datetime <= "
+                                        "(SELECT datetime FROM epochs WHERE label = ?)",
+                                  args=(reflector, at_or_before), order="DESC", limit=1)
+        return rows[0] if rows else None
 
     def displacement_flags(self, epoch: str) -> list[str]:
         """Every per-target displacement flag of an epoch (one entry per target and flag)."""
         rows = self.conn.execute("SELECT flags FROM displacements WHERE epoch = ?", (epoch,)).fetchall()
         return [f for r in rows for f in json.loads(r[0])]
 
-    def reference_check_rows(self, epoch: str) -> list[dict]:
-        return [dict(r) for r in self.conn.execute("SELECT * FROM reference_checks WHERE epoch = ?", (epoch,))]
+    def reference_checks(self, epoch: str) -> list[ReferenceCheck]:
+        """How each pier target moved in an epoch."""
+        return [ReferenceCheck(r["epoch"], r["reflector"], r["median_change_m"], r["max_change_m"], bool(r["moved"]),
+                               bool(r["missing"]), bool(r["suspect"]))
+                for r in self.conn.execute("SELECT * FROM reference_checks WHERE epoch = ?", (epoch,))]
 
     # ------------------------------------------------------------------ limits
     def set_limit(self, reflector: str, rule: str) -> None:
@@ -589,15 +629,25 @@ class Campaign:
             self.conn.execute("SELECT * FROM limits WHERE reflector = '*'").fetchone()
         return None if row is None else Limit(row["warning_mm"], row["alarm_mm"], row["rule"])
 
+    def limits(self) -> list[LimitRecord]:
+        """Every limit set, by target ("*" is the default for all measurement targets)."""
+        from projects.limits import Limit
+
+        return [LimitRecord(r["reflector"], Limit(r["warning_mm"], r["alarm_mm"], r["rule"]))
+                for r in self.conn.execute("SELECT * FROM limits ORDER BY reflector")]
+
     def integrity_check(self) -> str:
         res = self.conn.execute("PRAGMA integrity_check").fetchone()[0]
         fk = self.conn.execute("PRAGMA foreign_key_check").fetchall()
         return res if not fk else f"foreign key violations: {len(fk)}"
 
 
+def _reflector(r: sqlite3.Row) -> Reflector:
+    return Reflector(r["id"], r["grp"], (r["x"], r["y"], r["z"]), r["diameter_m"],
+                     (_nan(r["nx"]), _nan(r["ny"]), _nan(r["nz"])), r["installed"], r["retired"], r["replaces"],
+                     r["note"])
+
+
 def _f(v) -> Optional[float]:
     return float(v) if v is not None and np.isfinite(v) else None
 
-
-def _nan(v) -> float:
-    return float("nan") if v is None else float(v)

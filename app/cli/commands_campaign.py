@@ -192,7 +192,7 @@ def cmd_plan(args) -> int:
             from projects.field_sheet import write_field_sheet
 
             write_field_sheet(plan, args.sheet, campaign_name=c.name, preview=c.map_preview(args.epoch),
-                              epoch_date=c.epoch(args.epoch)["datetime"][:10])
+                              epoch_date=c.epoch(args.epoch).date)
     plan.save(args.out)
     print(f"wrote {args.out}: {len(plan.rois)} windows, {plan.total_seconds / 60:.1f} min"
           + (f"; field sheet {args.sheet}" if args.sheet else ""))
@@ -286,11 +286,11 @@ def _xyz(text: str):
 def cmd_reflector(args) -> int:
     with _open(args.dir, writable=args.action != "list") as c:
         if args.action == "list":
-            rows = c.reflectors()
+            rows = [r.to_dict() for r in c.reflectors()]
             if args.json:
                 dump_json(rows)
             else:
-                table(rows, ["id", "grp", "x", "y", "z", "diameter_m", "installed", "retired", "replaces"])
+                table(rows, ["id", "group", "x", "y", "z", "diameter_m", "installed", "retired", "replaces"])
         elif args.action == "add":
             c.add_reflector(args.id, args.group, _xyz(args.xyz), diameter_m=args.diameter_mm / 1000.0,
                             installed=args.installed)

@@ -106,7 +106,7 @@ def cmd_field_sheet(args) -> int:
             plan = plan_epoch(c, args.epoch, progress=cb)
         preview = c.map_preview(args.epoch)
         ep = c.epoch(args.epoch)
-        path = write_field_sheet(plan, args.out, campaign_name=c.name, preview=preview, epoch_date=ep["datetime"][:10])
+        path = write_field_sheet(plan, args.out, campaign_name=c.name, preview=preview, epoch_date=ep.date)
     print(f"wrote {path}: {len(plan.rois)} windows, {plan.total_seconds / 60:.1f} min "
           f"(budget {plan.budget_seconds / 60:.0f} min) on a {plan.profile.name}")
     return 0

@@ -188,7 +188,7 @@ def field_sheet(session, label: str, path: Path, progress: Callable) -> Path:
     with session.write() as c:
         plan = plan_epoch(c, label, progress=scaled(progress, 0.0, 0.8))
         return write_field_sheet(plan, path, campaign_name=c.name, preview=c.map_preview(label),
-                                 epoch_date=c.epoch(label)["datetime"][:10])
+                                 epoch_date=c.epoch(label).date)
 
 
 def check(session, label: str, progress: Callable):

@@ -40,7 +40,7 @@ class CampaignTree(QTreeWidget):
             self._items[(kind, key)] = it
         return it
 
-    def populate(self, status: dict, reflectors: list[dict], series: list[dict]) -> None:
+    def populate(self, status: dict, reflectors: list, series: list[dict]) -> None:
         """Rebuild from :func:`projects.overview.campaign_status`, the reflectors and the camera series."""
         selected = self.current_key()
         self.blockSignals(True)
@@ -51,15 +51,15 @@ class CampaignTree(QTreeWidget):
         latest = {t["reflector"]: t for t in status["targets"]}
         refl = self._item(root, f"Reflectors ({len(reflectors)})")
         for group, title in (("reference", "Reference group (piers)"), ("measurement", "Measurement group (deck)")):
-            rows = [r for r in reflectors if r["grp"] == group]
+            rows = [r for r in reflectors if r.group == group]
             g = self._item(refl, f"{title} ({len(rows)})")
             for r in rows:
-                t = latest.get(r["id"])
-                state = "retired" if r["retired"] else (t["state"] if t else "")
-                text = r["id"]
+                t = latest.get(r.id)
+                state = "retired" if r.retired else (t["state"] if t else "")
+                text = r.id
                 if t and t["displacement_mm"] is not None:
                     text += f"   {t['displacement_mm']:+.2f} mm"
-                self._item(g, text, state, "reflector", r["id"], (r["note"] or "") + (f" flags: {t['flags']}"
+                self._item(g, text, state, "reflector", r.id, (r.note or "") + (f" flags: {t['flags']}"
                                                                                        if t and t["flags"] else ""))
         eps = self._item(root, f"Epochs ({len(status['epochs'])})")
         for e in status["epochs"]:

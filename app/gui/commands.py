@@ -5,7 +5,6 @@ then runs the work as a background job through ``self.run_job`` and refreshes th
 """
 from __future__ import annotations
 
-import json
 from typing import Callable, Optional
 
 from PySide6.QtWidgets import QFileDialog, QInputDialog
@@ -26,15 +25,13 @@ class CommandsMixin:
             return
         if self.map_view.plan is not None and self.map_view.label == label and self.map_view.dirty:
             return  # keep unsaved edits
-        from lidar.plan import ScanPlan
-
         with self.session.read() as c:
             preview = c.map_preview(label)
-            row = c.plan_row(label)
+            plan = c.plan(label)
         if preview is None:
             self.map_view.show_message(f"Epoch {label} has not been planned yet: Epoch ▸ Plan, or Process.")
             return
-        self.map_view.load(label, preview, None if row is None else ScanPlan.from_json(json.loads(row["json"])))
+        self.map_view.load(label, preview, plan)
         if self.session.reflector:
             self.map_view.select_reflector(self.session.reflector)
 
@@ -70,7 +67,7 @@ class CommandsMixin:
         if self.map_view.plan is None:
             return
         with self.session.read() as c:
-            refl = {r["id"]: r for r in c.reflectors() if not r["retired"]}
+            refl = {r.id: r for r in c.reflectors() if not r.retired}
         taken = {it.roi.reflector for it in self.map_view.items}
         free = [rid for rid in refl if rid not in taken]
         if not free:
@@ -262,7 +259,7 @@ class CommandsMixin:
         from projects.camera import midspan_reflector
 
         with self.session.read() as c:
-            meas = [r["id"] for r in c.reflectors() if r["grp"] == "measurement" and not r["retired"]]
+            meas = [r.id for r in c.reflectors() if not r.is_reference and not r.retired]
             try:
                 default = midspan_reflector(c)
             except SurveyError:

@@ -2,11 +2,11 @@
 from __future__ import annotations
 
 import html
-import json
 
 import numpy as np
 
 from lidar.flags import describe
+from projects.history import histories
 from projects.overview import epoch_state
 
 
@@ -25,40 +25,38 @@ def campaign_html(c, status: dict) -> str:
 
 def reflector_html(c, rid: str) -> str:
     r = c.reflector(rid)
-    rows = [("Group", r["grp"]), ("Layout position", f"{r['x']:.3f}, {r['y']:.3f}, {r['z']:.3f} m"),
-            ("Diameter", f"{r['diameter_m'] * 1000:.0f} mm")]
-    for k in ("installed", "retired", "replaces"):
-        if r[k]:
-            rows.append((k.capitalize(), r[k]))
-    lim = c.limit_for(rid) if r["grp"] == "measurement" else None
+    rows = [("Group", r.group), ("Layout position", ", ".join(f"{v:.3f}" for v in r.xyz_layout) + " m"),
+            ("Diameter", f"{r.diameter_m * 1000:.0f} mm")]
+    for name, value in (("Installed", r.installed), ("Retired", r.retired), ("Replaces", r.replaces)):
+        if value:
+            rows.append((name, value))
+    lim = None if r.is_reference else c.limit_for(rid)
     if lim is not None:
         rows.append(("Limits", f"warning {lim.warning_mm:.2f} mm, alarm {lim.alarm_mm:.2f} mm ({lim.rule})"))
-    hist = [d for d in c.displacement_rows() if d["reflector"] == rid and d["displacement_m"] is not None]
-    if hist:
-        last = hist[-1]
-        rows.append(("Latest", f"{last['displacement_m'] * 1e3:+.3f} ± {last['sigma_m'] * 1e3:.3f} mm "
-                               f"({last['epoch']})"))
-        vals = np.array([d["displacement_m"] for d in hist]) * 1e3
-        rows.append(("Range", f"{vals.min():+.2f} .. {vals.max():+.2f} mm over {len(hist)} epochs"))
-        if json.loads(last["flags"]):
-            rows.append(("Flags", ", ".join(json.loads(last["flags"]))))
+    h = histories(c, targets=[rid]).get(rid)
+    h = h.measured() if h is not None else None
+    if h is not None and len(h):
+        rows.append(("Latest", f"{h.displacement_mm[-1]:+.3f} ± {h.sigma_mm[-1]:.3f} mm ({h.epochs[-1]})"))
+        vals = h.displacement_mm
+        rows.append(("Range", f"{vals.min():+.2f} .. {vals.max():+.2f} mm over {len(h)} epochs"))
+        if h.flags[-1]:
+            rows.append(("Flags", ", ".join(h.flags[-1])))
     return f"<h3>Reflector {html.escape(rid)}</h3>" + _rows(rows)
 
 
 def epoch_html(c, label: str) -> str:
     e = c.epoch(label)
     state, flags = epoch_state(c, label)
-    rows = [("Date", e["datetime"]), ("State", state), ("Notes", e["notes"] or "-")]
+    rows = [("Date", e.datetime), ("State", state), ("Notes", e.notes or "-")]
     if flags:
         rows.append(("Flags", describe(flags)))
     for f in c.files(label):
-        rows.append((f"{f['role']} scan", f"{f['original_path'].rsplit('/', 1)[-1]} ({f['size'] / 1e6:.1f} MB, "
-                                           f"sha256 {f['sha256'][:12]}…)"))
-    plan = c.plan_row(label)
-    if plan is not None:
-        p = json.loads(plan["json"])
-        rows.append(("Plan", f"{len(p['rois'])} windows, {p['total_seconds'] / 60:.1f} min"
-                             + (" (edited by hand)" if p.get("edited") else "")))
+        rows.append((f"{f.role} scan", f"{f.original_path.rsplit('/', 1)[-1]} ({f.size / 1e6:.1f} MB, "
+                                       f"sha256 {f.sha256[:12]}…)"))
+    stored = c.stored_plan(label)
+    if stored is not None:
+        rows.append(("Plan", f"{len(stored.plan.rois)} windows, {stored.plan.total_seconds / 60:.1f} min"
+                             + (" (edited by hand)" if stored.edited else "")))
     out = f"<h3>Epoch {html.escape(label)}</h3>" + _rows(rows)
     cents = c.centroids(label)
     if cents:

@@ -339,6 +339,7 @@ class MainWindow(CommandsMixin, QMainWindow):
             return
         from projects.camera import series_rows
         from projects.context import plot_context
+        from projects.history import histories
         from projects.overview import campaign_status
 
         try:
@@ -346,15 +347,14 @@ class MainWindow(CommandsMixin, QMainWindow):
                 status = campaign_status(c)
                 reflectors = c.reflectors()
                 series = series_rows(c)
-                rows = c.displacement_rows()
-                limits = {r["id"]: c.limit_for(r["id"]) for r in reflectors if r["grp"] == "measurement"}
+                hist = histories(c)
                 context = plot_context(c)
         except SurveyError as exc:
             show_error(self, "Reload campaign", str(exc))
             return
         self.status_data = status
         self.tree.populate(status, reflectors, series)
-        self.displacements.set_data(rows, limits, context)
+        self.displacements.set_data(hist, context)
         self._show_details()
         self._tab_changed(self.tabs.currentIndex())
 

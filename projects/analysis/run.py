@@ -19,6 +19,7 @@ from common.files import write_atomic
 from projects.analysis.models import Event, TargetFit, first_crossing, fit_target
 from projects.environment import events as stored_events
 from projects.environment import load_env
+from projects.history import histories
 from projects.store import Campaign
 
 ANALYSIS_FORMAT_VERSION = 1
@@ -48,11 +49,11 @@ def analyse_campaign(c: Campaign, *, horizon_days: float = 365.0, long_term_fact
         raise InputError(f"the horizon must be between 1 day and 100 years, got {horizon_days} days")
     if long_term_factor is not None and not (math.isfinite(long_term_factor) and long_term_factor >= 1):
         raise InputError(f"the long-term factor must be at least 1, got {long_term_factor}")
-    rows = [r for r in c.displacement_rows() if r["baseline"]]
-    if not rows:
+    hist = histories(c)
+    if not hist:
         raise InputError(f"{c.folder}: no displacements yet; run 'bridgesurvey process' first")
     base = baseline_epoch(c)
-    origin = _ns(c.epoch(base)["datetime"])
+    origin = _ns(c.epoch(base).datetime)
     series = load_env(c, kind="structure-temperature") or load_env(c, kind="temperature")
     temperature, temp_source = None, None
     if series:
@@ -60,21 +61,20 @@ def analyse_campaign(c: Campaign, *, horizon_days: float = 365.0, long_term_fact
         temperature = ((s.time_ns - origin) / DAY_NS, s.value)
         temp_source = f"{s.kind} series {s.name!r}"
     evs = [Event((_ns(e["date"]) - origin) / DAY_NS, e["label"], e["kind"], e["date"][:10]) for e in stored_events(c)]
-    epoch_times = sorted({r["datetime"] for r in rows})
+    epoch_times = sorted({t for h in hist.values() for t in h.times})
     from projects.predictions import casting_ns, predictions
 
     preds = predictions(c)
     casting = casting_ns(c)
     warnings = _aliasing_warnings(epoch_times, temperature, origin)
     targets = []
-    for rid in sorted({r["reflector"] for r in rows}):
-        mine = [r for r in rows if r["reflector"] == rid and r["displacement_m"] is not None]
-        t = np.array([(_ns(r["datetime"]) - origin) / DAY_NS for r in mine])
-        d = np.array([r["displacement_m"] * 1000 for r in mine], dtype=float)
-        sg = np.array([(r["sigma_m"] or 0.0) * 1000 for r in mine], dtype=float)
-        sg = np.where(sg > 0, sg, np.nan)  # the baseline itself (sigma 0) carries no information
+    for rid, h in hist.items():
+        mine = h.measured()
+        t = (mine.time_ns - origin) / DAY_NS
+        d = mine.displacement_mm
+        sg = np.where(mine.sigma_mm > 0, mine.sigma_mm, np.nan)  # the baseline itself (sigma 0) carries no information
         fit = fit_target(t, d, sg, temperature=temperature, events=evs, reference_temperature=reference_temperature)
-        lim = c.limit_for(rid)
+        lim = h.limit
         tj = _target_json(rid, fit, t, origin, horizon_days, lim, long_term_factor)
         if rid in preds:
             tj["prediction_offset_mm"] = _num(preds[rid][2]["offset_mm"])
@@ -89,10 +89,9 @@ def analyse_campaign(c: Campaign, *, horizon_days: float = 365.0, long_term_fact
             "horizon_days": horizon_days, "long_term_factor": long_term_factor, "targets": targets}
 
 
-def _aliasing_warnings(epoch_times: list[str], temperature, origin: int) -> list[str]:
+def _aliasing_warnings(epoch_times: list[dt.datetime], temperature, origin: int) -> list[str]:
     out = []
-    hours = np.array([dt.datetime.fromisoformat(e).astimezone(dt.timezone.utc).hour +
-                      dt.datetime.fromisoformat(e).minute / 60 for e in epoch_times])
+    hours = np.array([e.astimezone(dt.timezone.utc).hour + e.minute / 60 for e in epoch_times])
     if len(hours) >= 3:
         ang = hours / 24 * 2 * np.pi
         spread = math.sqrt(-2 * math.log(max(math.hypot(np.cos(ang).mean(), np.sin(ang).mean()), 1e-9))) * 24 / (2 * np.pi)

@@ -35,7 +35,7 @@ def _preview_from_scan(c: Campaign):
 
         if not c.files(label, "coarse"):
             return None
-        analysis = analyse_epoch_coarse(c, label, c.layout(c.epoch(label)["datetime"]), parameters(c))
+        analysis = analyse_epoch_coarse(c, label, c.layout(c.epoch(label).datetime), parameters(c))
         return decode_preview(*encode_preview(analysis))
     return preview_of
 

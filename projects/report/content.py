@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import datetime as dt
 import getpass
-import json
 import logging
 import platform
 from dataclasses import dataclass
@@ -18,7 +17,10 @@ from typing import Optional
 from common.errors import InputError, SurveyError
 from projects import schema
 from projects.exports import displacement_table
+from projects.history import DisplacementHistory, histories
 from projects.processing import PIPELINE_VERSION, baseline_epoch, parameters
+from projects.records import (DisplacementSet, Epoch, LimitRecord, LogEntry, Reflector, ReferenceCheck, ScanFile,
+                              StoredPlan)
 from projects.store import Campaign
 
 log = logging.getLogger(__name__)
@@ -80,12 +82,12 @@ class EpochSection:
     datetime: str
     notes: str
     stage: str
-    plan: Optional[dict]
+    plan: Optional[StoredPlan]
     preview: object  # projects.map_previews.MapPreview or None
     centroids: dict
-    reference_checks: tuple[dict, ...]
-    displacement_set: Optional[dict]
-    files: tuple[dict, ...]
+    reference_checks: tuple[ReferenceCheck, ...]
+    displacement_set: Optional[DisplacementSet]
+    files: tuple[ScanFile, ...]
 
 
 @dataclass(frozen=True, eq=False)
@@ -103,12 +105,13 @@ class ReportContent:
     baseline: Optional[str]
     epochs: tuple[EpochSection, ...]
     displacements: tuple[dict, ...]      # rows of projects.exports.displacement_table within the scope
-    reflectors: tuple[dict, ...]
+    histories: dict[str, DisplacementHistory]  # per target, within the scope
+    reflectors: tuple[Reflector, ...]
     target_states: tuple[TargetState, ...]
-    limits: tuple[dict, ...]
+    limits: tuple[LimitRecord, ...]
     parameters: dict
     versions: dict
-    log: tuple[dict, ...]
+    log: tuple[LogEntry, ...]
     extras: dict                         # optional sections (comparisons, camera cross-validation) by name
 
     @property
@@ -116,12 +119,12 @@ class ReportContent:
         return (self.epochs[0].datetime, self.epochs[-1].datetime) if self.epochs else ("", "")
 
 
-def select_epochs(c: Campaign, scope: ReportScope) -> list[dict]:
+def select_epochs(c: Campaign, scope: ReportScope) -> list[Epoch]:
     """The campaign's epochs (in time order) that a scope covers; InputError for unknown labels."""
     epochs = c.epochs()
     if not epochs:
         raise InputError(f"{c.folder}: the campaign has no epochs yet; add one with 'bridgesurvey add-epoch'")
-    labels = [e["label"] for e in epochs]
+    labels = [e.label for e in epochs]
     for lab in (scope.epoch, scope.start, scope.end):
         if lab is not None and lab not in labels:
             raise InputError(f"unknown epoch {lab!r}; the campaign has {labels[0]} ... {labels[-1]} "
@@ -149,26 +152,27 @@ def versions() -> dict:
 
 
 def _target_states(c: Campaign, last: Optional[EpochSection]) -> list[TargetState]:
-    moved = {r["reflector"] for r in (last.reference_checks if last else ()) if r["moved"] or r["suspect"]}
-    replaced_by = {r["replaces"]: r["id"] for r in c.reflectors() if r["replaces"]}
+    moved = {r.reflector for r in (last.reference_checks if last else ()) if r.moved or r.suspect}
+    reflectors = c.reflectors()
+    replaced_by = {r.replaces: r.id for r in reflectors if r.replaces}
     out = []
-    for r in c.reflectors():
-        t = last.centroids.get(r["id"]) if last else None
+    for r in reflectors:
+        t = last.centroids.get(r.id) if last else None
         flags = tuple(t.flags) if t is not None else ()
         remarks = []
         if t is not None and not t.found:
             remarks.append("not found (occluded or removed)")
         if "second_bright_object" in flags:
             remarks.append("contamination beside the target left out")
-        if r["id"] in moved:
+        if r.id in moved:
             remarks.append("moved reference: left out of the reference group")
-        if r["replaces"]:
-            remarks.append(f"replaces {r['replaces']}")
-        if r["id"] in replaced_by:
-            remarks.append(f"replaced by {replaced_by[r['id']]}")
-        if r["retired"] and last is not None and r["retired"] <= last.datetime:
-            remarks.append(f"retired {r['retired'][:10]}")
-        out.append(TargetState(r["id"], r["grp"], r["installed"], r["retired"], r["replaces"],
+        if r.replaces:
+            remarks.append(f"replaces {r.replaces}")
+        if r.id in replaced_by:
+            remarks.append(f"replaced by {replaced_by[r.id]}")
+        if r.retired and last is not None and r.retired <= last.datetime:
+            remarks.append(f"retired {r.retired[:10]}")
+        out.append(TargetState(r.id, r.group, r.installed, r.retired, r.replaces,
                                None if t is None else bool(t.found), flags, tuple(remarks)))
     return out
 
@@ -179,25 +183,25 @@ def gather(c: Campaign, scope: ReportScope = ReportScope(), *, author: Optional[
     chosen = select_epochs(c, scope)
     sections = []
     for e in chosen:
-        lab = e["label"]
-        res = c.result_row(lab)
-        plan = c.plan_row(lab)
+        lab = e.label
+        res = c.result(lab)
         sections.append(EpochSection(
-            lab, e["datetime"], e["notes"], res["stage"] if res else "imported",
-            json.loads(plan["json"]) if plan else None, c.map_preview(lab) if with_previews else None,
-            c.centroids(lab), tuple(c.reference_check_rows(lab)), c.displacement_set(lab), tuple(c.files(lab))))
-    last_time = chosen[-1]["datetime"]
-    first_time = chosen[0]["datetime"]
+            lab, e.datetime, e.notes, res.stage if res else "imported",
+            c.stored_plan(lab), c.map_preview(lab) if with_previews else None,
+            c.centroids(lab), tuple(c.reference_checks(lab)), c.displacement_set(lab), tuple(c.files(lab))))
+    last_time = chosen[-1].datetime
+    first_time = chosen[0].datetime
     # A visit report shows the history up to the visit; a period report the period itself.
     since = "" if scope.epoch is not None else first_time
     rows = [r for r in displacement_table(c) if since <= r["datetime"] <= last_time]
     if scope.epoch is not None:  # a visit report shows the history up to that visit
-        text = f"visit of {chosen[0]['datetime'][:16].replace('T', ' ')} (epoch {scope.epoch})"
+        text = f"visit of {chosen[0].datetime[:16].replace('T', ' ')} (epoch {scope.epoch})"
     elif len(chosen) == len(c.epochs()):
         text = f"whole campaign, {len(chosen)} epochs"
     else:
-        text = f"period {chosen[0]['label']} to {chosen[-1]['label']}, {len(chosen)} epochs"
-    limits = [dict(r) for r in c.conn.execute("SELECT * FROM limits ORDER BY reflector")]
+        text = f"period {chosen[0].label} to {chosen[-1].label}, {len(chosen)} epochs"
+    in_scope = {r["epoch"] for r in rows}
+    hist = {rid: h.select([lab in in_scope for lab in h.epochs]) for rid, h in histories(c).items()}
     from projects.comparison import comparisons
 
     extras = {}
@@ -219,11 +223,11 @@ def gather(c: Campaign, scope: ReportScope = ReportScope(), *, author: Optional[
             extras["analysis"] = analyse_campaign(c)
         except SurveyError as exc:  # no displacements to analyse: the report says so elsewhere
             log.info("no analysis section: %s", exc)
-    log_rows = [r for r in c.log_rows() if r["epoch"] is None or r["epoch"] in {s.label for s in sections}]
+    log_rows = [r for r in c.log() if r.epoch is None or r.epoch in {s.label for s in sections}]
     return ReportContent(
         name=c.name, folder=str(c.folder), span_m=c.span_m, scanner=c.profile.name,
         author=author or getpass.getuser(),
         generated=dt.datetime.now(dt.timezone.utc).astimezone().isoformat(timespec="seconds"),
         scope=scope, scope_text=text, baseline=baseline_epoch(c), epochs=tuple(sections), displacements=tuple(rows),
-        reflectors=tuple(c.reflectors()), target_states=tuple(_target_states(c, sections[-1])),
-        limits=tuple(limits), parameters=parameters(c), versions=versions(), log=tuple(log_rows), extras=extras)
+        histories=hist, reflectors=tuple(c.reflectors()), target_states=tuple(_target_states(c, sections[-1])),
+        limits=tuple(c.limits()), parameters=parameters(c), versions=versions(), log=tuple(log_rows), extras=extras)

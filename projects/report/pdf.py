@@ -204,7 +204,7 @@ def summary_section(content: ReportContent, ss) -> list:
         out += [Spacer(1, 4), _table(table, (18, 24, 26, 16, 30, 16, 48), ss, cell_colours=colours)]
         problem_epochs = []
         for sec in content.epochs:
-            fl = json.loads(sec.displacement_set["flags"]) if sec.displacement_set else []
+            fl = sec.displacement_set.flags if sec.displacement_set else ()
             bad = [f for f in fl if severity(f) == "problem"]
             if bad:
                 problem_epochs.append(f"{sec.label} ({bad[0]})")
@@ -226,15 +226,15 @@ def summary_section(content: ReportContent, ss) -> list:
     if rows:
         from projects.figures import displacement_history_figure
 
-        fig = displacement_history_figure(list(rows), title="All measurement targets (bars ±2σ)")
+        fig = displacement_history_figure(content.histories, title="All measurement targets (bars ±2σ)")
         fig.set_size_inches(7.0, 3.3)
         out += [Spacer(1, 6), figure_flowable(fig, 170)]
     out.append(Paragraph("Limits in force", ss["Heading2"]))
     if content.limits:
         lim = [["Applies to", "Rule", "Warning [mm]", "Alarm [mm]"]]
         for r in content.limits:
-            lim.append(["every measurement target" if r["reflector"] == "*" else r["reflector"], r["rule"],
-                        _num(r["warning_mm"], "{:.2f}"), _num(r["alarm_mm"], "{:.2f}")])
+            lim.append(["every measurement target" if r.reflector == "*" else r.reflector, r.limit.rule,
+                        _num(r.limit.warning_mm, "{:.2f}"), _num(r.limit.alarm_mm, "{:.2f}")])
         out.append(_table(lim, (50, 45, 30, 30), ss))
         out.append(Paragraph("States compare |displacement| with the thresholds: warning at or above the warning "
                              "value, alarm at or above the alarm value.", ss["Small"]))
@@ -251,14 +251,14 @@ def layout_section(content: ReportContent, ss) -> list:
     out = [PageBreak(), Paragraph("Reflector layout and target state", ss["Heading1"]),
            figure_flowable(layout_figure(content.reflectors, content.target_states, span_m=content.span_m), 170)]
     table = [["Target", "Group", "x / y / z [m]", "In use", f"Epoch {content.epochs[-1].label}"]]
-    by_id = {r["id"]: r for r in content.reflectors}
+    by_id = {r.id: r for r in content.reflectors}
     colours = []
     for k, s in enumerate(content.target_states, start=1):
         r = by_id[s.reflector]
         use = (f"from {s.installed[:10]}" if s.installed else "from start") + \
               (f", retired {s.retired[:10]}" if s.retired else "")
         found = "not measured" if s.found is None else ("found" if s.found else "NOT FOUND")
-        table.append([s.reflector, s.group, f"{r['x']:.2f} / {r['y']:.2f} / {r['z']:.2f}", use,
+        table.append([s.reflector, s.group, " / ".join(f"{v:.2f}" for v in r.xyz_layout), use,
                       "; ".join((found,) + s.remarks)])
         if s.remarks or s.found is False:
             colours.append((k, 4, "#fff3e0"))
@@ -272,7 +272,7 @@ def history_section(content: ReportContent, ss) -> list:
     from projects.report.plots import history_grid_figure
 
     out = [PageBreak(), Paragraph("Displacement history", ss["Heading1"])]
-    targets = sorted({r["reflector"] for r in content.displacements})
+    targets = sorted(content.histories)
     if not targets:
         return out + [Paragraph("No displacements yet.", ss["Normal"])]
     out.append(Paragraph("Each panel is one measurement target. Flagged values (orange rings) carry a remark in "
@@ -282,7 +282,7 @@ def history_section(content: ReportContent, ss) -> list:
         out.append(Paragraph("Dashed purple lines: events" + (f"; orange: {ctx.series_name}, daily means" if
                                                               ctx.series_name else "") + ".", ss["Small"]))
     for k in range(0, len(targets), 6):
-        out.append(figure_flowable(history_grid_figure(content.displacements, targets=targets[k:k + 6],
+        out.append(figure_flowable(history_grid_figure(content.histories, targets=targets[k:k + 6],
                                                        context=ctx), 175))
     return out
 
@@ -290,7 +290,7 @@ def history_section(content: ReportContent, ss) -> list:
 MAP_FIGSIZE = (7.0, 3.1)
 
 
-def render_map_jpeg(preview, plan: Optional[dict], label: str) -> bytes:
+def render_map_jpeg(preview, plan, label: str) -> bytes:
     """An epoch's map figure as JPEG bytes (JPEG goes into the PDF as it is, without re-encoding)."""
     from projects.report.plots import epoch_map_figure
 
@@ -317,7 +317,7 @@ def render_maps(sections: Sequence[EpochSection], preview_of: Optional[Callable]
         if p is not None:  # reduce before sending to a worker: the figure never needs more
             p = MapPreview(reduce_map(p.reflectance_map, max_cells=300_000), p.detections, p.identification,
                            p.full_step_deg)
-        jobs.append(None if p is None else (p, e.plan, e.label))
+        jobs.append(None if p is None else (p, e.plan.plan if e.plan else None, e.label))
     todo = [j for j in jobs if j is not None]
     workers = workers or min(os.cpu_count() or 1, 4)
     if len(todo) < 8 or workers < 2:
@@ -355,33 +355,34 @@ def epoch_section(e: EpochSection, content: ReportContent, ss, *, new_page: bool
     else:
         out.append(Paragraph("No coarse-scan map for this epoch.", ss["Small"]))
     if e.plan:
-        ident = e.plan.get("identification", {})
-        out.append(Paragraph(f"Plan: {len(e.plan['rois'])} windows, {e.plan['total_seconds'] / 60:.1f} min planned; "
+        ident = e.plan.identification
+        plan = e.plan.plan
+        out.append(Paragraph(f"Plan: {len(plan.rois)} windows, {plan.total_seconds / 60:.1f} min planned; "
                              f"{ident.get('detections', '?')} detections, layout fit RMS "
                              f"{_num((ident.get('fit_rms_m') or float('nan')) * 100, '{:.1f}')} cm, "
                              f"predicted (not seen): {', '.join(ident.get('missing', [])) or 'none'}.", ss["Small"]))
         table = [["Target", "Steps φ×θ [°]", "Planned s", "Planned pts on target", "Points in window",
                   "Points on target", "σx / σy / σz [mm]", "Flags"]]
         colours = []
-        for k, r in enumerate(e.plan["rois"], start=1):
-            t = e.centroids.get(r["reflector"])
+        for k, r in enumerate(plan.rois, start=1):
+            t = e.centroids.get(r.reflector)
             sig = "–" if t is None or not t.found else " / ".join(f"{v * 1000:.2f}" for v in t.sigma_m)
             flags = "not scanned yet" if t is None else (", ".join(t.flags) or "–")
             n_on = "–" if t is None else str(t.n_points)
-            table.append([r["reflector"], f"{r['phi_step_deg']:.4f}×{r['theta_step_deg']:.4f}",
-                          f"{r['expected_seconds']:.0f}", str(r.get("expected_target_points", "–")),
+            table.append([r.reflector, f"{r.window.phi_step_deg:.4f}×{r.window.theta_step_deg:.4f}",
+                          f"{r.expected_seconds:.0f}", str(r.expected_target_points or "–"),
                           "–" if t is None or t.n_window < 0 else str(t.n_window), n_on, sig, flags])
-            if t is not None and (t.flags or (r.get("expected_target_points") and
-                                              t.n_points < 0.5 * r["expected_target_points"])):
+            if t is not None and (t.flags or (r.expected_target_points and
+                                              t.n_points < 0.5 * r.expected_target_points)):
                 colours.append((k, 7, "#fff3e0"))
         out += [Spacer(1, 3), _table(table, (14, 26, 14, 22, 20, 18, 30, 34), ss, cell_colours=colours)]
     if e.reference_checks:
         table = [["Reference", "Median distance change [mm]", "Max change [mm]", "Verdict"]]
         for r in e.reference_checks:
-            verdict = "missing" if r["missing"] else ("MOVED, left out" if r["moved"] else
-                                                       ("suspect" if r["suspect"] else "stable"))
-            table.append([r["reflector"], _num(None if r["median_change_m"] is None else r["median_change_m"] * 1000),
-                          _num(None if r["max_change_m"] is None else r["max_change_m"] * 1000), verdict])
+            verdict = "missing" if r.missing else ("MOVED, left out" if r.moved else
+                                                    ("suspect" if r.suspect else "stable"))
+            table.append([r.reflector, _num(None if r.median_change_m is None else r.median_change_m * 1000),
+                          _num(None if r.max_change_m is None else r.max_change_m * 1000), verdict])
         out += [Spacer(1, 4), Paragraph("Reference group check", ss["Small"]), _table(table, (20, 45, 30, 35), ss)]
     rows = [r for r in content.displacements if r["epoch"] == e.label]
     if rows:
@@ -389,7 +390,7 @@ def epoch_section(e: EpochSection, content: ReportContent, ss, *, new_page: bool
         for r in rows:
             table.append([r["reflector"], _num(r["displacement_mm"]), _num(r["sigma_mm"], "{:.3f}"), r["state"],
                           r["flags"].replace(";", ", ") or "–"])
-        flags = e.displacement_set and json.loads(e.displacement_set["flags"])
+        flags = e.displacement_set.flags if e.displacement_set else ()
         out += [Spacer(1, 4), Paragraph("Displacements" + (f" (epoch flags, {_esc(describe(flags))})" if flags else ""),
                                         ss["Small"]), _table(table, (20, 30, 20, 20, 88), ss)]
         problems = [f for f in (flags or []) if severity(f) == "problem"]
@@ -414,8 +415,8 @@ def log_section(content: ReportContent, ss, *, max_log_rows: int = 400) -> list:
     files = [["Epoch", "Role", "Original file", "Size [MB]", "SHA-256"]]
     for e in content.epochs:
         for f in e.files:
-            files.append([e.label, f["role"], os.path.basename(f["original_path"]), f"{f['size'] / 1e6:.1f}",
-                          Paragraph(f["sha256"], ss["Mono"])])
+            files.append([e.label, f.role, os.path.basename(f.original_path), f"{f.size / 1e6:.1f}",
+                          Paragraph(f.sha256, ss["Mono"])])
     out.append(_table(files, (20, 12, 40, 14, 92), ss))
     out.append(Paragraph("Flags used in this report", ss["Heading2"]))
     out.append(_table([["Flag", "Meaning"]] + [[k, v] for k, v in FLAG_TEXT.items()], (45, 133), ss))
@@ -427,8 +428,8 @@ def log_section(content: ReportContent, ss, *, max_log_rows: int = 400) -> list:
         log = log[-max_log_rows:]
     rows = [["Time", "Action", "Epoch", "Details"]]
     for r in log:
-        details = r["details"]
-        rows.append([r["time"][:19], r["action"], r["epoch"] or "", details[:160] + ("…" if len(details) > 160 else "")])
+        details = json.dumps(r.details, default=str)
+        rows.append([r.time[:19], r.action, r.epoch or "", details[:160] + ("…" if len(details) > 160 else "")])
     out.append(_table(rows, (32, 20, 22, 104), ss))
     return out
 

@@ -1,16 +1,17 @@
 """Report figures (matplotlib Figures, no GUI toolkit): layout, per-target histories, epoch maps."""
 from __future__ import annotations
 
-import datetime as dt
-from collections import defaultdict
-from typing import Optional, Sequence
+from typing import Mapping, Optional, Sequence
 
 import numpy as np
+
+from projects.history import DisplacementHistory
+from projects.records import Reflector
 
 GROUP_STYLE = {"reference": ("s", "tab:blue"), "measurement": ("o", "tab:green")}
 
 
-def layout_figure(reflectors: Sequence[dict], states: Sequence = (), *, span_m: Optional[float] = None):
+def layout_figure(reflectors: Sequence[Reflector], states: Sequence = (), *, span_m: Optional[float] = None):
     """Plan (x, y) and elevation (x, z) of the reflector layout, flagged targets in red."""
     from matplotlib.figure import Figure
 
@@ -20,14 +21,14 @@ def layout_figure(reflectors: Sequence[dict], states: Sequence = (), *, span_m: 
     axes = fig.subplots(2, 1, sharex=True)
     for ax, (j, name) in zip(axes, ((1, "y [m]"), (2, "z [m]"))):
         for grp, (marker, colour) in GROUP_STYLE.items():
-            pts = [r for r in reflectors if r["grp"] == grp]
+            pts = [r for r in reflectors if r.group == grp]
             if not pts:
                 continue
-            ax.scatter([r["x"] for r in pts], [(r["y"], r["z"])[j - 1] for r in pts], marker=marker, c=colour,
+            ax.scatter([r.xyz_layout[0] for r in pts], [r.xyz_layout[j] for r in pts], marker=marker, c=colour,
                        s=28, label=f"{grp} ({len(pts)})", zorder=3)
         for r in reflectors:
-            colour = "tab:red" if r["id"] in trouble else "0.2"
-            ax.annotate(r["id"], (r["x"], (r["y"], r["z"])[j - 1]), xytext=(4, 4), textcoords="offset points",
+            colour = "tab:red" if r.id in trouble else "0.2"
+            ax.annotate(r.id, (r.xyz_layout[0], r.xyz_layout[j]), xytext=(4, 4), textcoords="offset points",
                         fontsize=7, color=colour)
         ax.set_ylabel(name)
         ax.grid(alpha=0.3)
@@ -39,41 +40,34 @@ def layout_figure(reflectors: Sequence[dict], states: Sequence = (), *, span_m: 
     return fig
 
 
-def history_grid_figure(rows: Sequence[dict], *, targets: Optional[Sequence[str]] = None, max_points: int = 2000,
+def history_grid_figure(histories: Mapping[str, DisplacementHistory], *, targets: Optional[Sequence[str]] = None, max_points: int = 2000,
                         context=None):
     """One panel per measurement target: displacement with ±2σ bars, warning and alarm lines, and
     (``context``, a :class:`projects.context.PlotContext`) the events and an environment series.
 
-    Series longer than ``max_points`` are thinned for drawing only.
+    ``histories`` as :func:`projects.history.histories` gives them. Series longer than ``max_points`` are
+    thinned for drawing only.
     """
     from matplotlib.figure import Figure
 
-    series = defaultdict(list)
-    lims = {}
-    for r in rows:
-        lims.setdefault(r["reflector"], (r.get("warning_mm"), r.get("alarm_mm")))
-        if r["displacement_mm"] is None:
-            continue
-        series[r["reflector"]].append((dt.datetime.fromisoformat(r["datetime"]), r["displacement_mm"],
-                                       r["sigma_mm"] or 0.0, bool(r["flags"])))
-    names = list(targets) if targets is not None else sorted(lims)
+    names = list(targets) if targets is not None else sorted(histories)
     n = max(len(names), 1)
     fig = Figure(figsize=(7.0, min(1.55 * n + 0.6, 9.4)), layout="constrained")
     axes = np.atleast_1d(fig.subplots(n, 1, sharex=True))
     for ax, rid in zip(axes, names):
-        pts = series.get(rid, [])
-        if len(pts) > max_points:
-            pts = pts[:: int(np.ceil(len(pts) / max_points))]
+        h = histories.get(rid)
+        pts = h.measured().thinned(max_points) if h is not None else None
         if pts:
-            t = [p[0] for p in pts]
-            u = np.array([p[1] for p in pts])
-            s2 = 2 * np.array([p[2] for p in pts])
-            ax.errorbar(t, u, yerr=s2, fmt="o-", ms=2.5, lw=0.9, capsize=1.5, color="tab:blue", ecolor="0.45")
-            bad = [k for k, p in enumerate(pts) if p[3]]
-            if bad:
+            t = list(pts.times)
+            u = pts.displacement_mm
+            ax.errorbar(t, u, yerr=2 * pts.sigma_mm, fmt="o-", ms=2.5, lw=0.9, capsize=1.5, color="tab:blue",
+                        ecolor="0.45")
+            bad = np.flatnonzero(pts.flagged)
+            if bad.size:
                 ax.plot([t[k] for k in bad], u[bad], "o", mfc="none", mec="tab:orange", ms=6, label="flagged")
                 ax.legend(fontsize=6, loc="lower left")
-        w, a = lims.get(rid, (None, None))
+        lim = h.limit if h is not None else None
+        w, a = (lim.warning_mm, lim.alarm_mm) if lim is not None else (None, None)
         lo, hi = ax.get_ylim() if pts else (-1.0, 1.0)
         reach = max(abs(lo), abs(hi), 1.0)
         off_scale = []
@@ -102,13 +96,13 @@ def history_grid_figure(rows: Sequence[dict], *, targets: Optional[Sequence[str]
     return fig
 
 
-def epoch_map_figure(preview, plan: Optional[dict], *, title: str):
-    """The epoch's reflectance map with detections, identified targets and the planned windows."""
+def epoch_map_figure(preview, plan, *, title: str):
+    """The epoch's reflectance map with detections, identified targets and the planned windows
+    (``plan`` a :class:`lidar.plan.ScanPlan` or None)."""
     from lidar.figures import reflectance_map_figure
-    from lidar.plan import RoiPlan
     from lidar.reflectance_map import reduce_map
 
-    rois = [RoiPlan.from_json(r) for r in plan["rois"]] if plan else None
+    rois = list(plan.rois) if plan is not None else None
     fig = reflectance_map_figure(reduce_map(preview.reflectance_map, max_cells=300_000),
                                  detections=preview.detections, identification=preview.identification, rois=rois,
                                  title=title, figsize=(7.0, 3.1), fixed_layout=True)

@@ -144,10 +144,10 @@ def test_predicted_sigma_matches_what_processing_reports(processed):
     with Campaign.open(processed, writable=False) as c:
         layout = c.layout()
         base = {k: Observation(v.xyz_socs, v.cov) for k, v in c.centroids(LABEL).items() if v.found}
-        rows = c.displacement_rows()
+        rows = c.displacements()
         for k, label in ((1, "2026-03-09"), (2, "2026-03-16")):
             pred = predict_station(layout, VISITS[k][0].position_m, profile=c.profile, baseline=base)
-            got = {r["reflector"]: r["sigma_m"] * 1000 for r in rows if r["epoch"] == label}
+            got = {r.reflector: r.sigma_m * 1000 for r in rows if r.epoch == label}
             ratios = [pred.predicted_sigma_mm[m] / got[m] for m in got]
             assert not pred.hidden
             assert all(0.7 <= q <= 1.3 for q in ratios), (label, ratios)

@@ -34,8 +34,8 @@ def _stale_copy(processed, dst: Path) -> Path:
 
 def _tables(folder: Path):
     with Campaign.open(folder, writable=False) as c:
-        rows = c.displacement_rows()
-        cents = {e["label"]: {k: (v.found, tuple(v.xyz_socs), v.n_points) for k, v in c.centroids(e["label"]).items()}
+        rows = c.displacements()
+        cents = {e.label: {k: (v.found, tuple(v.xyz_socs), v.n_points) for k, v in c.centroids(e.label).items()}
                  for e in c.epochs()}
     return rows, cents
 

@@ -67,7 +67,7 @@ def test_an_epoch_dated_before_the_baseline_gets_negative_time_not_a_new_baselin
                                                                                      capsys):
     with Campaign.open(processed_copy, writable=False) as c:
         assert c.settings().get("baseline") == "2026-03-02"  # stored once, at the first processing
-        before = {(r["epoch"], r["reflector"]): r["displacement_m"] for r in c.displacement_rows()}
+        before = {(r.epoch, r.reflector): r.displacement_m for r in c.displacements()}
     _visit(field_copy, "early", "2026-02-23T09:00", processed_copy, EpochConditions(midspan_displacement_m=0.002),
            seed=78)
     assert main(["process", str(processed_copy)]) == 0
@@ -80,12 +80,12 @@ def test_an_epoch_dated_before_the_baseline_gets_negative_time_not_a_new_baselin
     mid = [r for r in early if r["reflector"] == "M3"]
     assert mid and mid[0]["displacement_mm"] == pytest.approx(2.0, abs=0.5)  # 2 mm up, against the baseline
     with Campaign.open(processed_copy, writable=False) as c:
-        after = {(r["epoch"], r["reflector"]): r["displacement_m"] for r in c.displacement_rows()}
+        after = {(r.epoch, r.reflector): r.displacement_m for r in c.displacements()}
     assert all(after[k] == before[k] for k in before)  # nothing else was re-referenced
     assert main(["settings", str(processed_copy), "baseline", "2026-03-09"]) == 0
     assert "re-referenced" in capsys.readouterr().err
     with Campaign.open(processed_copy, writable=False) as c:
-        assert any(r["action"] == "setting" and "2026-03-09" in r["details"] for r in c.log_rows())
+        assert any(r.action == "setting" and "2026-03-09" in str(r.details) for r in c.log())
 
 
 def test_identification_settings_are_validated(processed_copy, capsys):

@@ -45,7 +45,7 @@ def test_kill_9_during_import_and_processing_leaves_a_valid_campaign(campaign, f
         assert c.integrity_check() == "ok"
         epochs = c.epochs()
         stored = {p.name for p in (campaign / "scans").iterdir()}
-        assert len(stored) == sum(len(c.files(e["label"])) for e in epochs)  # no orphan, no half file
+        assert len(stored) == sum(len(c.files(e.label)) for e in epochs)  # no orphan, no half file
     if not epochs:  # killed before the commit: the same command completes it
         assert main(["add-epoch", str(campaign), "--date", "2026-03-02", "--coarse", coarse]) == 0
     run_and_kill(["process", str(campaign)], delay)
@@ -53,7 +53,7 @@ def test_kill_9_during_import_and_processing_leaves_a_valid_campaign(campaign, f
         assert c.integrity_check() == "ok"
     assert main(["process", str(campaign)]) == 0
     with Campaign.open(campaign) as c:
-        assert c.result_row("2026-03-02")["stage"] == "planned"
+        assert c.result("2026-03-02").stage == "planned"
         assert c.integrity_check() == "ok"
 
 
@@ -115,7 +115,7 @@ def test_version_1_campaign_migrates_to_current_with_its_data(tmp_path):
     conn.close()
     with Campaign.open(folder) as c:
         assert schema.version_of(c.conn) == schema.SCHEMA_VERSION
-        assert c.name == "Old bridge" and [e["label"] for e in c.epochs()] == ["e1"]
+        assert c.name == "Old bridge" and [e.label for e in c.epochs()] == ["e1"]
         t = c.centroids("e1")["M1"]
         assert t.n_points == 900 and t.n_window == -1  # not recorded before schema 2
         assert c.map_preview("e1") is None

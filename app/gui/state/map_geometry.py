@@ -41,7 +41,7 @@ def window_of_cells(rect: CellRect, theta0: float, phi0: float, step: float) -> 
             "theta_min_deg": round(max(t0, 0.0), 6), "theta_max_deg": round(min(t0 + rect.height * step, 180.0), 6)}
 
 
-def window_from_cells(preview, plan, rect: CellRect, rid: str, reflector: dict):
+def window_from_cells(preview, plan, rect: CellRect, rid: str, reflector):
     """A new plan window for ``rid`` from a rectangle drawn on an epoch's map preview (its range from the
     map's cells, its steps for the plan's points on a target of that size)."""
     from common.errors import InputError
@@ -54,5 +54,5 @@ def window_from_cells(preview, plan, rect: CellRect, rid: str, reflector: dict):
     if ranges.size == 0 or not np.isfinite(ranges).any():
         raise InputError("the drawn window holds no scanned cell; draw it over the target")
     w = window_of_cells(rect, rmap.theta0_deg, rmap.phi0_deg, rmap.step_deg)
-    return new_roi(rid, reflector["grp"], range_m=float(np.nanmedian(ranges)), diameter_m=reflector["diameter_m"],
+    return new_roi(rid, reflector.group, range_m=float(np.nanmedian(ranges)), diameter_m=reflector.diameter_m,
                    n_points=plan.min_points, profile=plan.profile, **w)

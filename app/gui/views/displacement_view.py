@@ -2,9 +2,6 @@
 and a click that selects the epoch."""
 from __future__ import annotations
 
-import datetime as dt
-import json
-
 import numpy as np
 from PySide6.QtCore import Signal
 from PySide6.QtWidgets import QCheckBox, QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
@@ -39,21 +36,19 @@ class DisplacementView(QWidget):
         lay = QVBoxLayout(self)
         lay.addLayout(bar)
         lay.addWidget(self.canvas, 1)
-        self.rows: list[dict] = []
-        self.limit_of: dict = {}
+        self.histories: dict = {}
         self.selected_epoch = None
-        self._points = []  # (x, y, row) drawn, for hover and picking
+        self._points = []  # (x, y, history, index) drawn, for hover and picking
         self._annot = None  # the hover label of the current plot
         self.canvas.mpl_connect("motion_notify_event", self._on_move)
         self.canvas.mpl_connect("button_press_event", self._on_click)
 
-    def set_data(self, rows: list[dict], limits: dict, context=None) -> None:
-        """``rows`` from :meth:`Campaign.displacement_rows`; ``limits`` reflector -> Limit or None;
-        ``context`` a :class:`projects.context.PlotContext` (events, an environment series) or None."""
-        self.rows = rows
-        self.limit_of = limits
+    def set_data(self, histories: dict, context=None) -> None:
+        """``histories`` from :func:`projects.history.histories` (reflector -> DisplacementHistory, with
+        its limits); ``context`` a :class:`projects.context.PlotContext` (events, an environment series) or None."""
+        self.histories = histories
         self.context = context
-        targets = sorted({r["reflector"] for r in rows})
+        targets = sorted(histories)
         current = self.target.currentText()
         self.target.blockSignals(True)
         self.target.clear()
@@ -78,32 +73,30 @@ class DisplacementView(QWidget):
         self._points = []
         self._annot = None
         which = self.target.currentText()
-        targets = sorted({r["reflector"] for r in self.rows}) if which in ("", "all targets") else [which]
-        if not self.rows:
+        targets = sorted(self.histories) if which in ("", "all targets") else [which]
+        if not self.histories:
             ax.text(0.5, 0.5, "No displacements yet: add epochs and process them", ha="center", va="center",
                     transform=ax.transAxes)
             ax.set_axis_off()
             self.canvas.draw_idle()
             return
-        colours = {t: f"C{k % 10}" for k, t in enumerate(sorted({r["reflector"] for r in self.rows}))}
+        colours = {t: f"C{k % 10}" for k, t in enumerate(sorted(self.histories))}
         for rid in targets:
-            rs = [r for r in self.rows if r["reflector"] == rid and r["displacement_m"] is not None]
-            if not rs:
+            h = self.histories[rid].measured() if rid in self.histories else None
+            if h is None or not len(h):
                 continue
-            x = [dt.datetime.fromisoformat(r["datetime"]) for r in rs]
-            y = np.array([r["displacement_m"] for r in rs]) * 1e3
-            s = np.array([r["sigma_m"] or 0.0 for r in rs]) * 1e3
-            ax.errorbar(x, y, yerr=2 * s, fmt="o-", ms=3.5, lw=1, capsize=2, color=colours[rid], label=rid)
-            flagged = [i for i, r in enumerate(rs) if json.loads(r["flags"])]
-            if flagged:
+            x, y = list(h.times), h.displacement_mm
+            ax.errorbar(x, y, yerr=2 * h.sigma_mm, fmt="o-", ms=3.5, lw=1, capsize=2, color=colours[rid], label=rid)
+            flagged = np.flatnonzero(h.flagged)
+            if flagged.size:
                 ax.plot([x[i] for i in flagged], y[flagged], "o", ms=9, mfc="none", mec="red")
-            self._points += [(x[i], y[i], rs[i]) for i in range(len(rs))]
+            self._points += [(x[i], y[i], h, i) for i in range(len(h))]
         if self.limits.isChecked():
             drawn = set()
             ys = [p[1] for p in self._points]
             reach = 2.0 * max((abs(v) for v in ys), default=0.0) + 1.0
             for rid in targets:
-                lim = self.limit_of.get(rid)
+                lim = self.histories[rid].limit if rid in self.histories else None
                 if lim is None or (lim.warning_mm, lim.alarm_mm) in drawn:
                     continue
                 drawn.add((lim.warning_mm, lim.alarm_mm))
@@ -120,7 +113,7 @@ class DisplacementView(QWidget):
                                     f"({lim.rule})" + (f"; {' and '.join(hidden)} off the scale" if hidden else ""),
                         transform=ax.transAxes, fontsize=8, color="0.3")
         if self.selected_epoch:
-            sel = [p for p in self._points if p[2]["epoch"] == self.selected_epoch]
+            sel = [p for p in self._points if p[2].epochs[p[3]] == self.selected_epoch]
             if sel:
                 ax.axvline(sel[0][0], color="0.4", lw=1, ls=":")
         self._annot = ax.annotate("", xy=(0, 0), xytext=(12, 12), textcoords="offset points", fontsize=8,
@@ -153,9 +146,9 @@ class DisplacementView(QWidget):
                 self._annot.set_visible(False)
                 self.canvas.draw_idle()
             return
-        r = p[2]
-        flags = ", ".join(json.loads(r["flags"]))
-        text = (f"{r['reflector']} {r['epoch']}: {r['displacement_m'] * 1e3:+.3f} ± {(r['sigma_m'] or 0) * 1e3:.3f} mm"
+        h, i = p[2], p[3]
+        flags = ", ".join(h.flags[i])
+        text = (f"{h.reflector} {h.epochs[i]}: {h.displacement_mm[i]:+.3f} ± {h.sigma_mm[i]:.3f} mm"
                 + (f" [{flags}]" if flags else ""))
         self.hover.setText(text)
         self._annot.xy = (p[0], p[1])
@@ -166,4 +159,4 @@ class DisplacementView(QWidget):
     def _on_click(self, event) -> None:
         p = self._nearest(event)
         if p is not None:
-            self.epochPicked.emit(p[2]["epoch"])
+            self.epochPicked.emit(p[2].epochs[p[3]])

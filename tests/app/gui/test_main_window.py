@@ -1,7 +1,6 @@
 """The main window driven like a user would: open, select, edit the plan, process, inspect, export."""
 from __future__ import annotations
 
-import json
 
 import numpy as np
 import pytest
@@ -65,13 +64,14 @@ def test_displacement_view_hover_values_and_click_selects_the_epoch(window, proc
     v = window.displacements
     v.show_target("M3")
     v.canvas.draw()
-    x, y, row = v._points[1]
+    x, y, hist, i = v._points[1]
+    epoch = hist.epochs[i]
     ax = v.canvas.figure.axes[0]
     px, py = ax.transData.transform((ax.convert_xunits(x), y))
     v.canvas.callbacks.process("motion_notify_event", MouseEvent("motion_notify_event", v.canvas, px, py))
-    assert v.hover.text().startswith(f"M3 {row['epoch']}: ") and "±" in v.hover.text()
+    assert v.hover.text().startswith(f"M3 {epoch}: ") and "±" in v.hover.text()
     v.canvas.callbacks.process("button_press_event", MouseEvent("button_press_event", v.canvas, px, py, button=1))
-    assert window.session.epoch == row["epoch"]
+    assert window.session.epoch == epoch
 
 
 def test_roi_move_resize_delete_add_and_save_then_process(window, processed_copy, qtbot, monkeypatch):
@@ -121,15 +121,15 @@ def test_roi_move_resize_delete_add_and_save_then_process(window, processed_copy
     window.save_plan(mv.current_plan())
     wait_job(qtbot, window)
     with Campaign.open(processed_copy, writable=False) as c:
-        saved = json.loads(c.plan_row("2026-03-09")["json"])
+        saved = c.stored_plan("2026-03-09").plan_json
         assert saved["edited"] is True
         m3 = next(r for r in saved["rois"] if r["reflector"] == "M3")
         assert m3["phi_max_deg"] == pytest.approx(wider.window.phi_max_deg)
-        assert c.result_row("2026-03-09")["stage"] == "planned"  # measured again at the next processing
+        assert c.result("2026-03-09").stage == "planned"  # measured again at the next processing
     window.process()
     wait_job(qtbot, window)
     with Campaign.open(processed_copy, writable=False) as c:
-        assert c.result_row("2026-03-09")["stage"] == "measured"
+        assert c.result("2026-03-09").stage == "measured"
         assert c.centroids("2026-03-09")["M3"].found and c.centroids("2026-03-09")["M5"].found
     assert window.tree.item_for("epoch", "2026-03-09").text(1) == "processed"
 
@@ -264,7 +264,7 @@ def test_limits_reflectors_and_parameters_from_the_menus(window, processed_copy,
     window.set_parameter()
     with Campaign.open(processed_copy, writable=False) as c:
         assert c.limit_for("M3").rule == "abs:3,5"
-        assert c.reflector("M5b")["replaces"] == "M5" and c.reflector("M5")["retired"]
+        assert c.reflector("M5b").replaces == "M5" and c.reflector("M5").retired
         assert c.settings()["min_points"] == 2000
     assert window.tree.item_for("reflector", "M5b") is not None
     before = snapshot(processed_copy)

@@ -1,5 +1,4 @@
 """The application's logic that needs no Qt: imported and used without PySide6."""
-import json
 import subprocess
 import sys
 
@@ -25,13 +24,12 @@ def test_window_of_cells_keeps_the_plan_contract_across_zero():
 
 def test_window_from_cells_and_the_details_html_on_a_campaign(processed_copy):
     from app.gui.html import campaign_html, epoch_html, reflector_html
-    from lidar.plan import ScanPlan
     from projects.overview import campaign_status
     from projects.store import Campaign
 
     with Campaign.open(processed_copy, writable=False) as c:
         preview = c.map_preview("2026-03-02")
-        plan = ScanPlan.from_json(json.loads(c.plan_row("2026-03-02")["json"]))
+        plan = c.plan("2026-03-02")
         refl = c.reflector("M3")
         html_c = campaign_html(c, campaign_status(c))
         html_e = epoch_html(c, "2026-03-02")

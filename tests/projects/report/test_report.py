@@ -42,7 +42,7 @@ def test_whole_campaign_report_has_every_section_and_no_blank_page(processed, tm
     from projects.store import Campaign
 
     with Campaign.open(processed, writable=False) as c:
-        sha = c.files("2026-03-09")[0]["sha256"]
+        sha = c.files("2026-03-09")[0].sha256
     assert sha in text.replace(" ", "")  # checksums are printed so results can be traced
     pages = pages_as_images(out, tmp_path)
     assert len(pages) >= 8
@@ -102,7 +102,7 @@ def test_map_preview_round_trip(processed):
 
     with Campaign.open(processed, writable=False) as c:
         p = c.map_preview("2026-03-02")
-        plan = c.plan_row("2026-03-02")
+        plan = c.plan("2026-03-02")
     assert p.reflectance_map.count.size <= 1_000_000 and p.reflectance_map.n_points > 100_000
     ids = {m.id for m in p.identification.matches}
     assert {"R1", "R2", "R3", "R4", "M1", "M5"} <= ids
