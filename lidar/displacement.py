@@ -151,8 +151,9 @@ def _consistency(base, ep, ids, measurement_ids) -> float:
     """
     a = np.array([base[r].xyz for r in ids])
     b = np.array([ep[r].xyz for r in ids])
-    rot, t = fit_rigid(a, b)
-    res = [np.sum((a @ rot.T + t - b) ** 2, axis=1)]
+    motion = fit_rigid(a, b)
+    rot, t = motion.rotation, motion.translation
+    res = [np.sum((motion.apply(a) - b) ** 2, axis=1)]
     meas = [m for m in measurement_ids if m in base and m in ep]
     if len(meas) >= 3:
         mb = np.array([base[m].xyz for m in meas])
@@ -167,8 +168,9 @@ def _consistency(base, ep, ids, measurement_ids) -> float:
 def _loo_residual(base, ep, ids, k, tol_abs):
     """Residual of target ``k`` predicted by the rigid motion of the other reference targets, and its test."""
     others = [r for r in ids if r != k]
-    rot, t = fit_rigid(np.array([base[r].xyz for r in others]), np.array([ep[r].xyz for r in others]))
-    res = ep[k].xyz - (rot @ base[k].xyz + t)
+    motion = fit_rigid(np.array([base[r].xyz for r in others]), np.array([ep[r].xyz for r in others]))
+    rot = motion.rotation
+    res = ep[k].xyz - motion.apply(base[k].xyz)
     var = float(np.trace(ep[k].cov) + np.trace(rot @ base[k].cov @ rot.T)) * 2.0
     dist = float(np.linalg.norm(res))
     return dist, dist > max(tol_abs, 4.0 * np.sqrt(var))

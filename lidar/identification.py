@@ -18,7 +18,7 @@ from scipy.optimize import linear_sum_assignment
 
 from common.errors import InputError, ProcessingError
 from lidar.layout import Layout
-from common.rigid import apply, fit_rigid, pairwise_distances
+from common.rigid import Transform, fit_rigid, pairwise_distances
 
 
 @dataclass(frozen=True)
@@ -201,8 +201,9 @@ def identify_reflectors(detections_xyz: np.ndarray, layout: Layout, *, tolerance
                 for k in ks:
                     if k in (i, j):
                         continue
-                    r, t = fit_rigid(lay[[a, b, c]], det[[i, j, k]])
-                    pairs = _assign(apply(r, t, lay), det, tolerance_m)
+                    seed = fit_rigid(lay[[a, b, c]], det[[i, j, k]])
+                    r, t = seed.rotation, seed.translation
+                    pairs = _assign(seed.apply(lay), det, tolerance_m)
                     levelled = max_tilt_deg is None or tilt_deg(r, up_layout) <= max_tilt_deg
                     score = (levelled, len(pairs), -sum(p[2] for p in pairs))
                     key = frozenset((p[0], p[1]) for p in pairs)
@@ -225,12 +226,14 @@ def identify_reflectors(detections_xyz: np.ndarray, layout: Layout, *, tolerance
             f"for what was detected: {rival}); refusing to guess. Scan so that a deck target is detected, add "
             "an asymmetric target, or remove the wrong window by hand")
     _, r, t = best
+    fit = Transform.from_rt(r, t)
     for _ in range(4):  # refine on all matches
-        pairs = _assign(apply(r, t, lay), det, tolerance_m)
-        r, t = fit_rigid(lay[[p[0] for p in pairs]], det[[p[1] for p in pairs]])
-    pairs = _assign(apply(r, t, lay), det, tolerance_m)
+        pairs = _assign(fit.apply(lay), det, tolerance_m)
+        fit = fit_rigid(lay[[p[0] for p in pairs]], det[[p[1] for p in pairs]])
+    r, t = fit.rotation, fit.translation
+    pred = fit.apply(lay)
+    pairs = _assign(pred, det, tolerance_m)
     by_layout = {p[0]: p for p in pairs}
-    pred = apply(r, t, lay)
     matches = []
     for k, rid in enumerate(layout.ids):
         if k in by_layout:

@@ -85,7 +85,8 @@ def fit_reference_motion(ref_base: np.ndarray, ref_epoch: np.ndarray, ref_var: n
     ref_base = np.asarray(ref_base, dtype=np.float64)
     ref_epoch = np.asarray(ref_epoch, dtype=np.float64)
     w_ref = 1.0 / np.maximum(np.asarray(ref_var, dtype=np.float64), 1e-16)
-    r0, t0 = fit_rigid(ref_base, ref_epoch, weights=w_ref)
+    first = fit_rigid(ref_base, ref_epoch, weights=w_ref)
+    r0, t0 = first.rotation, first.translation
     use_deck = across_base is not None and deck_base is not None and len(deck_base) >= 1
     if not use_deck:
         return r0, t0

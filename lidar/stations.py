@@ -253,8 +253,8 @@ def _carry(base: Mapping[str, Observation], epoch: Mapping[str, Observation]) ->
     shared = [i for i in epoch if i in base]
     if len(shared) < 3:
         return {}
-    r, t = fit_rigid(np.array([base[i].xyz for i in shared]), np.array([epoch[i].xyz for i in shared]))
-    return {k: r @ np.asarray(base[k].xyz) + t for k in shared}
+    motion = fit_rigid(np.array([base[i].xyz for i in shared]), np.array([epoch[i].xyz for i in shared]))
+    return {k: motion.apply(np.asarray(base[k].xyz)) for k in shared}
 
 
 def default_area(layout: Layout, *, up=(0.0, 0.0, 1.0), reach_m: float = 25.0, beyond_m: float = 5.0) -> np.ndarray:

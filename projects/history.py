@@ -92,6 +92,15 @@ def histories_from_records(records: Iterable[DisplacementRecord], limits: Option
                            *, targets: Optional[Sequence[str]] = None) -> dict[str, DisplacementHistory]:
     """Group stored displacement records by target (records in epoch order).
 
+    Examples
+    --------
+    >>> from projects.records import DisplacementRecord
+    >>> recs = [DisplacementRecord("e1", "2026-03-02T09:00:00+00:00", "M1", 0.0, 0.0, (), (), "e1"),
+    ...         DisplacementRecord("e2", "2026-03-09T09:00:00+00:00", "M1", -0.0021, 0.0001, (), (), "e1")]
+    >>> h = histories_from_records(recs)["M1"]
+    >>> h.epochs, h.displacement_mm.round(3).tolist(), h.sigma_mm.round(3).tolist()
+    (('e1', 'e2'), [0.0, -2.1], [0.0, 0.1])
+
     Parameters
     ----------
     records : iterable of DisplacementRecord

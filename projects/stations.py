@@ -105,9 +105,10 @@ def last_station(c: Campaign) -> Optional[LastStation]:
         ids = [i for i in layout.ids if i in cents]
         if len(ids) < 3:
             continue
-        r, t = fit_rigid(np.array([layout.xyz[layout.index(i)] for i in ids]),
-                         np.array([cents[i].xyz_socs for i in ids]))
-        return LastStation(e.label, r, t)
+        pose = fit_rigid(np.array([layout.xyz[layout.index(i)] for i in ids]),
+                         np.array([cents[i].xyz_socs for i in ids]), source_frame="layout",
+                         target_frame=f"socs:{e.label}")
+        return LastStation(e.label, pose.rotation, pose.translation)
     return None
 
 

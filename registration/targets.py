@@ -71,7 +71,8 @@ def _fit(src: np.ndarray, dst: np.ndarray, mode: str, w: np.ndarray) -> tuple[np
         c, s = np.cos(yaw), np.sin(yaw)
         r = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         return r, cd - r @ cs, 1.0
-    r, t = fit_rigid(src, dst, w)
+    fit = fit_rigid(src, dst, w)
+    r, t = fit.rotation, fit.translation
     if mode == "rigid":
         return r, t, 1.0
     ww = w / w.sum()

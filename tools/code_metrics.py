@@ -78,6 +78,9 @@ def annotations(root: Path, pkg: str) -> tuple[int, int, int, int]:
 
 
 def main(argv: list[str]) -> int:
+    import signal
+
+    signal.signal(signal.SIGPIPE, signal.SIG_DFL)  # "| head" ends quietly
     root = Path(argv[1] if len(argv) > 1 else ".")
     n, f = row_key_lookups(root)
     print(f"row key lookups outside the store: {n} in {f} files")

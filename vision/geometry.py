@@ -13,39 +13,15 @@ Conventions
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+
+from common.rigid import apply_matrix, invert_matrix, matrix_from_rotvec, matrix_from_rt
 
 
-def rigid(rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
-    """4x4 transform from a 3x3 rotation and a translation of shape (3,)."""
-    B = np.eye(4)
-    B[:3, :3] = rotation
-    B[:3, 3] = np.asarray(translation, dtype=float).reshape(3)
-    return B
-
-
-def rigid_from_rotvec(rotvec: np.ndarray, translation: np.ndarray) -> np.ndarray:
-    """4x4 transform from a rotation vector (axis * angle, rad) and a translation (m)."""
-    return rigid(Rotation.from_rotvec(np.asarray(rotvec, dtype=float)).as_matrix(), translation)
-
-
-def invert(B: np.ndarray) -> np.ndarray:
-    """Inverse of one rigid transform (4x4) or a stack of them (n, 4, 4)."""
-    B = np.asarray(B, dtype=float)
-    R = B[..., :3, :3]
-    t = B[..., :3, 3]
-    Rt = np.swapaxes(R, -1, -2)
-    out = np.zeros_like(B)
-    out[..., :3, :3] = Rt
-    out[..., :3, 3] = -np.einsum("...ij,...j->...i", Rt, t)
-    out[..., 3, 3] = 1.0
-    return out
-
-
-def apply(B: np.ndarray, xyz: np.ndarray) -> np.ndarray:
-    """Transform points ``xyz`` of shape (..., 3) by the 4x4 ``B``."""
-    xyz = np.asarray(xyz, dtype=float)
-    return xyz @ B[:3, :3].T + B[:3, 3]
+# The 4x4 form of common.rigid.Transform, under the names this module's callers use.
+rigid = matrix_from_rt
+rigid_from_rotvec = matrix_from_rotvec
+invert = invert_matrix
+apply = apply_matrix
 
 
 def project_pinhole(K: np.ndarray, xyz_cam: np.ndarray) -> np.ndarray:
