@@ -1,7 +1,9 @@
 """What the GUI's commands do, as plain functions run in worker threads (no widgets touched here).
 
-Each takes the session (or plain values) and a ``progress(fraction, message)`` callback, opens the
-campaign for just as long as it needs it, and raises ``SurveyError`` with a message for the user.
+Each takes the session (anything with ``read()`` and ``write()``, see
+:class:`app.gui.state.campaign_access.CampaignAccess`; or plain values) and a
+``progress(fraction, message)`` callback, opens the campaign for just as long as it needs it, and
+raises ``SurveyError`` with a message for the user.
 """
 from __future__ import annotations
 
@@ -68,15 +70,6 @@ def save_plan(session, label: str, scan_plan) -> None:
 
     with session.write() as c:
         save_edited_plan(c, label, scan_plan)
-
-
-def window_from_rect(map_view, rect, rid: str, reflector: dict):
-    """A new plan window for ``rid`` from a rectangle drawn on the map (see
-    :func:`app.gui.state.map_geometry.window_from_cells`; ``rect`` has left/top/width/height methods)."""
-    from app.gui.state.map_geometry import CellRect, window_from_cells
-
-    cells = CellRect(rect.left(), rect.top(), rect.width(), rect.height())
-    return window_from_cells(map_view.preview, map_view.plan, cells, rid, reflector)
 
 
 def process(session, progress: Callable):

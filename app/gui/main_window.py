@@ -13,7 +13,7 @@ from PySide6.QtWidgets import (QDockWidget, QFileDialog, QHBoxLayout, QLabel, QL
 
 from app.gui import actions
 from app.gui.campaign_tree import CampaignTree
-from app.gui.commands import CommandsMixin
+from app.gui.commands import Commands
 from app.gui.details import DetailsPanel
 from app.gui.html import campaign_html, epoch_html, reflector_html, series_html
 from app.gui.dialogs import NewCampaignDialog, show_error
@@ -63,7 +63,7 @@ class WelcomePage(QWidget):
         self.recent.addItems(list(paths))
 
 
-class MainWindow(CommandsMixin, QMainWindow):
+class MainWindow(QMainWindow):
     def __init__(self, *, demo_dir: Optional[str] = None):
         super().__init__()
         self.setWindowTitle("BridgeSurvey")
@@ -72,6 +72,7 @@ class MainWindow(CommandsMixin, QMainWindow):
         self.status_data: dict = {"epochs": []}          # projects.overview.campaign_status of the last refresh
         self._details_for: tuple[str, str] = ("campaign", "")  # what the details panel shows
         self.jobs = JobRunner(self)
+        self.commands = Commands(self)
         self._build_views()
         self._build_docks()
         self._build_status()
@@ -155,27 +156,27 @@ class MainWindow(CommandsMixin, QMainWindow):
         m.addSeparator()
         self._action(m, "&Quit", self.close, "Ctrl+Q", False)
         m = mb.addMenu("C&ampaign")
-        self._action(m, "Set &limit…", self.set_limit)
-        self._action(m, "&Retire the selected reflector…", self.retire_reflector)
-        self._action(m, "Re&place the selected reflector…", self.replace_reflector)
-        self._action(m, "Processing &parameter…", self.set_parameter)
-        self._action(m, "&Scanner…", self.choose_scanner)
-        self._action(m, "&Where to stand…", self.evaluate_stations)
+        self._action(m, "Set &limit…", self.commands.set_limit)
+        self._action(m, "&Retire the selected reflector…", self.commands.retire_reflector)
+        self._action(m, "Re&place the selected reflector…", self.commands.replace_reflector)
+        self._action(m, "Processing &parameter…", self.commands.set_parameter)
+        self._action(m, "&Scanner…", self.commands.choose_scanner)
+        self._action(m, "&Where to stand…", self.commands.evaluate_stations)
         m = mb.addMenu("&Epoch")
-        self.act_add_epoch = self._action(m, "&Add epoch…", self.add_epoch, "Ctrl+E")
-        self._action(m, "Add &fine scans to the selected epoch…", self.add_fine)
-        self._action(m, "&Plan the selected epoch", self.plan_selected)
-        self._action(m, "Field &sheet of the selected epoch (PDF)…", self.field_sheet)
-        self._action(m, "&Check the fine scans before leaving", self.check_selected)
-        self.act_process = self._action(m, "P&rocess", self.process, "F5")
-        self._action(m, "&Inspect the selected target's fine scan", self.show_fine)
+        self.act_add_epoch = self._action(m, "&Add epoch…", self.commands.add_epoch, "Ctrl+E")
+        self._action(m, "Add &fine scans to the selected epoch…", self.commands.add_fine)
+        self._action(m, "&Plan the selected epoch", self.commands.plan_selected)
+        self._action(m, "Field &sheet of the selected epoch (PDF)…", self.commands.field_sheet)
+        self._action(m, "&Check the fine scans before leaving", self.commands.check_selected)
+        self.act_process = self._action(m, "P&rocess", self.commands.process, "F5")
+        self._action(m, "&Inspect the selected target's fine scan", self.commands.show_fine)
         m = mb.addMenu("&Camera")
-        self._action(m, "&Import series…", self.import_camera)
-        self._action(m, "&Cross-validate with LiDAR", self.crossval)
+        self._action(m, "&Import series…", self.commands.import_camera)
+        self._action(m, "&Cross-validate with LiDAR", self.commands.crossval)
         m = mb.addMenu("&Reports")
-        self._action(m, "Export &displacements (CSV)…", self.export_csv)
-        self._action(m, "Export &workbook (XLSX)…", self.export_xlsx)
-        self.act_report = self._action(m, "Write &report (PDF)…", self.write_report, "Ctrl+R")
+        self._action(m, "Export &displacements (CSV)…", self.commands.export_csv)
+        self._action(m, "Export &workbook (XLSX)…", self.commands.export_xlsx)
+        self.act_report = self._action(m, "Write &report (PDF)…", self.commands.write_report, "Ctrl+R")
         m = mb.addMenu("&View")
         m.addAction(self.tree_dock.toggleViewAction())
         m.addAction(self.details_dock.toggleViewAction())
@@ -197,16 +198,16 @@ class MainWindow(CommandsMixin, QMainWindow):
         self.tree.picked.connect(self._tree_picked)
         self.tree.activated_item.connect(self._tree_activated)
         self.displacements.epochPicked.connect(lambda lab: self.session and self.session.select(epoch=lab))
-        self.map_view.saveRequested.connect(self.save_plan)
-        self.map_view.exportRequested.connect(self.export_plan)
-        self.map_view.addRequested.connect(self.add_window)
+        self.map_view.saveRequested.connect(self.commands.save_plan)
+        self.map_view.exportRequested.connect(self.commands.export_plan)
+        self.map_view.addRequested.connect(self.commands.add_window)
         self.map_view.reflectorPicked.connect(lambda rid: self.session and self.session.select(reflector=rid))
-        self.cloud_view.loadRequested.connect(self.show_cloud)
+        self.cloud_view.loadRequested.connect(self.commands.show_cloud)
         self.cloud_view.targetPicked.connect(lambda rid: self.session and self.session.select(reflector=rid))
-        self.camera_view.crossvalRequested.connect(self.crossval)
-        self.camera_view.importRequested.connect(self.import_camera)
-        self.stations_view.evaluateRequested.connect(self.evaluate_stations)
-        self.analysis_view.runRequested.connect(self.run_analysis)
+        self.camera_view.crossvalRequested.connect(self.commands.crossval)
+        self.camera_view.importRequested.connect(self.commands.import_camera)
+        self.stations_view.evaluateRequested.connect(self.commands.evaluate_stations)
+        self.analysis_view.runRequested.connect(self.commands.run_analysis)
         self.tabs.currentChanged.connect(self._tab_changed)
 
     # ------------------------------------------------------------------ campaigns
@@ -356,7 +357,7 @@ class MainWindow(CommandsMixin, QMainWindow):
         self.tree.populate(status, reflectors, series)
         self.displacements.set_data(hist, context)
         self._show_details()
-        self._tab_changed(self.tabs.currentIndex())
+        self._tab_changed(self.tabs.currentIndex(), reload=True)
 
     def _tree_picked(self, kind: str, key: str) -> None:
         if self.session is None:
@@ -409,16 +410,16 @@ class MainWindow(CommandsMixin, QMainWindow):
             text = f"<p>{exc}</p>"
         self.details.setHtml(text)
 
-    def _tab_changed(self, _index: int) -> None:
+    def _tab_changed(self, _index: int, *, reload: bool = False) -> None:
         """Load what the visible view needs for the current selection (lazily, views that read scans
-        load on request)."""
+        load on request); ``reload`` after the campaign changed."""
         if self.session is None:
             return
         w = self.tabs.currentWidget()
         if w is self.map_view:
-            self._load_map()
+            self.commands._load_map(reload=reload)
         elif w is self.camera_view:
-            self._load_camera()
+            self.commands._load_camera()
 
     # ------------------------------------------------------------------ shutdown
     def closeEvent(self, event) -> None:

@@ -10,6 +10,7 @@ from typing import Optional
 
 from PySide6.QtCore import QObject, Signal
 
+from app.gui.state.campaign_access import CampaignAccess
 from projects.store import Campaign
 
 
@@ -20,7 +21,8 @@ class CampaignSession(QObject):
 
     def __init__(self, folder: str | Path, parent=None):
         super().__init__(parent)
-        self.folder = Path(folder)
+        self.access = CampaignAccess(folder)
+        self.folder = self.access.folder
         self.reflector: Optional[str] = None
         self.epoch: Optional[str] = None
         with self.read() as c:  # fails early (CampaignError) when the folder holds no campaign
@@ -28,11 +30,11 @@ class CampaignSession(QObject):
 
     def read(self) -> Campaign:
         """The campaign opened read-only (shared lock), for ``with session.read() as c``."""
-        return Campaign.open(self.folder, writable=False)
+        return self.access.read()
 
     def write(self) -> Campaign:
         """The campaign opened for a change (exclusive lock), for ``with session.write() as c``."""
-        return Campaign.open(self.folder, writable=True)
+        return self.access.write()
 
     def select(self, *, reflector: Optional[str] = ..., epoch: Optional[str] = ...) -> None:
         """Change the selection (arguments left out keep their value)."""

@@ -10,13 +10,14 @@ from typing import Callable, Optional
 import numpy as np
 from matplotlib import colormaps
 from PySide6.QtCore import QPointF, QRectF, Qt, QTimer, Signal
-from PySide6.QtGui import QBrush, QColor, QFont, QImage, QPainter, QPen, QPixmap
+from PySide6.QtGui import QBrush, QColor, QFont, QImage, QKeySequence, QPainter, QPen, QPixmap, QShortcut
 from PySide6.QtWidgets import (QAbstractItemView, QGraphicsEllipseItem, QGraphicsItem, QGraphicsRectItem,
                                QGraphicsScene, QGraphicsSimpleTextItem, QGraphicsView, QHBoxLayout, QLabel,
                                QPushButton, QSplitter, QTableWidget, QTableWidgetItem, QVBoxLayout, QWidget)
 
 from app.gui.state.map_geometry import CellRect, window_of_cells
-from lidar.plan import RoiPlan, ScanPlan, edit_roi, with_rois
+from app.gui.state.plan_edit import PlanEditor
+from lidar.plan import RoiPlan, ScanPlan
 
 GROUP_COLOURS = {"reference": QColor("#ff9f1c"), "measurement": QColor("#2ec4b6"), "": QColor("#e71d36")}
 
@@ -203,7 +204,10 @@ class MapGraphicsView(QGraphicsView):
 
 class MapView(QWidget):
     """An epoch's map, detections and editable plan. Signals: ``saveRequested(plan)``,
-    ``exportRequested(plan)``, ``addRequested(rect)`` (a window was drawn) and ``reflectorPicked(id)``."""
+    ``exportRequested(plan)``, ``addRequested(rect)`` (a window was drawn) and ``reflectorPicked(id)``.
+
+    The windows live in :attr:`editor` (a Qt-free :class:`app.gui.state.plan_edit.PlanEditor` with undo
+    and redo); this view draws them and hands it the user's gestures."""
     saveRequested = Signal(object)
     exportRequested = Signal(object)
     addRequested = Signal(QRectF)
@@ -227,6 +231,14 @@ class MapView(QWidget):
         self.delete_btn.clicked.connect(self.delete_selected)
         self.reset_btn = QPushButton("Revert")
         self.reset_btn.clicked.connect(self.revert)
+        self.undo_btn = QPushButton("Undo")
+        self.undo_btn.setToolTip("Undo the last change of the windows (Ctrl+Z)")
+        self.undo_btn.clicked.connect(self.undo)
+        self.redo_btn = QPushButton("Redo")
+        self.redo_btn.setToolTip("Redo (Ctrl+Shift+Z)")
+        self.redo_btn.clicked.connect(self.redo)
+        for keys, slot in ((QKeySequence.Undo, self.undo), (QKeySequence.Redo, self.redo)):
+            QShortcut(keys, self, slot, context=Qt.WidgetWithChildrenShortcut)
         self.save_btn = QPushButton("Save plan")
         self.save_btn.clicked.connect(lambda: self.saveRequested.emit(self.current_plan()))
         self.export_btn = QPushButton("Export plan JSON…")
@@ -234,7 +246,8 @@ class MapView(QWidget):
         fit = QPushButton("Show all")
         fit.clicked.connect(lambda: self.fit(everything=True))
         bar = QHBoxLayout()
-        for w in (self.title, self.draw_btn, self.delete_btn, self.reset_btn, self.save_btn, self.export_btn, fit):
+        for w in (self.title, self.draw_btn, self.delete_btn, self.undo_btn, self.redo_btn, self.reset_btn,
+                  self.save_btn, self.export_btn, fit):
             bar.addWidget(w)
         bar.insertStretch(1, 1)
         self.table = QTableWidget(0, len(self.COLUMNS))
@@ -257,18 +270,33 @@ class MapView(QWidget):
         lay.addLayout(bar)
         lay.addWidget(split)
         self.label: Optional[str] = None  # the epoch shown
-        self.plan: Optional[ScanPlan] = None
-        self.stored_plan: Optional[ScanPlan] = None
         self.geometry_: Optional[MapGeometry] = None
         self.preview = None
         self.items: list[RoiItem] = []
-        self.dirty = False
         self._syncing = False
+        self.editor = PlanEditor()
+        self.editor.on_change = self._editor_changed
         self._set_enabled(False)
+
+    @property
+    def plan(self) -> Optional[ScanPlan]:
+        """The plan as edited (None: no plan shown)."""
+        return self.editor.plan
+
+    @property
+    def stored_plan(self) -> Optional[ScanPlan]:
+        return self.editor.stored
+
+    @property
+    def dirty(self) -> bool:
+        """Whether the windows differ from the saved plan."""
+        return self.editor.dirty
 
     def _set_enabled(self, on: bool) -> None:
         for b in (self.draw_btn, self.delete_btn, self.reset_btn, self.save_btn, self.export_btn):
             b.setEnabled(on)
+        self.undo_btn.setEnabled(on and self.editor.can_undo)
+        self.redo_btn.setEnabled(on and self.editor.can_redo)
 
     # ------------------------------------------------------------------ content
     def _clear_scene(self) -> None:
@@ -280,7 +308,7 @@ class MapView(QWidget):
     def show_message(self, text: str) -> None:
         self._clear_scene()
         self.label = None
-        self.plan = self.stored_plan = None
+        self.editor.load(None)
         self.table.setRowCount(0)
         self.title.setText(text)
         self.total.setText("")
@@ -310,36 +338,56 @@ class MapView(QWidget):
             t.setFlag(QGraphicsItem.ItemIgnoresTransformations)
             t.setPos(p.x() + r, p.y() - r - 2)
             self.scene.addItem(t)
-        self.stored_plan = plan
         self.title.setText(f"Epoch {label}: {rmap.shape[1]}×{rmap.shape[0]} cells of {rmap.step_deg:.3f}°, "
                            f"{len(preview.detections.detections)} detections")
-        self._set_plan(plan)
+        self.editor.load(plan)
         self._set_enabled(plan is not None)
         self.fit()
         QTimer.singleShot(0, self.fit)  # again once the view has its final size
 
-    def _set_plan(self, plan: Optional[ScanPlan]) -> None:
-        old, self.items = self.items, []
-        for it in old:
-            self.scene.removeItem(it)
-        self.plan = plan
-        self.dirty = False
-        if plan is not None:
-            for roi in plan.rois:
-                self.add_roi(roi, mark_dirty=False)
+    def _editor_changed(self) -> None:
+        """Draw what the editor holds: keep the items of windows that stay (a window being dragged
+        is never replaced under the mouse), move those whose shape changed, add and remove the rest."""
+        rois = self.editor.rois
+        wanted = {r.reflector: r for r in rois}
+        keep = []
+        for it in self.items:
+            if it.roi.reflector in wanted:
+                keep.append(it)
+            else:
+                self.scene.removeItem(it)
+        have = {it.roi.reflector: it for it in keep}
+        self.items = []
+        self._syncing = True
+        try:
+            for roi in rois:
+                it = have.get(roi.reflector)
+                if it is None:
+                    it = RoiItem(roi, self.geometry_.rect_of(roi), self._roi_changed)
+                    self.scene.addItem(it)
+                elif it.roi is not roi:
+                    it.roi = roi
+                    if it._edges is None and not (self.scene.mouseGrabberItem() is it):
+                        it.set_scene_rect(self.geometry_.rect_of(roi))
+                self.items.append(it)
+        finally:
+            self._syncing = False
         self._refresh_table()
+        self._set_enabled(self.editor.stored is not None)
 
-    def add_roi(self, roi: RoiPlan, *, mark_dirty: bool = True) -> RoiItem:
-        item = RoiItem(roi, self.geometry_.rect_of(roi), self._roi_changed)
-        self.scene.addItem(item)
-        self.items.append(item)
-        if mark_dirty:
-            self.dirty = True
-            self._rebuild_plan()
-        return item
+    def add_roi(self, roi: RoiPlan) -> RoiItem:
+        """Add a window (one undo step); returns its item."""
+        self.editor.add(roi)
+        return next(it for it in self.items if it.roi.reflector == roi.reflector)
+
+    def undo(self) -> None:
+        self.editor.undo()
+
+    def redo(self) -> None:
+        self.editor.redo()
 
     def revert(self) -> None:
-        self._set_plan(self.stored_plan)
+        self.editor.revert()
 
     def fit(self, *, everything: bool = False) -> None:
         """Zoom on the selected window (when one is selected), else on all windows."""
@@ -356,13 +404,7 @@ class MapView(QWidget):
             self.view.fitInView(self.scene.sceneRect(), Qt.KeepAspectRatio)
 
     def delete_selected(self) -> None:
-        sel = [it for it in self.items if it.isSelected()]
-        self.items = [it for it in self.items if it not in sel]
-        for it in sel:
-            self.scene.removeItem(it)
-        if sel:
-            self.dirty = True
-            self._rebuild_plan()
+        self.editor.remove([it.roi.reflector for it in self.items if it.isSelected()])
 
     def showEvent(self, event):
         super().showEvent(event)
@@ -376,19 +418,10 @@ class MapView(QWidget):
 
     # ------------------------------------------------------------------ live plan
     def _roi_changed(self, item: RoiItem, final: bool) -> None:
-        if self.plan is None or self._syncing:
+        if self.editor.stored is None or self._syncing:
             return
-        w = self.geometry_.window_of(item.scene_rect())
-        try:
-            item.roi = edit_roi(item.roi, profile=self.plan.profile, **w)
-        except Exception:  # a window dragged off the sky (theta outside 0..180): keep the last valid one
-            return
-        self.dirty = True
-        self._rebuild_plan()
-
-    def _rebuild_plan(self) -> None:
-        self.plan = with_rois(self.plan or self.stored_plan, [it.roi for it in self.items])
-        self._refresh_table()
+        # a window dragged off the sky (theta outside 0..180) keeps its last valid shape
+        self.editor.reshape(item.roi.reflector, self.geometry_.window_of(item.scene_rect()), final=final)
 
     def current_plan(self) -> Optional[ScanPlan]:
         return self.plan

@@ -80,6 +80,7 @@ def test_roi_move_resize_delete_add_and_save_then_process(window, processed_copy
     window.tabs.setCurrentWidget(window.map_view)
     mv = window.map_view
     assert len(mv.items) == 9 and mv.table.rowCount() == 9
+    qtbot.wait(20)  # the view fits itself once shown: let it, then zoom for the gestures
     item = next(it for it in mv.items if it.roi.reflector == "M3")
     zoom = 150.0 / item.scene_rect().width()  # the window ~150 px wide on screen
     mv.view.resetTransform()
@@ -100,6 +101,10 @@ def test_roi_move_resize_delete_add_and_save_then_process(window, processed_copy
     assert wider.window.phi_max_deg - wider.window.phi_min_deg > moved.window.phi_max_deg - moved.window.phi_min_deg
     assert wider.expected_points > moved.expected_points and mv.plan.total_seconds > total_before
     assert "edited, not saved" in mv.total.text()
+    mv.undo_btn.click()  # the resize is one step: undo puts the moved window back, redo widens it again
+    assert item.roi == moved and item.scene_rect().width() < r.width() * 1.2 and mv.redo_btn.isEnabled()
+    mv.redo_btn.click()
+    assert item.roi == wider and not mv.redo_btn.isEnabled()
     row = [mv.table.item(k, 0).text() for k in range(mv.table.rowCount())].index("M3")
     assert mv.table.item(row, 6).text() == f"{wider.expected_seconds:.1f}"
     # delete M5's window, then draw a new one for it
@@ -118,7 +123,7 @@ def test_roi_move_resize_delete_add_and_save_then_process(window, processed_copy
     assert len(mv.items) == 9 and not mv.draw_btn.isChecked()
     new_m5 = next(it for it in mv.items if it.roi.reflector == "M5").roi
     assert new_m5.expected_target_points >= 500  # steps chosen for the target at the map's range
-    window.save_plan(mv.current_plan())
+    window.commands.save_plan(mv.current_plan())
     wait_job(qtbot, window)
     with Campaign.open(processed_copy, writable=False) as c:
         saved = c.stored_plan("2026-03-09").plan_json
@@ -126,7 +131,7 @@ def test_roi_move_resize_delete_add_and_save_then_process(window, processed_copy
         m3 = next(r for r in saved["rois"] if r["reflector"] == "M3")
         assert m3["phi_max_deg"] == pytest.approx(wider.window.phi_max_deg)
         assert c.result("2026-03-09").stage == "planned"  # measured again at the next processing
-    window.process()
+    window.commands.process()
     wait_job(qtbot, window)
     with Campaign.open(processed_copy, writable=False) as c:
         assert c.result("2026-03-09").stage == "measured"
@@ -137,7 +142,7 @@ def test_roi_move_resize_delete_add_and_save_then_process(window, processed_copy
 def test_fine_scan_view_shows_the_split_cluster_and_centroid(window, processed_copy, qtbot):
     window.open_campaign(processed_copy)
     window.session.select(epoch="2026-03-16", reflector="M3")
-    window.show_fine()
+    window.commands.show_fine()
     wait_job(qtbot, window)
     ins = window.fine_view.inspection
     assert ins is not None and ins.centroid.found
@@ -161,10 +166,10 @@ def test_new_campaign_add_epoch_plan_and_a_bad_file(window, field_copy, tmp_path
               "fines": [], "notes": "from the GUI"}
     monkeypatch.setattr(AddEpochDialog, "exec", lambda self: AddEpochDialog.Accepted)
     monkeypatch.setattr(AddEpochDialog, "values", lambda self: dict(values))
-    window.add_epoch()
+    window.commands.add_epoch()
     wait_job(qtbot, window)
     assert window.tree.item_for("epoch", "2026-04-01").text(1) == "imported *"  # * : work to do (process)
-    window.plan_selected()
+    window.commands.plan_selected()
     wait_job(qtbot, window)
     assert window.tree.item_for("epoch", "2026-04-01").text(1) == "planned"
     window.tabs.setCurrentWidget(window.map_view)
@@ -174,7 +179,7 @@ def test_new_campaign_add_epoch_plan_and_a_bad_file(window, field_copy, tmp_path
     bad.write_bytes(b"LASF" + b"\0" * 50)
     before = snapshot(camp)
     values.update(label="2026-04-08", coarse=str(bad), datetime="2026-04-08T09:00:00Z")
-    window.add_epoch()
+    window.commands.add_epoch()
     wait_job(qtbot, window)
     assert errors and str(bad) in errors[-1][1] and "\n" not in errors[-1][1]
     assert snapshot(camp) == before
@@ -191,22 +196,22 @@ def test_camera_import_crossval_and_report_export(window, processed_copy, tmp_pa
     monkeypatch.setattr(ImportCameraDialog, "exec", lambda self: ImportCameraDialog.Accepted)
     monkeypatch.setattr(ImportCameraDialog, "values", lambda self: {"file": str(csv), "name": "cam", "reflector": "M3",
                                                                    "timezone": "UTC", "positive": "up"})
-    window.import_camera()
+    window.commands.import_camera()
     wait_job(qtbot, window)
     assert window.tree.item_for("series", "cam") is not None
-    window.crossval()
+    window.commands.crossval()
     wait_job(qtbot, window)
     cv = window.camera_view.result
     assert cv is not None and cv.n_pairs == 3 and cv.rmse_mm < 0.5
     assert window.tabs.currentWidget() is window.camera_view
     out = tmp_path / "r.pdf"
     monkeypatch.setattr("app.gui.commands.ask_save_path", lambda *a: out)
-    window.write_report()
+    window.commands.write_report()
     wait_job(qtbot, window)
     assert out.stat().st_size > 10_000 and out.read_bytes()[:4] == b"%PDF"
     csv_out = tmp_path / "d.csv"
     monkeypatch.setattr("app.gui.commands.ask_save_path", lambda *a: csv_out)
-    window.export_csv()
+    window.commands.export_csv()
     wait_job(qtbot, window)
     assert csv_out.read_text().startswith("epoch,datetime,reflector,displacement_mm,sigma_mm,flags")
     assert not errors
@@ -258,10 +263,10 @@ def test_limits_reflectors_and_parameters_from_the_menus(window, processed_copy,
     monkeypatch.setattr("app.gui.commands.QInputDialog.getItem", lambda *a, **k: ("min_points", True))
     window.open_campaign(processed_copy)
     window.tree.select_key("reflector", "M3")
-    window.set_limit()
+    window.commands.set_limit()
     window.tree.select_key("reflector", "M5")
-    window.replace_reflector()
-    window.set_parameter()
+    window.commands.replace_reflector()
+    window.commands.set_parameter()
     with Campaign.open(processed_copy, writable=False) as c:
         assert c.limit_for("M3").rule == "abs:3,5"
         assert c.reflector("M5b").replaces == "M5" and c.reflector("M5").retired
@@ -269,7 +274,7 @@ def test_limits_reflectors_and_parameters_from_the_menus(window, processed_copy,
     assert window.tree.item_for("reflector", "M5b") is not None
     before = snapshot(processed_copy)
     window.tree.select_key("reflector", "M4")
-    window.retire_reflector()  # "not-a-date"
+    window.commands.retire_reflector()  # "not-a-date"
     assert "not ISO 8601" in errors[-1][1] and snapshot(processed_copy) == before
 
 
@@ -288,16 +293,16 @@ def test_field_sheet_check_stations_and_scanner_from_the_menus(window, processed
     window.session.select(epoch="2026-03-09")
     sheet = tmp_path / "sheet.pdf"
     monkeypatch.setattr(commands, "ask_save_path", lambda *a, **k: sheet)
-    window.field_sheet()
+    window.commands.field_sheet()
     wait_job(qtbot, window)
     assert sheet.read_bytes().startswith(b"%PDF")
-    window.check_selected()
+    window.commands.check_selected()
     wait_job(qtbot, window)
-    dlg = window.check_dialog
+    dlg = window.commands.check_dialog
     assert dlg.table.rowCount() == 9 and "complete" in dlg.summary.text()
     assert not dlg.save_btn.isEnabled()
     dlg.close()
-    window.evaluate_stations(8.0, 1.5)
+    window.commands.evaluate_stations(8.0, 1.5)
     wait_job(qtbot, window)
     view = window.stations_view
     assert window.tabs.currentWidget() is view
@@ -306,7 +311,7 @@ def test_field_sheet_check_stations_and_scanner_from_the_menus(window, processed
     from PySide6.QtWidgets import QInputDialog
 
     monkeypatch.setattr(QInputDialog, "getItem", staticmethod(lambda *a, **k: ("Trimble X7", True)))
-    window.choose_scanner()
+    window.commands.choose_scanner()
     wait_job(qtbot, window)
     with Campaign.open(processed_copy, writable=False) as c:
         assert c.profile.name == "Trimble X7"
@@ -338,7 +343,7 @@ def test_analysis_tab_and_event_overlay(window, processed_copy, tmp_path, qtbot,
         add_event(c, date="2026-03-12", kind="construction", label="slab")
     window.open_campaign(processed_copy)
     assert window.displacements.context is not None and len(window.displacements.context.events) == 1
-    window.run_analysis()
+    window.commands.run_analysis()
     wait_job(qtbot, window)
     view = window.analysis_view
     assert window.tabs.currentWidget() is view and view.table.rowCount() == 5

@@ -4,7 +4,8 @@ import sys
 
 from app.gui.state.map_geometry import CellRect, window_from_cells, window_of_cells
 
-QT_FREE = ["app.gui.actions", "app.gui.html", "app.gui.state.map_geometry"]
+QT_FREE = ["app.gui.actions", "app.gui.html", "app.gui.state.map_geometry", "app.gui.state.plan_edit",
+           "app.gui.state.campaign_access"]
 
 
 def test_these_modules_do_not_import_qt():
