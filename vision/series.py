@@ -166,6 +166,11 @@ def read_camera_series(path: str | os.PathLike, *, column: Optional[str] = None,
     ``quantity`` makes the same reader take other series (temperature, radiation...): its value
     column names and units; ``value_mm`` then holds the values in ``quantity.stored_unit``.
 
+    It runs in stages: the options are checked, the text is split into a table
+    (:func:`_read_table`), the time and value columns are found (:func:`_find_columns`), the times
+    (:func:`_read_times`) and values (:func:`_read_values`) are parsed with every bad row listed, and
+    the series is put in time order with its gaps and repeats noted (:func:`_assemble`).
+
     Parameters
     ----------
     path : CSV or text file.
@@ -176,9 +181,52 @@ def read_camera_series(path: str | os.PathLike, *, column: Optional[str] = None,
     gap_factor : a pause longer than this many median sampling intervals is reported as a gap.
     max_bad_fraction : refuse the file when more rows than this fraction are bad.
     """
+    path = Path(path)
+    _check_options(path, timezone, positive)
+    tab = _read_table(path)
+    cols = _find_columns(path, tab.header, column)
+    t_ns, t_ok = _read_times(tab, cols, timezone)
+    vals, missing, scale, offset, v_ok, file_unit = _read_values(tab, cols, t_ok, unit, quantity)
+    good = t_ok & v_ok
+    if good.sum() == 0:
+        first = min(tab.bad, key=lambda b: b.line) if tab.bad else None
+        raise SeriesFormatError(path, f"no readable rows ({tab.n_bad} bad; first: "
+                                f"{first.reason if first else 'none'} at line {first.line if first else '?'})")
+    if tab.n_bad > max_bad_fraction * tab.n_rows:
+        first = "; ".join(f"line {b.line}: {b.reason}" for b in sorted(tab.bad, key=lambda b: b.line)[:3])
+        raise SeriesFormatError(path, f"{tab.n_bad} of {tab.n_rows} rows are bad (more than "
+                                f"{max_bad_fraction:.0%}); {first}")
+    sign = 1.0 if positive == "up" or not quantity.signed else -1.0
+    v = np.where(missing[good], np.nan, (vals[good] * scale[good] + offset[good]) * sign)
+    return _assemble(path, tab, t_ns[good], v, tab.header[cols.value], file_unit, gap_factor)
+
+
+@dataclass
+class _Table:
+    """A series file split into fields: every row that has the header's field count, as text."""
+    header: list[str]
+    df: object             # pandas DataFrame of str, columns 0..n-1
+    line_no: np.ndarray    # file line of each row (1-based)
+    sep: Optional[str]
+    n_rows: int            # data rows in the file, bad ones included
+    bad: list              # BadRow, the first MAX_BAD_LISTED
+    n_bad: int
+
+
+@dataclass(frozen=True)
+class _Columns:
+    unix: Optional[int]
+    time: Optional[int]
+    date: Optional[int]
+    clock: Optional[int]
+    unit: Optional[int]
+    zone: Optional[int]
+    value: int
+
+
+def _check_options(path: Path, timezone: str, positive: str) -> None:
     import pandas as pd
 
-    path = Path(path)
     try:
         pd.Timestamp("2026-01-01").tz_localize(_zone(timezone))
     except Exception:  # pytz/zoneinfo raise several types for unknown zones
@@ -188,6 +236,12 @@ def read_camera_series(path: str | os.PathLike, *, column: Optional[str] = None,
         raise InputError(f"positive must be 'up' or 'down', not {positive!r}")
     if not path.is_file():
         raise InputError(f"{path}: no such file; check the path")
+
+
+def _read_table(path: Path) -> _Table:
+    """The header and the rows of a series file; rows with the wrong field count are listed as bad."""
+    import pandas as pd
+
     try:
         text = path.read_bytes().decode("utf-8-sig")
     except UnicodeDecodeError:
@@ -221,8 +275,12 @@ def read_camera_series(path: str | os.PathLike, *, column: Optional[str] = None,
     except Exception as exc:  # pandas' parser errors have many types
         raise SeriesFormatError(path, f"cannot be parsed as a table ({str(exc).splitlines()[0]})") from None
     line_no = np.asarray(body_lines, dtype=np.int64)[good_idx] + 1
+    return _Table(header, df, line_no, sep, len(body), bad, n_bad)
 
-    # ---- columns
+
+def _find_columns(path: Path, header: list[str], column: Optional[str]) -> _Columns:
+    """Which column holds the time (unix seconds, a date-time, or a date and a clock), the unit, the
+    time zone and the value (``column`` when given, else by name, else the one column left)."""
     t_unix = _find(header, UNIX_NAMES)
     t_col = _find(header, TIME_NAMES)
     date_col, clock_col = _find(header, ("date",)), _find(header, ("time", "clock"))
@@ -240,62 +298,71 @@ def read_camera_series(path: str | os.PathLike, *, column: Optional[str] = None,
     else:
         v_col = _find([h if i not in used else "" for i, h in enumerate(header)], VALUE_NAMES)
         if v_col is None:
-            candidates = [i for i in range(ncol) if i not in used]
+            candidates = [i for i in range(len(header)) if i not in used]
             if len(candidates) != 1:
                 raise InputError(f"{path}: cannot tell which column holds the displacement "
                                  f"({', '.join(header)}); name it with --column")
             v_col = candidates[0]
+    return _Columns(t_unix, t_col, date_col, clock_col, unit_col, tz_col, v_col)
 
-    # ---- times (UTC ns)
-    if t_unix is not None:
-        secs = pd.to_numeric(df[t_unix].str.strip(), errors="coerce").to_numpy(float)
+
+def _read_times(tab: _Table, cols: _Columns, timezone: str) -> tuple[np.ndarray, np.ndarray]:
+    """(UTC nanoseconds, readable mask) of every row; unreadable times are listed as bad rows."""
+    import pandas as pd
+
+    df = tab.df
+    if cols.unix is not None:
+        secs = pd.to_numeric(df[cols.unix].str.strip(), errors="coerce").to_numpy(float)
         t_ok = np.isfinite(secs)
         t_ns = np.where(t_ok, np.round(np.nan_to_num(secs) * 1e9), 0).astype(np.int64)
     else:
-        raw = df[t_col].str.strip()
-        if date_col is not None and clock_col is not None and date_col != clock_col:
-            raw = df[date_col].str.strip() + " " + df[clock_col].str.strip()
-        if tz_col is not None:
-            t_ns, t_ok = _times_with_zone_column(raw, df[tz_col].str.strip())
+        raw = df[cols.time].str.strip()
+        if cols.date is not None and cols.clock is not None and cols.date != cols.clock:
+            raw = df[cols.date].str.strip() + " " + df[cols.clock].str.strip()
+        if cols.zone is not None:
+            t_ns, t_ok = _times_with_zone_column(raw, df[cols.zone].str.strip())
         else:
             t_ns, t_ok = _parse_times(raw, timezone)
-    t_of = t_unix if t_unix is not None else t_col
-    n_bad += _add_bad(bad, ~t_ok, line_no, lambda j: f"time {df.iat[j, t_of]!r} is not a date-time")
+    t_of = cols.unix if cols.unix is not None else cols.time
+    tab.n_bad += _add_bad(tab.bad, ~t_ok, tab.line_no, lambda j: f"time {df.iat[j, t_of]!r} is not a date-time")
+    return t_ns, t_ok
 
-    # ---- values (mm)
-    vraw = df[v_col].str.strip()
+
+def _read_values(tab: _Table, cols: _Columns, t_ok: np.ndarray, unit: Optional[str], quantity: Quantity):
+    """(values, missing mask, scale and offset to the stored unit per row, readable mask, unit text);
+    values and units that cannot be read are listed as bad rows."""
+    import pandas as pd
+
+    df = tab.df
+    vraw = df[cols.value].str.strip()
     missing = vraw.str.lower().isin(NAN_TOKENS).to_numpy()
-    vals = pd.to_numeric(vraw.str.replace(",", ".", regex=False) if sep != "," else vraw,
+    vals = pd.to_numeric(vraw.str.replace(",", ".", regex=False) if tab.sep != "," else vraw,
                          errors="coerce").to_numpy(float)
     v_bad = ~missing & ~np.isfinite(vals) & t_ok
     table = quantity.units
-    file_unit = unit or _unit_in_name(header[v_col], table) or quantity.default_unit
+    file_unit = unit or _unit_in_name(tab.header[cols.value], table) or quantity.default_unit
     if file_unit.lower() not in table:
         raise InputError(f"unknown unit {file_unit!r} for a {quantity.noun}; use one of {', '.join(table)}")
     scale = np.full(len(df), table[file_unit.lower()][0])
     offset = np.full(len(df), table[file_unit.lower()][1])
     u_bad = np.zeros(len(df), bool)
-    if unit_col is not None:
-        units = df[unit_col].str.strip().str.lower()
+    if cols.unit is not None:
+        units = df[cols.unit].str.strip().str.lower()
         mapped = units.map({k: v[0] for k, v in table.items()}).to_numpy(float)
         mapped_off = units.map({k: v[1] for k, v in table.items()}).to_numpy(float)
         u_bad = ~np.isfinite(mapped) & t_ok & ~v_bad
         scale = np.where(np.isfinite(mapped), mapped, scale)
         offset = np.where(np.isfinite(mapped_off), mapped_off, offset)
         file_unit = "per row (" + ", ".join(sorted(set(units[~u_bad].unique()) & set(table))) + ")"
-    n_bad += _add_bad(bad, v_bad, line_no, lambda j: f"value {df.iat[j, v_col]!r} is not a number")
-    n_bad += _add_bad(bad, u_bad, line_no, lambda j: f"unit {df.iat[j, unit_col]!r} is not known")
-    good = t_ok & ~v_bad & ~u_bad
-    n_rows = len(body)
-    if good.sum() == 0:
-        raise SeriesFormatError(path, f"no readable rows ({n_bad} bad; first: "
-                                f"{bad[0].reason if bad else 'none'} at line {bad[0].line if bad else '?'})")
-    if n_bad > max_bad_fraction * n_rows:
-        first = "; ".join(f"line {b.line}: {b.reason}" for b in sorted(bad, key=lambda b: b.line)[:3])
-        raise SeriesFormatError(path, f"{n_bad} of {n_rows} rows are bad (more than {max_bad_fraction:.0%}); {first}")
-    sign = 1.0 if positive == "up" or not quantity.signed else -1.0
-    t = t_ns[good]
-    v = np.where(missing[good], np.nan, (vals[good] * scale[good] + offset[good]) * sign)
+    tab.n_bad += _add_bad(tab.bad, v_bad, tab.line_no, lambda j: f"value {df.iat[j, cols.value]!r} is not a number")
+    tab.n_bad += _add_bad(tab.bad, u_bad, tab.line_no, lambda j: f"unit {df.iat[j, cols.unit]!r} is not known")
+    return vals, missing, scale, offset, ~v_bad & ~u_bad, file_unit
+
+
+def _assemble(path: Path, tab: _Table, t: np.ndarray, v: np.ndarray, column: str, unit: str,
+              gap_factor: float) -> CameraSeries:
+    """The series in time order, a repeated time stamp kept once, with its sampling and gaps."""
+    in_order = bool(np.all(np.diff(t) >= 0))
     order = np.argsort(t, kind="stable")
     t, v = t[order], v[order]
     dup = np.concatenate([[False], np.diff(t) == 0])
@@ -310,10 +377,10 @@ def read_camera_series(path: str | os.PathLike, *, column: Optional[str] = None,
     notes = []
     if n_dup:
         notes.append(f"{n_dup} repeated time stamps: the first value of each was kept")
-    if not np.all(np.diff(t_ns[good]) >= 0):
+    if not in_order:
         notes.append("rows were not in time order; they were sorted")
-    return CameraSeries(time_ns=t, value_mm=v, source=str(path), column=header[v_col], unit=file_unit,
-                        bad_rows=tuple(sorted(bad, key=lambda b: b.line)), n_bad=n_bad,
+    return CameraSeries(time_ns=t, value_mm=v, source=str(path), column=column, unit=unit,
+                        bad_rows=tuple(sorted(tab.bad, key=lambda b: b.line)), n_bad=tab.n_bad,
                         n_missing=int(np.isnan(v).sum()), n_duplicates=n_dup, gaps=gaps, sampling_s=sampling,
                         notes=tuple(notes))
 
