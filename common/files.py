@@ -4,10 +4,11 @@ from __future__ import annotations
 import contextlib
 import os
 from pathlib import Path
+from typing import Any, Iterator
 
 
 @contextlib.contextmanager
-def atomic_output(path: str | os.PathLike):
+def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success it is renamed to ``path``, on failure removed.
 
     A crash never leaves half a file under the final name. The temporary name
@@ -33,7 +34,7 @@ def write_atomic(path: str | os.PathLike, data: str | bytes) -> Path:
     return Path(path)
 
 
-def json_safe(obj):
+def json_safe(obj: Any) -> Any:
     """``obj`` with every non-finite float replaced by None (JSON has no NaN), lists for tuples."""
     import math
 

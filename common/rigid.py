@@ -1,5 +1,7 @@
-"""Rigid (and similarity) transforms: the one :class:`Transform` type that lidar, registration and
-vision share, its 4x4 matrix form, and the least-squares fit between matched point sets.
+"""Rigid (and similarity) transforms.
+
+The one :class:`Transform` type that lidar, registration and vision share, its 4x4 matrix form, and the least-squares
+fit between matched point sets.
 
 Conventions: a transform maps coordinates of a source frame to a target frame,
 ``x_to = scale * R @ x_from + t``; its :attr:`Transform.matrix` is the 4x4 homogeneous form
@@ -23,6 +25,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from common.errors import InputError
+from typing import Any, Optional
+from numpy.typing import ArrayLike
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,13 +64,13 @@ class Transform:
         return cls(np.eye(3), np.zeros(3), 1.0, frame, frame, 0.0, 0.0, "identity")
 
     @classmethod
-    def from_rt(cls, rotation, translation, **kw) -> "Transform":
+    def from_rt(cls, rotation: ArrayLike, translation: ArrayLike, **kw: Any) -> "Transform":
         """A rigid transform from a (3, 3) rotation and a (3,) translation."""
         return cls(np.asarray(rotation, dtype=np.float64), np.asarray(translation, dtype=np.float64).reshape(3), 1.0,
                    **kw)
 
     @classmethod
-    def from_matrix(cls, m: np.ndarray, **kw) -> "Transform":
+    def from_matrix(cls, m: np.ndarray, **kw: Any) -> "Transform":
         m = np.asarray(m, dtype=np.float64)
         s = float(np.cbrt(np.linalg.det(m[:3, :3])))
         return cls(m[:3, :3] / s, m[:3, 3].copy(), s, **kw)
@@ -84,13 +88,14 @@ class Transform:
         return self.scale * (np.asarray(xyz, dtype=np.float64) @ self.rotation.T) + self.translation
 
     def then(self, other: "Transform") -> "Transform":
-        """This transform followed by ``other``."""
+        """The transform that applies this one, then ``other``."""
         m = other.matrix @ self.matrix
         sig_t = float(np.hypot(np.nan_to_num(self.sigma_translation_m), np.nan_to_num(other.sigma_translation_m)))
         sig_r = float(np.hypot(np.nan_to_num(self.sigma_rotation_deg), np.nan_to_num(other.sigma_rotation_deg)))
         return Transform.from_matrix(m, source_frame=self.source_frame, target_frame=other.target_frame,
                                      sigma_translation_m=sig_t, sigma_rotation_deg=sig_r,
-                                     method="+".join(m for m in (self.method, other.method) if m), notes=self.notes + other.notes)
+                                     method="+".join(m for m in (self.method, other.method) if m),
+                                     notes=self.notes + other.notes)
 
     def inverse(self) -> "Transform":
         r = self.rotation.T
@@ -122,7 +127,7 @@ def pose_difference(a: Transform, b: Transform) -> tuple[float, float]:
                                                                  .magnitude()))
 
 
-def fit_rigid(src: np.ndarray, dst: np.ndarray, weights=None, **provenance) -> Transform:
+def fit_rigid(src: np.ndarray, dst: np.ndarray, weights: Optional[ArrayLike] = None, **provenance: Any) -> Transform:
     """Least-squares rigid transform with ``dst ~= T.apply(src)`` (Kabsch, no reflection).
 
     Parameters

@@ -4,9 +4,12 @@ from __future__ import annotations
 import numpy as np
 
 from common.errors import InputError
+from numpy.typing import ArrayLike, DTypeLike
+from typing import Optional
 
 
-def require_points(xyz, what: str, *, min_points: int = 1, finite: bool = True, dtype=np.float64) -> np.ndarray:
+def require_points(xyz: ArrayLike, what: str, *, min_points: int = 1, finite: bool = True,
+                   dtype: Optional[DTypeLike] = np.float64) -> np.ndarray:
     """``xyz`` as an (N, 3) array of at least ``min_points`` rows (finite unless ``finite=False``).
 
     Raises

@@ -15,9 +15,11 @@ from typing import Optional
 import numpy as np
 
 from common.errors import InputError
+from numpy.typing import ArrayLike, DTypeLike
 
 
-def spherical_from_xyz(xyz_socs: np.ndarray, *, out_dtype=np.float64) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def spherical_from_xyz(xyz_socs: np.ndarray, *, out_dtype: DTypeLike = np.float64) -> tuple[np.ndarray, np.ndarray,
+                       np.ndarray]:
     """Zenith angle, azimuth and range of points in the scanner frame.
 
     Parameters
@@ -44,7 +46,7 @@ def spherical_from_xyz(xyz_socs: np.ndarray, *, out_dtype=np.float64) -> tuple[n
     return theta, phi, rng
 
 
-def direction_from_angles(theta_deg, phi_deg) -> np.ndarray:
+def direction_from_angles(theta_deg: ArrayLike, phi_deg: ArrayLike) -> np.ndarray:
     """(..., 3) unit vectors for zenith/azimuth angles in degrees."""
     t = np.radians(np.asarray(theta_deg, dtype=np.float64))
     p = np.radians(np.asarray(phi_deg, dtype=np.float64))
@@ -52,12 +54,12 @@ def direction_from_angles(theta_deg, phi_deg) -> np.ndarray:
     return np.stack([st * np.cos(p), st * np.sin(p), np.cos(t)], axis=-1)
 
 
-def wrap_phi(phi_deg):
+def wrap_phi(phi_deg: ArrayLike) -> np.ndarray:
     """Azimuth wrapped into [0, 360)."""
     return np.mod(phi_deg, 360.0)
 
 
-def phi_difference(a_deg, b_deg):
+def phi_difference(a_deg: ArrayLike, b_deg: ArrayLike) -> np.ndarray:
     """Signed smallest azimuth difference a - b in (-180, 180]."""
     d = np.mod(np.asarray(a_deg) - np.asarray(b_deg) + 180.0, 360.0) - 180.0
     return np.where(d == -180.0, 180.0, d)
@@ -113,7 +115,7 @@ class AngularWindow:
         pp, tt = np.meshgrid(phi, theta, indexing="ij")  # column-major: one vertical line per phi
         return tt.ravel(), wrap_phi(pp.ravel())
 
-    def contains(self, theta_deg, phi_deg) -> np.ndarray:
+    def contains(self, theta_deg: ArrayLike, phi_deg: ArrayLike) -> np.ndarray:
         """Boolean mask of directions inside the window (azimuth seam aware)."""
         theta_deg = np.asarray(theta_deg)
         phi_rel = np.mod(np.asarray(phi_deg) - self.phi_min_deg, 360.0)

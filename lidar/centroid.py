@@ -10,7 +10,7 @@ pull it; each doubt is flagged.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Optional, Sequence
+from typing import TYPE_CHECKING, Literal, Mapping, Optional, Sequence, overload
 
 import numpy as np
 from scipy.sparse import coo_matrix
@@ -20,6 +20,10 @@ from scipy.spatial import cKDTree
 from lidar.angles import AngularWindow, spherical_from_xyz
 from common.errors import InputError
 from lidar.scanner_profile import VZ1000, ScannerProfile
+from numpy.typing import ArrayLike
+
+if TYPE_CHECKING:
+    from lidar.plan import RoiPlan
 
 FLAG_NOT_FOUND = "not_found"
 FLAG_FEW_POINTS = "few_points"
@@ -152,10 +156,24 @@ class CentroidTrace:
         return cls(np.zeros(n, bool), np.zeros(n, bool), np.zeros(n, bool))
 
 
+@overload
 def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: str = "",
-                    expected_xyz: Optional[Sequence[float]] = None, diameter_m: float = 0.05,
+                    expected_xyz: Optional[ArrayLike] = None, diameter_m: float = 0.05,
                     window: Optional[AngularWindow] = None, profile: ScannerProfile = VZ1000,
-                    min_points: int = 30, trace: bool = False):
+                    min_points: int = 30, trace: Literal[False] = False) -> TargetCentroid: ...
+
+
+@overload
+def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: str = "",
+                    expected_xyz: Optional[ArrayLike] = None, diameter_m: float = 0.05,
+                    window: Optional[AngularWindow] = None, profile: ScannerProfile = VZ1000,
+                    min_points: int = 30, trace: Literal[True]) -> tuple[TargetCentroid, CentroidTrace]: ...
+
+
+def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: str = "",
+                    expected_xyz: Optional[ArrayLike] = None, diameter_m: float = 0.05,
+                    window: Optional[AngularWindow] = None, profile: ScannerProfile = VZ1000,
+                    min_points: int = 30, trace: bool = False) -> TargetCentroid | tuple[TargetCentroid, CentroidTrace]:
     """Robust centroid of the target in one fine-scan window.
 
     Stages: Otsu's split of the intensities (:func:`_bright`), the compact bright cluster nearest
@@ -254,17 +272,23 @@ def _trim_disc(cluster: np.ndarray, axes: np.ndarray, r_trim: float) -> tuple[np
 
 
 def rim_variance(radius_m: float, n_points: float, spacing_m: float) -> float:
-    """In-plane variance (m^2, per axis) of a disc centroid from its rim: each of the ~2 pi R / spacing rim
-    points is in or out (threshold noise, mixed pixels), moving the centroid by about R / n each."""
+    """In-plane variance (m^2, per axis) of a disc centroid from its rim.
+
+    Each of the ~2 pi R / spacing rim points is in or out (threshold noise, mixed pixels), moving the centroid by
+    about R / n each.
+    """
     n_rim = 2 * np.pi * radius_m / max(spacing_m, 1e-4)
     return (radius_m / n_points) ** 2 * n_rim / 6.0
 
 
 def _covariance(disc: np.ndarray, view: np.ndarray, radius: float, spacing: float
                 ) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
-    """(cov, sigma_range, disc normal, in-plane axes): range noise along the view over n, plus the rim
-    term in the disc plane (each of the ~2 pi R / spacing rim points is in or out -- threshold noise,
-    mixed pixels -- moving the centroid by about R / n each)."""
+    """(cov, sigma_range, disc normal, in-plane axes) of a disc's points.
+
+    Range noise along the view over n, plus the rim term in the disc plane (each of the ~2 pi R / spacing rim points
+    is in or out -- threshold noise,
+    mixed pixels -- moving the centroid by about R / n each).
+    """
     n = len(disc)
     c_plane, normal2, axes2 = _plane(disc)
     if normal2 @ view < 0:
@@ -355,7 +379,8 @@ def _centroid_stages(xyz: np.ndarray, inten: np.ndarray, ok_idx: np.ndarray, tr:
                           sigma_r, normal2)
 
 
-def centroids_from_scan(xyz_socs: np.ndarray, intensity: np.ndarray, rois, *, diameters_m=None,
+def centroids_from_scan(xyz_socs: np.ndarray, intensity: np.ndarray, rois: Sequence[RoiPlan], *,
+                        diameters_m: Optional[Mapping[str, float]] = None,
                         profile: ScannerProfile = VZ1000) -> dict[str, TargetCentroid]:
     """Centroids of every planned target from the fine-scan points of one set-up.
 

@@ -39,7 +39,7 @@ class Detection:
     theta_deg: float
     phi_deg: float
     range_m: float
-    xyz_socs: tuple[float, float, float]
+    xyz_socs: tuple[float, ...]
     peak_intensity: float
     n_cells: int
     size_deg: float
@@ -147,7 +147,8 @@ def detect_reflectors(rmap: ReflectanceMap, *, target_diameter_m: float = 0.05, 
     theta, phi = rmap.cell_angles(r_c, c_c)
     sin_t = np.sin(np.radians(theta))
     size = np.maximum(row_hi - row_lo + 1, (col_hi - col_lo + 1) * sin_t) * rmap.step_deg
-    kept, rejected = [], []
+    kept: list[Detection] = []
+    rejected: list[Detection] = []
     for k in range(1, nlab):
         if n_cells[k] == 0 or rng[k] <= 0:
             continue

@@ -33,13 +33,14 @@ numerical Jacobian.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Mapping, Optional, Sequence
+from typing import Any, Callable, Mapping, Optional, Sequence
 
 import numpy as np
 
 from common.errors import InputError, ProcessingError
 from lidar.reference_motion import across_axis, fit_reference_motion
 from common.rigid import fit_rigid
+from numpy.typing import ArrayLike
 
 FLAG_MISSING = "missing"
 FLAG_MISSING_AT_BASELINE = "missing_at_baseline"
@@ -119,7 +120,7 @@ def _as_obs(o) -> Observation:
     return Observation(np.asarray(o.xyz_socs, dtype=np.float64), np.asarray(o.cov, dtype=np.float64))
 
 
-def deck_normal(xyz: np.ndarray, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+def deck_normal(xyz: np.ndarray, up: ArrayLike = (0.0, 0.0, 1.0)) -> np.ndarray:
     """Unit normal of the best plane through points (smallest-eigenvalue eigenvector), oriented along ``up``."""
     xyz = np.asarray(xyz, dtype=np.float64)
     if len(xyz) < 3:
@@ -178,13 +179,15 @@ def _loo_residual(base, ep, ids, k, tol_abs):
 
 def check_references(baseline: Mapping[str, Observation], epoch: Mapping[str, Observation],
                      reference_ids: Sequence[str], *, tolerance_m: Optional[float] = None,
-                     measurement_ids: Sequence[str] = ()) -> tuple[tuple[ReferenceCheck, ...], tuple[str, ...], tuple[str, ...]]:
+                     measurement_ids: Sequence[str] = ()
+                     ) -> tuple[tuple[ReferenceCheck, ...], tuple[str, ...], tuple[str, ...]]:
     """Find reference targets that moved (or were replaced) since the baseline.
 
     With four or more reference targets, the one whose removal leaves the
     others most consistent with one rigid motion is predicted from them
     (leave-one-out); if it misses by more than ``max(tolerance, 4 sigma)`` it
-    is removed, and the test repeats while four or more remain. With three, the pairwise distances decide (a target whose two
+    is removed, and the test repeats while four or more remain. With three, the pairwise distances decide (a target
+    whose two
     distances changed while the third did not). Changes that cannot be pinned
     on one target flag the epoch ``reference_inconsistent``.
 
@@ -270,10 +273,13 @@ def _motion_rotation(base: dict, ep: dict, refs, mw: MotionWeights) -> np.ndarra
     return rot
 
 
-def _normals(base: dict, ep: dict, refs, meas_base, meas, mw: MotionWeights) -> tuple[np.ndarray, np.ndarray,
-                                                                                   Optional[np.ndarray]]:
-    """(g1, g_ref, g_epoch): the baseline deck normal, carried into the epoch by the frame motion, and
-    re-fitted on the epoch's own deck targets (None with fewer than three)."""
+def _normals(base: dict, ep: dict, refs, meas_base, meas,
+             mw: MotionWeights) -> tuple[np.ndarray, Optional[np.ndarray], Optional[np.ndarray]]:
+    """(g1, g_ref, g_epoch): the deck normal of the baseline, carried, and re-fitted.
+
+    The baseline deck normal, carried into the epoch by the frame motion (None with fewer than
+    three reference targets), and re-fitted on the epoch's own deck targets (None with fewer than three).
+    """
     g1 = deck_normal(np.array([base[m] for m in meas_base]))
     g_ref = _motion_rotation(base, ep, refs, mw) @ g1 if len(refs) >= 3 else None
     g_ep = deck_normal(np.array([ep[m] for m in meas])) if len(meas) >= 3 else None
@@ -282,7 +288,7 @@ def _normals(base: dict, ep: dict, refs, meas_base, meas, mw: MotionWeights) -> 
 
 def _vertical_positions(base: dict, ep: dict, refs, meas_base, meas, mode: str, w_ref: np.ndarray,
                         mw: MotionWeights, gain: Optional[np.ndarray] = None):
-    """h at baseline and epoch for ``meas`` ids, given position dicts id -> (3,) array.
+    """H at baseline and epoch for ``meas`` ids, given position dicts id -> (3,) array.
 
     The reference point is the same weighted mean of the same targets in both
     epochs (weights fixed beforehand), so it is the same physical point. In
@@ -298,6 +304,9 @@ def _vertical_positions(base: dict, ep: dict, refs, meas_base, meas, mode: str, 
         gk = deck_normal(np.array([ep[m] for m in meas]))
     else:
         g1, g_ref, g_ep = _normals(base, ep, refs, meas_base, meas, mw)
+        if g_ref is None:
+            raise ProcessingError("the deck normal cannot be carried into the epoch: fewer than three reference "
+                                  "targets were found in both epochs")
         gk = g_ref
         if mode == "auto" and gain is not None and g_ep is not None:
             gk = g_ref + gain @ (g_ep - g_ref)
@@ -315,7 +324,8 @@ def _tangent_basis(g: np.ndarray) -> np.ndarray:
     return np.vstack([e1, np.cross(g, e1)])
 
 
-def normal_gain(normals, x0: np.ndarray, cov: np.ndarray, step: float = 1e-6, *, expected: bool = False
+def normal_gain(normals: Callable[[np.ndarray], Any], x0: np.ndarray, cov: np.ndarray, step: float = 1e-6, *,
+                expected: bool = False
                 ) -> tuple[Optional[np.ndarray], np.ndarray, float]:
     """How far to move from the carried normal toward the epoch's own fit, by their uncertainties.
 
@@ -376,8 +386,11 @@ def normal_gain(normals, x0: np.ndarray, cov: np.ndarray, step: float = 1e-6, *,
 
 def reference_weights(base: Mapping[str, Observation], ep: Mapping[str, Observation], refs: Sequence[str],
                       up: np.ndarray) -> np.ndarray:
-    """Weights of the reference targets for the reference point: inverse vertical variance over both
-    epochs, summing to 1 (the frame-motion fit weighs them by :func:`motion_weights`)."""
+    """Weights of the reference targets for the reference point.
+
+    Inverse vertical variance over both epochs, summing to 1 (the frame-motion fit weighs them by
+    :func:`motion_weights`).
+    """
     var_up = np.array([up @ (base[r].cov + ep[r].cov) @ up for r in refs])
     w_ref = 1.0 / np.maximum(var_up, 1e-14)
     return w_ref / w_ref.sum()
@@ -385,8 +398,11 @@ def reference_weights(base: Mapping[str, Observation], ep: Mapping[str, Observat
 
 def motion_weights(base: Mapping[str, Observation], ep: Mapping[str, Observation], refs: Sequence[str],
                    meas: Sequence[str], up: np.ndarray, weighted: bool) -> MotionWeights:
-    """Variances for the frame-motion fit: each reference target's (isotropic) and each deck target's
-    across the span. ``weighted=False`` weighs the reference targets equally (the dissertation's plain mean)."""
+    """Variances for the frame-motion fit.
+
+    Each reference target's (isotropic) and each deck target's across the span. ``weighted=False`` weighs the
+    reference targets equally (the dissertation's plain mean).
+    """
     if not weighted:
         ref_var = np.full(len(refs), 1e-8)
     else:
@@ -495,7 +511,7 @@ def _solve(base: dict, ep: dict, meas_ids: list, stable: list, checks, flags: li
         cov[3 * j:3 * j + 3, 3 * j:3 * j + 3] = ep[k].cov
     gain, bias_cov, weight_epoch = None, np.zeros((3, 3)), 0.0
     if mode == "auto":
-        gain, bias_cov, weight_epoch = normal_gain(lambda x: _normals(*split(x), stable, meas_base, meas, mw)[1:],
+        gain, bias_cov, weight_epoch = normal_gain(lambda x: _normals(*split(x), stable, meas_base, meas, mw)[1:],  # type: ignore[call-arg]
                                                    x0, cov, expected=expected_sigmas)
         if weight_epoch > 0.5:
             flags.append(FLAG_NORMAL_FROM_EPOCH)

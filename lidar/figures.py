@@ -3,13 +3,20 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Optional, Sequence
+from typing import Any, Optional, Sequence, TYPE_CHECKING
 
 import numpy as np
 
+if TYPE_CHECKING:
+    from lidar.detection import DetectionResult
+    from lidar.identification import Identification
+    from lidar.reflectance_map import ReflectanceMap
 
-def reflectance_map_figure(rmap, *, detections=None, identification=None, rois: Optional[Sequence] = None,
-                           title: str = "Reflectance map", figsize=(11, 4.8), fixed_layout: bool = False):
+
+def reflectance_map_figure(rmap: ReflectanceMap, *, detections: Optional[DetectionResult] = None,
+                           identification: Optional[Identification] = None, rois: Optional[Sequence] = None,
+                           title: str = "Reflectance map", figsize: tuple[float, float] = (11, 4.8),
+                           fixed_layout: bool = False) -> Any:
     """A matplotlib Figure of the map (max intensity) with angle axes, a colour bar, detections and ROIs.
 
     ``fixed_layout`` places the axes at fixed positions instead of running matplotlib's layout
@@ -66,7 +73,8 @@ def reflectance_map_figure(rmap, *, detections=None, identification=None, rois: 
     return fig
 
 
-def save_figure(fig, path: str | os.PathLike) -> Path:
+def save_figure(fig: Any, path: str | os.PathLike) -> Path:
+    """Write a matplotlib Figure to ``path`` (format from the suffix) atomically; returns the path."""
     from common.files import atomic_output
 
     with atomic_output(path) as tmp:

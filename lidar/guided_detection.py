@@ -76,7 +76,7 @@ def recover_predicted(rmap: ReflectanceMap, detections: DetectionResult, identif
             continue
         bg = float(np.nanmedian(wide))
         mad = 1.4826 * float(np.nanmedian(np.abs(wide - bg)))
-        a, b = np.unravel_index(int(np.nanargmax(near)), near.shape)
+        a, b = (int(v) for v in np.unravel_index(int(np.nanargmax(near)), near.shape))
         peak = float(near[a, b])
         if peak < bg + max(MIN_CONTRAST * (detections.threshold - bg), MIN_MAD_FACTOR * mad, 0.05):
             continue

@@ -19,6 +19,7 @@ from scipy.optimize import linear_sum_assignment
 from common.errors import InputError, ProcessingError
 from lidar.layout import Layout
 from common.rigid import Transform, fit_rigid, pairwise_distances
+from numpy.typing import ArrayLike
 
 
 @dataclass(frozen=True)
@@ -31,7 +32,7 @@ class TargetMatch:
 
     id: str
     group: str
-    xyz_socs: tuple[float, float, float]
+    xyz_socs: tuple[float, ...]
     detection: Optional[int]
     residual_m: Optional[float]
 
@@ -76,8 +77,10 @@ class Identification:
 
 
 def _seed_triangles(xyz: np.ndarray, limit: int, groups: Optional[tuple] = None) -> list[tuple[int, int, int]]:
-    """Well-conditioned layout triangles (large, not thin), best first; the pier (reference) targets'
-    own triangles always come first, since deck targets are the ones a coarse scan misses."""
+    """Well-conditioned layout triangles (large, not thin), best first.
+
+    The pier (reference) targets' own triangles always come first, since deck targets are the ones a coarse scan misses.
+    """
     n = len(xyz)
     scored = []
     for a, b, c in combinations(range(n), 3):
@@ -88,7 +91,8 @@ def _seed_triangles(xyz: np.ndarray, limit: int, groups: Optional[tuple] = None)
             scored.append((area / per ** 2, (a, b, c)))
     scored.sort(key=lambda s: -s[0])
     # spread the seeds over many reflectors so a few missing ones cannot spoil all of them
-    out, used = [], {}
+    out: list[tuple[int, int, int]] = []
+    used: dict[int, int] = {}
     for _, tri in scored:
         if all(used.get(k, 0) < max(3, limit // max(n, 1) + 1) for k in tri):
             out.append(tri)
@@ -132,7 +136,7 @@ def _rival(best, candidates: dict) -> Optional[str]:
     return None
 
 
-def tilt_deg(rotation: np.ndarray, up_layout=(0.0, 0.0, 1.0)) -> float:
+def tilt_deg(rotation: np.ndarray, up_layout: ArrayLike = (0.0, 0.0, 1.0)) -> float:
     """Angle (degrees) between the layout's up axis, rotated into the scanner frame, and the scanner's +z.
 
     >>> round(tilt_deg(np.eye(3)), 6)
@@ -147,7 +151,7 @@ def tilt_deg(rotation: np.ndarray, up_layout=(0.0, 0.0, 1.0)) -> float:
 
 def identify_reflectors(detections_xyz: np.ndarray, layout: Layout, *, tolerance_m: float = 0.15,
                         max_seeds: int = 60, max_tilt_deg: Optional[float] = MAX_TILT_DEG,
-                        up_layout=(0.0, 0.0, 1.0)) -> Identification:
+                        up_layout: ArrayLike = (0.0, 0.0, 1.0)) -> Identification:
     """Match detections (scanner frame) to the layout (any frame).
 
     Parameters
@@ -235,12 +239,12 @@ def identify_reflectors(detections_xyz: np.ndarray, layout: Layout, *, tolerance
     pairs = _assign(pred, det, tolerance_m)
     by_layout = {p[0]: p for p in pairs}
     matches = []
-    for k, rid in enumerate(layout.ids):
-        if k in by_layout:
-            _, di, res = by_layout[k]
-            matches.append(TargetMatch(rid, layout.groups[k], tuple(float(v) for v in det[di]), di, res))
+    for i_lay, rid in enumerate(layout.ids):
+        if i_lay in by_layout:
+            _, di, res = by_layout[i_lay]
+            matches.append(TargetMatch(rid, layout.groups[i_lay], tuple(float(v) for v in det[di]), di, res))
         else:
-            matches.append(TargetMatch(rid, layout.groups[k], tuple(float(v) for v in pred[k]), None, None))
+            matches.append(TargetMatch(rid, layout.groups[i_lay], tuple(float(v) for v in pred[i_lay]), None, None))
     used = {p[1] for p in pairs}
     rms = float(np.sqrt(np.mean([p[2] ** 2 for p in pairs])))
     return Identification(tuple(matches), r, t, rms, tuple(i for i in range(len(det)) if i not in used),

@@ -5,11 +5,15 @@ import csv
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
+from typing import Optional, Sequence, TYPE_CHECKING
 
 import numpy as np
 
 from common.errors import InputError
+from numpy.typing import ArrayLike
+
+if TYPE_CHECKING:
+    from lidar.simulate.bridge import BridgeModel
 
 GROUPS = ("reference", "measurement")
 REQUIRED_COLUMNS = ("id", "group", "x", "y", "z")
@@ -36,7 +40,7 @@ class Layout:
     groups: tuple[str, ...]
     xyz: np.ndarray
     diameters_m: np.ndarray
-    normals: Optional[np.ndarray] = None
+    normals: np.ndarray = None  # type: ignore[assignment]  # None: __post_init__ fills NaN rows
 
     def __post_init__(self) -> None:
         n = len(self.ids)
@@ -79,7 +83,7 @@ class Layout:
     def ids_in(self, group: str) -> tuple[str, ...]:
         return tuple(i for i, g in zip(self.ids, self.groups) if g == group)
 
-    def subset(self, ids) -> "Layout":
+    def subset(self, ids: Sequence[str]) -> "Layout":
         idx = [self.index(i) for i in ids]
         return Layout(tuple(self.ids[k] for k in idx), tuple(self.groups[k] for k in idx), self.xyz[idx],
                       self.diameters_m[idx], self.normals[idx])
@@ -173,6 +177,7 @@ def check_layout(layout: Layout, *, source: str = "layout") -> None:
 
 
 def write_layout_csv(layout: Layout, path: str | os.PathLike) -> Path:
+    """Write a layout as ``layout.csv`` (id,group,x,y,z,diameter_m[,nx,ny,nz]) atomically; returns the path."""
     p = Path(path)
     with open(p, "w", newline="", encoding="utf-8") as fh:
         fields = ["id", "group", "x", "y", "z", "diameter_mm"]
@@ -185,17 +190,17 @@ def write_layout_csv(layout: Layout, path: str | os.PathLike) -> Path:
     return p
 
 
-def layout_from_model(model, *, noise_m: float = 0.0, rng: Optional[np.random.Generator] = None,
+def layout_from_model(model: BridgeModel, *, noise_m: float = 0.0, rng: Optional[np.random.Generator] = None,
                       with_normals: bool = False) -> Layout:
     """The layout of a simulated bridge, optionally with design-drawing-like errors and the targets' normals."""
     rng = rng or np.random.default_rng(0)
     xyz = np.array([t.centre_m for t in model.targets]) + rng.normal(0, noise_m, (len(model.targets), 3))
     return Layout(tuple(t.id for t in model.targets), tuple(t.group for t in model.targets), xyz,
                   np.array([t.diameter_m for t in model.targets]),
-                  np.array([t.normal for t in model.targets]) if with_normals else None)
+                  np.array([t.normal for t in model.targets]) if with_normals else None)  # type: ignore[arg-type]
 
 
-def bridge_axis(layout: Layout, *, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+def bridge_axis(layout: Layout, *, up: ArrayLike = (0.0, 0.0, 1.0)) -> np.ndarray:
     """Unit horizontal direction along the bridge in the layout's frame (its sign is arbitrary).
 
     The principal axis of every target's position projected on the horizontal plane: the targets
@@ -210,7 +215,7 @@ def bridge_axis(layout: Layout, *, up=(0.0, 0.0, 1.0)) -> np.ndarray:
     return a / np.linalg.norm(a)
 
 
-def target_normals(layout: Layout, *, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+def target_normals(layout: Layout, *, up: ArrayLike = (0.0, 0.0, 1.0)) -> np.ndarray:
     """(N, 3) unit normal of every target in the layout's frame.
 
     The layout's own normals (``nx,ny,nz``) where given. Otherwise a measurement target faces

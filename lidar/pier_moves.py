@@ -21,10 +21,13 @@ when the deck's shape under that choice is implausible.
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Callable, Mapping, Optional
+from typing import Callable, Mapping, Optional, TYPE_CHECKING
 
 import numpy as np
 from scipy.stats import chi2 as chi2_dist
+
+if TYPE_CHECKING:
+    from lidar.displacement import EpochDisplacements
 
 #: How much worse (chi-square ratio) the rejected explanation must fit than the kept one.
 DECISIVE_RATIO = 4.0
@@ -35,7 +38,7 @@ LINE_TOLERANCE_M = 0.5
 
 
 def _span_coordinates(base: Mapping, groups: Mapping[str, str], meas: list[str]):
-    """xi in [0, 1] of each deck target between the piers, and its girder line, from the baseline geometry."""
+    """Xi in [0, 1] of each deck target between the piers, and its girder line, from the baseline geometry."""
     refs = [r for r, g in groups.items() if g == "reference" and r in base]
     deck = np.array([base[m].xyz for m in meas])
     c = deck - deck.mean(axis=0)
@@ -54,7 +57,8 @@ def _span_coordinates(base: Mapping, groups: Mapping[str, str], meas: list[str])
     return xi, lines
 
 
-def deck_shape_chi2(result, base: Mapping, groups: Mapping[str, str]) -> Optional[tuple[float, int]]:
+def deck_shape_chi2(result: EpochDisplacements, base: Mapping, groups: Mapping[str, str]) -> Optional[tuple[float,
+                    int]]:
     """(chi-square, degrees of freedom) of the deck displacements against the supported-span shapes.
 
     None when there are too few deck targets for any degree of freedom.
@@ -85,8 +89,8 @@ def deck_shape_chi2(result, base: Mapping, groups: Mapping[str, str]) -> Optiona
     return float(r @ r), int(dof)
 
 
-def resolve_ambiguous_move(result, base: Mapping, groups: Mapping[str, str], solve: Callable,
-                           consistency: Callable[[list], float]):
+def resolve_ambiguous_move(result: EpochDisplacements, base: Mapping, groups: Mapping[str, str], solve: Callable,
+                           consistency: Callable[[list], float]) -> EpochDisplacements:
     """Try every pier target as the one that moved; keep the explanation the deck's shape supports.
 
     Called when the reference check could not tell which of two targets moved
@@ -150,8 +154,8 @@ def _decisive(fits: list):
     return best
 
 
-def verify_single_move(result, base: Mapping, groups: Mapping[str, str], solve: Callable,
-                       consistency: Callable[[list], float]):
+def verify_single_move(result: EpochDisplacements, base: Mapping, groups: Mapping[str, str], solve: Callable,
+                       consistency: Callable[[list], float]) -> EpochDisplacements:
     """Check the one pier target the reference check named as moved against the deck's shape.
 
     When the deck displacements under that explanation do not fit a supported

@@ -20,6 +20,7 @@ from common.progress import ProgressCallback, report, scaled
 from lidar.reflectance_map import ReflectanceMap, reflectance_map
 from lidar.scan import Scan
 from lidar.scanner_profile import VZ1000, ScannerProfile
+from numpy.typing import ArrayLike
 
 
 @dataclass(frozen=True, eq=False)
@@ -32,22 +33,25 @@ class CoarseAnalysis:
     incidence_cos: Mapping[str, Optional[float]]
 
 
-def _need_intensity(scan: Scan, what: str) -> None:
+def _need_intensity(scan: Scan, what: str) -> np.ndarray:
+    """The scan's intensities; a scan without them is refused with what needs them."""
     if scan.intensity is None:
         raise InputError(f"{scan.source or scan.name}: the scan has no intensity values; {what} needs them "
                          "(export the scan with intensity/reflectance)")
+    return scan.intensity
 
 
 def analyse_coarse(scan: Scan, layout: Layout, *, step_deg: Optional[float] = None, threshold: Optional[float] = None,
                    tolerance_m: float = 0.15, max_tilt_deg: Optional[float] = MAX_TILT_DEG,
-                   up_layout=(0.0, 0.0, 1.0), progress: Optional[ProgressCallback] = None) -> CoarseAnalysis:
+                   up_layout: ArrayLike = (0.0, 0.0, 1.0),
+                   progress: Optional[ProgressCallback] = None) -> CoarseAnalysis:
     """Reflectance map, detection and identification of a coarse scan.
 
     ``max_tilt_deg`` and ``up_layout`` go to :func:`lidar.identification.identify_reflectors`
     (None for a scanner that was not levelled).
     """
-    _need_intensity(scan, "reflector detection")
-    rmap = reflectance_map(scan.xyz_socs, scan.intensity, step_deg=step_deg, progress=scaled(progress, 0, 0.8))
+    intensity = _need_intensity(scan, "reflector detection")
+    rmap = reflectance_map(scan.xyz_socs, intensity, step_deg=step_deg, progress=scaled(progress, 0, 0.8))
     diameter = float(np.median(layout.diameters_m))
     det = detect_reflectors(rmap, target_diameter_m=diameter, threshold=threshold)
     report(progress, 0.9, "identifying reflectors")
@@ -60,7 +64,7 @@ def analyse_coarse(scan: Scan, layout: Layout, *, step_deg: Optional[float] = No
 
 
 def layout_incidence(identification: Identification, layout: Layout, *,
-                     up_layout=(0.0, 0.0, 1.0)) -> dict[str, float]:
+                     up_layout: ArrayLike = (0.0, 0.0, 1.0)) -> dict[str, float]:
     """|cos| of the incidence angle at every identified target, from the layout's normals.
 
     The normals (``nx,ny,nz`` or the defaults of :func:`lidar.layout.target_normals`) are carried
@@ -80,7 +84,7 @@ def layout_incidence(identification: Identification, layout: Layout, *,
 
 def plan_from_coarse(coarse: CoarseAnalysis, layout: Layout, *, epoch: str = "", profile: ScannerProfile = VZ1000,
                      min_points: int = 1000, budget_seconds: float = 3600.0, margin_m: float = 0.10,
-                     up_layout=(0.0, 0.0, 1.0)) -> ScanPlan:
+                     up_layout: ArrayLike = (0.0, 0.0, 1.0)) -> ScanPlan:
     """Fine-scan plan for every layout reflector (detected or predicted).
 
     Incidence comes from the layout's target normals carried into the scanner frame
@@ -97,7 +101,7 @@ def plan_from_coarse(coarse: CoarseAnalysis, layout: Layout, *, epoch: str = "",
 def measure_targets(fine: Scan, plan: ScanPlan, layout: Optional[Layout] = None, *,
                     profile: Optional[ScannerProfile] = None) -> dict[str, TargetCentroid]:
     """Centroids of every planned target from the epoch's fine scans (concatenated)."""
-    _need_intensity(fine, "the target centroids")
+    intensity = _need_intensity(fine, "the target centroids")
     diam = None if layout is None else {i: float(d) for i, d in zip(layout.ids, layout.diameters_m)}
-    return centroids_from_scan(fine.xyz_socs, fine.intensity, plan.rois, diameters_m=diam,
+    return centroids_from_scan(fine.xyz_socs, intensity, plan.rois, diameters_m=diam,
                                profile=profile or plan.profile)

@@ -23,6 +23,7 @@ from lidar.angles import AngularWindow, direction_from_angles, spherical_from_xy
 from common.errors import InputError
 from lidar.reflectance_map import ReflectanceMap
 from lidar.scanner_profile import VZ1000, ScannerProfile
+from numpy.typing import ArrayLike
 
 PLAN_FORMAT_VERSION = 1
 DEFAULT_INCIDENCE_COS = 0.6  # used when the surface around a target cannot be measured
@@ -34,7 +35,7 @@ class PlanTarget:
 
     id: str
     group: str
-    xyz_socs: tuple[float, float, float]
+    xyz_socs: tuple[float, ...]
     diameter_m: float = 0.05
     predicted: bool = False
     incidence_cos: Optional[float] = None
@@ -171,7 +172,7 @@ class ScanPlan:
         return cls.from_json(d, source=str(p))
 
 
-def incidence_from_map(rmap: ReflectanceMap, xyz_socs, *, radius_m: float = 0.35) -> Optional[float]:
+def incidence_from_map(rmap: ReflectanceMap, xyz_socs: ArrayLike, *, radius_m: float = 0.35) -> Optional[float]:
     """|cos| of the incidence angle at a target, from a plane fitted to the map's cells around it."""
     xyz = np.asarray(xyz_socs, dtype=np.float64)
     theta, phi, rng = spherical_from_xyz(xyz[None])
@@ -237,8 +238,8 @@ def plan_roi(target: PlanTarget, *, n_points: float, profile: ScannerProfile = V
     the part of that scan the target is measured from, and costs no time of its own.
     """
     xyz = np.asarray(target.xyz_socs, dtype=np.float64)
-    theta, phi, rng = spherical_from_xyz(xyz[None])
-    theta, phi, r = float(theta[0]), float(phi[0]), float(rng[0])
+    theta_a, phi_a, rng = spherical_from_xyz(xyz[None])
+    theta, phi, r = float(theta_a[0]), float(phi_a[0]), float(rng[0])
     if not (np.isfinite(r) and r > 0.1):
         raise InputError(f"reflector {target.id}: position {tuple(xyz)} is not a valid direction from the scanner")
     notes = []

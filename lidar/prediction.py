@@ -13,6 +13,7 @@ import numpy as np
 
 from common.errors import InputError
 from lidar.centroid import rim_variance
+from numpy.typing import ArrayLike
 
 
 def disc_points(diameter_m: float, range_m: float, cos_incidence: float, theta_deg: float,
@@ -35,7 +36,7 @@ def disc_points(diameter_m: float, range_m: float, cos_incidence: float, theta_d
     return omega / cell
 
 
-def centroid_covariance(xyz_socs, normal_socs, n_points: float, *, diameter_m: float = 0.05,
+def centroid_covariance(xyz_socs: ArrayLike, normal_socs: ArrayLike, n_points: float, *, diameter_m: float = 0.05,
                         range_noise_m: float = 0.005) -> np.ndarray:
     """(3, 3) covariance of a target centroid from ``n_points`` disc points, m^2.
 

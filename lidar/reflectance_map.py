@@ -18,6 +18,7 @@ from lidar.angles import direction_from_angles, wrap_phi
 from common.validation import require_points
 from common.errors import InputError
 from common.progress import ProgressCallback, report
+from numpy.typing import ArrayLike
 
 CHUNK = 1_000_000
 #: The automatic cell size keeps maps below this many cells: a few cells across a target are enough
@@ -59,13 +60,13 @@ class ReflectanceMap:
     def shape(self) -> tuple[int, int]:
         return self.count.shape
 
-    def cell_angles(self, row, col) -> tuple[np.ndarray, np.ndarray]:
+    def cell_angles(self, row: ArrayLike, col: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """(theta, phi in [0, 360)) of (fractional) cell indices, at cell centres for integers."""
         theta = self.theta0_deg + (np.asarray(row, dtype=np.float64) + 0.5) * self.step_deg
         phi = wrap_phi(self.phi0_deg + (np.asarray(col, dtype=np.float64) + 0.5) * self.step_deg)
         return theta, phi
 
-    def cells_of(self, theta_deg, phi_deg) -> tuple[np.ndarray, np.ndarray]:
+    def cells_of(self, theta_deg: ArrayLike, phi_deg: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Fractional (row, col) of directions (cell centres at integers)."""
         row = (np.asarray(theta_deg, dtype=np.float64) - self.theta0_deg) / self.step_deg - 0.5
         col = np.mod(np.asarray(phi_deg, dtype=np.float64) - self.phi0_deg, 360.0) / self.step_deg - 0.5
@@ -78,7 +79,7 @@ class ReflectanceMap:
         return (self.phi0_deg, self.phi0_deg + w * self.step_deg, self.theta0_deg + h * self.step_deg,
                 self.theta0_deg)
 
-    def xyz_of(self, theta_deg, phi_deg, range_m) -> np.ndarray:
+    def xyz_of(self, theta_deg: ArrayLike, phi_deg: ArrayLike, range_m: ArrayLike) -> np.ndarray:
         return direction_from_angles(theta_deg, phi_deg) * np.asarray(range_m, dtype=np.float64)[..., None]
 
 

@@ -146,7 +146,7 @@ class Scan:
         has_i = all(s.intensity is not None for s in scans)
         raw = None
         if all(s.intensity_raw is not None for s in scans):
-            raw = np.concatenate([s.intensity_raw.astype(np.float64) for s in scans])
+            raw = np.concatenate([np.asarray(s.intensity_raw, dtype=np.float64) for s in scans])
         return cls(
             xyz_socs=np.concatenate([s.xyz_socs for s in scans]),
             intensity=np.concatenate([s.intensity for s in scans]) if has_i else None,

@@ -241,6 +241,7 @@ DEFAULT_SCANNER = "Riegl VZ-1000"
 
 
 def scanner_names() -> tuple[str, ...]:
+    """The catalogue's scanner names, in catalogue order."""
     return tuple(CATALOGUE)
 
 
@@ -263,4 +264,5 @@ def get_scanner(name_or_file: str) -> ScannerProfile:
 
 
 def profile_source(profile: ScannerProfile, field: str) -> Optional[str]:
+    """Where a profile's value of ``field`` comes from (a data sheet, the dissertation, "assumed: ..."), or None."""
     return dict(profile.sources).get(field)

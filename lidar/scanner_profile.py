@@ -12,6 +12,9 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Optional
 
+import numpy as np
+from numpy.typing import ArrayLike
+
 from common.errors import InputError
 from lidar.identification import MAX_TILT_DEG
 
@@ -159,10 +162,8 @@ class ScannerProfile:
         """Seconds of one full-dome scan at a step (overhead included)."""
         return self.window_seconds(360.0, step_deg, step_deg)
 
-    def instrument_angles(self, theta_deg, phi_deg):
+    def instrument_angles(self, theta_deg: ArrayLike, phi_deg: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Our (zenith theta, azimuth phi) as the instrument shows them: (horizontal, vertical), degrees."""
-        import numpy as np
-
         phi = np.asarray(phi_deg, dtype=np.float64)
         theta = np.asarray(theta_deg, dtype=np.float64)
         rel = phi - self.horizontal_zero_deg
@@ -177,9 +178,10 @@ class ScannerProfile:
             "elevation (0 = horizontal, + up)"
         return f"horizontal angle grows {sense} seen from above from the instrument's zero; vertical: {vert}"
 
-    def footprint_m(self, range_m):
+    def footprint_m(self, range_m: ArrayLike) -> float | np.ndarray:
         """Beam footprint diameter at a range, metres."""
-        return self.beam_exit_diameter_m + self.beam_divergence_mrad * 1e-3 * range_m
+        fp = self.beam_exit_diameter_m + self.beam_divergence_mrad * 1e-3 * np.asarray(range_m, dtype=np.float64)
+        return float(fp) if fp.ndim == 0 else fp
 
     def line_seconds(self, theta_step_deg: float) -> float:
         """Seconds one vertical mirror line takes at a vertical step."""

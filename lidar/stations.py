@@ -28,6 +28,7 @@ from lidar.plan import PlanTarget, plan_fine_scans
 from lidar.prediction import centroid_covariance
 from common.progress import ProgressCallback, report
 from lidar.scanner_profile import ScannerProfile
+from numpy.typing import ArrayLike
 
 log = logging.getLogger(__name__)
 MIN_INCIDENCE_COS = 0.1  # beyond about 84 deg a retro-reflective disc returns too few points to use
@@ -51,7 +52,7 @@ class StationPrediction:
         Points the plan would put on each visible target.
     """
 
-    xyz_layout: tuple[float, float, float]
+    xyz_layout: tuple[float, ...]
     seconds: float
     predicted_sigma_mm: Mapping[str, float]
     hidden: tuple[str, ...]
@@ -164,7 +165,7 @@ class Obstacles:
 
 
 def predict_station(layout: Layout, station_layout: Sequence[float], *, profile: ScannerProfile,
-                    min_points: int = 1000, budget_seconds: float = 3600.0, up=(0.0, 0.0, 1.0),
+                    min_points: int = 1000, budget_seconds: float = 3600.0, up: ArrayLike = (0.0, 0.0, 1.0),
                     baseline: Optional[Mapping[str, Observation]] = None,
                     normals: Optional[np.ndarray] = None, piers: Optional[_Piers] = None,
                     obstacles: Optional[Obstacles] = None) -> StationPrediction:
@@ -246,8 +247,10 @@ def predict_station(layout: Layout, station_layout: Sequence[float], *, profile:
 
 
 def _carry(base: Mapping[str, Observation], epoch: Mapping[str, Observation]) -> dict[str, np.ndarray]:
-    """Epoch positions such that the epoch is the baseline seen from the station (no change): a rigid
-    fit of the shared targets carries the baseline positions into the station's frame."""
+    """Epoch positions such that the epoch is the baseline seen from the station (no change).
+
+    A rigid fit of the shared targets carries the baseline positions into the station's frame.
+    """
     from common.rigid import fit_rigid
 
     shared = [i for i in epoch if i in base]
@@ -257,9 +260,13 @@ def _carry(base: Mapping[str, Observation], epoch: Mapping[str, Observation]) ->
     return {k: motion.apply(np.asarray(base[k].xyz)) for k in shared}
 
 
-def default_area(layout: Layout, *, up=(0.0, 0.0, 1.0), reach_m: float = 25.0, beyond_m: float = 5.0) -> np.ndarray:
-    """(4, 2) polygon in the layout's x, y: a band ``reach_m`` to both sides of the bridge, from
-    ``beyond_m`` before the first pier target to ``beyond_m`` after the last."""
+def default_area(layout: Layout, *, up: ArrayLike = (0.0, 0.0, 1.0), reach_m: float = 25.0,
+                 beyond_m: float = 5.0) -> np.ndarray:
+    """(4, 2) polygon in the layout's x, y where stations are tried.
+
+    A band ``reach_m`` to both sides of the bridge, from ``beyond_m`` before the first pier target to ``beyond_m``
+    after the last.
+    """
     u = np.asarray(up, dtype=np.float64)
     axis = bridge_axis(layout, up=u)
     across = np.cross(u / np.linalg.norm(u), axis)
@@ -306,7 +313,7 @@ def _predict_chunk(args) -> list[StationPrediction]:
 
 
 def survey_stations(layout: Layout, positions_layout: np.ndarray, *, profile: ScannerProfile,
-                    min_points: int = 1000, budget_seconds: float = 3600.0, up=(0.0, 0.0, 1.0),
+                    min_points: int = 1000, budget_seconds: float = 3600.0, up: ArrayLike = (0.0, 0.0, 1.0),
                     baseline: Optional[Mapping[str, Observation]] = None, workers: Optional[int] = None,
                     obstacles_xyz: Optional[np.ndarray] = None,
                     progress: Optional[ProgressCallback] = None) -> tuple[StationPrediction, ...]:

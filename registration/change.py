@@ -53,7 +53,7 @@ class ChangeResult:
         """Statistics over all points or a subset (mm)."""
         d = self.distance_m if mask is None else self.distance_m[mask]
         ok = np.isfinite(d)
-        out = {"n": int(ok.sum())}
+        out: dict[str, Optional[float]] = {"n": int(ok.sum())}
         if ok.any():
             dd = d[ok] * 1e3
             out.update(mean_mm=float(dd.mean()), median_mm=float(np.median(dd)), std_mm=float(dd.std()),
@@ -67,8 +67,11 @@ class ChangeResult:
 
 @contextlib.contextmanager
 def _quiet_py4dgeo():
-    """py4dgeo logs every search tree at INFO and appends to ./py4dgeo.log in the user's folder:
-    keep warnings only, and no log file, while we call it."""
+    """Quiet py4dgeo while we call it.
+
+    py4dgeo logs every search tree at INFO and appends to ./py4dgeo.log in the user's folder: keep warnings only, and
+    no log file, while we call it.
+    """
     lg = logging.getLogger("py4dgeo")
     level = lg.level
     files = [h for h in lg.handlers if isinstance(h, logging.FileHandler)]

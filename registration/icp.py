@@ -13,6 +13,7 @@ from common.progress import ProgressCallback, report
 from common.validation import require_points
 from registration.errors import InputError, RegistrationError
 from registration.transform import Transform
+from numpy.typing import ArrayLike
 
 _ITER = re.compile(r"ICP Iteration #(\d+): Fitness ([0-9.]+), RMSE ([0-9.eE+-]+)")
 
@@ -64,7 +65,7 @@ def _capture_stdout():
         box["text"] = buf.getvalue()
 
 
-def check_clouds(source_xyz, target_xyz, what: str) -> tuple[np.ndarray, np.ndarray]:
+def check_clouds(source_xyz: ArrayLike, target_xyz: ArrayLike, what: str) -> tuple[np.ndarray, np.ndarray]:
     """Source and target as float64 (N, 3) arrays of at least 100 finite points, or InputError."""
     out = []
     for name, a in (("source", source_xyz), ("target", target_xyz)):
@@ -172,17 +173,17 @@ def stable_mask(xyz: np.ndarray, anchors_xyz: np.ndarray, *, radius_m: float = 4
     from scipy.spatial import cKDTree
 
     xyz = np.asarray(xyz, dtype=np.float64)
-    up = np.asarray(up, dtype=np.float64)
-    up = up / np.linalg.norm(up)
+    up_v = np.asarray(up, dtype=np.float64)
+    up_v = up_v / np.linalg.norm(up_v)
     anchors = np.asarray(anchors_xyz, dtype=np.float64).reshape(-1, 3)
     if len(anchors) == 0:
         raise InputError("stable areas need at least one anchor (a reference target)")
 
     def horizontal(a):
-        return a - np.outer(a @ up, up)
+        return a - np.outer(a @ up_v, up_v)
 
     d, _ = cKDTree(horizontal(anchors)).query(horizontal(xyz), distance_upper_bound=radius_m)
     mask = np.isfinite(d)
     if exclude_above_m is not None:
-        mask &= (xyz @ up) < exclude_above_m
+        mask &= (xyz @ up_v) < exclude_above_m
     return mask

@@ -53,7 +53,7 @@ def parse_transform(text: str) -> np.ndarray:
     if len(rows) < 4:
         raise RegistrationError(f"{PROGRAM} printed no transform; its output ended with: "
                                 f"{(text.strip().splitlines() or ['(nothing)'])[-1][:120]}")
-    mat = np.array([[float(v) for v in _ROW.match(r).groups()] for r in rows[-4:]])
+    mat = np.array([[float(v) for v in m.groups()] for r in rows[-4:] if (m := _ROW.match(r)) is not None])
     if not np.isfinite(mat).all() or not np.allclose(mat[3], (0, 0, 0, 1)):
         raise RegistrationError(f"{PROGRAM} printed an invalid transform")
     return mat
@@ -110,8 +110,8 @@ def refine_ndt(source_xyz: np.ndarray, target_xyz: np.ndarray, initial: Transfor
     s = _voxel_thin(initial.then(shift).apply(src), voxel_m)
     t = _voxel_thin(tgt - off, voxel_m)
     report(progress, 0.1, f"NDT ({len(s):,} and {len(t):,} points)")
-    with tempfile.TemporaryDirectory(prefix="bridgesurvey-ndt-") as tmp:
-        tmp = Path(tmp)
+    with tempfile.TemporaryDirectory(prefix="bridgesurvey-ndt-") as tmp_name:
+        tmp = Path(tmp_name)
         (tmp / "in").mkdir()
         (tmp / "out").mkdir()
         _write_pcd(tmp / "in" / "target.pcd", t)

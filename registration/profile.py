@@ -110,14 +110,14 @@ def span_profile(xyz_from: np.ndarray, xyz_to: np.ndarray, girder_points: np.nda
         raise InputError("a span profile needs at least two finite girder points (measurement targets)")
     if not (bin_m > 0 and half_width_m > 0 and band_m > 0):
         raise InputError("span profile: bin length, half width and band must be positive")
-    up = np.asarray(up, dtype=np.float64)
-    up = up / np.linalg.norm(up)
-    gh = g - np.outer(g @ up, up)
+    up_v = np.asarray(up, dtype=np.float64)
+    up_v = up_v / np.linalg.norm(up_v)
+    gh = g - np.outer(g @ up_v, up_v)
     c = gh.mean(axis=0)
     _, _, vt = np.linalg.svd(gh - c)
-    axis = vt[0] - (vt[0] @ up) * up
+    axis = vt[0] - (vt[0] @ up_v) * up_v
     axis /= np.linalg.norm(axis)
-    side = np.cross(up, axis)
+    side = np.cross(up_v, axis)
     if origin is None:
         s_g = (g - c) @ axis
         if np.median(s_g) < 0:  # stations grow along the span from the first target
@@ -137,7 +137,7 @@ def span_profile(xyz_from: np.ndarray, xyz_to: np.ndarray, girder_points: np.nda
     bins = []
     for gi, grp in enumerate(groups):
         s_t = (g[grp] - origin) @ axis
-        h_t = g[grp] @ up
+        h_t = g[grp] @ up_v
         fit = np.polyfit(s_t, h_t, 1) if len(grp) >= 2 and np.ptp(s_t) > 1.0 else np.array([0.0, h_t.mean()])
         lo = np.floor(s_t.min() / bin_m) * bin_m - bin_m
         hi = np.ceil(s_t.max() / bin_m) * bin_m + bin_m
@@ -145,7 +145,7 @@ def span_profile(xyz_from: np.ndarray, xyz_to: np.ndarray, girder_points: np.nda
         for xyz in (a, b):
             s = (xyz - origin) @ axis
             lat = (xyz - origin) @ side
-            h = xyz @ up
+            h = xyz @ up_v
             sel = (np.abs(lat - offsets[gi]) <= half_width_m) & (np.abs(h - np.polyval(fit, s)) <= band_m) & \
                   (s >= lo) & (s < hi)
             k = np.floor((s[sel] - lo) / bin_m).astype(np.int64)
@@ -160,4 +160,4 @@ def span_profile(xyz_from: np.ndarray, xyz_to: np.ndarray, girder_points: np.nda
             if n1[j] >= min_points and n2[j] >= min_points:
                 bins.append(ProfileBin(gi, float(lo + (j + 0.5) * bin_m), int(n1[j]), int(n2[j]), float(m1[j]),
                                        float(m2[j]), float(s1[j]), float(s2[j])))
-    return SpanProfile(tuple(bins), origin, axis, up, offsets, float(bin_m), float(half_width_m), float(band_m))
+    return SpanProfile(tuple(bins), origin, axis, up_v, offsets, float(bin_m), float(half_width_m), float(band_m))

@@ -19,7 +19,7 @@ class TieResidual:
     """How one tie point fits: residual after the fit, and after a fit without it (leave-one-out)."""
 
     id: str
-    residual_m: tuple[float, float, float]
+    residual_m: tuple[float, ...]
     residual_norm_m: float
     loo_residual_m: float
     used: bool

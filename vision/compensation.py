@@ -41,6 +41,7 @@ class DualCalibration:
     false_rms_px : RMS size of the false displacement over the calibration motions (the range
         the model was fitted on; beyond it its error grows in proportion).
     """
+
     Bbar: np.ndarray
     X_cs1: np.ndarray
     residual_px: np.ndarray
@@ -129,8 +130,11 @@ def fit_false_displacement(main_uv: np.ndarray, motion: CameraMotion) -> DualCal
 
 @dataclass(frozen=True)
 class DualCameraSetup:
-    """Everything the measurement stage needs: the affine target model, the sub-camera's
-    intrinsics and rest pose, the rest-frame main-target pixels and the dual calibration."""
+    """Everything the measurement stage needs.
+
+    The affine target model, the sub-camera's intrinsics and rest pose, the rest-frame main-target pixels and the dual calibration.
+    """
+
     target: AffineTargetModel
     intrinsics: Intrinsics
     board_points_m: np.ndarray
@@ -176,6 +180,7 @@ class DualCameraResult:
     flags : one tuple of strings per frame (``main-target-missing``, ``sub-target-missing``).
     provenance : calibration figures (motions used, misfit, mm per pixel, intrinsics RMS).
     """
+
     displacement_m: np.ndarray
     sigma_m: np.ndarray
     single_camera_m: np.ndarray

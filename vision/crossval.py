@@ -20,6 +20,7 @@ from vision.series import CameraSeries
 @dataclass(frozen=True)
 class Pair:
     """One LiDAR epoch and the camera around its time (millimetres, positive up)."""
+
     epoch: str
     datetime: str
     lidar_mm: float
@@ -42,6 +43,7 @@ class CrossValidation:
     with fewer than three pairs); ``within_2sigma`` the share of pairs whose difference is within
     twice its combined sigma. ``alignment`` says how the camera's zero was set.
     """
+
     pairs: tuple
     n_pairs: int
     bias_mm: float

@@ -37,6 +37,7 @@ class CircleDetection:
     centres_px : (n, 2) sub-pixel centres (u, v); ``radii_px`` (n,) equivalent radii;
     ``circularity`` (n,) 4*pi*area/perimeter^2 (1 for a perfect disc).
     """
+
     centres_px: np.ndarray
     radii_px: np.ndarray
     circularity: np.ndarray

@@ -26,6 +26,7 @@ def list_images(folder: str | os.PathLike) -> list[Path]:
 
 
 def read_gray(path: Path) -> np.ndarray:
+    """An image file as a 2-D grayscale array indexed (row, col); a clear error when it cannot be read."""
     import cv2
 
     img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
@@ -35,6 +36,7 @@ def read_gray(path: Path) -> np.ndarray:
 
 
 def paired(main: Sequence[Path], sub: Sequence[Path]) -> None:
+    """Check that the main and sub-camera image lists pair one to one (same count)."""
     if len(main) != len(sub):
         raise InputError(f"the main camera has {len(main)} images and the sub-camera {len(sub)}; each frame needs "
                          "one image of each, in the same name order")
@@ -61,8 +63,10 @@ def detect_sequence(main: Sequence[Path], sub: Sequence[Path], *, pattern_m: np.
 
 
 def detect_boards(paths: Sequence[Path], inner_corners: tuple[int, int]) -> tuple[list[np.ndarray], tuple[int, int]]:
-    """Corners of every image where the whole board is found (for Zhang's calibration), and the
-    image size (width, height) they share."""
+    """Corners of every image where the whole board is found (for Zhang's calibration).
+
+    Also the image size (width, height) they share.
+    """
     out, size = [], None
     for p in paths:
         img = read_gray(p)

@@ -24,6 +24,7 @@ class AffineTargetModel:
     residual_px : RMS of the fit over the features (0 for exactly three features).
     pattern_m : (N, 2) feature coordinates in WM it was fitted with.
     """
+
     Bt: np.ndarray
     b: np.ndarray
     residual_px: float

@@ -43,9 +43,12 @@ MAX_BAD_LISTED = 1000  # bad rows kept with their line numbers (all are counted)
 
 @dataclass(frozen=True)
 class Quantity:
-    """What a series file's value column holds, for the reader: column names to look for, units as
+    """What a series file's value column holds, for the reader.
+
+    Column names to look for, units as
     ``name -> (scale, offset)`` into the stored unit (``stored = value * scale + offset``), the default
-    unit, and a noun for messages."""
+    unit, and a noun for messages.
+    """
 
     noun: str
     value_names: tuple[str, ...]
@@ -67,6 +70,8 @@ class SeriesFormatError(SurveyError):
 
 @dataclass(frozen=True)
 class BadRow:
+    """A row of a series file that could not be read: its line number and why."""
+
     line: int
     reason: str
 
@@ -84,6 +89,7 @@ class CameraSeries:
     gaps : (start_ns, end_ns) of pauses longer than ``gap_factor`` sampling intervals.
     sampling_s : median sampling interval in seconds.
     """
+
     time_ns: np.ndarray
     value_mm: np.ndarray
     source: str = ""
@@ -204,6 +210,7 @@ def read_camera_series(path: str | os.PathLike, *, column: Optional[str] = None,
 @dataclass
 class _Table:
     """A series file split into fields: every row that has the header's field count, as text."""
+
     header: list[str]
     df: object             # pandas DataFrame of str, columns 0..n-1
     line_no: np.ndarray    # file line of each row (1-based)
@@ -279,8 +286,10 @@ def _read_table(path: Path) -> _Table:
 
 
 def _find_columns(path: Path, header: list[str], column: Optional[str]) -> _Columns:
-    """Which column holds the time (unix seconds, a date-time, or a date and a clock), the unit, the
-    time zone and the value (``column`` when given, else by name, else the one column left)."""
+    """Which column holds the time, the unit, the time zone and the value.
+
+    The time is unix seconds, a date-time, or a date and a clock; the time zone and the value (``column`` when given, else by name, else the one column left).
+    """
     t_unix = _find(header, UNIX_NAMES)
     t_col = _find(header, TIME_NAMES)
     date_col, clock_col = _find(header, ("date",)), _find(header, ("time", "clock"))
@@ -329,8 +338,10 @@ def _read_times(tab: _Table, cols: _Columns, timezone: str) -> tuple[np.ndarray,
 
 
 def _read_values(tab: _Table, cols: _Columns, t_ok: np.ndarray, unit: Optional[str], quantity: Quantity):
-    """(values, missing mask, scale and offset to the stored unit per row, readable mask, unit text);
-    values and units that cannot be read are listed as bad rows."""
+    """(values, missing mask, scale and offset to the stored unit per row, readable mask, unit text).
+
+    Values and units that cannot be read are listed as bad rows.
+    """
     import pandas as pd
 
     df = tab.df

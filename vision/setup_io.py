@@ -25,6 +25,7 @@ VERSION = 1
 
 
 def setup_to_json(s: DualCameraSetup) -> dict:
+    """A dual-camera set-up as its versioned JSON document."""
     t, i, c = s.target, s.intrinsics, s.calibration
     return {
         "format": FORMAT, "version": VERSION,
@@ -41,6 +42,7 @@ def setup_to_json(s: DualCameraSetup) -> dict:
 
 
 def setup_from_json(d: dict, *, source: str = "set-up") -> DualCameraSetup:
+    """A dual-camera set-up from its JSON document (a newer format version is refused)."""
     if not isinstance(d, dict) or d.get("format") != FORMAT:
         raise InputError(f"{source}: not a BridgeSurvey dual-camera set-up file")
     if int(d.get("version", 0)) > VERSION:
@@ -62,10 +64,12 @@ def setup_from_json(d: dict, *, source: str = "set-up") -> DualCameraSetup:
 
 
 def save_setup(s: DualCameraSetup, path: str | os.PathLike) -> Path:
+    """Write a set-up JSON file atomically; returns its path."""
     return write_atomic(path, json.dumps(setup_to_json(s), indent=1) + "\n")
 
 
 def load_setup(path: str | os.PathLike) -> DualCameraSetup:
+    """Read a set-up JSON file (one-line errors for a missing, damaged or newer file)."""
     p = Path(path)
     try:
         d = json.loads(p.read_text(encoding="utf-8"))

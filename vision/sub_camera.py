@@ -13,8 +13,11 @@ from vision.geometry import invert, rigid
 
 @dataclass(frozen=True)
 class Intrinsics:
-    """A calibrated camera: ``K`` (3x3, pixels), ``distortion`` (OpenCV's k1 k2 p1 p2 k3),
-    the calibration's reprojection RMS in pixels and the number of views it used."""
+    """A calibrated camera.
+
+    ``K`` (3x3, pixels), ``distortion`` (OpenCV's k1 k2 p1 p2 k3), the calibration's reprojection RMS in pixels and the number of views it used.
+    """
+
     K: np.ndarray
     distortion: np.ndarray
     rms_px: float
@@ -70,6 +73,7 @@ class CameraMotion:
     pose_cov : (n, 6, 6) covariance of each frame's pose (rotation vector rad, translation m)
         from the corners' reprojection scatter; NaN where unknown.
     """
+
     B_ws_to_cs: np.ndarray
     R: np.ndarray
     T: np.ndarray

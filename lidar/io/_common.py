@@ -4,7 +4,7 @@ from __future__ import annotations
 import contextlib
 import os
 from pathlib import Path
-from typing import Optional
+from typing import BinaryIO, Iterator, Optional, Sequence
 
 import numpy as np
 
@@ -116,9 +116,9 @@ def pose_from_text(path: Path, words: list[str], what: str) -> np.ndarray:
     return vals.reshape(4, 4)
 
 
-def read_ascii_table(path: Path, fh, *, sep: str, nrows: Optional[int], what: str,
+def read_ascii_table(path: Path, fh: BinaryIO, *, sep: str, nrows: Optional[int], what: str,
                      ncols: Optional[int] = None) -> np.ndarray:
-    """Parse ASCII point lines from an open binary file at its current position (pandas' C reader).
+    r"""Parse ASCII point lines from an open binary file at its current position (pandas' C reader).
 
     ``sep`` is a separator or ``r"\\s+"``; ``ncols`` fixes the number of columns (longer lines are
     an error); ``what`` names the lines in the ScanFormatError for a malformed one.
@@ -134,7 +134,7 @@ def read_ascii_table(path: Path, fh, *, sep: str, nrows: Optional[int], what: st
         raise ScanFormatError(path, f"malformed {what} ({msg[:100]})") from exc
 
 
-def pose_from_quaternion(q_wxyz, t) -> np.ndarray:
+def pose_from_quaternion(q_wxyz: Sequence[float], t: Sequence[float]) -> np.ndarray:
     """4x4 homogeneous transform from a unit quaternion (w, x, y, z) and a translation."""
     w, x, y, z = (float(v) for v in q_wxyz)
     n = np.sqrt(w * w + x * x + y * y + z * z)
@@ -163,7 +163,7 @@ def quaternion_from_pose(pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 @contextlib.contextmanager
-def quiet_stderr():
+def quiet_stderr() -> Iterator[None]:
     """Silence C/C++ libraries that print diagnostics straight to file descriptor 2."""
     try:
         fd = os.dup(2)

@@ -163,7 +163,7 @@ def write_e57(scans: Scan | list[Scan], path: str | os.PathLike) -> Path:
                     }
                     if scan.intensity is not None:
                         data["intensity"] = raw_for_writing(scan).astype(np.float64)
-                    kwargs = {"name": scan.name or "scan"}
+                    kwargs: dict[str, object] = {"name": scan.name or "scan"}
                     if scan.pose is not None:
                         q, t = quaternion_from_pose(scan.pose)
                         kwargs.update(rotation=q, translation=t)

@@ -30,6 +30,8 @@ _NS = "{http://www.astm.org/COMMIT/E57/2010-e57-v1.0}"
 
 @dataclass(frozen=True)
 class E57ScanFacts:
+    """What an E57 file says of one of its scans (checked against the file before anything is read)."""
+
     name: str
     record_count: int
     bits_per_record: int
@@ -39,6 +41,8 @@ class E57ScanFacts:
 
 @dataclass(frozen=True)
 class E57Facts:
+    """What an E57 file's header and XML section say (version, scans, pages), checked against its size."""
+
     version: str
     scans: tuple[E57ScanFacts, ...]
     images: int

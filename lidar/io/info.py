@@ -30,8 +30,8 @@ class ScanInfo:
 
     name: str
     points: int
-    bounds_min: tuple[float, float, float]
-    bounds_max: tuple[float, float, float]
+    bounds_min: tuple[float, ...]
+    bounds_max: tuple[float, ...]
     pose: Optional[list[list[float]]]
     intensity_convention: str
     intensity_raw_range: Optional[tuple[float, float]]

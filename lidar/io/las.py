@@ -146,7 +146,7 @@ def _decode_las(p: Path, header, xyz, raw, scales, offsets, chunk_points, progre
         if buf is None or buf.size < chunk_points * dtype.itemsize:
             buf = local.buf = np.empty(chunk_points * dtype.itemsize, np.uint8)
         view = buf[: m * dtype.itemsize]
-        got = os.preadv(fd, [view], first + start * dtype.itemsize)
+        got = os.preadv(fd, [view], first + start * dtype.itemsize)  # type: ignore[list-item]
         if got != view.size:
             raise ScanFormatError(p, "truncated: the point records end early")
         _scale_into(xyz, raw, start, view.view(dtype), scales, offsets)
@@ -161,8 +161,10 @@ def _decode_las(p: Path, header, xyz, raw, scales, offsets, chunk_points, progre
 
 
 def _decode_laz(reader, p: Path, xyz, raw, scales, offsets, chunk_points, progress):
-    """Decode LAZ chunk by chunk (lazrs decompresses each chunk on all cores, holding the GIL,
-    so a prefetch thread would gain nothing)."""
+    """Decode LAZ chunk by chunk.
+
+    lazrs decompresses each chunk on all cores, holding the GIL, so a prefetch thread would gain nothing.
+    """
     n = xyz.shape[0]
     start = 0
     for chunk in reader.chunk_iterator(chunk_points):

@@ -46,8 +46,8 @@ class LasHeaderFacts:
     vlr_count: int
     evlr_count: int
     compressed: bool
-    scales: tuple[float, float, float]
-    offsets: tuple[float, float, float]
+    scales: tuple[float, ...]
+    offsets: tuple[float, ...]
     file_size: int
 
 

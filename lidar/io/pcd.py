@@ -33,6 +33,8 @@ MAX_FIELD_COUNT = 4096
 
 @dataclass(frozen=True)
 class PcdHeader:
+    """The header of a PCD file: fields, sizes, types, counts, point count and data encoding."""
+
     fields: tuple[str, ...]
     sizes: tuple[int, ...]
     types: tuple[str, ...]
@@ -132,7 +134,7 @@ def read_pcd(path: str | os.PathLike) -> Scan:
         head = fh.read(MAX_HEADER_BYTES)
     h = parse_header(p, head)
     cx, cy, cz = (find_column(h.fields, axis) for axis in ("x", "y", "z"))
-    if None in (cx, cy, cz):
+    if cx is None or cy is None or cz is None:
         raise ScanFormatError(p, f"the PCD file has no x, y, z fields (fields: {' '.join(h.fields)[:80]})")
     ci = find_column(h.fields, "intensity")
     if h.points == 0:

@@ -31,6 +31,8 @@ _END = re.compile(rb"end_header[ \t]*\r?\n")
 
 @dataclass(frozen=True)
 class PlyElement:
+    """One element of a PLY header (``vertex``...): its name, count and properties."""
+
     name: str
     count: int
     min_row_bytes: int  # binary: exact for scalar rows, a lower bound with lists
@@ -130,7 +132,10 @@ def read_ply(path: str | os.PathLike) -> Scan:
     names = data.dtype.names or ()
     if len(data) != vertex.count:
         raise ScanFormatError(p, f"truncated: the PLY header declares {vertex.count} points, {len(data)} were read")
-    xyz = np.column_stack([data[names[c]] for c in (find_column(names, a) for a in ("x", "y", "z"))]).astype(np.float64)
+    xyz_cols = [c for c in (find_column(names, a) for a in ("x", "y", "z")) if c is not None]
+    if len(xyz_cols) != 3:
+        raise ScanFormatError(p, "the PLY vertex data has no x, y, z columns")
+    xyz = np.column_stack([data[names[c]] for c in xyz_cols]).astype(np.float64)
     ci = find_column(names, "intensity")
     raw = np.asarray(data[names[ci]]) if ci is not None else None
     return make_scan(p, xyz, raw, fmt="PLY", pose=_pose_comment(p, clean),

@@ -32,7 +32,7 @@ def read_ptx(path: str | os.PathLike) -> list[Scan]:
     scans: list[Scan] = []
     with open(p, "rb") as fh:
         while True:
-            head = []
+            head: list[str] = []
             while len(head) < 10:
                 raw = fh.readline(4096)
                 if not raw:
@@ -94,6 +94,8 @@ def _read_points(p: Path, fh, n: int, k: int) -> np.ndarray:
             raise ScanFormatError(p, f"scan {k}: point lines change their number of values")
         table[done:done + len(chunk)] = chunk[:, :table.shape[1]]
         done += len(chunk)
+    if table is None:
+        raise ScanFormatError(p, f"scan {k} holds no points")
     return table
 
 

@@ -108,7 +108,7 @@ def read_xyz(path: str | os.PathLike) -> Scan:
     if names and len(names) == table.shape[1]:
         found = [find_column(names, a) for a in ("x", "y", "z")]
         if None not in found:
-            cols = found
+            cols = [int(c) for c in found if c is not None]
         ci = find_column(names, "intensity")
         if ci is None and table.shape[1] >= 4 and names[3].lower() not in ("r", "red"):
             ci = 3

@@ -6,11 +6,12 @@ ground at z = 0, the access side (where the scanner stands) at y < 0.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Optional
+from typing import Optional, Sequence
 
 import numpy as np
 
 from common.errors import InputError
+from numpy.typing import ArrayLike
 
 
 @dataclass(frozen=True)
@@ -30,8 +31,8 @@ class Target:
 
     id: str
     group: str
-    centre_m: tuple[float, float, float]
-    normal: tuple[float, float, float]
+    centre_m: tuple[float, ...]
+    normal: tuple[float, ...]
     diameter_m: float = 0.05
 
     def __post_init__(self) -> None:
@@ -43,9 +44,12 @@ class Target:
 
 
 def _default_targets(span: float, pier_length: float, deck_bottom: float, diameter: float) -> tuple[Target, ...]:
-    """Four reference targets on the piers' inner faces (looking into the span, where a scanner
-    between the piers sees them at moderate incidence), at two heights and two positions across the
-    bridge; five measurement targets under the deck, symmetric about midspan, on two girder lines."""
+    """The demo bridge's nine targets.
+
+    Four reference targets on the piers' inner faces (looking into the span, where a scanner between the piers sees
+    them at moderate incidence), at two heights and two positions across the
+    bridge; five measurement targets under the deck, symmetric about midspan, on two girder lines.
+    """
     face1 = pier_length / 2 + 0.001  # pier 1's +x face, 1 mm proud
     face2 = span - pier_length / 2 - 0.001  # pier 2's -x face
     ref = [
@@ -96,7 +100,7 @@ class BridgeModel:
                 return t
         raise InputError(f"bridge model has no target {target_id!r}")
 
-    def deflection_m(self, x_m, midspan_m: float) -> np.ndarray:
+    def deflection_m(self, x_m: ArrayLike, midspan_m: float) -> np.ndarray:
         """Vertical displacement (positive up) along the span for a midspan amplitude.
 
         The first-mode shape of a simply supported beam, ``a sin(pi x / L)``
@@ -106,11 +110,11 @@ class BridgeModel:
         w = midspan_m * np.sin(np.pi * x / self.span_m)
         return np.where((x >= 0) & (x <= self.span_m), w, 0.0)
 
-    def with_targets(self, targets) -> "BridgeModel":
+    def with_targets(self, targets: Sequence[Target]) -> "BridgeModel":
         return replace(self, targets=tuple(targets))
 
 
-def box_mesh(lo, hi) -> tuple[np.ndarray, np.ndarray]:
+def box_mesh(lo: Sequence[float], hi: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
     """Vertices (8, 3) and outward triangles (12, 3) of an axis-aligned box."""
     x0, y0, z0 = lo
     x1, y1, z1 = hi
@@ -132,7 +136,7 @@ def deck_mesh(model: BridgeModel, midspan_m: float, stations: int = 200) -> tupl
     v[:, :, 0] = x[:, None]
     v[:, :, 1] = corners[None, :, 0]
     v[:, :, 2] = corners[None, :, 1] + w[:, None]
-    v = v.reshape(-1, 3)
+    verts = v.reshape(-1, 3)
     faces = []
     for s in range(stations - 1):
         for c in range(4):
@@ -141,22 +145,24 @@ def deck_mesh(model: BridgeModel, midspan_m: float, stations: int = 200) -> tupl
             faces.append([b, a + 4, b + 4])
     last = (stations - 1) * 4
     faces += [[0, 1, 2], [0, 2, 3], [last, last + 2, last + 1], [last, last + 3, last + 2]]
-    return v, np.asarray(faces, dtype=np.int32)
+    return verts, np.asarray(faces, dtype=np.int32)
 
 
 def pier_meshes(model: BridgeModel) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(vertices, triangles) of each pier's box, bridge frame, metres."""
     hl, hw = model.pier_length_m / 2, model.pier_width_m / 2
     return [box_mesh((xc - hl, -hw, 0.0), (xc + hl, hw, model.deck_bottom_m)) for xc in (0.0, model.span_m)]
 
 
 def ground_mesh(model: BridgeModel, extent_m: float = 150.0) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices, triangles) of a square of ground ``extent_m`` wide centred on the span, bridge frame."""
     xc = model.span_m / 2
     v = np.array([[xc - extent_m, -extent_m, 0], [xc + extent_m, -extent_m, 0],
                   [xc + extent_m, extent_m, 0], [xc - extent_m, extent_m, 0]], dtype=np.float64)
     return v, np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int32)
 
 
-def plate_mesh(centre, normal, half_size_m: float) -> tuple[np.ndarray, np.ndarray]:
+def plate_mesh(centre: ArrayLike, normal: ArrayLike, half_size_m: float) -> tuple[np.ndarray, np.ndarray]:
     """A square plate (two-sided) centred on a point, facing ``normal``."""
     e1, e2 = in_plane_axes(normal)
     c = np.asarray(centre, dtype=np.float64)
@@ -164,7 +170,7 @@ def plate_mesh(centre, normal, half_size_m: float) -> tuple[np.ndarray, np.ndarr
     return v, np.array([[0, 1, 2], [0, 2, 3], [0, 2, 1], [0, 3, 2]], dtype=np.int32)
 
 
-def in_plane_axes(normal, up_hint: Optional[np.ndarray] = None) -> tuple[np.ndarray, np.ndarray]:
+def in_plane_axes(normal: ArrayLike, up_hint: Optional[np.ndarray] = None) -> tuple[np.ndarray, np.ndarray]:
     """Two unit vectors spanning the plane normal to ``normal``.
 
     The second axis is the projection of +z (or of +y for horizontal planes),

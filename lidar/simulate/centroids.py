@@ -18,6 +18,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from lidar.displacement import Observation
+from typing import Sequence
+from numpy.typing import ArrayLike
 
 
 @dataclass(frozen=True)
@@ -65,7 +67,8 @@ class BridgeGeometry:
         return tuple(ids), groups, np.array(xyz, dtype=np.float64)
 
 
-def deflection(xyz: np.ndarray, groups: dict[str, str], ids, geometry: BridgeGeometry, *, midspan_m: float,
+def deflection(xyz: np.ndarray, groups: dict[str, str], ids: Sequence[str], geometry: BridgeGeometry, *,
+               midspan_m: float,
                girder_ratio: float = 1.0, asymmetry_m: float = 0.0) -> np.ndarray:
     """Vertical deck displacement (m, positive up) of each target; reference targets do not move.
 
@@ -84,9 +87,10 @@ def deflection(xyz: np.ndarray, groups: dict[str, str], ids, geometry: BridgeGeo
     return out
 
 
-def observe(xyz_bridge: np.ndarray, ids, *, scanner_xyz, heading_deg: float, rng: np.random.Generator,
+def observe(xyz_bridge: np.ndarray, ids: Sequence[str], *, scanner_xyz: ArrayLike, heading_deg: float,
+            rng: np.random.Generator,
             range_sigma_m: float = 0.005, angle_sigma_rad: float = 4e-5, points: int = 1000,
-            tilt_deg: float = 0.005, return_rotation: bool = False):
+            tilt_deg: float = 0.005, return_rotation: bool = False) -> dict | tuple[dict, np.ndarray]:
     """Centroids of the targets as a scanner at ``scanner_xyz`` (bridge frame) would measure them.
 
     Returns observations in the scanner's own frame (levelled to ``tilt_deg``,

@@ -1,20 +1,27 @@
-"""Simulated epochs with windows planned from the truth (no coarse scan, for speed): the tests' and the
-accuracy benchmark's fixtures, and the 40 m bridge's version of the dissertation's lab design (3 scanner
-positions x 4 loads)."""
+"""Simulated epochs with windows planned from the truth (no coarse scan, for speed).
+
+The tests' and the accuracy benchmark's fixtures, and the 40 m bridge's version of the dissertation's
+lab design (3 scanner positions x 4 loads).
+"""
 from __future__ import annotations
+
+from typing import Optional
 
 import numpy as np
 
 from lidar.centroid import centroids_from_scan
-from lidar.plan import PlanTarget, plan_fine_scans
+from lidar.plan import PlanTarget, ScanPlan, plan_fine_scans
 from lidar.scan import Scan
 from lidar.simulate import BridgeModel, BridgeScene, EpochConditions, ScannerSetup
+from lidar.simulate.truth import ScanTruth
 
 MODEL = BridgeModel()
 GROUPS = {t.id: t.group for t in MODEL.targets}
 
 
-def plan_from_truth(scene, *, min_points=1000, position_noise_m=0.01, rng=None):
+def plan_from_truth(scene: BridgeScene, *, min_points: int = 1000, position_noise_m: float = 0.01,
+                    rng: Optional[np.random.Generator] = None) -> ScanPlan:
+    """A fine-scan plan from the scene's true target positions, each disturbed by ``position_noise_m``."""
     rng = rng or np.random.default_rng(0)
     truth = scene.truth()
     targets = []
@@ -25,8 +32,8 @@ def plan_from_truth(scene, *, min_points=1000, position_noise_m=0.01, rng=None):
     return plan_fine_scans(targets, min_points=min_points)
 
 
-def fine_epoch(conditions: EpochConditions, setup: ScannerSetup, *, seed: int, min_points=1000,
-               range_noise_m=None):
+def fine_epoch(conditions: EpochConditions, setup: ScannerSetup, *, seed: int, min_points: int = 1000,
+               range_noise_m: Optional[float] = None) -> tuple[dict, ScanTruth, ScanPlan, Scan]:
     """Centroids (found only) and truth of one epoch scanned at its planned windows."""
     scene = BridgeScene(MODEL, conditions, setup)
     rng = np.random.default_rng(seed)
@@ -37,7 +44,7 @@ def fine_epoch(conditions: EpochConditions, setup: ScannerSetup, *, seed: int, m
         scans.append(s)
         counts[r.reflector] = t.target(r.reflector).points_on_target
     fine = Scan.concatenate(scans)
-    cents = centroids_from_scan(fine.xyz_socs, fine.intensity, plan.rois)
+    cents = centroids_from_scan(fine.xyz_socs, np.asarray(fine.intensity), plan.rois)
     return {k: c for k, c in cents.items() if c.found}, scene.truth(counts), plan, fine
 
 

@@ -11,7 +11,7 @@ import json
 import os
 from dataclasses import asdict
 from pathlib import Path
-from typing import Optional
+from typing import Optional, Sequence, TYPE_CHECKING
 
 import numpy as np
 
@@ -23,10 +23,15 @@ from lidar.simulate.scene import BridgeScene, EpochConditions
 from lidar.simulate.setup import ScannerSetup
 from lidar.simulate.truth import ScanTruth
 
+if TYPE_CHECKING:
+    from lidar.plan import RoiPlan
+
 SCENE_FORMAT_VERSION = 1
 
 
-def save_scene(folder: Path, setup: ScannerSetup, conditions: EpochConditions, seed: int, coarse_step_deg: float) -> Path:
+def save_scene(folder: Path, setup: ScannerSetup, conditions: EpochConditions, seed: int,
+               coarse_step_deg: float) -> Path:
+    """Write ``scene.json``: what a visit folder's simulated scans were made from (to scan it again)."""
     spec = {
         "format_version": SCENE_FORMAT_VERSION,
         "setup": asdict(setup),
@@ -45,6 +50,7 @@ def save_scene(folder: Path, setup: ScannerSetup, conditions: EpochConditions, s
 
 
 def load_scene(folder: Path) -> tuple[ScannerSetup, EpochConditions, int, float]:
+    """Read a visit folder's ``scene.json``: (set-up, conditions, seed, coarse step in degrees)."""
     p = Path(folder) / "scene.json"
     if not p.is_file():
         raise InputError(f"{p}: no simulated scene here; run 'bridgesurvey simulate {folder}' first")
@@ -73,7 +79,7 @@ def simulate_coarse(folder: str | os.PathLike, *, setup: ScannerSetup, condition
     return write_las(scan, folder / name), truth
 
 
-def simulate_fine(folder: str | os.PathLike, rois, *, model: Optional[BridgeModel] = None,
+def simulate_fine(folder: str | os.PathLike, rois: Sequence[RoiPlan], *, model: Optional[BridgeModel] = None,
                   name: str = "fine.laz") -> tuple[Path, ScanTruth]:
     """Scan the planned windows of the visit in ``folder`` (same set-up and state as its coarse scan)."""
     folder = Path(folder)

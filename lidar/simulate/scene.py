@@ -55,7 +55,7 @@ class EpochConditions:
     """
 
     midspan_displacement_m: float = 0.0
-    moved_targets: Mapping[str, tuple[float, float, float]] = field(default_factory=dict)
+    moved_targets: Mapping[str, tuple[float, ...]] = field(default_factory=dict)
     occluded: tuple[str, ...] = ()
     cable_ties: tuple[str, ...] = ()
     removed: tuple[str, ...] = ()
@@ -126,8 +126,8 @@ class BridgeScene:
     def _add(self, kind: str, vertices: np.ndarray, triangles: np.ndarray) -> None:
         import open3d as o3d
 
-        gid = self._scene.add_triangles(o3d.core.Tensor(vertices.astype(np.float32)),
-                                        o3d.core.Tensor(triangles.astype(np.uint32)))
+        gid = self._scene.add_triangles(o3d.core.Tensor(vertices.astype(np.float32)),  # type: ignore[call-overload]
+                                        o3d.core.Tensor(triangles.astype(np.uint32)))  # type: ignore[call-overload]
         self._kind[int(gid)] = kind
 
     def _discs(self) -> list[_Disc]:
@@ -158,7 +158,7 @@ class BridgeScene:
         rays = np.empty((len(d_world), 6), dtype=np.float32)
         rays[:, :3] = origin
         rays[:, 3:] = d_world
-        ans = self._scene.cast_rays(o3d.core.Tensor(rays))
+        ans = self._scene.cast_rays(o3d.core.Tensor(rays))  # type: ignore[call-overload]
         t = ans["t_hit"].numpy().astype(np.float64)
         gid = ans["geometry_ids"].numpy()
         normals = ans["primitive_normals"].numpy().astype(np.float64)
@@ -197,8 +197,10 @@ class BridgeScene:
 
     @staticmethod
     def _plane_hits(centre, normal, reach_m: float, origin, d_world, t, hit):
-        """Rays that may hit a flat patch glued on the structure, where they meet its plane, and
-        whether it is visible there (facing the scanner, not behind anything the scene hit first).
+        """Rays that may hit a flat patch glued on the structure.
+
+        Where they meet its plane, and whether it is visible there (facing the scanner, not behind anything the scene
+        hit first).
 
         Returns (candidate ray indices, hit points, distances along the rays, visible, cos incidence).
         """
@@ -216,7 +218,7 @@ class BridgeScene:
         return cand, q, t_d, visible, np.clip(-denom, 1e-3, 1.0)
 
     def _paint_disc(self, disc: _Disc, k: int, origin, d_world, t, hit, intensity, on_target) -> int:
-        reach = disc.radius + 3 * self.profile.footprint_m(np.linalg.norm(disc.centre - origin))
+        reach = disc.radius + 3 * float(self.profile.footprint_m(np.linalg.norm(disc.centre - origin)))
         cand, q, t_d, visible, cos_inc = self._plane_hits(disc.centre, disc.normal, reach, origin, d_world, t, hit)
         if cand.size == 0:
             return 0
@@ -252,7 +254,7 @@ class BridgeScene:
         hit[idx] = True
 
     # ------------------------------------------------------------------ truth
-    def truth(self, points_on_target: Optional[Mapping[str, int]] = None) -> ScanTruth:
+    def truth(self, points_on_target: Optional[Mapping[str, Optional[int]]] = None) -> ScanTruth:
         """Ground truth of this state and set-up: target centres in both frames."""
         targets = []
         for disc in self.discs:
@@ -266,7 +268,7 @@ class BridgeScene:
                 moved=tid in self.conditions.moved_targets,
                 occluded=tid in self.conditions.occluded,
                 cable_tie=tid in self.conditions.cable_ties,
-                points_on_target=None if points_on_target is None else int(points_on_target.get(tid, 0)),
+                points_on_target=None if points_on_target is None else int(points_on_target.get(tid) or 0),
             ))
         return ScanTruth(
             scanner_pose=self.setup.pose, midspan_displacement_m=self.conditions.midspan_displacement_m,
@@ -289,6 +291,8 @@ class BridgeScene:
                 edges.append(e)
         theta, phi, _ = spherical_from_xyz(self.setup.to_socs(np.concatenate(edges)))
         w = bounding_window(theta, phi, margin_deg=margin_deg, theta_step_deg=step_deg, phi_step_deg=step_deg)
+        if w is None:
+            raise InputError("the bridge is not in view of this set-up")
         lo, hi = self.profile.theta_fov_deg
         return AngularWindow(float(w.phi_min_deg), float(w.phi_max_deg), float(max(lo, w.theta_min_deg)),
                              float(min(hi, w.theta_max_deg)), step_deg, step_deg)

@@ -18,7 +18,7 @@ class ScannerSetup:
     (about x), with its origin at ``position_m``.
     """
 
-    position_m: tuple[float, float, float]
+    position_m: tuple[float, ...]
     heading_deg: float = 0.0
     pitch_deg: float = 0.0
     roll_deg: float = 0.0
@@ -47,8 +47,9 @@ class ScannerSetup:
         return (np.asarray(xyz_bridge, dtype=np.float64) - np.asarray(self.position_m)) @ self.rotation
 
     @classmethod
-    def random(cls, rng: np.random.Generator, *, span_m: float = 40.0, x_range=(0.15, 0.85),
-               y_range_m=(-20.0, -10.0), height_m=(1.2, 1.8), tilt_deg: float = 0.05) -> "ScannerSetup":
+    def random(cls, rng: np.random.Generator, *, span_m: float = 40.0, x_range: tuple[float, float] = (0.15, 0.85),
+               y_range_m: tuple[float, float] = (-20.0, -10.0), height_m: tuple[float, float] = (1.2, 1.8),
+               tilt_deg: float = 0.05) -> "ScannerSetup":
         """A plausible weekly set-up on the access side of the bridge."""
         return cls(
             position_m=(rng.uniform(*x_range) * span_m, rng.uniform(*y_range_m), rng.uniform(*height_m)),

@@ -14,11 +14,13 @@ TRUTH_FORMAT_VERSION = 1
 
 @dataclass(frozen=True)
 class TargetTruth:
+    """A simulated target as it really was in one scan: position, normal, points on it and visibility."""
+
     id: str
     group: str
-    centre_bridge_m: tuple[float, float, float]
-    centre_socs_m: tuple[float, float, float]
-    normal_socs: tuple[float, float, float]
+    centre_bridge_m: tuple[float, ...]
+    centre_socs_m: tuple[float, ...]
+    normal_socs: tuple[float, ...]
     vertical_displacement_m: float
     moved: bool = False
     occluded: bool = False
@@ -28,6 +30,8 @@ class TargetTruth:
 
 @dataclass(frozen=True)
 class ScanTruth:
+    """What a simulated scan really held: the scanner's pose and every target's truth."""
+
     scanner_pose: np.ndarray  # (4, 4) SOCS -> bridge frame
     midspan_displacement_m: float
     targets: tuple[TargetTruth, ...]

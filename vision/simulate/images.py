@@ -1,11 +1,11 @@
-"""A synthetic image set of a dual-camera installation, laid out as a surveyor would bring it:
+"""A synthetic image set of a dual-camera installation, laid out as a surveyor would bring it.
 
-    zhang/                  the sub-camera's board at tilted poses (Zhang calibration)
-    calibration/main, sub/  rest frame first, then H rig motions with both targets still
-    measurement/main, sub/  the monitoring frames (rig drifting, the main target moving)
-    pattern.csv             main-target feature coordinates (x_mm, y_mm; y up)
-    times.csv               frame, timestamp of the measurement frames
-    truth.csv               frame, timestamp, true vertical displacement and the false one (mm)
+zhang/                  the sub-camera's board at tilted poses (Zhang calibration)
+calibration/main, sub/  rest frame first, then H rig motions with both targets still
+measurement/main, sub/  the monitoring frames (rig drifting, the main target moving)
+pattern.csv             main-target feature coordinates (x_mm, y_mm; y up)
+times.csv               frame, timestamp of the measurement frames
+truth.csv               frame, timestamp, true vertical displacement and the false one (mm)
 """
 from __future__ import annotations
 

@@ -62,8 +62,10 @@ def calibration_motions(h: int = 21, *, rotation_rad: float = 2e-3, translation_
 
 def pan_tilt_drift(n: int, *, pan_rad: float = 4.0e-3, tilt_rad: float = 1.0e-3, roll_rad: float = 0.5e-3,
                    translation_m: float = 0.002) -> np.ndarray:
-    """Stepwise drift of a rig on a pan-tilt head (the lab's long-term motion): mostly pan (about the
-    vertical y axis), some tilt and roll, and small translations; reaches the bounds at the end."""
+    """Stepwise drift of a rig on a pan-tilt head (the lab's long-term motion).
+
+    Mostly pan (about the vertical y axis), some tilt and roll, and small translations; reaches the bounds at the end.
+    """
     steps = np.floor(np.linspace(0, 10, n)) / 10.0
     rot = np.array([tilt_rad, pan_rad, roll_rad])
     tra = np.array([translation_m, -translation_m / 2, translation_m])

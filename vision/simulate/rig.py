@@ -31,6 +31,7 @@ _R_WM_TO_WORLD = np.diag([-1.0, -1.0, 1.0])
 @dataclass(frozen=True)
 class Checkerboard:
     """A checkerboard sub-target: ``squares`` = (columns, rows) of squares, edge ``square_m``."""
+
     squares: tuple[int, int] = (13, 8)
     square_m: float = 0.008
 
@@ -84,6 +85,7 @@ class RigGeometry:
     board : the sub-target checkerboard.
     main_mount_rotvec : small misalignment of the main camera on the rig (rad).
     """
+
     main_distance_m: float = 9.82
     sub_distance_m: float = 0.10
     baseline_m: float = 0.08
@@ -269,8 +271,10 @@ class SyntheticRig:
 
 
 def _sample_offsets(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """n*n sub-pixel sample offsets on a rotated grid: all n*n u and all n*n v positions differ, so
-    the coverage of a near-axis-parallel edge is resolved to 1/n^2 of a pixel, not 1/n."""
+    """n*n sub-pixel sample offsets on a rotated grid.
+
+    All n*n u and all n*n v positions differ, so the coverage of a near-axis-parallel edge is resolved to 1/n^2 of a pixel, not 1/n.
+    """
     i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
     du = (i + (j + 0.5) / n) / n - 0.5
     dv = (j + (i + 0.5) / n) / n - 0.5
