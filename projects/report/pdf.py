@@ -361,7 +361,7 @@ def epoch_section(e: EpochSection, content: ReportContent, ss, *, new_page: bool
                              f"{ident.get('detections', '?')} detections, layout fit RMS "
                              f"{_num((ident.get('fit_rms_m') or float('nan')) * 100, '{:.1f}')} cm, "
                              f"predicted (not seen): {', '.join(ident.get('missing', [])) or 'none'}.", ss["Small"]))
-        table = [["Target", "Steps φ×θ [°]", "Planned s", "Planned pts on target", "Points in window",
+        table = [["Target", "Steps φ×θ [°]", "Planned time [s]", "Planned pts on target", "Points in window",
                   "Points on target", "σx / σy / σz [mm]", "Flags"]]
         colours = []
         for k, r in enumerate(plan.rois, start=1):
@@ -375,7 +375,7 @@ def epoch_section(e: EpochSection, content: ReportContent, ss, *, new_page: bool
             if t is not None and (t.flags or (r.expected_target_points and
                                               t.n_points < 0.5 * r.expected_target_points)):
                 colours.append((k, 7, "#fff3e0"))
-        out += [Spacer(1, 3), _table(table, (14, 26, 14, 22, 20, 18, 30, 34), ss, cell_colours=colours)]
+        out += [Spacer(1, 3), _table(table, (14, 26, 16, 22, 20, 18, 30, 32), ss, cell_colours=colours)]
     if e.reference_checks:
         table = [["Reference", "Median distance change [mm]", "Max change [mm]", "Verdict"]]
         for r in e.reference_checks:

@@ -93,3 +93,27 @@ def test_the_trace_shows_each_stage():
     assert int(tr.disc.sum()) == c.n_points
     assert tr.bright.sum() > tr.disc.sum()  # the cable tie is bright but not part of the disc
     assert np.allclose(scan.xyz_socs[tr.disc].mean(axis=0), c.xyz_socs)
+
+
+def test_one_fine_file_holding_every_window_counts_each_window_on_its_own():
+    """A fine scan is often one file with every window in it: each target reports the points of its own
+    window (the report's "Points in window"), not the file's."""
+    from lidar.angles import direction_from_angles
+    from lidar.centroid import centroids_from_scan
+    from lidar.plan import RoiPlan
+
+    rng = np.random.default_rng(4)
+    wins = {"A": AngularWindow(10.0, 10.5, 80.0, 80.4, 0.01, 0.01), "B": AngularWindow(40.0, 40.2, 85.0, 85.1, 0.01, 0.01),
+            "C": AngularWindow(300.0, 301.0, 70.0, 71.0, 0.02, 0.02)}
+    parts, counts = [], {}
+    for k, (rid, w) in enumerate(wins.items()):
+        n = 2000 * (k + 1)
+        theta = rng.uniform(w.theta_min_deg, w.theta_max_deg, n)
+        phi = rng.uniform(w.phi_min_deg, w.phi_max_deg, n)
+        parts.append(direction_from_angles(theta, phi) * 20.0)
+        counts[rid] = n
+    xyz = np.concatenate(parts)
+    rois = [RoiPlan(rid, "measurement", w, 20.0, 5.0, 1000, 1000, 10.0) for rid, w in wins.items()]
+    cents = centroids_from_scan(xyz, np.full(len(xyz), 0.1), rois)
+    assert {rid: c.n_window for rid, c in cents.items()} == counts
+    assert len({c.n_window for c in cents.values()}) == 3
