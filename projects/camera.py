@@ -13,7 +13,8 @@ from common.files import json_safe, output_folder, write_atomic
 from common.errors import ProcessingError
 from projects.errors import InputError
 from projects.history import histories
-from projects.store import CAMERA_DIR, Campaign, json_rows, now_iso, parse_datetime
+from projects.records import SeriesRecord
+from projects.store import CAMERA_DIR, Campaign, parse_datetime
 from vision.crossval import CrossValidation, cross_validate
 from vision.series import CameraSeries, read_camera_series
 
@@ -49,10 +50,9 @@ def import_series(c: Campaign, path: str | os.PathLike, *, name: Optional[str] =
     summary = series.summary()
 
     def record(conn, rel):
-        conn.execute("INSERT INTO camera_series(name, reflector, sha256, stored_path, original_path, imported, "
-                     "options, summary, arrays) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                     (name, rid, sha, rel, str(path.resolve()), now_iso(), json.dumps(options),
-                      json.dumps(summary), series.to_npz_bytes()))
+        c.insert_series(conn, "camera_series", name=name, reflector=rid, sha256=sha, stored_path=rel,
+                        original_path=str(path.resolve()), options=options, summary=summary,
+                        arrays=series.to_npz_bytes())
         c._log(conn, "camera-import", None, {"name": name, "file": str(path), "sha256": sha, "rows": len(series),
                                               "bad_rows": series.n_bad, "reflector": rid})
 
@@ -60,32 +60,30 @@ def import_series(c: Campaign, path: str | os.PathLike, *, name: Optional[str] =
     return name, series
 
 
-def series_rows(c: Campaign) -> list[dict]:
+def series_records(c: Campaign) -> list[SeriesRecord]:
     """The imported camera series (without their arrays)."""
-    return json_rows(c.conn.execute("SELECT name, reflector, sha256, stored_path, original_path, imported, options, "
-                                    "summary FROM camera_series ORDER BY imported, name"))
+    return c.series("camera_series")
 
 
-def load_series(c: Campaign, name: Optional[str] = None) -> tuple[dict, CameraSeries]:
+def load_series(c: Campaign, name: Optional[str] = None) -> tuple[SeriesRecord, CameraSeries]:
     """One stored series (the only one when ``name`` is None)."""
-    rows = series_rows(c)
+    rows = series_records(c)
     if not rows:
         raise InputError(f"{c.folder}: no camera series yet; import one with 'bridgesurvey camera import'")
     if name is None:
         if len(rows) > 1:
-            raise InputError(f"the campaign has {len(rows)} camera series ({', '.join(r['name'] for r in rows)}); "
+            raise InputError(f"the campaign has {len(rows)} camera series ({', '.join(r.name for r in rows)}); "
                              "choose one with --series")
         row = rows[0]
     else:
-        match = [r for r in rows if r["name"] == name]
+        match = [r for r in rows if r.name == name]
         if not match:
-            raise InputError(f"no camera series {name!r}; the campaign has {', '.join(r['name'] for r in rows)}")
+            raise InputError(f"no camera series {name!r}; the campaign has {', '.join(r.name for r in rows)}")
         row = match[0]
-    blob = c.conn.execute("SELECT arrays FROM camera_series WHERE name = ?", (row["name"],)).fetchone()[0]
-    t, v = CameraSeries.arrays_from_npz(blob)
-    s = row["summary"]
-    return row, CameraSeries(time_ns=t, value_mm=v, source=row["original_path"], column=row["options"]["column"],
-                             unit=row["options"]["unit"], n_bad=s["bad_rows"], n_missing=s["missing_values"],
+    t, v = CameraSeries.arrays_from_npz(c.series_arrays("camera_series", row.name))
+    s = row.summary
+    return row, CameraSeries(time_ns=t, value_mm=v, source=row.original_path, column=row.options["column"],
+                             unit=row.options["unit"], n_bad=s["bad_rows"], n_missing=s["missing_values"],
                              sampling_s=s["sampling_s"] or float("nan"))
 
 
@@ -98,7 +96,7 @@ def crossvalidate(c: Campaign, *, series: Optional[str] = None, reflector: Optio
                   align_at: Optional[str] = None, window_min: float = 30.0) -> tuple[CrossValidation, CameraSeries]:
     """Cross-validate a stored camera series with the LiDAR displacements of its reflector."""
     row, cam = load_series(c, series)
-    rid = reflector or row["reflector"] or midspan_reflector(c)
+    rid = reflector or row.reflector or midspan_reflector(c)
     c.reflector(rid)
     if not (np.isfinite(window_min) and window_min > 0):
         raise InputError(f"--window-min must be a positive number of minutes, got {window_min}")
@@ -106,21 +104,20 @@ def crossvalidate(c: Campaign, *, series: Optional[str] = None, reflector: Optio
     if h is None:
         raise ProcessingError(f"no LiDAR displacements of {rid} yet; run 'bridgesurvey process' first")
     at = _to_ns(parse_datetime(align_at)) if align_at else None
-    return cross_validate(list(h.epochs), h.time_ns, h.displacement_mm, h.sigma_mm, cam, window_s=window_min * 60.0, align_at_ns=at, reflector=rid,
-                          series=row["name"]), cam
+    return cross_validate(list(h.epochs), h.time_ns, h.displacement_mm, h.sigma_mm, cam, window_s=window_min * 60.0,
+                          align_at_ns=at, reflector=rid, series=row.name), cam
 
 
 def save_crossval(c: Campaign, cv: CrossValidation) -> None:
     """Keep the cross-validation summary in the campaign (the report shows it)."""
-    with c.transaction() as conn:
-        conn.execute("INSERT OR REPLACE INTO crossvals(series, summary, created) VALUES (?, ?, ?)",
-                     (cv.series, json.dumps(json_safe(cv.to_json())), now_iso()))
-        c._log(conn, "crossval", None, {"series": cv.series, "reflector": cv.reflector, "n_pairs": cv.n_pairs,
-                                        "bias_mm": cv.bias_mm, "rmse_mm": cv.rmse_mm})
+    c.save_crossval_summary(cv.series, json_safe(cv.to_json()),
+                            {"series": cv.series, "reflector": cv.reflector, "n_pairs": cv.n_pairs,
+                             "bias_mm": cv.bias_mm, "rmse_mm": cv.rmse_mm})
 
 
 def crossval_summaries(c: Campaign) -> list[dict]:
-    return [json.loads(r[0]) for r in c.conn.execute("SELECT summary FROM crossvals ORDER BY series")]
+    """Every stored cross-validation summary (JSON documents of :class:`vision.crossval.CrossValidation`)."""
+    return c.crossval_summaries()
 
 
 def write_crossval_outputs(cv: CrossValidation, camera: CameraSeries, out_dir: str | os.PathLike) -> list[Path]:

@@ -252,20 +252,15 @@ def write_change_las(change: ChangeResult, path: Path) -> Path:
 
 
 def save_comparison(c: Campaign, summary: dict) -> None:
-    public = {k: v for k, v in summary.items() if k != "_arrays"}
-    with c.transaction() as conn:
-        conn.execute("INSERT OR REPLACE INTO comparisons VALUES (?, ?, ?, ?, ?)",
-                     (summary["from"], summary["to"], summary["method"], json.dumps(public, default=float), now_iso()))
-        c._log(conn, "compare", summary["to"], {"from": summary["from"], "method": summary["method"]})
+    c.save_comparison_summary({k: v for k, v in summary.items() if k != "_arrays"})
 
 
 def comparisons(c: Campaign, epochs: Optional[set] = None) -> list[dict]:
     """Stored comparison summaries (newest versions this BridgeSurvey reads), optionally within some epochs."""
     out = []
-    for r in c.conn.execute("SELECT * FROM comparisons ORDER BY created"):
-        s = json.loads(r["summary"])
+    for s in c.comparison_summaries():
         if int(s.get("version", 0)) > SUMMARY_VERSION:
             continue
-        if epochs is None or (r["from_epoch"] in epochs and r["to_epoch"] in epochs):
+        if epochs is None or (s["from"] in epochs and s["to"] in epochs):
             out.append(s)
     return out

@@ -25,7 +25,7 @@ def plot_context(c, *, kind_preference=("structure-temperature", "temperature"))
     """Events and the first series of the preferred kinds (daily means), from an open campaign."""
     from projects.environment import events, load_env
 
-    evs = tuple((dt.datetime.fromisoformat(e["date"]), e["label"]) for e in events(c))
+    evs = tuple((e.when, e.label) for e in events(c))
     for kind in kind_preference:
         series = load_env(c, kind=kind)
         if series:

@@ -78,8 +78,7 @@ def build_demo(folder: str | os.PathLike, *, weeks: int = 52, seed: int = 2026,
         layout = layout_from_model(model, noise_m=0.02, rng=np.random.default_rng(seed))
         c = Campaign.create(folder, name="Demo railway bridge (simulated, 40 m span)", layout=layout,
                             span_m=model.span_m)
-        with c.transaction() as conn:
-            conn.execute("INSERT INTO meta(key, value) VALUES ('demo', '1')")
+        c.set_meta("demo", "1")
         c.set_limit("*", "kr-rail:0-200")
     with c:
         field_dir = folder / "field"
@@ -152,14 +151,14 @@ def add_demo_story(c: Campaign, folder: Path, *, weeks: int, seed: int) -> list[
     """The field story: an hourly temperature series, the two dead-load events, the design prediction
     (no temperature, offset by 21.59 mm) aligned at week 8, and the analysis in ``analysis/``."""
     from projects.analysis.run import write_analysis
-    from projects.environment import add_event, env_rows, events, import_env
+    from projects.environment import add_event, env_records, events, import_env
     from projects.predictions import import_prediction, predictions
 
     field = folder / "field"
     field.mkdir(exist_ok=True)
     t0 = np.datetime64(START.replace(tzinfo=None), "ns").astype(np.int64)
     hour = 3600 * 10 ** 9
-    if not any(r["name"] == "air-temperature" for r in env_rows(c)):
+    if not any(r.name == "air-temperature" for r in env_records(c)):
         t = np.arange(t0 - 7 * 24 * hour, t0 + (weeks + 1) * 7 * 24 * hour, hour)
         temp = demo_temperature(t) + np.random.default_rng(seed + 11).normal(0, 0.3, t.size)
         lines = ["time,temperature_degC"] + [
@@ -203,7 +202,7 @@ def add_demo_story(c: Campaign, folder: Path, *, weeks: int, seed: int) -> list[
 def add_demo_camera(c: Campaign, folder: Path, *, weeks: int, seed: int) -> Path:
     """The dual-camera system's 1-minute series of the midspan target over the campaign (its own zero,
     0.2 mm noise, a ten-day outage, a few empty readings), imported and cross-validated."""
-    from projects.camera import crossvalidate, save_crossval, series_rows, write_crossval_outputs
+    from projects.camera import crossvalidate, save_crossval, series_records, write_crossval_outputs
     from projects.camera import import_series
     from vision.simulate.series import simulate_series, write_series_csv
 
@@ -213,7 +212,7 @@ def add_demo_camera(c: Campaign, folder: Path, *, weeks: int, seed: int) -> Path
     def truth_mm(t):
         return np.array([midspan_history_m(w) for w in (t - t0) / week_ns]) * 1000.0
 
-    if not any(r["name"] == "midspan-camera" for r in series_rows(c)):
+    if not any(r.name == "midspan-camera" for r in series_records(c)):
         end = t0 + (weeks - 1) * week_ns + 86400 * 10 ** 9
         grid = np.arange(t0 - 86400 * 10 ** 9, end + 1, 3600 * 10 ** 9)
         smooth = truth_mm(grid)  # hourly truth, interpolated to minutes (the history is smooth)

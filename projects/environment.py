@@ -6,7 +6,6 @@ and bad rows reported) and kept read-only in the campaign's ``environment/`` fol
 """
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass
 from typing import Optional
@@ -14,7 +13,8 @@ from typing import Optional
 import numpy as np
 
 from common.errors import InputError
-from projects.store import ENV_DIR, Campaign, json_rows, now_iso, parse_datetime
+from projects.records import EventRecord, SeriesRecord
+from projects.store import ENV_DIR, Campaign, parse_datetime
 from vision.series import CameraSeries, Quantity, read_camera_series
 
 _TEMP_UNITS = {"degc": (1.0, 0.0), "c": (1.0, 0.0), "°c": (1.0, 0.0), "celsius": (1.0, 0.0),
@@ -70,10 +70,9 @@ def import_env(c: Campaign, path: str | os.PathLike, *, kind: str, name: Optiona
     summary = series.summary()
     summary["unit"] = q.stored_unit
     def record(conn, rel):
-        conn.execute("INSERT INTO env_series(name, kind, sha256, stored_path, original_path, imported, options, "
-                     "summary, arrays) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                     (name, kind, sha, rel, str(path.resolve()), now_iso(), json.dumps(options),
-                      json.dumps(summary), series.to_npz_bytes()))
+        c.insert_series(conn, "env_series", name=name, kind=kind, sha256=sha, stored_path=rel,
+                        original_path=str(path.resolve()), options=options, summary=summary,
+                        arrays=series.to_npz_bytes())
         c._log(conn, "env-import", None, {"name": name, "kind": kind, "file": str(path), "sha256": sha,
                                            "rows": len(series), "bad_rows": series.n_bad})
 
@@ -81,23 +80,17 @@ def import_env(c: Campaign, path: str | os.PathLike, *, kind: str, name: Optiona
     return name, series
 
 
-def env_rows(c: Campaign) -> list[dict]:
-    return json_rows(c.conn.execute("SELECT name, kind, original_path, imported, options, summary FROM env_series "
-                                    "ORDER BY kind, name"))
+def env_records(c: Campaign) -> list[SeriesRecord]:
+    """The imported environment series (without their arrays), by kind and name."""
+    return sorted(c.series("env_series"), key=lambda r: (r.kind, r.name))
 
 
 def load_env(c: Campaign, *, kind: Optional[str] = None, name: Optional[str] = None) -> list[EnvSeries]:
     """Stored series of a kind (or the one named), oldest import first."""
-    q = "SELECT name, kind, options, arrays FROM env_series"
-    args: tuple = ()
-    if name is not None:
-        q, args = q + " WHERE name = ?", (name,)
-    elif kind is not None:
-        q, args = q + " WHERE kind = ?", (kind,)
     out = []
-    for r in c.conn.execute(q + " ORDER BY imported", args):
-        t, v = CameraSeries.arrays_from_npz(r["arrays"])
-        out.append(EnvSeries(r["name"], r["kind"], json.loads(r["options"])["unit"], t, v))
+    for r in c.series("env_series", kind=kind, name=name):
+        t, v = CameraSeries.arrays_from_npz(c.series_arrays("env_series", r.name))
+        out.append(EnvSeries(r.name, r.kind, r.options["unit"], t, v))
     if name is not None and not out:
         raise InputError(f"no environment series {name!r} in the campaign")
     return out
@@ -124,12 +117,9 @@ def add_event(c: Campaign, *, date: str, kind: str, label: str, load_kn_m: Optio
     if when < first or when > limit:
         raise InputError(f"event date {when[:10]} is outside the campaign ({first[:10]} to {last[:10]}); its effect "
                          "cannot be measured from these epochs")
-    with c.transaction() as conn:
-        cur = conn.execute("INSERT INTO events(date, kind, label, load_kn_m, created) VALUES (?, ?, ?, ?, ?)",
-                           (when, kind, label.strip(), load_kn_m, now_iso()))
-        c._log(conn, "event-add", None, {"id": cur.lastrowid, "date": when, "kind": kind, "label": label})
-    return int(cur.lastrowid)
+    return c.insert_event(when, kind, label.strip(), load_kn_m)
 
 
-def events(c: Campaign) -> list[dict]:
-    return [dict(r) for r in c.conn.execute("SELECT id, date, kind, label, load_kn_m FROM events ORDER BY date, id")]
+def events(c: Campaign) -> list[EventRecord]:
+    """The campaign's events, by date."""
+    return c.events()

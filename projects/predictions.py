@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import datetime as dt
 import io
-import json
 import os
 from pathlib import Path
 from typing import Optional
@@ -19,7 +18,7 @@ import numpy as np
 
 from common.errors import InputError
 from projects.history import histories
-from projects.store import PREDICTION_DIR, Campaign, now_iso, parse_datetime, sha256_of
+from projects.store import PREDICTION_DIR, Campaign, parse_datetime, sha256_of
 
 DAY_NS = 86_400 * 10**9
 FORMAT_VERSION = 1
@@ -151,9 +150,8 @@ def import_prediction(c: Campaign, path: str | os.PathLike, *, align_at: Optiona
             buf = io.BytesIO()
             np.savez_compressed(buf, version=np.int64(FORMAT_VERSION), time_ns=t, value_mm=v)
             options = {"axis": axis, "align_at": align_at, "lsq": lsq, **out[rid]}
-            conn.execute("INSERT OR REPLACE INTO predictions(reflector, sha256, stored_path, original_path, "
-                         "imported, options, arrays) VALUES (?, ?, ?, ?, ?, ?, ?)",
-                         (rid, sha, rel, str(path.resolve()), now_iso(), json.dumps(options), buf.getvalue()))
+            c.insert_prediction(conn, rid, sha256=sha, stored_path=rel, original_path=str(path.resolve()),
+                                options=options, arrays=buf.getvalue())
         c._log(conn, "prediction-import", None, {"file": str(path), "sha256": sha, "targets": sorted(curves),
                                                  "align_at": align_at, "lsq": lsq})
 
@@ -164,10 +162,10 @@ def import_prediction(c: Campaign, path: str | os.PathLike, *, align_at: Optiona
 def predictions(c: Campaign) -> dict:
     """``{reflector: (time_ns, value_mm aligned, options)}``."""
     out = {}
-    for r in c.conn.execute("SELECT reflector, options, arrays FROM predictions"):
-        with np.load(io.BytesIO(r["arrays"])) as z:
+    for r in c.prediction_records():
+        with np.load(io.BytesIO(r.arrays)) as z:
             if int(z["version"]) > FORMAT_VERSION:
                 raise InputError("a prediction stored by a newer BridgeSurvey; update it")
-            opts = json.loads(r["options"])
-            out[r["reflector"]] = (z["time_ns"].astype(np.int64), z["value_mm"] + opts["offset_mm"], opts)
+            opts = r.options
+            out[r.reflector] = (z["time_ns"].astype(np.int64), z["value_mm"] + opts["offset_mm"], opts)
     return out

@@ -210,3 +210,51 @@ class LogEntry:
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
+
+
+@dataclass(frozen=True)
+class SeriesRecord:
+    """An imported time series (a camera's displacements or an environment quantity), without its arrays.
+
+    ``reflector`` is the LiDAR target a camera series watches (None for environment series); ``kind``
+    the environment quantity (``"camera"`` for camera series). ``options`` say how the file was read
+    (column, unit, time zone, sign) and ``summary`` what it held (rows, period, sampling, gaps, bad rows).
+    """
+    name: str
+    kind: str
+    reflector: Optional[str]
+    sha256: str
+    stored_path: str
+    original_path: str
+    imported: str
+    options: dict
+    summary: dict
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class EventRecord:
+    """Something that explains a change: a construction step, a load, a repair (``date`` ISO 8601 UTC)."""
+    id: int
+    date: str
+    kind: str
+    label: str
+    load_kn_m: Optional[float] = None
+
+    @property
+    def when(self) -> dt.datetime:
+        return dt.datetime.fromisoformat(self.date)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class PredictionRecord:
+    """A target's stored design prediction: how it was aligned (``options``) and its curve as stored
+    (``arrays``: the npz bytes of time_ns and value_mm, unaligned)."""
+    reflector: str
+    options: dict
+    arrays: bytes

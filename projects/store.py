@@ -31,6 +31,7 @@ from lidar.layout import Layout, check_layout
 from lidar.scanner_profile import ScannerProfile
 from projects import schema
 from projects.errors import CampaignError, CampaignLockedError, DuplicateImportError, InputError
+from projects.store_series import SeriesTables
 from projects.records import (DisplacementRecord, DisplacementSet, Epoch, EpochResult, LimitRecord, LogEntry,
                               Reflector, ReferenceCheck, ScanFile, StoredPlan)
 
@@ -65,17 +66,6 @@ def sha256_of(path: Path, chunk: int = 8 << 20) -> str:
     return h.hexdigest()
 
 
-def json_rows(cursor, columns=("options", "summary")) -> list[dict]:
-    """Rows as dicts with the JSON text of ``columns`` decoded."""
-    rows = []
-    for r in cursor:
-        d = dict(r)
-        for col in columns:
-            d[col] = json.loads(d[col])
-        rows.append(d)
-    return rows
-
-
 def _normal_values(n) -> tuple:
     """A layout normal as three SQL values (NULLs when unknown)."""
     return tuple(float(v) for v in n) if np.all(np.isfinite(n)) else (None, None, None)
@@ -85,7 +75,7 @@ def _nan(v) -> float:
     return float("nan") if v is None else float(v)
 
 
-class Campaign:
+class Campaign(SeriesTables):
     """An open campaign. Use :meth:`create` or :meth:`open`, preferably as a context manager."""
 
     def __init__(self, folder: Path, conn: sqlite3.Connection, lock_fh, *, writable: bool):
@@ -233,6 +223,11 @@ class Campaign:
     def meta(self, key: str, default: Optional[str] = None) -> Optional[str]:
         row = self.conn.execute("SELECT value FROM meta WHERE key = ?", (key,)).fetchone()
         return default if row is None else row[0]
+
+    def set_meta(self, key: str, value: str) -> None:
+        """Set one campaign-level value (``meta`` table), in its own transaction."""
+        with self.transaction() as c:
+            c.execute("INSERT OR REPLACE INTO meta(key, value) VALUES (?, ?)", (key, value))
 
     @property
     def name(self) -> str:

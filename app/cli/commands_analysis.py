@@ -89,17 +89,17 @@ def cmd_env_import(args) -> int:
 
 
 def cmd_env_list(args) -> int:
-    from projects.environment import env_rows
+    from projects.environment import env_records
 
     with _open(args.dir, writable=False) as c:
-        rows = env_rows(c)
+        rows = env_records(c)
     if args.json:
-        dump_json(rows)
+        dump_json([r.to_dict() for r in rows])
         return 0
-    table([{"name": r["name"], "kind": r["kind"], "unit": r["options"]["unit"], "rows": r["summary"]["rows"],
-            "start": (r["summary"]["start"] or "")[:16], "end": (r["summary"]["end"] or "")[:16],
-            "bad_rows": r["summary"]["bad_rows"]} for r in rows], ["name", "kind", "unit", "rows", "start", "end",
-                                                                   "bad_rows"])
+    table([{"name": r.name, "kind": r.kind, "unit": r.options["unit"], "rows": r.summary["rows"],
+            "start": (r.summary["start"] or "")[:16], "end": (r.summary["end"] or "")[:16],
+            "bad_rows": r.summary["bad_rows"]} for r in rows], ["name", "kind", "unit", "rows", "start", "end",
+                                                                "bad_rows"])
     return 0
 
 
@@ -116,7 +116,7 @@ def cmd_event_list(args) -> int:
     from projects.environment import events
 
     with _open(args.dir, writable=False) as c:
-        rows = events(c)
+        rows = [e.to_dict() for e in events(c)]
     if args.json:
         dump_json(rows)
     else:

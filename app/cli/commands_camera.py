@@ -55,7 +55,7 @@ def cmd_camera_import(args) -> int:
     with Campaign.open(args.dir) as c:
         name, series = import_series(c, args.file, name=args.name, reflector=args.reflector, column=args.column,
                                      timezone=args.timezone, unit=args.unit, positive=args.positive)
-        rid = c.conn.execute("SELECT reflector FROM camera_series WHERE name = ?", (name,)).fetchone()[0]
+        rid = c.series("camera_series", name=name)[0].reflector
     s = series.summary()
     if args.json:
         dump_json({"name": name, "reflector": rid, **s})
@@ -72,17 +72,17 @@ def cmd_camera_import(args) -> int:
 
 
 def cmd_camera_list(args) -> int:
-    from projects.camera import series_rows
+    from projects.camera import series_records
     from projects.store import Campaign
 
     with Campaign.open(args.dir, writable=False) as c:
-        rows = series_rows(c)
+        rows = series_records(c)
     if args.json:
-        dump_json(rows)
+        dump_json([r.to_dict() for r in rows])
         return 0
-    table([{"name": r["name"], "reflector": r["reflector"], "rows": r["summary"]["rows"],
-            "start": r["summary"]["start"], "end": r["summary"]["end"], "bad_rows": r["summary"]["bad_rows"],
-            "file": r["original_path"]} for r in rows],
+    table([{"name": r.name, "reflector": r.reflector, "rows": r.summary["rows"],
+            "start": r.summary["start"], "end": r.summary["end"], "bad_rows": r.summary["bad_rows"],
+            "file": r.original_path} for r in rows],
           ["name", "reflector", "rows", "start", "end", "bad_rows", "file"])
     return 0
 

@@ -40,7 +40,7 @@ class CampaignTree(QTreeWidget):
             self._items[(kind, key)] = it
         return it
 
-    def populate(self, status: dict, reflectors: list, series: list[dict]) -> None:
+    def populate(self, status: dict, reflectors: list, series: list) -> None:
         """Rebuild from :func:`projects.overview.campaign_status`, the reflectors and the camera series."""
         selected = self.current_key()
         self.blockSignals(True)
@@ -68,8 +68,8 @@ class CampaignTree(QTreeWidget):
         if series:
             cam = self._item(root, f"Camera series ({len(series)})")
             for s in series:
-                self._item(cam, s["name"], s["reflector"] or "", "series", s["name"],
-                           f"{s['summary']['rows']} rows, {s['summary']['start'][:10]} .. {s['summary']['end'][:10]}")
+                self._item(cam, s.name, s.reflector or "", "series", s.name,
+                           f"{s.summary['rows']} rows, {s.summary['start'][:10]} .. {s.summary['end'][:10]}")
         self.expandToDepth(2)
         self.blockSignals(False)
         if selected in self._items:

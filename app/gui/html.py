@@ -69,9 +69,10 @@ def epoch_html(c, label: str) -> str:
     return out
 
 
-def series_html(row: dict) -> str:
-    s = row["summary"]
-    return (f"<h3>Camera series {html.escape(row['name'])}</h3>" + _rows([
-        ("Target", row["reflector"] or "-"), ("Rows", f"{s['rows']:,}"), ("Period", f"{s['start']} .. {s['end']}"),
+def series_html(row) -> str:
+    """A camera series (a :class:`projects.records.SeriesRecord`)."""
+    s = row.summary
+    return (f"<h3>Camera series {html.escape(row.name)}</h3>" + _rows([
+        ("Target", row.reflector or "-"), ("Rows", f"{s['rows']:,}"), ("Period", f"{s['start']} .. {s['end']}"),
         ("Sampling", f"{s['sampling_s']:.0f} s"), ("Gaps", s["gaps"]), ("Missing values", s["missing_values"]),
-        ("Bad rows", s["bad_rows"]), ("File", row["original_path"]), ("sha256", row["sha256"][:16] + "…")]))
+        ("Bad rows", s["bad_rows"]), ("File", row.original_path), ("sha256", row.sha256[:16] + "…")]))

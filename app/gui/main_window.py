@@ -338,7 +338,7 @@ class MainWindow(QMainWindow):
     def refresh(self) -> None:
         if self.session is None:
             return
-        from projects.camera import series_rows
+        from projects.camera import series_records
         from projects.context import plot_context
         from projects.history import histories
         from projects.overview import campaign_status
@@ -347,7 +347,7 @@ class MainWindow(QMainWindow):
             with self.session.read() as c:
                 status = campaign_status(c)
                 reflectors = c.reflectors()
-                series = series_rows(c)
+                series = series_records(c)
                 hist = histories(c)
                 context = plot_context(c)
         except SurveyError as exc:
@@ -394,7 +394,7 @@ class MainWindow(QMainWindow):
         if self.session is None:
             return
         kind, key = self._details_for
-        from projects.camera import series_rows
+        from projects.camera import series_records
 
         try:
             with self.session.read() as c:
@@ -403,7 +403,7 @@ class MainWindow(QMainWindow):
                 elif kind == "epoch":
                     text = epoch_html(c, key)
                 elif kind == "series":
-                    text = series_html(next(r for r in series_rows(c) if r["name"] == key))
+                    text = series_html(next(r for r in series_records(c) if r.name == key))
                 else:
                     text = campaign_html(c, self.status_data)
         except (SurveyError, StopIteration) as exc:

@@ -60,7 +60,8 @@ def analyse_campaign(c: Campaign, *, horizon_days: float = 365.0, long_term_fact
         s = series[0]
         temperature = ((s.time_ns - origin) / DAY_NS, s.value)
         temp_source = f"{s.kind} series {s.name!r}"
-    evs = [Event((_ns(e["date"]) - origin) / DAY_NS, e["label"], e["kind"], e["date"][:10]) for e in stored_events(c)]
+    stored = stored_events(c)
+    evs = [Event((_ns(e.date) - origin) / DAY_NS, e.label, e.kind, e.date[:10]) for e in stored]
     epoch_times = sorted({t for h in hist.values() for t in h.times})
     from projects.predictions import casting_ns, predictions
 
@@ -85,7 +86,8 @@ def analyse_campaign(c: Campaign, *, horizon_days: float = 365.0, long_term_fact
         targets.append(tj)
     return {"format_version": ANALYSIS_FORMAT_VERSION, "campaign": c.name, "baseline": base,
             "time_origin": dt.datetime.fromtimestamp(origin / 1e9, dt.timezone.utc).isoformat(),
-            "temperature_source": temp_source, "casting_date": c.settings().get("casting_date"), "events": stored_events(c), "warnings": warnings,
+            "temperature_source": temp_source, "casting_date": c.settings().get("casting_date"),
+            "events": [e.to_dict() for e in stored], "warnings": warnings,
             "horizon_days": horizon_days, "long_term_factor": long_term_factor, "targets": targets}
 
 

@@ -84,3 +84,22 @@ def test_last_displacement_is_the_latest_value_up_to_an_epoch(processed):
         got = c.last_displacement(rid, at_or_before=labels[1])
         assert got is not None and got.epoch == labels[1] and got.reflector == rid
         assert c.last_displacement("no-such-target", at_or_before=labels[-1]) is None
+
+
+def test_no_sql_outside_the_store():
+    """Only the store (projects/store.py, store_series.py, schema.py) talks SQL; everyone else gets records."""
+    import re
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    allowed = {"projects/store.py", "projects/store_series.py", "projects/schema.py"}
+    offenders = []
+    for pkg in ("app", "projects"):
+        for path in sorted((root / pkg).rglob("*.py")):
+            rel = path.relative_to(root).as_posix()
+            if rel in allowed:
+                continue
+            text = path.read_text()
+            if re.search(r"\.execute\(|\bc\.conn\b|\bsqlite3\b|\.plan_row\(|json\.loads\(\w+\[\"json\"\]", text):
+                offenders.append(rel)
+    assert not offenders, f"SQL or stored rows outside the store: {offenders}"
