@@ -16,6 +16,13 @@ from typing import Any, Optional
 import numpy as np
 
 
+class _Plain:
+    """Records that export themselves as plain values (tables, JSON)."""
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)  # type: ignore[call-overload]
+
+
 @dataclass(frozen=True)
 class Reflector:
     """A retro-reflective target of the layout.
@@ -65,7 +72,7 @@ class Reflector:
 
 
 @dataclass(frozen=True)
-class Epoch:
+class Epoch(_Plain):
     """One weekly visit: its label, date-time (ISO 8601, UTC), notes and when it was recorded."""
     label: str
     datetime: str
@@ -82,12 +89,9 @@ class Epoch:
         """The visit's date, ``YYYY-MM-DD``."""
         return self.datetime[:10]
 
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
 
 @dataclass(frozen=True)
-class ScanFile:
+class ScanFile(_Plain):
     """A scan file imported into an epoch: ``role`` is ``"coarse"`` or ``"fine"``; ``stored_path`` is
     relative to the campaign folder; ``size`` in bytes."""
     sha256: str
@@ -97,9 +101,6 @@ class ScanFile:
     original_path: str
     size: int
     imported: str
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
 
 
 @dataclass(frozen=True)
@@ -200,7 +201,7 @@ class LimitRecord:
 
 
 @dataclass(frozen=True)
-class LogEntry:
+class LogEntry(_Plain):
     """One line of the campaign's log: what was done, to which epoch, with its details."""
     id: int
     time: str
@@ -208,12 +209,9 @@ class LogEntry:
     epoch: Optional[str]
     details: dict = field(default_factory=dict)
 
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
 
 @dataclass(frozen=True)
-class SeriesRecord:
+class SeriesRecord(_Plain):
     """An imported time series (a camera's displacements or an environment quantity), without its arrays.
 
     ``reflector`` is the LiDAR target a camera series watches (None for environment series); ``kind``
@@ -230,12 +228,9 @@ class SeriesRecord:
     options: dict
     summary: dict
 
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
 
 @dataclass(frozen=True)
-class EventRecord:
+class EventRecord(_Plain):
     """Something that explains a change: a construction step, a load, a repair (``date`` ISO 8601 UTC)."""
     id: int
     date: str
@@ -246,9 +241,6 @@ class EventRecord:
     @property
     def when(self) -> dt.datetime:
         return dt.datetime.fromisoformat(self.date)
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
 
 
 @dataclass(frozen=True)

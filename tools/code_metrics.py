@@ -12,6 +12,9 @@ Figures printed:
 ``plan JSON decodes``
     ``json.loads`` calls on stored rows (any ``json.loads`` in those folders outside the store and
     the file readers that parse user files);
+``files running SQL``, ``row accessors``, ``plan decodes``
+    what leaks out of the store: modules that execute SQL themselves, calls of accessors that return
+    database rows, ``json.loads(row["json"])`` of stored plans;
 ``annotated parameters``
     the share of function parameters (not ``self``/``cls``) that carry an annotation, per package;
 ``annotated public functions``
@@ -46,6 +49,25 @@ def row_key_lookups(root: Path) -> tuple[int, int]:
             total += n
             files += n > 0
     return total, files
+
+
+STORE = {"projects/store.py", "projects/store_series.py", "projects/schema.py"}
+ROW_ACCESSORS = re.compile(r"\.(displacement_rows|plan_row|result_row|log_rows|reference_check_rows)\(|"
+                           r"\b(series_rows|env_rows|json_rows)\(")
+
+
+def store_leaks(root: Path) -> tuple[int, int, int]:
+    """(files outside the store that run SQL, calls of row-returning accessors, stored plans decoded by hand)."""
+    sql_files = accessors = plan_decodes = 0
+    for pkg in ("app", "projects"):
+        for path in (root / pkg).rglob("*.py"):
+            if path.relative_to(root).as_posix() in STORE:
+                continue
+            text = path.read_text()
+            sql_files += bool(re.search(r"\.execute\(|\bc\.conn\b", text))
+            accessors += len(ROW_ACCESSORS.findall(text))
+            plan_decodes += len(re.findall(r"json\.loads\(\w+\[\"json\"\]\)", text))
+    return sql_files, accessors, plan_decodes
 
 
 def json_decodes(root: Path) -> int:
@@ -85,6 +107,9 @@ def main(argv: list[str]) -> int:
     n, f = row_key_lookups(root)
     print(f"row key lookups outside the store: {n} in {f} files")
     print(f"json.loads outside the store (app/, projects/): {json_decodes(root)}")
+    sql, acc, plans = store_leaks(root)
+    print(f"files outside the store running SQL: {sql}; calls returning SQL rows: {acc}; "
+          f"stored plans decoded by hand: {plans}")
     tot = [0, 0, 0, 0]
     for pkg in PACKAGES:
         if not (root / pkg).is_dir():

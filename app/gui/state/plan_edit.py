@@ -131,20 +131,12 @@ class PlanEditor:
         return new
 
     def undo(self) -> bool:
-        if not self._undo:
-            return False
-        self._redo.append(self._rois)
-        self._rois = self._undo.pop()
-        self._notify()
-        return True
+        """Take back the last change; False when there is none."""
+        return self._step(self._undo, self._redo)
 
     def redo(self) -> bool:
-        if not self._redo:
-            return False
-        self._undo.append(self._rois)
-        self._rois = self._redo.pop()
-        self._notify()
-        return True
+        """Make the last undone change again; False when there is none."""
+        return self._step(self._redo, self._undo)
 
     def revert(self) -> None:
         """Back to the last saved windows (itself a change that can be undone)."""
@@ -166,6 +158,14 @@ class PlanEditor:
         self._undo.append(previous)
         del self._undo[:-UNDO_DEPTH]
         self._redo.clear()
+
+    def _step(self, source: list, target: list) -> bool:
+        if not source:
+            return False
+        target.append(self._rois)
+        self._rois = source.pop()
+        self._notify()
+        return True
 
     def _notify(self) -> None:
         if self.on_change is not None:
