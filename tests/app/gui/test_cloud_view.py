@@ -43,7 +43,7 @@ SCRIPT = textwrap.dedent("""
     win.tabs.setCurrentWidget(win.cloud_view)
     assert win.cloud_view.show_btn.isEnabled()
     win.cloud_view.cloud = None
-    win.show_cloud("intensity")
+    win.commands.show_cloud("intensity")
     wait()
     cv = win.cloud_view
     assert cv.cloud is not None and cv.cloud.value_name == "intensity"
@@ -53,7 +53,7 @@ SCRIPT = textwrap.dedent("""
     cv.pick_target("M3")
     assert win.session.reflector == "M3" and cv.selected == "M3"
     assert win.displacements.target.currentText() == "M3"
-    win.show_cloud("change")
+    win.commands.show_cloud("change")
     wait()
     assert cv.cloud.value_name.startswith("M3C2 change") and np.isfinite(cv.cloud.values).mean() > 0.5
     deck = np.abs(cv.cloud.values[np.isfinite(cv.cloud.values)])
