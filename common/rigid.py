@@ -20,13 +20,13 @@ and :func:`apply_matrix`, which accept ``(..., 4, 4)`` stacks; :meth:`Transform.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any, Optional
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
 from common.errors import InputError
-from typing import Any, Optional
-from numpy.typing import ArrayLike
 
 
 @dataclass(frozen=True, eq=False)

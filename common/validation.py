@@ -1,11 +1,12 @@
 """Checks made once at the public boundary of a computation."""
 from __future__ import annotations
 
+from typing import Optional
+
 import numpy as np
+from numpy.typing import ArrayLike, DTypeLike
 
 from common.errors import InputError
-from numpy.typing import ArrayLike, DTypeLike
-from typing import Optional
 
 
 def require_points(xyz: ArrayLike, what: str, *, min_points: int = 1, finite: bool = True,

@@ -13,9 +13,9 @@ from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
+from numpy.typing import ArrayLike, DTypeLike
 
 from common.errors import InputError
-from numpy.typing import ArrayLike, DTypeLike
 
 
 def spherical_from_xyz(xyz_socs: np.ndarray, *, out_dtype: DTypeLike = np.float64) -> tuple[np.ndarray, np.ndarray,

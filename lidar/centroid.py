@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal, Mapping, Optional, Sequence, overload
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
@@ -20,7 +21,6 @@ from scipy.spatial import cKDTree
 from lidar.angles import AngularWindow, spherical_from_xyz
 from common.errors import InputError
 from lidar.scanner_profile import VZ1000, ScannerProfile
-from numpy.typing import ArrayLike
 
 if TYPE_CHECKING:
     from lidar.plan import RoiPlan

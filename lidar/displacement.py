@@ -36,11 +36,11 @@ from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Optional, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from common.errors import InputError, ProcessingError
 from lidar.reference_motion import across_axis, fit_reference_motion
 from common.rigid import fit_rigid
-from numpy.typing import ArrayLike
 
 FLAG_MISSING = "missing"
 FLAG_MISSING_AT_BASELINE = "missing_at_baseline"

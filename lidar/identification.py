@@ -14,12 +14,12 @@ from itertools import combinations
 from typing import Optional
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.optimize import linear_sum_assignment
 
 from common.errors import InputError, ProcessingError
 from lidar.layout import Layout
 from common.rigid import Transform, fit_rigid, pairwise_distances
-from numpy.typing import ArrayLike
 
 
 @dataclass(frozen=True)

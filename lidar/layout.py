@@ -8,9 +8,9 @@ from pathlib import Path
 from typing import Optional, Sequence, TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from common.errors import InputError
-from numpy.typing import ArrayLike
 
 if TYPE_CHECKING:
     from lidar.simulate.bridge import BridgeModel

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from typing import Mapping, Optional
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from lidar.centroid import TargetCentroid, centroids_from_scan
 from lidar.detection import DetectionResult, detect_reflectors
@@ -20,7 +21,6 @@ from common.progress import ProgressCallback, report, scaled
 from lidar.reflectance_map import ReflectanceMap, reflectance_map
 from lidar.scan import Scan
 from lidar.scanner_profile import VZ1000, ScannerProfile
-from numpy.typing import ArrayLike
 
 
 @dataclass(frozen=True, eq=False)

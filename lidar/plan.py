@@ -18,12 +18,12 @@ from pathlib import Path
 from typing import Optional, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from lidar.angles import AngularWindow, direction_from_angles, spherical_from_xyz, window_around
 from common.errors import InputError
 from lidar.reflectance_map import ReflectanceMap
 from lidar.scanner_profile import VZ1000, ScannerProfile
-from numpy.typing import ArrayLike
 
 PLAN_FORMAT_VERSION = 1
 DEFAULT_INCIDENCE_COS = 0.6  # used when the surface around a target cannot be measured

@@ -10,10 +10,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from common.errors import InputError
 from lidar.centroid import rim_variance
-from numpy.typing import ArrayLike
 
 
 def disc_points(diameter_m: float, range_m: float, cos_incidence: float, theta_deg: float,

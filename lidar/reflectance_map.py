@@ -13,12 +13,12 @@ from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from lidar.angles import direction_from_angles, wrap_phi
 from common.validation import require_points
 from common.errors import InputError
 from common.progress import ProgressCallback, report
-from numpy.typing import ArrayLike
 
 CHUNK = 1_000_000
 #: The automatic cell size keeps maps below this many cells: a few cells across a target are enough

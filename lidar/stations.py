@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from typing import Mapping, Optional, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from lidar.displacement import Observation, compute_displacements
 from common.errors import InputError, SurveyError
@@ -28,7 +29,6 @@ from lidar.plan import PlanTarget, plan_fine_scans
 from lidar.prediction import centroid_covariance
 from common.progress import ProgressCallback, report
 from lidar.scanner_profile import ScannerProfile
-from numpy.typing import ArrayLike
 
 log = logging.getLogger(__name__)
 MIN_INCIDENCE_COS = 0.1  # beyond about 84 deg a retro-reflective disc returns too few points to use

@@ -8,12 +8,12 @@ from dataclasses import dataclass
 from typing import Optional, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from common.progress import ProgressCallback, report
 from common.validation import require_points
 from registration.errors import InputError, RegistrationError
 from registration.transform import Transform
-from numpy.typing import ArrayLike
 
 _ITER = re.compile(r"ICP Iteration #(\d+): Fitness ([0-9.]+), RMSE ([0-9.eE+-]+)")
 

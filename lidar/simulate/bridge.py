@@ -9,9 +9,9 @@ from dataclasses import dataclass, field, replace
 from typing import Optional, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from common.errors import InputError
-from numpy.typing import ArrayLike
 
 
 @dataclass(frozen=True)

@@ -14,12 +14,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from typing import Sequence
+
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
 from lidar.displacement import Observation
-from typing import Sequence
-from numpy.typing import ArrayLike
 
 
 @dataclass(frozen=True)
