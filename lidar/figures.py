@@ -69,7 +69,8 @@ def reflectance_map_figure(rmap: ReflectanceMap, *, detections: Optional[Detecti
             w = r.window
             x0 = unwrap(w.phi_min_deg)
             ax.add_patch(Rectangle((x0, w.theta_min_deg), w.phi_max_deg - w.phi_min_deg,
-                                   w.theta_max_deg - w.theta_min_deg, fill=False, ec="tab:red", lw=0.8))
+                                   w.theta_max_deg - w.theta_min_deg, fill=False, ec="tab:red", lw=1.3,
+                                   zorder=4))  # above the detection rings: a window is only a few pixels wide
     return fig
 
 
