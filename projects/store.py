@@ -184,7 +184,7 @@ class Campaign(SeriesTables):
     def close(self) -> None:
         if self.conn is not None:
             self.conn.close()
-            self.conn = None
+            self.conn = None  # type: ignore[assignment]  # a closed campaign has no connection
         if self._lock_fh is not None:
             with contextlib.suppress(OSError):
                 fcntl.flock(self._lock_fh, fcntl.LOCK_UN)
@@ -220,7 +220,8 @@ class Campaign(SeriesTables):
             p.unlink()
 
     # ------------------------------------------------------------------ metadata
-    def meta(self, key: str, default: Optional[str] = None) -> Optional[str]:
+    def meta(self, key: str, default: str = "") -> str:
+        """One campaign-level value of the ``meta`` table (``default`` when it is not set)."""
         row = self.conn.execute("SELECT value FROM meta WHERE key = ?", (key,)).fetchone()
         return default if row is None else row[0]
 
@@ -429,34 +430,34 @@ class Campaign(SeriesTables):
         ``validate(path)`` must raise on an unreadable file (before anything is changed).
         ``create_epoch`` (label, datetime, notes) creates the epoch in the same transaction.
         """
-        paths = [Path(p) for p in paths]
-        for p in paths:
+        files = [Path(p) for p in paths]
+        for p in files:
             if not p.is_file():
                 raise InputError(f"{p}: no such file; check the path")
-        shas = [sha256_of(p) for p in paths]
+        shas = [sha256_of(p) for p in files]
         if len(set(shas)) != len(shas):
             raise DuplicateImportError("the same file is given twice")
-        for p, sha in zip(paths, shas):
+        for p, sha in zip(files, shas):
             row = self.conn.execute("SELECT epoch, original_path FROM files WHERE sha256 = ?", (sha,)).fetchone()
             if row is not None:
                 raise DuplicateImportError(f"{p}: this file is already in the campaign (epoch {row['epoch']}, "
                                            f"imported from {row['original_path']}); nothing was changed")
         if validate is not None:
-            for p in paths:
+            for p in files:
                 validate(p)
         copied = []
         try:
-            for p in paths:
+            for p in files:
                 copied.append(self._copy_in(p))
             with self.transaction() as c:
                 if create_epoch is not None:
                     c.execute("INSERT INTO epochs(label, datetime, notes, created) VALUES (?, ?, ?, ?)",
                               (create_epoch["label"], create_epoch["datetime"], create_epoch.get("notes", ""),
                                now_iso()))
-                for p, (sha, rel, size) in zip(paths, copied):
+                for p, (sha, rel, size) in zip(files, copied):
                     c.execute("INSERT INTO files(sha256, epoch, role, stored_path, original_path, size, imported) "
                               "VALUES (?, ?, ?, ?, ?, ?, ?)", (sha, epoch, role, rel, str(p.resolve()), size, now_iso()))
-                self._log(c, "import", epoch, {"role": role, "files": [str(p) for p in paths], "sha256": shas})
+                self._log(c, "import", epoch, {"role": role, "files": [str(p) for p in files], "sha256": shas})
         except BaseException:
             self._clean_partial_files()
             raise

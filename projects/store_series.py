@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import json
 import sqlite3
-from typing import Optional
+from typing import ContextManager, Optional
 
 from projects.records import EventRecord, PredictionRecord, SeriesRecord
 
@@ -24,6 +24,13 @@ class SeriesTables:
     """Imported series and what is derived from them; mixed into :class:`projects.store.Campaign`."""
 
     conn: sqlite3.Connection
+
+    # provided by Campaign
+    def transaction(self) -> ContextManager[sqlite3.Connection]:
+        raise NotImplementedError
+
+    def _log(self, conn: sqlite3.Connection, action: str, epoch: Optional[str], details: dict) -> None:
+        raise NotImplementedError
 
     # ------------------------------------------------------------------ camera and environment series
     def insert_series(self, conn: sqlite3.Connection, table: str, *, name: str, sha256: str, stored_path: str,
@@ -72,10 +79,10 @@ class SeriesTables:
     # ------------------------------------------------------------------ cross-validations
     def save_crossval_summary(self, series: str, summary: dict, details: dict) -> None:
         """Keep a camera series' cross-validation summary (JSON-safe document) and log it."""
-        with self.transaction() as conn:  # type: ignore[attr-defined]
+        with self.transaction() as conn:
             conn.execute("INSERT OR REPLACE INTO crossvals(series, summary, created) VALUES (?, ?, ?)",
                          (series, json.dumps(summary), _now()))
-            self._log(conn, "crossval", None, details)  # type: ignore[attr-defined]
+            self._log(conn, "crossval", None, details)
 
     def crossval_summaries(self) -> list[dict]:
         """Every stored cross-validation summary, by series name."""
@@ -84,12 +91,12 @@ class SeriesTables:
     # ------------------------------------------------------------------ events
     def insert_event(self, date: str, kind: str, label: str, load_kn_m: Optional[float]) -> int:
         """Record an event (already checked) and log it; returns its id."""
-        with self.transaction() as conn:  # type: ignore[attr-defined]
+        with self.transaction() as conn:
             cur = conn.execute("INSERT INTO events(date, kind, label, load_kn_m, created) VALUES (?, ?, ?, ?, ?)",
                                (date, kind, label, load_kn_m, _now()))
-            self._log(conn, "event-add", None, {"id": cur.lastrowid, "date": date, "kind": kind,  # type: ignore
+            self._log(conn, "event-add", None, {"id": cur.lastrowid, "date": date, "kind": kind,
                                                 "label": label})
-        return int(cur.lastrowid)
+        return int(cur.lastrowid or 0)
 
     def events(self) -> list[EventRecord]:
         """The campaign's events, by date."""
@@ -111,11 +118,11 @@ class SeriesTables:
     # ------------------------------------------------------------------ whole-scan comparisons
     def save_comparison_summary(self, summary: dict) -> None:
         """Keep a comparison's JSON summary (``from``, ``to``, ``method`` ...) and log it."""
-        with self.transaction() as conn:  # type: ignore[attr-defined]
+        with self.transaction() as conn:
             conn.execute("INSERT OR REPLACE INTO comparisons VALUES (?, ?, ?, ?, ?)",
                          (summary["from"], summary["to"], summary["method"], json.dumps(summary, default=float),
                           _now()))
-            self._log(conn, "compare", summary["to"], {"from": summary["from"],  # type: ignore[attr-defined]
+            self._log(conn, "compare", summary["to"], {"from": summary["from"],
                                                        "method": summary["method"]})
 
     def comparison_summaries(self) -> list[dict]:
