@@ -1,4 +1,4 @@
-"""The on-site check: right after the fine scans are imported, is every target good enough to leave?
+"""The on-site check, right after the fine scans are imported: is every target good enough to leave.
 
 For each planned target: found or not, points on the target against the plan, and the vertical
 centroid sigma against the goal (the sigma the plan's points promise, with 30 % tolerance, or the
@@ -60,6 +60,8 @@ class TargetCheck:
 
 @dataclass(frozen=True)
 class EpochCheck:
+    """The on-site check of an epoch's fine scans: each target's verdict and the re-scan plan (or None)."""
+
     epoch: str
     targets: tuple[TargetCheck, ...]
     rescan: Optional[ScanPlan]
@@ -122,8 +124,10 @@ def check_epoch(c: Campaign, label: str, *, goal_sigma_mm: Optional[float] = Non
 
 
 def _rescan_plan(plan: ScanPlan, retry, diam: dict) -> ScanPlan:
-    """Windows for the targets that fell short, aimed at the measured centroid, with the incidence
-    scaled by what the scan delivered (the planner then picks finer steps)."""
+    """Windows for the targets that fell short, aimed at the measured centroid.
+
+    The incidence is scaled by what the scan delivered (the planner then picks finer steps).
+    """
     targets = []
     for roi, cent, ratio in retry:
         cos_planned = math.cos(math.radians(roi.incidence_deg)) if math.isfinite(roi.incidence_deg) else None

@@ -232,6 +232,7 @@ def write_outputs(summary: dict, out_dir: str | os.PathLike) -> list[Path]:
 
 
 def write_change_las(change: ChangeResult, path: Path) -> Path:
+    """Write a comparison's points with their change (mm) as extra dimensions of a LAS file; returns its path."""
     import laspy
 
     hdr = laspy.LasHeader(point_format=6, version="1.4")
@@ -252,6 +253,7 @@ def write_change_las(change: ChangeResult, path: Path) -> Path:
 
 
 def save_comparison(c: Campaign, summary: dict) -> None:
+    """Keep a comparison's summary (without its arrays) in the campaign, for reports."""
     c.save_comparison_summary({k: v for k, v in summary.items() if k != "_arrays"})
 
 

@@ -14,6 +14,8 @@ import numpy as np
 
 @dataclass(frozen=True)
 class PlotContext:
+    """What explains a displacement plot: the events (date, label) and one environment series (daily means)."""
+
     events: tuple[tuple[dt.datetime, str], ...] = ()
     series_name: Optional[str] = None
     series_unit: str = ""
@@ -40,6 +42,7 @@ def plot_context(c, *, kind_preference=("structure-temperature", "temperature"))
 
 
 def draw_context(ax, ctx: Optional[PlotContext], *, label_events: bool = True, series: bool = True) -> None:
+    """Draw the events (dashed lines) and the environment series (on a twin axis) behind a time plot."""
     if ctx is None:
         return
     lo, hi = ax.get_xlim()

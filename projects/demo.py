@@ -28,8 +28,10 @@ OCCLUDED_WEEK = 30
 
 
 def midspan_history_m(week: int) -> float:
-    """Midspan displacement (positive up): dead-load steps, creep and a seasonal temperature swing,
-    shaped like the dissertation's field test of a railway bridge under construction."""
+    """Midspan displacement (positive up): dead-load steps, creep and a seasonal temperature swing.
+
+    Shaped like the dissertation's field test of a railway bridge under construction.
+    """
     w = float(week)
     u = 0.0
     if w >= 6:
@@ -42,6 +44,8 @@ def midspan_history_m(week: int) -> float:
 
 @dataclass
 class DemoResult:
+    """Where the demo put its campaign and outputs, and what happened in the simulated year."""
+
     folder: Path
     epochs: int
     csv: Path
@@ -148,8 +152,11 @@ def demo_temperature(t_ns: np.ndarray) -> np.ndarray:
 
 
 def add_demo_story(c: Campaign, folder: Path, *, weeks: int, seed: int) -> list[str]:
-    """The field story: an hourly temperature series, the two dead-load events, the design prediction
-    (no temperature, offset by 21.59 mm) aligned at week 8, and the analysis in ``analysis/``."""
+    """The field story told by the demo's imports and analysis.
+
+    An hourly temperature series, the two dead-load events, the design prediction (no temperature,
+    offset by 21.59 mm) aligned at week 8, and the analysis in ``analysis/``.
+    """
     from projects.analysis.run import write_analysis
     from projects.environment import add_event, env_records, events, import_env
     from projects.predictions import import_prediction, predictions
@@ -200,8 +207,10 @@ def add_demo_story(c: Campaign, folder: Path, *, weeks: int, seed: int) -> list[
 
 
 def add_demo_camera(c: Campaign, folder: Path, *, weeks: int, seed: int) -> Path:
-    """The dual-camera system's 1-minute series of the midspan target over the campaign (its own zero,
-    0.2 mm noise, a ten-day outage, a few empty readings), imported and cross-validated."""
+    """The dual-camera system's 1-minute series of the midspan target over the campaign.
+
+    Its own zero, 0.2 mm noise, a ten-day outage, a few empty readings), imported and cross-validated.
+    """
     from projects.camera import crossvalidate, save_crossval, series_records, write_crossval_outputs
     from projects.camera import import_series
     from vision.simulate.series import simulate_series, write_series_csv

@@ -1,5 +1,7 @@
-"""Environment series (air and structure temperature, sun, rain, snow, humidity) and events
-(construction steps, loads, repairs): what explains a displacement history.
+"""What explains a displacement history: environment series and events.
+
+Environment series are air and structure temperature, sun, rain, snow and humidity; events are
+construction steps, loads and repairs.
 
 Series are read by the same robust importer as camera series (separators, units, time zones, gaps
 and bad rows reported) and kept read-only in the campaign's ``environment/`` folder.
@@ -98,8 +100,11 @@ def load_env(c: Campaign, *, kind: Optional[str] = None, name: Optional[str] = N
 
 # ------------------------------------------------------------------------------------------- events
 def add_event(c: Campaign, *, date: str, kind: str, label: str, load_kn_m: Optional[float] = None) -> int:
-    """Record a construction step, load, repair... The date must fall within the campaign's epochs (or up to a
-    year after the last one, for an event whose effect is still to be measured)."""
+    """Record a construction step, load, repair...
+
+    The date must fall within the campaign's epochs (or up to a
+    year after the last one, for an event whose effect is still to be measured).
+    """
     if kind not in EVENT_KINDS:
         raise InputError(f"unknown event kind {kind!r}; use one of {', '.join(EVENT_KINDS)}")
     if not label.strip():

@@ -67,6 +67,7 @@ def displacement_table(c: Campaign) -> list[dict]:
 
 
 def to_csv(rows: list[dict], columns=DISPLACEMENT_COLUMNS) -> str:
+    """Rows as CSV text with the given columns (missing values as empty cells)."""
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=columns, extrasaction="ignore", lineterminator="\n")
     w.writeheader()

@@ -10,8 +10,9 @@ from projects.history import DisplacementHistory
 
 def displacement_history_figure(histories: Mapping[str, DisplacementHistory], *,
                                 title: str = "Vertical displacement history", context=None):
-    """Displacement of every measurement target over time with 2-sigma error bars and limit lines (and the
-    events and an environment series of ``context``, a :class:`projects.context.PlotContext`).
+    """Displacement of every measurement target over time with 2-sigma error bars and limit lines.
+
+    Also the events and an environment series of ``context``, a :class:`projects.context.PlotContext`).
 
     ``histories`` as :func:`projects.history.histories` gives them (reflector -> history).
     """

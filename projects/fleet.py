@@ -145,4 +145,5 @@ def fleet_status(roots: Sequence[str | os.PathLike], *, today: Optional[dt.date]
 
 
 def iter_names(status: dict) -> Iterable[str]:
+    """The bridge names of a fleet status document."""
     return (b["name"] for b in status["bridges"])

@@ -34,6 +34,8 @@ TASK_RETRIES = 2
 
 @dataclass
 class CampaignRun:
+    """One campaign in a fleet run: its processing summary, the tasks it sent, or why it was skipped."""
+
     folder: str
     name: str = ""
     skipped: Optional[str] = None
@@ -43,6 +45,8 @@ class CampaignRun:
 
 @dataclass
 class FleetRun:
+    """A whole fleet run: every campaign, the tasks, the failures and the cluster that ran them."""
+
     campaigns: list[CampaignRun] = field(default_factory=list)
     tasks: int = 0
     failed: int = 0

@@ -36,6 +36,7 @@ class DisplacementHistory:
     limit : projects.limits.Limit or None
         The warning and alarm limits that apply to the target.
     """
+
     reflector: str
     epochs: tuple[str, ...]
     times: tuple[dt.datetime, ...]

@@ -24,6 +24,7 @@ class TargetInspection:
     the points of the centroid); ``centroid`` is recomputed from these points and ``stored`` is
     what processing saved (None before processing).
     """
+
     epoch: str
     reflector: str
     roi: RoiPlan
@@ -76,6 +77,7 @@ def inspect_target(c: Campaign, label: str, reflector: str, *,
 @dataclass(frozen=True, eq=False)
 class DisplayCloud:
     """Points to draw (decimated for display only) with a value per point and labelled markers."""
+
     xyz: np.ndarray
     values: np.ndarray
     value_name: str

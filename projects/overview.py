@@ -13,8 +13,10 @@ EPOCH_STATES = ("imported", "planned", "scanned", "measured", "processed", "warn
 
 
 def epoch_flags(c: Campaign, label: str) -> list[str]:
-    """The epoch's own flags, then its targets' (each distinct flag once); an ambiguous reference
-    change names its suspects."""
+    """The epoch's own flags, then its targets' (each distinct flag once).
+
+    An ambiguous reference change names its suspects.
+    """
     ds = c.displacement_set(label)
     if ds is None:
         return []
@@ -31,9 +33,12 @@ def epoch_flags(c: Campaign, label: str) -> list[str]:
 
 
 def epoch_state(c: Campaign, label: str) -> tuple[str, list[str]]:
-    """(state, flags) of one epoch: imported (coarse scan only), planned, scanned (fine scans not
+    """(state, flags) of one epoch.
+
+    The state is imported (coarse scan only), planned, scanned (fine scans not
     measured yet), measured, or - once its displacements are computed - processed, warning or
-    problem by its most serious flag."""
+    problem by its most serious flag.
+    """
     res = c.result(label)
     ds = c.displacement_set(label)
     if ds is not None:

@@ -1,5 +1,6 @@
-"""The design prediction of each target's displacement (a finite-element model's curve), aligned to
-the measurements at a date or by least squares, and how far the measurements depart from it.
+"""The design prediction of each target's displacement (a finite-element model's curve).
+
+It is aligned to the measurements at a date or by least squares, and how far the measurements depart from it.
 
 File: CSV/text with a header. Time is a ``date`` (ISO 8601) column or an ``age_days`` column (days
 since casting; the campaign needs ``settings DIR casting_date ISO``). Values in mm, positive up:
@@ -25,6 +26,7 @@ FORMAT_VERSION = 1
 
 
 def casting_ns(c: Campaign) -> Optional[int]:
+    """The casting date setting as nanoseconds since 1970 (UTC), or None when it is not set."""
     s = c.settings().get("casting_date")
     return None if not s else int(dt.datetime.fromisoformat(s).timestamp() * 1e9)
 

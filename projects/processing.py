@@ -56,6 +56,7 @@ LATER_STAGE1_KEYS = ("levelled", "max_tilt_deg", "layout_up")
 
 
 def stage1_params(params: dict) -> dict:
+    """The parameters stage 1 depends on (their hash decides whether an epoch is planned and measured again)."""
     return {k: params[k] for k in STAGE1_KEYS if k not in LATER_STAGE1_KEYS or params[k] != DEFAULTS[k]}
 
 
@@ -66,8 +67,11 @@ _LATER_PROFILE_FIELDS = {"max_tilt_deg": MAX_TILT_DEG, "kind": "line", "step_pre
 
 
 def _profile_key(profile) -> dict:
-    """The profile as it enters the input hash: what decides the plan and the centroids (a field added
-    later only when it differs from its default; sources and notes never)."""
+    """The profile as it enters the input hash.
+
+    What decides the plan and the centroids (a field added
+    later only when it differs from its default; sources and notes never).
+    """
     d = profile.to_dict()
     for k, default in _LATER_PROFILE_FIELDS.items():
         if d.get(k) == default:
@@ -83,6 +87,7 @@ def max_tilt(c: Campaign, params: dict, label: Optional[str] = None) -> Optional
 
 
 def layout_up(params: dict) -> np.ndarray:
+    """The layout's up direction from the ``layout_up`` setting, shape (3,)."""
     return np.array([float(v) for v in str(params["layout_up"]).split(",")])
 STAGE2_KEYS = ("normal_mode", "weighted_references", "moved_tolerance_m")
 FLAG_CHAINED = "chained_to_replaced_target"
@@ -135,6 +140,7 @@ def set_parameter(c: Campaign, key: str, text: Optional[str]) -> None:
 
 
 def parameters(c: Campaign) -> dict:
+    """The campaign's processing parameters: the defaults overridden by its settings."""
     return {**DEFAULTS, **{k: v for k, v in c.settings().items() if k in DEFAULTS}}
 
 
@@ -144,6 +150,8 @@ def _hash(obj) -> str:
 
 @dataclass
 class EpochOutcome:
+    """What processing did to one epoch: planned, measured, up-to-date or failed, with a message."""
+
     epoch: str
     action: str  # planned, measured, up-to-date, failed
     message: str = ""
@@ -151,6 +159,8 @@ class EpochOutcome:
 
 @dataclass
 class ProcessSummary:
+    """What a processing run did: each epoch's outcome, the epochs with new displacements and their problems."""
+
     outcomes: list[EpochOutcome] = field(default_factory=list)
     displacement_epochs: list[str] = field(default_factory=list)
     baseline: Optional[str] = None
@@ -174,6 +184,7 @@ def read_files(c: Campaign, files: Sequence[ScanFile], progress=None) -> Scan:
 
 
 def plan_inputs(c: Campaign, label: str, params: dict) -> tuple[str, object]:
+    """(hash of the inputs, layout) of an epoch's plan: coarse scans, layout at its date, parameters, scanner."""
     ep = c.epoch(label)
     coarse = c.files(label, "coarse")
     if not coarse:
@@ -206,7 +217,9 @@ def analyse_epoch_coarse(c: Campaign, label: str, layout, params: dict, *,
 
 @dataclass(frozen=True, eq=False)
 class Stage1Job:
-    """Everything stage 1 of one epoch needs, as plain picklable values (no campaign handle): a worker
+    """Everything stage 1 of one epoch needs, as plain picklable values (no campaign handle).
+
+    A worker
     process or another machine can run it with :func:`run_stage1`; only the campaign's owner saves the
     result (:func:`save_stage1`).
 
@@ -228,8 +241,10 @@ class Stage1Job:
 
 @dataclass(frozen=True, eq=False)
 class Stage1Result:
-    """What :func:`run_stage1` computed: a new plan (with its map preview) unless the stored one was reused,
-    and the centroids when the epoch has fine scans."""
+    """What :func:`run_stage1` computed.
+
+    A new plan (with its map preview) unless the stored one was reused, and the centroids when the epoch has fine scans.
+    """
 
     job: Stage1Job
     plan: ScanPlan
@@ -239,6 +254,7 @@ class Stage1Result:
 
 
 def stage1_job(c: Campaign, label: str) -> Stage1Job:
+    """An epoch's stage-1 job as plain values (its stored plan reused when its inputs are unchanged)."""
     params = parameters(c)
     h, layout = plan_inputs(c, label, params)
     sp = c.stored_plan(label)
@@ -334,6 +350,7 @@ def stale_epochs(c: Campaign) -> dict[str, str]:
 
 
 def baseline_epoch(c: Campaign) -> Optional[str]:
+    """The baseline epoch: the one chosen, else the first measured one (None before any)."""
     chosen = c.settings().get("baseline")
     if chosen:
         return chosen

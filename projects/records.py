@@ -43,6 +43,7 @@ class Reflector:
         The target it took over from (its history continues this one's).
     note : str
     """
+
     id: str
     group: str
     xyz_layout: tuple[float, float, float]
@@ -74,6 +75,7 @@ class Reflector:
 @dataclass(frozen=True)
 class Epoch(_Plain):
     """One weekly visit: its label, date-time (ISO 8601, UTC), notes and when it was recorded."""
+
     label: str
     datetime: str
     notes: str = ""
@@ -92,8 +94,12 @@ class Epoch(_Plain):
 
 @dataclass(frozen=True)
 class ScanFile(_Plain):
-    """A scan file imported into an epoch: ``role`` is ``"coarse"`` or ``"fine"``; ``stored_path`` is
-    relative to the campaign folder; ``size`` in bytes."""
+    """A scan file imported into an epoch.
+
+    ``role`` is ``"coarse"`` or ``"fine"``; ``stored_path`` is
+    relative to the campaign folder; ``size`` in bytes.
+    """
+
     sha256: str
     epoch: str
     role: str
@@ -105,8 +111,12 @@ class ScanFile(_Plain):
 
 @dataclass(frozen=True)
 class EpochResult:
-    """How far processing has taken an epoch: ``stage`` is ``"planned"`` or ``"measured"``, with the
-    hash of the inputs it was computed from."""
+    """How far processing has taken an epoch.
+
+    ``stage`` is ``"planned"`` or ``"measured"``, with the
+    hash of the inputs it was computed from.
+    """
+
     epoch: str
     stage: str
     inputs_hash: str
@@ -119,6 +129,7 @@ class StoredPlan:
 
     ``plan`` is a :class:`lidar.plan.ScanPlan`; ``plan_json`` its contract JSON as stored.
     """
+
     epoch: str
     plan: Any
     plan_json: dict
@@ -151,6 +162,7 @@ class DisplacementSet:
     flags : tuple of str
         The epoch's own flags (see :mod:`lidar.flags`).
     """
+
     epoch: str
     baseline: str
     inputs_hash: str
@@ -164,8 +176,11 @@ class DisplacementSet:
 
 @dataclass(frozen=True)
 class DisplacementRecord:
-    """One target's stored displacement in one epoch (metres, positive up; None where none could be
-    computed), with its own flags and its epoch's."""
+    """One target's stored displacement in one epoch, with its own flags and its epoch's.
+
+    Metres, positive up; None where none could be computed.
+    """
+
     epoch: str
     datetime: str
     reflector: str
@@ -183,6 +198,7 @@ class DisplacementRecord:
 @dataclass(frozen=True)
 class ReferenceCheck:
     """How a pier target moved between the baseline and an epoch (metres)."""
+
     epoch: str
     reflector: str
     median_change_m: Optional[float]
@@ -194,8 +210,12 @@ class ReferenceCheck:
 
 @dataclass(frozen=True)
 class LimitRecord:
-    """A limit in force: ``reflector`` is a target id or ``"*"`` for every measurement target;
-    ``limit`` a :class:`projects.limits.Limit`."""
+    """A limit in force.
+
+    ``reflector`` is a target id or ``"*"`` for every measurement target;
+    ``limit`` a :class:`projects.limits.Limit`.
+    """
+
     reflector: str
     limit: Any
 
@@ -203,6 +223,7 @@ class LimitRecord:
 @dataclass(frozen=True)
 class LogEntry(_Plain):
     """One line of the campaign's log: what was done, to which epoch, with its details."""
+
     id: int
     time: str
     action: str
@@ -218,6 +239,7 @@ class SeriesRecord(_Plain):
     the environment quantity (``"camera"`` for camera series). ``options`` say how the file was read
     (column, unit, time zone, sign) and ``summary`` what it held (rows, period, sampling, gaps, bad rows).
     """
+
     name: str
     kind: str
     reflector: Optional[str]
@@ -232,6 +254,7 @@ class SeriesRecord(_Plain):
 @dataclass(frozen=True)
 class EventRecord(_Plain):
     """Something that explains a change: a construction step, a load, a repair (``date`` ISO 8601 UTC)."""
+
     id: int
     date: str
     kind: str
@@ -245,8 +268,12 @@ class EventRecord(_Plain):
 
 @dataclass(frozen=True)
 class PredictionRecord:
-    """A target's stored design prediction: how it was aligned (``options``) and its curve as stored
-    (``arrays``: the npz bytes of time_ns and value_mm, unaligned)."""
+    """A target's stored design prediction.
+
+    How it was aligned (``options``) and its curve as stored
+    (``arrays``: the npz bytes of time_ns and value_mm, unaligned).
+    """
+
     reflector: str
     options: dict
     arrays: bytes

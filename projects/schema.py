@@ -177,6 +177,7 @@ MIGRATIONS: dict[int, str] = {
 
 
 def create(conn: sqlite3.Connection) -> None:
+    """Create a new campaign database: version 1 and every migration after it."""
     conn.executescript(SCHEMA_V1)
     conn.execute("INSERT INTO meta(key, value) VALUES ('schema_version', '1')")
     for v in range(2, SCHEMA_VERSION + 1):
@@ -185,6 +186,7 @@ def create(conn: sqlite3.Connection) -> None:
 
 
 def version_of(conn: sqlite3.Connection) -> int:
+    """The schema version of a campaign database."""
     row = conn.execute("SELECT value FROM meta WHERE key = 'schema_version'").fetchone()
     return int(row[0])
 

@@ -85,8 +85,11 @@ def read_area_csv(path: str | os.PathLike) -> np.ndarray:
 
 @dataclass(frozen=True)
 class LastStation:
-    """Where the last measured epoch's scanner stood: its frame is ``rotation @ layout + translation``
-    (rigid fit of its found centroids to the layout)."""
+    """Where the last measured epoch's scanner stood.
+
+    Its frame is ``rotation @ layout + translation``
+    (rigid fit of its found centroids to the layout).
+    """
 
     label: str
     rotation: np.ndarray

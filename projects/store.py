@@ -44,6 +44,7 @@ LOCK_NAME = ".lock"
 
 
 def now_iso() -> str:
+    """The current UTC time, ISO 8601 to the second."""
     return dt.datetime.now(dt.timezone.utc).replace(microsecond=0).isoformat()
 
 
@@ -59,6 +60,7 @@ def parse_datetime(text: str) -> str:
 
 
 def sha256_of(path: Path, chunk: int = 8 << 20) -> str:
+    """The SHA-256 of a file (hex), read in chunks."""
     h = hashlib.sha256()
     with open(path, "rb") as fh:
         while block := fh.read(chunk):
@@ -365,8 +367,11 @@ class Campaign(SeriesTables):
         return self.folder / file.stored_path
 
     def new_series(self, table: str, path: str | os.PathLike, name: Optional[str], what: str) -> tuple[Path, str]:
-        """The file and the name of a series about to be imported into ``table`` (``camera_series``,
-        ``env_series``): the file exists and the name (default: the file's stem) is usable and free."""
+        """The file and the name of a series about to be imported into ``table``.
+
+        ``table`` is ``camera_series`` or ``env_series``; the file exists and the name (default: the
+        file's stem) is usable and free.
+        """
         path = Path(path)
         if not path.is_file():
             raise InputError(f"{path}: no such file; check the path")
@@ -387,8 +392,10 @@ class Campaign(SeriesTables):
         return sha
 
     def import_file(self, src: Path, sha: str, sub: str, record) -> str:
-        """Copy ``src`` (whose checksum was ``sha`` when it was read) into ``sub`` read-only and, in one
-        transaction, ``record(conn, stored_path)``. On any failure nothing stays: no row, no copy."""
+        """Copy ``src`` into ``sub`` read-only and, in one transaction, ``record(conn, stored_path)``.
+
+        ``sha`` is the file's checksum when it was read. On any failure nothing stays: no row, no copy.
+        """
         try:
             sha2, rel, _ = self._copy_in(src, sub)
             if sha2 != sha:

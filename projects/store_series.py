@@ -51,8 +51,10 @@ class SeriesTables:
             raise ValueError(f"not a series table: {table!r}")
 
     def series(self, table: str, *, kind: Optional[str] = None, name: Optional[str] = None) -> list[SeriesRecord]:
-        """The imported series of ``table`` (``camera_series`` or ``env_series``), oldest import first,
-        optionally of one environment ``kind`` or one ``name``."""
+        """The imported series of ``table`` (``camera_series`` or ``env_series``), oldest import first.
+
+        Optionally of one environment ``kind`` or one ``name``.
+        """
         if table not in SERIES_TABLES:
             raise ValueError(f"not a series table: {table!r}")
         what = "reflector, NULL AS kind" if table == "camera_series" else "NULL AS reflector, kind"

@@ -5,6 +5,7 @@ import numpy as np
 
 
 def target_figure(doc: dict, target: dict):
+    """One target's analysis figure: measurements, the fitted model and its parts, events, the projection."""
     import matplotlib
 
     matplotlib.use("Agg", force=False)

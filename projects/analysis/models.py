@@ -54,6 +54,8 @@ def creep_shape(tau_days, law) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Event:
+    """An event as the fit sees it: its time in days from the baseline, label, kind and date."""
+
     t_days: float
     label: str
     kind: str = "construction"
@@ -62,6 +64,8 @@ class Event:
 
 @dataclass(frozen=True)
 class EventFit:
+    """What the fit found for one event: its step and creep (mm, with sigma) and the creep coefficients."""
+
     label: str
     date: str
     kind: str
@@ -362,8 +366,10 @@ def fit_target(t_days: Sequence[float], d_mm: Sequence[float], sigma_mm: Sequenc
 
 def first_crossing(fit: TargetFit, t_from: float, t_to: float, level_mm: float, *, step_days: float = 1.0
                    ) -> Optional[tuple[float, float, float]]:
-    """(central, earliest, latest) day on which the projection reaches ``|level_mm|`` (central estimate and
-    the 2-sigma band's crossings), or None when even the band does not reach it before ``t_to``."""
+    """(central, earliest, latest) day on which the projection reaches ``|level_mm|``.
+
+    The central estimate and the 2-sigma band's crossings; or None when even the band does not reach it before ``t_to``.
+    """
     tq = np.arange(t_from, t_to + step_days, step_days)
     v, sg = fit.predict(tq)
     lvl = abs(level_mm)

@@ -141,6 +141,7 @@ def select_epochs(c: Campaign, scope: ReportScope) -> list[Epoch]:
 
 
 def versions() -> dict:
+    """Versions of Python, the pipeline, the campaign schema and the libraries that shaped the numbers."""
     out = {"python": platform.python_version(), "pipeline": PIPELINE_VERSION,
            "campaign schema": str(schema.SCHEMA_VERSION)}
     for p in PACKAGES:

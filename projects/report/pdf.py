@@ -157,6 +157,7 @@ def _make_doc(path, content: ReportContent):
 
 # ----------------------------------------------------------------------------- sections
 def title_page(content: ReportContent, ss) -> list:
+    """Flowables of the title page."""
     from reportlab.platypus import NextPageTemplate, PageBreak, Paragraph, Spacer
 
     p0, p1 = content.period
@@ -177,6 +178,7 @@ def title_page(content: ReportContent, ss) -> list:
 
 
 def summary_section(content: ReportContent, ss) -> list:
+    """Flowables of the summary: latest value of every target, problems, largest movement, limits."""
     from reportlab.platypus import Paragraph, Spacer
 
     out = [Paragraph("Summary", ss["Heading1"])]
@@ -244,6 +246,7 @@ def summary_section(content: ReportContent, ss) -> list:
 
 
 def layout_section(content: ReportContent, ss) -> list:
+    """Flowables of the layout figure and each target's state."""
     from reportlab.platypus import PageBreak, Paragraph
 
     from projects.report.plots import layout_figure
@@ -267,6 +270,7 @@ def layout_section(content: ReportContent, ss) -> list:
 
 
 def history_section(content: ReportContent, ss) -> list:
+    """Flowables of the per-target history panels, six to a page."""
     from reportlab.platypus import PageBreak, Paragraph
 
     from projects.report.plots import history_grid_figure
@@ -401,6 +405,7 @@ def epoch_section(e: EpochSection, content: ReportContent, ss, *, new_page: bool
 
 
 def log_section(content: ReportContent, ss, *, max_log_rows: int = 400) -> list:
+    """Flowables of the processing log: versions, parameters, file checksums and the last actions."""
     from reportlab.platypus import PageBreak, Paragraph
 
     out = [PageBreak(), Paragraph("Processing log", ss["Heading1"]),
@@ -435,6 +440,7 @@ def log_section(content: ReportContent, ss, *, max_log_rows: int = 400) -> list:
 
 
 def comparison_section(content: ReportContent, ss) -> list:
+    """Flowables of the whole-scan comparisons and span profiles."""
     from reportlab.platypus import PageBreak, Paragraph, Spacer
 
     from projects.figures import span_profile_figure
@@ -475,6 +481,7 @@ def comparison_section(content: ReportContent, ss) -> list:
 
 
 def crossval_section(content: ReportContent, ss) -> list:
+    """Flowables of the dual-camera cross-checks."""
     from reportlab.platypus import PageBreak, Paragraph, Spacer
 
     from vision.crossval import CrossValidation

@@ -42,8 +42,9 @@ def layout_figure(reflectors: Sequence[Reflector], states: Sequence = (), *, spa
 
 def history_grid_figure(histories: Mapping[str, DisplacementHistory], *, targets: Optional[Sequence[str]] = None, max_points: int = 2000,
                         context=None):
-    """One panel per measurement target: displacement with ±2σ bars, warning and alarm lines, and
-    (``context``, a :class:`projects.context.PlotContext`) the events and an environment series.
+    """One panel per measurement target: displacement with ±2σ bars, warning and alarm lines.
+
+    Also (``context``, a :class:`projects.context.PlotContext`) the events and an environment series.
 
     ``histories`` as :func:`projects.history.histories` gives them. Series longer than ``max_points`` are
     thinned for drawing only.
@@ -97,8 +98,10 @@ def history_grid_figure(histories: Mapping[str, DisplacementHistory], *, targets
 
 
 def epoch_map_figure(preview, plan, *, title: str):
-    """The epoch's reflectance map with detections, identified targets and the planned windows
-    (``plan`` a :class:`lidar.plan.ScanPlan` or None)."""
+    """The epoch's reflectance map with detections, identified targets and the planned windows.
+
+    (``plan`` a :class:`lidar.plan.ScanPlan` or None).
+    """
     from lidar.figures import reflectance_map_figure
     from lidar.reflectance_map import reduce_map
 
