@@ -176,7 +176,7 @@ def pairwise_distances(xyz: np.ndarray) -> np.ndarray:
 
 
 # ---------------------------------------------------------------- 4x4 matrix form (stacks allowed)
-def matrix_from_rt(rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
+def matrix_from_rt(rotation: ArrayLike, translation: ArrayLike) -> np.ndarray:
     """4x4 transform from a 3x3 rotation and a translation of shape (3,)."""
     m = np.eye(4)
     m[:3, :3] = rotation
@@ -184,7 +184,7 @@ def matrix_from_rt(rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
     return m
 
 
-def matrix_from_rotvec(rotvec: np.ndarray, translation: np.ndarray) -> np.ndarray:
+def matrix_from_rotvec(rotvec: ArrayLike, translation: ArrayLike) -> np.ndarray:
     """4x4 transform from a rotation vector (axis * angle, rad) and a translation (m)."""
     return matrix_from_rt(Rotation.from_rotvec(np.asarray(rotvec, dtype=float)).as_matrix(), translation)
 

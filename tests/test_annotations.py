@@ -1,10 +1,10 @@
-"""Every public function of the core packages (common, lidar, registration) is annotated, so mypy
-(run by './run test') checks its callers."""
+"""Every public function of the core packages (common, lidar, registration, vision) is annotated, so
+mypy (run by './run test') checks its callers."""
 import ast
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-CORE = ("common", "lidar", "registration")
+CORE = ("common", "lidar", "registration", "vision")
 
 
 def _public_functions(tree):

@@ -70,7 +70,8 @@ class CrossValidation:
         def num(v):
             return float("nan") if v is None else v
 
-        pairs = tuple(Pair(**{k: (tuple(v) if k == "flags" else num(v)) for k, v in p.items()}) for p in d["pairs"])
+        pairs = tuple(Pair(**{k: (tuple(v) if k == "flags" else num(v)) for k, v in p.items()})  # type: ignore[arg-type]
+                      for p in d["pairs"])
         fields = {k: num(v) for k, v in d.items() if k not in ("pairs", "alignment")}
         return cls(pairs=pairs, alignment=dict(d["alignment"]), **fields)
 

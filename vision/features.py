@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from itertools import permutations
-from typing import Optional
+from typing import Any, Optional
 
 import cv2
 import numpy as np
@@ -109,7 +109,7 @@ def match_pattern(centres_px: np.ndarray, pattern_m: np.ndarray, *, max_tilt_rad
     for perm in permutations(range(N)):
         P = pts[list(perm)]
         coef = pinv @ P  # (3, 2): image = A @ coef
-        res = np.linalg.norm(A @ coef - P)
+        res = float(np.linalg.norm(A @ coef - P))
         if res >= best_res:
             continue
         ang_x = np.arctan2(coef[0, 1], coef[0, 0])  # pattern +x from the image's +u
@@ -121,7 +121,7 @@ def match_pattern(centres_px: np.ndarray, pattern_m: np.ndarray, *, max_tilt_rad
     return best
 
 
-def detect_main_target(image: np.ndarray, pattern_m: np.ndarray, **kw) -> np.ndarray:
+def detect_main_target(image: np.ndarray, pattern_m: np.ndarray, **kw: Any) -> np.ndarray:
     """Circle centres of the main target in pattern order, (N, 2) pixels."""
     return match_pattern(detect_circles(image, **kw).centres_px, pattern_m)
 

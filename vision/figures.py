@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import datetime as dt
-from typing import Optional
+from typing import Any, Optional
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -40,7 +40,7 @@ def _pairs_with(cv: CrossValidation, attr: str):
     return p, _dates(ns.astype(np.int64))
 
 
-def overlay_figure(cv: CrossValidation, camera: Optional[CameraSeries] = None, *, ax=None):
+def overlay_figure(cv: CrossValidation, camera: Optional[CameraSeries] = None, *, ax: Any = None) -> Any:
     """Camera series (aligned) with the LiDAR epochs and their +-2 sigma error bars."""
     fig = None
     if ax is None:
@@ -61,7 +61,7 @@ def overlay_figure(cv: CrossValidation, camera: Optional[CameraSeries] = None, *
     return fig or ax.figure
 
 
-def difference_figure(cv: CrossValidation, *, ax=None):
+def difference_figure(cv: CrossValidation, *, ax: Any = None) -> Any:
     """LiDAR - camera at every pair over time, with +-2 sigma bars and the bias line."""
     fig = None
     if ax is None:
@@ -80,7 +80,7 @@ def difference_figure(cv: CrossValidation, *, ax=None):
     return fig or ax.figure
 
 
-def scatter_figure(cv: CrossValidation, *, ax=None):
+def scatter_figure(cv: CrossValidation, *, ax: Any = None) -> Any:
     """LiDAR against camera at the pairs, with the 1:1 line."""
     fig = None
     if ax is None:

@@ -78,4 +78,6 @@ def detect_boards(paths: Sequence[Path], inner_corners: tuple[int, int]) -> tupl
         c = detect_checkerboard(img, inner_corners)
         if c is not None:
             out.append(c)
-    return out, size
+    if size is None:
+        raise InputError("no board images were given; calibrate the sub-camera from views of the checkerboard")
+    return out, (int(size[0]), int(size[1]))

@@ -24,7 +24,7 @@ import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Optional
+from typing import Any, Optional
 
 import numpy as np
 
@@ -212,7 +212,7 @@ class _Table:
     """A series file split into fields: every row that has the header's field count, as text."""
 
     header: list[str]
-    df: object             # pandas DataFrame of str, columns 0..n-1
+    df: Any                # pandas DataFrame of str, columns 0..n-1 (pandas has no type stubs here)
     line_no: np.ndarray    # file line of each row (1-based)
     sep: Optional[str]
     n_rows: int            # data rows in the file, bad ones included
@@ -305,13 +305,14 @@ def _find_columns(path: Path, header: list[str], column: Optional[str]) -> _Colu
             raise InputError(f"{path}: no column {column!r}; the columns are {', '.join(header)}")
         v_col = matches[0]
     else:
-        v_col = _find([h if i not in used else "" for i, h in enumerate(header)], VALUE_NAMES)
-        if v_col is None:
+        found = _find([h if i not in used else "" for i, h in enumerate(header)], VALUE_NAMES)
+        if found is None:
             candidates = [i for i in range(len(header)) if i not in used]
             if len(candidates) != 1:
                 raise InputError(f"{path}: cannot tell which column holds the displacement "
                                  f"({', '.join(header)}); name it with --column")
-            v_col = candidates[0]
+            found = candidates[0]
+        v_col = found
     return _Columns(t_unix, t_col, date_col, clock_col, unit_col, tz_col, v_col)
 
 
@@ -381,7 +382,7 @@ def _assemble(path: Path, tab: _Table, t: np.ndarray, v: np.ndarray, column: str
     t, v = t[~dup], v[~dup]
     dt_s = np.diff(t) / 1e9
     sampling = float(np.median(dt_s)) if len(dt_s) else float("nan")
-    gaps = ()
+    gaps: tuple[tuple[int, int], ...] = ()
     if len(dt_s) and sampling > 0:
         idx = np.nonzero(dt_s > gap_factor * sampling)[0]
         gaps = tuple((int(t[i]), int(t[i + 1])) for i in idx)

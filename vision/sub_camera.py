@@ -50,13 +50,13 @@ def calibrate_intrinsics(object_points: np.ndarray, image_points: Sequence[np.nd
                                              criteria=(cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 200, 1e-12))
     if not np.isfinite(rms):
         raise ProcessingError("the sub-camera calibration did not converge; use more views at larger tilts")
-    return Intrinsics(K=K, distortion=dist.ravel(), rms_px=float(rms), image_size=tuple(image_size),
+    return Intrinsics(K=K, distortion=dist.ravel(), rms_px=float(rms), image_size=(int(image_size[0]), int(image_size[1])),
                       n_views=len(views))
 
 
 def exact_intrinsics(K: np.ndarray, image_size: tuple[int, int]) -> Intrinsics:
     """Known intrinsics (a simulated or factory-calibrated camera) without distortion."""
-    return Intrinsics(K=np.asarray(K, float), distortion=np.zeros(5), rms_px=0.0, image_size=tuple(image_size),
+    return Intrinsics(K=np.asarray(K, float), distortion=np.zeros(5), rms_px=0.0, image_size=(int(image_size[0]), int(image_size[1])),
                       n_views=0)
 
 

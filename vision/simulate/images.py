@@ -65,10 +65,10 @@ def write_dualcam_dataset(folder: str | os.PathLike, *, geometry: Optional[RigGe
     sag = -sag_mm / 1000.0 * np.sin(np.linspace(0, np.pi / 2, n_frames))
     truth_rows, time_rows = ["frame,timestamp,true_vertical_mm,false_vertical_mm"], ["frame,timestamp"]
     for k, (P, dy) in enumerate(zip(poses, sag)):
-        d = np.array([0.0, dy])
-        _write_png(dirs["measurement/main"] / f"frame_{k:04d}.png", rig.render_main(P, d, noise=0.004, rng=rng))
+        disp = np.array([0.0, dy])
+        _write_png(dirs["measurement/main"] / f"frame_{k:04d}.png", rig.render_main(P, disp, noise=0.004, rng=rng))
         _write_png(dirs["measurement/sub"] / f"frame_{k:04d}.png", rig.render_sub(P, noise=0.004, rng=rng))
-        moved = rig.main_image_points(P, d) - rig.main_image_points(np.eye(4))
+        moved = rig.main_image_points(P, disp) - rig.main_image_points(np.eye(4))
         stamp = (start + dt.timedelta(seconds=k * interval_s)).isoformat()
         false_v = -np.mean(moved[:, 1]) * g.main_fov_m / g.resolution[0] * 1e3 - dy * 1e3
         truth_rows.append(f"{k},{stamp},{dy * 1e3:.4f},{false_v:.4f}")

@@ -16,9 +16,10 @@ estimates is ``B_CS(1)->CS(k) = inv(G_k)``.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Optional
+from typing import Any, Optional
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from vision.geometry import apply, intrinsic_matrix, invert, project_pinhole, rigid, rigid_from_rotvec
 
@@ -142,7 +143,7 @@ class RigGeometry:
     def B_ws_to_world(self) -> np.ndarray:
         return rigid(np.eye(3), np.array([0.0, 0.0, self.sub_distance_m]) - self.board.centre_ws)
 
-    def main_points_world(self, displacement_m: np.ndarray = np.zeros(2)) -> np.ndarray:
+    def main_points_world(self, displacement_m: ArrayLike = (0.0, 0.0)) -> np.ndarray:
         """Circle centres in CS(1) after an in-plane target displacement (dx, dy) in WM, (N, 3)."""
         p = np.column_stack([self.main_pattern_m + np.asarray(displacement_m, float).reshape(1, 2),
                              np.zeros(len(self.main_pattern_m))])
@@ -161,7 +162,8 @@ class SyntheticRig:
         self.geometry = geometry
 
     # ---------------------------------------------------------------- exact projections
-    def main_image_points(self, pose: np.ndarray, displacement_m=np.zeros(2), *, quantise: bool = False) -> np.ndarray:
+    def main_image_points(self, pose: np.ndarray, displacement_m: ArrayLike = (0.0, 0.0), *,
+                          quantise: bool = False) -> np.ndarray:
         """(N, 2) image points (u, v) of the main target's circle centres at rig pose ``pose``."""
         g = self.geometry
         body = apply(invert(pose), g.main_points_world(displacement_m))
@@ -192,7 +194,7 @@ class SyntheticRig:
         obj = g.board.object_points()
         centre = rigid(np.eye(3), -g.board.centre_ws)
         w, h = g.resolution
-        poses = []
+        poses: list[np.ndarray] = []
         while len(poses) < n:
             tilt = rng.uniform(-max_tilt_rad, max_tilt_rad, 3) * np.array([1, 1, 0.3])
             dist = g.sub_distance_m * rng.uniform(1.1, 1.6)
@@ -211,7 +213,7 @@ class SyntheticRig:
                  for B in self.zhang_poses(n, max_tilt_rad=max_tilt_rad, rng=rng)]
         return [np.round(v) if quantise else v for v in views]
 
-    def render_board_view(self, B_ws_to_cs: np.ndarray, **kw) -> np.ndarray:
+    def render_board_view(self, B_ws_to_cs: np.ndarray, **kw: Any) -> np.ndarray:
         """Sub-camera image of the board at pose ``B_ws_to_cs`` (e.g. from :meth:`zhang_poses`)."""
         return self.render_sub(self.geometry.B_ws_to_world @ invert(B_ws_to_cs), **kw)
 
@@ -226,7 +228,7 @@ class SyntheticRig:
         s = -t[2] / d[..., 2]
         return t[0] + s * d[..., 0], t[1] + s * d[..., 1]
 
-    def render_main(self, pose: np.ndarray, displacement_m=np.zeros(2), *, supersample: int = 8,
+    def render_main(self, pose: np.ndarray, displacement_m: ArrayLike = (0.0, 0.0), *, supersample: int = 8,
                     noise: float = 0.0, rng: Optional[np.random.Generator] = None) -> np.ndarray:
         """8-bit main-camera image (rows, cols): white circles on black, anti-aliased."""
         g = self.geometry
@@ -258,7 +260,7 @@ class SyntheticRig:
         w, h = g.resolution
         B_cam = pose  # the sub-camera frame is the rig body
         # Colour at every pixel corner; pixels whose four corners agree need no supersampling.
-        v_c, u_c = np.mgrid[-0.5:h:1.0, -0.5:w:1.0]
+        v_c, u_c = np.mgrid[-0.5:h:1.0, -0.5:w:1.0]  # type: ignore[misc]  # float slices: pixel corners
         x, y = self._rays_to_plane(g.K_sub, B_cam, g.B_ws_to_world, u_c, v_c)
         col = g.board.colour(x, y)
         a, b, c, d = col[:-1, :-1], col[:-1, 1:], col[1:, :-1], col[1:, 1:]
