@@ -12,7 +12,7 @@ import numpy as np
 from common.files import json_safe, output_folder, write_atomic
 from common.errors import ProcessingError
 from projects.errors import InputError
-from projects.history import histories
+from projects.history import histories, ns_of
 from projects.records import SeriesRecord
 from projects.store import CAMERA_DIR, Campaign, parse_datetime
 from vision.crossval import CrossValidation, cross_validate
@@ -87,11 +87,6 @@ def load_series(c: Campaign, name: Optional[str] = None) -> tuple[SeriesRecord, 
                              sampling_s=s["sampling_s"] or float("nan"))
 
 
-def _to_ns(iso: str) -> int:
-    d = dt.datetime.fromisoformat(iso)
-    return int(round(d.timestamp() * 1e6)) * 1000
-
-
 def crossvalidate(c: Campaign, *, series: Optional[str] = None, reflector: Optional[str] = None,
                   align_at: Optional[str] = None, window_min: float = 30.0) -> tuple[CrossValidation, CameraSeries]:
     """Cross-validate a stored camera series with the LiDAR displacements of its reflector."""
@@ -103,7 +98,7 @@ def crossvalidate(c: Campaign, *, series: Optional[str] = None, reflector: Optio
     h = histories(c, targets=[rid]).get(rid)
     if h is None:
         raise ProcessingError(f"no LiDAR displacements of {rid} yet; run 'bridgesurvey process' first")
-    at = _to_ns(parse_datetime(align_at)) if align_at else None
+    at = ns_of(dt.datetime.fromisoformat(parse_datetime(align_at))) if align_at else None
     return cross_validate(list(h.epochs), h.time_ns, h.displacement_mm, h.sigma_mm, cam, window_s=window_min * 60.0,
                           align_at_ns=at, reflector=rid, series=row.name), cam
 

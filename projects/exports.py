@@ -31,9 +31,10 @@ def displacement_table(c: Campaign) -> list[dict]:
     preds = predictions(c)
     tols = settings.get("prediction_tolerance_mm") or {}
     rows = []
-    limits: dict = {}
-    for r in c.displacements():
-        lim = limits[r.reflector] if r.reflector in limits else limits.setdefault(r.reflector, c.limit_for(r.reflector))
+    records = c.displacements()
+    limits = {rid: c.limit_for(rid) for rid in {r.reflector for r in records}}
+    for r in records:
+        lim = limits[r.reflector]
         mm = None if r.displacement_m is None else r.displacement_m * 1000.0
         rows.append({
             "epoch": r.epoch, "datetime": r.datetime, "reflector": r.reflector,

@@ -15,6 +15,11 @@ import numpy as np
 from projects.records import DisplacementRecord
 
 
+def ns_of(when: dt.datetime) -> int:
+    """A timezone-aware date-time as nanoseconds since 1970 (UTC), to the microsecond."""
+    return int(round(when.timestamp() * 1e6)) * 1000
+
+
 @dataclass(frozen=True)
 class DisplacementHistory:
     """One target's displacement at every processed epoch, oldest first.
@@ -63,11 +68,7 @@ class DisplacementHistory:
     @property
     def time_ns(self) -> np.ndarray:
         """Epoch times as int64 nanoseconds since 1970 (UTC), shape (N,)."""
-        return np.array([int(round(t.timestamp() * 1e6)) * 1000 for t in self.times], dtype=np.int64)
-
-    def days_since(self, origin: dt.datetime) -> np.ndarray:
-        """Epoch times in days from ``origin``, shape (N,)."""
-        return np.array([(t - origin).total_seconds() / 86400.0 for t in self.times])
+        return np.array([ns_of(t) for t in self.times], dtype=np.int64)
 
     def select(self, mask) -> "DisplacementHistory":
         """The history at the epochs where ``mask`` (boolean or index array) holds."""
@@ -129,5 +130,5 @@ def histories_from_records(records: Iterable[DisplacementRecord], limits: Option
 def histories(c, *, targets: Optional[Sequence[str]] = None) -> dict[str, DisplacementHistory]:
     """Every target's history in campaign ``c`` (a :class:`projects.store.Campaign`), with its limits."""
     records = c.displacements()
-    ids = sorted({r.reflector for r in records})
-    return histories_from_records(records, {rid: c.limit_for(rid) for rid in ids}, targets=targets)
+    ids = {r.reflector for r in records} if targets is None else set(targets)
+    return histories_from_records(records, {rid: c.limit_for(rid) for rid in sorted(ids)}, targets=targets)

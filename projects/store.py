@@ -577,15 +577,18 @@ class Campaign(SeriesTables):
                                np.array(json.loads(r["reference_point"]), float), tuple(json.loads(r["reference_ids"])),
                                r["normal_mode"], tuple(json.loads(r["flags"])), r["processed"])
 
-    def displacements(self, *, where: str = "", args: tuple = (), order: str = "ASC",
-                      limit: Optional[int] = None) -> list[DisplacementRecord]:
-        """Every stored displacement, by epoch date then target (see :func:`projects.history.histories`).
+    def displacements(self) -> list[DisplacementRecord]:
+        """Every stored displacement, by epoch date then target (see :func:`projects.history.histories`)."""
+        return self._displacement_records()
 
-        ``where`` (SQL over ``d`` displacements and ``e`` epochs, with ``args``), ``order`` and ``limit``
-        are for the store's own narrower queries.
+    def _displacement_records(self, where: str = "", args: tuple = (), *, newest_first: bool = False,
+                              limit: Optional[int] = None) -> list[DisplacementRecord]:
+        """Displacement records, optionally narrowed by ``where``.
+
+        ``where`` is SQL over ``d`` displacements and ``e`` epochs, with ``args``: the store's own
+        queries only, never a caller's text.
         """
-        if order not in ("ASC", "DESC"):
-            raise ValueError(f"order must be ASC or DESC, not {order!r}")
+        order = "DESC" if newest_first else "ASC"
         q = f"""SELECT e.label AS epoch, e.datetime AS datetime, d.reflector, d.displacement_m, d.sigma_m,
                       d.flags AS flags, s.flags AS epoch_flags, s.baseline
                FROM displacements d JOIN displacement_sets s ON s.epoch = d.epoch
@@ -597,9 +600,9 @@ class Campaign(SeriesTables):
 
     def last_displacement(self, reflector: str, *, at_or_before: str) -> Optional[DisplacementRecord]:
         """A target's latest displacement with a value, in an epoch dated no later than epoch ``at_or_before``."""
-        rows = self.displacements(where="d.reflector = ? AND d.displacement_m IS NOT NULL AND e.datetime <= "
-                                        "(SELECT datetime FROM epochs WHERE label = ?)",
-                                  args=(reflector, at_or_before), order="DESC", limit=1)
+        rows = self._displacement_records("d.reflector = ? AND d.displacement_m IS NOT NULL AND e.datetime <= "
+                                          "(SELECT datetime FROM epochs WHERE label = ?)", (reflector, at_or_before),
+                                          newest_first=True, limit=1)
         return rows[0] if rows else None
 
     def displacement_flags(self, epoch: str) -> list[str]:

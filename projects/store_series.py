@@ -37,18 +37,14 @@ class SeriesTables:
                       original_path: str, options: dict, summary: dict, arrays: bytes,
                       reflector: Optional[str] = None, kind: Optional[str] = None) -> None:
         """Record an imported series inside the import's transaction (see ``Campaign.import_file``)."""
-        if table == "camera_series":
-            conn.execute("INSERT INTO camera_series(name, reflector, sha256, stored_path, original_path, imported, "
-                         "options, summary, arrays) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                         (name, reflector, sha256, stored_path, original_path, _now(), json.dumps(options),
-                          json.dumps(summary), arrays))
-        elif table == "env_series":
-            conn.execute("INSERT INTO env_series(name, kind, sha256, stored_path, original_path, imported, options, "
-                         "summary, arrays) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                         (name, kind, sha256, stored_path, original_path, _now(), json.dumps(options),
-                          json.dumps(summary), arrays))
-        else:
+        if table not in SERIES_TABLES:
             raise ValueError(f"not a series table: {table!r}")
+        # the one column the two tables do not share: the watched target, or the environment quantity
+        col, value = ("reflector", reflector) if table == "camera_series" else ("kind", kind)
+        conn.execute(f"INSERT INTO {table}(name, {col}, sha256, stored_path, original_path, imported, options, "
+                     "summary, arrays) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                     (name, value, sha256, stored_path, original_path, _now(), json.dumps(options),
+                      json.dumps(summary), arrays))
 
     def series(self, table: str, *, kind: Optional[str] = None, name: Optional[str] = None) -> list[SeriesRecord]:
         """The imported series of ``table`` (``camera_series`` or ``env_series``), oldest import first.

@@ -308,11 +308,9 @@ class MapView(QWidget):
     def show_message(self, text: str) -> None:
         self._clear_scene()
         self.label = None
-        self.editor.load(None)
-        self.table.setRowCount(0)
+        self.editor.load(None)  # empties the table and disables the buttons
         self.title.setText(text)
         self.total.setText("")
-        self._set_enabled(False)
 
     def load(self, label: str, preview, plan: Optional[ScanPlan]) -> None:
         """Show an epoch's stored map preview and plan (``plan`` may be None)."""
@@ -340,8 +338,7 @@ class MapView(QWidget):
             self.scene.addItem(t)
         self.title.setText(f"Epoch {label}: {rmap.shape[1]}×{rmap.shape[0]} cells of {rmap.step_deg:.3f}°, "
                            f"{len(preview.detections.detections)} detections")
-        self.editor.load(plan)
-        self._set_enabled(plan is not None)
+        self.editor.load(plan)  # draws the windows and enables the buttons when there is a plan
         self.fit()
         QTimer.singleShot(0, self.fit)  # again once the view has its final size
 
