@@ -32,8 +32,8 @@ def build_campaign(work: Path, n: int, *, report_every: int = 10) -> tuple[Path,
     from lidar.layout import layout_from_model, read_layout_csv, write_layout_csv
     from lidar.simulate import BridgeModel, EpochConditions, ScannerSetup
     from lidar.simulate.files import simulate_coarse, simulate_fine
-    from projects.processing import plan_epoch, process
-    from projects.store import Campaign
+    from projects.processing.stages import plan_epoch, process
+    from projects.store.campaign import Campaign
 
     field = work / "field"
     simulate_coarse(field, setup=ScannerSetup((20.0, -12.0, 1.5), heading_deg=30.0),

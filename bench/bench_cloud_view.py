@@ -31,7 +31,7 @@ def main(n: int) -> None:
     from pyvistaqt import QtInteractor
 
     from app.gui.views.cloud_view import with_interactive_lod
-    from projects.inspection import decimate
+    from projects.outputs.inspection import decimate
 
     app = QApplication.instance() or QApplication([])
     rng = np.random.default_rng(0)

@@ -26,8 +26,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from projects.demo import build_demo  # noqa: E402
-from projects.processing import process, set_parameter  # noqa: E402
-from projects.store import Campaign  # noqa: E402
+from projects.processing.stages import process, set_parameter  # noqa: E402
+from projects.store.campaign import Campaign  # noqa: E402
 
 
 def cli(*args):

@@ -29,7 +29,7 @@ def main(n: int = 100) -> None:
             import matplotlib
             matplotlib.use("Agg")
             from matplotlib.figure import Figure
-            from projects.store import Campaign
+            from projects.store.campaign import Campaign
             c = Campaign.open({str(camp)!r}, writable=False)
             labels = [e.label for e in c.epochs()]
         """, """

@@ -2,9 +2,11 @@
 from __future__ import annotations
 
 import contextlib
+import csv
+import io
 import os
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Iterator, Mapping, Sequence
 
 
 @contextlib.contextmanager
@@ -56,3 +58,18 @@ def output_folder(path: str | os.PathLike) -> Path:
         raise InputError(f"{out}: exists and is not a folder")
     out.mkdir(parents=True, exist_ok=True)
     return out
+
+
+def csv_text(rows: Sequence[Mapping[str, Any]], columns: Sequence[str]) -> str:
+    """Rows as CSV text with the given columns (missing values and None as empty cells, extra keys ignored).
+
+    >>> print(csv_text([{"a": 1, "b": None, "c": 3}], ["a", "b"]), end="")
+    a,b
+    1,
+    """
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(columns), extrasaction="ignore", lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: ("" if r.get(k) is None else r.get(k)) for k in columns})
+    return buf.getvalue()

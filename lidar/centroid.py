@@ -20,21 +20,22 @@ from scipy.spatial import cKDTree
 
 from lidar.angles import AngularWindow, spherical_from_xyz
 from common.errors import InputError
+from common.flags import (
+    FLAG_CLIPPED,
+    FLAG_FEW_POINTS,
+    FLAG_LOW_CONTRAST,
+    FLAG_LOW_SEPARABILITY,
+    FLAG_NOT_COMPACT,
+    FLAG_NOT_FOUND,
+    FLAG_OFF_EXPECTED,
+    FLAG_SATURATED,
+    FLAG_SECOND_OBJECT,
+    FLAG_SIZE,
+)
 from lidar.scanner_profile import VZ1000, ScannerProfile
 
 if TYPE_CHECKING:
     from lidar.plan import RoiPlan
-
-FLAG_NOT_FOUND = "not_found"
-FLAG_FEW_POINTS = "few_points"
-FLAG_SECOND_OBJECT = "second_bright_object"
-FLAG_CLIPPED = "clipped_by_window"
-FLAG_SATURATED = "saturated"
-FLAG_LOW_SEPARABILITY = "low_separability"
-FLAG_SIZE = "size_mismatch"
-FLAG_OFF_EXPECTED = "off_expected_position"
-FLAG_LOW_CONTRAST = "no_bright_target"
-FLAG_NOT_COMPACT = "no_compact_target"
 
 #: A retro-reflector is several times brighter than its background; below this contrast
 #: ((bright - dark) / (bright + dark) of the class means) the window holds no target.

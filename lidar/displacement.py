@@ -39,79 +39,24 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from common.errors import InputError, ProcessingError
-from lidar.reference_motion import across_axis, fit_reference_motion
+from common.flags import (
+    FLAG_MISSING,
+    FLAG_MISSING_AT_BASELINE,
+    FLAG_NORMAL_FROM_EPOCH,
+    FLAG_REFERENCE_AMBIGUOUS,
+    FLAG_REFERENCE_INCONSISTENT,
+    FLAG_REFERENCE_MISSING,
+    FLAG_REFERENCE_MOVED,
+)
 from common.rigid import fit_rigid
+from lidar.displacement_result import Displacement, EpochDisplacements, Observation, ReferenceCheck
+from lidar.pier_moves import resolve_ambiguous_move, verify_single_move
+from lidar.reference_motion import across_axis, fit_reference_motion
 
-FLAG_MISSING = "missing"
-FLAG_MISSING_AT_BASELINE = "missing_at_baseline"
-FLAG_REFERENCE_MOVED = "reference_moved"
-FLAG_REFERENCE_MISSING = "reference_missing"
-FLAG_REFERENCE_INCONSISTENT = "reference_inconsistent"
-FLAG_NORMAL_FROM_EPOCH = "normal_refitted_in_epoch"
-FLAG_REFERENCE_AMBIGUOUS = "reference_change_ambiguous"
 #: 95 % quantile of chi-square with 2 degrees of freedom: the two deck normals agree within their noise.
 CHI2_2DOF_95 = 5.991
 #: How the epoch's deck normal is obtained (see the module notes).
 NORMAL_MODES = ("auto", "reference", "epoch")
-
-
-@dataclass(frozen=True)
-class Observation:
-    """A measured target position (scanner frame, metres) and its covariance (m^2)."""
-
-    xyz: np.ndarray
-    cov: np.ndarray
-
-
-@dataclass(frozen=True)
-class ReferenceCheck:
-    """Stability of one reference target between the baseline and an epoch."""
-
-    reflector: str
-    median_change_m: float
-    max_change_m: float
-    moved: bool
-    missing: bool
-    suspect: bool = False  # one of two targets that may have moved; left out of the reference point
-
-
-@dataclass(frozen=True)
-class Displacement:
-    """Vertical displacement of one measurement target against the baseline (positive up)."""
-
-    reflector: str
-    displacement_m: float
-    sigma_m: float
-    vertical_m: float
-    baseline_vertical_m: float
-    flags: tuple[str, ...] = ()
-
-    @property
-    def displacement_mm(self) -> float:
-        return self.displacement_m * 1000.0
-
-    @property
-    def sigma_mm(self) -> float:
-        return self.sigma_m * 1000.0
-
-
-@dataclass(frozen=True, eq=False)
-class EpochDisplacements:
-    """All displacements of one epoch and how they were obtained."""
-
-    displacements: tuple[Displacement, ...]
-    reference_ids: tuple[str, ...]
-    reference_checks: tuple[ReferenceCheck, ...]
-    normal_socs: np.ndarray
-    reference_point_socs: np.ndarray
-    normal_mode: str
-    flags: tuple[str, ...] = ()
-
-    def of(self, reflector: str) -> Displacement:
-        for d in self.displacements:
-            if d.reflector == reflector:
-                return d
-        raise InputError(f"no displacement for reflector {reflector!r}")
 
 
 def _as_obs(o) -> Observation:
@@ -463,8 +408,6 @@ def compute_displacements(baseline: Mapping[str, object], epoch: Mapping[str, ob
 
     result = solve(stable, checks, flags)
     # A moved pier target: the deck's shape (zero at the supports) tells which one it was.
-    from lidar.pier_moves import resolve_ambiguous_move, verify_single_move
-
     if FLAG_REFERENCE_AMBIGUOUS in flags:
         result = resolve_ambiguous_move(result, base, groups, solve,
                                         lambda ids: _consistency(base, ep, ids, meas_ids))

@@ -21,13 +21,13 @@ when the deck's shape under that choice is implausible.
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Callable, Mapping, Optional, TYPE_CHECKING
+from typing import Callable, Mapping, Optional
 
 import numpy as np
 from scipy.stats import chi2 as chi2_dist
 
-if TYPE_CHECKING:
-    from lidar.displacement import EpochDisplacements
+from common.flags import FLAG_REFERENCE_AMBIGUOUS, FLAG_REFERENCE_MOVED
+from lidar.displacement_result import EpochDisplacements
 
 #: How much worse (chi-square ratio) the rejected explanation must fit than the kept one.
 DECISIVE_RATIO = 4.0
@@ -103,8 +103,6 @@ def resolve_ambiguous_move(result: EpochDisplacements, base: Mapping, groups: Ma
     target is named as moved and the others are kept. ``solve(stable_ids,
     checks, flags)`` recomputes the epoch. Otherwise ``result`` stands.
     """
-    from lidar.displacement import FLAG_REFERENCE_AMBIGUOUS, FLAG_REFERENCE_MOVED
-
     suspects = [c.reflector for c in result.reference_checks if c.suspect]
     if len(suspects) != 2:
         return result

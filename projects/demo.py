@@ -15,12 +15,14 @@ from lidar.layout import layout_from_model
 from common.progress import ProgressCallback, report
 from lidar.simulate import BridgeModel, EpochConditions, ScannerSetup
 from lidar.simulate.files import simulate_coarse, simulate_fine
-from projects.errors import CampaignError
-from projects.exports import displacement_table, export, to_csv, write_atomic
-from projects.figures import displacement_history_figure
-from projects.history import histories
-from projects.processing import plan_epoch, process
-from projects.store import DB_NAME, Campaign
+from projects.store.errors import CampaignError
+from common.files import write_atomic
+from projects.outputs.exports import export
+from projects.results.table import displacement_table, to_csv
+from projects.outputs.figures import displacement_history_figure
+from projects.store.history import histories
+from projects.processing.stages import plan_epoch, process
+from projects.store.campaign import DB_NAME, Campaign
 
 START = dt.datetime(2026, 1, 5, 9, 0, tzinfo=dt.timezone.utc)
 CABLE_TIE_WEEK = 20
@@ -124,9 +126,9 @@ def build_demo(folder: str | os.PathLike, *, weeks: int = 52, seed: int = 2026,
         report(progress, 0.978, "temperature, events, design prediction, analysis")
         story = add_demo_story(c, folder, weeks=weeks, seed=seed)
         report(progress, 0.98, "report")
-        from projects.report import write_report
+        from projects.outputs.report import write_report
 
-        from projects.context import plot_context
+        from projects.series.context import plot_context
 
         rows = displacement_table(c)
         csv_path = write_atomic(folder / "displacements.csv", to_csv(rows))
@@ -158,8 +160,8 @@ def add_demo_story(c: Campaign, folder: Path, *, weeks: int, seed: int) -> list[
     offset by 21.59 mm) aligned at week 8, and the analysis in ``analysis/``.
     """
     from projects.analysis.run import write_analysis
-    from projects.environment import add_event, env_records, events, import_env
-    from projects.predictions import import_prediction, predictions
+    from projects.series.environment import add_event, env_records, events, import_env
+    from projects.series.predictions import import_prediction, predictions
 
     field = folder / "field"
     field.mkdir(exist_ok=True)
@@ -211,8 +213,8 @@ def add_demo_camera(c: Campaign, folder: Path, *, weeks: int, seed: int) -> Path
 
     Its own zero, 0.2 mm noise, a ten-day outage, a few empty readings), imported and cross-validated.
     """
-    from projects.camera import crossvalidate, save_crossval, series_records, write_crossval_outputs
-    from projects.camera import import_series
+    from projects.series.camera import crossvalidate, save_crossval, series_records, write_crossval_outputs
+    from projects.series.camera import import_series
     from vision.simulate.series import simulate_series, write_series_csv
 
     t0 = np.datetime64(START.replace(tzinfo=None), "ns").astype(np.int64)

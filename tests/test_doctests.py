@@ -4,7 +4,7 @@ import importlib
 
 import pytest
 
-MODULES = ["common.validation", "common.rigid", "projects.history", "app.gui.state.plan_edit", "lidar.flags", "lidar.identification", "lidar.io.names", "lidar.io.intensity",
+MODULES = ["common.validation", "common.files", "common.rigid", "projects.store.history", "app.gui.state.plan_edit", "common.flags", "lidar.identification", "lidar.io.names", "lidar.io.intensity",
            "app.gui.state.map_geometry"]
 
 

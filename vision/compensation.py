@@ -21,6 +21,7 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from common.errors import InputError, ProcessingError
+from common.flags import FLAG_MAIN_TARGET_MISSING, FLAG_SUB_TARGET_MISSING
 from common.progress import ProgressCallback, report
 from vision.geometry import rigid_from_rotvec
 from vision.main_camera import AffineTargetModel, fit_affine_target
@@ -177,7 +178,7 @@ class DualCameraResult:
     false_displacement_m : (n, 2) the predicted false displacement that was removed.
     per_feature_m : (n, N, 2) compensated displacement of every feature.
     valid : (n,) both cameras saw their targets.
-    flags : one tuple of strings per frame (``main-target-missing``, ``sub-target-missing``).
+    flags : one tuple of strings per frame (``main_target_missing``, ``sub_target_missing``).
     provenance : calibration figures (motions used, misfit, mm per pixel, intrinsics RMS).
     """
 
@@ -253,7 +254,7 @@ def measure_dual_camera(setup: DualCameraSetup, main_uv: np.ndarray, sub_uv: Opt
     cal_sigma = np.where(valid[:, None], (cal.prediction_sigma_px(mean_false) * setup.target.mm_per_px / 1e3)[..., None],
                          np.nan)
     sigma = np.sqrt(scatter ** 2 + pose_sigma ** 2 + cal_sigma ** 2)
-    flags = tuple(tuple(f for f, bad in (("main-target-missing", not found[k]), ("sub-target-missing", not okm[k]))
+    flags = tuple(tuple(f for f, bad in ((FLAG_MAIN_TARGET_MISSING, not found[k]), (FLAG_SUB_TARGET_MISSING, not okm[k]))
                         if bad) for k in range(n))
     prov = {"calibration_motions": cal.n_motions, "calibration_misfit_px": cal.residual_px.tolist(),
             "target_mm_per_px": setup.target.mm_per_px, "target_fit_px": setup.target.residual_px,

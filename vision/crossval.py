@@ -14,6 +14,7 @@ from typing import Optional, Sequence
 import numpy as np
 
 from common.errors import InputError, ProcessingError
+from common.flags import FLAG_FEW_CAMERA_SAMPLES, FLAG_NO_CAMERA_DATA, FLAG_NO_LIDAR_VALUE
 from vision.series import CameraSeries
 
 
@@ -151,11 +152,11 @@ def cross_validate(epochs: Sequence[str], time_ns: np.ndarray, lidar_mm: np.ndar
     for k in range(len(t)):
         flags = []
         if cam_n[k] == 0:
-            flags.append("no-camera-data")
+            flags.append(FLAG_NO_CAMERA_DATA)
         elif cam_n[k] < 3:
-            flags.append("few-camera-samples")
+            flags.append(FLAG_FEW_CAMERA_SAMPLES)
         if not np.isfinite(y[k]):
-            flags.append("no-lidar-value")
+            flags.append(FLAG_NO_LIDAR_VALUE)
         pairs.append(Pair(epoch=str(epochs[k]), datetime=_iso(int(t[k])), lidar_mm=float(y[k]),
                           lidar_sigma_mm=float(sy[k]), camera_mm=float(aligned[k]), camera_raw_mm=float(cam[k]),
                           camera_sigma_mm=float(cam_s[k]), camera_n=int(cam_n[k]), difference_mm=float(diff[k]),

@@ -8,7 +8,7 @@ from app.cli.output import dump_json, table
 
 
 def register(sub) -> None:
-    from projects.environment import EVENT_KINDS, KINDS
+    from projects.series.environment import EVENT_KINDS, KINDS
 
     p = sub.add_parser("env", help="environment series: temperature, sun, rain, snow, humidity")
     es = p.add_subparsers(dest="env_command", metavar="ACTION")
@@ -75,7 +75,7 @@ def register(sub) -> None:
 
 
 def cmd_env_import(args) -> int:
-    from projects.environment import import_env
+    from projects.series.environment import import_env
 
     with _open(args.dir) as c:
         name, s = import_env(c, args.file, kind=args.kind, name=args.name, column=args.column, unit=args.unit,
@@ -89,7 +89,7 @@ def cmd_env_import(args) -> int:
 
 
 def cmd_env_list(args) -> int:
-    from projects.environment import env_records
+    from projects.series.environment import env_records
 
     with _open(args.dir, writable=False) as c:
         rows = env_records(c)
@@ -104,7 +104,7 @@ def cmd_env_list(args) -> int:
 
 
 def cmd_event_add(args) -> int:
-    from projects.environment import add_event
+    from projects.series.environment import add_event
 
     with _open(args.dir) as c:
         eid = add_event(c, date=args.date, kind=args.kind, label=args.label, load_kn_m=args.load_kn_m)
@@ -113,7 +113,7 @@ def cmd_event_add(args) -> int:
 
 
 def cmd_event_list(args) -> int:
-    from projects.environment import events
+    from projects.series.environment import events
 
     with _open(args.dir, writable=False) as c:
         rows = [e.to_dict() for e in events(c)]
@@ -125,7 +125,7 @@ def cmd_event_list(args) -> int:
 
 
 def cmd_prediction_import(args) -> int:
-    from projects.predictions import import_prediction
+    from projects.series.predictions import import_prediction
 
     with _open(args.dir) as c:
         out = import_prediction(c, args.file, align_at=args.align_at, lsq=args.align == "lsq")

@@ -5,6 +5,7 @@ import math
 from pathlib import Path
 
 from app.cli.output import dump_json, table
+from common.flags import FLAG_NO_CAMERA_DATA
 
 
 def register(sub) -> None:
@@ -49,8 +50,8 @@ def register(sub) -> None:
 
 
 def cmd_camera_import(args) -> int:
-    from projects.camera import import_series
-    from projects.store import Campaign
+    from projects.series.camera import import_series
+    from projects.store.campaign import Campaign
 
     with Campaign.open(args.dir) as c:
         name, series = import_series(c, args.file, name=args.name, reflector=args.reflector, column=args.column,
@@ -72,8 +73,8 @@ def cmd_camera_import(args) -> int:
 
 
 def cmd_camera_list(args) -> int:
-    from projects.camera import series_records
-    from projects.store import Campaign
+    from projects.series.camera import series_records
+    from projects.store.campaign import Campaign
 
     with Campaign.open(args.dir, writable=False) as c:
         rows = series_records(c)
@@ -88,8 +89,8 @@ def cmd_camera_list(args) -> int:
 
 
 def cmd_crossval(args) -> int:
-    from projects.camera import crossvalidate, save_crossval, write_crossval_outputs
-    from projects.store import Campaign
+    from projects.series.camera import crossvalidate, save_crossval, write_crossval_outputs
+    from projects.store.campaign import Campaign
 
     with Campaign.open(args.dir) as c:
         cv, cam = crossvalidate(c, series=args.series, reflector=args.reflector, align_at=args.align_at,
@@ -111,7 +112,7 @@ def cmd_crossval(args) -> int:
     print(f"  bias {f(cv.bias_mm, '{:+.3f}')} mm, RMSE {f(cv.rmse_mm, '{:.3f}')} mm, std {f(cv.std_mm, '{:.3f}')} mm, "
           f"max |diff| {f(cv.max_abs_mm, '{:.3f}')} mm, correlation {f(cv.correlation, '{:.4f}')}, "
           f"{100 * cv.within_2sigma:.0f} % within 2 sigma")
-    missing = [p.epoch for p in cv.pairs if "no-camera-data" in p.flags]
+    missing = [p.epoch for p in cv.pairs if FLAG_NO_CAMERA_DATA in p.flags]
     if missing:
         print(f"  no camera data within +-{args.window_min:g} min of: {', '.join(missing[:10])}"
               + (" ..." if len(missing) > 10 else ""))

@@ -1,6 +1,7 @@
 """Campaign commands: init, add-epoch, add-fine, plan, process, displacements, status, reflector, limit, export, demo."""
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 from pathlib import Path
@@ -8,7 +9,7 @@ from pathlib import Path
 from app.cli.output import dump_json, table
 from app.cli.progress import progress_bar
 from common.errors import InputError
-from lidar.flags import describe, severity
+from common.flags import FLAG_DEPARTS, describe, severity
 
 
 def register(sub) -> None:
@@ -96,20 +97,15 @@ def register(sub) -> None:
     p.add_argument("--reflector", default="*", help="one target (default: every measurement target)")
     p.set_defaults(func=cmd_limit)
 
+    from projects.processing.parameters import help_text
+
     p = sub.add_parser("settings", help="show or change processing parameters (marks what becomes stale)",
+                       formatter_class=argparse.RawDescriptionHelpFormatter,
                        description="Without KEY: list the parameters. With KEY VALUE: change one; 'process' then "
-                                   "recomputes exactly the results it affects. Keys: " + ", ".join(
-                                       ["min_points", "budget_min", "normal_mode", "weighted_references",
-                                        "map_step_deg", "detection_threshold", "identification_tolerance_m",
-                                        "moved_tolerance_m", "levelled", "max_tilt_deg", "layout_up", "baseline",
-                                        "scanner", "casting_date"]) +
-                                   ". normal_mode: auto (default: both deck normals by their uncertainty), "
-                                   "reference or epoch. levelled false: the scanner had no compensator "
-                                   "(identification then accepts tilted solutions); max_tilt_deg: the largest tilt a levelled "
-                                   "solution may imply (default: the scanner profile's, 2 deg for the VZ-1000). layout_up x,y,z: the "
-                                   "layout's up axis (default 0,0,1). Changing the baseline re-references "
-                                   "every displacement. scanner NAME|FILE.json: the campaign's instrument "
-                                   "(with --epoch: one visit's).")
+                                   "recomputes exactly the results it affects\n(stale: plan = plans and centroids "
+                                   "of every epoch, displacements = displacements only, baseline = every "
+                                   "displacement).\n\n" + help_text() + "\n  scanner (NAME | FILE.json): the "
+                                   "campaign's instrument (with --epoch: one visit's)")
     p.add_argument("dir", type=Path)
     p.add_argument("key", nargs="?")
     p.add_argument("value", nargs="?")
@@ -132,7 +128,7 @@ def register(sub) -> None:
 
 
 def _open(path: Path, writable: bool = True):
-    from projects.store import Campaign
+    from projects.store.campaign import Campaign
 
     return Campaign.open(path, writable=writable)
 
@@ -146,7 +142,7 @@ def _validate(path: Path) -> None:
 
 def cmd_init(args) -> int:
     from lidar.layout import read_layout_csv
-    from projects.store import Campaign
+    from projects.store.campaign import Campaign
 
     from lidar.scanner_catalogue import DEFAULT_SCANNER, get_scanner
 
@@ -159,7 +155,7 @@ def cmd_init(args) -> int:
 
 
 def cmd_add_epoch(args) -> int:
-    from projects.store import parse_datetime
+    from projects.store.campaign import parse_datetime
 
     from lidar.scanner_catalogue import get_scanner
 
@@ -183,13 +179,13 @@ def cmd_add_fine(args) -> int:
 
 
 def cmd_plan(args) -> int:
-    from projects.processing import plan_epoch
+    from projects.processing.stages import plan_epoch
 
     with _open(args.dir) as c:
         with progress_bar("planning") as cb:
             plan = plan_epoch(c, args.epoch, progress=cb)
         if args.sheet is not None:
-            from projects.field_sheet import write_field_sheet
+            from projects.outputs.field_sheet import write_field_sheet
 
             write_field_sheet(plan, args.sheet, campaign_name=c.name, preview=c.map_preview(args.epoch),
                               epoch_date=c.epoch(args.epoch).date)
@@ -206,7 +202,7 @@ EXIT_PROBLEM = 3
 
 
 def cmd_process(args) -> int:
-    from projects.processing import process
+    from projects.processing.stages import process
 
     with _open(args.dir) as c:
         with progress_bar("processing") as cb:
@@ -230,7 +226,8 @@ def cmd_process(args) -> int:
 
 
 def cmd_displacements(args) -> int:
-    from projects.exports import displacement_table, to_csv, write_atomic
+    from common.files import write_atomic
+    from projects.results.table import displacement_table, to_csv
 
     with _open(args.dir, writable=False) as c:
         rows = displacement_table(c)
@@ -244,7 +241,7 @@ def cmd_displacements(args) -> int:
 
 
 def cmd_status(args) -> int:
-    from projects.overview import campaign_status
+    from projects.results.state import campaign_status
 
     with _open(args.dir, writable=False) as c:
         data = campaign_status(c)
@@ -328,12 +325,13 @@ def _prediction_tolerance(args) -> int:
         tols[args.reflector] = tol
         c.set_setting("prediction_tolerance_mm", tols)
     print(f"a displacement departing from the design prediction by more than {tol:g} mm is flagged "
-          f"(departs_from_prediction) for {'every target' if args.reflector == '*' else args.reflector}")
+          f"({FLAG_DEPARTS}) for {'every target' if args.reflector == '*' else args.reflector}")
     return 0
 
 
 def cmd_settings(args) -> int:
-    from projects.processing import DEFAULTS, parameters, stale_epochs, set_parameter
+    from projects.processing.parameters import DEFAULTS
+    from projects.processing.stages import parameters, stale_epochs, set_parameter
 
     if args.key == "scanner":
         return _set_scanner(args)
@@ -362,7 +360,7 @@ def cmd_settings(args) -> int:
 
 def _set_scanner(args) -> int:
     from lidar.scanner_catalogue import get_scanner
-    from projects.processing import stale_epochs
+    from projects.processing.stages import stale_epochs
 
     if not args.value:
         raise InputError("give the scanner: a name from 'bridgesurvey scanners' or a profile .json")
@@ -376,7 +374,7 @@ def _set_scanner(args) -> int:
 
 
 def cmd_export(args) -> int:
-    from projects.exports import export
+    from projects.outputs.exports import export
 
     with _open(args.dir, writable=False) as c:
         path = export(c, args.out)

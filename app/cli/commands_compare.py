@@ -28,8 +28,8 @@ def register(sub) -> None:
 
 
 def cmd_compare(args) -> int:
-    from projects.comparison import compare_epochs, save_comparison, write_outputs
-    from projects.store import Campaign
+    from projects.compare.whole_scan import compare_epochs, save_comparison, write_outputs
+    from projects.store.campaign import Campaign
 
     with Campaign.open(args.dir) as c:
         with progress_bar("comparing") as cb:

@@ -140,7 +140,7 @@ def _infer_board(setup) -> tuple[int, int]:
 
 def _times(path: Path, n: int) -> list[str]:
     from common.errors import InputError
-    from projects.store import parse_datetime
+    from projects.store.campaign import parse_datetime
 
     try:
         rows = [ln.split(",") for ln in path.read_text().splitlines()[1:] if ln.strip()]

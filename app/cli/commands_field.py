@@ -98,8 +98,8 @@ def cmd_scanners(args) -> int:
 
 
 def cmd_field_sheet(args) -> int:
-    from projects.field_sheet import write_field_sheet
-    from projects.processing import plan_epoch
+    from projects.outputs.field_sheet import write_field_sheet
+    from projects.processing.stages import plan_epoch
 
     with _open(args.dir) as c:
         with progress_bar("planning") as cb:
@@ -116,7 +116,7 @@ EXIT_SHORT = 3
 
 
 def cmd_check(args) -> int:
-    from projects.check import check_epoch
+    from projects.field.check import check_epoch
 
     with _open(args.dir) as c:
         with progress_bar("measuring the fine scans") as cb:
@@ -140,7 +140,7 @@ def cmd_check(args) -> int:
 
 
 def cmd_stations(args) -> int:
-    from projects.stations import advise_stations, read_area_csv, station_map_figure
+    from projects.field.stations import advise_stations, read_area_csv, station_map_figure
     from lidar.figures import save_figure
 
     area = read_area_csv(args.area) if args.area is not None else None

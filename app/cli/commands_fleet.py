@@ -38,7 +38,7 @@ def register(sub) -> None:
 
 
 def cmd_fleet_status(args) -> int:
-    from projects.fleet import fleet_status
+    from projects.fleet.status import fleet_status
 
     status = fleet_status(args.roots, overdue_days=args.overdue_days)
     if args.json:
@@ -59,8 +59,8 @@ def cmd_fleet_status(args) -> int:
 
 
 def cmd_fleet_report(args) -> int:
-    from projects.fleet import fleet_status
-    from projects.fleet_report import write_fleet_report
+    from projects.fleet.status import fleet_status
+    from projects.outputs.fleet_report import write_fleet_report
 
     status = fleet_status(args.roots, overdue_days=args.overdue_days)
     path = write_fleet_report(status, args.out)
@@ -69,7 +69,7 @@ def cmd_fleet_report(args) -> int:
 
 
 def cmd_fleet_process(args) -> int:
-    from projects.fleet_process import fleet_process
+    from projects.fleet.process import fleet_process
 
     with progress_bar("fleet") as cb:
         run = fleet_process(args.roots, scheduler=args.scheduler, workers=args.workers, progress=cb)

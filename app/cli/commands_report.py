@@ -22,8 +22,8 @@ def register(sub) -> None:
 
 
 def cmd_report(args) -> int:
-    from projects.report import ReportScope, write_report
-    from projects.store import Campaign
+    from projects.outputs.report import ReportScope, write_report
+    from projects.store.campaign import Campaign
 
     scope = ReportScope(epoch=args.epoch, start=args.start, end=args.end)
     with Campaign.open(args.dir, writable=False) as c:

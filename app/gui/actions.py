@@ -22,7 +22,7 @@ def build_demo(folder: Path, progress: Callable):
 
 def create_campaign(*, folder: str, name: str, layout: str, span_m: Optional[float], diameter_mm: float) -> Path:
     from lidar.layout import read_layout_csv
-    from projects.store import Campaign
+    from projects.store.campaign import Campaign
 
     if not folder:
         raise InputError("choose a folder for the campaign")
@@ -42,7 +42,7 @@ def _validator(progress: Callable):
 
 
 def add_epoch(session, v: dict, progress: Callable) -> str:
-    from projects.store import parse_datetime
+    from projects.store.campaign import parse_datetime
 
     if not v["coarse"]:
         raise InputError("choose the coarse scan of the visit")
@@ -59,44 +59,44 @@ def add_fine(session, label: str, paths, progress: Callable) -> None:
 
 
 def plan(session, label: str, progress: Callable):
-    from projects.processing import plan_epoch
+    from projects.processing.stages import plan_epoch
 
     with session.write() as c:
         return plan_epoch(c, label, progress=progress)
 
 
 def save_plan(session, label: str, scan_plan) -> None:
-    from projects.processing import save_edited_plan
+    from projects.processing.stages import save_edited_plan
 
     with session.write() as c:
         save_edited_plan(c, label, scan_plan)
 
 
 def process(session, progress: Callable):
-    from projects.processing import process as run
+    from projects.processing.stages import process as run
 
     with session.write() as c:
         return run(c, progress=progress)
 
 
 def inspect(session, label: str, rid: str, progress: Callable):
-    from projects.inspection import inspect_target
+    from projects.outputs.inspection import inspect_target
 
     with session.read() as c:
         return inspect_target(c, label, rid, progress=progress)
 
 
 def epoch_cloud(session, label: str, progress: Callable):
-    from projects.inspection import epoch_cloud as cloud
+    from projects.outputs.inspection import epoch_cloud as cloud
 
     with session.read() as c:
         return cloud(c, label, progress=progress)
 
 
 def change_cloud(session, label: str, progress: Callable):
-    from projects.comparison import save_comparison
-    from projects.inspection import change_cloud as change
-    from projects.processing import baseline_epoch
+    from projects.compare.whole_scan import save_comparison
+    from projects.outputs.inspection import change_cloud as change
+    from projects.processing.stages import baseline_epoch
 
     with session.write() as c:
         base = baseline_epoch(c)
@@ -110,7 +110,7 @@ def change_cloud(session, label: str, progress: Callable):
 
 
 def import_camera(session, v: dict, progress: Callable):
-    from projects.camera import import_series
+    from projects.series.camera import import_series
 
     if not v["file"]:
         raise InputError("choose the camera series file")
@@ -122,7 +122,7 @@ def import_camera(session, v: dict, progress: Callable):
 
 
 def crossval(session, progress: Callable):
-    from projects.camera import crossvalidate, save_crossval
+    from projects.series.camera import crossvalidate, save_crossval
 
     progress(0.1, "pairing LiDAR epochs with the camera")
     with session.write() as c:
@@ -132,21 +132,22 @@ def crossval(session, progress: Callable):
 
 
 def export_csv(session, path: Path) -> Path:
-    from projects.exports import displacement_table, to_csv, write_atomic
+    from common.files import write_atomic
+    from projects.results.table import displacement_table, to_csv
 
     with session.read() as c:
         return write_atomic(path, to_csv(displacement_table(c)))
 
 
 def export_xlsx(session, path: Path) -> Path:
-    from projects.exports import export
+    from projects.outputs.exports import export
 
     with session.read() as c:
         return export(c, path)
 
 
 def report(session, path: Path, progress: Callable) -> Path:
-    from projects.report import write_report
+    from projects.outputs.report import write_report
 
     with session.read() as c:
         return write_report(c, path, progress=progress)
@@ -168,15 +169,15 @@ def replace_reflector(session, old: str, new: str, when: str) -> None:
 
 
 def set_parameter(session, key: str, text: str) -> None:
-    from projects.processing import set_parameter as setp
+    from projects.processing.stages import set_parameter as setp
 
     with session.write() as c:
         setp(c, key, text)
 
 
 def field_sheet(session, label: str, path: Path, progress: Callable) -> Path:
-    from projects.field_sheet import write_field_sheet
-    from projects.processing import plan_epoch
+    from projects.outputs.field_sheet import write_field_sheet
+    from projects.processing.stages import plan_epoch
 
     with session.write() as c:
         plan = plan_epoch(c, label, progress=scaled(progress, 0.0, 0.8))
@@ -185,7 +186,7 @@ def field_sheet(session, label: str, path: Path, progress: Callable) -> Path:
 
 
 def check(session, label: str, progress: Callable):
-    from projects.check import check_epoch
+    from projects.field.check import check_epoch
 
     with session.write() as c:
         return check_epoch(c, label, progress=progress)
@@ -193,7 +194,7 @@ def check(session, label: str, progress: Callable):
 
 def stations(session, grid_m: float, height_m: float, progress: Callable):
     """The station advice and the layout it was made on."""
-    from projects.stations import advise_stations
+    from projects.field.stations import advise_stations
 
     with session.read() as c:
         return advise_stations(c, grid_m=grid_m, height_m=height_m, progress=progress), c.layout()
@@ -214,7 +215,7 @@ def set_scanner(session, name: str, epoch: Optional[str] = None) -> None:
 
 
 def fleet_status(folder: str) -> dict:
-    from projects.fleet import fleet_status as status
+    from projects.fleet.status import fleet_status as status
 
     return status([folder])
 

@@ -260,21 +260,24 @@ class Commands:
             self._quick("Replace reflector", lambda: actions.replace_reflector(self.win.session, rid, new, when))
 
     def set_parameter(self) -> None:
-        from projects.processing import DEFAULTS, parameters
+        from projects.processing.parameters import BY_NAME, PARAMETERS
+        from projects.processing.stages import parameters
 
         with self.win.session.read() as c:
-            current = parameters(c)
-        keys = list(DEFAULTS) + ["baseline"]
+            current = {**parameters(c), **{k: v for k, v in c.settings().items() if k in BY_NAME}}
+        keys = [p.name for p in PARAMETERS]
         key, ok = QInputDialog.getItem(self.win, "Processing parameter", "Parameter:", keys, 0, False)
         if not ok:
             return
-        text = self._ask("Processing parameter", f"New value of {key} (now {current.get(key)}):")
+        p = BY_NAME[key]
+        text = self._ask("Processing parameter", f"{key}: {p.help}.\nValues: {p.values}. "
+                                                 f"Now {current.get(key)}, default {p.default}.\nNew value:")
         if text is not None:
             self._quick("Processing parameter", lambda: actions.set_parameter(self.win.session, key, text))
 
     # ------------------------------------------------------------------ camera
     def _load_camera(self) -> None:
-        from projects.camera import crossval_summaries, load_series
+        from projects.series.camera import crossval_summaries, load_series
         from vision.crossval import CrossValidation
 
         with self.win.session.read() as c:
@@ -287,7 +290,7 @@ class Commands:
                                           "Cross-validate with LiDAR.")
 
     def import_camera(self) -> None:
-        from projects.camera import midspan_reflector
+        from projects.series.camera import midspan_reflector
 
         with self.win.session.read() as c:
             meas = [r.id for r in c.reflectors() if not r.is_reference and not r.retired]

@@ -5,9 +5,9 @@ import html
 
 import numpy as np
 
-from lidar.flags import describe
-from projects.history import histories
-from projects.overview import epoch_state
+from common.flags import describe
+from projects.store.history import histories
+from projects.results.state import epoch_state
 
 
 def _rows(pairs) -> str:

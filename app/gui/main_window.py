@@ -277,7 +277,7 @@ class MainWindow(QMainWindow):
             self.open_campaign(folder)
 
     def open_demo(self) -> None:
-        from projects.store import DB_NAME
+        from projects.store.campaign import DB_NAME
 
         if (self.demo_dir / DB_NAME).exists():
             self.open_campaign(self.demo_dir)
@@ -338,10 +338,10 @@ class MainWindow(QMainWindow):
     def refresh(self) -> None:
         if self.session is None:
             return
-        from projects.camera import series_records
-        from projects.context import plot_context
-        from projects.history import histories
-        from projects.overview import campaign_status
+        from projects.series.camera import series_records
+        from projects.series.context import plot_context
+        from projects.store.history import histories
+        from projects.results.state import campaign_status
 
         try:
             with self.session.read() as c:
@@ -394,7 +394,7 @@ class MainWindow(QMainWindow):
         if self.session is None:
             return
         kind, key = self._details_for
-        from projects.camera import series_records
+        from projects.series.camera import series_records
 
         try:
             with self.session.read() as c:

@@ -11,7 +11,7 @@ from typing import Optional
 from PySide6.QtCore import QObject, Signal
 
 from app.gui.state.campaign_access import CampaignAccess
-from projects.store import Campaign
+from projects.store.campaign import Campaign
 
 
 class CampaignSession(QObject):

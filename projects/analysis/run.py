@@ -17,10 +17,10 @@ import numpy as np
 from common.errors import InputError
 from common.files import write_atomic
 from projects.analysis.models import Event, TargetFit, first_crossing, fit_target
-from projects.environment import events as stored_events
-from projects.environment import load_env
-from projects.history import histories
-from projects.store import Campaign
+from projects.series.environment import events as stored_events
+from projects.series.environment import load_env
+from projects.store.history import histories
+from projects.store.campaign import Campaign
 
 ANALYSIS_FORMAT_VERSION = 1
 DAY_NS = 86_400 * 10**9
@@ -43,7 +43,7 @@ def _num(v, nd=4):
 def analyse_campaign(c: Campaign, *, horizon_days: float = 365.0, long_term_factor: Optional[float] = None,
                      reference_temperature: Optional[float] = None) -> dict:
     """The analysis of every measurement target (the ``analysis.json`` document)."""
-    from projects.processing import baseline_epoch
+    from projects.processing.stages import baseline_epoch
 
     if not (math.isfinite(horizon_days) and 0 < horizon_days <= 36525):
         raise InputError(f"the horizon must be between 1 day and 100 years, got {horizon_days} days")
@@ -63,7 +63,7 @@ def analyse_campaign(c: Campaign, *, horizon_days: float = 365.0, long_term_fact
     stored = stored_events(c)
     evs = [Event((_ns(e.date) - origin) / DAY_NS, e.label, e.kind, e.date[:10]) for e in stored]
     epoch_times = sorted({t for h in hist.values() for t in h.times})
-    from projects.predictions import casting_ns, predictions
+    from projects.series.predictions import casting_ns, predictions
 
     preds = predictions(c)
     casting = casting_ns(c)

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from lidar.displacement import FLAG_NORMAL_FROM_EPOCH, FLAG_REFERENCE_AMBIGUOUS, compute_displacements
+from common.flags import FLAG_NORMAL_FROM_EPOCH, FLAG_REFERENCE_AMBIGUOUS
+from lidar.displacement import compute_displacements
 from lidar.reference_motion import across_axis, fit_reference_motion
 from lidar.simulate.centroids import BridgeGeometry, deflection, observe, random_station
 

@@ -24,8 +24,8 @@ def build_processed_campaign(field: Path, folder: Path, *, name: str = "Test bri
     """The three visits of the ``field`` fixture imported, fine-scanned from their plans and processed."""
     from lidar.layout import read_layout_csv
     from lidar.simulate.files import simulate_fine
-    from projects.processing import plan_epoch, process
-    from projects.store import Campaign
+    from projects.processing.stages import plan_epoch, process
+    from projects.store.campaign import Campaign
     from tests.projects.conftest import MODEL, VISITS
 
     dates = ("2026-03-02T09:00:00+00:00", "2026-03-09T10:00:00+00:00", "2026-03-16T08:30:00+00:00")

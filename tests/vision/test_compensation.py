@@ -109,7 +109,7 @@ def test_missing_frames_are_flagged_not_invented():
     sub[2] = np.nan
     res = measure_dual_camera(setup, main, sub)
     assert list(res.valid) == [True, False, False, True]
-    assert res.flags[1] == ("main-target-missing",) and res.flags[2] == ("sub-target-missing",)
+    assert res.flags[1] == ("main_target_missing",) and res.flags[2] == ("sub_target_missing",)
     assert np.isnan(res.displacement_m[1]).all() and np.isnan(res.displacement_m[2]).all()
 
 

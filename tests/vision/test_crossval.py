@@ -45,7 +45,7 @@ def test_known_bias_after_alignment_at_a_date_and_noise_statistics():
 def test_epochs_without_camera_data_are_flagged_and_left_out():
     t = np.array([5, 10, 40]) * 24 * H  # the camera stops after 30 days
     cv = cross_validate(["a", "b", "c"], t, truth(t), np.full(3, 0.1), _camera(truth, 0.0))
-    assert cv.n_pairs == 2 and cv.pairs[2].flags == ("no-camera-data",) and np.isnan(cv.pairs[2].difference_mm)
+    assert cv.n_pairs == 2 and cv.pairs[2].flags == ("no_camera_data",) and np.isnan(cv.pairs[2].difference_mm)
     assert np.isnan(cv.correlation)  # fewer than three pairs
     with pytest.raises(ProcessingError, match="no LiDAR epoch has camera samples"):
         cross_validate(["c"], t[2:], truth(t[2:]), np.full(1, 0.1), _camera(truth, 0.0))

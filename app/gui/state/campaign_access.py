@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from projects.store import Campaign
+from projects.store.campaign import Campaign
 
 
 class CampaignAccess:

@@ -124,7 +124,7 @@ class DisplacementView(QWidget):
         ax.legend(loc="best", fontsize=8, ncol=2)
         self._ax = ax
         if self.context_box.isChecked() and self.context is not None:
-            from projects.context import draw_context
+            from projects.series.context import draw_context
 
             draw_context(ax, self.context)
         fig.autofmt_xdate()

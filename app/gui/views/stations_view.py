@@ -47,7 +47,7 @@ class StationsView(QWidget):
 
     def show_advice(self, advice, layout) -> None:
         """Draw a :class:`projects.stations.StationAdvice` over its layout."""
-        from projects.stations import draw_station_map
+        from projects.field.stations import draw_station_map
 
         self.advice = advice
         fig = self.canvas.figure

@@ -35,8 +35,8 @@ def test_env_import_converts_units_and_is_listed(processed_copy, tmp_path):
     r = _cli("env", "list", processed_copy, "--json")
     rows = json.loads(r.stdout)
     assert rows[0]["kind"] == "temperature" and rows[0]["options"]["unit"] == "°C"
-    from projects.environment import load_env
-    from projects.store import Campaign
+    from projects.series.environment import load_env
+    from projects.store.campaign import Campaign
 
     with Campaign.open(processed_copy, writable=False) as c:
         s = load_env(c, kind="temperature")[0]
@@ -98,8 +98,8 @@ def _prediction_csv(path, ids, start="2026-02-20", days=40, offset=5.0):
 
 
 def test_prediction_import_aligns_flags_departures_and_refuses_unknown_targets(processed_copy, tmp_path):
-    from projects.exports import displacement_table
-    from projects.store import Campaign
+    from projects.results.table import displacement_table
+    from projects.store.campaign import Campaign
 
     before = snapshot(processed_copy)
     bad = _prediction_csv(tmp_path / "bad.csv", ["M1", "M9"])

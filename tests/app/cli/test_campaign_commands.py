@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from app.cli.main import main
-from projects.store import Campaign
+from projects.store.campaign import Campaign
 from tests.projects.campaign_helpers import snapshot
 
 DATES = ("2026-03-02T09:00", "2026-03-09T10:00", "2026-03-16T08:30")

@@ -6,7 +6,7 @@ import pytest
 from app.gui import actions
 from app.gui.state.campaign_access import CampaignAccess
 from common.errors import InputError
-from projects.store import Campaign
+from projects.store.campaign import Campaign
 
 
 def _progress(seen):

@@ -7,7 +7,7 @@ import pytest
 from PySide6.QtCore import QEvent, QPointF, Qt
 from PySide6.QtGui import QMouseEvent
 
-from projects.store import Campaign
+from projects.store.campaign import Campaign
 from tests.app.gui.conftest import wait_job
 from tests.projects.campaign_helpers import snapshot
 
@@ -187,7 +187,7 @@ def test_new_campaign_add_epoch_plan_and_a_bad_file(window, field_copy, tmp_path
 
 def test_camera_import_crossval_and_report_export(window, processed_copy, tmp_path, qtbot, monkeypatch, errors):
     from app.gui.dialogs import ImportCameraDialog
-    from tests.projects.test_camera import _ns, truth
+    from tests.projects.series.test_camera import _ns, truth
     from vision.simulate.series import simulate_series, write_series_csv
 
     t, v = simulate_series(_ns("2026-02-28T00:00"), _ns("2026-03-18T00:00"), truth, noise_mm=0.1, zero_offset_mm=5.0)
@@ -337,7 +337,7 @@ def test_fleet_page_lists_the_bridges_and_opens_one(window, processed_copy, tmp_
 
 
 def test_analysis_tab_and_event_overlay(window, processed_copy, tmp_path, qtbot, errors):
-    from projects.environment import add_event
+    from projects.series.environment import add_event
 
     with Campaign.open(processed_copy) as c:
         add_event(c, date="2026-03-12", kind="construction", label="slab")

@@ -25,8 +25,8 @@ def test_window_of_cells_keeps_the_plan_contract_across_zero():
 
 def test_window_from_cells_and_the_details_html_on_a_campaign(processed_copy):
     from app.gui.html import campaign_html, epoch_html, reflector_html
-    from projects.overview import campaign_status
-    from projects.store import Campaign
+    from projects.results.state import campaign_status
+    from projects.store.campaign import Campaign
 
     with Campaign.open(processed_copy, writable=False) as c:
         preview = c.map_preview("2026-03-02")

@@ -1,0 +1,222 @@
+"""Every flag the product raises, declared once: its code, severity, meaning and the package that raises it.
+
+Flags come from the centroids (a doubt about one target), the displacement computation (the reference
+check, the deck normal, the frame), processing (an epoch that gave no result) and the camera
+cross-check. They are not equally serious, and treating them alike turns every epoch red (alarm fatigue):
+
+* **info** - how a result was obtained; nothing to do (``normal_refitted_in_epoch``).
+* **warning** - a result exists but deserves a look (a target missing, a moved pier target left out, a
+  second bright object in a window).
+* **problem** - the epoch has no trustworthy result (no deck or pier targets measured, inconsistent
+  references): act before the next visit.
+
+A flag may carry its reason after a colon (``deck_not_measured: 0 of 6 deck targets found``); its code is
+the part before it. Producers import the constants below; a code that is not registered here is an error
+(:class:`UnknownFlagError`), never guessed: stored campaigns from older versions have their codes mapped
+by a migration (:data:`RENAMED`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Iterable, Optional
+
+from common.errors import SurveyError
+
+INFO, WARNING, PROBLEM = "info", "warning", "problem"
+SEVERITIES = (INFO, WARNING, PROBLEM)
+
+
+class UnknownFlagError(SurveyError):
+    """A flag code this version does not know."""
+
+
+@dataclass(frozen=True)
+class Flag:
+    """One registered flag.
+
+    Attributes
+    ----------
+    code : str
+        snake_case code, as stored and printed.
+    severity : {"info", "warning", "problem"}
+    meaning : str
+        One line for the report's flag table and the application's details.
+    raised_by : str
+        The module that raises it.
+    """
+
+    code: str
+    severity: str
+    meaning: str
+    raised_by: str
+
+
+REGISTRY: dict[str, Flag] = {}
+
+
+def _flag(code: str, severity_: str, meaning: str, raised_by: str) -> str:
+    if code in REGISTRY or severity_ not in SEVERITIES or code != code.lower() or "-" in code:
+        raise ValueError(f"flag {code!r} declared twice, in another case or with a bad severity")
+    REGISTRY[code] = Flag(code, severity_, meaning, raised_by)
+    return code
+
+
+# ---- a target in one fine scan (lidar.centroid)
+FLAG_NOT_FOUND = _flag("not_found", WARNING, "target not found in its fine scan (occluded, removed or outside "
+                       "the window)", "lidar.centroid")
+FLAG_FEW_POINTS = _flag("few_points", WARNING, "fewer points on the target than planned", "lidar.centroid")
+FLAG_SECOND_OBJECT = _flag("second_bright_object", WARNING, "a second bright object beside the target was left "
+                           "out (cable-tie-like contamination)", "lidar.centroid")
+FLAG_CLIPPED = _flag("clipped_by_window", WARNING, "the target touches the edge of its scan window",
+                     "lidar.centroid")
+FLAG_SATURATED = _flag("saturated", INFO, "intensity saturated on the target", "lidar.centroid")
+FLAG_LOW_SEPARABILITY = _flag("low_separability", WARNING, "target and background intensities overlap",
+                              "lidar.centroid")
+FLAG_SIZE = _flag("size_mismatch", WARNING, "bright area does not match the target diameter", "lidar.centroid")
+FLAG_OFF_EXPECTED = _flag("off_expected_position", WARNING, "centroid away from the planned position",
+                          "lidar.centroid")
+FLAG_LOW_CONTRAST = _flag("no_bright_target", WARNING, "no bright target in the window", "lidar.centroid")
+FLAG_NOT_COMPACT = _flag("no_compact_target", WARNING, "bright points but no disc-shaped cluster",
+                         "lidar.centroid")
+
+# ---- a target's displacement and the epoch's reference check (lidar.displacement, lidar.pier_moves)
+FLAG_MISSING = _flag("missing", WARNING, "no value this epoch (target not found)", "lidar.displacement")
+FLAG_MISSING_AT_BASELINE = _flag("missing_at_baseline", INFO, "target not measured in the baseline epoch",
+                                 "lidar.displacement")
+FLAG_REFERENCE_MOVED = _flag("reference_moved", WARNING, "a reference target moved and was left out of the "
+                             "reference group", "lidar.displacement")
+FLAG_REFERENCE_MISSING = _flag("reference_missing", WARNING, "a reference target was not found",
+                               "lidar.displacement")
+FLAG_REFERENCE_INCONSISTENT = _flag("reference_inconsistent", PROBLEM, "reference distances changed beyond "
+                                    "tolerance", "lidar.displacement")
+FLAG_NORMAL_FROM_EPOCH = _flag("normal_refitted_in_epoch", INFO, "deck normal re-fitted in this epoch (fewer "
+                               "references than needed, or the fit agreed with the carried normal)",
+                               "lidar.displacement")
+FLAG_REFERENCE_AMBIGUOUS = _flag("reference_change_ambiguous", WARNING, "the reference group changed and the "
+                                 "moved target could not be singled out", "lidar.displacement")
+
+# ---- an epoch with no result, or a history (projects.processing)
+FLAG_DECK_NOT_MEASURED = _flag("deck_not_measured", PROBLEM, "too few deck targets measured for a "
+                               "displacement", "projects.processing")
+FLAG_PIERS_NOT_MEASURED = _flag("piers_not_measured", PROBLEM, "no reference target measured in both this "
+                                "epoch and the baseline", "projects.processing")
+FLAG_NO_DISPLACEMENT = _flag("no_displacement", PROBLEM, "the displacements could not be computed (the reason "
+                             "follows)", "projects.processing")
+FLAG_CHAINED = _flag("chained_to_replaced_target", INFO, "history continues from a replaced target",
+                     "projects.processing")
+FLAG_DEPARTS = _flag("departs_from_prediction", WARNING, "the displacement departs from the design prediction "
+                     "by more than its tolerance", "projects.results")
+
+# ---- the camera cross-check (vision.crossval)
+FLAG_NO_CAMERA_DATA = _flag("no_camera_data", WARNING, "no camera samples around this LiDAR epoch",
+                            "vision.crossval")
+FLAG_FEW_CAMERA_SAMPLES = _flag("few_camera_samples", INFO, "few camera samples around this LiDAR epoch",
+                                "vision.crossval")
+FLAG_NO_LIDAR_VALUE = _flag("no_lidar_value", WARNING, "no LiDAR displacement at this epoch", "vision.crossval")
+
+# ---- one frame of the dual-camera method (vision.compensation)
+FLAG_MAIN_TARGET_MISSING = _flag("main_target_missing", WARNING, "the main camera's target was not found in "
+                                 "this frame", "vision.compensation")
+FLAG_SUB_TARGET_MISSING = _flag("sub_target_missing", WARNING, "the sub-camera's checkerboard was not found in "
+                                "this frame", "vision.compensation")
+
+#: Codes of older versions and what they are now (applied by the campaign migrations and when reading
+#: files written by older versions).
+RENAMED: dict[str, str] = {
+    "no-camera-data": FLAG_NO_CAMERA_DATA,
+    "few-camera-samples": FLAG_FEW_CAMERA_SAMPLES,
+    "no-lidar-value": FLAG_NO_LIDAR_VALUE,
+    "main-target-missing": FLAG_MAIN_TARGET_MISSING,
+    "sub-target-missing": FLAG_SUB_TARGET_MISSING,
+}
+
+
+def code(flag: str) -> str:
+    """The flag's code, without its reason.
+
+    >>> code("deck_not_measured: 0 of 6 deck targets found")
+    'deck_not_measured'
+    """
+    return flag.split(":", 1)[0].strip()
+
+
+def lookup(flag: str) -> Flag:
+    """The registered flag of ``flag`` (with or without its reason).
+
+    Raises
+    ------
+    UnknownFlagError
+        The code is not registered.
+    """
+    try:
+        return REGISTRY[code(flag)]
+    except KeyError:
+        raise UnknownFlagError(f"unknown flag {code(flag)!r}: not one this version of BridgeSurvey raises "
+                               "(a campaign from a newer version?)") from None
+
+
+def severity(flag: str) -> str:
+    """``info``, ``warning`` or ``problem`` (an unregistered code is an :class:`UnknownFlagError`).
+
+    >>> severity("normal_refitted_in_epoch"), severity("missing"), severity("no_displacement: why")
+    ('info', 'warning', 'problem')
+    """
+    return lookup(flag).severity
+
+
+def meaning(flag: str) -> str:
+    """The one-line meaning of a flag.
+
+    >>> meaning("saturated")
+    'intensity saturated on the target'
+    """
+    return lookup(flag).meaning
+
+
+def renamed(flag: str) -> str:
+    """A flag of an older version under its current code (the reason kept), others unchanged.
+
+    >>> renamed("no-camera-data"), renamed("missing")
+    ('no_camera_data', 'missing')
+    """
+    c = code(flag)
+    return RENAMED[c] + flag[len(c):] if c in RENAMED else flag
+
+
+def worst(flags: Iterable[str]) -> Optional[str]:
+    """The most serious severity among ``flags`` (None when there are none).
+
+    >>> worst(["normal_refitted_in_epoch", "missing"])
+    'warning'
+    >>> worst([]) is None
+    True
+    """
+    ranks = [SEVERITIES.index(severity(f)) for f in flags]
+    return SEVERITIES[max(ranks)] if ranks else None
+
+
+def count(flags: Iterable[str]) -> dict[str, int]:
+    """How many flags of each severity.
+
+    >>> count(["missing", "missing", "reference_inconsistent"])
+    {'info': 0, 'warning': 2, 'problem': 1}
+    """
+    out = {s: 0 for s in SEVERITIES}
+    for f in flags:
+        out[severity(f)] += 1
+    return out
+
+
+def describe(flags: Iterable[str]) -> str:
+    """Flags grouped by severity for a status line, most serious first.
+
+    >>> describe(["normal_refitted_in_epoch", "missing"])
+    'warning: missing; info: normal_refitted_in_epoch'
+    """
+    flags = list(flags)
+    parts = []
+    for s in reversed(SEVERITIES):
+        these = [f for f in flags if severity(f) == s]
+        if these:
+            parts.append(f"{s}: " + ", ".join(these))
+    return "; ".join(parts)

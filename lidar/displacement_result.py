@@ -1,0 +1,71 @@
+"""What the displacement computation takes and gives: observed centroids, reference checks, displacements.
+
+Kept apart from :mod:`lidar.displacement` so that the modules it calls (:mod:`lidar.pier_moves`) can name
+its result without importing it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from common.errors import InputError
+
+
+@dataclass(frozen=True)
+class Observation:
+    """A measured target position (scanner frame, metres) and its covariance (m^2)."""
+
+    xyz: np.ndarray
+    cov: np.ndarray
+
+
+@dataclass(frozen=True)
+class ReferenceCheck:
+    """Stability of one reference target between the baseline and an epoch."""
+
+    reflector: str
+    median_change_m: float
+    max_change_m: float
+    moved: bool
+    missing: bool
+    suspect: bool = False  # one of two targets that may have moved; left out of the reference point
+
+
+@dataclass(frozen=True)
+class Displacement:
+    """Vertical displacement of one measurement target against the baseline (positive up)."""
+
+    reflector: str
+    displacement_m: float
+    sigma_m: float
+    vertical_m: float
+    baseline_vertical_m: float
+    flags: tuple[str, ...] = ()
+
+    @property
+    def displacement_mm(self) -> float:
+        return self.displacement_m * 1000.0
+
+    @property
+    def sigma_mm(self) -> float:
+        return self.sigma_m * 1000.0
+
+
+@dataclass(frozen=True, eq=False)
+class EpochDisplacements:
+    """All displacements of one epoch and how they were obtained."""
+
+    displacements: tuple[Displacement, ...]
+    reference_ids: tuple[str, ...]
+    reference_checks: tuple[ReferenceCheck, ...]
+    normal_socs: np.ndarray
+    reference_point_socs: np.ndarray
+    normal_mode: str
+    flags: tuple[str, ...] = ()
+
+    def of(self, reflector: str) -> Displacement:
+        for d in self.displacements:
+            if d.reflector == reflector:
+                return d
+        raise InputError(f"no displacement for reflector {reflector!r}")

@@ -1,0 +1,269 @@
+"""Whole-scan comparison of two epochs of a campaign (the conventional approach, for context).
+
+Both epochs are brought into the campaign frame (the baseline epoch's scanner frame): a rigid
+registration on the reference-target centroids, refined by ICP on the stable parts (piers and
+the ground around them, below the deck). Then cloud-to-cloud or M3C2 change, and a span
+profile along the girder lines next to the target displacements of the same epochs.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+from common.errors import InputError
+from common.files import atomic_output, output_folder
+from common.progress import ProgressCallback, report, scaled
+from projects.store.errors import CampaignError
+from common.files import write_atomic
+from projects.results.table import displacement_table
+from projects.processing.stages import baseline_epoch, read_files
+from projects.store.campaign import Campaign, now_iso
+from registration.change import METHODS, ChangeResult, cloud_to_cloud, core_points_grid, m3c2
+from registration.icp import IcpResult, refine_icp, stable_mask
+from registration.ndt import refine_ndt
+from registration.profile import span_profile
+from registration.targets import TargetRegistration, register_targets
+from registration.transform import Transform
+
+SUMMARY_VERSION = 1
+
+
+@dataclass(frozen=True, eq=False)
+class EpochInFrame:
+    """One epoch brought into the campaign frame."""
+
+    label: str
+    registration: Optional[TargetRegistration]  # None for the baseline itself
+    icp: Optional[IcpResult]
+    transform: Transform                        # epoch SOCS -> campaign frame
+    xyz: np.ndarray                             # coarse scan in the campaign frame
+
+
+def _centroid_arrays(c: Campaign, label: str, ids) -> tuple[np.ndarray, np.ndarray]:
+    cents = c.centroids(label)
+    xyz = np.array([cents[i].xyz_socs if i in cents and cents[i].found else np.full(3, np.nan) for i in ids])
+    sig = np.array([float(np.sqrt(np.trace(cents[i].cov))) if i in cents and cents[i].found else np.nan for i in ids])
+    return xyz, sig
+
+
+def _below_deck_m(meas_xyz: np.ndarray) -> Optional[float]:
+    """Height limit of the stable parts: half a metre below the lowest deck target (None if none was seen)."""
+    z = meas_xyz[:, 2]
+    return float(np.nanmin(z) - 0.5) if np.isfinite(z).any() else None
+
+
+#: Refinements of the target registration on the stable parts.
+REFINEMENTS = ("icp", "ndt", "targets")
+
+
+def bring_to_campaign_frame(c: Campaign, label: str, base: str, *, refinement: str = "icp", base_xyz=None,
+                            progress: Optional[ProgressCallback] = None) -> EpochInFrame:
+    """Register epoch ``label`` onto the baseline epoch ``base`` (targets, then ICP or NDT on stable parts).
+
+    ``refinement`` is ``icp`` (Open3D, the default), ``ndt`` (PCL's
+    pcl_ndt3d) or ``targets`` (no refinement). ``base_xyz``, the baseline's
+    coarse scan, is read here when not given.
+    """
+    if refinement not in REFINEMENTS:
+        raise InputError(f"unknown registration refinement {refinement!r}; use {', '.join(REFINEMENTS)}")
+    refine = refinement != "targets"
+    if base_xyz is None and (label == base or refine):
+        base_xyz = read_files(c, c.files(base, "coarse")).xyz_socs
+    if label == base:
+        return EpochInFrame(label, None, None, Transform.identity("campaign"), base_xyz)
+    if not c.centroids(label) or not c.centroids(base):
+        raise CampaignError(f"epochs {label} and {base} need measured targets for the registration; "
+                            "add their fine scans and run 'bridgesurvey process'")
+    report(progress, 0.0, f"reading {label}")
+    scan = read_files(c, c.files(label, "coarse"), scaled(progress, 0.0, 0.3))
+    layout = c.layout()
+    refs = layout.ids_in("reference")
+    src, s1 = _centroid_arrays(c, label, refs)
+    dst, s2 = _centroid_arrays(c, base, refs)
+    tr = register_targets(src, dst, refs, sigma_m=np.hypot(s1, s2), source_frame=f"socs:{label}",
+                          target_frame="campaign")
+    tf, icp = tr.transform, None
+    if refine:
+        meas = layout.ids_in("measurement")
+        used = np.isfinite(src[:, 0]) & np.isfinite(dst[:, 0])
+        mask_src = stable_mask(scan.xyz_socs, src[used],
+                               exclude_above_m=_below_deck_m(_centroid_arrays(c, label, meas)[0]))
+        mask_dst = stable_mask(base_xyz, dst[used], exclude_above_m=_below_deck_m(_centroid_arrays(c, base, meas)[0]))
+        report(progress, 0.4, f"{refinement.upper()} on stable parts")
+        refine_fn = refine_ndt if refinement == "ndt" else refine_icp
+        icp = refine_fn(scan.xyz_socs[mask_src], base_xyz[mask_dst], tr.transform, progress=scaled(progress, 0.4, 0.95))
+        tf = icp.transform
+    return EpochInFrame(label, tr, icp, tf, tf.apply(scan.xyz_socs))
+
+
+def _deck_mask(xyz: np.ndarray, targets: np.ndarray, radius_m: float = 1.0, band_m: float = 0.15) -> np.ndarray:
+    from scipy.spatial import cKDTree
+
+    t = targets[np.isfinite(targets[:, 0])]
+    d, k = cKDTree(t[:, :2]).query(xyz[:, :2], distance_upper_bound=radius_m)
+    ok = np.isfinite(d)
+    out = np.zeros(len(xyz), bool)
+    out[ok] = np.abs(xyz[ok, 2] - t[k[ok], 2]) <= band_m
+    return out
+
+
+def compare_epochs(c: Campaign, from_label: str, to_label: str, *, method: str = "m3c2", refinement: str = "icp",
+                   bin_m: float = 2.5, core_spacing_m: float = 0.25,
+                   progress: Optional[ProgressCallback] = None) -> dict:
+    """Register two epochs into the campaign frame and compute their change and span profile.
+
+    Returns a JSON-ready summary; the arrays are under the private key ``_arrays``.
+    """
+    if method not in METHODS:
+        raise InputError(f"unknown comparison method {method!r}; use c2c or m3c2")
+    for lab in (from_label, to_label):
+        c.epoch(lab)
+    if from_label == to_label:
+        raise InputError("--from and --to must be two different epochs")
+    base = baseline_epoch(c)
+    if base is None:
+        raise CampaignError("no measured epoch yet: process the campaign first ('bridgesurvey process')")
+    report(progress, 0.0, f"reading {base}")
+    base_xyz = read_files(c, c.files(base, "coarse")).xyz_socs  # once, for both epochs
+    ea = bring_to_campaign_frame(c, from_label, base, refinement=refinement, base_xyz=base_xyz,
+                                 progress=scaled(progress, 0.05, 0.35))
+    eb = bring_to_campaign_frame(c, to_label, base, refinement=refinement, base_xyz=base_xyz,
+                                 progress=scaled(progress, 0.35, 0.7))
+    layout = c.layout()
+    refs, meas = layout.ids_in("reference"), layout.ids_in("measurement")
+    ref_base, _ = _centroid_arrays(c, base, refs)
+    meas_from, _ = _centroid_arrays(c, from_label, meas)
+    meas_from = ea.transform.apply(meas_from)
+    reg_err = float(np.sqrt(sum((e.registration.rms_m if e.registration else 0.0) ** 2 for e in (ea, eb))))
+    # The region worth comparing: the bridge (targets) and 5 m around it, ground included.
+    anchors = np.vstack([ref_base[np.isfinite(ref_base[:, 0])], meas_from[np.isfinite(meas_from[:, 0])]])
+    lo, hi = anchors.min(axis=0) - 5.0, anchors.max(axis=0) + 5.0
+    lo[2] = anchors[:, 2].min() - 10.0
+
+    def crop(x):
+        return x[np.all((x >= lo) & (x <= hi), axis=1)]
+
+    xa, xb = crop(ea.xyz), crop(eb.xyz)
+    report(progress, 0.72, f"change ({method})")
+    if method == "m3c2":
+        change = m3c2(xa, xb, core_points_grid(xa, core_spacing_m), registration_error_m=reg_err,
+                      progress=scaled(progress, 0.72, 0.92))
+    else:
+        change = cloud_to_cloud(xa, xb, registration_error_m=reg_err)
+    stable = stable_mask(change.points, ref_base[np.isfinite(ref_base[:, 0])], exclude_above_m=_below_deck_m(meas_from))
+    deck = _deck_mask(change.points, meas_from)
+    report(progress, 0.93, "span profile")
+    prof = span_profile(xa, xb, meas_from, bin_m=bin_m)
+    # target displacements of the same two epochs, at their stations along the span
+    rows = {(r["epoch"], r["reflector"]): r for r in displacement_table(c)}
+    targets = []
+    for rid, p in zip(meas, meas_from):
+        a, b = rows.get((from_label, rid)), rows.get((to_label, rid))
+        if a and b and a["displacement_mm"] is not None and b["displacement_mm"] is not None and np.isfinite(p[0]):
+            targets.append({"reflector": rid, "station_m": float(prof.station_of(p)[0]),
+                            "girder": int(prof.girder_of(p)[0]) + 1,
+                            "displacement_mm": b["displacement_mm"] - a["displacement_mm"],
+                            "sigma_mm": float(np.hypot(a["sigma_mm"] or 0, b["sigma_mm"] or 0))})
+    summary = {
+        "version": SUMMARY_VERSION, "from": from_label, "to": to_label, "baseline": base, "method": method,
+        "frame": f"campaign (scanner frame of baseline epoch {base})",
+        "registration": {e.label: _registration_json(e) for e in (ea, eb)},
+        "registration_error_mm": reg_err * 1e3,
+        "change": {"all": change.summary(), "stable_parts": change.summary(stable), "deck": change.summary(deck),
+                   "parameters": change.parameters},
+        "span_profile": {"bin_m": prof.bin_m, "girder_offsets_m": list(prof.girder_offsets_m),
+                         "bins": prof.table()},
+        "targets": targets, "created": now_iso(),
+    }
+    summary["_arrays"] = {"change": change, "profile": prof}
+    report(progress, 1.0, "compared")
+    return summary
+
+
+def _registration_json(e: EpochInFrame) -> dict:
+    if e.registration is None:
+        return {"role": "baseline (defines the campaign frame)", "transform": e.transform.to_json()}
+    out = {"targets": {"rms_mm": e.registration.rms_m * 1e3, "mode": e.registration.mode,
+                       "residuals": e.registration.table(), "warnings": list(e.registration.warnings)},
+           "transform": e.transform.to_json()}
+    if e.icp is not None:
+        from registration.transform import pose_difference
+
+        dt_m, dr_deg = pose_difference(e.registration.transform, e.icp.transform)
+        out["icp"] = {"method": e.icp.correction.method, "fitness": e.icp.fitness, "rms_mm": e.icp.rms_m * 1e3, "iterations": list(e.icp.iterations),
+                      "voxels_m": list(e.icp.voxels_m), "points": [e.icp.n_source, e.icp.n_target],
+                      "change_from_targets_mm": dt_m * 1e3, "change_from_targets_deg": dr_deg}
+    return out
+
+
+def write_outputs(summary: dict, out_dir: str | os.PathLike) -> list[Path]:
+    """change.laz (distances as extra dimensions), summary.json, registration.csv, span_profile.csv/.png."""
+    out = output_folder(out_dir)
+    arrays = summary["_arrays"]
+    public = {k: v for k, v in summary.items() if k != "_arrays"}
+    paths = [write_change_las(arrays["change"], out / "change.laz"),
+             write_atomic(out / "summary.json", json.dumps(public, indent=2, default=float))]
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["epoch", "target", "dx_mm", "dy_mm", "dz_mm", "residual_mm", "leave_one_out_mm", "used", "fits"])
+    for lab, reg in public["registration"].items():
+        for r in reg.get("targets", {}).get("residuals", []):
+            w.writerow([lab, r["target"], *(f"{r[k]:.3f}" for k in ("dx_mm", "dy_mm", "dz_mm", "residual_mm",
+                                                                     "leave_one_out_mm")), r["used"], r["fits"]])
+    paths.append(write_atomic(out / "registration.csv", buf.getvalue()))
+    buf = io.StringIO()
+    bins = public["span_profile"]["bins"]
+    if bins:
+        w = csv.DictWriter(buf, fieldnames=list(bins[0]), lineterminator="\n")
+        w.writeheader()
+        w.writerows(bins)
+    paths.append(write_atomic(out / "span_profile.csv", buf.getvalue()))
+    from lidar.figures import save_figure
+    from projects.compare.figures import span_profile_figure
+
+    paths.append(save_figure(span_profile_figure(public), out / "span_profile.png"))
+    return paths
+
+
+def write_change_las(change: ChangeResult, path: Path) -> Path:
+    """Write a comparison's points with their change (mm) as extra dimensions of a LAS file; returns its path."""
+    import laspy
+
+    hdr = laspy.LasHeader(point_format=6, version="1.4")
+    hdr.scales = np.array([1e-4, 1e-4, 1e-4])
+    hdr.offsets = np.floor(change.points.min(axis=0))
+    hdr.add_extra_dims([laspy.ExtraBytesParams(name=f"{change.method}_distance_mm", type=np.float32),
+                        laspy.ExtraBytesParams(name="lod_mm", type=np.float32),
+                        laspy.ExtraBytesParams(name="significant", type=np.uint8)])
+    las = laspy.LasData(hdr)
+    las.x, las.y, las.z = change.points[:, 0], change.points[:, 1], change.points[:, 2]
+    las[f"{change.method}_distance_mm"] = (change.distance_m * 1e3).astype(np.float32)
+    lod = change.lod_m if change.lod_m is not None else np.full(len(change.points), change.registration_error_m)
+    las["lod_mm"] = (lod * 1e3).astype(np.float32)
+    las["significant"] = change.significant.astype(np.uint8)
+    with atomic_output(path) as tmp:
+        las.write(tmp)
+    return path
+
+
+def save_comparison(c: Campaign, summary: dict) -> None:
+    """Keep a comparison's summary (without its arrays) in the campaign, for reports."""
+    c.save_comparison_summary({k: v for k, v in summary.items() if k != "_arrays"})
+
+
+def comparisons(c: Campaign, epochs: Optional[set] = None) -> list[dict]:
+    """Stored comparison summaries (newest versions this BridgeSurvey reads), optionally within some epochs."""
+    out = []
+    for s in c.comparison_summaries():
+        if int(s.get("version", 0)) > SUMMARY_VERSION:
+            continue
+        if epochs is None or (s["from"] in epochs and s["to"] in epochs):
+            out.append(s)
+    return out

@@ -1,0 +1,144 @@
+"""The on-site check, right after the fine scans are imported: is every target good enough to leave.
+
+For each planned target: found or not, points on the target against the plan, and the vertical
+centroid sigma against the goal (the sigma the plan's points promise, with 30 % tolerance, or the
+campaign's ``sigma_goal_mm``). Targets that fall short get a re-scan plan in the plan JSON contract,
+with steps scaled by what the scan actually delivered.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from lidar.angles import direction_from_angles
+from lidar.plan import PlanTarget, ScanPlan, plan_fine_scans
+from lidar.prediction import centroid_covariance
+from common.progress import ProgressCallback
+from common.errors import ProcessingError
+from projects.store.campaign import Campaign
+
+POINTS_TOLERANCE = 0.7  # fewer than 70 % of the planned points: re-scan
+SIGMA_TOLERANCE = 1.3  # sigma over 130 % of the promised one: re-scan
+STATUSES = ("ok", "short", "imprecise", "not found")
+
+
+@dataclass(frozen=True)
+class TargetCheck:
+    """One target of the check.
+
+    Attributes
+    ----------
+    points, planned_points : int
+        Disc points measured, and promised by the plan.
+    sigma_mm, goal_sigma_mm : float
+        Vertical standard deviation of the centroid, and the goal, mm (NaN when not found).
+    status : {"ok", "short", "imprecise", "not found"}
+    """
+
+    reflector: str
+    group: str
+    found: bool
+    points: int
+    planned_points: int
+    sigma_mm: float
+    goal_sigma_mm: float
+    status: str
+    note: str = ""
+
+    def to_json(self) -> dict:
+        def num(v):
+            return None if not math.isfinite(v) else round(float(v), 4)
+        return {"reflector": self.reflector, "group": self.group, "found": self.found, "points": self.points,
+                "planned_points": self.planned_points,
+                "points_ratio": None if not self.planned_points else round(self.points / self.planned_points, 3),
+                "sigma_mm": num(self.sigma_mm), "goal_sigma_mm": num(self.goal_sigma_mm), "status": self.status,
+                "note": self.note}
+
+
+@dataclass(frozen=True)
+class EpochCheck:
+    """The on-site check of an epoch's fine scans: each target's verdict and the re-scan plan (or None)."""
+
+    epoch: str
+    targets: tuple[TargetCheck, ...]
+    rescan: Optional[ScanPlan]
+
+    @property
+    def short(self) -> tuple[TargetCheck, ...]:
+        return tuple(t for t in self.targets if t.status != "ok")
+
+    def to_json(self) -> dict:
+        return {"epoch": self.epoch, "ok": not self.short, "targets": [t.to_json() for t in self.targets],
+                "rescan": None if self.rescan is None else self.rescan.to_json()}
+
+
+def check_epoch(c: Campaign, label: str, *, goal_sigma_mm: Optional[float] = None,
+                progress: Optional[ProgressCallback] = None) -> EpochCheck:
+    """Measure the epoch's fine scans and judge every planned target (see the module notes)."""
+    from projects.processing.stages import run_stage1, save_stage1, stage1_job
+
+    c.epoch(label)  # an unknown epoch says so
+    if not c.files(label, "fine"):
+        raise ProcessingError(f"epoch {label} has no fine scans yet; import them with 'bridgesurvey add-fine' first")
+    if goal_sigma_mm is not None and not (math.isfinite(goal_sigma_mm) and goal_sigma_mm > 0):
+        raise ProcessingError(f"the sigma goal must be a positive number of millimetres, got {goal_sigma_mm}")
+    result = run_stage1(stage1_job(c, label), progress=progress)  # the plan it measured with, and the centroids
+    save_stage1(c, result)
+    cents, plan = result.centroids, result.plan
+    layout = c.layout(c.epoch(label).datetime)
+    diam = {i: float(d) for i, d in zip(layout.ids, layout.diameters_m)}
+    rows, retry = [], []
+    for roi in plan.rois:
+        cent = cents.get(roi.reflector)
+        planned = int(roi.expected_target_points)
+        d = diam.get(roi.reflector, 0.05)
+        if cent is None or not cent.found:
+            rows.append(TargetCheck(roi.reflector, roi.group, False, 0 if cent is None else int(cent.n_points), planned,
+                                    float("nan"), float("nan"), "not found",
+                                    "no disc in the window: check the line of sight and that the target is there"))
+            retry.append((roi, None, 1.0))
+            continue
+        sigma = 1000.0 * math.sqrt(max(float(cent.cov[2, 2]), 0.0))
+        if goal_sigma_mm is None:
+            noise = cent.sigma_range_m if math.isfinite(cent.sigma_range_m) and cent.sigma_range_m > 0 \
+                else plan.profile.range_noise_m
+            normal = cent.normal_socs if np.all(np.isfinite(cent.normal_socs)) else -cent.xyz_socs
+            promised = centroid_covariance(cent.xyz_socs, normal, max(planned, 1), diameter_m=d, range_noise_m=noise)
+            goal = SIGMA_TOLERANCE * 1000.0 * math.sqrt(promised[2, 2])
+        else:
+            goal = float(goal_sigma_mm)
+        ratio = cent.n_points / planned if planned else 1.0
+        if ratio < POINTS_TOLERANCE:
+            status, note = "short", f"{cent.n_points} of {planned} planned points"
+        elif sigma > goal:
+            status, note = "imprecise", f"sigma {sigma:.3f} mm over the goal {goal:.3f} mm"
+        else:
+            status, note = "ok", ""
+        rows.append(TargetCheck(roi.reflector, roi.group, True, int(cent.n_points), planned, sigma, goal, status, note))
+        if status != "ok":
+            retry.append((roi, cent, ratio))
+    return EpochCheck(label, tuple(rows), _rescan_plan(plan, retry, diam) if retry else None)
+
+
+def _rescan_plan(plan: ScanPlan, retry, diam: dict) -> ScanPlan:
+    """Windows for the targets that fell short, aimed at the measured centroid.
+
+    The incidence is scaled by what the scan delivered (the planner then picks finer steps).
+    """
+    targets = []
+    for roi, cent, ratio in retry:
+        cos_planned = math.cos(math.radians(roi.incidence_deg)) if math.isfinite(roi.incidence_deg) else None
+        if cent is not None:
+            xyz = tuple(float(v) for v in cent.xyz_socs)
+            cos_eff = None if cos_planned is None else float(np.clip(cos_planned * max(ratio, 0.05), 0.05, 1.0))
+            targets.append(PlanTarget(roi.reflector, roi.group, xyz, diam.get(roi.reflector, 0.05), False, cos_eff))
+        else:
+            tc, pc = roi.window.centre
+            xyz = tuple(float(v) for v in direction_from_angles(tc, pc) * roi.range_m)
+            targets.append(PlanTarget(roi.reflector, roi.group, xyz, diam.get(roi.reflector, 0.05), True, cos_planned))
+    out = plan_fine_scans(targets, epoch=plan.epoch, profile=plan.profile, min_points=plan.min_points,
+                          budget_seconds=plan.budget_seconds)
+    return out

@@ -1,0 +1,191 @@
+"""Processing many campaigns on a Dask cluster: workers compute, the campaigns' owner saves.
+
+Every stale epoch of every campaign becomes one ``dask.distributed`` task running
+:func:`projects.processing.run_stage1` on plain values (file paths, layout, parameters, scanner);
+workers never open a campaign. This process holds each campaign's writer lock for the whole run and
+saves each result in its own transaction as it arrives, so bridges never wait for each other and an
+interrupted run keeps everything saved so far. Stage 2 (displacements, cheap) runs here once a
+campaign's epochs are in.
+
+Workers need the same BridgeSurvey installed and the campaign folders at the same paths (shared
+storage). A worker that dies mid-task loses nothing: the scheduler runs the task again elsewhere
+(``retries`` covers errors raised by the task itself). A campaign another process is writing (another
+fleet run, the desktop application) is skipped with a message, not waited for.
+"""
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+from dataclasses import dataclass, field
+from typing import Optional, Sequence
+
+from common.errors import InputError, SurveyError
+from common.progress import ProgressCallback, report
+from projects.store.errors import CampaignLockedError
+from projects.fleet.status import find_campaigns
+from projects.processing.stages import (EpochOutcome, ProcessSummary, finish_displacements, run_stage1, save_stage1,
+                                 stage1_job, stale_epochs)
+from projects.store.campaign import Campaign
+
+log = logging.getLogger(__name__)
+TASK_RETRIES = 2
+
+
+@dataclass
+class CampaignRun:
+    """One campaign in a fleet run: its processing summary, the tasks it sent, or why it was skipped."""
+
+    folder: str
+    name: str = ""
+    skipped: Optional[str] = None
+    summary: ProcessSummary = field(default_factory=ProcessSummary)
+    tasks: int = 0
+
+
+@dataclass
+class FleetRun:
+    """A whole fleet run: every campaign, the tasks, the failures and the cluster that ran them."""
+
+    campaigns: list[CampaignRun] = field(default_factory=list)
+    tasks: int = 0
+    failed: int = 0
+    cluster: str = ""
+
+    def to_json(self) -> dict:
+        return {"cluster": self.cluster, "tasks": self.tasks, "failed": self.failed,
+                "campaigns": [{"folder": r.folder, "name": r.name, "skipped": r.skipped, "tasks": r.tasks,
+                               "baseline": r.summary.baseline, "displacement_epochs": r.summary.displacement_epochs,
+                               "outcomes": [o.__dict__ for o in r.summary.outcomes],
+                               "problems": r.summary.problems} for r in self.campaigns]}
+
+
+def _task(job):
+    """The worker side: stage 1 of one epoch (imported by name on the worker)."""
+    return run_stage1(job)
+
+
+@contextlib.contextmanager
+def _client(scheduler: Optional[str], workers: Optional[int]):
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:  # pragma: no cover - a dependency of the package
+        raise InputError("fleet processing needs dask.distributed; reinstall BridgeSurvey") from None
+    if scheduler:
+        try:
+            client = Client(scheduler, timeout="20s")
+        except (OSError, TimeoutError) as exc:
+            raise InputError(f"cannot reach the Dask scheduler at {scheduler} ({exc}); start it with "
+                             "'dask scheduler' and its workers with 'dask worker ADDRESS'") from None
+        try:
+            yield client, f"scheduler {scheduler}"
+        finally:
+            client.close()
+        return
+    n = workers or max(1, min(4, os.cpu_count() or 1))
+    if not log.isEnabledFor(logging.INFO):  # the cluster's own chatter only with --verbose
+        for name in ("distributed", "distributed.scheduler", "distributed.nanny", "distributed.core"):
+            logging.getLogger(name).setLevel(logging.ERROR)
+    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                           scheduler_kwargs={"dashboard": False}, silence_logs=logging.ERROR)
+    client = Client(cluster)
+    try:
+        yield client, f"LocalCluster of {n} worker processes"
+    finally:
+        client.close()
+        cluster.close()
+
+
+def fleet_process(roots: Sequence[str | os.PathLike], *, scheduler: Optional[str] = None,
+                  workers: Optional[int] = None, progress: Optional[ProgressCallback] = None) -> FleetRun:
+    """Bring every campaign under ``roots`` up to date on a Dask cluster (see the module notes).
+
+    Parameters
+    ----------
+    roots : sequence of folders or fleet files
+    scheduler : str, optional, keyword-only
+        Address of a running Dask scheduler (``tcp://host:8786``); default: a LocalCluster here.
+    workers : int, optional, keyword-only
+        Worker processes of the LocalCluster (default one per core, at most 4).
+    progress : callable, optional, keyword-only
+    """
+    if workers is not None and workers < 1:
+        raise InputError(f"--workers must be at least 1, got {workers}")
+    folders = find_campaigns(roots)
+    run = FleetRun()
+    with contextlib.ExitStack() as stack:
+        open_campaigns: dict[str, Campaign] = {}
+        jobs = []
+        for folder in folders:
+            cr = CampaignRun(str(folder))
+            run.campaigns.append(cr)
+            try:
+                c = stack.enter_context(Campaign.open(folder, writable=True))
+            except CampaignLockedError as exc:
+                cr.skipped = str(exc).splitlines()[0]
+                continue
+            except SurveyError as exc:
+                cr.skipped = str(exc).splitlines()[0]
+                continue
+            cr.name = c.name
+            open_campaigns[cr.folder] = c
+            stale = stale_epochs(c)
+            for e in c.epochs():
+                if e.label in stale:
+                    try:
+                        jobs.append((cr, stage1_job(c, e.label)))
+                        cr.tasks += 1
+                    except SurveyError as exc:
+                        cr.summary.outcomes.append(EpochOutcome(e.label, "failed", str(exc)))
+        run.tasks = len(jobs)
+        if jobs or scheduler:  # a scheduler given is checked even when there is nothing to do
+            client, run.cluster = stack.enter_context(_client(scheduler, workers))
+            if jobs:
+                _run_tasks(client, jobs, open_campaigns, run, progress)
+        for cr in run.campaigns:
+            c = open_campaigns.get(cr.folder)
+            if c is None:
+                continue
+            labels = [e.label for e in c.epochs()]
+            done = {o.epoch for o in cr.summary.outcomes}
+            cr.summary.outcomes += [EpochOutcome(lab, "up-to-date") for lab in labels if lab not in done]
+            finish_displacements(c, cr.summary, labels)
+    report(progress, 1.0, f"{run.tasks} epoch(s) on {len(folders)} campaign(s)")
+    return run
+
+
+def _run_tasks(client, jobs, open_campaigns, run: FleetRun, progress) -> None:
+    from distributed import KilledWorker, as_completed
+
+    futures = {}
+    for cr, job in jobs:
+        key = f"bridgesurvey-stage1-{job.plan_hash[:12]}-{job.measure_hash or 'plan'}-{abs(hash(job.folder)) % 10**8}"
+        fut = client.submit(_task, job, key=key, pure=False, retries=TASK_RETRIES)
+        futures[fut] = (cr, job)
+    done = 0
+    try:
+        for fut in as_completed(list(futures)):
+            cr, job = futures[fut]
+            c = open_campaigns[cr.folder]
+            try:
+                result = fut.result()
+                save_stage1(c, result)
+                if result.centroids is not None:
+                    found = sum(t.found for t in result.centroids.values())
+                    cr.summary.outcomes.append(EpochOutcome(job.label, "measured",
+                                                        f"{found}/{len(result.centroids)} targets found"))
+                else:
+                    cr.summary.outcomes.append(EpochOutcome(job.label, "planned", f"{len(result.plan.rois)} windows"))
+            except SurveyError as exc:
+                run.failed += 1
+                cr.summary.outcomes.append(EpochOutcome(job.label, "failed", str(exc).splitlines()[0]))
+            except KilledWorker:
+                run.failed += 1
+                cr.summary.outcomes.append(EpochOutcome(job.label, "failed", "the workers running this epoch died "
+                                                    "repeatedly (out of memory?); run 'bridgesurvey process' on it"))
+            done += 1
+            report(progress, 0.95 * done / len(futures), f"{done} of {len(futures)} epochs ({cr.name} {job.label})")
+    except BaseException:
+        # Ctrl-C or a lost cluster: stop the rest; what was saved stays (each epoch in its own transaction)
+        client.cancel(list(futures))
+        raise

@@ -1,0 +1,64 @@
+"""Survey reports: a PDF for the bridge owner (one visit, a period, or the whole campaign).
+
+``write_report`` is the entry point; :mod:`projects.outputs.report.content` gathers the
+facts, :mod:`projects.outputs.report.plots` draws the figures and
+:mod:`projects.outputs.report.pdf` lays out the document.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Optional
+
+from common.errors import InputError
+from common.progress import ProgressCallback, scaled
+from projects.outputs.report.content import ReportContent, ReportScope, gather
+from projects.store.campaign import Campaign
+
+__all__ = ["ReportContent", "ReportScope", "gather", "write_report"]
+
+
+def _check_output(path: Path) -> None:
+    if path.suffix.lower() != ".pdf":
+        raise InputError(f"{path}: the report is a PDF; give an output name ending in .pdf")
+    if not path.parent.is_dir():
+        raise InputError(f"{path}: the folder {path.parent} does not exist; create it first")
+    if path.is_dir():
+        raise InputError(f"{path}: is a folder; give a file name ending in .pdf")
+
+
+def _preview_from_scan(c: Campaign):
+    """For epochs planned before previews were stored: analyse the coarse scan again (slow, not saved)."""
+    def preview_of(label: str):
+        from projects.store.previews import decode_preview, encode_preview
+        from projects.processing.stages import analyse_epoch_coarse, parameters
+
+        if not c.files(label, "coarse"):
+            return None
+        analysis = analyse_epoch_coarse(c, label, c.layout(c.epoch(label).datetime), parameters(c))
+        return decode_preview(*encode_preview(analysis))
+    return preview_of
+
+
+def write_report(c: Campaign, path: str | os.PathLike, scope: ReportScope = ReportScope(), *,
+                 author: Optional[str] = None, progress: Optional[ProgressCallback] = None) -> Path:
+    """Write the PDF report of ``scope`` (default: whole campaign) to ``path``.
+
+    Parameters
+    ----------
+    c : Campaign
+        An open campaign (read-only is enough; nothing is changed).
+    path : path-like
+        Output file, ``.pdf``; written through a temporary file.
+    scope : ReportScope, optional
+        One epoch (a visit report, with the history up to it) or a period.
+    author : str, optional, keyword-only
+        Who prepared the report (default: the login name).
+    progress : callable, optional, keyword-only
+    """
+    from projects.outputs.report.pdf import build_pdf
+
+    path = Path(path)
+    _check_output(path)
+    content = gather(c, scope, author=author)
+    return build_pdf(content, path, preview_of=_preview_from_scan(c), progress=scaled(progress, 0.05, 1.0))

@@ -1,0 +1,213 @@
+"""What goes into a survey report, gathered from a campaign (no PDF code here).
+
+:func:`gather` reads everything the report shows for a scope (one epoch, a
+period or the whole campaign) into plain frozen dataclasses, so the PDF
+builder and any other front end (the desktop application) draw the same facts.
+"""
+from __future__ import annotations
+
+import datetime as dt
+import getpass
+import logging
+import platform
+from dataclasses import dataclass
+from importlib import metadata
+from typing import Optional
+
+from common.errors import InputError, SurveyError
+from common.flags import FLAG_SECOND_OBJECT
+from projects.store import schema
+from projects.results.table import displacement_table
+from projects.store.history import DisplacementHistory, histories
+from projects.processing.stages import PIPELINE_VERSION, baseline_epoch, parameters
+from projects.store.records import (DisplacementSet, Epoch, LimitRecord, LogEntry, Reflector, ReferenceCheck, ScanFile,
+                              StoredPlan)
+from projects.store.campaign import Campaign
+
+log = logging.getLogger(__name__)
+
+PACKAGES = ("bridgesurvey", "numpy", "scipy", "laspy", "lazrs", "pye57", "open3d", "py4dgeo", "matplotlib",
+            "reportlab", "svglib")
+
+
+@dataclass(frozen=True)
+class ReportScope:
+    """Which epochs a report covers: one epoch, a period, or (both None) everything."""
+
+    epoch: Optional[str] = None
+    start: Optional[str] = None
+    end: Optional[str] = None
+
+
+@dataclass(frozen=True)
+class TargetState:
+    """One reflector's situation at the last epoch of the report."""
+
+    reflector: str
+    group: str
+    installed: Optional[str]
+    retired: Optional[str]
+    replaces: Optional[str]
+    found: Optional[bool]
+    flags: tuple[str, ...]
+    remarks: tuple[str, ...]
+
+
+@dataclass(frozen=True, eq=False)
+class EpochSection:
+    """Everything the report shows about one epoch."""
+
+    label: str
+    datetime: str
+    notes: str
+    stage: str
+    plan: Optional[StoredPlan]
+    preview: object  # projects.map_previews.MapPreview or None
+    centroids: dict
+    reference_checks: tuple[ReferenceCheck, ...]
+    displacement_set: Optional[DisplacementSet]
+    files: tuple[ScanFile, ...]
+
+
+@dataclass(frozen=True, eq=False)
+class ReportContent:
+    """The facts of one report."""
+
+    name: str
+    folder: str
+    span_m: Optional[float]
+    scanner: str
+    author: str
+    generated: str
+    scope: ReportScope
+    scope_text: str
+    baseline: Optional[str]
+    epochs: tuple[EpochSection, ...]
+    displacements: tuple[dict, ...]      # rows of projects.exports.displacement_table within the scope
+    histories: dict[str, DisplacementHistory]  # per target, within the scope
+    reflectors: tuple[Reflector, ...]
+    target_states: tuple[TargetState, ...]
+    limits: tuple[LimitRecord, ...]
+    parameters: dict
+    versions: dict
+    log: tuple[LogEntry, ...]
+    extras: dict                         # optional sections (comparisons, camera cross-validation) by name
+
+    @property
+    def period(self) -> tuple[str, str]:
+        return (self.epochs[0].datetime, self.epochs[-1].datetime) if self.epochs else ("", "")
+
+
+def select_epochs(c: Campaign, scope: ReportScope) -> list[Epoch]:
+    """The campaign's epochs (in time order) that a scope covers; InputError for unknown labels."""
+    epochs = c.epochs()
+    if not epochs:
+        raise InputError(f"{c.folder}: the campaign has no epochs yet; add one with 'bridgesurvey add-epoch'")
+    labels = [e.label for e in epochs]
+    for lab in (scope.epoch, scope.start, scope.end):
+        if lab is not None and lab not in labels:
+            raise InputError(f"unknown epoch {lab!r}; the campaign has {labels[0]} ... {labels[-1]} "
+                             "(see 'bridgesurvey status')")
+    if scope.epoch is not None:
+        if scope.start or scope.end:
+            raise InputError("give either --epoch or --from/--to, not both")
+        return [epochs[labels.index(scope.epoch)]]
+    i0 = labels.index(scope.start) if scope.start else 0
+    i1 = labels.index(scope.end) if scope.end else len(labels) - 1
+    if i1 < i0:
+        raise InputError(f"--from {scope.start} comes after --to {scope.end}")
+    return epochs[i0:i1 + 1]
+
+
+def versions() -> dict:
+    """Versions of Python, the pipeline, the campaign schema and the libraries that shaped the numbers."""
+    out = {"python": platform.python_version(), "pipeline": PIPELINE_VERSION,
+           "campaign schema": str(schema.SCHEMA_VERSION)}
+    for p in PACKAGES:
+        try:
+            out[p] = metadata.version(p)
+        except metadata.PackageNotFoundError:
+            pass
+    return out
+
+
+def _target_states(c: Campaign, last: Optional[EpochSection]) -> list[TargetState]:
+    moved = {r.reflector for r in (last.reference_checks if last else ()) if r.moved or r.suspect}
+    reflectors = c.reflectors()
+    replaced_by = {r.replaces: r.id for r in reflectors if r.replaces}
+    out = []
+    for r in reflectors:
+        t = last.centroids.get(r.id) if last else None
+        flags = tuple(t.flags) if t is not None else ()
+        remarks = []
+        if t is not None and not t.found:
+            remarks.append("not found (occluded or removed)")
+        if FLAG_SECOND_OBJECT in flags:
+            remarks.append("contamination beside the target left out")
+        if r.id in moved:
+            remarks.append("moved reference: left out of the reference group")
+        if r.replaces:
+            remarks.append(f"replaces {r.replaces}")
+        if r.id in replaced_by:
+            remarks.append(f"replaced by {replaced_by[r.id]}")
+        if r.retired and last is not None and r.retired <= last.datetime:
+            remarks.append(f"retired {r.retired[:10]}")
+        out.append(TargetState(r.id, r.group, r.installed, r.retired, r.replaces,
+                               None if t is None else bool(t.found), flags, tuple(remarks)))
+    return out
+
+
+def gather(c: Campaign, scope: ReportScope = ReportScope(), *, author: Optional[str] = None,
+           with_previews: bool = True) -> ReportContent:
+    """Collect the report's facts for ``scope`` from an open campaign."""
+    chosen = select_epochs(c, scope)
+    sections = []
+    for e in chosen:
+        lab = e.label
+        res = c.result(lab)
+        sections.append(EpochSection(
+            lab, e.datetime, e.notes, res.stage if res else "imported",
+            c.stored_plan(lab), c.map_preview(lab) if with_previews else None,
+            c.centroids(lab), tuple(c.reference_checks(lab)), c.displacement_set(lab), tuple(c.files(lab))))
+    last_time = chosen[-1].datetime
+    first_time = chosen[0].datetime
+    # A visit report shows the history up to the visit; a period report the period itself.
+    since = "" if scope.epoch is not None else first_time
+    rows = [r for r in displacement_table(c) if since <= r["datetime"] <= last_time]
+    if scope.epoch is not None:  # a visit report shows the history up to that visit
+        text = f"visit of {chosen[0].datetime[:16].replace('T', ' ')} (epoch {scope.epoch})"
+    elif len(chosen) == len(c.epochs()):
+        text = f"whole campaign, {len(chosen)} epochs"
+    else:
+        text = f"period {chosen[0].label} to {chosen[-1].label}, {len(chosen)} epochs"
+    in_scope = {r["epoch"] for r in rows}
+    hist = {rid: h.select([lab in in_scope for lab in h.epochs]) for rid, h in histories(c).items()}
+    from projects.compare.whole_scan import comparisons
+
+    extras = {}
+    cmp_ = comparisons(c, {s.label for s in sections} | ({baseline_epoch(c)} if scope.epoch else set()))
+    if cmp_:
+        extras["comparisons"] = cmp_
+    from projects.series.camera import crossval_summaries, load_series
+
+    cvs = crossval_summaries(c)
+    if cvs:
+        extras["crossvals"] = [(s, load_series(c, s["series"])[1]) for s in cvs]
+    from projects.series.context import plot_context
+
+    extras["context"] = plot_context(c)
+    if len({r["epoch"] for r in rows}) >= 4:
+        from projects.analysis.run import analyse_campaign
+
+        try:
+            extras["analysis"] = analyse_campaign(c)
+        except SurveyError as exc:  # no displacements to analyse: the report says so elsewhere
+            log.info("no analysis section: %s", exc)
+    log_rows = [r for r in c.log() if r.epoch is None or r.epoch in {s.label for s in sections}]
+    return ReportContent(
+        name=c.name, folder=str(c.folder), span_m=c.span_m, scanner=c.profile.name,
+        author=author or getpass.getuser(),
+        generated=dt.datetime.now(dt.timezone.utc).astimezone().isoformat(timespec="seconds"),
+        scope=scope, scope_text=text, baseline=baseline_epoch(c), epochs=tuple(sections), displacements=tuple(rows),
+        histories=hist, reflectors=tuple(c.reflectors()), target_states=tuple(_target_states(c, sections[-1])),
+        limits=tuple(c.limits()), parameters=parameters(c), versions=versions(), log=tuple(log_rows), extras=extras)

@@ -1,0 +1,580 @@
+"""The survey report as a PDF (reportlab platypus; figures from matplotlib, line plots as vectors)."""
+from __future__ import annotations
+
+import io
+import json
+import os
+from pathlib import Path
+from typing import Callable, Optional, Sequence
+
+import numpy as np
+
+from common.flags import FLAG_NO_CAMERA_DATA, REGISTRY, describe, severity
+from common.progress import ProgressCallback, report, scaled
+from projects.outputs.report.content import EpochSection, ReportContent
+
+PAGE_MARGIN_MM = 16
+STATE_COLOURS = {"ok": "#c8e6c9", "warning": "#ffe0b2", "alarm": "#ffcdd2", "unknown": "#eeeeee"}
+
+
+# ----------------------------------------------------------------------------- styles and helpers
+def _fonts() -> tuple[str, str]:
+    """DejaVu Sans (shipped with matplotlib) so that σ, ±, ≤ print; registered once."""
+    from matplotlib import get_data_path
+    from reportlab.pdfbase import pdfmetrics
+    from reportlab.pdfbase.ttfonts import TTFont
+
+    if "DejaVuSans" not in pdfmetrics.getRegisteredFontNames():
+        ttf = Path(get_data_path()) / "fonts" / "ttf"
+        pdfmetrics.registerFont(TTFont("DejaVuSans", str(ttf / "DejaVuSans.ttf")))
+        pdfmetrics.registerFont(TTFont("DejaVuSans-Bold", str(ttf / "DejaVuSans-Bold.ttf")))
+        from reportlab.lib.fonts import addMapping
+
+        addMapping("DejaVuSans", 0, 0, "DejaVuSans")
+        addMapping("DejaVuSans", 1, 0, "DejaVuSans-Bold")
+    return "DejaVuSans", "DejaVuSans-Bold"
+
+
+def _styles():
+    from reportlab.lib.styles import ParagraphStyle, getSampleStyleSheet
+
+    regular, bold = _fonts()
+    ss = getSampleStyleSheet()
+    for name in ("Normal", "BodyText", "Title", "Heading1", "Heading2", "Heading3"):
+        ss[name].fontName = bold if name != "Normal" and name != "BodyText" else regular
+    ss["Normal"].fontSize = 9
+    ss["Normal"].leading = 12
+    ss.add(ParagraphStyle("Small", parent=ss["Normal"], fontSize=7.5, leading=9.5))
+    ss.add(ParagraphStyle("Cell", parent=ss["Normal"], fontSize=7, leading=8.5))
+    ss.add(ParagraphStyle("Mono", parent=ss["Normal"], fontName="Courier", fontSize=5.8, leading=8))
+    ss.add(ParagraphStyle("Big", parent=ss["Title"], fontSize=24, leading=30, alignment=0))
+    ss.add(ParagraphStyle("Sub", parent=ss["Normal"], fontSize=13, leading=17))
+    ss["Heading1"].fontSize = 15
+    ss["Heading2"].fontSize = 11.5
+    ss["Heading2"].spaceBefore = 8
+    return ss
+
+
+def _esc(text) -> str:
+    from xml.sax.saxutils import escape
+
+    return escape("" if text is None else str(text))
+
+
+def _num(v, fmt="{:.2f}") -> str:
+    return "–" if v is None or (isinstance(v, float) and not np.isfinite(v)) else fmt.format(v)
+
+
+def _table(rows: Sequence[Sequence], widths_mm: Sequence[float], ss, *, header_rows: int = 1,
+           cell_colours: Sequence[tuple[int, int, str]] = ()):
+    from reportlab.lib import colors
+    from reportlab.lib.units import mm
+    from reportlab.platypus import Paragraph, Table, TableStyle
+
+    data = [[c if not isinstance(c, str) else Paragraph(_esc(c), ss["Cell"]) for c in r] for r in rows]
+    t = Table(data, colWidths=[w * mm for w in widths_mm], repeatRows=header_rows)
+    style = [("GRID", (0, 0), (-1, -1), 0.25, colors.HexColor("#9e9e9e")),
+             ("BACKGROUND", (0, 0), (-1, header_rows - 1), colors.HexColor("#e3eaf3")),
+             ("VALIGN", (0, 0), (-1, -1), "TOP"),
+             ("TOPPADDING", (0, 0), (-1, -1), 1.5), ("BOTTOMPADDING", (0, 0), (-1, -1), 1.5)]
+    for r in range(header_rows, len(rows)):
+        if (r - header_rows) % 2:
+            style.append(("BACKGROUND", (0, r), (-1, r), colors.HexColor("#f6f6f6")))
+    for r, c, colour in cell_colours:
+        style.append(("BACKGROUND", (c, r), (c, r), colors.HexColor(colour)))
+    t.setStyle(TableStyle(style))
+    return t
+
+
+def figure_flowable(fig, width_mm: float):
+    """A matplotlib Figure as a vector drawing ``width_mm`` wide (SVG through svglib).
+
+    Maps are raster images instead: see :func:`render_map_jpeg`.
+    """
+    from reportlab.lib.units import mm
+    from svglib.svglib import svg2rlg
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="svg")
+    buf.seek(0)
+    d = svg2rlg(buf)
+    f = width_mm * mm / d.width
+    d.scale(f, f)
+    d.width, d.height = d.width * f, d.height * f
+    return d
+
+
+def write_landscape_pdf(story: list, path: str | os.PathLike, *, title: str) -> Path:
+    """A one-off landscape A4 document (field sheet, fleet summary), written through a temporary file."""
+    from reportlab.lib.pagesizes import A4, landscape
+    from reportlab.lib.units import mm
+    from reportlab.platypus import SimpleDocTemplate
+
+    from common.files import atomic_output
+
+    with atomic_output(path) as tmp:
+        SimpleDocTemplate(str(tmp), pagesize=landscape(A4), leftMargin=10 * mm, rightMargin=10 * mm,
+                          topMargin=10 * mm, bottomMargin=10 * mm, title=title).build(story)
+    return Path(path)
+
+
+def _make_doc(path, content: ReportContent):
+    """A BaseDocTemplate with header and footer, whose level-1/2 headings become PDF bookmarks."""
+    from reportlab import rl_config
+    from reportlab.lib.pagesizes import A4
+    from reportlab.lib.units import mm
+    from reportlab.platypus import BaseDocTemplate, Frame, PageTemplate
+
+    rl_config.useA85 = 0  # binary streams: ASCII85 is slow in pure Python and makes files larger
+    regular, _ = _fonts()
+
+    class Doc(BaseDocTemplate):
+        def afterFlowable(self, flowable):
+            style = getattr(flowable, "style", None)
+            if style is not None and style.name in ("Heading1", "Heading2"):
+                key = f"h{id(flowable)}"
+                self.canv.bookmarkPage(key)
+                self.canv.addOutlineEntry(flowable.getPlainText(), key, level=int(style.name[-1]) - 1)
+
+    def decorate(canv, doc):
+        canv.saveState()
+        canv.setFont(regular, 7)
+        canv.setFillGray(0.35)
+        w, h = A4
+        canv.drawString(PAGE_MARGIN_MM * mm, h - 10 * mm, f"{content.name} · {content.scope_text}")
+        canv.drawRightString(w - PAGE_MARGIN_MM * mm, 8 * mm, f"page {doc.page}")
+        canv.drawString(PAGE_MARGIN_MM * mm, 8 * mm,
+                        f"BridgeSurvey {content.versions.get('bridgesurvey', '')} · {content.generated}")
+        canv.restoreState()
+
+    doc = Doc(str(path), pagesize=A4, leftMargin=PAGE_MARGIN_MM * mm, rightMargin=PAGE_MARGIN_MM * mm,
+              topMargin=16 * mm, bottomMargin=14 * mm, title=f"{content.name}: displacement survey report",
+              author=content.author, subject=content.scope_text, creator="BridgeSurvey")
+    frame = Frame(doc.leftMargin, doc.bottomMargin, doc.width, doc.height, id="body")
+    doc.addPageTemplates([PageTemplate("title", [frame]), PageTemplate("body", [frame], onPage=decorate)])
+    return doc
+
+
+# ----------------------------------------------------------------------------- sections
+def title_page(content: ReportContent, ss) -> list:
+    """Flowables of the title page."""
+    from reportlab.platypus import NextPageTemplate, PageBreak, Paragraph, Spacer
+
+    p0, p1 = content.period
+    rows = [["Structure", content.name], ["Report covers", content.scope_text],
+            ["Period", f"{p0[:16].replace('T', ' ')}  to  {p1[:16].replace('T', ' ')}"],
+            ["Span", f"{content.span_m:g} m" if content.span_m else "not given"],
+            ["Scanner", content.scanner], ["Baseline epoch", content.baseline or "none yet"],
+            ["Campaign folder", content.folder], ["Prepared by", content.author], ["Generated", content.generated],
+            ["Software", f"BridgeSurvey {content.versions.get('bridgesurvey', '?')}, "
+                         f"pipeline {content.versions['pipeline']}"]]
+    return [Paragraph("Displacement survey report", ss["Sub"]), Spacer(1, 6), Paragraph(_esc(content.name), ss["Big"]),
+            Spacer(1, 18), _table([["", ""]] + rows, (45, 130), ss, header_rows=1), Spacer(1, 18),
+            Paragraph("Vertical displacements of the measurement targets under the deck, relative to the reference "
+                      "targets on the piers, from terrestrial laser scans; positive is up, against the baseline "
+                      "epoch. Uncertainties are one standard deviation propagated from every target centroid.",
+                      ss["Normal"]),
+            NextPageTemplate("body"), PageBreak()]
+
+
+def summary_section(content: ReportContent, ss) -> list:
+    """Flowables of the summary: latest value of every target, problems, largest movement, limits."""
+    from reportlab.platypus import Paragraph, Spacer
+
+    out = [Paragraph("Summary", ss["Heading1"])]
+    rows = content.displacements
+    latest = {}
+    for r in rows:  # the latest value of each target; an epoch without one does not hide the last good one
+        if r["displacement_mm"] is not None or r["reflector"] not in latest:
+            latest[r["reflector"]] = r
+    if not rows:
+        out.append(Paragraph("No displacements computed yet: the epochs in this report have not all been measured "
+                             "(see the epoch sections and 'bridgesurvey status').", ss["Normal"]))
+    else:
+        last_epoch = content.epochs[-1].label
+        out.append(Paragraph(f"{len(content.epochs)} epoch(s) in this report; displacements against baseline "
+                             f"epoch {_esc(content.baseline)}. Latest value of every measurement target "
+                             f"(epoch {last_epoch} unless noted):", ss["Normal"]))
+        table = [["Target", "Epoch", "Displacement [mm]", "σ [mm]", "Warning / alarm [mm]", "State", "Flags"]]
+        colours = []
+        for k, rid in enumerate(sorted(latest), start=1):
+            r = latest[rid]
+            table.append([rid, r["epoch"], _num(r["displacement_mm"]), _num(r["sigma_mm"], "{:.3f}"),
+                          f"{_num(r['warning_mm'], '{:.1f}')} / {_num(r['alarm_mm'], '{:.1f}')}", r["state"],
+                          r["flags"].replace(";", ", ") or "–"])
+            colours.append((k, 5, STATE_COLOURS.get(r["state"], "#ffffff")))
+        out += [Spacer(1, 4), _table(table, (18, 24, 26, 16, 30, 16, 48), ss, cell_colours=colours)]
+        problem_epochs = []
+        for sec in content.epochs:
+            fl = sec.displacement_set.flags if sec.displacement_set else ()
+            bad = [f for f in fl if severity(f) == "problem"]
+            if bad:
+                problem_epochs.append(f"{sec.label} ({bad[0]})")
+        if problem_epochs:
+            out.append(Spacer(1, 4))
+            out.append(Paragraph("<font color='#d62728'><b>Epochs without a trustworthy result:</b> " +
+                                 _esc("; ".join(problem_epochs)) + "</font>", ss["Normal"]))
+        valued = [r for r in rows if r["displacement_mm"] is not None]
+        if valued:
+            big = max(valued, key=lambda r: abs(r["displacement_mm"]))
+            out.append(Spacer(1, 6))
+            out.append(Paragraph(f"<b>Largest movement in this report:</b> {big['reflector']} at epoch {big['epoch']}: "
+                                 f"{big['displacement_mm']:+.2f} ± {big['sigma_mm'] or 0:.2f} mm "
+                                 f"(state {big['state']}).", ss["Normal"]))
+            alarms = sorted({(r["reflector"], r["state"]) for r in valued if r["state"] in ("warning", "alarm")})
+            if alarms:
+                out.append(Paragraph("Targets that reached a limit during the period: " +
+                                     ", ".join(f"{a} ({s})" for a, s in alarms) + ".", ss["Normal"]))
+    if rows:
+        from projects.outputs.figures import displacement_history_figure
+
+        fig = displacement_history_figure(content.histories, title="All measurement targets (bars ±2σ)")
+        fig.set_size_inches(7.0, 3.3)
+        out += [Spacer(1, 6), figure_flowable(fig, 170)]
+    out.append(Paragraph("Limits in force", ss["Heading2"]))
+    if content.limits:
+        lim = [["Applies to", "Rule", "Warning [mm]", "Alarm [mm]"]]
+        for r in content.limits:
+            lim.append(["every measurement target" if r.reflector == "*" else r.reflector, r.limit.rule,
+                        _num(r.limit.warning_mm, "{:.2f}"), _num(r.limit.alarm_mm, "{:.2f}")])
+        out.append(_table(lim, (50, 45, 30, 30), ss))
+        out.append(Paragraph("States compare |displacement| with the thresholds: warning at or above the warning "
+                             "value, alarm at or above the alarm value.", ss["Small"]))
+    else:
+        out.append(Paragraph("No limits set (bridgesurvey limit DIR --rule ...).", ss["Normal"]))
+    return out
+
+
+def layout_section(content: ReportContent, ss) -> list:
+    """Flowables of the layout figure and each target's state."""
+    from reportlab.platypus import PageBreak, Paragraph
+
+    from projects.outputs.report.plots import layout_figure
+
+    out = [PageBreak(), Paragraph("Reflector layout and target state", ss["Heading1"]),
+           figure_flowable(layout_figure(content.reflectors, content.target_states, span_m=content.span_m), 170)]
+    table = [["Target", "Group", "x / y / z [m]", "In use", f"Epoch {content.epochs[-1].label}"]]
+    by_id = {r.id: r for r in content.reflectors}
+    colours = []
+    for k, s in enumerate(content.target_states, start=1):
+        r = by_id[s.reflector]
+        use = (f"from {s.installed[:10]}" if s.installed else "from start") + \
+              (f", retired {s.retired[:10]}" if s.retired else "")
+        found = "not measured" if s.found is None else ("found" if s.found else "NOT FOUND")
+        table.append([s.reflector, s.group, " / ".join(f"{v:.2f}" for v in r.xyz_layout), use,
+                      "; ".join((found,) + s.remarks)])
+        if s.remarks or s.found is False:
+            colours.append((k, 4, "#fff3e0"))
+    out.append(_table(table, (16, 24, 38, 38, 62), ss, cell_colours=colours))
+    return out
+
+
+def history_section(content: ReportContent, ss) -> list:
+    """Flowables of the per-target history panels, six to a page."""
+    from reportlab.platypus import PageBreak, Paragraph
+
+    from projects.outputs.report.plots import history_grid_figure
+
+    out = [PageBreak(), Paragraph("Displacement history", ss["Heading1"])]
+    targets = sorted(content.histories)
+    if not targets:
+        return out + [Paragraph("No displacements yet.", ss["Normal"])]
+    out.append(Paragraph("Each panel is one measurement target. Flagged values (orange rings) carry a remark in "
+                         "the epoch sections.", ss["Small"]))
+    ctx = content.extras.get("context")
+    if ctx is not None and (ctx.events or ctx.series_name):
+        out.append(Paragraph("Dashed purple lines: events" + (f"; orange: {ctx.series_name}, daily means" if
+                                                              ctx.series_name else "") + ".", ss["Small"]))
+    for k in range(0, len(targets), 6):
+        out.append(figure_flowable(history_grid_figure(content.histories, targets=targets[k:k + 6],
+                                                       context=ctx), 175))
+    return out
+
+
+MAP_FIGSIZE = (7.0, 3.1)
+
+
+def render_map_jpeg(preview, plan, label: str) -> bytes:
+    """An epoch's map figure as JPEG bytes (JPEG goes into the PDF as it is, without re-encoding)."""
+    from projects.outputs.report.plots import epoch_map_figure
+
+    fig = epoch_map_figure(preview, plan, title=f"Reflectance map, epoch {label} "
+                                                "(orange rings: detections; red boxes: planned fine windows)")
+    buf = io.BytesIO()
+    fig.savefig(buf, format="jpg", dpi=130, pil_kwargs={"quality": 88})
+    return buf.getvalue()
+
+
+def _render_map_job(job) -> Optional[bytes]:
+    return render_map_jpeg(*job)
+
+
+def render_maps(sections: Sequence[EpochSection], preview_of: Optional[Callable] = None, *,
+                progress: Optional[ProgressCallback] = None, workers: Optional[int] = None) -> list[Optional[bytes]]:
+    """Map images of many epochs, drawn in parallel worker processes when there are enough of them."""
+    from lidar.reflectance_map import reduce_map
+    from projects.store.previews import MapPreview
+
+    jobs = []
+    for e in sections:
+        p = e.preview if e.preview is not None else (preview_of(e.label) if preview_of else None)
+        if p is not None:  # reduce before sending to a worker: the figure never needs more
+            p = MapPreview(reduce_map(p.reflectance_map, max_cells=300_000), p.detections, p.identification,
+                           p.full_step_deg)
+        jobs.append(None if p is None else (p, e.plan.plan if e.plan else None, e.label))
+    todo = [j for j in jobs if j is not None]
+    workers = workers or min(os.cpu_count() or 1, 4)
+    if len(todo) < 8 or workers < 2:
+        images = []
+        for k, j in enumerate(todo):
+            report(progress, k / max(len(todo), 1), f"map {j[2]}")
+            images.append(_render_map_job(j))
+    else:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        # spawn, not fork: safe inside the desktop application's threads
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+            images = []
+            for k, img in enumerate(pool.map(_render_map_job, todo, chunksize=2)):
+                report(progress, k / len(todo), "maps")
+                images.append(img)
+    it = iter(images)
+    return [None if j is None else next(it) for j in jobs]
+
+
+def epoch_section(e: EpochSection, content: ReportContent, ss, *, new_page: bool = True,
+                  map_jpeg: Optional[bytes] = None) -> list:
+    """Flowables of one epoch; ``map_jpeg`` from :func:`render_maps` (None: the epoch has no map)."""
+    from reportlab.platypus import PageBreak, Paragraph, Spacer
+
+    out = [PageBreak()] if new_page else []
+    out += [Paragraph(f"Epoch {_esc(e.label)} — {e.datetime[:16].replace('T', ' ')}", ss["Heading2"]),
+            Paragraph(f"State: {e.stage}. {_esc(e.notes)}", ss["Small"])]
+    if map_jpeg is not None:
+        from reportlab.lib.units import mm
+        from reportlab.platypus import Image
+
+        out.append(Image(io.BytesIO(map_jpeg), width=178 * mm, height=178 * mm * MAP_FIGSIZE[1] / MAP_FIGSIZE[0]))
+    else:
+        out.append(Paragraph("No coarse-scan map for this epoch.", ss["Small"]))
+    if e.plan:
+        ident = e.plan.identification
+        plan = e.plan.plan
+        out.append(Paragraph(f"Plan: {len(plan.rois)} windows, {plan.total_seconds / 60:.1f} min planned; "
+                             f"{ident.get('detections', '?')} detections, layout fit RMS "
+                             f"{_num((ident.get('fit_rms_m') or float('nan')) * 100, '{:.1f}')} cm, "
+                             f"predicted (not seen): {', '.join(ident.get('missing', [])) or 'none'}.", ss["Small"]))
+        table = [["Target", "Steps φ×θ [°]", "Planned time [s]", "Planned pts on target", "Points in window",
+                  "Points on target", "σx / σy / σz [mm]", "Flags"]]
+        colours = []
+        for k, r in enumerate(plan.rois, start=1):
+            t = e.centroids.get(r.reflector)
+            sig = "–" if t is None or not t.found else " / ".join(f"{v * 1000:.2f}" for v in t.sigma_m)
+            flags = "not scanned yet" if t is None else (", ".join(t.flags) or "–")
+            n_on = "–" if t is None else str(t.n_points)
+            table.append([r.reflector, f"{r.window.phi_step_deg:.4f}×{r.window.theta_step_deg:.4f}",
+                          f"{r.expected_seconds:.0f}", str(r.expected_target_points or "–"),
+                          "–" if t is None or t.n_window < 0 else str(t.n_window), n_on, sig, flags])
+            if t is not None and (t.flags or (r.expected_target_points and
+                                              t.n_points < 0.5 * r.expected_target_points)):
+                colours.append((k, 7, "#fff3e0"))
+        out += [Spacer(1, 3), _table(table, (14, 26, 16, 22, 20, 18, 30, 32), ss, cell_colours=colours)]
+    if e.reference_checks:
+        table = [["Reference", "Median distance change [mm]", "Max change [mm]", "Verdict"]]
+        for r in e.reference_checks:
+            verdict = "not found" if r.missing else ("MOVED, left out" if r.moved else
+                                                    ("suspect" if r.suspect else "stable"))
+            table.append([r.reflector, _num(None if r.median_change_m is None else r.median_change_m * 1000),
+                          _num(None if r.max_change_m is None else r.max_change_m * 1000), verdict])
+        out += [Spacer(1, 4), Paragraph("Reference group check", ss["Small"]), _table(table, (20, 45, 30, 35), ss)]
+    rows = [r for r in content.displacements if r["epoch"] == e.label]
+    if rows:
+        table = [["Target", "Displacement [mm]", "σ [mm]", "State", "Flags"]]
+        for r in rows:
+            table.append([r["reflector"], _num(r["displacement_mm"]), _num(r["sigma_mm"], "{:.3f}"), r["state"],
+                          r["flags"].replace(";", ", ") or "–"])
+        flags = e.displacement_set.flags if e.displacement_set else ()
+        out += [Spacer(1, 4), Paragraph("Displacements" + (f" (epoch flags, {_esc(describe(flags))})" if flags else ""),
+                                        ss["Small"]), _table(table, (20, 30, 20, 20, 88), ss)]
+        problems = [f for f in (flags or []) if severity(f) == "problem"]
+        if problems:
+            out.insert(0, Paragraph(f"<font color='#d62728'><b>PROBLEM:</b> {_esc('; '.join(problems))}</font>",
+                                    ss["Normal"]))
+    return out
+
+
+def log_section(content: ReportContent, ss, *, max_log_rows: int = 400) -> list:
+    """Flowables of the processing log: versions, parameters, file checksums and the last actions."""
+    from reportlab.platypus import PageBreak, Paragraph
+
+    out = [PageBreak(), Paragraph("Processing log", ss["Heading1"]),
+           Paragraph("Everything needed to trace the numbers: software versions, processing parameters, the "
+                     "checksum of every scan file used, and the campaign's action log.", ss["Small"]),
+           Paragraph("Software", ss["Heading2"]),
+           _table([["Component", "Version"]] + [[k, v] for k, v in content.versions.items()], (50, 50), ss),
+           Paragraph("Processing parameters", ss["Heading2"]),
+           _table([["Parameter", "Value"]] + [[k, "auto" if v is None else str(v)]
+                                              for k, v in content.parameters.items()], (60, 50), ss),
+           Paragraph("Scan files (SHA-256, stored read-only in the campaign)", ss["Heading2"])]
+    files = [["Epoch", "Role", "Original file", "Size [MB]", "SHA-256"]]
+    for e in content.epochs:
+        for f in e.files:
+            files.append([e.label, f.role, os.path.basename(f.original_path), f"{f.size / 1e6:.1f}",
+                          Paragraph(f.sha256, ss["Mono"])])
+    out.append(_table(files, (20, 12, 40, 14, 92), ss))
+    out.append(Paragraph("Flags used in this report", ss["Heading2"]))
+    flag_rows = [[f.code, f"{f.severity}: {f.meaning}"] for f in REGISTRY.values()]
+    out.append(_table([["Flag", "Meaning"]] + flag_rows, (45, 133), ss))
+    out.append(Paragraph("Action log", ss["Heading2"]))
+    log = list(content.log)
+    if len(log) > max_log_rows:
+        out.append(Paragraph(f"The last {max_log_rows} of {len(log)} entries; export the campaign (xlsx) for "
+                             "all.", ss["Small"]))
+        log = log[-max_log_rows:]
+    rows = [["Time", "Action", "Epoch", "Details"]]
+    for r in log:
+        details = json.dumps(r.details, default=str)
+        rows.append([r.time[:19], r.action, r.epoch or "", details[:160] + ("…" if len(details) > 160 else "")])
+    out.append(_table(rows, (32, 20, 22, 104), ss))
+    return out
+
+
+def comparison_section(content: ReportContent, ss) -> list:
+    """Flowables of the whole-scan comparisons and span profiles."""
+    from reportlab.platypus import PageBreak, Paragraph, Spacer
+
+    from projects.compare.figures import span_profile_figure
+
+    out = [PageBreak(), Paragraph("Epoch comparison and span profile", ss["Heading1"]),
+           Paragraph("The conventional whole-scan approach, for context: both epochs registered into the campaign "
+                     "frame (reference targets as tie points, then ICP on the piers and the ground around them), "
+                     "their change computed point by point, and the mean height of the deck underside compared per "
+                     "bin along the girder lines. Compare its spread with the targets' uncertainty.", ss["Small"])]
+    for s in content.extras["comparisons"]:
+        out.append(Paragraph(f"{_esc(s['from'])} → {_esc(s['to'])} ({s['method'].upper()})", ss["Heading2"]))
+        lines = []
+        for lab, reg in s["registration"].items():
+            if "targets" not in reg:
+                continue
+            text = f"{lab}: target registration RMS {reg['targets']['rms_mm']:.2f} mm"
+            if "icp" in reg:
+                i = reg["icp"]
+                text += (f"; ICP fitness {i['fitness']:.2f}, RMS {i['rms_mm']:.1f} mm, iterations "
+                         f"{'/'.join(map(str, i['iterations']))}, changed the pose by {i['change_from_targets_mm']:.2f} mm")
+            lines.append(text + "".join(f" — warning: {w}" for w in reg["targets"]["warnings"]))
+        out += [Paragraph(_esc(t), ss["Small"]) for t in lines]
+        table = [["Part", "Points", "Median [mm]", "Std [mm]", "95 % |d| [mm]", "Median LoD [mm]"]]
+        for part, name in (("stable_parts", "piers and ground (stable)"), ("deck", "deck underside near targets"),
+                           ("all", "everything compared")):
+            st = s["change"][part]
+            table.append([name, str(st["n"]), _num(st.get("median_mm")), _num(st.get("std_mm")),
+                          _num(st.get("p95_abs_mm")), _num(st.get("median_lod_mm"))])
+        out += [Spacer(1, 3), _table(table, (50, 20, 25, 22, 25, 28), ss), Spacer(1, 4)]
+        if s["span_profile"]["bins"]:
+            out.append(figure_flowable(span_profile_figure(s), 172))
+            spread = [np.hypot(b["std_from_mm"], b["std_to_mm"]) / np.sqrt(2) for b in s["span_profile"]["bins"]]
+            tsig = [t["sigma_mm"] for t in s["targets"]]
+            out.append(Paragraph(f"Height spread of the scan points per {s['span_profile']['bin_m']:g} m bin: median "
+                                 f"{np.median(spread):.1f} mm; target displacement σ: median "
+                                 f"{np.median(tsig) if tsig else float('nan'):.2f} mm.", ss["Small"]))
+    return out
+
+
+def crossval_section(content: ReportContent, ss) -> list:
+    """Flowables of the dual-camera cross-checks."""
+    from reportlab.platypus import PageBreak, Paragraph, Spacer
+
+    from vision.crossval import CrossValidation
+    from vision.figures import difference_figure, overlay_figure, scatter_figure
+
+    out = [PageBreak(), Paragraph("Cross-check with the dual-camera system", ss["Heading1"]),
+           Paragraph("The camera series of the midspan target (its own zero, set by the alignment below) against "
+                     "the LiDAR displacements: each epoch is paired with the median of the camera samples around "
+                     "its time.", ss["Small"])]
+    for summary, camera in content.extras["crossvals"]:
+        cv = CrossValidation.from_json(summary)
+        al = cv.alignment
+        how = (f"aligned at epoch {al['epoch']}" if al["method"] == "at-date" else "aligned by least squares")
+        out.append(Paragraph(f"{_esc(cv.series)} against LiDAR target {_esc(cv.reflector)}", ss["Heading2"]))
+        out.append(Paragraph(_esc(f"{len(camera):,} camera samples from {camera.summary()['start'][:10]} to "
+                                  f"{camera.summary()['end'][:10]}; pairing window ±{cv.window_s / 60:g} min; {how}, "
+                                  f"offset {cv.offset_mm:+.2f} mm."), ss["Small"]))
+        table = [["Pairs", "Bias [mm]", "RMSE [mm]", "Std [mm]", "Max |d| [mm]", "Correlation", "Within 2σ"],
+                 [f"{cv.n_pairs} of {len(cv.pairs)}", _num(cv.bias_mm, "{:+.2f}"), _num(cv.rmse_mm), _num(cv.std_mm),
+                  _num(cv.max_abs_mm), _num(cv.correlation, "{:.3f}"), f"{100 * cv.within_2sigma:.0f} %"]]
+        out += [Spacer(1, 3), _table(table, (24, 22, 22, 20, 24, 24, 22), ss), Spacer(1, 4),
+                figure_flowable(overlay_figure(cv, camera), 172), figure_flowable(difference_figure(cv), 172),
+                figure_flowable(scatter_figure(cv), 90)]
+        missing = [p.epoch for p in cv.pairs if FLAG_NO_CAMERA_DATA in p.flags]
+        if missing:
+            out.append(Paragraph(_esc(f"No camera data around: {', '.join(missing)}."), ss["Small"]))
+    return out
+
+
+#: Optional sections: name -> builder taking (content, ss) and returning flowables; called only when
+def analysis_section(content: ReportContent, ss) -> list:
+    """What explains the displacements: temperature effect, events with creep, trend and projection."""
+    from reportlab.platypus import PageBreak, Paragraph
+
+    doc = content.extras["analysis"]
+    out = [PageBreak(), Paragraph("Analysis: temperature, events, creep and projection", ss["Heading1"]),
+           Paragraph(_esc(f"Temperature: {doc['temperature_source'] or 'none imported'}. Times in days from the "
+                          f"baseline {doc['baseline']}" + (f"; concrete cast {doc['casting_date'][:10]}" if
+                                                            doc.get("casting_date") else "") + "."), ss["Small"])]
+    for w in doc["warnings"]:
+        out.append(Paragraph(_esc(f"⚠ {w}"), ss["Small"]))
+    rows = [["Target", "mm/°C (σ)", "trend mm/yr (σ)", "seasonal mm", "events: step (σ), creep coefficient (σ)",
+             "prediction offset / RMS", "projection"]]
+    for t in doc["targets"]:
+        ev = "; ".join(f"{e['label']}: {_num(e['step_mm'])} ({_num(e['step_sigma_mm'])}) mm, φ "
+                       f"{_num(e['creep_coefficient'])} ({_num(e['creep_coefficient_sigma'])})"
+                       + (f" [{e['note']}]" if e["note"] else "") for e in t["events"]) or "–"
+        proj = t["projection"] or {}
+        rows.append([t["reflector"], f"{_num(t['thermal_mm_per_degC'], '{:.3f}')} ({_num(t['thermal_sigma'], '{:.3f}')})",
+                     f"{_num(t['trend_mm_per_year'])} ({_num(t['trend_sigma'])})", _num(t["seasonal_amplitude_mm"]), ev,
+                     f"{_num(t['prediction_offset_mm'])} / {_num(t['prediction_residual_rms_mm'])}",
+                     proj.get("warning") or (f"{_num(proj.get('displacement_mm'))} ± {_num(proj.get('sigma_mm'))} mm on "
+                                             f"{proj.get('date')}" if proj else "–")])
+    out.append(_table(rows, [14, 22, 24, 16, 48, 22, 34], ss))
+    notes = sorted({n for t in doc["targets"] for n in t["notes"]})
+    for n in notes:
+        out.append(Paragraph(_esc(n), ss["Small"]))
+    return out
+
+
+#: ``content.extras`` holds that name.
+EXTRA_SECTIONS: dict[str, Callable] = {"comparisons": comparison_section, "crossvals": crossval_section,
+                                       "analysis": analysis_section}
+
+
+def build_pdf(content: ReportContent, path: str | os.PathLike, *, preview_of: Optional[Callable] = None,
+              progress: Optional[ProgressCallback] = None) -> Path:
+    """Write the report to ``path`` (through a temporary file, so a failure leaves no half PDF)."""
+    path = Path(path)
+    ss = _styles()
+    story = title_page(content, ss)
+    report(progress, 0.02, "summary")
+    story += summary_section(content, ss) + layout_section(content, ss) + history_section(content, ss)
+    for name, builder in EXTRA_SECTIONS.items():
+        if name in content.extras:
+            story += builder(content, ss)
+    if content.epochs:
+        from reportlab.platypus import PageBreak, Paragraph
+
+        story += [PageBreak(), Paragraph("Epochs", ss["Heading1"]),
+                  Paragraph("Per epoch: the coarse scan's reflectance map with detections and the planned fine-scan "
+                            "windows, the plan against what the fine scans held, the centroids with their "
+                            "uncertainty and flags, the reference check and the displacements.", ss["Small"])]
+        maps = render_maps(content.epochs, preview_of, progress=scaled(progress, 0.1, 0.6))
+        for k, (e, jpeg) in enumerate(zip(content.epochs, maps)):
+            report(progress, 0.6 + 0.2 * k / len(content.epochs), f"epoch {e.label}")
+            story += epoch_section(e, content, ss, new_page=k > 0, map_jpeg=jpeg)
+    story += log_section(content, ss)
+    report(progress, 0.9, "writing PDF")
+    from common.files import atomic_output
+
+    with atomic_output(path) as tmp:
+        _make_doc(tmp, content).build(story)
+    report(progress, 1.0, "report written")
+    return path

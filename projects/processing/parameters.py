@@ -1,0 +1,172 @@
+"""Every processing parameter, declared once: name, default, parser, the stage it makes stale, and its help.
+
+The defaults, the validation of ``settings DIR KEY VALUE``, the stage input hashes and the help of the
+command line and the application are all generated from :data:`PARAMETERS`.
+
+Stages:
+
+* ``plan`` - stage 1 (plan the fine scans, measure the centroids): changing it plans and measures every
+  epoch again;
+* ``displacements`` - stage 2: changing it recomputes the displacements only;
+* ``baseline`` - which epoch is the baseline (stage 2 of every epoch);
+* ``analysis`` - read by the analysis and the age axes, not by processing.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Callable, Optional
+
+from common.errors import InputError
+
+STAGES = ("plan", "displacements", "baseline", "analysis")
+
+
+def _positive_float(text: str) -> float:
+    v = float(text)
+    if not (math.isfinite(v) and v > 0):
+        raise ValueError
+    return v
+
+
+def _optional_positive(text: str) -> Optional[float]:
+    return None if text.strip().lower() in ("none", "auto", "") else _positive_float(text)
+
+
+def _boolean(text: str) -> bool:
+    return {"true": True, "1": True, "yes": True, "false": False, "0": False, "no": False}[text.strip().lower()]
+
+
+def _min_points(text: str) -> int:
+    v = int(text)
+    if v < 10:
+        raise ValueError
+    return v
+
+
+def _normal_mode(text: str) -> str:
+    if text not in ("auto", "reference", "epoch"):
+        raise ValueError
+    return text
+
+
+def _vector(text: str) -> str:
+    vec = [float(v) for v in text.split(",")]
+    if len(vec) != 3 or not all(math.isfinite(v) for v in vec) or not any(vec):
+        raise ValueError
+    return ",".join(f"{v:g}" for v in vec)
+
+
+def _text_or_none(text: str) -> Optional[str]:
+    return text.strip() or None
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One processing parameter.
+
+    Attributes
+    ----------
+    name : str
+    default : object
+        The value a new campaign has.
+    parse : callable
+        ``parse(text) -> value``; raises ValueError (or KeyError) on a bad value.
+    stage : {"plan", "displacements", "baseline", "analysis"}
+        What changing it makes stale (see the module notes).
+    help : str
+        One line for ``settings --help`` and the application's dialog.
+    values : str
+        What may be given, for the help ("a number > 0", "auto | reference | epoch").
+    added_later : bool
+        A stage-1 parameter added after campaigns were processed without it: it enters the input hash only
+        when it differs from its default, so those campaigns are not measured again for nothing.
+    """
+
+    name: str
+    default: Any
+    parse: Callable[[str], Any]
+    stage: str
+    help: str
+    values: str
+    added_later: bool = False
+
+    def value_of(self, text: Optional[str]) -> Any:
+        """The validated value of ``text`` (an :class:`InputError` naming the parameter when it is not one)."""
+        if text is None:
+            raise InputError(f"give a value for {self.name} ({self.values})")
+        try:
+            return self.parse(text)
+        except (ValueError, KeyError):
+            raise InputError(f"{self.name}: {text!r} is not a valid value ({self.values})") from None
+
+
+PARAMETERS: tuple[Parameter, ...] = (
+    Parameter("min_points", 1000, _min_points, "plan", "points to plan on every target", "a whole number >= 10"),
+    Parameter("budget_min", 60.0, _positive_float, "plan", "time budget of the fine scans of one visit, minutes",
+              "a number > 0"),
+    Parameter("map_step_deg", None, _optional_positive, "plan",
+              "cell size of the coarse scan's reflectance map, degrees (auto: from the scan)", "auto | a number > 0"),
+    Parameter("detection_threshold", None, _optional_positive, "plan",
+              "normalised intensity a reflector must exceed in the map (auto: from the map)", "auto | a number > 0"),
+    Parameter("identification_tolerance_m", 0.15, _positive_float, "plan",
+              "how far (m) a detection may be from the layout's prediction and still be that target", "a number > 0"),
+    Parameter("levelled", True, _boolean, "plan",
+              "the scanner was levelled: identifications implying a tilt lose", "true | false", added_later=True),
+    Parameter("max_tilt_deg", None, _optional_positive, "plan",
+              "largest tilt an identification may imply, degrees (auto: the scanner profile's)",
+              "auto | a number > 0", added_later=True),
+    Parameter("layout_up", "0,0,1", _vector, "plan", "the layout frame's up direction", "x,y,z (not all zero)",
+              added_later=True),
+    Parameter("normal_mode", "auto", _normal_mode, "displacements",
+              "deck normal: carried from the baseline, re-fitted each epoch, or both combined (auto)",
+              "auto | reference | epoch"),
+    Parameter("weighted_references", True, _boolean, "displacements",
+              "weight the reference targets by their precision (false: the plain mean)", "true | false"),
+    Parameter("moved_tolerance_m", 0.001, _positive_float, "displacements",
+              "smallest change of a reference distance taken as movement, m (or 4 sigma, whichever is larger)",
+              "a number > 0"),
+    Parameter("baseline", None, _text_or_none, "baseline",
+              "the epoch every displacement is measured against (default: the first measured)", "an epoch label"),
+    Parameter("casting_date", None, _text_or_none, "analysis",
+              "date the concrete was cast, for age axes and predictions by age", "an ISO 8601 date"),
+)
+
+BY_NAME: dict[str, Parameter] = {p.name: p for p in PARAMETERS}
+#: Parameters processing reads (``baseline`` and ``casting_date`` are kept as plain settings).
+PROCESSING = tuple(p for p in PARAMETERS if p.stage in ("plan", "displacements"))
+DEFAULTS: dict[str, Any] = {p.name: p.default for p in PROCESSING}
+STAGE1_KEYS = tuple(p.name for p in PROCESSING if p.stage == "plan")
+STAGE2_KEYS = tuple(p.name for p in PROCESSING if p.stage == "displacements")
+#: Names ``settings`` takes besides the parameters: the scanner has a command form of its own.
+OTHER_SETTINGS = ("scanner",)
+
+
+def parameter(name: str) -> Parameter:
+    """The parameter called ``name`` (an :class:`InputError` listing them all when there is none)."""
+    try:
+        return BY_NAME[name]
+    except KeyError:
+        raise InputError(f"unknown setting {name!r}; settings are "
+                         f"{', '.join([*BY_NAME, *OTHER_SETTINGS])}") from None
+
+
+def stage1_params(params: dict) -> dict:
+    """The parameters stage 1 depends on (their hash decides whether an epoch is planned and measured again)."""
+    return {p.name: params[p.name] for p in PROCESSING
+            if p.stage == "plan" and (not p.added_later or params[p.name] != p.default)}
+
+
+def stage2_params(params: dict) -> dict:
+    """The parameters stage 2 depends on."""
+    return {k: params[k] for k in STAGE2_KEYS}
+
+
+def help_text() -> str:
+    """Every parameter with its values, default and meaning, for ``settings --help``."""
+    lines = []
+    for p in PARAMETERS:
+        default = "none" if p.default is None else str(p.default).lower() if isinstance(p.default, bool) \
+            else str(p.default)
+        lines.append(f"  {p.name} ({p.values}; default {default}; stale: {p.stage}): {p.help}")
+    return "\n".join(lines)

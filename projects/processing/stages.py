@@ -1,0 +1,490 @@
+"""Processing a campaign: plan, measure and compute displacements, incrementally.
+
+Stage 1 (per epoch): coarse scan -> plan; fine scans -> centroids. Its inputs
+hash covers the scan checksums, the reflectors expected at that date, the
+parameters and the pipeline version; an epoch whose hash is unchanged is not
+recomputed. Stage 2 (per epoch): displacements against the baseline, hashed on
+the stage-1 hashes of the epoch and of its baseline(s) and the displacement
+parameters. Adding epoch 100 therefore computes epoch 100 only; changing a
+parameter marks exactly the epochs it affects as stale.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+from dataclasses import dataclass, field, replace
+from typing import Optional, Sequence
+
+import numpy as np
+
+from common.flags import (FLAG_CHAINED, FLAG_DECK_NOT_MEASURED, FLAG_MISSING, FLAG_NO_DISPLACEMENT,
+                          FLAG_PIERS_NOT_MEASURED, PROBLEM, severity)
+from lidar.displacement import Displacement, EpochDisplacements, compute_displacements
+from common.errors import InputError, ProcessingError, SurveyError
+from lidar.identification import MAX_TILT_DEG
+from lidar.io import read_scan
+from lidar.pipeline import analyse_coarse, measure_targets, plan_from_coarse
+from lidar.plan import ScanPlan
+from common.progress import ProgressCallback, report, scaled
+from lidar.scan import Scan
+from projects.processing.parameters import DEFAULTS, parameter, stage1_params, stage2_params
+from projects.store.previews import encode_preview
+from projects.store.records import ScanFile
+from projects.store.campaign import Campaign
+
+log = logging.getLogger(__name__)
+
+PIPELINE_VERSION = "1"
+#: Profile fields added later: they enter the input hash only when they differ from their default.
+_LATER_PROFILE_FIELDS = {"max_tilt_deg": MAX_TILT_DEG, "kind": "line", "step_presets": [], "windowed": True,
+                         "horizontal_direction": "ccw", "horizontal_zero_deg": 0.0, "vertical_reference": "zenith",
+                         "resolution_label": "step", "quality": ""}
+
+
+def _profile_key(profile) -> dict:
+    """The profile as it enters the input hash.
+
+    What decides the plan and the centroids (a field added
+    later only when it differs from its default; sources and notes never).
+    """
+    d = profile.to_dict()
+    for k, default in _LATER_PROFILE_FIELDS.items():
+        if d.get(k) == default:
+            del d[k]
+    for k in ("sources", "notes"):
+        d.pop(k, None)
+    return d
+
+
+def max_tilt(c: Campaign, params: dict, label: Optional[str] = None) -> Optional[float]:
+    """Largest tilt an identification may imply: None when the scanner was not levelled."""
+    return _tilt_limit(params, c.profile_for(label))
+
+
+def layout_up(params: dict) -> np.ndarray:
+    """The layout's up direction from the ``layout_up`` setting, shape (3,)."""
+    return np.array([float(v) for v in str(params["layout_up"]).split(",")])
+
+
+def set_parameter(c: Campaign, key: str, text: Optional[str]) -> None:
+    """Change one processing parameter (or the baseline, or the casting date) from its text form, validated."""
+    p = parameter(key)
+    if p.stage == "baseline":
+        value = p.parse(text or "")
+        if value:
+            c.epoch(value)
+        c.set_setting("baseline", value)
+        return
+    if p.stage == "analysis":  # concrete age axes and predictions by age
+        from projects.store.campaign import parse_datetime
+
+        c.set_setting(key, parse_datetime(text) if text else None)
+        return
+    c.set_setting(key, p.value_of(text))
+
+
+def parameters(c: Campaign) -> dict:
+    """The campaign's processing parameters: the defaults overridden by its settings."""
+    return {**DEFAULTS, **{k: v for k, v in c.settings().items() if k in DEFAULTS}}
+
+
+def _hash(obj) -> str:
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:32]
+
+
+@dataclass
+class EpochOutcome:
+    """What processing did to one epoch: planned, measured, up-to-date or failed, with a message."""
+
+    epoch: str
+    action: str  # planned, measured, up-to-date, failed
+    message: str = ""
+
+
+@dataclass
+class ProcessSummary:
+    """What a processing run did: each epoch's outcome, the epochs with new displacements and their problems."""
+
+    outcomes: list[EpochOutcome] = field(default_factory=list)
+    displacement_epochs: list[str] = field(default_factory=list)
+    baseline: Optional[str] = None
+    problems: dict[str, str] = field(default_factory=dict)  # epoch -> its first problem flag
+
+    @property
+    def failed(self) -> list[EpochOutcome]:
+        return [o for o in self.outcomes if o.action == "failed"]
+
+
+def read_paths(paths, progress: Optional[ProgressCallback] = None) -> Scan:
+    """Scan files as one scan (each file's share of the progress in turn)."""
+    scans = [read_scan(p, progress=scaled(progress, k / len(paths), (k + 1) / len(paths)))
+             for k, p in enumerate(paths)]
+    return scans[0] if len(scans) == 1 else Scan.concatenate(scans)
+
+
+def read_files(c: Campaign, files: Sequence[ScanFile], progress=None) -> Scan:
+    """The stored scan files ``files`` (from ``Campaign.files``) as one scan."""
+    return read_paths([c.path_of(f) for f in files], progress)
+
+
+def plan_inputs(c: Campaign, label: str, params: dict) -> tuple[str, object]:
+    """(hash of the inputs, layout) of an epoch's plan: coarse scans, layout at its date, parameters, scanner."""
+    ep = c.epoch(label)
+    coarse = c.files(label, "coarse")
+    if not coarse:
+        raise ProcessingError(f"epoch {label} has no coarse scan")
+    layout = c.layout(ep.datetime)
+    key = {"v": PIPELINE_VERSION, "coarse": [f.sha256 for f in coarse],
+           "layout": layout.to_rows(), "params": stage1_params(params),
+           "profile": _profile_key(c.profile_for(label))}
+    return _hash(key), layout
+
+
+def _tilt_limit(params: dict, profile) -> Optional[float]:
+    if not params["levelled"]:
+        return None
+    return float(params["max_tilt_deg"]) if params["max_tilt_deg"] is not None else profile.max_tilt_deg
+
+
+def _analyse(coarse: Scan, layout, params: dict, profile, progress: Optional[ProgressCallback] = None):
+    return analyse_coarse(coarse, layout, step_deg=params["map_step_deg"], threshold=params["detection_threshold"],
+                          tolerance_m=params["identification_tolerance_m"],
+                          max_tilt_deg=_tilt_limit(params, profile), up_layout=layout_up(params), progress=progress)
+
+
+def analyse_epoch_coarse(c: Campaign, label: str, layout, params: dict, *,
+                         progress: Optional[ProgressCallback] = None):
+    """Reflectance map, detections and identification of an epoch's coarse scan with the campaign's parameters."""
+    coarse = read_files(c, c.files(label, "coarse"), scaled(progress, 0.0, 0.5))
+    return _analyse(coarse, layout, params, c.profile_for(label), scaled(progress, 0.5, 1.0))
+
+
+@dataclass(frozen=True, eq=False)
+class Stage1Job:
+    """Everything stage 1 of one epoch needs, as plain picklable values (no campaign handle).
+
+    A worker
+    process or another machine can run it with :func:`run_stage1`; only the campaign's owner saves the
+    result (:func:`save_stage1`).
+
+    ``stored_plan`` is the epoch's plan JSON when its inputs are unchanged (it is reused, not
+    recomputed); ``measure_hash`` is None when the epoch has no fine scans yet.
+    """
+
+    folder: str
+    label: str
+    coarse_paths: tuple[str, ...]
+    fine_paths: tuple[str, ...]
+    layout: object
+    params: dict
+    profile: object
+    plan_hash: str
+    stored_plan: Optional[dict]
+    measure_hash: Optional[str]
+
+
+@dataclass(frozen=True, eq=False)
+class Stage1Result:
+    """What :func:`run_stage1` computed.
+
+    A new plan (with its map preview) unless the stored one was reused, and the centroids when the epoch has fine scans.
+    """
+
+    job: Stage1Job
+    plan: ScanPlan
+    new_plan_json: Optional[dict]
+    preview: Optional[tuple[bytes, str]]
+    centroids: Optional[dict]
+
+
+def stage1_job(c: Campaign, label: str) -> Stage1Job:
+    """An epoch's stage-1 job as plain values (its stored plan reused when its inputs are unchanged)."""
+    params = parameters(c)
+    h, layout = plan_inputs(c, label, params)
+    sp = c.stored_plan(label)
+    stored = sp.plan_json if sp is not None and sp.inputs_hash == h else None
+    fine = c.files(label, "fine")
+    return Stage1Job(str(c.folder), label, tuple(str(c.path_of(r)) for r in c.files(label, "coarse")),
+                     tuple(str(c.path_of(r)) for r in fine), layout, params, c.profile_for(label), h, stored,
+                     measure_inputs(c, label, params, h) if fine else None)
+
+
+def run_stage1(job: Stage1Job, *, progress: Optional[ProgressCallback] = None) -> Stage1Result:
+    """Plan (unless reused) and centroids of one epoch: pure computation on its files."""
+    new_plan, preview = None, None
+    if job.stored_plan is not None:
+        plan = ScanPlan.from_json(job.stored_plan)
+    else:
+        coarse = read_paths(job.coarse_paths, scaled(progress, 0.0, 0.25))
+        analysis = _analyse(coarse, job.layout, job.params, job.profile, scaled(progress, 0.25, 0.4))
+        del coarse
+        plan = plan_from_coarse(analysis, job.layout, epoch=job.label, profile=job.profile,
+                                min_points=int(job.params["min_points"]),
+                                budget_seconds=float(job.params["budget_min"]) * 60.0, up_layout=layout_up(job.params))
+        new_plan = plan.to_json()
+        new_plan["identification"] = {"missing": list(analysis.identification.missing),
+                                      "extra_detections": len(analysis.identification.extra_detections),
+                                      "fit_rms_m": analysis.identification.rms_m,
+                                      "detections": len(analysis.detections.detections)}
+        preview = encode_preview(analysis)
+    cents = None
+    if job.fine_paths:
+        fine = read_paths(job.fine_paths, scaled(progress, 0.4, 0.8))
+        cents = measure_targets(fine, plan, job.layout, profile=plan.profile)
+    report(progress, 1.0, "measured" if cents is not None else "planned")
+    return Stage1Result(job, plan, new_plan, preview, cents)
+
+
+def save_stage1(c: Campaign, result: Stage1Result) -> None:
+    """Store what :func:`run_stage1` computed (the campaign's single writer does this)."""
+    job = result.job
+    if result.new_plan_json is not None:
+        c.save_plan(job.label, result.new_plan_json, job.plan_hash, preview=result.preview)
+    if result.centroids is not None:
+        c.save_centroids(job.label, result.centroids, job.measure_hash, stage1_params(job.params))
+
+
+def plan_epoch(c: Campaign, label: str, *, progress: Optional[ProgressCallback] = None) -> ScanPlan:
+    """The fine-scan plan of an epoch, from its coarse scan (reused when its inputs are unchanged)."""
+    job = stage1_job(c, label)
+    if job.stored_plan is not None:
+        return ScanPlan.from_json(job.stored_plan)
+    result = run_stage1(replace(job, fine_paths=(), measure_hash=None), progress=progress)
+    save_stage1(c, result)
+    return result.plan
+
+
+def measure_inputs(c: Campaign, label: str, params: dict, plan_hash: Optional[str] = None) -> str:
+    """Stage 1's input hash of an epoch with fine scans (``plan_hash`` when already computed)."""
+    plan_h = plan_hash if plan_hash is not None else plan_inputs(c, label, params)[0]
+    return _hash({"plan": plan_h, "fine": [f.sha256 for f in c.files(label, "fine")]})
+
+
+def measure_epoch(c: Campaign, label: str, *, progress: Optional[ProgressCallback] = None) -> dict:
+    """Plan (when needed) and centroids of an epoch with fine scans, saved; returns the centroids."""
+    job = stage1_job(c, label)
+    if not job.fine_paths:
+        raise ProcessingError(f"epoch {label} has no fine scans yet; import them with 'bridgesurvey add-fine' first")
+    result = run_stage1(job, progress=progress)
+    save_stage1(c, result)
+    return result.centroids
+
+
+def stale_epochs(c: Campaign) -> dict[str, str]:
+    """Epochs whose stored stage-1 results no longer match their inputs: label -> reason."""
+    params = parameters(c)
+    out = {}
+    for e in c.epochs():
+        res = c.result(e.label)
+        if not c.files(e.label, "coarse"):
+            continue
+        if c.files(e.label, "fine"):
+            want = measure_inputs(c, e.label, params)
+            if res is None or res.stage != "measured":
+                out[e.label] = "not measured yet"
+            elif res.inputs_hash != want:
+                out[e.label] = "inputs or parameters changed"
+        else:
+            want, _ = plan_inputs(c, e.label, params)
+            if res is None:
+                out[e.label] = "not planned yet"
+            elif res.inputs_hash != want and res.stage == "planned":
+                out[e.label] = "inputs or parameters changed"
+    return out
+
+
+def baseline_epoch(c: Campaign) -> Optional[str]:
+    """The baseline epoch: the one chosen, else the first measured one (None before any)."""
+    chosen = c.settings().get("baseline")
+    if chosen:
+        return chosen
+    for e in c.epochs():
+        if _stage1_hash(c, e.label):
+            return e.label
+    return None
+
+
+def process(c: Campaign, labels: Optional[Sequence[str]] = None, *,
+            progress: Optional[ProgressCallback] = None) -> ProcessSummary:
+    """Bring the given epochs (default: all) up to date, then their displacements."""
+    epochs = c.epochs()
+    if labels:
+        for lab in labels:
+            c.epoch(lab)
+        wanted = set(labels)
+        todo = [e for e in epochs if e.label in wanted]
+    else:
+        todo = epochs
+    summary = ProcessSummary()
+    stale = stale_epochs(c)
+    for k, e in enumerate(todo):
+        lab = e.label
+        sub = scaled(progress, k / max(len(todo), 1), (k + 1) / max(len(todo), 1))
+        if lab not in stale:
+            summary.outcomes.append(EpochOutcome(lab, "up-to-date"))
+            continue
+        try:
+            if c.files(lab, "fine"):
+                cents = measure_epoch(c, lab, progress=sub)
+                found = sum(t.found for t in cents.values())
+                summary.outcomes.append(EpochOutcome(lab, "measured", f"{found}/{len(cents)} targets found"))
+            else:
+                plan = plan_epoch(c, lab, progress=sub)
+                summary.outcomes.append(EpochOutcome(lab, "planned", f"{len(plan.rois)} windows, "
+                                                     f"{plan.total_seconds / 60:.1f} min; add its fine scans"))
+        except SurveyError as exc:
+            log.warning("epoch %s: %s", lab, exc)
+            summary.outcomes.append(EpochOutcome(lab, "failed", str(exc)))
+    finish_displacements(c, summary, [e.label for e in todo])
+    report(progress, 1.0, "done")
+    return summary
+
+
+def finish_displacements(c: Campaign, summary: ProcessSummary, labels: Sequence[str]) -> None:
+    """Stage 2 after stage 1: fix the baseline once, update the displacements, note the problems of ``labels``."""
+    summary.baseline = baseline_epoch(c)
+    if summary.baseline is not None and not c.settings().get("baseline"):
+        # The first measured epoch becomes the baseline once, for good: an epoch added later with an
+        # earlier date gets a negative time against it instead of silently re-referencing everything.
+        c.set_setting("baseline", summary.baseline)
+    if summary.baseline is not None:
+        summary.displacement_epochs = update_displacements(c, summary.baseline)
+    for lab in labels:
+        ds = c.displacement_set(lab)
+        if ds is not None:
+            bad = [f for f in ds.flags if severity(f) == PROBLEM]
+            if bad:
+                summary.problems[lab] = bad[0]
+
+
+def _stage1_hash(c: Campaign, label: str) -> Optional[str]:
+    res = c.result(label)
+    return res.inputs_hash if res is not None and res.stage == "measured" else None
+
+
+def update_displacements(c: Campaign, baseline: str) -> list[str]:
+    """(Re)compute the displacements of every measured epoch whose inputs changed; returns those epochs."""
+    params = parameters(c)
+    refl = {r.id: r for r in c.reflectors()}
+    groups = {rid: r.group for rid, r in refl.items()}
+    measured = [e.label for e in c.epochs() if _stage1_hash(c, e.label)]
+    if baseline not in measured:
+        return []
+    found_cache: dict[str, dict] = {}
+
+    def found(label):
+        if label not in found_cache:
+            found_cache[label] = {k: v for k, v in c.centroids(label).items() if v.found}
+        return found_cache[label]
+
+    first_seen: dict[str, str] = {}
+    start = measured.index(baseline)
+    for lab in measured[start:]:
+        for rid in found(lab):
+            first_seen.setdefault(rid, lab)
+    done = []
+    for pos, lab in enumerate(measured):
+        cents = found(lab)
+        meas_here = [m for m in cents if groups.get(m) == "measurement"]
+        if pos < start:  # dated before the baseline: negative time against it, never a new baseline
+            bases = [baseline]
+        else:
+            bases = sorted({first_seen[m] for m in meas_here} | {baseline}, key=measured.index)
+        key = {"v": PIPELINE_VERSION, "epoch": _stage1_hash(c, lab), "params": stage2_params(params),
+               "bases": {b: _stage1_hash(c, b) for b in bases}, "reflectors": sorted((k, repr(v)) for k, v in refl.items())}
+        h = _hash(key)
+        stored = c.displacement_set(lab)
+        if stored is not None and stored.inputs_hash == h:
+            continue
+        result = None
+        extra = []
+        failure = None
+        for b in bases:
+            targets = [m for m in meas_here if first_seen.get(m) == b] if b != baseline else \
+                [m for m in groups if groups[m] == "measurement" and first_seen.get(m, baseline) == baseline]
+            if not targets:
+                continue
+            sub_groups = {r: g for r, g in groups.items() if g == "reference" or r in targets}
+            try:
+                res = compute_displacements(found(b), cents, sub_groups, normal_mode=params["normal_mode"],
+                                            moved_tolerance_m=params["moved_tolerance_m"],
+                                            weighted=bool(params["weighted_references"]))
+            except SurveyError as exc:
+                log.warning("epoch %s against %s: %s", lab, b, exc)
+                if b == baseline:
+                    failure = str(exc).splitlines()[0].replace(";", ",")
+                continue
+            if b == baseline:
+                result = res
+            else:
+                extra += [_chain(c, d, b, refl) for d in res.displacements]
+        if result is None:
+            if failure is None:
+                continue
+            result = _failed_result(groups, found(baseline), cents, baseline, failure)
+        elif not any(np.isfinite(d.displacement_m) for d in result.displacements):
+            n_meas = sum(1 for g in groups.values() if g == "measurement")
+            result = replace(result, flags=tuple(result.flags) + (
+                f"{FLAG_DECK_NOT_MEASURED}: none of the {n_meas} deck targets was found in this epoch",))
+        if lab == baseline:  # the baseline against itself: zero by definition, exactly known
+            result = replace(result, displacements=tuple(
+                replace(d, displacement_m=0.0, sigma_m=0.0) if np.isfinite(d.displacement_m) else d
+                for d in result.displacements))
+        if extra:
+            result = replace(result, displacements=tuple(result.displacements) + tuple(extra))
+        c.save_displacements(lab, baseline, result, h)
+        done.append(lab)
+    return done
+
+
+def _failed_result(groups: dict, base: dict, cents: dict, baseline: str, reason: str) -> EpochDisplacements:
+    """An epoch with no displacement: every deck target missing, and a problem flag saying why."""
+    refs = [r for r, g in groups.items() if g == "reference"]
+    meas = [m for m, g in groups.items() if g == "measurement"]
+    both = [r for r in refs if r in base and r in cents]
+    found_meas = [m for m in meas if m in cents]
+    if not both:
+        flag = (f"{FLAG_PIERS_NOT_MEASURED}: no reference target was found in both this epoch and the baseline "
+                f"{baseline} ({len([r for r in refs if r in cents])} of {len(refs)} found here)")
+    elif len(found_meas) < 3:
+        flag = f"{FLAG_DECK_NOT_MEASURED}: {len(found_meas)} of {len(meas)} deck targets found, at least 3 needed"
+    else:
+        flag = f"{FLAG_NO_DISPLACEMENT}: {reason}"
+    nan = float("nan")
+    disp = tuple(Displacement(m, nan, nan, nan, nan, (FLAG_MISSING,)) for m in meas)
+    return EpochDisplacements(disp, (), (), np.full(3, nan), np.full(3, nan), "none", (flag,))
+
+
+def _chain(c: Campaign, d, base_label: str, refl: dict):
+    """A target first measured after the baseline: continue the history of the target it replaced."""
+    old = refl[d.reflector].replaces
+    if not old:
+        return d
+    last = c.last_displacement(old, at_or_before=base_label)
+    if last is None or not np.isfinite(d.displacement_m):
+        return d
+    return replace(d, displacement_m=d.displacement_m + last.displacement_m,
+                   sigma_m=float(np.hypot(d.sigma_m, last.sigma_m)),
+                   flags=tuple(d.flags) + (FLAG_CHAINED,))
+
+
+def save_edited_plan(c: Campaign, label: str, plan: ScanPlan) -> None:
+    """Store a plan whose windows were edited by hand; it replaces the epoch's plan and its centroids.
+
+    The plan keeps the inputs hash of the plan it was edited from, so processing uses it as it is
+    (and measures the epoch again when fine scans exist); a new coarse scan, layout or parameter
+    plans the epoch afresh.
+    """
+    stored = c.stored_plan(label)
+    if stored is None:
+        raise ProcessingError(f"epoch {label} has no plan to edit yet; plan it first")
+    if not plan.rois:
+        raise InputError("the edited plan has no windows; keep at least one")
+    old = stored.plan_json
+    d = plan.to_json()
+    d["epoch"] = label
+    d["edited"] = True
+    if "identification" in old:
+        d["identification"] = old["identification"]
+    c.save_plan(label, d, stored.inputs_hash)

@@ -1,0 +1,70 @@
+"""The displacement table: one row per processed epoch x measurement target, with state and limits.
+
+The single source of the rows that ``displacements``, the exports, the report, ``status`` and the camera
+cross-check print (columns: :data:`DISPLACEMENT_COLUMNS`).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from common.files import csv_text
+from projects.store.campaign import Campaign
+
+DISPLACEMENT_COLUMNS = ["epoch", "datetime", "reflector", "displacement_mm", "sigma_mm", "flags", "state",
+                        "warning_mm", "alarm_mm", "baseline", "epoch_flags", "days_from_baseline", "severity",
+                        "concrete_age_days", "predicted_mm", "departure_mm"]
+
+
+def displacement_table(c: Campaign) -> list[dict]:
+    """One row per processed epoch x measurement target (baseline = first epoch, positive up)."""
+    from datetime import datetime
+
+    from common.flags import FLAG_DEPARTS, worst
+
+    from projects.series.predictions import predictions
+
+    when = {e.label: e.when for e in c.epochs()}
+    settings = c.settings()
+    casting = datetime.fromisoformat(settings["casting_date"]) if settings.get("casting_date") else None
+    preds = predictions(c)
+    tols = settings.get("prediction_tolerance_mm") or {}
+    rows = []
+    records = c.displacements()
+    limits = {rid: c.limit_for(rid) for rid in {r.reflector for r in records}}
+    for r in records:
+        lim = limits[r.reflector]
+        mm = None if r.displacement_m is None else r.displacement_m * 1000.0
+        rows.append({
+            "epoch": r.epoch, "datetime": r.datetime, "reflector": r.reflector,
+            "displacement_mm": None if mm is None else round(mm, 4) + 0.0,
+            "sigma_mm": None if r.sigma_m is None else round(r.sigma_m * 1000.0, 4),
+            "flags": ";".join(r.flags),
+            "state": lim.state(mm if mm is not None else float("nan")) if lim else ("unknown" if mm is None else "ok"),
+            "warning_mm": None if lim is None else lim.warning_mm, "alarm_mm": None if lim is None else lim.alarm_mm,
+            "baseline": r.baseline, "epoch_flags": ";".join(r.epoch_flags),
+            # negative for an epoch dated before the baseline
+            "days_from_baseline": round((when[r.epoch] - when[r.baseline]).total_seconds() / 86400.0, 4)
+            if r.baseline in when else None,
+            "severity": worst(r.flags + r.epoch_flags) or "",
+            "concrete_age_days": None if casting is None else
+            round((when[r.epoch] - casting).total_seconds() / 86400.0, 3),
+            "predicted_mm": None, "departure_mm": None,
+        })
+        p = preds.get(r.reflector)
+        t_ns = int(when[r.epoch].timestamp() * 1e9)
+        if p is not None and p[0][0] <= t_ns <= p[0][-1]:
+            pred = float(np.interp(t_ns, p[0], p[1]))
+            row = rows[-1]
+            row["predicted_mm"] = round(pred, 4)
+            if mm is not None:
+                row["departure_mm"] = round(mm - pred, 4)
+                tol = tols.get(r.reflector, tols.get("*"))
+                if tol is not None and abs(mm - pred) > tol:
+                    row["flags"] = ";".join(f for f in (row["flags"], FLAG_DEPARTS) if f)
+                    row["severity"] = worst(row["flags"].split(";") + list(r.epoch_flags)) or ""
+    return rows
+
+
+def to_csv(rows: list[dict], columns=DISPLACEMENT_COLUMNS) -> str:
+    """Rows as CSV text with the given columns (default the displacement table's; missing values as empty cells)."""
+    return csv_text(rows, columns)

@@ -1,0 +1,133 @@
+"""Camera displacement series in a campaign: import, storage and cross-validation with LiDAR."""
+from __future__ import annotations
+
+import datetime as dt
+import json
+import os
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+from common.files import csv_text, json_safe, output_folder, write_atomic
+from common.errors import ProcessingError
+from projects.store.errors import InputError
+from projects.store.history import histories, ns_of
+from projects.store.records import SeriesRecord
+from projects.store.campaign import CAMERA_DIR, Campaign, parse_datetime
+from vision.crossval import CrossValidation, cross_validate
+from vision.series import CameraSeries, read_camera_series
+
+
+def midspan_reflector(c: Campaign) -> str:
+    """The measurement target nearest the middle between the piers (mean of the reference targets)."""
+    refl = [r for r in c.reflectors() if not r.retired]
+    refs = np.array([r.xyz_layout for r in refl if r.is_reference], float)
+    meas = [r for r in refl if not r.is_reference]
+    if not meas:
+        raise InputError("the campaign has no measurement target to pair the camera with")
+    if len(refs) == 0:
+        return meas[0].id
+    mid = refs.mean(axis=0)
+    return min(meas, key=lambda r: float(np.linalg.norm(np.array(r.xyz_layout) - mid))).id
+
+
+def import_series(c: Campaign, path: str | os.PathLike, *, name: Optional[str] = None,
+                  reflector: Optional[str] = None, column: Optional[str] = None, timezone: str = "UTC",
+                  unit: Optional[str] = None, positive: str = "up") -> tuple[str, CameraSeries]:
+    """Read a camera series file, copy it into the campaign (read-only) and store the series.
+
+    Nothing changes in the campaign unless the whole file was read; a file already imported
+    (same checksum) or an existing name is refused.
+    """
+    path, name = c.new_series("camera_series", path, name, "a camera series")
+    rid = reflector or midspan_reflector(c)
+    if c.reflector(rid).is_reference:
+        raise InputError(f"{rid} is a reference target; pair the camera with a measurement target")
+    sha = c.checksum_if_new("camera_series", path)
+    series = read_camera_series(path, column=column, timezone=timezone, unit=unit, positive=positive)
+    options = {"column": series.column, "unit": series.unit, "timezone": timezone, "positive": positive}
+    summary = series.summary()
+
+    def record(conn, rel):
+        c.insert_series(conn, "camera_series", name=name, reflector=rid, sha256=sha, stored_path=rel,
+                        original_path=str(path.resolve()), options=options, summary=summary,
+                        arrays=series.to_npz_bytes())
+        c._log(conn, "camera-import", None, {"name": name, "file": str(path), "sha256": sha, "rows": len(series),
+                                              "bad_rows": series.n_bad, "reflector": rid})
+
+    c.import_file(path, sha, CAMERA_DIR, record)
+    return name, series
+
+
+def series_records(c: Campaign) -> list[SeriesRecord]:
+    """The imported camera series (without their arrays)."""
+    return c.series("camera_series")
+
+
+def load_series(c: Campaign, name: Optional[str] = None) -> tuple[SeriesRecord, CameraSeries]:
+    """One stored series (the only one when ``name`` is None)."""
+    rows = series_records(c)
+    if not rows:
+        raise InputError(f"{c.folder}: no camera series yet; import one with 'bridgesurvey camera import'")
+    if name is None:
+        if len(rows) > 1:
+            raise InputError(f"the campaign has {len(rows)} camera series ({', '.join(r.name for r in rows)}); "
+                             "choose one with --series")
+        row = rows[0]
+    else:
+        match = [r for r in rows if r.name == name]
+        if not match:
+            raise InputError(f"no camera series {name!r}; the campaign has {', '.join(r.name for r in rows)}")
+        row = match[0]
+    t, v = CameraSeries.arrays_from_npz(c.series_arrays("camera_series", row.name))
+    s = row.summary
+    return row, CameraSeries(time_ns=t, value_mm=v, source=row.original_path, column=row.options["column"],
+                             unit=row.options["unit"], n_bad=s["bad_rows"], n_missing=s["missing_values"],
+                             sampling_s=s["sampling_s"] or float("nan"))
+
+
+def crossvalidate(c: Campaign, *, series: Optional[str] = None, reflector: Optional[str] = None,
+                  align_at: Optional[str] = None, window_min: float = 30.0) -> tuple[CrossValidation, CameraSeries]:
+    """Cross-validate a stored camera series with the LiDAR displacements of its reflector."""
+    row, cam = load_series(c, series)
+    rid = reflector or row.reflector or midspan_reflector(c)
+    c.reflector(rid)
+    if not (np.isfinite(window_min) and window_min > 0):
+        raise InputError(f"--window-min must be a positive number of minutes, got {window_min}")
+    h = histories(c, targets=[rid]).get(rid)
+    if h is None:
+        raise ProcessingError(f"no LiDAR displacements of {rid} yet; run 'bridgesurvey process' first")
+    at = ns_of(dt.datetime.fromisoformat(parse_datetime(align_at))) if align_at else None
+    return cross_validate(list(h.epochs), h.time_ns, h.displacement_mm, h.sigma_mm, cam, window_s=window_min * 60.0,
+                          align_at_ns=at, reflector=rid, series=row.name), cam
+
+
+def save_crossval(c: Campaign, cv: CrossValidation) -> None:
+    """Keep the cross-validation summary in the campaign (the report shows it)."""
+    c.save_crossval_summary(cv.series, json_safe(cv.to_json()),
+                            {"series": cv.series, "reflector": cv.reflector, "n_pairs": cv.n_pairs,
+                             "bias_mm": cv.bias_mm, "rmse_mm": cv.rmse_mm})
+
+
+def crossval_summaries(c: Campaign) -> list[dict]:
+    """Every stored cross-validation summary (JSON documents of :class:`vision.crossval.CrossValidation`)."""
+    return c.crossval_summaries()
+
+
+def write_crossval_outputs(cv: CrossValidation, camera: CameraSeries, out_dir: str | os.PathLike) -> list[Path]:
+    """``crossval.json``, ``crossval.csv`` and the overlay, difference and scatter plots (PNG)."""
+    from lidar.figures import save_figure
+    from vision.figures import difference_figure, overlay_figure, scatter_figure
+
+    out = output_folder(out_dir)
+    table = json_safe(cv.to_json())  # NaN -> None, which to_csv writes as an empty cell
+    paths = [write_atomic(out / "crossval.json", json.dumps(table, indent=2) + "\n")]
+    rows = [{**p, "flags": ";".join(p["flags"])} for p in table["pairs"]]
+    cols = ["epoch", "datetime", "lidar_mm", "lidar_sigma_mm", "camera_mm", "camera_raw_mm", "camera_sigma_mm",
+            "camera_n", "difference_mm", "sigma_mm", "flags"]
+    paths.append(write_atomic(out / "crossval.csv", csv_text(rows, cols)))
+    for name, fig in (("overlay.png", overlay_figure(cv, camera)), ("difference.png", difference_figure(cv)),
+                      ("scatter.png", scatter_figure(cv))):
+        paths.append(save_figure(fig, out / name))
+    return paths

@@ -1,0 +1,130 @@
+"""What explains a displacement history: environment series and events.
+
+Environment series are air and structure temperature, sun, rain, snow and humidity; events are
+construction steps, loads and repairs.
+
+Series are read by the same robust importer as camera series (separators, units, time zones, gaps
+and bad rows reported) and kept read-only in the campaign's ``environment/`` folder.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from common.errors import InputError
+from projects.store.records import EventRecord, SeriesRecord
+from projects.store.campaign import ENV_DIR, Campaign, parse_datetime
+from vision.series import CameraSeries, Quantity, read_camera_series
+
+_TEMP_UNITS = {"degc": (1.0, 0.0), "c": (1.0, 0.0), "°c": (1.0, 0.0), "celsius": (1.0, 0.0),
+               "degf": (5 / 9, -160 / 9), "f": (5 / 9, -160 / 9), "°f": (5 / 9, -160 / 9),
+               "fahrenheit": (5 / 9, -160 / 9), "k": (1.0, -273.15), "kelvin": (1.0, -273.15)}
+KINDS: dict[str, Quantity] = {
+    "temperature": Quantity("air temperature", ("temperature", "air_temperature", "temp", "t_air", "ta", "value"),
+                            _TEMP_UNITS, "degc", "°C", signed=False),
+    "structure-temperature": Quantity("structure temperature",
+                                      ("structure_temperature", "concrete_temperature", "t_struct", "temperature",
+                                       "temp", "value"), _TEMP_UNITS, "degc", "°C", signed=False),
+    "solar": Quantity("solar radiation", ("solar", "radiation", "irradiance", "ghi", "value"),
+                      {"w/m2": (1.0, 0.0), "w_m2": (1.0, 0.0), "wm2": (1.0, 0.0), "kw/m2": (1000.0, 0.0)},
+                      "w/m2", "W/m²", signed=False),
+    "rain": Quantity("rainfall", ("rain", "rainfall", "precipitation", "precip", "value"),
+                     {"mm": (1.0, 0.0), "cm": (10.0, 0.0), "in": (25.4, 0.0)}, "mm", "mm", signed=False),
+    "snow": Quantity("snow depth", ("snow", "snow_depth", "snowfall", "value"),
+                     {"cm": (1.0, 0.0), "mm": (0.1, 0.0), "m": (100.0, 0.0)}, "cm", "cm", signed=False),
+    "humidity": Quantity("relative humidity", ("humidity", "relative_humidity", "rh", "value"),
+                         {"%": (1.0, 0.0), "pct": (1.0, 0.0), "percent": (1.0, 0.0), "fraction": (100.0, 0.0)},
+                         "%", "%", signed=False),
+}
+EVENT_KINDS = ("construction", "load", "repair", "other")
+
+
+@dataclass(frozen=True)
+class EnvSeries:
+    """A stored environment series: values in its kind's unit at UTC times (NaN: a gap value)."""
+
+    name: str
+    kind: str
+    unit: str
+    time_ns: np.ndarray
+    value: np.ndarray
+
+
+def import_env(c: Campaign, path: str | os.PathLike, *, kind: str, name: Optional[str] = None,
+               column: Optional[str] = None, unit: Optional[str] = None, timezone: str = "UTC"
+               ) -> tuple[str, CameraSeries]:
+    """Read an environment series file, copy it into the campaign (read-only) and store it.
+
+    Nothing changes unless the whole file was read; the same file twice or a name in use is refused.
+    """
+    if kind not in KINDS:
+        raise InputError(f"unknown series kind {kind!r}; use one of {', '.join(KINDS)}")
+    path, name = c.new_series("env_series", path, name, "an environment series")
+    sha = c.checksum_if_new("env_series", path)
+    q = KINDS[kind]
+    series = read_camera_series(path, column=column, timezone=timezone, unit=unit, quantity=q)
+    if not np.any(np.isfinite(series.value_mm)):
+        raise InputError(f"{path}: every {q.noun} value is missing")
+    options = {"column": series.column, "unit_read": series.unit, "unit": q.stored_unit, "timezone": timezone}
+    summary = series.summary()
+    summary["unit"] = q.stored_unit
+    def record(conn, rel):
+        c.insert_series(conn, "env_series", name=name, kind=kind, sha256=sha, stored_path=rel,
+                        original_path=str(path.resolve()), options=options, summary=summary,
+                        arrays=series.to_npz_bytes())
+        c._log(conn, "env-import", None, {"name": name, "kind": kind, "file": str(path), "sha256": sha,
+                                           "rows": len(series), "bad_rows": series.n_bad})
+
+    c.import_file(path, sha, ENV_DIR, record)
+    return name, series
+
+
+def env_records(c: Campaign) -> list[SeriesRecord]:
+    """The imported environment series (without their arrays), by kind and name."""
+    return sorted(c.series("env_series"), key=lambda r: (r.kind, r.name))
+
+
+def load_env(c: Campaign, *, kind: Optional[str] = None, name: Optional[str] = None) -> list[EnvSeries]:
+    """Stored series of a kind (or the one named), oldest import first."""
+    out = []
+    for r in c.series("env_series", kind=kind, name=name):
+        t, v = CameraSeries.arrays_from_npz(c.series_arrays("env_series", r.name))
+        out.append(EnvSeries(r.name, r.kind, r.options["unit"], t, v))
+    if name is not None and not out:
+        raise InputError(f"no environment series {name!r} in the campaign")
+    return out
+
+
+# ------------------------------------------------------------------------------------------- events
+def add_event(c: Campaign, *, date: str, kind: str, label: str, load_kn_m: Optional[float] = None) -> int:
+    """Record a construction step, load, repair...
+
+    The date must fall within the campaign's epochs (or up to a
+    year after the last one, for an event whose effect is still to be measured).
+    """
+    if kind not in EVENT_KINDS:
+        raise InputError(f"unknown event kind {kind!r}; use one of {', '.join(EVENT_KINDS)}")
+    if not label.strip():
+        raise InputError("an event needs a --label")
+    if load_kn_m is not None and not (np.isfinite(load_kn_m) and load_kn_m >= 0):
+        raise InputError(f"--load-kn-m must be a non-negative number, got {load_kn_m}")
+    when = parse_datetime(date)
+    epochs = c.epochs()
+    if not epochs:
+        raise InputError("the campaign has no epoch yet; add the visits before the events between them")
+    first, last = epochs[0].datetime, epochs[-1].datetime
+    import datetime as dt
+
+    limit = (dt.datetime.fromisoformat(last) + dt.timedelta(days=366)).isoformat()
+    if when < first or when > limit:
+        raise InputError(f"event date {when[:10]} is outside the campaign ({first[:10]} to {last[:10]}); its effect "
+                         "cannot be measured from these epochs")
+    return c.insert_event(when, kind, label.strip(), load_kn_m)
+
+
+def events(c: Campaign) -> list[EventRecord]:
+    """The campaign's events, by date."""
+    return c.events()

@@ -1,0 +1,279 @@
+"""Typed records of what a campaign stores.
+
+:class:`projects.store.Campaign` hands these out instead of database rows, so a caller reads
+``epoch.label`` rather than ``row["label"]`` and never decodes JSON columns itself. Records are frozen:
+changing a campaign goes through the store's methods, never through a record.
+
+Dates are ISO 8601 text in UTC as stored (``datetime``); :attr:`Epoch.when` gives the parsed value.
+Lengths are metres unless the name says otherwise.
+"""
+from __future__ import annotations
+
+import datetime as dt
+from dataclasses import asdict, dataclass, field
+from typing import Any, Optional
+
+import numpy as np
+
+
+class _Plain:
+    """Records that export themselves as plain values (tables, JSON)."""
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)  # type: ignore[call-overload]
+
+
+@dataclass(frozen=True)
+class Reflector:
+    """A retro-reflective target of the layout.
+
+    Attributes
+    ----------
+    id, group
+        Its name and ``"reference"`` (on a pier) or ``"measurement"`` (on the deck).
+    xyz_layout : tuple of 3 float
+        Position in the layout frame, metres.
+    diameter_m : float
+        Disc diameter, metres.
+    normal_layout : tuple of 3 float
+        Unit normal in the layout frame; NaNs when the layout gives none.
+    installed, retired : str or None
+        ISO date-times from which it is expected in scans, and after which it no longer is.
+    replaces : str or None
+        The target it took over from (its history continues this one's).
+    note : str
+    """
+
+    id: str
+    group: str
+    xyz_layout: tuple[float, float, float]
+    diameter_m: float
+    normal_layout: tuple[float, float, float] = (float("nan"),) * 3
+    installed: Optional[str] = None
+    retired: Optional[str] = None
+    replaces: Optional[str] = None
+    note: str = ""
+
+    @property
+    def is_reference(self) -> bool:
+        return self.group == "reference"
+
+    def expected_at(self, at: Optional[str]) -> bool:
+        """Whether the target is in place at the ISO date-time ``at`` (None: now, i.e. not retired)."""
+        if at is None:
+            return not self.retired
+        return not ((self.installed and self.installed > at) or (self.retired and self.retired <= at))
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain values for tables and exports (``x``, ``y``, ``z``, ``nx``... as columns)."""
+        return {"id": self.id, "group": self.group, "x": self.xyz_layout[0], "y": self.xyz_layout[1],
+                "z": self.xyz_layout[2], "diameter_m": self.diameter_m, "nx": self.normal_layout[0],
+                "ny": self.normal_layout[1], "nz": self.normal_layout[2], "installed": self.installed,
+                "retired": self.retired, "replaces": self.replaces, "note": self.note}
+
+
+@dataclass(frozen=True)
+class Epoch(_Plain):
+    """One weekly visit: its label, date-time (ISO 8601, UTC), notes and when it was recorded."""
+
+    label: str
+    datetime: str
+    notes: str = ""
+    created: str = ""
+
+    @property
+    def when(self) -> dt.datetime:
+        """The visit's date-time, timezone-aware."""
+        return dt.datetime.fromisoformat(self.datetime)
+
+    @property
+    def date(self) -> str:
+        """The visit's date, ``YYYY-MM-DD``."""
+        return self.datetime[:10]
+
+
+@dataclass(frozen=True)
+class ScanFile(_Plain):
+    """A scan file imported into an epoch.
+
+    ``role`` is ``"coarse"`` or ``"fine"``; ``stored_path`` is
+    relative to the campaign folder; ``size`` in bytes.
+    """
+
+    sha256: str
+    epoch: str
+    role: str
+    stored_path: str
+    original_path: str
+    size: int
+    imported: str
+
+
+@dataclass(frozen=True)
+class EpochResult:
+    """How far processing has taken an epoch.
+
+    ``stage`` is ``"planned"`` or ``"measured"``, with the
+    hash of the inputs it was computed from.
+    """
+
+    epoch: str
+    stage: str
+    inputs_hash: str
+    processed: str
+
+
+@dataclass(frozen=True)
+class StoredPlan:
+    """An epoch's stored scan plan with the hash of the inputs it was made from.
+
+    ``plan`` is a :class:`lidar.plan.ScanPlan`; ``plan_json`` its contract JSON as stored.
+    """
+
+    epoch: str
+    plan: Any
+    plan_json: dict
+    inputs_hash: str
+    created: str
+
+    @property
+    def edited(self) -> bool:
+        """Whether the windows were edited by hand (see :func:`projects.processing.save_edited_plan`)."""
+        return bool(self.plan_json.get("edited"))
+
+    @property
+    def identification(self) -> dict:
+        """What the coarse scan's identification recorded with the plan (detections, fit RMS, missing)."""
+        return dict(self.plan_json.get("identification") or {})
+
+
+@dataclass(frozen=True)
+class DisplacementSet:
+    """What an epoch's displacements were computed with.
+
+    Attributes
+    ----------
+    normal_socs : ndarray, shape (3,)
+        The deck normal the displacements are measured along, scanner frame.
+    reference_point_socs : ndarray, shape (3,)
+    reference_ids : tuple of str
+        Pier targets the frame motion was fitted to.
+    normal_mode : str
+    flags : tuple of str
+        The epoch's own flags (see :mod:`common.flags`).
+    """
+
+    epoch: str
+    baseline: str
+    inputs_hash: str
+    normal_socs: np.ndarray
+    reference_point_socs: np.ndarray
+    reference_ids: tuple[str, ...]
+    normal_mode: str
+    flags: tuple[str, ...]
+    processed: str
+
+
+@dataclass(frozen=True)
+class DisplacementRecord:
+    """One target's stored displacement in one epoch, with its own flags and its epoch's.
+
+    Metres, positive up; None where none could be computed.
+    """
+
+    epoch: str
+    datetime: str
+    reflector: str
+    displacement_m: Optional[float]
+    sigma_m: Optional[float]
+    flags: tuple[str, ...]
+    epoch_flags: tuple[str, ...]
+    baseline: str
+
+    @property
+    def when(self) -> dt.datetime:
+        return dt.datetime.fromisoformat(self.datetime)
+
+
+@dataclass(frozen=True)
+class ReferenceCheck:
+    """How a pier target moved between the baseline and an epoch (metres)."""
+
+    epoch: str
+    reflector: str
+    median_change_m: Optional[float]
+    max_change_m: Optional[float]
+    moved: bool
+    missing: bool
+    suspect: bool
+
+
+@dataclass(frozen=True)
+class LimitRecord:
+    """A limit in force.
+
+    ``reflector`` is a target id or ``"*"`` for every measurement target;
+    ``limit`` a :class:`projects.limits.Limit`.
+    """
+
+    reflector: str
+    limit: Any
+
+
+@dataclass(frozen=True)
+class LogEntry(_Plain):
+    """One line of the campaign's log: what was done, to which epoch, with its details."""
+
+    id: int
+    time: str
+    action: str
+    epoch: Optional[str]
+    details: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class SeriesRecord(_Plain):
+    """An imported time series (a camera's displacements or an environment quantity), without its arrays.
+
+    ``reflector`` is the LiDAR target a camera series watches (None for environment series); ``kind``
+    the environment quantity (``"camera"`` for camera series). ``options`` say how the file was read
+    (column, unit, time zone, sign) and ``summary`` what it held (rows, period, sampling, gaps, bad rows).
+    """
+
+    name: str
+    kind: str
+    reflector: Optional[str]
+    sha256: str
+    stored_path: str
+    original_path: str
+    imported: str
+    options: dict
+    summary: dict
+
+
+@dataclass(frozen=True)
+class EventRecord(_Plain):
+    """Something that explains a change: a construction step, a load, a repair (``date`` ISO 8601 UTC)."""
+
+    id: int
+    date: str
+    kind: str
+    label: str
+    load_kn_m: Optional[float] = None
+
+    @property
+    def when(self) -> dt.datetime:
+        return dt.datetime.fromisoformat(self.date)
+
+
+@dataclass(frozen=True)
+class PredictionRecord:
+    """A target's stored design prediction.
+
+    How it was aligned (``options``) and its curve as stored
+    (``arrays``: the npz bytes of time_ns and value_mm, unaligned).
+    """
+
+    reflector: str
+    options: dict
+    arrays: bytes

@@ -1,0 +1,205 @@
+"""The campaign database schema, its version and the migrations from older versions."""
+from __future__ import annotations
+
+import sqlite3
+
+from common.flags import RENAMED
+
+SCHEMA_VERSION = 8
+
+SCHEMA_V1 = """
+CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE reflectors (
+    id TEXT PRIMARY KEY,
+    grp TEXT NOT NULL CHECK (grp IN ('reference', 'measurement')),
+    x REAL NOT NULL, y REAL NOT NULL, z REAL NOT NULL,
+    diameter_m REAL NOT NULL CHECK (diameter_m > 0),
+    installed TEXT,                     -- ISO date-time from which it is expected in scans (NULL: from the start)
+    retired TEXT,                       -- ISO date-time after which it is no longer expected
+    replaces TEXT REFERENCES reflectors(id),
+    note TEXT NOT NULL DEFAULT ''
+);
+CREATE TABLE epochs (
+    label TEXT PRIMARY KEY,
+    datetime TEXT NOT NULL,
+    notes TEXT NOT NULL DEFAULT '',
+    created TEXT NOT NULL
+);
+CREATE TABLE files (
+    sha256 TEXT PRIMARY KEY,
+    epoch TEXT NOT NULL REFERENCES epochs(label) ON DELETE CASCADE,
+    role TEXT NOT NULL CHECK (role IN ('coarse', 'fine')),
+    stored_path TEXT NOT NULL UNIQUE,
+    original_path TEXT NOT NULL,
+    size INTEGER NOT NULL,
+    imported TEXT NOT NULL
+);
+CREATE TABLE plans (
+    epoch TEXT PRIMARY KEY REFERENCES epochs(label) ON DELETE CASCADE,
+    json TEXT NOT NULL,
+    inputs_hash TEXT NOT NULL,
+    created TEXT NOT NULL
+);
+CREATE TABLE centroids (
+    epoch TEXT NOT NULL REFERENCES epochs(label) ON DELETE CASCADE,
+    reflector TEXT NOT NULL REFERENCES reflectors(id),
+    found INTEGER NOT NULL,
+    x REAL, y REAL, z REAL,
+    cov TEXT NOT NULL,
+    n INTEGER NOT NULL,
+    threshold REAL, separability REAL, sigma_range_m REAL,
+    flags TEXT NOT NULL,
+    PRIMARY KEY (epoch, reflector)
+);
+CREATE TABLE epoch_results (
+    epoch TEXT PRIMARY KEY REFERENCES epochs(label) ON DELETE CASCADE,
+    stage TEXT NOT NULL CHECK (stage IN ('planned', 'measured')),
+    inputs_hash TEXT NOT NULL,
+    processed TEXT NOT NULL
+);
+CREATE TABLE displacement_sets (
+    epoch TEXT PRIMARY KEY REFERENCES epochs(label) ON DELETE CASCADE,
+    baseline TEXT NOT NULL REFERENCES epochs(label),
+    inputs_hash TEXT NOT NULL,
+    normal TEXT NOT NULL, reference_point TEXT NOT NULL, reference_ids TEXT NOT NULL,
+    normal_mode TEXT NOT NULL, flags TEXT NOT NULL,
+    processed TEXT NOT NULL
+);
+CREATE TABLE displacements (
+    epoch TEXT NOT NULL REFERENCES displacement_sets(epoch) ON DELETE CASCADE,
+    reflector TEXT NOT NULL REFERENCES reflectors(id),
+    displacement_m REAL, sigma_m REAL, vertical_m REAL, baseline_vertical_m REAL,
+    flags TEXT NOT NULL,
+    PRIMARY KEY (epoch, reflector)
+);
+CREATE TABLE reference_checks (
+    epoch TEXT NOT NULL REFERENCES displacement_sets(epoch) ON DELETE CASCADE,
+    reflector TEXT NOT NULL REFERENCES reflectors(id),
+    median_change_m REAL, max_change_m REAL, moved INTEGER NOT NULL, missing INTEGER NOT NULL,
+    suspect INTEGER NOT NULL,
+    PRIMARY KEY (epoch, reflector)
+);
+CREATE TABLE limits (
+    reflector TEXT PRIMARY KEY,         -- '*' holds the default for every measurement target
+    warning_mm REAL, alarm_mm REAL, rule TEXT NOT NULL
+);
+CREATE TABLE log (
+    id INTEGER PRIMARY KEY AUTOINCREMENT,
+    time TEXT NOT NULL, action TEXT NOT NULL, epoch TEXT, details TEXT NOT NULL
+);
+CREATE INDEX files_by_epoch ON files(epoch);
+"""
+
+# version -> SQL that upgrades the previous version to it. A new campaign is created as version 1
+# and then upgraded through every migration, so new and migrated campaigns have the same schema.
+MIGRATIONS: dict[int, str] = {
+    # 2: what the report needs to show each epoch without re-reading its scans: a reduced reflectance
+    #    map with its detections, and the points each fine-scan window actually held.
+    2: """
+    ALTER TABLE centroids ADD COLUMN n_window INTEGER;
+    CREATE TABLE map_previews (
+        epoch TEXT PRIMARY KEY REFERENCES epochs(label) ON DELETE CASCADE,
+        inputs_hash TEXT NOT NULL,
+        arrays BLOB NOT NULL,           -- numpy .npz: reduced map arrays and geometry
+        annotations TEXT NOT NULL       -- JSON: detections and identified reflectors
+    );
+    """,
+    # 3: whole-scan comparisons of two epochs (registration, change statistics, span profile) for reports.
+    3: """
+    CREATE TABLE comparisons (
+        from_epoch TEXT NOT NULL REFERENCES epochs(label) ON DELETE CASCADE,
+        to_epoch TEXT NOT NULL REFERENCES epochs(label) ON DELETE CASCADE,
+        method TEXT NOT NULL,
+        summary TEXT NOT NULL,          -- JSON, see projects.compare.whole_scan
+        created TEXT NOT NULL,
+        PRIMARY KEY (from_epoch, to_epoch, method)
+    );
+    """,
+    # 4: displacement series of a dual-camera installation and their cross-validation with LiDAR.
+    4: """
+    CREATE TABLE camera_series (
+        name TEXT PRIMARY KEY,
+        reflector TEXT REFERENCES reflectors(id),   -- the LiDAR target the camera watches
+        sha256 TEXT NOT NULL UNIQUE,
+        stored_path TEXT NOT NULL UNIQUE,           -- the imported file, copied read-only into camera/
+        original_path TEXT NOT NULL,
+        imported TEXT NOT NULL,
+        options TEXT NOT NULL,                      -- JSON: how the file was read (column, unit, zone, sign)
+        summary TEXT NOT NULL,                      -- JSON: rows, period, sampling, gaps, bad rows
+        arrays BLOB NOT NULL                        -- numpy .npz: time_ns (UTC), value_mm (positive up)
+    );
+    CREATE TABLE crossvals (
+        series TEXT PRIMARY KEY REFERENCES camera_series(name) ON DELETE CASCADE,
+        summary TEXT NOT NULL,                      -- JSON, see vision.crossval.CrossValidation
+        created TEXT NOT NULL
+    );
+    """,
+    # 5: target normals from layout.csv (nx,ny,nz; NULL when the layout gives none), for planning.
+    5: """
+    ALTER TABLE reflectors ADD COLUMN nx REAL;
+    ALTER TABLE reflectors ADD COLUMN ny REAL;
+    ALTER TABLE reflectors ADD COLUMN nz REAL;
+    """,
+    # 6: what explains the displacements: environment series (temperature, sun, rain...) and events
+    #    (construction steps, loads, repairs).
+    6: """
+    CREATE TABLE env_series (
+        name TEXT PRIMARY KEY,
+        kind TEXT NOT NULL,                         -- temperature, structure-temperature, solar, rain, snow, humidity
+        sha256 TEXT NOT NULL UNIQUE,
+        stored_path TEXT NOT NULL UNIQUE,           -- the imported file, copied read-only into environment/
+        original_path TEXT NOT NULL,
+        imported TEXT NOT NULL,
+        options TEXT NOT NULL,                      -- JSON: column, unit, zone
+        summary TEXT NOT NULL,                      -- JSON: rows, period, sampling, gaps, bad rows
+        arrays BLOB NOT NULL                        -- numpy .npz: time_ns (UTC), values in the kind's unit
+    );
+    CREATE TABLE events (
+        id INTEGER PRIMARY KEY AUTOINCREMENT,
+        date TEXT NOT NULL,                         -- ISO 8601 UTC
+        kind TEXT NOT NULL CHECK (kind IN ('construction', 'load', 'repair', 'other')),
+        label TEXT NOT NULL,
+        load_kn_m REAL,
+        created TEXT NOT NULL
+    );
+    """,
+    # 7: the design (finite-element) prediction of each target's displacement, aligned to the measurements.
+    7: """
+    CREATE TABLE predictions (
+        reflector TEXT PRIMARY KEY REFERENCES reflectors(id),
+        sha256 TEXT NOT NULL,                       -- the file (one file may hold every target)
+        stored_path TEXT NOT NULL,
+        original_path TEXT NOT NULL,
+        imported TEXT NOT NULL,
+        options TEXT NOT NULL,                      -- JSON: alignment (date or lsq), offset_mm, axis (date/age)
+        arrays BLOB NOT NULL                        -- numpy .npz: time_ns (UTC), value_mm (positive up, unaligned)
+    );
+    """,
+    # 8: flag codes are snake_case everywhere (common.flags): the camera cross-check's kebab-case codes of
+    #    older versions are renamed in the stored summaries (common.flags.RENAMED).
+    8: "".join(f"""UPDATE crossvals SET summary = replace(summary, '"{old}"', '"{new}"');\n"""
+               for old, new in RENAMED.items()),
+}
+
+
+def create(conn: sqlite3.Connection) -> None:
+    """Create a new campaign database: version 1 and every migration after it."""
+    conn.executescript(SCHEMA_V1)
+    conn.execute("INSERT INTO meta(key, value) VALUES ('schema_version', '1')")
+    for v in range(2, SCHEMA_VERSION + 1):
+        conn.executescript(MIGRATIONS[v])
+    conn.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),))
+
+
+def version_of(conn: sqlite3.Connection) -> int:
+    """The schema version of a campaign database."""
+    row = conn.execute("SELECT value FROM meta WHERE key = 'schema_version'").fetchone()
+    return int(row[0])
+
+
+def migrate(conn: sqlite3.Connection, from_version: int) -> None:
+    """Upgrade an older campaign in place, one version at a time, in one transaction each."""
+    for v in range(from_version + 1, SCHEMA_VERSION + 1):
+        with conn:
+            conn.executescript(MIGRATIONS[v])
+            conn.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(v),))

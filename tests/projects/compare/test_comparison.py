@@ -1,0 +1,132 @@
+"""Whole-scan comparison of two simulated epochs against the simulator's truth, and the compare command."""
+from __future__ import annotations
+
+import json
+import shutil
+
+import laspy
+import numpy as np
+import pytest
+
+from app.cli.main import main
+from lidar.simulate.files import load_scene
+from projects.store.campaign import Campaign
+from tests.projects.campaign_helpers import snapshot
+from tests.projects.conftest import MODEL
+
+
+def true_transform(field, k_from: int, k_to: int) -> np.ndarray:
+    """SOCS of visit k_from -> SOCS of visit k_to (4x4)."""
+    p_from = load_scene(field / f"v{k_from}")[0].pose
+    p_to = load_scene(field / f"v{k_to}")[0].pose
+    return np.linalg.inv(p_to) @ p_from
+
+
+@pytest.fixture(scope="module")
+def compared(processed, field, tmp_path_factory):
+    import shutil
+
+    camp = tmp_path_factory.mktemp("cmp") / "camp"
+    shutil.copytree(processed, camp, ignore=shutil.ignore_patterns(".lock"))
+    out = camp.parent / "out"
+    assert main(["compare", str(camp), "--from", "2026-03-02", "--to", "2026-03-16", "--out", str(out)]) == 0
+    return camp, out
+
+
+def test_registration_recovers_the_relative_pose_and_icp_keeps_it(compared, field):
+    _, out = compared
+    s = json.loads((out / "summary.json").read_text())
+    reg = s["registration"]["2026-03-16"]
+    truth = true_transform(field, 2, 0)
+    refs = np.array([t.centre_m for t in MODEL.targets])  # bridge frame -> SOCS of visit 2
+    pose2 = load_scene(field / "v2")[0]
+    pts = pose2.to_socs(refs)
+    tf_targets = np.array(reg["transform"]["matrix"])
+    err_icp = np.abs(pts @ tf_targets[:3, :3].T + tf_targets[:3, 3] - (pts @ truth[:3, :3].T + truth[:3, 3])).max()
+    assert reg["targets"]["rms_mm"] < 0.5 and not reg["targets"]["warnings"]
+    assert err_icp <= 1.0e-3, err_icp  # ICP on the piers and ground: within a millimetre where the bridge is
+    assert reg["icp"]["fitness"] > 0.5 and all(i >= 1 for i in reg["icp"]["iterations"])
+    d = np.linalg.inv(truth) @ tf_targets
+    assert np.degrees(np.arccos(np.clip((np.trace(d[:3, :3]) - 1) / 2, -1, 1))) <= 0.005
+
+
+@pytest.mark.skipif(shutil.which("pcl_ndt3d") is None, reason="PCL's pcl_ndt3d is not installed (pcl-tools)")
+def test_ndt_refinement_beside_icp_at_the_targets(processed, field):
+    from projects.compare.whole_scan import bring_to_campaign_frame
+
+    truth = true_transform(field, 1, 0)
+    pts = load_scene(field / "v1")[0].to_socs(np.array([t.centre_m for t in MODEL.targets]))
+    errs = {}
+    with Campaign.open(processed, writable=False) as c:
+        for refinement in ("ndt", "icp"):
+            e = bring_to_campaign_frame(c, "2026-03-09", "2026-03-02", refinement=refinement)
+            errs[refinement] = np.abs(e.transform.apply(pts) - (pts @ truth[:3, :3].T + truth[:3, 3])).max()
+            assert e.icp.correction.method == refinement
+    assert errs["icp"] <= 1.0e-3, errs
+    assert errs["ndt"] <= 5.0e-3, errs  # NDT on 1 m cells: millimetres at the targets
+
+
+def test_target_registration_alone_within_half_a_millimetre(processed, field):
+    from projects.compare.whole_scan import bring_to_campaign_frame
+
+    with Campaign.open(processed, writable=False) as c:
+        e = bring_to_campaign_frame(c, "2026-03-09", "2026-03-02", refinement="targets")
+    truth = true_transform(field, 1, 0)
+    pts = load_scene(field / "v1")[0].to_socs(np.array([t.centre_m for t in MODEL.targets]))
+    err = np.abs(e.transform.apply(pts) - (pts @ truth[:3, :3].T + truth[:3, 3])).max()
+    assert err <= 5e-4, err  # issue 5: <= 0.5 mm with 4 reference targets
+
+
+def test_m3c2_is_zero_on_the_piers_and_follows_the_deflection_on_the_deck(compared, field):
+    _, out = compared
+    s = json.loads((out / "summary.json").read_text())
+    stable, deck = s["change"]["stable_parts"], s["change"]["deck"]
+    assert stable["n"] > 100 and abs(stable["median_mm"]) <= stable["median_lod_mm"]
+    las = laspy.read(out / "change.laz")
+    xyz = np.column_stack([las.x, las.y, las.z])
+    d = np.asarray(las["m3c2_distance_mm"], dtype=float)
+    lod = np.asarray(las["lod_mm"], dtype=float)
+    # truth at each core point under the deck: 7 mm midspan sag in the first mode
+    pose0 = load_scene(field / "v0")[0].pose
+    xb = xyz @ pose0[:3, :3].T + pose0[:3, 3]
+    under = (np.abs(xb[:, 2] - MODEL.deck_bottom_m) < 0.1) & (xb[:, 0] > 4) & (xb[:, 0] < MODEL.span_m - 4) & \
+        np.isfinite(d)
+    assert under.sum() > 50
+    true_mm = (MODEL.deflection_m(xb[under, 0], -0.007) - MODEL.deflection_m(xb[under, 0], 0.0)) * 1e3
+    err = d[under] - true_mm
+    assert abs(np.median(err)) < 0.5 and np.mean(np.abs(err) <= lod[under]) >= 0.9
+    assert deck["median_mm"] < -3.0 and deck["median_lod_mm"] < 3.0
+
+
+def test_outputs_profile_and_report_section(compared, tmp_path):
+    camp, out = compared
+    for name in ("change.laz", "summary.json", "registration.csv", "span_profile.csv", "span_profile.png"):
+        assert (out / name).stat().st_size > 0
+    s = json.loads((out / "summary.json").read_text())
+    bins = s["span_profile"]["bins"]
+    assert len(s["span_profile"]["girder_offsets_m"]) == 2 and len(bins) >= 16
+    mid = [b for b in bins if 15 <= b["station_m"] <= 25]
+    assert mid and all(-12 < b["change_mm"] < -2 for b in mid)  # a 7 mm sag, seen through 5 mm noise
+    assert {t["reflector"] for t in s["targets"]} == {"M1", "M2", "M3", "M4", "M5"}
+    with Campaign.open(camp, writable=False) as c:
+        from projects.compare.whole_scan import comparisons
+
+        assert [x["to"] for x in comparisons(c)] == ["2026-03-16"]
+    pdf = tmp_path / "r.pdf"
+    assert main(["report", str(camp), "--out", str(pdf)]) == 0
+    import subprocess
+
+    text = subprocess.run(["pdftotext", str(pdf), "-"], capture_output=True, text=True).stdout
+    assert "Epoch comparison and span profile" in text
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--from", "2026-03-02", "--to", "2026-03-02"], "two different epochs"),
+    (["--from", "2026-03-02", "--to", "2099-01-01"], "2099-01-01"),
+])
+def test_bad_compare_arguments_leave_the_campaign_unchanged(processed_copy, tmp_path, capsys, args, message):
+    before = snapshot(processed_copy)
+    assert main(["compare", str(processed_copy), *args, "--out", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1
+    assert snapshot(processed_copy) == before
