@@ -11,6 +11,19 @@ from vision.crossval import CrossValidation
 from vision.series import CameraSeries
 
 
+def _fmt(v: float, fmt: str) -> str:
+    """A statistic as text: '-' for NaN, and no minus sign on a value that rounds to zero."""
+    if not np.isfinite(v):
+        return "-"
+    text = fmt.format(v)
+    return fmt.format(0.0) if text[:1] == "-" and text.lstrip("+-").strip("0.") == "" else text
+
+
+def _legend_outside(ax: Any) -> None:
+    """The legend to the right of the axes, never over the data."""
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7, frameon=False, borderaxespad=0.0)
+
+
 def _dates(ns: np.ndarray):
     return np.asarray(ns, dtype="datetime64[ns]").astype("datetime64[ms]").astype(dt.datetime)
 
@@ -54,10 +67,12 @@ def overlay_figure(cv: CrossValidation, camera: Optional[CameraSeries] = None, *
     ax.errorbar(tt, [q.lidar_mm for q in p], yerr=[2 * q.lidar_sigma_mm for q in p], fmt="o", ms=3.5,
                 color="tab:blue", ecolor="tab:blue", capsize=2, lw=0.8, label="LiDAR (±2σ)")
     ax.set_ylabel("vertical displacement (mm, up)")
-    ax.set_title(f"{cv.series or 'camera'} vs LiDAR {cv.reflector}: bias {cv.bias_mm:+.2f} mm, "
-                 f"RMSE {cv.rmse_mm:.2f} mm, r = {cv.correlation:.3f}")
+    head = f"{cv.series or 'camera'} vs LiDAR {cv.reflector}"
+    ax.set_title(f"{head}: {cv.note}" if not cv.has_statistics else
+                 f"{head}: bias {_fmt(cv.bias_mm, '{:+.2f}')} mm, RMSE {_fmt(cv.rmse_mm, '{:.2f}')} mm, "
+                 f"r = {_fmt(cv.correlation, '{:.3f}')}")
     ax.grid(alpha=0.3)
-    ax.legend(loc="best", fontsize=8)
+    _legend_outside(ax)
     return fig or ax.figure
 
 
@@ -71,12 +86,15 @@ def difference_figure(cv: CrossValidation, *, ax: Any = None) -> Any:
     ax.errorbar(tt, [q.difference_mm for q in p], yerr=[2 * q.sigma_mm for q in p], fmt="o", ms=3.5,
                 color="tab:purple", capsize=2, lw=0.8)
     ax.axhline(0.0, color="k", lw=0.8)
-    ax.axhline(cv.bias_mm, color="tab:red", lw=1.0, ls="--", label=f"bias {cv.bias_mm:+.2f} mm")
     ax.set_ylabel("LiDAR − camera (mm)")
-    ax.set_title(f"Differences ({cv.n_pairs} pairs, RMSE {cv.rmse_mm:.2f} mm, "
-                 f"{100 * cv.within_2sigma:.0f} % within 2σ)")
     ax.grid(alpha=0.3)
-    ax.legend(loc="best", fontsize=8)
+    if not cv.has_statistics:
+        ax.set_title(f"Differences ({cv.note})")
+        return fig or ax.figure
+    ax.axhline(cv.bias_mm, color="tab:red", lw=1.0, ls="--", label=f"bias {_fmt(cv.bias_mm, '{:+.2f}')} mm")
+    ax.set_title(f"Differences ({cv.n_pairs} pairs, RMSE {_fmt(cv.rmse_mm, '{:.2f}')} mm, "
+                 f"{_fmt(100 * cv.within_2sigma, '{:.0f}')} % within 2σ)")
+    _legend_outside(ax)
     return fig or ax.figure
 
 
@@ -98,7 +116,8 @@ def scatter_figure(cv: CrossValidation, *, ax: Any = None) -> Any:
     ax.set_aspect("equal")
     ax.set_xlabel("camera (mm, aligned)")
     ax.set_ylabel("LiDAR (mm)")
-    ax.set_title(f"r = {cv.correlation:.3f}, slope {cv.slope:.3f}")
+    ax.set_title(f"r = {_fmt(cv.correlation, '{:.3f}')}, slope {_fmt(cv.slope, '{:.3f}')}" if cv.has_statistics
+                 else "too few pairs for statistics")
     ax.grid(alpha=0.3)
     ax.legend(loc="upper left", fontsize=8)
     return fig or ax.figure

@@ -145,15 +145,39 @@ def cmd_analyse(args) -> int:
     if args.json:
         dump_json(doc)
         return 0
-    rows = []
-    for t in doc["targets"]:
-        rows.append({"reflector": t["reflector"], "thermal_mm_per_degC": t["thermal_mm_per_degC"],
-                     "thermal_sigma": t["thermal_sigma"], "trend_mm_per_year": t["trend_mm_per_year"],
-                     "events": "; ".join(f"{e['label']}: {e['step_mm']} mm, phi {e['creep_coefficient']}"
-                                         for e in t["events"]) or "-",
-                     "projection": (t["projection"] or {}).get("warning", "-")})
-    table(rows, ["reflector", "thermal_mm_per_degC", "thermal_sigma", "trend_mm_per_year", "events", "projection"])
-    for w in doc["warnings"]:
-        print(f"warning: {w}")
+    print_analysis(doc)
     print(f"wrote {len(paths)} file(s) to {args.out}")
     return 0
+
+
+def _pm(v, s, fmt="{:+.2f}", sfmt="{:.2f}") -> str:
+    if v is None:
+        return "-"
+    return fmt.format(v) + ("" if s is None else " ± " + sfmt.format(s))
+
+
+def print_analysis(doc: dict) -> None:
+    """The analysis target by target: thermal coefficient and trend, each event with what its numbers mean,
+    the projection and the notes; then the warnings."""
+    numbers = {(e["date"][:10], e["label"]): k for k, e in enumerate(doc["events"], start=1)}
+    for t in doc["targets"]:
+        thermal = ("no thermal term" if t["thermal_mm_per_degC"] is None else
+                   f"thermal {_pm(t['thermal_mm_per_degC'], t['thermal_sigma'], '{:+.3f}', '{:.3f}')} mm/°C")
+        trend = ("no trend" if t["trend_mm_per_year"] is None else
+                 f"trend {_pm(t['trend_mm_per_year'], t['trend_sigma'], '{:+.1f}', '{:.1f}')} mm/year")
+        print(f"{t['reflector']}  {thermal}, {trend}, {t['epochs']} epochs")
+        for e in t["events"]:
+            k = numbers.get((e["date"][:10], e["label"]), "-")
+            text = f"    event {k} {e['label']} ({e['date'][:10]}): step {_pm(e['step_mm'], e['step_sigma_mm'])} mm"
+            if e["creep_coefficient"] is not None:
+                text += f", creep coefficient {_pm(e['creep_coefficient'], e['creep_coefficient_sigma'], '{:.2f}')}"
+            print(text)
+            if e["note"]:
+                print(f"      note: {e['note']}")
+        proj = t["projection"] or {}
+        if proj.get("warning"):
+            print(f"    projection: {proj['warning']}")
+        for n in t["notes"]:
+            print(f"    note: {n}")
+    for w in doc["warnings"]:
+        print(f"warning: {w}")

@@ -1,7 +1,6 @@
 """Camera commands: import a dual-camera displacement series, list them, cross-validate with LiDAR."""
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 from app.cli.output import dump_json, table
@@ -101,17 +100,12 @@ def cmd_crossval(args) -> int:
         dump_json(cv.to_json())
         return 0
 
-    def f(v, fmt):
-        return "-" if v is None or (isinstance(v, float) and math.isnan(v)) else fmt.format(v)
-
     al = cv.alignment
     how = (f"aligned at {al['epoch']} (nearest to {al['requested']})" if al["method"] == "at-date"
            else "aligned by least squares")
     print(f"camera '{cv.series}' vs LiDAR {cv.reflector}: {cv.n_pairs} pairs of {len(cv.pairs)} epochs, {how}, "
           f"offset {cv.offset_mm:+.2f} mm")
-    print(f"  bias {f(cv.bias_mm, '{:+.3f}')} mm, RMSE {f(cv.rmse_mm, '{:.3f}')} mm, std {f(cv.std_mm, '{:.3f}')} mm, "
-          f"max |diff| {f(cv.max_abs_mm, '{:.3f}')} mm, correlation {f(cv.correlation, '{:.4f}')}, "
-          f"{100 * cv.within_2sigma:.0f} % within 2 sigma")
+    print(f"  {cv.statistics_text()}")
     missing = [p.epoch for p in cv.pairs if FLAG_NO_CAMERA_DATA in p.flags]
     if missing:
         print(f"  no camera data within +-{args.window_min:g} min of: {', '.join(missing[:10])}"

@@ -1,57 +1,105 @@
-"""The analysis figure of one target: measured and temperature-corrected histories, events, temperature."""
+"""The analysis figure of one target: the data, the fitted model, the temperature-corrected series and the events.
+
+Everything on a date axis (with the concrete's age on top when a casting date is set), the colours of
+:data:`projects.series.context.COLOURS`, and the legend outside the data.
+"""
 from __future__ import annotations
+
+import datetime as dt
+from typing import Any, Optional
 
 import numpy as np
 
 
-def target_figure(doc: dict, target: dict):
-    """One target's analysis figure: measurements, the fitted model and its parts, events, the projection."""
+def _array(values: Optional[list]) -> np.ndarray:
+    return np.array([np.nan if v is None else v for v in (values or [])], dtype=float)
+
+
+def _dates(origin: dt.datetime, days: np.ndarray) -> list[dt.datetime]:
+    return [origin + dt.timedelta(days=float(d)) for d in days]
+
+
+def target_figure(doc: dict, target: dict, *, figsize: tuple[float, float] = (9.0, 4.8)) -> Any:
+    """One target's analysis figure (a matplotlib Figure, no GUI toolkit), legend below the plot."""
     import matplotlib
 
     matplotlib.use("Agg", force=False)
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(9, 4.8), dpi=110)
-    draw_target(fig.add_subplot(111), doc, target)
-    fig.tight_layout()
+    fig = Figure(figsize=figsize, dpi=110, layout="constrained")
+    draw_target(fig.add_subplot(111), doc, target, legend="below")
     return fig
 
 
-def draw_target(ax, doc: dict, target: dict) -> None:
-    """Draw one target's analysis on a matplotlib Axes (the file export and the application share it)."""
-    t = np.array([v if v is not None else np.nan for v in target["epoch_days"]], dtype=float)
-    age_shift = None  # with a casting date the time axis is the concrete's age
-    ages = target.get("concrete_age_days")
-    if ages and len(ages) == t.size and ages[0] is not None:
-        age_shift = float(ages[0]) - float(t[0])
-        t = t + age_shift
-    corr = np.array([v if v is not None else np.nan for v in target["corrected_mm"]], dtype=float)
-    sig = np.array([v if v is not None else np.nan for v in target["corrected_sigma_mm"]], dtype=float)
-    if corr.size == t.size and t.size:
-        label = "temperature-corrected" if target["thermal_mm_per_degC"] is not None else "measured"
-        ax.errorbar(t, corr, yerr=2 * sig, fmt="o", ms=3, lw=0.8, capsize=2, label=f"{label} (±2σ)")
-    import datetime as dt
+def draw_target(ax: Any, doc: dict, target: dict, *, legend: str = "below") -> None:
+    """Draw one target's analysis on a matplotlib Axes (the file export, the report and the application share it).
+
+    Measured displacements (grey, ±2σ), the temperature-corrected series (blue, ±2σ, when there is a thermal
+    term), the fitted model at the reference temperature (black, its ±2σ band shaded) and the events
+    (dashed, numbered above the axes). ``legend`` is ``below`` (under the axes) or ``none``.
+    """
+    import matplotlib.transforms as mtransforms
+
+    from projects.series.context import COLOURS
 
     origin = dt.datetime.fromisoformat(doc["time_origin"])
-    for e in doc["events"]:
-        day = (dt.datetime.fromisoformat(e["date"]) - origin).total_seconds() / 86400 + (age_shift or 0.0)
-        ax.axvline(day, color="tab:red", lw=0.8, ls="--")
-        ax.annotate(e["label"], (day, 1), xycoords=("data", "axes fraction"), rotation=90, va="top", ha="right",
-                    fontsize=7, color="tab:red")
-    temps = [v for v in target["temperature_at_epochs_degC"]]
-    if temps and any(v is not None for v in temps) and len(temps) == t.size:
-        ax2 = ax.twinx()
-        ax2.plot(t, [np.nan if v is None else v for v in temps], color="tab:orange", lw=0.8, alpha=0.7)
-        ax2.set_ylabel("temperature at the epochs (°C)", color="tab:orange")
-    ax.set_xlabel(f"concrete age (days since casting on {doc['casting_date'][:10]})" if age_shift is not None
-                  else f"days from the baseline ({doc['baseline']})")
-    ax.set_ylabel("vertical displacement (mm, positive up)")
-    b = target["thermal_mm_per_degC"]
+    t = _array(target["epoch_days"])
+    thermal = target["thermal_mm_per_degC"] is not None
+    handles = []
+    meas, meas_s = _array(target.get("measured_mm")), _array(target.get("measured_sigma_mm"))
+    if meas.size == t.size and t.size:
+        handles.append(ax.errorbar(_dates(origin, t), meas, yerr=2 * meas_s, fmt="o", ms=2.5, lw=0.7, capsize=1.5,
+                                   color=COLOURS["measured"], mfc="white", zorder=2,
+                                   label="measured (±2σ)"))
+    corr, sig = _array(target["corrected_mm"]), _array(target["corrected_sigma_mm"])
+    if thermal and corr.size == t.size and t.size:
+        ref = target.get("reference_temperature_degC")
+        handles.append(ax.errorbar(_dates(origin, t), corr, yerr=2 * sig, fmt="o", ms=3, lw=0.8, capsize=1.5,
+                                   color=COLOURS["corrected"], zorder=3,
+                                   label="temperature-corrected" + (f" to {ref:.1f} °C" if ref is not None else "")
+                                         + " (±2σ)"))
+    curve = target.get("model_curve")
+    if curve and curve["days"]:
+        cd, cv, cs = _array(curve["days"]), _array(curve["mm"]), _array(curve["sigma_mm"])
+        when = _dates(origin, cd)
+        ax.fill_between(when, cv - 2 * cs, cv + 2 * cs, color=COLOURS["model"], alpha=0.12, lw=0, zorder=1)
+        handles.append(ax.plot(when, cv, color=COLOURS["model"], lw=1.1, zorder=4,
+                               label="fitted model" + (" at that temperature" if thermal else "") + " (band ±2σ)")[0])
+    top = mtransforms.blended_transform_factory(ax.transData, ax.transAxes)
+    from matplotlib.lines import Line2D
+
+    for k, e in enumerate(doc["events"], start=1):
+        day = dt.datetime.fromisoformat(e["date"])
+        if day.tzinfo is None:
+            day = day.replace(tzinfo=origin.tzinfo)
+        ax.axvline(day, color=COLOURS["event"], lw=0.8, ls="--", zorder=1)
+        ax.text(day, 1.01, str(k), transform=top, ha="center", va="bottom", fontsize=7, color=COLOURS["event"],
+                fontweight="bold", clip_on=False)
+        handles.append(Line2D([], [], color=COLOURS["event"], ls="--", lw=0.8,
+                              label=f"{k}  {e['label']} ({e['date'][:10]})"))
+    ax.set_ylabel("vertical displacement [mm, positive up]")
+    ax.grid(alpha=0.3)
+    ax.set_title(_title(target), fontsize=9, pad=14)
+    casting = doc.get("casting_date")
+    if casting:
+        import matplotlib.dates as mdates
+
+        c0 = mdates.date2num(dt.datetime.fromisoformat(casting[:10]))
+        sec = ax.secondary_xaxis("top", functions=(lambda x: x - c0, lambda a: a + c0))
+        sec.set_xlabel(f"concrete age [days since casting on {casting[:10]}]", fontsize=7)
+        sec.tick_params(labelsize=7)
+    ax.figure.autofmt_xdate()
+    if legend == "below" and handles:
+        ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=2, fontsize=7, frameon=False)
+
+
+def _title(target: dict) -> str:
+    """``M3: thermal 0.11 ± 0.01 mm/°C, trend …`` rounded to what the numbers mean."""
     title = f"{target['reflector']}"
+    b = target["thermal_mm_per_degC"]
+    parts = []
     if b is not None:
-        title += f": {b:+.3f} ± {target['thermal_sigma']:.3f} mm/°C"
+        parts.append(f"thermal {b:+.2f} ± {target['thermal_sigma']:.2f} mm/°C")
     if target["trend_mm_per_year"] is not None:
-        title += f", trend {target['trend_mm_per_year']:+.2f} mm/year"
-    ax.set_title(title)
-    if ax.get_legend_handles_labels()[0]:
-        ax.legend(loc="lower left", fontsize=8)
+        parts.append(f"trend {target['trend_mm_per_year']:+.1f} ± {target['trend_sigma']:.1f} mm/year")
+    return title + (": " + ", ".join(parts) if parts else "")

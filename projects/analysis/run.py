@@ -10,16 +10,17 @@ import json
 import math
 import os
 from pathlib import Path
-from typing import Optional
+from typing import Optional, cast
 
 import numpy as np
 
 from common.errors import InputError
 from common.files import write_atomic
-from projects.analysis.models import Event, TargetFit, first_crossing, fit_target
+from projects.analysis.models import Event, EventFit, TargetFit, first_crossing, fit_target
 from projects.series.environment import events as stored_events
 from projects.series.environment import load_env
 from projects.store.history import histories
+from projects.store.limits import Limit
 from projects.store.campaign import Campaign
 
 ANALYSIS_FORMAT_VERSION = 1
@@ -36,7 +37,7 @@ def _iso_day(origin_ns: int, t_days: float) -> Optional[str]:
     return dt.datetime.fromtimestamp((origin_ns + t_days * DAY_NS) / 1e9, dt.timezone.utc).date().isoformat()
 
 
-def _num(v, nd=4):
+def _num(v: Optional[float], nd: int = 4) -> Optional[float]:
     return None if v is None or not math.isfinite(v) else round(float(v), nd)
 
 
@@ -51,8 +52,11 @@ def analyse_campaign(c: Campaign, *, horizon_days: float = 365.0, long_term_fact
         raise InputError(f"the long-term factor must be at least 1, got {long_term_factor}")
     hist = histories(c)
     if not hist:
-        raise InputError(f"{c.folder}: no displacements yet; run 'bridgesurvey process' first")
+        raise InputError(f"{c.folder}: no displacements yet; process the epochs first (Epoch ▸ Process in the "
+                         "application, or 'bridgesurvey process DIR')")
     base = baseline_epoch(c)
+    if base is None:
+        raise InputError(f"{c.folder}: the campaign has no baseline epoch yet; process the epochs first")
     origin = _ns(c.epoch(base).datetime)
     series = load_env(c, kind="structure-temperature") or load_env(c, kind="temperature")
     temperature, temp_source = None, None
@@ -75,7 +79,7 @@ def analyse_campaign(c: Campaign, *, horizon_days: float = 365.0, long_term_fact
         d = mine.displacement_mm
         sg = np.where(mine.sigma_mm > 0, mine.sigma_mm, np.nan)  # the baseline itself (sigma 0) carries no information
         fit = fit_target(t, d, sg, temperature=temperature, events=evs, reference_temperature=reference_temperature)
-        lim = h.limit
+        lim = cast(Optional[Limit], h.limit)
         tj = _target_json(rid, fit, t, origin, horizon_days, lim, long_term_factor)
         if rid in preds:
             tj["prediction_offset_mm"] = _num(preds[rid][2]["offset_mm"])
@@ -91,7 +95,8 @@ def analyse_campaign(c: Campaign, *, horizon_days: float = 365.0, long_term_fact
             "horizon_days": horizon_days, "long_term_factor": long_term_factor, "targets": targets}
 
 
-def _aliasing_warnings(epoch_times: list[dt.datetime], temperature, origin: int) -> list[str]:
+def _aliasing_warnings(epoch_times: list[dt.datetime], temperature: Optional[tuple[np.ndarray, np.ndarray]],
+                       origin: int) -> list[str]:
     out = []
     hours = np.array([e.astimezone(dt.timezone.utc).hour + e.minute / 60 for e in epoch_times])
     if len(hours) >= 3:
@@ -101,51 +106,80 @@ def _aliasing_warnings(epoch_times: list[dt.datetime], temperature, origin: int)
             out.append(f"the epochs were scanned at very different times of day (spread {spread:.1f} h): the daily "
                        "temperature swing aliases into the weekly series")
     if temperature is None:
-        out.append("no temperature series: the thermal effect cannot be separated (import one with 'env import')")
+        out.append("no temperature series: the thermal effect cannot be separated (import one with "
+                   "'bridgesurvey env import DIR FILE --kind temperature')")
     return out
 
 
-def _target_json(rid: str, fit: TargetFit, t: np.ndarray, origin: int, horizon: float, lim,
-                 long_term_factor: Optional[float]) -> dict:
-    ev = [{"date": e.date, "label": e.label, "kind": e.kind, "step_mm": _num(e.step_mm),
+def _event_json(e: EventFit, long_term_factor: Optional[float]) -> dict:
+    out = {"date": e.date, "label": e.label, "kind": e.kind, "step_mm": _num(e.step_mm),
            "step_sigma_mm": _num(e.step_sigma_mm), "creep_mm": _num(e.creep_mm),
            "creep_sigma_mm": _num(e.creep_sigma_mm), "creep_final_mm": _num(e.creep_final_mm),
            "creep_coefficient": _num(e.creep_coefficient), "creep_coefficient_sigma": _num(e.creep_coefficient_sigma),
            "creep_coefficient_final": _num(e.creep_coefficient_final),
-           "creep_coefficient_final_sigma": _num(e.creep_coefficient_final_sigma), "note": e.note,
-           **({"long_term_mm": _num(long_term_factor * e.step_mm)} if long_term_factor and e.kind == "construction"
-              and math.isfinite(e.step_mm) else {})} for e in fit.events]
-    proj = None
-    if fit._predict is not None and len(t):
-        last = float(np.max(t))
-        v, s = fit.predict([last + horizon])
-        proj = {"date": _iso_day(origin, last + horizon), "displacement_mm": _num(v[0]), "sigma_mm": _num(s[0]),
-                "at_reference_temperature": fit.reference_temperature_degC is not None}
-        if lim is not None and lim.warning_mm:
-            level = -abs(lim.warning_mm) if v[0] < 0 else abs(lim.warning_mm)
-            cross = first_crossing(fit, last, last + 3652.5, level)
-            if cross is None:
-                proj["warning"] = f"the warning level ({lim.warning_mm:g} mm) is not reached within 10 years at this rate"
-            else:
-                c0, early, late = cross
-                proj.update(warning_level_mm=level, warning_date=_iso_day(origin, c0), warning_earliest=_iso_day(origin, early),
-                            warning_latest=_iso_day(origin, late))
-                proj["warning"] = (f"at this rate the warning level ({lim.warning_mm:g} mm) is reached on "
-                                   f"{proj['warning_date'] or 'no date (only the 2-sigma band reaches it)'}"
-                                   f" (2 sigma: from {proj['warning_earliest']})")
+           "creep_coefficient_final_sigma": _num(e.creep_coefficient_final_sigma), "note": e.note}
+    if long_term_factor and e.kind == "construction" and math.isfinite(e.step_mm):
+        out["long_term_mm"] = _num(long_term_factor * e.step_mm)
+    return out
+
+
+def _projection_json(fit: TargetFit, t: np.ndarray, origin: int, horizon: float, lim: Optional[Limit]
+                     ) -> Optional[dict]:
+    """The model's value at the horizon and when the warning level is reached at this rate (limits to 0.1 mm)."""
+    if fit.predictor is None or not len(t):
+        return None
+    last = float(np.max(t))
+    v, s = fit.predict([last + horizon])
+    proj: dict = {"date": _iso_day(origin, last + horizon), "displacement_mm": _num(v[0]), "sigma_mm": _num(s[0]),
+                  "at_reference_temperature": fit.reference_temperature_degC is not None}
+    if lim is None or not lim.warning_mm:
+        return proj
+    level = -abs(lim.warning_mm) if v[0] < 0 else abs(lim.warning_mm)
+    cross = first_crossing(fit, last, last + 3652.5, level)
+    if cross is None:
+        proj["warning"] = f"the warning level ({lim.warning_mm:.1f} mm) is not reached within 10 years at this rate"
+        return proj
+    c0, early, late = cross
+    proj.update(warning_level_mm=_num(level, 1), warning_date=_iso_day(origin, c0),
+                warning_earliest=_iso_day(origin, early), warning_latest=_iso_day(origin, late))
+    proj["warning"] = (f"at this rate the warning level ({lim.warning_mm:.1f} mm) is reached on "
+                       f"{proj['warning_date'] or 'no date (only the 2-sigma band reaches it)'}"
+                       f" (2 sigma: from {proj['warning_earliest']})")
+    return proj
+
+
+def _model_curve(fit: TargetFit, events: list[EventFit]) -> Optional[dict]:
+    """The fitted model at the reference temperature over the epochs' span (days, mm, sigma), steps kept sharp."""
+    if fit.predictor is None or not fit.epoch_days.size:
+        return None
+    t0, t1 = float(fit.epoch_days.min()), float(fit.epoch_days.max())
+    steps = [e.t_days for e in events if math.isfinite(e.t_days) and math.isfinite(e.step_mm)]
+    days = np.unique(np.round(np.concatenate([np.linspace(t0, t1, 300), [x - 0.001 for x in steps], steps]), 3))
+    days = days[(days >= t0) & (days <= t1)]
+    v, s = fit.predict(days)
+    return {"days": [_num(x, 3) for x in days], "mm": [_num(x) for x in v], "sigma_mm": [_num(x) for x in s]}
+
+
+def _target_json(rid: str, fit: TargetFit, t: np.ndarray, origin: int, horizon: float, lim: Optional[Limit],
+                 long_term_factor: Optional[float]) -> dict:
     return {"reflector": rid, "epochs": fit.n_epochs, "thermal_mm_per_degC": _num(fit.thermal_mm_per_degC, 5),
             "thermal_sigma": _num(fit.thermal_sigma, 5), "thermal_p_value": _num(fit.thermal_p_value, 6),
             "thermal_significant": bool(math.isfinite(fit.thermal_p_value) and fit.thermal_p_value < 0.05),
             "temperature_window_h": fit.temperature_window_h, "temperature_lag_h": fit.temperature_lag_h,
-            "reference_temperature_degC": _num(fit.reference_temperature_degC, 2), "events": ev,
+            "reference_temperature_degC": _num(fit.reference_temperature_degC, 2),
+            "events": [_event_json(e, long_term_factor) for e in fit.events],
             "prediction_offset_mm": None, "prediction_residual_rms_mm": None,
             "trend_mm_per_year": _num(fit.trend_mm_per_year), "trend_sigma": _num(fit.trend_sigma),
-            "seasonal_amplitude_mm": _num(fit.seasonal_amplitude_mm), "creep_d_days": fit.creep_d_days, "creep_law": fit.creep_law,
-            "sigma_scale": _num(fit.scale, 3), "rms_residual_mm": _num(fit.rms_residual_mm),
+            "seasonal_amplitude_mm": _num(fit.seasonal_amplitude_mm), "creep_d_days": fit.creep_d_days,
+            "creep_law": fit.creep_law, "sigma_scale": _num(fit.scale, 3), "rms_residual_mm": _num(fit.rms_residual_mm),
+            "measured_mm": [_num(v) for v in fit.measured_mm],
+            "measured_sigma_mm": [_num(v) for v in fit.measured_sigma_mm],
             "corrected_mm": [_num(v) for v in fit.corrected_mm],
             "corrected_sigma_mm": [_num(v) for v in fit.corrected_sigma_mm],
             "temperature_at_epochs_degC": [_num(v, 2) for v in fit.temperature_at_epochs],
-            "epoch_days": [_num(v, 3) for v in fit.epoch_days], "projection": proj, "notes": list(fit.notes)}
+            "epoch_days": [_num(v, 3) for v in fit.epoch_days],
+            "model_curve": _model_curve(fit, list(fit.events)),
+            "projection": _projection_json(fit, t, origin, horizon, lim), "notes": list(fit.notes)}
 
 
 def write_analysis(c: Campaign, out_dir: str | os.PathLike, **kw) -> tuple[dict, list[Path]]:

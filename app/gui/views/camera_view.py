@@ -45,8 +45,7 @@ class CameraView(QWidget):
         al = cv.alignment
         how = f"aligned at {al['epoch']}" if al["method"] == "at-date" else "aligned by least squares"
         self.info.setText(f"<b>{cv.series}</b> against LiDAR {cv.reflector}: {cv.n_pairs} pairs, {how} "
-                          f"(offset {cv.offset_mm:+.2f} mm); bias {cv.bias_mm:+.3f} mm, RMSE {cv.rmse_mm:.3f} mm, "
-                          f"r = {cv.correlation:.4f}, {100 * cv.within_2sigma:.0f} % within 2σ")
+                          f"(offset {cv.offset_mm:+.2f} mm); {cv.statistics_text()}")
 
     def show_message(self, text: str) -> None:
         self.result = None

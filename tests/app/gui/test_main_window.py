@@ -202,7 +202,7 @@ def test_camera_import_crossval_and_report_export(window, processed_copy, tmp_pa
     window.commands.crossval()
     wait_job(qtbot, window)
     cv = window.camera_view.result
-    assert cv is not None and cv.n_pairs == 3 and cv.rmse_mm < 0.5
+    assert cv is not None and cv.n_pairs == 3 and not cv.has_statistics  # 3 pairs: too few for statistics
     assert window.tabs.currentWidget() is window.camera_view
     out = tmp_path / "r.pdf"
     monkeypatch.setattr("app.gui.commands.ask_save_path", lambda *a: out)

@@ -76,3 +76,57 @@ def test_sigmas_are_honest_over_many_histories():
             inside += abs(est - truth) <= 2 * sig
             total += 1
     assert inside / total >= 0.9
+
+
+def test_the_model_pieces_design_matrix_search_average_and_predictor():
+    import dataclasses
+    import doctest
+
+    import pytest
+
+    import projects.analysis.models as m
+
+    assert doctest.testmod(m).failed == 0
+    e = Event(10.0, "load")
+    terms = (m.Term("offset"), m.Term("thermal"), m.Term("step", e), m.Term("creep", e), m.Term("trend"))
+    t = np.array([0.0, 10.0, 20.0])
+    X = m.design_matrix(t, terms, creep_law=("exp", 10.0), temperature_deviation=np.array([1.0, -1.0, 0.5]))
+    assert X[:, 0].tolist() == [1, 1, 1] and X[:, 1].tolist() == [1.0, -1.0, 0.5] and X[:, 2].tolist() == [0, 1, 1]
+    assert X[:, 3] == pytest.approx([0.0, 0.0, 1 - np.exp(-1.0)]) and X[:, 4] == pytest.approx(t / m.YEAR_D)
+    assert m.design_matrix(t, terms[:2], creep_law=None)[:, 1].tolist() == [0, 0, 0]  # at the reference temperature
+    # the candidates are frozen records, the best one has the lowest AICc
+    rng = np.random.default_rng(2)
+    tt = np.arange(0.0, 300.0, 7.0)
+    d = -2.0 * (tt >= 100) + rng.normal(0, 0.05, tt.size)
+    specs = list(m.model_specs(tt, [None], [(Event(100.0, "x"), False)]))
+    best, per_law = m.search_models(tt, d, np.full(tt.size, 400.0), specs)
+    assert best is not None and best.aicc == min(c.aicc for c in per_law)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        best.aicc = 0.0  # type: ignore[misc]
+    step = best.estimate(m.Term("step", Event(100.0, "x")))
+    assert step is not None and abs(step[0] + 2.0) < 0.1
+    # Akaike averaging adds the spread between the models to the variance
+    mean, sigma = m.akaike_average(np.array([0.5, 0.5]), [(1.0, 0.01), (3.0, 0.01)])
+    assert mean == pytest.approx(2.0) and sigma == pytest.approx(np.sqrt(1.01))
+    assert np.isnan(m.akaike_average(np.array([1.0]), [None])[0])
+    fit = fit_target(tt, d, np.full(tt.size, 0.05), events=[Event(100.0, "x")])
+    v, s = fit.predict([50.0, 150.0])
+    assert v[1] - v[0] == pytest.approx(-2.0, abs=0.1) and np.all(s > 0)
+    assert fit.measured_mm.tolist() == d.tolist()
+
+
+def test_a_negative_creep_coefficient_gets_a_note():
+    """Issue 25.9: a recovery after the step, or a coefficient the epochs cannot tell from zero, says so."""
+    rng = np.random.default_rng(8)
+    t = np.arange(0.0, 400.0, 7.0)
+    recovery = (t >= 100) * (-3.0 + 1.5 * (1 - np.exp(-(t - 100) / 40.0)))  # half the step comes back
+    fit = fit_target(t, recovery + rng.normal(0, 0.05, t.size), np.full(t.size, 0.05), events=[Event(100.0, "load")])
+    e = fit.events[0]
+    assert e.creep_coefficient < -2 * e.creep_coefficient_sigma
+    assert "negative creep coefficient" in e.note and "recovery" in e.note
+    flat = (t >= 100) * -3.0 + rng.normal(0, 0.1, t.size)  # no creep at all
+    e = fit_target(t, flat, np.full(t.size, 0.1), events=[Event(100.0, "load")]).events[0]
+    assert abs(e.creep_coefficient) <= 2 * e.creep_coefficient_sigma and "not determinable" in e.note
+    creep = (t >= 100) * (-3.0 * (1 + 1.2 * (1 - np.exp(-(t - 100) / 40.0)))) + rng.normal(0, 0.05, t.size)
+    e = fit_target(t, creep, np.full(t.size, 0.05), events=[Event(100.0, "load")]).events[0]
+    assert e.creep_coefficient > 2 * e.creep_coefficient_sigma and e.note == ""
