@@ -9,8 +9,10 @@ from pathlib import Path
 import numpy as np
 
 from common.files import write_atomic
+from projects.results.state import epoch_state
 from projects.results.table import displacement_table, to_csv
 from projects.store.campaign import Campaign
+
 
 def tables(c: Campaign) -> dict[str, list[dict]]:
     """Every table a surveyor may want, as lists of rows."""
@@ -25,10 +27,10 @@ def tables(c: Campaign) -> dict[str, list[dict]]:
                           "threshold": t.threshold, "separability": t.separability, "flags": ";".join(t.flags)})
     epoch_rows = []
     for e in epochs:
-        res = c.result(e.label)
+        state, flags = epoch_state(c, e.label)  # as 'status' and the campaign tree give it
         epoch_rows.append({"epoch": e.label, "datetime": e.datetime, "notes": e.notes,
                            "coarse_files": len(c.files(e.label, "coarse")), "fine_files": len(c.files(e.label, "fine")),
-                           "stage": res.stage if res else "imported"})
+                           "state": state, "flags": ";".join(flags)})
     log = [{**entry.to_dict(), "details": json.dumps(entry.details, default=str)} for entry in c.log()]
     return {"epochs": epoch_rows, "reflectors": [r.to_dict() for r in c.reflectors()], "centroids": cents,
             "displacements": displacement_table(c),

@@ -10,7 +10,7 @@ from __future__ import annotations
 import io
 import os
 from pathlib import Path
-from typing import Optional
+from typing import Any, Optional
 
 import numpy as np
 
@@ -40,7 +40,7 @@ def _thumbnail_png(preview, roi) -> Optional[bytes]:
     cols = np.mod(np.arange(c0 - k, c0 + k + 1), w) if rmap.full_circle else np.clip(np.arange(c0 - k, c0 + k + 1), 0, w - 1)
     img = rmap.max_intensity[np.ix_(rows, cols)]
     fig = Figure(figsize=(1.3, 1.3), dpi=110)
-    ax = fig.add_axes([0, 0, 1, 1])
+    ax = fig.add_axes((0, 0, 1, 1))
     ax.imshow(np.nan_to_num(img, nan=0.0), cmap="gray", vmin=0, vmax=1, origin="upper", interpolation="nearest")
     wr = (roi.window.theta_max_deg - roi.window.theta_min_deg) / rmap.step_deg
     wc = (roi.window.phi_max_deg - roi.window.phi_min_deg) / rmap.step_deg
@@ -51,7 +51,7 @@ def _thumbnail_png(preview, roi) -> Optional[bytes]:
     return buf.getvalue()
 
 
-def write_field_sheet(plan: ScanPlan, path: str | os.PathLike, *, campaign_name: str = "", preview=None,
+def write_field_sheet(plan: ScanPlan, path: str | os.PathLike, *, campaign_name: str = "", preview: Any = None,
                       epoch_date: str = "") -> Path:
     """Write the field sheet of ``plan`` to a PDF (``preview``: the epoch's stored map, for thumbnails)."""
     from reportlab.lib.units import mm

@@ -2,7 +2,10 @@
 
 ``write_report`` is the entry point; :mod:`projects.outputs.report.content` gathers the
 facts, :mod:`projects.outputs.report.plots` draws the figures and
-:mod:`projects.outputs.report.pdf` lays out the document.
+:mod:`projects.outputs.report.pdf` lays out the document from the building blocks of
+:mod:`projects.outputs.report.flowables`, with the analysis pages of
+:mod:`projects.outputs.report.analysis_page` and the action log in words of
+:mod:`projects.outputs.report.action_log`.
 """
 from __future__ import annotations
 

@@ -12,17 +12,19 @@ import logging
 import platform
 from dataclasses import dataclass
 from importlib import metadata
-from typing import Optional
+from typing import Any, Optional
 
 from common.errors import InputError, SurveyError
 from common.flags import FLAG_SECOND_OBJECT
 from projects.store import schema
+from projects.results.state import epoch_state
 from projects.results.table import displacement_table
 from projects.store.history import DisplacementHistory, histories
 from projects.processing.stages import PIPELINE_VERSION, baseline_epoch, parameters
 from projects.store.records import (DisplacementSet, Epoch, LimitRecord, LogEntry, Reflector, ReferenceCheck, ScanFile,
                               StoredPlan)
 from projects.store.campaign import Campaign
+from projects.store.previews import MapPreview
 
 log = logging.getLogger(__name__)
 
@@ -60,13 +62,15 @@ class EpochSection:
     label: str
     datetime: str
     notes: str
-    stage: str
+    stage: str  # the stored result's stage (imported, planned, measured)
     plan: Optional[StoredPlan]
-    preview: object  # projects.map_previews.MapPreview or None
+    preview: Optional[MapPreview]
     centroids: dict
     reference_checks: tuple[ReferenceCheck, ...]
     displacement_set: Optional[DisplacementSet]
     files: tuple[ScanFile, ...]
+    state: str = "imported"  # as ``status`` gives it (projects.results.state.epoch_state)
+    state_flags: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -91,7 +95,7 @@ class ReportContent:
     parameters: dict
     versions: dict
     log: tuple[LogEntry, ...]
-    extras: dict                         # optional sections (comparisons, camera cross-validation) by name
+    extras: dict[str, Any]               # optional sections (comparisons, camera cross-validation) by name
 
     @property
     def period(self) -> tuple[str, str]:
@@ -102,12 +106,13 @@ def select_epochs(c: Campaign, scope: ReportScope) -> list[Epoch]:
     """The campaign's epochs (in time order) that a scope covers; InputError for unknown labels."""
     epochs = c.epochs()
     if not epochs:
-        raise InputError(f"{c.folder}: the campaign has no epochs yet; add one with 'bridgesurvey add-epoch'")
+        raise InputError(f"{c.folder}: the campaign has no epochs yet; add one (Epoch ▸ Add epoch… in the "
+                         "application, or 'bridgesurvey add-epoch DIR')")
     labels = [e.label for e in epochs]
     for lab in (scope.epoch, scope.start, scope.end):
         if lab is not None and lab not in labels:
             raise InputError(f"unknown epoch {lab!r}; the campaign has {labels[0]} ... {labels[-1]} "
-                             "(see 'bridgesurvey status')")
+                             "(see the campaign tree, or 'bridgesurvey status DIR')")
     if scope.epoch is not None:
         if scope.start or scope.end:
             raise InputError("give either --epoch or --from/--to, not both")
@@ -165,10 +170,12 @@ def gather(c: Campaign, scope: ReportScope = ReportScope(), *, author: Optional[
     for e in chosen:
         lab = e.label
         res = c.result(lab)
+        state, state_flags = epoch_state(c, lab)
         sections.append(EpochSection(
             lab, e.datetime, e.notes, res.stage if res else "imported",
             c.stored_plan(lab), c.map_preview(lab) if with_previews else None,
-            c.centroids(lab), tuple(c.reference_checks(lab)), c.displacement_set(lab), tuple(c.files(lab))))
+            c.centroids(lab), tuple(c.reference_checks(lab)), c.displacement_set(lab), tuple(c.files(lab)),
+            state, tuple(state_flags)))
     last_time = chosen[-1].datetime
     first_time = chosen[0].datetime
     # A visit report shows the history up to the visit; a period report the period itself.
@@ -184,7 +191,7 @@ def gather(c: Campaign, scope: ReportScope = ReportScope(), *, author: Optional[
     hist = {rid: h.select([lab in in_scope for lab in h.epochs]) for rid, h in histories(c).items()}
     from projects.compare.whole_scan import comparisons
 
-    extras = {}
+    extras: dict[str, Any] = {}
     cmp_ = comparisons(c, {s.label for s in sections} | ({baseline_epoch(c)} if scope.epoch else set()))
     if cmp_:
         extras["comparisons"] = cmp_

@@ -2,106 +2,26 @@
 from __future__ import annotations
 
 import io
-import json
 import os
 from pathlib import Path
-from typing import Callable, Optional, Sequence
+from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 
-from common.flags import FLAG_NO_CAMERA_DATA, REGISTRY, describe, severity
+from common.flags import FLAG_NO_CAMERA_DATA, REGISTRY, code, describe, severity
 from common.progress import ProgressCallback, report, scaled
+from projects.outputs.report.analysis_page import analysis_section
 from projects.outputs.report.content import EpochSection, ReportContent
+from projects.outputs.report.flowables import esc, figure_flowable, fonts, num, styles, table
+from projects.series.context import WHOLE_DAY_COVERAGE
 
 PAGE_MARGIN_MM = 16
 STATE_COLOURS = {"ok": "#c8e6c9", "warning": "#ffe0b2", "alarm": "#ffcdd2", "unknown": "#eeeeee"}
 
 
 # ----------------------------------------------------------------------------- styles and helpers
-def _fonts() -> tuple[str, str]:
-    """DejaVu Sans (shipped with matplotlib) so that σ, ±, ≤ print; registered once."""
-    from matplotlib import get_data_path
-    from reportlab.pdfbase import pdfmetrics
-    from reportlab.pdfbase.ttfonts import TTFont
-
-    if "DejaVuSans" not in pdfmetrics.getRegisteredFontNames():
-        ttf = Path(get_data_path()) / "fonts" / "ttf"
-        pdfmetrics.registerFont(TTFont("DejaVuSans", str(ttf / "DejaVuSans.ttf")))
-        pdfmetrics.registerFont(TTFont("DejaVuSans-Bold", str(ttf / "DejaVuSans-Bold.ttf")))
-        from reportlab.lib.fonts import addMapping
-
-        addMapping("DejaVuSans", 0, 0, "DejaVuSans")
-        addMapping("DejaVuSans", 1, 0, "DejaVuSans-Bold")
-    return "DejaVuSans", "DejaVuSans-Bold"
-
-
-def _styles():
-    from reportlab.lib.styles import ParagraphStyle, getSampleStyleSheet
-
-    regular, bold = _fonts()
-    ss = getSampleStyleSheet()
-    for name in ("Normal", "BodyText", "Title", "Heading1", "Heading2", "Heading3"):
-        ss[name].fontName = bold if name != "Normal" and name != "BodyText" else regular
-    ss["Normal"].fontSize = 9
-    ss["Normal"].leading = 12
-    ss.add(ParagraphStyle("Small", parent=ss["Normal"], fontSize=7.5, leading=9.5))
-    ss.add(ParagraphStyle("Cell", parent=ss["Normal"], fontSize=7, leading=8.5))
-    ss.add(ParagraphStyle("Mono", parent=ss["Normal"], fontName="Courier", fontSize=5.8, leading=8))
-    ss.add(ParagraphStyle("Big", parent=ss["Title"], fontSize=24, leading=30, alignment=0))
-    ss.add(ParagraphStyle("Sub", parent=ss["Normal"], fontSize=13, leading=17))
-    ss["Heading1"].fontSize = 15
-    ss["Heading2"].fontSize = 11.5
-    ss["Heading2"].spaceBefore = 8
-    return ss
-
-
-def _esc(text) -> str:
-    from xml.sax.saxutils import escape
-
-    return escape("" if text is None else str(text))
-
-
-def _num(v, fmt="{:.2f}") -> str:
-    return "–" if v is None or (isinstance(v, float) and not np.isfinite(v)) else fmt.format(v)
-
-
-def _table(rows: Sequence[Sequence], widths_mm: Sequence[float], ss, *, header_rows: int = 1,
-           cell_colours: Sequence[tuple[int, int, str]] = ()):
-    from reportlab.lib import colors
-    from reportlab.lib.units import mm
-    from reportlab.platypus import Paragraph, Table, TableStyle
-
-    data = [[c if not isinstance(c, str) else Paragraph(_esc(c), ss["Cell"]) for c in r] for r in rows]
-    t = Table(data, colWidths=[w * mm for w in widths_mm], repeatRows=header_rows)
-    style = [("GRID", (0, 0), (-1, -1), 0.25, colors.HexColor("#9e9e9e")),
-             ("BACKGROUND", (0, 0), (-1, header_rows - 1), colors.HexColor("#e3eaf3")),
-             ("VALIGN", (0, 0), (-1, -1), "TOP"),
-             ("TOPPADDING", (0, 0), (-1, -1), 1.5), ("BOTTOMPADDING", (0, 0), (-1, -1), 1.5)]
-    for r in range(header_rows, len(rows)):
-        if (r - header_rows) % 2:
-            style.append(("BACKGROUND", (0, r), (-1, r), colors.HexColor("#f6f6f6")))
-    for r, c, colour in cell_colours:
-        style.append(("BACKGROUND", (c, r), (c, r), colors.HexColor(colour)))
-    t.setStyle(TableStyle(style))
-    return t
-
-
-def figure_flowable(fig, width_mm: float):
-    """A matplotlib Figure as a vector drawing ``width_mm`` wide (SVG through svglib).
-
-    Maps are raster images instead: see :func:`render_map_jpeg`.
-    """
-    from reportlab.lib.units import mm
-    from svglib.svglib import svg2rlg
-
-    buf = io.BytesIO()
-    fig.savefig(buf, format="svg")
-    buf.seek(0)
-    d = svg2rlg(buf)
-    f = width_mm * mm / d.width
-    d.scale(f, f)
-    d.width, d.height = d.width * f, d.height * f
-    return d
+# (kept under their old names: the field sheet and the fleet report use them too)
+_fonts, _styles, _esc, _num, _table = fonts, styles, esc, num, table
 
 
 def write_landscape_pdf(story: list, path: str | os.PathLike, *, title: str) -> Path:
@@ -156,7 +76,7 @@ def _make_doc(path, content: ReportContent):
 
 
 # ----------------------------------------------------------------------------- sections
-def title_page(content: ReportContent, ss) -> list:
+def title_page(content: ReportContent, ss: Any) -> list:
     """Flowables of the title page."""
     from reportlab.platypus import NextPageTemplate, PageBreak, Paragraph, Spacer
 
@@ -177,7 +97,7 @@ def title_page(content: ReportContent, ss) -> list:
             NextPageTemplate("body"), PageBreak()]
 
 
-def summary_section(content: ReportContent, ss) -> list:
+def summary_section(content: ReportContent, ss: Any) -> list:
     """Flowables of the summary: latest value of every target, problems, largest movement, limits."""
     from reportlab.platypus import Paragraph, Spacer
 
@@ -189,7 +109,8 @@ def summary_section(content: ReportContent, ss) -> list:
             latest[r["reflector"]] = r
     if not rows:
         out.append(Paragraph("No displacements computed yet: the epochs in this report have not all been measured "
-                             "(see the epoch sections and 'bridgesurvey status').", ss["Normal"]))
+                             "(see the epoch sections; Epoch ▸ Process in the application, or "
+                             "<font face='Courier'>bridgesurvey process DIR</font>).", ss["Normal"]))
     else:
         last_epoch = content.epochs[-1].label
         out.append(Paragraph(f"{len(content.epochs)} epoch(s) in this report; displacements against baseline "
@@ -228,24 +149,25 @@ def summary_section(content: ReportContent, ss) -> list:
     if rows:
         from projects.outputs.figures import displacement_history_figure
 
-        fig = displacement_history_figure(content.histories, title="All measurement targets (bars ±2σ)")
-        fig.set_size_inches(7.0, 3.3)
+        fig = displacement_history_figure(content.histories, title="All measurement targets (bars ±2σ)",
+                                          context=content.extras.get("context"), series=False, figsize=(7.0, 3.8))
         out += [Spacer(1, 6), figure_flowable(fig, 170)]
     out.append(Paragraph("Limits in force", ss["Heading2"]))
     if content.limits:
-        lim = [["Applies to", "Rule", "Warning [mm]", "Alarm [mm]"]]
-        for r in content.limits:
-            lim.append(["every measurement target" if r.reflector == "*" else r.reflector, r.limit.rule,
-                        _num(r.limit.warning_mm, "{:.2f}"), _num(r.limit.alarm_mm, "{:.2f}")])
-        out.append(_table(lim, (50, 45, 30, 30), ss))
+        lim_rows: list[list] = [["Applies to", "Rule", "Warning [mm]", "Alarm [mm]"]]
+        for lr in content.limits:
+            lim_rows.append(["every measurement target" if lr.reflector == "*" else lr.reflector, lr.limit.rule,
+                             _num(lr.limit.warning_mm, "{:.1f}"), _num(lr.limit.alarm_mm, "{:.1f}")])
+        out.append(_table(lim_rows, (50, 45, 30, 30), ss))
         out.append(Paragraph("States compare |displacement| with the thresholds: warning at or above the warning "
                              "value, alarm at or above the alarm value.", ss["Small"]))
     else:
-        out.append(Paragraph("No limits set (bridgesurvey limit DIR --rule ...).", ss["Normal"]))
+        out.append(Paragraph("No limits set: Campaign ▸ Set limit… in the application, or "
+                             "<font face='Courier'>bridgesurvey limit DIR --rule RULE</font>.", ss["Normal"]))
     return out
 
 
-def layout_section(content: ReportContent, ss) -> list:
+def layout_section(content: ReportContent, ss: Any) -> list:
     """Flowables of the layout figure and each target's state."""
     from reportlab.platypus import PageBreak, Paragraph
 
@@ -269,7 +191,7 @@ def layout_section(content: ReportContent, ss) -> list:
     return out
 
 
-def history_section(content: ReportContent, ss) -> list:
+def history_section(content: ReportContent, ss: Any) -> list:
     """Flowables of the per-target history panels, six to a page."""
     from reportlab.platypus import PageBreak, Paragraph
 
@@ -279,12 +201,13 @@ def history_section(content: ReportContent, ss) -> list:
     targets = sorted(content.histories)
     if not targets:
         return out + [Paragraph("No displacements yet.", ss["Normal"])]
-    out.append(Paragraph("Each panel is one measurement target. Flagged values (orange rings) carry a remark in "
-                         "the epoch sections.", ss["Small"]))
+    out.append(Paragraph("Each panel is one measurement target; the legend above the panels says what each line "
+                         "and colour is. Flagged values (black rings) carry a remark in the epoch sections; events are "
+                         "numbered above the first panel.", ss["Small"]))
     ctx = content.extras.get("context")
-    if ctx is not None and (ctx.events or ctx.series_name):
-        out.append(Paragraph("Dashed purple lines: events" + (f"; orange: {ctx.series_name}, daily means" if
-                                                              ctx.series_name else "") + ".", ss["Small"]))
+    if ctx is not None and ctx.series_name and ctx.series_statistic == "daily means":
+        out.append(Paragraph(_esc(f"{ctx.series_name}: means of whole days only (a day whose readings cover less "
+                                  f"than {WHOLE_DAY_COVERAGE:.0%} of it is left out)."), ss["Small"]))
     for k in range(0, len(targets), 6):
         out.append(figure_flowable(history_grid_figure(content.histories, targets=targets[k:k + 6],
                                                        context=ctx), 175))
@@ -294,7 +217,7 @@ def history_section(content: ReportContent, ss) -> list:
 MAP_FIGSIZE = (7.0, 3.1)
 
 
-def render_map_jpeg(preview, plan, label: str) -> bytes:
+def render_map_jpeg(preview: Any, plan: Any, label: str) -> bytes:
     """An epoch's map figure as JPEG bytes (JPEG goes into the PDF as it is, without re-encoding)."""
     from projects.outputs.report.plots import epoch_map_figure
 
@@ -343,14 +266,27 @@ def render_maps(sections: Sequence[EpochSection], preview_of: Optional[Callable]
     return [None if j is None else next(it) for j in jobs]
 
 
-def epoch_section(e: EpochSection, content: ReportContent, ss, *, new_page: bool = True,
+#: Text colour of an epoch state in the report (the campaign tree's orange and red).
+STATE_TEXT_COLOURS = {"warning": "#b35900", "problem": "#d62728"}
+
+
+def state_line(e: EpochSection) -> str:
+    """``State: warning (second_bright_object: ...)`` as ``status`` gives it, then the epoch's notes (markup)."""
+    colour = STATE_TEXT_COLOURS.get(e.state)
+    state = f"<b>{_esc(e.state)}</b>" if colour is None else f"<font color='{colour}'><b>{_esc(e.state)}</b></font>"
+    flags = describe(e.state_flags) if e.state_flags else ""
+    text = f"State: {state}" + (f" ({_esc(flags)})" if flags else "") + "."
+    return text + (f" {_esc(e.notes)}" if e.notes else "")
+
+
+def epoch_section(e: EpochSection, content: ReportContent, ss: Any, *, new_page: bool = True,
                   map_jpeg: Optional[bytes] = None) -> list:
     """Flowables of one epoch; ``map_jpeg`` from :func:`render_maps` (None: the epoch has no map)."""
     from reportlab.platypus import PageBreak, Paragraph, Spacer
 
     out = [PageBreak()] if new_page else []
     out += [Paragraph(f"Epoch {_esc(e.label)} — {e.datetime[:16].replace('T', ' ')}", ss["Heading2"]),
-            Paragraph(f"State: {e.stage}. {_esc(e.notes)}", ss["Small"])]
+            Paragraph(state_line(e), ss["Small"])]
     if map_jpeg is not None:
         from reportlab.lib.units import mm
         from reportlab.platypus import Image
@@ -394,19 +330,35 @@ def epoch_section(e: EpochSection, content: ReportContent, ss, *, new_page: bool
         for r in rows:
             table.append([r["reflector"], _num(r["displacement_mm"]), _num(r["sigma_mm"], "{:.3f}"), r["state"],
                           r["flags"].replace(";", ", ") or "–"])
-        flags = e.displacement_set.flags if e.displacement_set else ()
-        out += [Spacer(1, 4), Paragraph("Displacements" + (f" (epoch flags, {_esc(describe(flags))})" if flags else ""),
+        epoch_flags = e.displacement_set.flags if e.displacement_set else ()
+        out += [Spacer(1, 4), Paragraph("Displacements" + (f" (epoch flags, {_esc(describe(epoch_flags))})"
+                                                           if epoch_flags else ""),
                                         ss["Small"]), _table(table, (20, 30, 20, 20, 88), ss)]
-        problems = [f for f in (flags or []) if severity(f) == "problem"]
+        problems = [f for f in epoch_flags if severity(f) == "problem"]
         if problems:
             out.insert(0, Paragraph(f"<font color='#d62728'><b>PROBLEM:</b> {_esc('; '.join(problems))}</font>",
                                     ss["Normal"]))
     return out
 
 
-def log_section(content: ReportContent, ss, *, max_log_rows: int = 400) -> list:
-    """Flowables of the processing log: versions, parameters, file checksums and the last actions."""
+def _flags_in(content: ReportContent) -> set[str]:
+    """The flag codes that appear anywhere in the report's epochs."""
+    used: set[str] = set()
+    for e in content.epochs:
+        used.update(e.state_flags)
+        used.update(e.displacement_set.flags if e.displacement_set else ())
+        for t in e.centroids.values():
+            used.update(t.flags)
+    for r in content.displacements:
+        used.update(f for f in (r["flags"] + ";" + (r.get("epoch_flags") or "")).split(";") if f)
+    return {code(f) for f in used}
+
+
+def log_section(content: ReportContent, ss: Any, *, max_log_rows: int = 400) -> list:
+    """Flowables of the processing log: versions, parameters, file checksums, flags and the action log."""
     from reportlab.platypus import PageBreak, Paragraph
+
+    from projects.outputs.report.action_log import action_row
 
     out = [PageBreak(), Paragraph("Processing log", ss["Heading1"]),
            Paragraph("Everything needed to trace the numbers: software versions, processing parameters, the "
@@ -417,30 +369,35 @@ def log_section(content: ReportContent, ss, *, max_log_rows: int = 400) -> list:
            _table([["Parameter", "Value"]] + [[k, "auto" if v is None else str(v)]
                                               for k, v in content.parameters.items()], (60, 50), ss),
            Paragraph("Scan files (SHA-256, stored read-only in the campaign)", ss["Heading2"])]
-    files = [["Epoch", "Role", "Original file", "Size [MB]", "SHA-256"]]
+    files: list[list] = [["Epoch", "Role", "Original file", "Size [MB]", "SHA-256"]]
     for e in content.epochs:
         for f in e.files:
             files.append([e.label, f.role, os.path.basename(f.original_path), f"{f.size / 1e6:.1f}",
                           Paragraph(f.sha256, ss["Mono"])])
-    out.append(_table(files, (20, 12, 40, 14, 92), ss))
-    out.append(Paragraph("Flags used in this report", ss["Heading2"]))
-    flag_rows = [[f.code, f"{f.severity}: {f.meaning}"] for f in REGISTRY.values()]
-    out.append(_table([["Flag", "Meaning"]] + flag_rows, (45, 133), ss))
+    out.append(_table(files, (20, 15, 40, 14, 89), ss))
+    out.append(Paragraph("Flags raised in this report", ss["Heading2"]))
+    used = _flags_in(content)
+    flag_rows = [[f.code, f.severity, f.meaning] for f in REGISTRY.values() if f.code in used]
+    if flag_rows:
+        out.append(_table([["Flag", "Severity", "Meaning"]] + flag_rows, (50, 18, 110), ss))
+    else:
+        out.append(Paragraph("No flag was raised in this report's epochs.", ss["Small"]))
     out.append(Paragraph("Action log", ss["Heading2"]))
     log = list(content.log)
     if len(log) > max_log_rows:
-        out.append(Paragraph(f"The last {max_log_rows} of {len(log)} entries; export the campaign (xlsx) for "
-                             "all.", ss["Small"]))
+        out.append(Paragraph(f"The last {max_log_rows} of {len(log)} entries; the workbook export (Reports ▸ "
+                             "Export workbook… or <font face='Courier'>bridgesurvey export DIR</font>) has them all.",
+                             ss["Small"]))
         log = log[-max_log_rows:]
-    rows = [["Time", "Action", "Epoch", "Details"]]
-    for r in log:
-        details = json.dumps(r.details, default=str)
-        rows.append([r.time[:19], r.action, r.epoch or "", details[:160] + ("…" if len(details) > 160 else "")])
-    out.append(_table(rows, (32, 20, 22, 104), ss))
+    rows: list[list] = [["Time (UTC)", "Epoch", "Action", "Files", "Result"]]
+    for entry in log:
+        a = action_row(entry)
+        rows.append([a.time, a.epoch or "–", a.action, a.files or "–", a.result or "–"])
+    out.append(_table(rows, (30, 18, 35, 30, 65), ss))
     return out
 
 
-def comparison_section(content: ReportContent, ss) -> list:
+def comparison_section(content: ReportContent, ss: Any) -> list:
     """Flowables of the whole-scan comparisons and span profiles."""
     from reportlab.platypus import PageBreak, Paragraph, Spacer
 
@@ -481,7 +438,7 @@ def comparison_section(content: ReportContent, ss) -> list:
     return out
 
 
-def crossval_section(content: ReportContent, ss) -> list:
+def crossval_section(content: ReportContent, ss: Any) -> list:
     """Flowables of the dual-camera cross-checks."""
     from reportlab.platypus import PageBreak, Paragraph, Spacer
 
@@ -502,8 +459,13 @@ def crossval_section(content: ReportContent, ss) -> list:
                                   f"offset {cv.offset_mm:+.2f} mm."), ss["Small"]))
         table = [["Pairs", "Bias [mm]", "RMSE [mm]", "Std [mm]", "Max |d| [mm]", "Correlation", "Within 2σ"],
                  [f"{cv.n_pairs} of {len(cv.pairs)}", _num(cv.bias_mm, "{:+.2f}"), _num(cv.rmse_mm), _num(cv.std_mm),
-                  _num(cv.max_abs_mm), _num(cv.correlation, "{:.3f}"), f"{100 * cv.within_2sigma:.0f} %"]]
-        out += [Spacer(1, 3), _table(table, (24, 22, 22, 20, 24, 24, 22), ss), Spacer(1, 4),
+                  _num(cv.max_abs_mm), _num(cv.correlation, "{:.3f}"), _num(100 * cv.within_2sigma, "{:.0f} %")]]
+        out += [Spacer(1, 3), _table(table, (24, 22, 22, 20, 24, 24, 22), ss), Spacer(1, 4)]
+        if not cv.has_statistics:
+            out.append(Paragraph(_esc(f"{cv.note[:1].upper()}{cv.note[1:]}. Import a longer camera series or widen "
+                                      "the pairing window ('bridgesurvey crossval DIR --window-min MIN')."),
+                                 ss["Normal"]))
+        out += [
                 figure_flowable(overlay_figure(cv, camera), 172), figure_flowable(difference_figure(cv), 172),
                 figure_flowable(scatter_figure(cv), 90)]
         missing = [p.epoch for p in cv.pairs if FLAG_NO_CAMERA_DATA in p.flags]
@@ -513,36 +475,6 @@ def crossval_section(content: ReportContent, ss) -> list:
 
 
 #: Optional sections: name -> builder taking (content, ss) and returning flowables; called only when
-def analysis_section(content: ReportContent, ss) -> list:
-    """What explains the displacements: temperature effect, events with creep, trend and projection."""
-    from reportlab.platypus import PageBreak, Paragraph
-
-    doc = content.extras["analysis"]
-    out = [PageBreak(), Paragraph("Analysis: temperature, events, creep and projection", ss["Heading1"]),
-           Paragraph(_esc(f"Temperature: {doc['temperature_source'] or 'none imported'}. Times in days from the "
-                          f"baseline {doc['baseline']}" + (f"; concrete cast {doc['casting_date'][:10]}" if
-                                                            doc.get("casting_date") else "") + "."), ss["Small"])]
-    for w in doc["warnings"]:
-        out.append(Paragraph(_esc(f"⚠ {w}"), ss["Small"]))
-    rows = [["Target", "mm/°C (σ)", "trend mm/yr (σ)", "seasonal mm", "events: step (σ), creep coefficient (σ)",
-             "prediction offset / RMS", "projection"]]
-    for t in doc["targets"]:
-        ev = "; ".join(f"{e['label']}: {_num(e['step_mm'])} ({_num(e['step_sigma_mm'])}) mm, φ "
-                       f"{_num(e['creep_coefficient'])} ({_num(e['creep_coefficient_sigma'])})"
-                       + (f" [{e['note']}]" if e["note"] else "") for e in t["events"]) or "–"
-        proj = t["projection"] or {}
-        rows.append([t["reflector"], f"{_num(t['thermal_mm_per_degC'], '{:.3f}')} ({_num(t['thermal_sigma'], '{:.3f}')})",
-                     f"{_num(t['trend_mm_per_year'])} ({_num(t['trend_sigma'])})", _num(t["seasonal_amplitude_mm"]), ev,
-                     f"{_num(t['prediction_offset_mm'])} / {_num(t['prediction_residual_rms_mm'])}",
-                     proj.get("warning") or (f"{_num(proj.get('displacement_mm'))} ± {_num(proj.get('sigma_mm'))} mm on "
-                                             f"{proj.get('date')}" if proj else "–")])
-    out.append(_table(rows, [14, 22, 24, 16, 48, 22, 34], ss))
-    notes = sorted({n for t in doc["targets"] for n in t["notes"]})
-    for n in notes:
-        out.append(Paragraph(_esc(n), ss["Small"]))
-    return out
-
-
 #: ``content.extras`` holds that name.
 EXTRA_SECTIONS: dict[str, Callable] = {"comparisons": comparison_section, "crossvals": crossval_section,
                                        "analysis": analysis_section}

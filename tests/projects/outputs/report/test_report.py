@@ -113,3 +113,130 @@ def test_map_preview_round_trip(processed):
         r, col = int(round(float(r))), int(round(float(col)))
         patch = p.reflectance_map.max_intensity[max(r - 2, 0):r + 3, max(col - 2, 0):col + 3]
         assert np.nanmax(patch) > 0.5
+
+
+def _cell_words_broken(flowables) -> list[str]:
+    """Words a table cell breaks inside (reportlab splits a word that does not fit its column)."""
+    import html
+    import re
+
+    from reportlab.platypus import Paragraph, Table
+
+    from projects.outputs.report.flowables import CELL_PADDING_PT
+
+    broken = []
+    for t in flowables:
+        if not isinstance(t, Table):
+            continue
+        for row in t._cellvalues:
+            for w, cell in zip(t._colWidths, row):
+                if not isinstance(cell, Paragraph):
+                    continue
+                cell.wrap(w - 2 * CELL_PADDING_PT, 10_000)
+                source = set(html.unescape(re.sub(r"<[^>]+>", " ", cell.text)).split())
+                bl = cell.blPara
+                lines = [" ".join(x[1]) for x in bl.lines] if bl.kind == 0 else \
+                    ["".join(f.text for f in x.words) for x in bl.lines]
+                broken += [word for line in lines for word in line.split() if word not in source]
+    return broken
+
+
+def test_tables_never_break_a_word_and_numbers_are_rounded(processed):
+    from projects.outputs.report import ReportScope, gather
+    from projects.outputs.report.flowables import cell_paragraph, styles
+    from projects.outputs.report.pdf import epoch_section, layout_section, log_section, summary_section
+    from projects.store.campaign import Campaign
+
+    ss = styles()
+    with Campaign.open(processed, writable=False) as c:
+        content = gather(c, ReportScope(), with_previews=False)
+    story = summary_section(content, ss) + layout_section(content, ss) + log_section(content, ss)
+    for e in content.epochs:
+        story += epoch_section(e, content, ss)
+    assert _cell_words_broken(story) == []
+    p = cell_paragraph("displacements computed", 20 * 2.83465, ss["Cell"])  # 20 mm: the old action column
+    assert p.style.fontSize < ss["Cell"].fontSize and _cell_words_broken([_one_cell_table(p, 20)]) == []
+    from projects.outputs.report.flowables import num
+
+    assert num(-0.0037, "{:+.2f}") == "+0.00" and num(-0.004) == "0.00" and num(-0.05) == "-0.05"
+
+
+def _one_cell_table(p, width_mm):
+    from reportlab.lib.units import mm
+    from reportlab.platypus import Table
+
+    return Table([[p]], colWidths=[width_mm * mm])
+
+
+def test_the_report_reads_like_a_professionals(processed_copy, field, tmp_path):
+    """Issue 25.8: states as 'status' gives them, limits to 0.1 mm, an action log in words, hints in the
+    application's and the command line's words."""
+    import dataclasses
+
+    from projects.outputs.report import ReportScope, gather
+    from projects.outputs.report.flowables import styles
+    from projects.outputs.report.pdf import summary_section
+    from projects.results.state import epoch_state
+    from projects.store.campaign import Campaign
+
+    las = tmp_path / "coarse-again.las"  # the first visit's scan once more, as another file
+    assert main(["convert", str(field / "v0" / "coarse.laz"), str(las)]) == 0
+    with Campaign.open(processed_copy) as c:
+        c.add_epoch("2026-03-23", "2026-03-23T09:00:00+00:00", las)
+    out = tmp_path / "r.pdf"
+    assert main(["report", str(processed_copy), "--out", str(out)]) == 0
+    text = pdf_text(out)
+    with Campaign.open(processed_copy, writable=False) as c:
+        states = {e.label: epoch_state(c, e.label)[0] for e in c.epochs()}
+        content = gather(c, ReportScope(), with_previews=False)
+    assert states["2026-03-23"] == "imported" and states["2026-03-16"] == "processed"
+    for label, state in states.items():
+        page = text.split(f"Epoch {label} — ")[1][:200]
+        assert f"State: {state}." in page or f"State: {state} (" in page, (label, page)
+    assert "State: measured" not in text
+    assert "16.8" in text and "21.1" in text and "16.84" not in text and "21.05" not in text
+    log = text.split("Action log")[1]
+    assert "coarse scan imported" in log and "displacements computed" in log and "limit set" in log
+    assert '{"' not in log and "sha256" not in log
+    empty = dataclasses.replace(content, limits=())
+    hint = " ".join(p.getPlainText() for p in summary_section(empty, styles()) if hasattr(p, "getPlainText"))
+    assert "Campaign ▸ Set limit…" in hint and "bridgesurvey limit DIR --rule" in hint
+
+
+def test_thin_cross_validation_and_the_analysis_page(processed, tmp_path):
+    """A one-row camera series gives no statistics; the analysis page has a figure per target and says what a
+    negative creep coefficient means."""
+    import dataclasses
+
+    from reportlab.graphics.shapes import Drawing
+
+    from projects.outputs.report import ReportScope, gather
+    from projects.outputs.report.analysis_page import analysis_section
+    from projects.outputs.report.flowables import styles
+    from projects.outputs.report.pdf import build_pdf, crossval_section
+    from projects.store.campaign import Campaign
+    from projects.store.history import histories
+    from tests.projects.analysis.test_run import _doc
+    from vision.crossval import cross_validate
+    from vision.series import CameraSeries
+
+    with Campaign.open(processed, writable=False) as c:
+        content = gather(c, ReportScope(), with_previews=False)
+        h = histories(c)["M3"]
+    one = CameraSeries(time_ns=h.time_ns[1:2] + 60 * 10**9, value_mm=np.array([2.0]))
+    cv = cross_validate(list(h.epochs), h.time_ns, h.displacement_mm, h.sigma_mm, one, reflector="M3", series="one")
+    doc, _, _ = _doc()
+    content = dataclasses.replace(content, extras={**content.extras, "crossvals": [(cv.to_json(), one)],
+                                                   "analysis": doc})
+    ss = styles()
+    words = " ".join(p.getPlainText() for p in crossval_section(content, ss) if hasattr(p, "getPlainText"))
+    assert "Only 1 pair: too few for statistics (5 needed)" in words
+    page = analysis_section(content, ss)
+    flat = [f for x in page for f in getattr(x, "_content", [x])]
+    assert sum(isinstance(f, Drawing) for f in flat) == len(doc["targets"])
+    assert _cell_words_broken(flat) == []
+    out = build_pdf(content, tmp_path / "r.pdf")
+    text = pdf_text(out)
+    assert "RMSE 0.000" not in text and "100 %" not in text.split("Cross-check")[1].split("Analysis")[0]
+    assert "Target M3" in text, text
+    assert "recovery" in text
