@@ -22,7 +22,7 @@ import os
 import sqlite3
 import uuid
 from pathlib import Path
-from typing import Iterable, Optional, Sequence
+from typing import Iterable, Iterator, Optional, Sequence
 
 import numpy as np
 
@@ -31,9 +31,10 @@ from lidar.layout import Layout, check_layout
 from lidar.scanner_profile import ScannerProfile
 from projects.store import schema
 from projects.store.errors import CampaignError, CampaignLockedError, DuplicateImportError, InputError
-from projects.store.series import SeriesTables
-from projects.store.records import (DisplacementRecord, DisplacementSet, Epoch, EpochResult, LimitRecord, LogEntry,
-                              Reflector, ReferenceCheck, ScanFile, StoredPlan)
+from projects.store.repositories import (ComparisonRepository, CrossvalRepository, EventRepository,
+                                         PredictionRepository, SeriesRepository)
+from projects.store.records import (DisplacementRecord, DisplacementSet, Epoch, EpochInputs, EpochResult, LimitRecord,
+                                    LogEntry, Reflector, ReferenceCheck, ScanFile, StoredPlan)
 
 DB_NAME = "campaign.sqlite"
 SCANS_DIR = "scans"
@@ -77,14 +78,29 @@ def _nan(v) -> float:
     return float("nan") if v is None else float(v)
 
 
-class Campaign(SeriesTables):
-    """An open campaign. Use :meth:`create` or :meth:`open`, preferably as a context manager."""
+class Campaign:
+    """An open campaign. Use :meth:`create` or :meth:`open`, preferably as a context manager.
+
+    The campaign owns the connection, the lock and the transactions, and the core tables (epochs,
+    their files, plans, centroids and displacements, reflectors, limits, settings, the log). The
+    other tables are behind repositories hanging off it:
+
+    ``series``
+        camera and environment series (:class:`~projects.store.repositories.SeriesRepository`);
+    ``events``, ``predictions``, ``crossvals``, ``comparisons``
+        events, design predictions, camera cross-validations, whole-scan comparisons.
+    """
 
     def __init__(self, folder: Path, conn: sqlite3.Connection, lock_fh, *, writable: bool):
         self.folder = folder
         self.conn = conn
         self._lock_fh = lock_fh
         self.writable = writable
+        self.series = SeriesRepository(self)
+        self.events = EventRepository(self)
+        self.predictions = PredictionRepository(self)
+        self.crossvals = CrossvalRepository(self)
+        self.comparisons = ComparisonRepository(self)
 
     # ------------------------------------------------------------------ opening
     @classmethod
@@ -200,12 +216,25 @@ class Campaign(SeriesTables):
         self.close()
 
     @contextlib.contextmanager
-    def transaction(self):
+    def transaction(self) -> Iterator[sqlite3.Connection]:
         """One atomic change: everything inside commits together or not at all."""
         if not self.writable:
             raise CampaignError("the campaign is open read-only")
         with self.conn:
             yield self.conn
+
+    @contextlib.contextmanager
+    def snapshot(self) -> Iterator[sqlite3.Connection]:
+        """Several reads seen at one moment (one read transaction; inside a transaction, that one)."""
+        if self.conn.in_transaction:
+            yield self.conn
+            return
+        self.conn.execute("BEGIN")
+        try:
+            yield self.conn
+        finally:
+            if self.conn.in_transaction:
+                self.conn.execute("COMMIT")
 
     def _clean_partial_files(self) -> None:
         """Remove what an interrupted import left: temporary copies and files no row refers to."""
@@ -255,14 +284,14 @@ class Campaign(SeriesTables):
         if epoch is None:
             with self.transaction() as c:
                 c.execute("UPDATE meta SET value = ? WHERE key = 'scanner_profile'", (json.dumps(profile.to_dict()),))
-                self._log(c, "scanner", None, {"name": profile.name})
+                self.log_action(c, "scanner", None, {"name": profile.name})
             return
         self.epoch(epoch)
         s = self.settings()
         s.setdefault("epoch_scanners", {})[epoch] = profile.to_dict()
         with self.transaction() as c:
             c.execute("UPDATE meta SET value = ? WHERE key = 'settings'", (json.dumps(s),))
-            self._log(c, "scanner", epoch, {"name": profile.name})
+            self.log_action(c, "scanner", epoch, {"name": profile.name})
 
     def settings(self) -> dict:
         return json.loads(self.meta("settings", "{}"))
@@ -272,9 +301,10 @@ class Campaign(SeriesTables):
         s[key] = value
         with self.transaction() as c:
             c.execute("UPDATE meta SET value = ? WHERE key = 'settings'", (json.dumps(s),))
-            self._log(c, "setting", None, {key: value})
+            self.log_action(c, "setting", None, {key: value})
 
-    def _log(self, conn, action: str, epoch: Optional[str], details: dict) -> None:
+    def log_action(self, conn: sqlite3.Connection, action: str, epoch: Optional[str], details: dict) -> None:
+        """Add a line to the campaign's log inside the transaction ``conn``."""
         conn.execute("INSERT INTO log(time, action, epoch, details) VALUES (?, ?, ?, ?)",
                      (now_iso(), action, epoch, json.dumps(details, default=str)))
 
@@ -297,11 +327,7 @@ class Campaign(SeriesTables):
 
     def layout(self, at: Optional[str] = None) -> Layout:
         """Reflectors expected at a date-time (all active ones when None)."""
-        rows = [r for r in self.reflectors() if r.expected_at(at)]
-        return Layout(tuple(r.id for r in rows), tuple(r.group for r in rows),
-                      np.array([r.xyz_layout for r in rows], dtype=float).reshape(-1, 3),
-                      np.array([r.diameter_m for r in rows], dtype=float),
-                      np.array([r.normal_layout for r in rows], dtype=float).reshape(-1, 3))
+        return _layout_of(self.reflectors(), at)
 
     def add_reflector(self, rid: str, group: str, xyz: Sequence[float], *, diameter_m: float = 0.05,
                       installed: Optional[str] = None, replaces: Optional[str] = None, note: str = "") -> None:
@@ -318,7 +344,7 @@ class Campaign(SeriesTables):
         with self.transaction() as c:
             c.execute("INSERT INTO reflectors(id, grp, x, y, z, diameter_m, installed, replaces, note) "
                       "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)", (rid, group, *xyz, diameter_m, installed, replaces, note))
-            self._log(c, "reflector-add", None, {"id": rid, "group": group, "replaces": replaces})
+            self.log_action(c, "reflector-add", None, {"id": rid, "group": group, "replaces": replaces})
 
     def retire_reflector(self, rid: str, when: str) -> None:
         r = self.reflector(rid)
@@ -327,7 +353,7 @@ class Campaign(SeriesTables):
         when = parse_datetime(when)
         with self.transaction() as c:
             c.execute("UPDATE reflectors SET retired = ? WHERE id = ?", (when, rid))
-            self._log(c, "reflector-retire", None, {"id": rid, "when": when})
+            self.log_action(c, "reflector-retire", None, {"id": rid, "when": when})
 
     def replace_reflector(self, old: str, new: str, when: str, *, xyz: Optional[Sequence[float]] = None) -> None:
         """Retire ``old`` and install ``new`` at the same place (or at ``xyz``); the history continues."""
@@ -341,7 +367,7 @@ class Campaign(SeriesTables):
             c.execute("INSERT INTO reflectors(id, grp, x, y, z, diameter_m, installed, replaces, note, nx, ny, nz) "
                       "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                       (new, r.group, *pos, r.diameter_m, when, old, f"replaces {old}", *_normal_values(r.normal_layout)))
-            self._log(c, "reflector-replace", None, {"old": old, "new": new, "when": when})
+            self.log_action(c, "reflector-replace", None, {"old": old, "new": new, "when": when})
 
     # ------------------------------------------------------------------ epochs and files
     def epochs(self) -> list[Epoch]:
@@ -362,34 +388,27 @@ class Campaign(SeriesTables):
         q = "SELECT * FROM files WHERE epoch = ?" + (" AND role = ?" if role else "") + " ORDER BY imported, stored_path"
         return [ScanFile(**dict(r)) for r in self.conn.execute(q, (epoch, role) if role else (epoch,))]
 
+    def epoch_inputs(self, label: str, *, plan: bool = True) -> EpochInputs:
+        """In one read: the epoch, its files by role, its stored plan and result, its layout, scanner and settings.
+
+        An unknown label is an :class:`InputError`. ``plan=False`` does not read the plan (``plan`` is
+        then None), for callers that only compare hashes.
+        """
+        with self.snapshot():
+            ep = self.epoch(label)
+            files = self.files(label)
+            stored = self.stored_plan(label) if plan else None
+            result = self.result(label)
+            reflectors = self.reflectors()
+            settings = self.settings()
+            own = settings.get("epoch_scanners", {}).get(label)
+            profile = ScannerProfile.from_dict(own, source=f"epoch {label} scanner") if own else self.profile
+        return EpochInputs(ep, tuple(f for f in files if f.role == "coarse"), tuple(f for f in files if f.role == "fine"),
+                           stored, result, _layout_of(reflectors, ep.datetime), profile, settings)
+
     def path_of(self, file: ScanFile) -> Path:
         """Where a stored scan file is on disk."""
         return self.folder / file.stored_path
-
-    def new_series(self, table: str, path: str | os.PathLike, name: Optional[str], what: str) -> tuple[Path, str]:
-        """The file and the name of a series about to be imported into ``table``.
-
-        ``table`` is ``camera_series`` or ``env_series``; the file exists and the name (default: the
-        file's stem) is usable and free.
-        """
-        path = Path(path)
-        if not path.is_file():
-            raise InputError(f"{path}: no such file; check the path")
-        name = (name or path.stem).strip()
-        if not name or any(ch in name for ch in "/\\\n"):
-            raise InputError(f"series name {name!r} is not usable")
-        if self.conn.execute(f"SELECT 1 FROM {table} WHERE name = ?", (name,)).fetchone():
-            raise InputError(f"{what} named {name!r} is already in the campaign; give another --name")
-        return path, name
-
-    def checksum_if_new(self, table: str, path: Path) -> str:
-        """The file's sha256, refusing a file already imported into ``table`` under some series name."""
-        sha = sha256_of(path)
-        row = self.conn.execute(f"SELECT name, original_path FROM {table} WHERE sha256 = ?", (sha,)).fetchone()
-        if row is not None:
-            raise DuplicateImportError(f"{path}: this file is already in the campaign as series {row['name']!r} "
-                                       f"(from {row['original_path']}); nothing was changed")
-        return sha
 
     def import_file(self, src: Path, sha: str, sub: str, record) -> str:
         """Copy ``src`` into ``sub`` read-only and, in one transaction, ``record(conn, stored_path)``.
@@ -464,7 +483,7 @@ class Campaign(SeriesTables):
                 for p, (sha, rel, size) in zip(files, copied):
                     c.execute("INSERT INTO files(sha256, epoch, role, stored_path, original_path, size, imported) "
                               "VALUES (?, ?, ?, ?, ?, ?, ?)", (sha, epoch, role, rel, str(p.resolve()), size, now_iso()))
-                self._log(c, "import", epoch, {"role": role, "files": [str(p) for p in files], "sha256": shas})
+                self.log_action(c, "import", epoch, {"role": role, "files": [str(p) for p in files], "sha256": shas})
         except BaseException:
             self._clean_partial_files()
             raise
@@ -496,7 +515,7 @@ class Campaign(SeriesTables):
             c.execute("INSERT OR REPLACE INTO epoch_results(epoch, stage, inputs_hash, processed) VALUES (?, ?, ?, ?)",
                       (epoch, "planned", inputs_hash, now_iso()))
             c.execute("DELETE FROM centroids WHERE epoch = ?", (epoch,))
-            self._log(c, "plan", epoch, {"inputs_hash": inputs_hash})
+            self.log_action(c, "plan", epoch, {"inputs_hash": inputs_hash})
 
     def stored_plan(self, epoch: str) -> Optional[StoredPlan]:
         """An epoch's plan with the inputs hash it was made from, or None when it has none."""
@@ -537,7 +556,7 @@ class Campaign(SeriesTables):
                            json.dumps(list(tc.flags)), int(tc.n_window)))
             c.execute("INSERT OR REPLACE INTO epoch_results(epoch, stage, inputs_hash, processed) VALUES (?, ?, ?, ?)",
                       (epoch, "measured", inputs_hash, now_iso()))
-            self._log(c, "measure", epoch, {"inputs_hash": inputs_hash, "params": params,
+            self.log_action(c, "measure", epoch, {"inputs_hash": inputs_hash, "params": params,
                                              "found": sum(int(t.found) for t in cents.values())})
 
     def centroids(self, epoch: str) -> dict[str, TargetCentroid]:
@@ -566,7 +585,7 @@ class Campaign(SeriesTables):
                 c.execute("INSERT INTO reference_checks VALUES (?, ?, ?, ?, ?, ?, ?)",
                           (epoch, rc.reflector, _f(rc.median_change_m), _f(rc.max_change_m), int(rc.moved),
                            int(rc.missing), int(rc.suspect)))
-            self._log(c, "displacements", epoch, {"baseline": baseline, "inputs_hash": inputs_hash})
+            self.log_action(c, "displacements", epoch, {"baseline": baseline, "inputs_hash": inputs_hash})
 
     def displacement_set(self, epoch: str) -> Optional[DisplacementSet]:
         """What an epoch's displacements were computed with, or None before they are."""
@@ -626,7 +645,7 @@ class Campaign(SeriesTables):
         with self.transaction() as c:
             c.execute("INSERT OR REPLACE INTO limits VALUES (?, ?, ?, ?)",
                       (reflector, lim.warning_mm, lim.alarm_mm, rule))
-            self._log(c, "limit", None, {"reflector": reflector, "rule": rule})
+            self.log_action(c, "limit", None, {"reflector": reflector, "rule": rule})
 
     def limit_for(self, reflector: str):
         from projects.store.limits import Limit
@@ -646,6 +665,15 @@ class Campaign(SeriesTables):
         res = self.conn.execute("PRAGMA integrity_check").fetchone()[0]
         fk = self.conn.execute("PRAGMA foreign_key_check").fetchall()
         return res if not fk else f"foreign key violations: {len(fk)}"
+
+
+def _layout_of(reflectors: Sequence[Reflector], at: Optional[str]) -> Layout:
+    """The layout of the reflectors expected at the ISO date-time ``at`` (all active ones when None)."""
+    rows = [r for r in reflectors if r.expected_at(at)]
+    return Layout(tuple(r.id for r in rows), tuple(r.group for r in rows),
+                  np.array([r.xyz_layout for r in rows], dtype=float).reshape(-1, 3),
+                  np.array([r.diameter_m for r in rows], dtype=float),
+                  np.array([r.normal_layout for r in rows], dtype=float).reshape(-1, 3))
 
 
 def _reflector(r: sqlite3.Row) -> Reflector:
