@@ -56,7 +56,9 @@ def import_series(c: Campaign, path: str | os.PathLike, *, name: Optional[str] =
         c.log_action(conn, "camera-import", None, {"name": name, "file": str(path), "sha256": sha, "rows": len(series),
                                               "bad_rows": series.n_bad, "reflector": rid})
 
-    c.import_file(path, sha, CAMERA_DIR, record)
+    c.import_file(path, sha, CAMERA_DIR, record, journal_entry={  # what 'repair' needs to read it again
+        "kind": "camera", "name": name, "reflector": rid,
+        "read": {"column": column, "timezone": timezone, "unit": unit, "positive": positive}})
     return name, series
 
 

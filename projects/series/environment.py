@@ -78,7 +78,9 @@ def import_env(c: Campaign, path: str | os.PathLike, *, kind: str, name: Optiona
         c.log_action(conn, "env-import", None, {"name": name, "kind": kind, "file": str(path), "sha256": sha,
                                            "rows": len(series), "bad_rows": series.n_bad})
 
-    c.import_file(path, sha, ENV_DIR, record)
+    c.import_file(path, sha, ENV_DIR, record, journal_entry={  # what 'repair' needs to read it again
+        "kind": "environment", "name": name, "series_kind": kind,
+        "read": {"column": column, "unit": unit, "timezone": timezone}})
     return name, series
 
 

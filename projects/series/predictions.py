@@ -157,7 +157,8 @@ def import_prediction(c: Campaign, path: str | os.PathLike, *, align_at: Optiona
         c.log_action(conn, "prediction-import", None, {"file": str(path), "sha256": sha, "targets": sorted(curves),
                                                  "align_at": align_at, "lsq": lsq})
 
-    c.import_file(path, sha, PREDICTION_DIR, record)
+    c.import_file(path, sha, PREDICTION_DIR, record, journal_entry={  # what 'repair' needs to read it again
+        "kind": "prediction", "read": {"align_at": align_at, "lsq": lsq}})
     return out
 
 

@@ -4,7 +4,8 @@ A :class:`projects.store.campaign.Campaign` owns the connection, the lock and th
 hangs one repository per concern off itself (``campaign.series``, ``campaign.events``,
 ``campaign.predictions``, ``campaign.crossvals``, ``campaign.comparisons``). A repository holds a
 back-reference to that core and nothing else: the SQL of its tables lives here, and callers get the
-typed records of :mod:`projects.store.records`, never rows.
+typed records of :mod:`projects.store.records`, never rows. What they store carries a digest
+(:mod:`projects.store.digests`); a stored document that no longer matches it is never handed out.
 """
 from __future__ import annotations
 
@@ -12,9 +13,10 @@ import json
 import os
 import sqlite3
 from pathlib import Path
-from typing import ContextManager, Optional, Protocol
+from typing import ContextManager, Optional, Protocol, Sequence
 
-from projects.store.errors import DuplicateImportError, InputError
+from projects.store import digests
+from projects.store.errors import CampaignError, DuplicateImportError, InputError
 from projects.store.records import (ComparisonRecord, CrossvalRecord, EventRecord, PredictionRecord,
                                     SeriesRecord)
 
@@ -32,6 +34,10 @@ class StoreCore(Protocol):
 
     def log_action(self, conn: sqlite3.Connection, action: str, epoch: Optional[str], details: dict) -> None:
         """Add a line to the campaign's log inside the transaction ``conn``."""
+        ...
+
+    def is_sound(self, table: str, key: Sequence) -> bool:
+        """Whether a stored group still matches its digest."""
         ...
 
 
@@ -101,6 +107,7 @@ class SeriesRepository(_Repository):
                      "summary, arrays) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
                      (name, value, sha256, stored_path, original_path, _now(), json.dumps(options),
                       json.dumps(summary), arrays))
+        digests.seal(conn, table, (name,))
 
     def records(self, table: str, *, kind: Optional[str] = None, name: Optional[str] = None) -> list[SeriesRecord]:
         """The imported series of ``table`` (``camera_series`` or ``env_series``), oldest import first.
@@ -126,6 +133,9 @@ class SeriesRepository(_Repository):
         row = self._conn.execute(f"SELECT arrays FROM {table} WHERE name = ?", (name,)).fetchone()
         if row is None:
             raise KeyError(name)
+        if not self._core.is_sound(table, (name,)):
+            raise CampaignError(f"the stored {digests.GROUPS[table].name} {name!r} is damaged (it no longer matches "
+                                "its checksum); run 'bridgesurvey repair' on the campaign to read it again from its file")
         return row[0]
 
 
@@ -156,13 +166,15 @@ class PredictionRepository(_Repository):
         conn.execute("INSERT OR REPLACE INTO predictions(reflector, sha256, stored_path, original_path, imported, "
                      "options, arrays) VALUES (?, ?, ?, ?, ?, ?, ?)",
                      (reflector, sha256, stored_path, original_path, _now(), json.dumps(options), arrays))
+        digests.seal(conn, "predictions", (reflector,))
 
     def all(self) -> list[PredictionRecord]:
-        """Every target's stored prediction, by target."""
+        """Every target's stored prediction, by target (one that fails its digest is left out)."""
         return [PredictionRecord(r["reflector"], json.loads(r["options"]), r["arrays"], r["sha256"],
                                  r["stored_path"], r["original_path"])
                 for r in self._conn.execute("SELECT reflector, options, arrays, sha256, stored_path, original_path "
-                                            "FROM predictions ORDER BY reflector")]
+                                            "FROM predictions ORDER BY reflector").fetchall()
+                if self._core.is_sound("predictions", (r["reflector"],))]
 
 
 class CrossvalRepository(_Repository):
@@ -173,12 +185,14 @@ class CrossvalRepository(_Repository):
         with self._core.transaction() as conn:
             conn.execute("INSERT OR REPLACE INTO crossvals(series, summary, created) VALUES (?, ?, ?)",
                          (series, json.dumps(summary), _now()))
+            digests.seal(conn, "crossvals", (series,))
             self._core.log_action(conn, "crossval", None, details)
 
     def all(self) -> list[CrossvalRecord]:
-        """Every stored cross-validation, by series name."""
+        """Every stored cross-validation, by series name (one that fails its digest is stale: left out)."""
         return [CrossvalRecord(r["series"], json.loads(r["summary"]), r["created"])
-                for r in self._conn.execute("SELECT series, summary, created FROM crossvals ORDER BY series")]
+                for r in self._conn.execute("SELECT series, summary, created FROM crossvals ORDER BY series").fetchall()
+                if self._core.is_sound("crossvals", (r["series"],))]
 
 
 class ComparisonRepository(_Repository):
@@ -187,14 +201,16 @@ class ComparisonRepository(_Repository):
     def save(self, summary: dict) -> None:
         """Keep a comparison's JSON summary (``from``, ``to``, ``method`` ...) and log it."""
         with self._core.transaction() as conn:
-            conn.execute("INSERT OR REPLACE INTO comparisons VALUES (?, ?, ?, ?, ?)",
-                         (summary["from"], summary["to"], summary["method"], json.dumps(summary, default=float),
-                          _now()))
+            conn.execute("INSERT OR REPLACE INTO comparisons(from_epoch, to_epoch, method, summary, created) "
+                         "VALUES (?, ?, ?, ?, ?)", (summary["from"], summary["to"], summary["method"],
+                                                    json.dumps(summary, default=float), _now()))
+            digests.seal(conn, "comparisons", (summary["from"], summary["to"], summary["method"]))
             self._core.log_action(conn, "compare", summary["to"], {"from": summary["from"],
                                                                    "method": summary["method"]})
 
     def all(self) -> list[ComparisonRecord]:
-        """Stored comparisons, oldest first."""
+        """Stored comparisons, oldest first (one that fails its digest is stale: left out)."""
         return [ComparisonRecord(r["from_epoch"], r["to_epoch"], r["method"], json.loads(r["summary"]), r["created"])
                 for r in self._conn.execute("SELECT from_epoch, to_epoch, method, summary, created FROM comparisons "
-                                            "ORDER BY created")]
+                                            "ORDER BY created").fetchall()
+                if self._core.is_sound("comparisons", (r["from_epoch"], r["to_epoch"], r["method"]))]
