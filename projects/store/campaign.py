@@ -518,7 +518,7 @@ class Campaign:
         """Create an epoch with its coarse scan (and fine scans), all checked before anything changes.
 
         A date more than :data:`projects.store.inputs.DATE_SPAN_YEARS` years from the campaign's other
-        epochs (or from its creation, for the first one) is refused unless ``allow_date``. An
+        epochs (for the first one: outside the plausible years) is refused unless ``allow_date``. An
         epoch dated before every measured one never becomes the baseline: the implicit baseline (the
         first measured epoch) is fixed first (see :meth:`baseline_note`).
         """
@@ -528,7 +528,7 @@ class Campaign:
         if self.conn.execute("SELECT 1 FROM epochs WHERE label = ?", (label,)).fetchone():
             raise InputError(f"epoch {label!r} already exists; use another --label or add-fine to add files to it")
         if not allow_date:
-            inputs.check_epoch_date(when, [e.datetime for e in self.epochs()], self.meta("created", ""))
+            inputs.check_epoch_date(when, [e.datetime for e in self.epochs()])
         self._pin_baseline_before(when)
         self.import_files(label, [coarse], "coarse", validate=validate,
                           create_epoch={"label": label, "datetime": when, "notes": notes})

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Optional
 
 from common.errors import SurveyError
-from common.files import MB, DiskFullError, disk_full_error, free_bytes
+from common.files import MB, disk_full_error, free_bytes
 from projects.store.errors import CampaignError
 
 
@@ -145,9 +145,9 @@ def connect(db: Path, *, uri: Optional[str] = None, timeout: float = 30.0) -> St
 def open_database(db: Path, *, writable: bool) -> StoreConnection:
     """The campaign database opened for work: foreign keys on, WAL journal, full sync.
 
-    A reader on a full disk, where SQLite cannot create its shared-memory file, reads anyway: the
-    file opened immutable when no write-ahead log holds data, else with an exclusive SQLite lock
-    (which needs no shared memory). A writer on a full disk gets the disk-full line.
+    A reader on a full disk or a read-only medium, where SQLite cannot create its shared-memory
+    file, reads anyway: the file opened immutable when no write-ahead log holds data, else with an
+    exclusive SQLite lock (which needs no shared memory). A writer gets the one-line error.
     """
     conn = connect(db)
     try:
@@ -155,18 +155,21 @@ def open_database(db: Path, *, writable: bool) -> StoreConnection:
         conn.execute("PRAGMA journal_mode = WAL")
         conn.execute("PRAGMA synchronous = FULL")
         conn.execute("SELECT count(*) FROM sqlite_master").fetchone()
-    except DiskFullError:
+    except (SurveyError, sqlite3.OperationalError) as exc:
         conn.close()
         if writable:
             raise
-        return _open_at_full_disk(db)
+        try:  # a reader on a full disk or a read-only medium reads without the shared-memory file
+            return _open_without_shm(db)
+        except Exception:
+            raise exc from None
     except BaseException:
         conn.close()
         raise
     return conn
 
 
-def _open_at_full_disk(db: Path) -> StoreConnection:
+def _open_without_shm(db: Path) -> StoreConnection:
     wal = db.with_name(db.name + "-wal")
     if wal.exists() and wal.stat().st_size > 0:  # committed changes still in the log: read it, exclusively
         conn = connect(db)

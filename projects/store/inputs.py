@@ -3,9 +3,9 @@
 * A layout target that no station near the others could reach (farther from the other targets than
   the scanner's range) is a warning at ``init``, at ``plan`` and in ``status``: it would be planned
   as a window giving no points and reported missing every epoch.
-* An epoch dated more than :data:`DATE_SPAN_YEARS` years from the campaign's other epochs (from its
-  creation, for the first epoch) is refused unless the user says the date is right (``--allow-date``):
-  a typed 1900 or 2200 would otherwise become a baseline or stretch every time axis.
+* An epoch dated more than :data:`DATE_SPAN_YEARS` years from the campaign's other epochs (outside
+  :data:`PLAUSIBLE_YEARS`, for the first epoch) is refused unless the user says the date is right
+  (``--allow-date``): a typed 1900 or 2200 would otherwise become a baseline or stretch every time axis.
 """
 from __future__ import annotations
 
@@ -18,6 +18,8 @@ from common.errors import InputError
 
 #: How far (years) an epoch may lie from the campaign's other epochs before its date must be confirmed.
 DATE_SPAN_YEARS = 3.0
+#: The years a campaign's first epoch may fall in without confirmation (first and last).
+PLAUSIBLE_YEARS = (1980, 2099)
 
 
 def _aware(text: str) -> dt.datetime:
@@ -25,8 +27,11 @@ def _aware(text: str) -> dt.datetime:
     return value if value.tzinfo is not None else value.replace(tzinfo=dt.timezone.utc)
 
 
-def check_epoch_date(when: str, others: Sequence[str], created: str = "") -> None:
-    """Refuse an epoch date far from the others (see the module notes); dates are ISO 8601 text.
+def check_epoch_date(when: str, others: Sequence[str]) -> None:
+    """Refuse an epoch date far from the others, or outside :data:`PLAUSIBLE_YEARS` (see the module notes).
+
+    Dates are ISO 8601 text. The first epoch of a campaign has no others: only the plausible years
+    apply (a typed 1900 or 2200), so a campaign of archived scans can start at any real date.
 
     Examples
     --------
@@ -35,23 +40,27 @@ def check_epoch_date(when: str, others: Sequence[str], created: str = "") -> Non
     Traceback (most recent call last):
     ...
     common.errors.InputError: epoch date 1900-01-01 is 126 years before the campaign's other epochs (2026-03-02 to 2026-03-09); check --date, or give --allow-date if it is right
+    >>> check_epoch_date("2200-01-01", [])
+    Traceback (most recent call last):
+    ...
+    common.errors.InputError: epoch date 2200-01-01 is not a plausible date for a scan (years 1980 to 2099); check --date, or give --allow-date if it is right
     """
-    ref = list(others) or ([created] if created else [])
-    if not ref:
-        return
     w = _aware(when)
-    dates = sorted(_aware(t) for t in ref)
+    hint = "check --date, or give --allow-date if it is right"
+    if not others:
+        if not PLAUSIBLE_YEARS[0] <= w.year <= PLAUSIBLE_YEARS[1]:
+            raise InputError(f"epoch date {w.date()} is not a plausible date for a scan (years {PLAUSIBLE_YEARS[0]} "
+                             f"to {PLAUSIBLE_YEARS[1]}); {hint}")
+        return
+    dates = sorted(_aware(t) for t in others)
     lo, hi = dates[0], dates[-1]
     span = dt.timedelta(days=365.25 * DATE_SPAN_YEARS)
     if lo - span <= w <= hi + span:
         return
     gap = (lo - w) if w < lo else (w - hi)
-    years = gap.days / 365.25
     where = "before" if w < lo else "after"
-    what = (f"the campaign's other epochs ({lo.date()} to {hi.date()})" if others
-            else f"the campaign's creation ({lo.date()})")
-    raise InputError(f"epoch date {w.date()} is {years:.0f} years {where} {what}; check --date, or give "
-                     "--allow-date if it is right")
+    raise InputError(f"epoch date {w.date()} is {gap.days / 365.25:.0f} years {where} the campaign's other epochs "
+                     f"({lo.date()} to {hi.date()}); {hint}")
 
 
 def unreachable_targets(ids: Sequence[str], xyz: np.ndarray, *, max_range_m: float, scanner: str = "the scanner"

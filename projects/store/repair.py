@@ -65,7 +65,7 @@ def repair_schema_version(folder: str | os.PathLike) -> Optional[str]:
             with conn:
                 conn.execute("INSERT OR REPLACE INTO meta(key, value) VALUES ('schema_version', ?)", (str(version),))
             return (f"schema version set to {version} from the tables (it was "
-                    f"{'missing' if before is None else repr(before)})")
+                    f"{'not recorded' if before is None else repr(before)})")
         finally:
             conn.close()
     finally:

@@ -41,7 +41,7 @@ REMEDY = {
 class Finding:
     """One problem found: what it concerns, what is wrong, what to do."""
 
-    kind: str  # database, missing, changed, unlisted, damaged, stale
+    kind: str  # database, absent, changed, unlisted, damaged, stale
     subject: str
     problem: str
     action: str
@@ -80,7 +80,7 @@ def _files(c: Campaign, progress: Optional[ProgressCallback]) -> list[Finding]:
         report(progress, 0.1 + 0.8 * k / max(len(files), 1), f"checking {rel}")
         path = c.folder / rel
         if not path.is_file():
-            out.append(Finding("missing", rel, "missing from the campaign folder",
+            out.append(Finding("absent", rel, "missing from the campaign folder",
                                f"import it again from {original} (or restore it from a backup)"))
         elif sha256_of(path) != sha:
             out.append(Finding("changed", rel, "changed since its import (its checksum differs)",

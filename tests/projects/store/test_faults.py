@@ -389,6 +389,20 @@ def test_a_real_full_disk(processed, small_disk, tmp_path, capsys):
     assert tables(camp) == tables(processed)
 
 
+def test_a_campaign_on_a_read_only_medium_is_read_and_writers_get_one_line(processed, small_disk, capsys):
+    camp = small_disk / "camp"
+    shutil.copytree(processed, camp, ignore=shutil.ignore_patterns(".lock"))
+    r = subprocess.run(["mount", "-o", "remount,ro", str(small_disk)], capture_output=True)
+    if r.returncode != 0:
+        pytest.skip("cannot remount read-only here")
+    rc, out, err = run(capsys, "status", camp)
+    assert rc == 0 and "campaign 'Test bridge'" in out, err
+    assert run(capsys, "verify", camp)[0] == 0
+    rc, _, err = run(capsys, "settings", camp, "min_points", "900")
+    assert rc == 1
+    one_line(err, "cannot be opened to lock the campaign")
+
+
 # ------------------------------------------------------------------------------------------ flipped bytes
 def test_flipped_bytes_in_stored_results_are_found_by_verify_and_recomputed_by_process(processed_copy, tmp_path,
                                                                                       capsys):
