@@ -1,12 +1,71 @@
-"""Writing output files safely: through a temporary file beside the target, renamed on success."""
+"""Writing output files safely: through a temporary file beside the target, renamed on success.
+
+A full disk is one clear line (:class:`DiskFullError`: "no space left on the device holding FILE:
+free N MB and run the command again"), never a traceback, and never half a file.
+"""
 from __future__ import annotations
 
 import contextlib
 import csv
+import errno
 import io
+import math
 import os
 from pathlib import Path
-from typing import Any, Iterator, Mapping, Sequence
+from typing import Any, Iterator, Mapping, Optional, Sequence
+
+from common.errors import SurveyError
+
+MB = 1 << 20
+#: What a write whose size is not known beforehand is assumed to need (an output file, a database change).
+DEFAULT_NEED_BYTES = 32 * MB
+
+
+class DiskFullError(SurveyError):
+    """The device a file is written to has no space left; nothing was changed."""
+
+
+def free_bytes(path: str | os.PathLike) -> Optional[int]:
+    """Bytes free for this user on the device holding ``path`` (or its nearest existing parent); None if unknown."""
+    p = Path(path).absolute()
+    while not p.exists() and p != p.parent:
+        p = p.parent
+    try:
+        st = os.statvfs(p)
+    except OSError:
+        return None
+    return int(st.f_bavail * st.f_frsize)
+
+
+def disk_full_error(path: str | os.PathLike, need_bytes: Optional[int] = None) -> DiskFullError:
+    """The one-line error for a write to ``path`` that found (or would find) the disk full.
+
+    ``need_bytes`` is what the write needs (default :data:`DEFAULT_NEED_BYTES`); the message asks for
+    what is missing of it, at least 1 MB.
+    """
+    free = free_bytes(path) or 0
+    need = DEFAULT_NEED_BYTES if need_bytes is None else int(need_bytes)
+    missing = max(1, math.ceil((need - free) / MB))
+    return DiskFullError(f"no space left on the device holding {path}: free {missing} MB and run the command again")
+
+
+def is_disk_full(exc: BaseException) -> bool:
+    """Whether ``exc`` (or an exception it was raised from) is the system's 'no space left on device'."""
+    seen = 0
+    cur: Optional[BaseException] = exc
+    while cur is not None and seen < 10:
+        if isinstance(cur, OSError) and cur.errno in (errno.ENOSPC, errno.EDQUOT):
+            return True
+        cur = cur.__cause__ or cur.__context__
+        seen += 1
+    return False
+
+
+def ensure_free(path: str | os.PathLike, need_bytes: int) -> None:
+    """Raise :class:`DiskFullError` before a write of ``need_bytes`` to ``path`` that cannot fit."""
+    free = free_bytes(path)
+    if free is not None and free < need_bytes:
+        raise disk_full_error(path, need_bytes)
 
 
 @contextlib.contextmanager
@@ -14,16 +73,25 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success it is renamed to ``path``, on failure removed.
 
     A crash never leaves half a file under the final name. The temporary name
-    keeps the suffix: some writers (laspy, matplotlib) choose the encoding from it.
+    keeps the suffix: some writers (laspy, matplotlib) choose the encoding from it. A full disk,
+    met by the writer or by the rename, is a :class:`DiskFullError` (the temporary file removed).
     """
     final = Path(path)
     tmp = final.with_name(f".{final.stem}.part{final.suffix}")
     try:
         yield tmp
         os.replace(tmp, final)
+    except Exception as exc:
+        if not is_disk_full(exc):
+            raise
+        written = tmp.stat().st_size if tmp.exists() else 0
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise disk_full_error(final, max(2 * written, 8 * MB)) from None
     finally:
         if tmp.exists():
-            tmp.unlink()
+            with contextlib.suppress(OSError):
+                tmp.unlink()
 
 
 def write_atomic(path: str | os.PathLike, data: str | bytes) -> Path:

@@ -51,7 +51,7 @@ def row_key_lookups(root: Path) -> tuple[int, int]:
     return total, files
 
 
-STORE = {"projects/store/campaign.py", "projects/store/series.py", "projects/store/schema.py"}
+STORE = "projects/store/"  # the store package is the one place that talks SQL
 ROW_ACCESSORS = re.compile(r"\.(displacement_rows|plan_row|result_row|log_rows|reference_check_rows)\(|"
                            r"\b(series_rows|env_rows|json_rows)\(")
 
@@ -61,7 +61,7 @@ def store_leaks(root: Path) -> tuple[int, int, int]:
     sql_files = accessors = plan_decodes = 0
     for pkg in ("app", "projects"):
         for path in (root / pkg).rglob("*.py"):
-            if path.relative_to(root).as_posix() in STORE:
+            if path.relative_to(root).as_posix().startswith(STORE):
                 continue
             text = path.read_text()
             sql_files += bool(re.search(r"\.execute\(|\bc\.conn\b", text))

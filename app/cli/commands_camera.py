@@ -55,7 +55,7 @@ def cmd_camera_import(args) -> int:
     with Campaign.open(args.dir) as c:
         name, series = import_series(c, args.file, name=args.name, reflector=args.reflector, column=args.column,
                                      timezone=args.timezone, unit=args.unit, positive=args.positive)
-        rid = c.series("camera_series", name=name)[0].reflector
+        rid = c.series.records("camera_series", name=name)[0].reflector
     s = series.summary()
     if args.json:
         dump_json({"name": name, "reflector": rid, **s})

@@ -35,6 +35,8 @@ def register(sub) -> None:
     p.add_argument("--notes", default="", help="station notes")
     p.add_argument("--scanner", default=None, help="this visit's scanner when it is not the campaign's "
                                                    "(a name from 'bridgesurvey scanners' or a profile .json)")
+    p.add_argument("--allow-date", action="store_true",
+                   help="accept a date more than 3 years from the campaign's other epochs (it is refused otherwise)")
     p.set_defaults(func=cmd_add_epoch)
 
     p = sub.add_parser("add-fine", help="import the fine scans of an epoch")
@@ -151,6 +153,8 @@ def cmd_init(args) -> int:
     with Campaign.create(args.dir, name=args.name, layout=layout, span_m=args.span_m, profile=profile) as c:
         print(f"created campaign '{c.name}' in {args.dir} with {len(layout)} reflectors "
               f"({len(layout.ids_in('reference'))} reference, {len(layout.ids_in('measurement'))} measurement)")
+        for w in c.layout_warnings():
+            print(f"warning: {w}")
     return 0
 
 
@@ -163,10 +167,14 @@ def cmd_add_epoch(args) -> int:
     label = args.label or when[:10]
     profile = get_scanner(args.scanner) if args.scanner else None
     with _open(args.dir) as c:
-        c.add_epoch(label, when, args.coarse, args.fine, notes=args.notes, validate=_validate)
+        c.add_epoch(label, when, args.coarse, args.fine, notes=args.notes, validate=_validate,
+                    allow_date=args.allow_date)
         if profile is not None:
             c.set_profile(profile, epoch=label)
+        note = c.baseline_note(label)
     print(f"added epoch {label} ({when}) with {1 + len(args.fine)} file(s)")
+    if note:
+        print(f"note: {note}")
     return 0
 
 
@@ -189,10 +197,11 @@ def cmd_plan(args) -> int:
 
             write_field_sheet(plan, args.sheet, campaign_name=c.name, preview=c.map_preview(args.epoch),
                               epoch_date=c.epoch(args.epoch).date)
+        warnings = c.layout_warnings(args.epoch)
     plan.save(args.out)
     print(f"wrote {args.out}: {len(plan.rois)} windows, {plan.total_seconds / 60:.1f} min"
           + (f"; field sheet {args.sheet}" if args.sheet else ""))
-    for w in plan.warnings:
+    for w in [*plan.warnings, *warnings]:
         print(f"warning: {w}")
     return 0
 
@@ -265,6 +274,11 @@ def cmd_status(args) -> int:
     alarms = [t["reflector"] for t in data["targets"] if t["state"] == "alarm"]
     if alarms:
         print(f"ALARM: {', '.join(alarms)}")
+    for w in data["warnings"]:
+        print(f"warning: {w}")
+    if data["unlisted_files"]:
+        print(f"warning: {len(data['unlisted_files'])} file(s) in the campaign folder that the database does not list "
+              f"(kept; 'bridgesurvey repair {args.dir}' registers them again): {', '.join(data['unlisted_files'])}")
     return 0
 
 

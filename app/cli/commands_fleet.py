@@ -85,4 +85,6 @@ def cmd_fleet_process(args) -> int:
                          "problems": len(cr.summary.problems)})
         table(rows, ["campaign", "epochs", "measured", "planned", "failed", "problems", "skipped"])
         print(f"{run.tasks} epoch task(s) on {run.cluster or 'no cluster (nothing to do)'}; {run.failed} failed")
+        for note in run.notes:
+            print(f"warning: {note}")
     return 0 if not run.failed and not any(cr.skipped for cr in run.campaigns) else 3

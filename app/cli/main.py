@@ -32,6 +32,8 @@ def build_parser() -> argparse.ArgumentParser:
     for module in (commands_campaign, commands_compare, commands_camera, commands_dualcam, commands_report,
                    commands_files, commands_scanfiles, commands_field, commands_fleet, commands_analysis):
         module.register(sub)
+    from app.cli import commands_store  # verify, repair
+    commands_store.register(sub)
     return parser
 
 

@@ -255,13 +255,13 @@ def write_change_las(change: ChangeResult, path: Path) -> Path:
 
 def save_comparison(c: Campaign, summary: dict) -> None:
     """Keep a comparison's summary (without its arrays) in the campaign, for reports."""
-    c.save_comparison_summary({k: v for k, v in summary.items() if k != "_arrays"})
+    c.comparisons.save({k: v for k, v in summary.items() if k != "_arrays"})
 
 
 def comparisons(c: Campaign, epochs: Optional[set] = None) -> list[dict]:
     """Stored comparison summaries (newest versions this BridgeSurvey reads), optionally within some epochs."""
     out = []
-    for s in c.comparison_summaries():
+    for s in (r.summary for r in c.comparisons.all()):
         if int(s.get("version", 0)) > SUMMARY_VERSION:
             continue
         if epochs is None or (s["from"] in epochs and s["to"] in epochs):

@@ -80,15 +80,15 @@ def check_epoch(c: Campaign, label: str, *, goal_sigma_mm: Optional[float] = Non
     """Measure the epoch's fine scans and judge every planned target (see the module notes)."""
     from projects.processing.stages import run_stage1, save_stage1, stage1_job
 
-    c.epoch(label)  # an unknown epoch says so
-    if not c.files(label, "fine"):
+    job = stage1_job(c, label)  # one read of the store; an unknown epoch says so
+    if not job.fine_paths:
         raise ProcessingError(f"epoch {label} has no fine scans yet; import them with 'bridgesurvey add-fine' first")
     if goal_sigma_mm is not None and not (math.isfinite(goal_sigma_mm) and goal_sigma_mm > 0):
         raise ProcessingError(f"the sigma goal must be a positive number of millimetres, got {goal_sigma_mm}")
-    result = run_stage1(stage1_job(c, label), progress=progress)  # the plan it measured with, and the centroids
+    result = run_stage1(job, progress=progress)  # the plan it measured with, and the centroids
     save_stage1(c, result)
     cents, plan = result.centroids, result.plan
-    layout = c.layout(c.epoch(label).datetime)
+    layout = job.layout
     diam = {i: float(d) for i, d in zip(layout.ids, layout.diameters_m)}
     rows, retry = [], []
     for roi in plan.rois:

@@ -9,7 +9,8 @@ campaign's epochs are in.
 
 Workers need the same BridgeSurvey installed and the campaign folders at the same paths (shared
 storage). A worker that dies mid-task loses nothing: the scheduler runs the task again elsewhere
-(``retries`` covers errors raised by the task itself). A campaign another process is writing (another
+(``retries`` covers errors raised by the task itself), and the run says so ("worker lost, task retried:
+epoch L of BRIDGE", :attr:`FleetRun.notes`). A campaign another process is writing (another
 fleet run, the desktop application) is skipped with a message, not waited for.
 """
 from __future__ import annotations
@@ -21,6 +22,7 @@ from dataclasses import dataclass, field
 from typing import Optional, Sequence
 
 from common.errors import InputError, SurveyError
+from common.processes import quiet_resource_tracker
 from common.progress import ProgressCallback, report
 from projects.store.errors import CampaignLockedError
 from projects.fleet.status import find_campaigns
@@ -45,15 +47,19 @@ class CampaignRun:
 
 @dataclass
 class FleetRun:
-    """A whole fleet run: every campaign, the tasks, the failures and the cluster that ran them."""
+    """A whole fleet run: every campaign, the tasks, the failures, the cluster that ran them and what it met.
+
+    ``notes`` are one line each: a worker lost while running a task that was then retried.
+    """
 
     campaigns: list[CampaignRun] = field(default_factory=list)
     tasks: int = 0
     failed: int = 0
     cluster: str = ""
+    notes: list[str] = field(default_factory=list)
 
     def to_json(self) -> dict:
-        return {"cluster": self.cluster, "tasks": self.tasks, "failed": self.failed,
+        return {"cluster": self.cluster, "tasks": self.tasks, "failed": self.failed, "notes": self.notes,
                 "campaigns": [{"folder": r.folder, "name": r.name, "skipped": r.skipped, "tasks": r.tasks,
                                "baseline": r.summary.baseline, "displacement_epochs": r.summary.displacement_epochs,
                                "outcomes": [o.__dict__ for o in r.summary.outcomes],
@@ -82,6 +88,7 @@ def _client(scheduler: Optional[str], workers: Optional[int]):
         finally:
             client.close()
         return
+    quiet_resource_tracker()  # a tracker killed with the workers would fill stderr with stdlib tracebacks
     n = workers or max(1, min(4, os.cpu_count() or 1))
     if not log.isEnabledFor(logging.INFO):  # the cluster's own chatter only with --verbose
         for name in ("distributed", "distributed.scheduler", "distributed.nanny", "distributed.core"):
@@ -183,9 +190,28 @@ def _run_tasks(client, jobs, open_campaigns, run: FleetRun, progress) -> None:
                 run.failed += 1
                 cr.summary.outcomes.append(EpochOutcome(job.label, "failed", "the workers running this epoch died "
                                                     "repeatedly (out of memory?); run 'bridgesurvey process' on it"))
+            lost = _workers_lost(client, fut.key)
+            if lost:
+                run.notes.append(f"worker lost, task retried: epoch {job.label} of {cr.name or cr.folder}"
+                                 + (f" ({lost} times)" if lost > 1 else ""))
             done += 1
             report(progress, 0.95 * done / len(futures), f"{done} of {len(futures)} epochs ({cr.name} {job.label})")
     except BaseException:
         # Ctrl-C or a lost cluster: stop the rest; what was saved stays (each epoch in its own transaction)
         client.cancel(list(futures))
         raise
+
+
+def _suspicious(key, dask_scheduler=None) -> int:
+    """On the scheduler: how many workers died while running task ``key``."""
+    ts = dask_scheduler.tasks.get(key) if dask_scheduler is not None else None
+    return 0 if ts is None else int(ts.suspicious)
+
+
+def _workers_lost(client, key) -> int:
+    """Workers lost while running ``key`` (0 when the scheduler cannot be asked)."""
+    try:
+        return int(client.run_on_scheduler(_suspicious, key))
+    except Exception:  # an external scheduler that refuses to run functions: nothing to say
+        log.debug("cannot ask the scheduler about lost workers", exc_info=True)
+        return 0

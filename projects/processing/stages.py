@@ -30,7 +30,7 @@ from common.progress import ProgressCallback, report, scaled
 from lidar.scan import Scan
 from projects.processing.parameters import DEFAULTS, parameter, stage1_params, stage2_params
 from projects.store.previews import encode_preview
-from projects.store.records import ScanFile
+from projects.store.records import EpochInputs, ScanFile
 from projects.store.campaign import Campaign
 
 log = logging.getLogger(__name__)
@@ -86,7 +86,11 @@ def set_parameter(c: Campaign, key: str, text: Optional[str]) -> None:
 
 def parameters(c: Campaign) -> dict:
     """The campaign's processing parameters: the defaults overridden by its settings."""
-    return {**DEFAULTS, **{k: v for k, v in c.settings().items() if k in DEFAULTS}}
+    return _parameters_of(c.settings())
+
+
+def _parameters_of(settings: dict) -> dict:
+    return {**DEFAULTS, **{k: v for k, v in settings.items() if k in DEFAULTS}}
 
 
 def _hash(obj) -> str:
@@ -130,15 +134,21 @@ def read_files(c: Campaign, files: Sequence[ScanFile], progress=None) -> Scan:
 
 def plan_inputs(c: Campaign, label: str, params: dict) -> tuple[str, object]:
     """(hash of the inputs, layout) of an epoch's plan: coarse scans, layout at its date, parameters, scanner."""
-    ep = c.epoch(label)
-    coarse = c.files(label, "coarse")
-    if not coarse:
-        raise ProcessingError(f"epoch {label} has no coarse scan")
-    layout = c.layout(ep.datetime)
-    key = {"v": PIPELINE_VERSION, "coarse": [f.sha256 for f in coarse],
-           "layout": layout.to_rows(), "params": stage1_params(params),
-           "profile": _profile_key(c.profile_for(label))}
-    return _hash(key), layout
+    inp = c.epoch_inputs(label, plan=False)
+    return _plan_hash(inp, params), inp.layout
+
+
+def _plan_hash(inp: EpochInputs, params: dict) -> str:
+    if not inp.coarse:
+        raise ProcessingError(f"epoch {inp.label} has no coarse scan")
+    key = {"v": PIPELINE_VERSION, "coarse": [f.sha256 for f in inp.coarse],
+           "layout": inp.layout.to_rows(), "params": stage1_params(params),
+           "profile": _profile_key(inp.profile)}
+    return _hash(key)
+
+
+def _measure_hash(inp: EpochInputs, plan_hash: str) -> str:
+    return _hash({"plan": plan_hash, "fine": [f.sha256 for f in inp.fine]})
 
 
 def _tilt_limit(params: dict, profile) -> Optional[float]:
@@ -200,14 +210,14 @@ class Stage1Result:
 
 def stage1_job(c: Campaign, label: str) -> Stage1Job:
     """An epoch's stage-1 job as plain values (its stored plan reused when its inputs are unchanged)."""
-    params = parameters(c)
-    h, layout = plan_inputs(c, label, params)
-    sp = c.stored_plan(label)
+    inp = c.epoch_inputs(label)  # one read: epoch, files, plan, layout, scanner, settings
+    params = _parameters_of(inp.settings)
+    h = _plan_hash(inp, params)
+    sp = inp.plan
     stored = sp.plan_json if sp is not None and sp.inputs_hash == h else None
-    fine = c.files(label, "fine")
-    return Stage1Job(str(c.folder), label, tuple(str(c.path_of(r)) for r in c.files(label, "coarse")),
-                     tuple(str(c.path_of(r)) for r in fine), layout, params, c.profile_for(label), h, stored,
-                     measure_inputs(c, label, params, h) if fine else None)
+    return Stage1Job(str(c.folder), label, tuple(str(c.path_of(r)) for r in inp.coarse),
+                     tuple(str(c.path_of(r)) for r in inp.fine), inp.layout, params, inp.profile, h, stored,
+                     _measure_hash(inp, h) if inp.fine else None)
 
 
 def run_stage1(job: Stage1Job, *, progress: Optional[ProgressCallback] = None) -> Stage1Result:
@@ -257,8 +267,8 @@ def plan_epoch(c: Campaign, label: str, *, progress: Optional[ProgressCallback] 
 
 def measure_inputs(c: Campaign, label: str, params: dict, plan_hash: Optional[str] = None) -> str:
     """Stage 1's input hash of an epoch with fine scans (``plan_hash`` when already computed)."""
-    plan_h = plan_hash if plan_hash is not None else plan_inputs(c, label, params)[0]
-    return _hash({"plan": plan_h, "fine": [f.sha256 for f in c.files(label, "fine")]})
+    inp = c.epoch_inputs(label, plan=False)
+    return _measure_hash(inp, plan_hash if plan_hash is not None else _plan_hash(inp, params))
 
 
 def measure_epoch(c: Campaign, label: str, *, progress: Optional[ProgressCallback] = None) -> dict:
@@ -276,17 +286,18 @@ def stale_epochs(c: Campaign) -> dict[str, str]:
     params = parameters(c)
     out = {}
     for e in c.epochs():
-        res = c.result(e.label)
-        if not c.files(e.label, "coarse"):
+        inp = c.epoch_inputs(e.label, plan=False)  # one read an epoch
+        res = inp.result
+        if not inp.coarse:
             continue
-        if c.files(e.label, "fine"):
-            want = measure_inputs(c, e.label, params)
+        if inp.fine:
+            want = _measure_hash(inp, _plan_hash(inp, params))
             if res is None or res.stage != "measured":
                 out[e.label] = "not measured yet"
             elif res.inputs_hash != want:
                 out[e.label] = "inputs or parameters changed"
         else:
-            want, _ = plan_inputs(c, e.label, params)
+            want = _plan_hash(inp, params)
             if res is None:
                 out[e.label] = "not planned yet"
             elif res.inputs_hash != want and res.stage == "planned":

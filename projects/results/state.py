@@ -53,7 +53,12 @@ def epoch_state(c: Campaign, label: str) -> tuple[str, list[str]]:
 
 
 def campaign_status(c: Campaign) -> dict:
-    """Name, span, baseline, epochs (state, staleness, flags) and the latest row of every target."""
+    """Name, span, baseline, epochs (state, staleness, flags), the latest row of every target, and warnings.
+
+    ``warnings`` are the layout's (targets no station could reach) and the stored results that fail their
+    checksum (not shown, recomputed by ``process``); ``unlisted_files`` the files of the
+    import folders the database does not list (never deleted: ``bridgesurvey repair`` registers them).
+    """
     from projects.results.table import displacement_table
     from projects.processing.stages import baseline_epoch, stale_epochs
 
@@ -64,9 +69,14 @@ def campaign_status(c: Campaign) -> dict:
         epochs.append({"epoch": e.label, "datetime": e.datetime[:16], "state": state,
                        "stale": stale.get(e.label, ""), "flags": "; ".join(flags), "flag_list": flags,
                        "severity": count(flags)})
+    from projects.store.verify import REMEDY, describe_group
+
+    damaged = [f"stored {describe_group(t, k)}: damaged (fails its checksum), not shown; {REMEDY[t]}"
+               for t, k in c.damaged_results()]
     latest = {}
     for r in displacement_table(c):
         if r["displacement_mm"] is not None or r["reflector"] not in latest:  # keep the last good value
             latest[r["reflector"]] = r
     return {"name": c.name, "span_m": c.span_m, "baseline": baseline_epoch(c), "epochs": epochs,
-            "targets": list(latest.values())}
+            "targets": list(latest.values()), "warnings": c.layout_warnings() + damaged,
+            "unlisted_files": c.unlisted_files()}

@@ -40,29 +40,31 @@ def import_series(c: Campaign, path: str | os.PathLike, *, name: Optional[str] =
     Nothing changes in the campaign unless the whole file was read; a file already imported
     (same checksum) or an existing name is refused.
     """
-    path, name = c.new_series("camera_series", path, name, "a camera series")
+    path, name = c.series.check_new("camera_series", path, name, "a camera series")
     rid = reflector or midspan_reflector(c)
     if c.reflector(rid).is_reference:
         raise InputError(f"{rid} is a reference target; pair the camera with a measurement target")
-    sha = c.checksum_if_new("camera_series", path)
+    sha = c.series.checksum_if_new("camera_series", path)
     series = read_camera_series(path, column=column, timezone=timezone, unit=unit, positive=positive)
     options = {"column": series.column, "unit": series.unit, "timezone": timezone, "positive": positive}
     summary = series.summary()
 
     def record(conn, rel):
-        c.insert_series(conn, "camera_series", name=name, reflector=rid, sha256=sha, stored_path=rel,
+        c.series.insert(conn, "camera_series", name=name, reflector=rid, sha256=sha, stored_path=rel,
                         original_path=str(path.resolve()), options=options, summary=summary,
                         arrays=series.to_npz_bytes())
-        c._log(conn, "camera-import", None, {"name": name, "file": str(path), "sha256": sha, "rows": len(series),
+        c.log_action(conn, "camera-import", None, {"name": name, "file": str(path), "sha256": sha, "rows": len(series),
                                               "bad_rows": series.n_bad, "reflector": rid})
 
-    c.import_file(path, sha, CAMERA_DIR, record)
+    c.import_file(path, sha, CAMERA_DIR, record, journal_entry={  # what 'repair' needs to read it again
+        "kind": "camera", "name": name, "reflector": rid,
+        "read": {"column": column, "timezone": timezone, "unit": unit, "positive": positive}})
     return name, series
 
 
 def series_records(c: Campaign) -> list[SeriesRecord]:
     """The imported camera series (without their arrays)."""
-    return c.series("camera_series")
+    return c.series.records("camera_series")
 
 
 def load_series(c: Campaign, name: Optional[str] = None) -> tuple[SeriesRecord, CameraSeries]:
@@ -80,7 +82,7 @@ def load_series(c: Campaign, name: Optional[str] = None) -> tuple[SeriesRecord, 
         if not match:
             raise InputError(f"no camera series {name!r}; the campaign has {', '.join(r.name for r in rows)}")
         row = match[0]
-    t, v = CameraSeries.arrays_from_npz(c.series_arrays("camera_series", row.name))
+    t, v = CameraSeries.arrays_from_npz(c.series.arrays("camera_series", row.name))
     s = row.summary
     return row, CameraSeries(time_ns=t, value_mm=v, source=row.original_path, column=row.options["column"],
                              unit=row.options["unit"], n_bad=s["bad_rows"], n_missing=s["missing_values"],
@@ -105,14 +107,14 @@ def crossvalidate(c: Campaign, *, series: Optional[str] = None, reflector: Optio
 
 def save_crossval(c: Campaign, cv: CrossValidation) -> None:
     """Keep the cross-validation summary in the campaign (the report shows it)."""
-    c.save_crossval_summary(cv.series, json_safe(cv.to_json()),
+    c.crossvals.save(cv.series, json_safe(cv.to_json()),
                             {"series": cv.series, "reflector": cv.reflector, "n_pairs": cv.n_pairs,
                              "bias_mm": cv.bias_mm, "rmse_mm": cv.rmse_mm})
 
 
 def crossval_summaries(c: Campaign) -> list[dict]:
     """Every stored cross-validation summary (JSON documents of :class:`vision.crossval.CrossValidation`)."""
-    return c.crossval_summaries()
+    return [r.summary for r in c.crossvals.all()]
 
 
 def write_crossval_outputs(cv: CrossValidation, camera: CameraSeries, out_dir: str | os.PathLike) -> list[Path]:

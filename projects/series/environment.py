@@ -62,8 +62,8 @@ def import_env(c: Campaign, path: str | os.PathLike, *, kind: str, name: Optiona
     """
     if kind not in KINDS:
         raise InputError(f"unknown series kind {kind!r}; use one of {', '.join(KINDS)}")
-    path, name = c.new_series("env_series", path, name, "an environment series")
-    sha = c.checksum_if_new("env_series", path)
+    path, name = c.series.check_new("env_series", path, name, "an environment series")
+    sha = c.series.checksum_if_new("env_series", path)
     q = KINDS[kind]
     series = read_camera_series(path, column=column, timezone=timezone, unit=unit, quantity=q)
     if not np.any(np.isfinite(series.value_mm)):
@@ -72,26 +72,28 @@ def import_env(c: Campaign, path: str | os.PathLike, *, kind: str, name: Optiona
     summary = series.summary()
     summary["unit"] = q.stored_unit
     def record(conn, rel):
-        c.insert_series(conn, "env_series", name=name, kind=kind, sha256=sha, stored_path=rel,
+        c.series.insert(conn, "env_series", name=name, kind=kind, sha256=sha, stored_path=rel,
                         original_path=str(path.resolve()), options=options, summary=summary,
                         arrays=series.to_npz_bytes())
-        c._log(conn, "env-import", None, {"name": name, "kind": kind, "file": str(path), "sha256": sha,
+        c.log_action(conn, "env-import", None, {"name": name, "kind": kind, "file": str(path), "sha256": sha,
                                            "rows": len(series), "bad_rows": series.n_bad})
 
-    c.import_file(path, sha, ENV_DIR, record)
+    c.import_file(path, sha, ENV_DIR, record, journal_entry={  # what 'repair' needs to read it again
+        "kind": "environment", "name": name, "series_kind": kind,
+        "read": {"column": column, "unit": unit, "timezone": timezone}})
     return name, series
 
 
 def env_records(c: Campaign) -> list[SeriesRecord]:
     """The imported environment series (without their arrays), by kind and name."""
-    return sorted(c.series("env_series"), key=lambda r: (r.kind, r.name))
+    return sorted(c.series.records("env_series"), key=lambda r: (r.kind, r.name))
 
 
 def load_env(c: Campaign, *, kind: Optional[str] = None, name: Optional[str] = None) -> list[EnvSeries]:
     """Stored series of a kind (or the one named), oldest import first."""
     out = []
-    for r in c.series("env_series", kind=kind, name=name):
-        t, v = CameraSeries.arrays_from_npz(c.series_arrays("env_series", r.name))
+    for r in c.series.records("env_series", kind=kind, name=name):
+        t, v = CameraSeries.arrays_from_npz(c.series.arrays("env_series", r.name))
         out.append(EnvSeries(r.name, r.kind, r.options["unit"], t, v))
     if name is not None and not out:
         raise InputError(f"no environment series {name!r} in the campaign")
@@ -122,9 +124,9 @@ def add_event(c: Campaign, *, date: str, kind: str, label: str, load_kn_m: Optio
     if when < first or when > limit:
         raise InputError(f"event date {when[:10]} is outside the campaign ({first[:10]} to {last[:10]}); its effect "
                          "cannot be measured from these epochs")
-    return c.insert_event(when, kind, label.strip(), load_kn_m)
+    return c.events.add(when, kind, label.strip(), load_kn_m)
 
 
 def events(c: Campaign) -> list[EventRecord]:
     """The campaign's events, by date."""
-    return c.events()
+    return c.events.all()

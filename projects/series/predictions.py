@@ -152,19 +152,20 @@ def import_prediction(c: Campaign, path: str | os.PathLike, *, align_at: Optiona
             buf = io.BytesIO()
             np.savez_compressed(buf, version=np.int64(FORMAT_VERSION), time_ns=t, value_mm=v)
             options = {"axis": axis, "align_at": align_at, "lsq": lsq, **out[rid]}
-            c.insert_prediction(conn, rid, sha256=sha, stored_path=rel, original_path=str(path.resolve()),
+            c.predictions.put(conn, rid, sha256=sha, stored_path=rel, original_path=str(path.resolve()),
                                 options=options, arrays=buf.getvalue())
-        c._log(conn, "prediction-import", None, {"file": str(path), "sha256": sha, "targets": sorted(curves),
+        c.log_action(conn, "prediction-import", None, {"file": str(path), "sha256": sha, "targets": sorted(curves),
                                                  "align_at": align_at, "lsq": lsq})
 
-    c.import_file(path, sha, PREDICTION_DIR, record)
+    c.import_file(path, sha, PREDICTION_DIR, record, journal_entry={  # what 'repair' needs to read it again
+        "kind": "prediction", "read": {"align_at": align_at, "lsq": lsq}})
     return out
 
 
 def predictions(c: Campaign) -> dict:
     """``{reflector: (time_ns, value_mm aligned, options)}``."""
     out = {}
-    for r in c.prediction_records():
+    for r in c.predictions.all():
         with np.load(io.BytesIO(r.arrays)) as z:
             if int(z["version"]) > FORMAT_VERSION:
                 raise InputError("a prediction stored by a newer BridgeSurvey; update it")

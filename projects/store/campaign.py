@@ -15,32 +15,33 @@ from __future__ import annotations
 
 import contextlib
 import datetime as dt
-import fcntl
 import hashlib
 import json
 import os
 import sqlite3
 import uuid
 from pathlib import Path
-from typing import Iterable, Optional, Sequence
+from typing import Iterable, Iterator, Optional, Sequence
 
 import numpy as np
 
 from lidar.centroid import TargetCentroid
 from lidar.layout import Layout, check_layout
 from lidar.scanner_profile import ScannerProfile
-from projects.store import schema
+from common.files import MB, disk_full_error, ensure_free, is_disk_full
+from projects.store import digests, inputs, journal, schema
+from projects.store.connection import connect, open_database
+from projects.store.imports import (IMPORT_DIRS, SCANS_DIR, Copied, clean_temp_files, copy_in, folder_files,
+                                    header_facts, remove_uncommitted)
+from projects.store.imports import CAMERA_DIR, ENV_DIR, PREDICTION_DIR  # noqa: F401  (importers name them here)
+from projects.store.lock import LOCK_NAME, CampaignLock  # noqa: F401  (LOCK_NAME: likewise)
 from projects.store.errors import CampaignError, CampaignLockedError, DuplicateImportError, InputError
-from projects.store.series import SeriesTables
-from projects.store.records import (DisplacementRecord, DisplacementSet, Epoch, EpochResult, LimitRecord, LogEntry,
-                              Reflector, ReferenceCheck, ScanFile, StoredPlan)
+from projects.store.repositories import (ComparisonRepository, CrossvalRepository, EventRepository,
+                                         PredictionRepository, SeriesRepository)
+from projects.store.records import (DisplacementRecord, DisplacementSet, Epoch, EpochInputs, EpochResult, LimitRecord,
+                                    LogEntry, Reflector, ReferenceCheck, ScanFile, StoredPlan)
 
 DB_NAME = "campaign.sqlite"
-SCANS_DIR = "scans"
-CAMERA_DIR = "camera"
-ENV_DIR = "environment"
-PREDICTION_DIR = "prediction"
-LOCK_NAME = ".lock"
 
 
 def now_iso() -> str:
@@ -77,14 +78,31 @@ def _nan(v) -> float:
     return float("nan") if v is None else float(v)
 
 
-class Campaign(SeriesTables):
-    """An open campaign. Use :meth:`create` or :meth:`open`, preferably as a context manager."""
+class Campaign:
+    """An open campaign. Use :meth:`create` or :meth:`open`, preferably as a context manager.
 
-    def __init__(self, folder: Path, conn: sqlite3.Connection, lock_fh, *, writable: bool):
+    The campaign owns the connection, the lock and the transactions, and the core tables (epochs,
+    their files, plans, centroids and displacements, reflectors, limits, settings, the log). The
+    other tables are behind repositories hanging off it:
+
+    ``series``
+        camera and environment series (:class:`~projects.store.repositories.SeriesRepository`);
+    ``events``, ``predictions``, ``crossvals``, ``comparisons``
+        events, design predictions, camera cross-validations, whole-scan comparisons.
+    """
+
+    def __init__(self, folder: Path, conn: sqlite3.Connection, lock: Optional[CampaignLock], *, writable: bool):
         self.folder = folder
         self.conn = conn
-        self._lock_fh = lock_fh
+        self._lock = lock
         self.writable = writable
+        self._sound: dict[tuple, bool] = {}
+        self._sound_at = -1
+        self.series = SeriesRepository(self)
+        self.events = EventRepository(self)
+        self.predictions = PredictionRepository(self)
+        self.crossvals = CrossvalRepository(self)
+        self.comparisons = ComparisonRepository(self)
 
     # ------------------------------------------------------------------ opening
     @classmethod
@@ -111,10 +129,10 @@ class Campaign(SeriesTables):
         folder.mkdir(parents=True, exist_ok=True)
         (folder / SCANS_DIR).mkdir(exist_ok=True)
         tmp = folder / f".{DB_NAME}.{uuid.uuid4().hex}.part"
-        conn = sqlite3.connect(tmp)
+        conn = connect(tmp)
         try:
+            schema.create(conn)
             with conn:
-                schema.create(conn)
                 meta = {"name": name.strip(), "span_m": "" if span_m is None else repr(float(span_m)),
                         "scanner_profile": json.dumps(profile.to_dict()), "created": now_iso(),
                         "settings": json.dumps({})}
@@ -125,73 +143,68 @@ class Campaign(SeriesTables):
                      zip(layout.ids, layout.groups, layout.xyz, layout.diameters_m, layout.normals)])
                 conn.execute("INSERT INTO log(time, action, epoch, details) VALUES (?, 'init', NULL, ?)",
                              (now_iso(), json.dumps({"name": name, "reflectors": len(layout)})))
-        finally:
             conn.close()
-        os.replace(tmp, folder / DB_NAME)
+            os.replace(tmp, folder / DB_NAME)
+        except BaseException:
+            conn.close()
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+            raise
         return cls.open(folder)
 
     @classmethod
     def open(cls, folder: str | os.PathLike, *, writable: bool = True) -> "Campaign":
-        """Open a campaign; a writer holds an exclusive lock, readers a shared one."""
+        """Open a campaign; a writer holds an exclusive lock, readers a shared one (see :mod:`projects.store.lock`).
+
+        A damaged or unknown schema version, a damaged database and a full disk are each one line
+        (:class:`CampaignError`, :class:`~common.files.DiskFullError`); readers still read at 0 bytes free.
+        """
         folder = Path(folder)
         db = folder / DB_NAME
         if not db.is_file():
             raise CampaignError(f"{folder}: no campaign here (no {DB_NAME}); create one with 'bridgesurvey init'")
-        lock_fh = open(folder / LOCK_NAME, "a+")
+        lock = CampaignLock.acquire(folder, exclusive=writable)
         try:
-            fcntl.flock(lock_fh, (fcntl.LOCK_EX if writable else fcntl.LOCK_SH) | fcntl.LOCK_NB)
-        except BlockingIOError:
-            lock_fh.seek(0)
-            holder = lock_fh.read().strip() or "another process"
-            lock_fh.close()
-            raise CampaignLockedError(f"{folder}: the campaign is in use by {holder}; wait for it to finish "
-                                      "and try again") from None
+            conn = open_database(db, writable=writable)
+            try:
+                cls._upgrade(conn, lock, folder, writable)
+            except BaseException:
+                conn.close()
+                raise
+        except BaseException:
+            lock.release()
+            raise
+        camp = cls(folder, conn, lock, writable=writable)
         if writable:
-            lock_fh.seek(0)
-            lock_fh.truncate()
-            lock_fh.write(f"BridgeSurvey process {os.getpid()}")
-            lock_fh.flush()
-        try:
-            conn = sqlite3.connect(db, timeout=30)
-            conn.row_factory = sqlite3.Row
-            conn.execute("PRAGMA foreign_keys = ON")
-            conn.execute("PRAGMA journal_mode = WAL")
-            conn.execute("PRAGMA synchronous = FULL")
-            version = schema.version_of(conn)
-        except sqlite3.DatabaseError as exc:
-            lock_fh.close()
-            raise CampaignError(f"{db}: not a readable campaign database ({exc})") from None
+            camp._clean_temp_files()
+        return camp
+
+    @staticmethod
+    def _upgrade(conn: sqlite3.Connection, lock: CampaignLock, folder: Path, writable: bool) -> None:
+        """Check the schema version and migrate an older campaign (a reader under a brief exclusive lock)."""
+        version = schema.version_of(conn, str(folder))
         if version > schema.SCHEMA_VERSION:
-            conn.close()
-            lock_fh.close()
             raise CampaignError(f"{folder}: written by a newer BridgeSurvey (schema {version}, this one reads up to "
                                 f"{schema.SCHEMA_VERSION}); update BridgeSurvey")
-        if version < schema.SCHEMA_VERSION:
-            try:
-                if not writable:  # upgrade under a brief exclusive lock, then share again
-                    fcntl.flock(lock_fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                schema.migrate(conn, version)
-                if not writable:
-                    fcntl.flock(lock_fh, fcntl.LOCK_SH | fcntl.LOCK_NB)
-            except BlockingIOError:
-                conn.close()
-                lock_fh.close()
-                raise CampaignLockedError(f"{folder}: the campaign needs a schema upgrade but another process is "
-                                          "using it; try again when it has finished") from None
-        camp = cls(folder, conn, lock_fh, writable=writable)
-        if writable:
-            camp._clean_partial_files()
-        return camp
+        if version == schema.SCHEMA_VERSION:
+            return
+        try:
+            if not writable:
+                lock.upgrade()
+            schema.migrate(conn, version)
+            if not writable:
+                lock.downgrade()
+        except BlockingIOError:
+            raise CampaignLockedError(f"{folder}: the campaign needs a schema upgrade but another process is "
+                                      "using it; try again when it has finished") from None
 
     def close(self) -> None:
         if self.conn is not None:
             self.conn.close()
             self.conn = None  # type: ignore[assignment]  # a closed campaign has no connection
-        if self._lock_fh is not None:
-            with contextlib.suppress(OSError):
-                fcntl.flock(self._lock_fh, fcntl.LOCK_UN)
-            self._lock_fh.close()
-            self._lock_fh = None
+        if self._lock is not None:
+            self._lock.release()
+            self._lock = None
 
     def __enter__(self) -> "Campaign":
         return self
@@ -200,26 +213,41 @@ class Campaign(SeriesTables):
         self.close()
 
     @contextlib.contextmanager
-    def transaction(self):
+    def transaction(self) -> Iterator[sqlite3.Connection]:
         """One atomic change: everything inside commits together or not at all."""
         if not self.writable:
             raise CampaignError("the campaign is open read-only")
         with self.conn:
             yield self.conn
 
-    def _clean_partial_files(self) -> None:
-        """Remove what an interrupted import left: temporary copies and files no row refers to."""
-        for sub, table in ((SCANS_DIR, "files"), (CAMERA_DIR, "camera_series"), (ENV_DIR, "env_series"),
-                           (PREDICTION_DIR, "predictions")):
-            folder = self.folder / sub
-            known = {r[0] for r in self.conn.execute(f"SELECT stored_path FROM {table}")}
-            for p in folder.iterdir() if folder.is_dir() else ():
-                if p.name.startswith(".") or f"{sub}/{p.name}" not in known:
-                    with contextlib.suppress(OSError):
-                        p.chmod(0o644)
-                        p.unlink()
-        for p in self.folder.glob(f".{DB_NAME}.*.part"):
-            p.unlink()
+    @contextlib.contextmanager
+    def snapshot(self) -> Iterator[sqlite3.Connection]:
+        """Several reads seen at one moment (one read transaction; inside a transaction, that one)."""
+        if self.conn.in_transaction:
+            yield self.conn
+            return
+        self.conn.execute("BEGIN")
+        try:
+            yield self.conn
+        finally:
+            if self.conn.in_transaction:
+                self.conn.execute("COMMIT")
+
+    def _clean_temp_files(self) -> None:
+        """Remove the temporary files an interrupted import left (never an imported file: see :mod:`.imports`)."""
+        clean_temp_files(self.folder, DB_NAME)
+
+    def listed_files(self) -> set[str]:
+        """Every file of the import folders the database lists (paths relative to the campaign)."""
+        return {r[0] for table in IMPORT_DIRS.values() for r in self.conn.execute(f"SELECT stored_path FROM {table}")}
+
+    def unlisted_files(self) -> list[str]:
+        """Files in the import folders that the database does not list (after restoring an older database).
+
+        They are never removed: ``verify`` lists them and ``repair`` registers them again.
+        """
+        listed = self.listed_files()
+        return sorted(rel for rel in folder_files(self.folder) if rel not in listed)
 
     # ------------------------------------------------------------------ metadata
     def meta(self, key: str, default: str = "") -> str:
@@ -255,14 +283,20 @@ class Campaign(SeriesTables):
         if epoch is None:
             with self.transaction() as c:
                 c.execute("UPDATE meta SET value = ? WHERE key = 'scanner_profile'", (json.dumps(profile.to_dict()),))
-                self._log(c, "scanner", None, {"name": profile.name})
+                self.log_action(c, "scanner", None, {"name": profile.name})
             return
         self.epoch(epoch)
         s = self.settings()
         s.setdefault("epoch_scanners", {})[epoch] = profile.to_dict()
-        with self.transaction() as c:
-            c.execute("UPDATE meta SET value = ? WHERE key = 'settings'", (json.dumps(s),))
-            self._log(c, "scanner", epoch, {"name": profile.name})
+        mark = self._journal_entry({"kind": "epoch-scanner", "epoch": epoch, "profile": profile.to_dict(),
+                                    "stored_path": "", "imported": now_iso()})  # for 'repair'
+        try:
+            with self.transaction() as c:
+                c.execute("UPDATE meta SET value = ? WHERE key = 'settings'", (json.dumps(s),))
+                self.log_action(c, "scanner", epoch, {"name": profile.name})
+        except BaseException:
+            journal.truncate(self.folder, mark)
+            raise
 
     def settings(self) -> dict:
         return json.loads(self.meta("settings", "{}"))
@@ -272,9 +306,10 @@ class Campaign(SeriesTables):
         s[key] = value
         with self.transaction() as c:
             c.execute("UPDATE meta SET value = ? WHERE key = 'settings'", (json.dumps(s),))
-            self._log(c, "setting", None, {key: value})
+            self.log_action(c, "setting", None, {key: value})
 
-    def _log(self, conn, action: str, epoch: Optional[str], details: dict) -> None:
+    def log_action(self, conn: sqlite3.Connection, action: str, epoch: Optional[str], details: dict) -> None:
+        """Add a line to the campaign's log inside the transaction ``conn``."""
         conn.execute("INSERT INTO log(time, action, epoch, details) VALUES (?, ?, ?, ?)",
                      (now_iso(), action, epoch, json.dumps(details, default=str)))
 
@@ -297,11 +332,14 @@ class Campaign(SeriesTables):
 
     def layout(self, at: Optional[str] = None) -> Layout:
         """Reflectors expected at a date-time (all active ones when None)."""
-        rows = [r for r in self.reflectors() if r.expected_at(at)]
-        return Layout(tuple(r.id for r in rows), tuple(r.group for r in rows),
-                      np.array([r.xyz_layout for r in rows], dtype=float).reshape(-1, 3),
-                      np.array([r.diameter_m for r in rows], dtype=float),
-                      np.array([r.normal_layout for r in rows], dtype=float).reshape(-1, 3))
+        return _layout_of(self.reflectors(), at)
+
+    def layout_warnings(self, epoch: Optional[str] = None) -> list[str]:
+        """Warnings about the layout (at an epoch's date, with its scanner): targets no station could reach."""
+        at = self.epoch(epoch).datetime if epoch else None
+        layout, profile = self.layout(at), self.profile_for(epoch)
+        return inputs.unreachable_targets(layout.ids, layout.xyz, max_range_m=float(profile.max_range_m),
+                                          scanner=f"the {profile.name}")
 
     def add_reflector(self, rid: str, group: str, xyz: Sequence[float], *, diameter_m: float = 0.05,
                       installed: Optional[str] = None, replaces: Optional[str] = None, note: str = "") -> None:
@@ -318,7 +356,7 @@ class Campaign(SeriesTables):
         with self.transaction() as c:
             c.execute("INSERT INTO reflectors(id, grp, x, y, z, diameter_m, installed, replaces, note) "
                       "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)", (rid, group, *xyz, diameter_m, installed, replaces, note))
-            self._log(c, "reflector-add", None, {"id": rid, "group": group, "replaces": replaces})
+            self.log_action(c, "reflector-add", None, {"id": rid, "group": group, "replaces": replaces})
 
     def retire_reflector(self, rid: str, when: str) -> None:
         r = self.reflector(rid)
@@ -327,7 +365,7 @@ class Campaign(SeriesTables):
         when = parse_datetime(when)
         with self.transaction() as c:
             c.execute("UPDATE reflectors SET retired = ? WHERE id = ?", (when, rid))
-            self._log(c, "reflector-retire", None, {"id": rid, "when": when})
+            self.log_action(c, "reflector-retire", None, {"id": rid, "when": when})
 
     def replace_reflector(self, old: str, new: str, when: str, *, xyz: Optional[Sequence[float]] = None) -> None:
         """Retire ``old`` and install ``new`` at the same place (or at ``xyz``); the history continues."""
@@ -341,7 +379,7 @@ class Campaign(SeriesTables):
             c.execute("INSERT INTO reflectors(id, grp, x, y, z, diameter_m, installed, replaces, note, nx, ny, nz) "
                       "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                       (new, r.group, *pos, r.diameter_m, when, old, f"replaces {old}", *_normal_values(r.normal_layout)))
-            self._log(c, "reflector-replace", None, {"old": old, "new": new, "when": when})
+            self.log_action(c, "reflector-replace", None, {"old": old, "new": new, "when": when})
 
     # ------------------------------------------------------------------ epochs and files
     def epochs(self) -> list[Epoch]:
@@ -362,73 +400,71 @@ class Campaign(SeriesTables):
         q = "SELECT * FROM files WHERE epoch = ?" + (" AND role = ?" if role else "") + " ORDER BY imported, stored_path"
         return [ScanFile(**dict(r)) for r in self.conn.execute(q, (epoch, role) if role else (epoch,))]
 
+    def epoch_inputs(self, label: str, *, plan: bool = True) -> EpochInputs:
+        """In one read: the epoch, its files by role, its stored plan and result, its layout, scanner and settings.
+
+        An unknown label is an :class:`InputError`. ``plan=False`` does not read the plan (``plan`` is
+        then None), for callers that only compare hashes.
+        """
+        with self.snapshot():
+            ep = self.epoch(label)
+            files = self.files(label)
+            stored = self.stored_plan(label) if plan else None
+            result = self.result(label)
+            reflectors = self.reflectors()
+            settings = self.settings()
+            own = settings.get("epoch_scanners", {}).get(label)
+            profile = ScannerProfile.from_dict(own, source=f"epoch {label} scanner") if own else self.profile
+        return EpochInputs(ep, tuple(f for f in files if f.role == "coarse"), tuple(f for f in files if f.role == "fine"),
+                           stored, result, _layout_of(reflectors, ep.datetime), profile, settings)
+
     def path_of(self, file: ScanFile) -> Path:
         """Where a stored scan file is on disk."""
         return self.folder / file.stored_path
 
-    def new_series(self, table: str, path: str | os.PathLike, name: Optional[str], what: str) -> tuple[Path, str]:
-        """The file and the name of a series about to be imported into ``table``.
-
-        ``table`` is ``camera_series`` or ``env_series``; the file exists and the name (default: the
-        file's stem) is usable and free.
-        """
-        path = Path(path)
-        if not path.is_file():
-            raise InputError(f"{path}: no such file; check the path")
-        name = (name or path.stem).strip()
-        if not name or any(ch in name for ch in "/\\\n"):
-            raise InputError(f"series name {name!r} is not usable")
-        if self.conn.execute(f"SELECT 1 FROM {table} WHERE name = ?", (name,)).fetchone():
-            raise InputError(f"{what} named {name!r} is already in the campaign; give another --name")
-        return path, name
-
-    def checksum_if_new(self, table: str, path: Path) -> str:
-        """The file's sha256, refusing a file already imported into ``table`` under some series name."""
-        sha = sha256_of(path)
-        row = self.conn.execute(f"SELECT name, original_path FROM {table} WHERE sha256 = ?", (sha,)).fetchone()
-        if row is not None:
-            raise DuplicateImportError(f"{path}: this file is already in the campaign as series {row['name']!r} "
-                                       f"(from {row['original_path']}); nothing was changed")
-        return sha
-
-    def import_file(self, src: Path, sha: str, sub: str, record) -> str:
+    def import_file(self, src: Path, sha: str, sub: str, record, *, journal_entry: Optional[dict] = None) -> str:
         """Copy ``src`` into ``sub`` read-only and, in one transaction, ``record(conn, stored_path)``.
 
-        ``sha`` is the file's checksum when it was read. On any failure nothing stays: no row, no copy.
+        ``sha`` is the file's checksum when it was read; ``journal_entry`` says what the file was
+        imported as, for the journal (:mod:`projects.store.journal`: a kind, and what it takes to read
+        it again). On any failure nothing stays: no row, and no copy this import made.
         """
+        copied: list[Copied] = []
+        marks: list[int] = []
         try:
-            sha2, rel, _ = self._copy_in(src, sub)
-            if sha2 != sha:
+            got = copy_in(self.folder, src, sub)
+            copied.append(got)
+            if got.sha256 != sha:
                 raise InputError(f"{src}: the file changed while it was being imported; try again")
+            marks.append(self._journal(got, src, {"kind": sub, **(journal_entry or {})}))
             with self.transaction() as conn:
-                record(conn, rel)
+                record(conn, got.rel)
         except BaseException:
-            self._clean_partial_files()
+            self._undo_import(copied, marks)
             raise
-        return rel
+        return got.rel
 
-    def _copy_in(self, src: Path, sub: str = SCANS_DIR) -> tuple[str, str, int]:
-        """Copy a file into scans/ (or ``sub``): temporary name, fsync, rename, read-only; returns (sha, rel path, size)."""
-        scans = self.folder / sub
-        scans.mkdir(exist_ok=True)
-        tmp = scans / f".import-{uuid.uuid4().hex}"
-        h = hashlib.sha256()
-        with open(src, "rb") as fin, open(tmp, "wb") as fout:
-            while block := fin.read(8 << 20):
-                h.update(block)
-                fout.write(block)
-            fout.flush()
-            os.fsync(fout.fileno())
-        sha = h.hexdigest()
-        safe = "".join(ch if ch.isalnum() or ch in "._-" else "_" for ch in src.name)
-        rel = f"{sub}/{sha[:16]}_{safe}"
-        final = self.folder / rel
-        if final.exists():
-            tmp.unlink()
-        else:
-            os.replace(tmp, final)
-            final.chmod(0o444)
-        return sha, rel, src.stat().st_size
+    def _undo_import(self, copied: list[Copied], marks: list[int]) -> None:
+        """What an import that did not commit leaves: nothing (its copies and journal lines taken back)."""
+        if marks:
+            journal.truncate(self.folder, marks[0])
+        remove_uncommitted(self.folder, copied)
+
+    def _journal(self, copied: Copied, src: Path, entry: dict) -> int:
+        """Write the journal line of a file about to be registered (before the transaction commits).
+
+        Returns the journal's size before the line (see :func:`projects.store.journal.truncate`).
+        """
+        return self._journal_entry({**entry, "stored_path": copied.rel, "sha256": copied.sha256, "size": copied.size,
+                                    "original_path": str(src.resolve()), "imported": now_iso()})
+
+    def _journal_entry(self, entry: dict) -> int:
+        try:
+            return journal.append(self.folder, entry)
+        except OSError as exc:
+            if is_disk_full(exc):
+                raise disk_full_error(self.folder / journal.JOURNAL_NAME, MB) from None
+            raise
 
     def import_files(self, epoch: str, paths: Iterable[str | os.PathLike], role: str, *,
                      validate=None, create_epoch: Optional[dict] = None) -> list[str]:
@@ -452,36 +488,72 @@ class Campaign(SeriesTables):
         if validate is not None:
             for p in files:
                 validate(p)
-        copied = []
+        ensure_free(self.folder / SCANS_DIR, sum(p.stat().st_size for p in files) + MB)
+        ep = create_epoch if create_epoch is not None else dict(self.epoch(epoch).to_dict())
+        copied: list[Copied] = []
+        marks: list[int] = []
         try:
             for p in files:
-                copied.append(self._copy_in(p))
+                copied.append(copy_in(self.folder, p, SCANS_DIR))
+            for p, got in zip(files, copied):
+                marks.append(self._journal(got, p, {"kind": "scan", "epoch": epoch, "role": role, "epoch_datetime": ep["datetime"],
+                                       "epoch_notes": ep.get("notes", ""), "header": _header_or_none(self.folder / got.rel)}))
             with self.transaction() as c:
                 if create_epoch is not None:
                     c.execute("INSERT INTO epochs(label, datetime, notes, created) VALUES (?, ?, ?, ?)",
                               (create_epoch["label"], create_epoch["datetime"], create_epoch.get("notes", ""),
                                now_iso()))
-                for p, (sha, rel, size) in zip(files, copied):
+                for p, got in zip(files, copied):
                     c.execute("INSERT INTO files(sha256, epoch, role, stored_path, original_path, size, imported) "
-                              "VALUES (?, ?, ?, ?, ?, ?, ?)", (sha, epoch, role, rel, str(p.resolve()), size, now_iso()))
-                self._log(c, "import", epoch, {"role": role, "files": [str(p) for p in files], "sha256": shas})
+                              "VALUES (?, ?, ?, ?, ?, ?, ?)",
+                              (got.sha256, epoch, role, got.rel, str(p.resolve()), got.size, now_iso()))
+                self.log_action(c, "import", epoch, {"role": role, "files": [str(p) for p in files], "sha256": shas})
         except BaseException:
-            self._clean_partial_files()
+            self._undo_import(copied, marks)
             raise
         return shas
 
     def add_epoch(self, label: str, when: str, coarse: str | os.PathLike, fines: Sequence = (), *, notes: str = "",
-                  validate=None) -> str:
+                  validate=None, allow_date: bool = False) -> str:
+        """Create an epoch with its coarse scan (and fine scans), all checked before anything changes.
+
+        A date more than :data:`projects.store.inputs.DATE_SPAN_YEARS` years from the campaign's other
+        epochs (for the first one: outside the plausible years) is refused unless ``allow_date``. An
+        epoch dated before every measured one never becomes the baseline: the implicit baseline (the
+        first measured epoch) is fixed first (see :meth:`baseline_note`).
+        """
         if not label or not label.strip() or any(ch in label for ch in "/\\\n"):
             raise InputError(f"epoch label {label!r} is not usable (no slashes or line breaks)")
         when = parse_datetime(when)
         if self.conn.execute("SELECT 1 FROM epochs WHERE label = ?", (label,)).fetchone():
             raise InputError(f"epoch {label!r} already exists; use another --label or add-fine to add files to it")
+        if not allow_date:
+            inputs.check_epoch_date(when, [e.datetime for e in self.epochs()])
+        self._pin_baseline_before(when)
         self.import_files(label, [coarse], "coarse", validate=validate,
                           create_epoch={"label": label, "datetime": when, "notes": notes})
         if fines:
             self.import_files(label, fines, "fine", validate=validate)
         return label
+
+    def _pin_baseline_before(self, when: str) -> None:
+        """Fix the implicit baseline (the first measured epoch) before an epoch dated earlier arrives."""
+        if self.settings().get("baseline"):
+            return
+        measured = [e for e in self.epochs() if (r := self.result(e.label)) is not None and r.stage == "measured"]
+        if measured and when < measured[0].datetime:
+            self.set_setting("baseline", measured[0].label)
+
+    def baseline_note(self, label: str) -> Optional[str]:
+        """A line for the user when epoch ``label`` is dated before the campaign's baseline, else None."""
+        base = self.settings().get("baseline")
+        if not base or base == label:
+            return None
+        ep, b = self.epoch(label), self.epoch(base)
+        if ep.datetime >= b.datetime:
+            return None
+        return (f"epoch {label} is dated before the baseline {base}: it is measured against {base} with a negative "
+                f"time; the baseline changes only with 'bridgesurvey settings DIR baseline {label}'")
 
     # ------------------------------------------------------------------ results
     def save_plan(self, epoch: str, plan_json: dict, inputs_hash: str, preview: Optional[tuple[bytes, str]] = None
@@ -496,17 +568,60 @@ class Campaign(SeriesTables):
             c.execute("INSERT OR REPLACE INTO epoch_results(epoch, stage, inputs_hash, processed) VALUES (?, ?, ?, ?)",
                       (epoch, "planned", inputs_hash, now_iso()))
             c.execute("DELETE FROM centroids WHERE epoch = ?", (epoch,))
-            self._log(c, "plan", epoch, {"inputs_hash": inputs_hash})
+            digests.seal(c, "plans", (epoch,))
+            if preview is not None:
+                digests.seal(c, "map_previews", (epoch,))
+            digests.seal(c, "epoch_results", (epoch,))
+            self.log_action(c, "plan", epoch, {"inputs_hash": inputs_hash})
 
     def stored_plan(self, epoch: str) -> Optional[StoredPlan]:
         """An epoch's plan with the inputs hash it was made from, or None when it has none."""
         from lidar.plan import ScanPlan
 
-        row = self.conn.execute("SELECT * FROM plans WHERE epoch = ?", (epoch,)).fetchone()
-        if row is None:
-            return None
+        row = self.conn.execute("SELECT json, inputs_hash, created FROM plans WHERE epoch = ?", (epoch,)).fetchone()
+        if row is None or not self._plan_sound(epoch):
+            return None  # a damaged plan (or the preview of an unedited one) is stale: planned again
         doc = json.loads(row["json"])
         return StoredPlan(epoch, ScanPlan.from_json(doc), doc, row["inputs_hash"], row["created"])
+
+    # -- a stored result whose digest does not match (projects.store.digests) is served as absent: stale
+    def is_sound(self, table: str, key: Sequence) -> bool:
+        """Whether a stored group of ``table`` still matches its digest (cached until this connection writes)."""
+        changes = self.conn.total_changes
+        if changes != self._sound_at:
+            self._sound.clear()
+            self._sound_at = changes
+        k = (table, tuple(key))
+        if k not in self._sound:
+            self._sound[k] = digests.is_sound(self.conn, table, key)
+        return self._sound[k]
+
+    def damaged_results(self) -> list[tuple[str, tuple]]:
+        """(table, key) of every stored result group that fails its digest (see :mod:`projects.store.digests`)."""
+        return [(table, key) for table in digests.GROUPS for key in digests.keys_of(self.conn, table)
+                if not self.is_sound(table, key)]
+
+    def _exists(self, table: str, epoch: str) -> bool:
+        return self.conn.execute(f"SELECT 1 FROM {table} WHERE epoch = ?", (epoch,)).fetchone() is not None
+
+    def _plan_sound(self, epoch: str) -> bool:
+        """The plan matches its digest, and so does its map preview unless the plan was edited by hand.
+
+        An unedited plan with a damaged preview is planned again (which remakes the preview); an
+        edited one is kept (planning again would lose the edits) and its preview is not shown.
+        """
+        if self._exists("plans", epoch) and not self.is_sound("plans", (epoch,)):
+            return False
+        if not self._exists("map_previews", epoch) or self.is_sound("map_previews", (epoch,)):
+            return True
+        row = self.conn.execute("SELECT json FROM plans WHERE epoch = ?", (epoch,)).fetchone()
+        return row is not None and bool(json.loads(row[0]).get("edited"))
+
+    def _stage1_sound(self, epoch: str) -> bool:
+        return self.is_sound("epoch_results", (epoch,)) and self._plan_sound(epoch)
+
+    def _displacements_sound(self, epoch: str) -> bool:
+        return self.is_sound("displacement_sets", (epoch,))
 
     def plan(self, epoch: str):
         """An epoch's :class:`lidar.plan.ScanPlan`, or None when it has none."""
@@ -518,12 +633,22 @@ class Campaign(SeriesTables):
         from projects.store.previews import decode_preview
 
         row = self.conn.execute("SELECT arrays, annotations FROM map_previews WHERE epoch = ?", (epoch,)).fetchone()
-        return None if row is None else decode_preview(row[0], row[1])
+        if row is None or not self.is_sound("map_previews", (epoch,)):
+            return None
+        try:
+            return decode_preview(row[0], row[1])
+        except CampaignError:
+            raise
+        except Exception:  # undecodable despite its digest: not shown, never a crash
+            return None
 
     def result(self, epoch: str) -> Optional[EpochResult]:
-        """How far processing has taken an epoch, or None when it has not started."""
-        row = self.conn.execute("SELECT * FROM epoch_results WHERE epoch = ?", (epoch,)).fetchone()
-        return None if row is None else EpochResult(**dict(row))
+        """How far processing has taken an epoch, or None when it has not started (or its stored results are damaged)."""
+        row = self.conn.execute("SELECT epoch, stage, inputs_hash, processed FROM epoch_results WHERE epoch = ?",
+                                (epoch,)).fetchone()
+        if row is None or not self._stage1_sound(epoch):
+            return None
+        return EpochResult(**dict(row))
 
     def save_centroids(self, epoch: str, cents: dict, inputs_hash: str, params: dict) -> None:
         with self.transaction() as c:
@@ -537,10 +662,14 @@ class Campaign(SeriesTables):
                            json.dumps(list(tc.flags)), int(tc.n_window)))
             c.execute("INSERT OR REPLACE INTO epoch_results(epoch, stage, inputs_hash, processed) VALUES (?, ?, ?, ?)",
                       (epoch, "measured", inputs_hash, now_iso()))
-            self._log(c, "measure", epoch, {"inputs_hash": inputs_hash, "params": params,
+            digests.seal(c, "epoch_results", (epoch,))
+            self.log_action(c, "measure", epoch, {"inputs_hash": inputs_hash, "params": params,
                                              "found": sum(int(t.found) for t in cents.values())})
 
     def centroids(self, epoch: str) -> dict[str, TargetCentroid]:
+        """An epoch's stored centroids by target (none when they fail their digest: stale)."""
+        if self._exists("epoch_results", epoch) and not self.is_sound("epoch_results", (epoch,)):
+            return {}
         out = {}
         for r in self.conn.execute("SELECT * FROM centroids WHERE epoch = ? ORDER BY reflector", (epoch,)):
             xyz = np.array([np.nan if r[k] is None else r[k] for k in ("x", "y", "z")], dtype=float)
@@ -554,25 +683,29 @@ class Campaign(SeriesTables):
     def save_displacements(self, epoch: str, baseline: str, res, inputs_hash: str) -> None:
         with self.transaction() as c:
             c.execute("DELETE FROM displacement_sets WHERE epoch = ?", (epoch,))
-            c.execute("INSERT INTO displacement_sets VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            c.execute("INSERT INTO displacement_sets(epoch, baseline, inputs_hash, normal, reference_point, "
+                      "reference_ids, normal_mode, flags, processed) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
                       (epoch, baseline, inputs_hash, json.dumps(np.asarray(res.normal_socs).tolist()),
                        json.dumps(np.asarray(res.reference_point_socs).tolist()), json.dumps(list(res.reference_ids)),
                        res.normal_mode, json.dumps(list(res.flags)), now_iso()))
             for d in res.displacements:
-                c.execute("INSERT INTO displacements VALUES (?, ?, ?, ?, ?, ?, ?)",
+                c.execute("INSERT INTO displacements(epoch, reflector, displacement_m, sigma_m, vertical_m, "
+                          "baseline_vertical_m, flags) VALUES (?, ?, ?, ?, ?, ?, ?)",
                           (epoch, d.reflector, _f(d.displacement_m), _f(d.sigma_m), _f(d.vertical_m),
                            _f(d.baseline_vertical_m), json.dumps(list(d.flags))))
             for rc in res.reference_checks:
-                c.execute("INSERT INTO reference_checks VALUES (?, ?, ?, ?, ?, ?, ?)",
+                c.execute("INSERT INTO reference_checks(epoch, reflector, median_change_m, max_change_m, moved, "
+                          "missing, suspect) VALUES (?, ?, ?, ?, ?, ?, ?)",
                           (epoch, rc.reflector, _f(rc.median_change_m), _f(rc.max_change_m), int(rc.moved),
                            int(rc.missing), int(rc.suspect)))
-            self._log(c, "displacements", epoch, {"baseline": baseline, "inputs_hash": inputs_hash})
+            digests.seal(c, "displacement_sets", (epoch,))
+            self.log_action(c, "displacements", epoch, {"baseline": baseline, "inputs_hash": inputs_hash})
 
     def displacement_set(self, epoch: str) -> Optional[DisplacementSet]:
         """What an epoch's displacements were computed with, or None before they are."""
         r = self.conn.execute("SELECT * FROM displacement_sets WHERE epoch = ?", (epoch,)).fetchone()
-        if r is None:
-            return None
+        if r is None or not self._displacements_sound(epoch):
+            return None  # damaged: stale, computed again by 'process'
         return DisplacementSet(r["epoch"], r["baseline"], r["inputs_hash"], np.array(json.loads(r["normal"]), float),
                                np.array(json.loads(r["reference_point"]), float), tuple(json.loads(r["reference_ids"])),
                                r["normal_mode"], tuple(json.loads(r["flags"])), r["processed"])
@@ -593,10 +726,20 @@ class Campaign(SeriesTables):
                       d.flags AS flags, s.flags AS epoch_flags, s.baseline
                FROM displacements d JOIN displacement_sets s ON s.epoch = d.epoch
                JOIN epochs e ON e.label = d.epoch {'WHERE ' + where if where else ''}
-               ORDER BY e.datetime {order}, e.label {order}, d.reflector""" + (f" LIMIT {int(limit)}" if limit else "")
-        return [DisplacementRecord(r["epoch"], r["datetime"], r["reflector"], r["displacement_m"], r["sigma_m"],
-                                   tuple(json.loads(r["flags"])), tuple(json.loads(r["epoch_flags"])), r["baseline"])
-                for r in self.conn.execute(q, args)]
+               ORDER BY e.datetime {order}, e.label {order}, d.reflector"""
+        sound: dict[str, bool] = {}
+        out = []
+        for r in self.conn.execute(q, args).fetchall():
+            ep = r["epoch"]
+            if ep not in sound:
+                sound[ep] = self._displacements_sound(ep)
+            if sound[ep]:  # a damaged epoch's values are never served
+                out.append(DisplacementRecord(ep, r["datetime"], r["reflector"], r["displacement_m"], r["sigma_m"],
+                                              tuple(json.loads(r["flags"])), tuple(json.loads(r["epoch_flags"])),
+                                              r["baseline"]))
+                if limit and len(out) >= limit:
+                    break
+        return out
 
     def last_displacement(self, reflector: str, *, at_or_before: str) -> Optional[DisplacementRecord]:
         """A target's latest displacement with a value, in an epoch dated no later than epoch ``at_or_before``."""
@@ -607,11 +750,15 @@ class Campaign(SeriesTables):
 
     def displacement_flags(self, epoch: str) -> list[str]:
         """Every per-target displacement flag of an epoch (one entry per target and flag)."""
+        if not self._displacements_sound(epoch):
+            return []
         rows = self.conn.execute("SELECT flags FROM displacements WHERE epoch = ?", (epoch,)).fetchall()
         return [f for r in rows for f in json.loads(r[0])]
 
     def reference_checks(self, epoch: str) -> list[ReferenceCheck]:
         """How each pier target moved in an epoch."""
+        if not self._displacements_sound(epoch):
+            return []
         return [ReferenceCheck(r["epoch"], r["reflector"], r["median_change_m"], r["max_change_m"], bool(r["moved"]),
                                bool(r["missing"]), bool(r["suspect"]))
                 for r in self.conn.execute("SELECT * FROM reference_checks WHERE epoch = ?", (epoch,))]
@@ -626,7 +773,7 @@ class Campaign(SeriesTables):
         with self.transaction() as c:
             c.execute("INSERT OR REPLACE INTO limits VALUES (?, ?, ?, ?)",
                       (reflector, lim.warning_mm, lim.alarm_mm, rule))
-            self._log(c, "limit", None, {"reflector": reflector, "rule": rule})
+            self.log_action(c, "limit", None, {"reflector": reflector, "rule": rule})
 
     def limit_for(self, reflector: str):
         from projects.store.limits import Limit
@@ -646,6 +793,24 @@ class Campaign(SeriesTables):
         res = self.conn.execute("PRAGMA integrity_check").fetchone()[0]
         fk = self.conn.execute("PRAGMA foreign_key_check").fetchall()
         return res if not fk else f"foreign key violations: {len(fk)}"
+
+
+def _layout_of(reflectors: Sequence[Reflector], at: Optional[str]) -> Layout:
+    """The layout of the reflectors expected at the ISO date-time ``at`` (all active ones when None)."""
+    rows = [r for r in reflectors if r.expected_at(at)]
+    return Layout(tuple(r.id for r in rows), tuple(r.group for r in rows),
+                  np.array([r.xyz_layout for r in rows], dtype=float).reshape(-1, 3),
+                  np.array([r.diameter_m for r in rows], dtype=float),
+                  np.array([r.normal_layout for r in rows], dtype=float).reshape(-1, 3))
+
+
+def _header_or_none(path: Path) -> Optional[dict]:
+    from common.errors import SurveyError
+
+    try:
+        return header_facts(path)
+    except SurveyError:
+        return None
 
 
 def _reflector(r: sqlite3.Row) -> Reflector:

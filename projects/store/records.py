@@ -277,3 +277,64 @@ class PredictionRecord:
     reflector: str
     options: dict
     arrays: bytes
+    sha256: str = ""
+    stored_path: str = ""
+    original_path: str = ""
+
+
+@dataclass(frozen=True)
+class CrossvalRecord:
+    """A camera series' stored cross-validation with LiDAR.
+
+    ``summary`` is the JSON document of :class:`vision.crossval.CrossValidation`.
+    """
+
+    series: str
+    summary: dict
+    created: str
+
+
+@dataclass(frozen=True)
+class ComparisonRecord:
+    """A stored whole-scan comparison of two epochs; ``summary`` as :mod:`projects.compare.whole_scan` writes it."""
+
+    from_epoch: str
+    to_epoch: str
+    method: str
+    summary: dict
+    created: str
+
+
+@dataclass(frozen=True, eq=False)
+class EpochInputs:
+    """Everything the store knows about one epoch that processing needs, read at one moment.
+
+    Attributes
+    ----------
+    epoch : Epoch
+    coarse, fine : tuple of ScanFile
+        Its scan files by role, in import order.
+    plan : StoredPlan or None
+        Its stored plan (None when it has none, or when it was not asked for).
+    result : EpochResult or None
+        How far processing has taken it.
+    layout : lidar.layout.Layout
+        The reflectors expected at its date.
+    profile : lidar.scanner_profile.ScannerProfile
+        Its scanner: its own when it has one, else the campaign's.
+    settings : dict
+        The campaign's settings (processing parameters among them).
+    """
+
+    epoch: Epoch
+    coarse: tuple[ScanFile, ...]
+    fine: tuple[ScanFile, ...]
+    plan: Optional[StoredPlan]
+    result: Optional[EpochResult]
+    layout: Any
+    profile: Any
+    settings: dict
+
+    @property
+    def label(self) -> str:
+        return self.epoch.label

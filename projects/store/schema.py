@@ -1,11 +1,20 @@
-"""The campaign database schema, its version and the migrations from older versions."""
+"""The campaign database schema, its version and the migrations from older versions.
+
+A campaign records its schema version in ``meta.schema_version``. Opening one checks that the
+version is a number this BridgeSurvey knows and that the tables agree with it (a version that says
+6 over the tables of 8 is damage, not an old campaign); each migration then runs in one transaction
+with the new version number, so a failed or interrupted upgrade leaves the campaign as it was.
+"""
 from __future__ import annotations
 
 import sqlite3
+from typing import Callable, Optional, Union
 
 from common.flags import RENAMED
+from projects.store import digests
+from projects.store.errors import CampaignError
 
-SCHEMA_VERSION = 8
+SCHEMA_VERSION = 9
 
 SCHEMA_V1 = """
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -90,9 +99,19 @@ CREATE TABLE log (
 CREATE INDEX files_by_epoch ON files(epoch);
 """
 
-# version -> SQL that upgrades the previous version to it. A new campaign is created as version 1
-# and then upgraded through every migration, so new and migrated campaigns have the same schema.
-MIGRATIONS: dict[int, str] = {
+
+def _add_digests(conn: sqlite3.Connection) -> None:
+    """Migration 9: a digest column on every table of results, filled for what is stored already."""
+    for table in digests.GROUPS:
+        conn.execute(f"ALTER TABLE {table} ADD COLUMN digest TEXT")
+    digests.seal_all(conn)
+
+
+Migration = Union[str, Callable[[sqlite3.Connection], None]]
+
+# version -> SQL (or a function) that upgrades the previous version to it. A new campaign is created
+# as version 1 and then upgraded through every migration, so new and migrated campaigns have the same schema.
+MIGRATIONS: dict[int, Migration] = {
     # 2: what the report needs to show each epoch without re-reading its scans: a reduced reflectance
     #    map with its detections, and the points each fine-scan window actually held.
     2: """
@@ -179,27 +198,138 @@ MIGRATIONS: dict[int, str] = {
     #    older versions are renamed in the stored summaries (common.flags.RENAMED).
     8: "".join(f"""UPDATE crossvals SET summary = replace(summary, '"{old}"', '"{new}"');\n"""
                for old, new in RENAMED.items()),
+    # 9: every stored result carries the digest of its values (projects.store.digests), so damage that
+    #    passes integrity_check is found by 'verify' and the result recomputed instead of served.
+    9: _add_digests,
+}
+
+#: What each migration leaves that can be seen in the tables: version -> (table, column or None).
+#: Version 8 renames codes inside stored documents only and leaves no mark.
+MARKS: dict[int, tuple[str, Optional[str]]] = {
+    1: ("displacements", None), 2: ("map_previews", None), 3: ("comparisons", None), 4: ("camera_series", None),
+    5: ("reflectors", "nx"), 6: ("env_series", None), 7: ("predictions", None), 9: ("plans", "digest"),
 }
 
 
+def _statements(script: str) -> list[str]:
+    """The SQL statements of a script, one by one (``executescript`` would commit the transaction)."""
+    out, buf = [], ""
+    for line in script.splitlines(keepends=True):
+        buf += line
+        if sqlite3.complete_statement(buf):
+            if buf.strip():
+                out.append(buf.strip())
+            buf = ""
+    if buf.strip():
+        out.append(buf.strip())
+    return out
+
+
+def _apply(conn: sqlite3.Connection, step: Migration) -> None:
+    if callable(step):
+        step(conn)
+    else:
+        for stmt in _statements(step):
+            conn.execute(stmt)
+
+
 def create(conn: sqlite3.Connection) -> None:
-    """Create a new campaign database: version 1 and every migration after it."""
-    conn.executescript(SCHEMA_V1)
-    conn.execute("INSERT INTO meta(key, value) VALUES ('schema_version', '1')")
-    for v in range(2, SCHEMA_VERSION + 1):
-        conn.executescript(MIGRATIONS[v])
-    conn.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),))
+    """Create a new campaign database in one transaction: version 1 and every migration after it."""
+    conn.execute("BEGIN")
+    try:
+        _apply(conn, SCHEMA_V1)
+        conn.execute("INSERT INTO meta(key, value) VALUES ('schema_version', '1')")
+        for v in range(2, SCHEMA_VERSION + 1):
+            _apply(conn, MIGRATIONS[v])
+        conn.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),))
+    except BaseException:
+        conn.rollback()
+        raise
+    conn.commit()
 
 
-def version_of(conn: sqlite3.Connection) -> int:
-    """The schema version of a campaign database."""
-    row = conn.execute("SELECT value FROM meta WHERE key = 'schema_version'").fetchone()
-    return int(row[0])
+def _has(conn: sqlite3.Connection, table: str, column: Optional[str]) -> bool:
+    if not conn.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", (table,)).fetchone():
+        return False
+    return column is None or any(r[1] == column for r in conn.execute(f"PRAGMA table_info({table})"))
 
 
-def migrate(conn: sqlite3.Connection, from_version: int) -> None:
-    """Upgrade an older campaign in place, one version at a time, in one transaction each."""
-    for v in range(from_version + 1, SCHEMA_VERSION + 1):
-        with conn:
-            conn.executescript(MIGRATIONS[v])
+def structural_version(conn: sqlite3.Connection) -> int:
+    """The newest version whose tables the database holds, and every earlier one's (0: not a campaign's tables).
+
+    A campaign of version 8 shows as 7 (version 8 leaves no mark in the tables).
+    """
+    found = 0
+    for v in sorted(MARKS):
+        if not _has(conn, *MARKS[v]):
+            break
+        found = v
+    return found
+
+
+def recorded_version(conn: sqlite3.Connection) -> Optional[str]:
+    """The text of ``meta.schema_version`` (None when the row or the table is missing)."""
+    try:
+        row = conn.execute("SELECT value FROM meta WHERE key = 'schema_version'").fetchone()
+    except sqlite3.OperationalError:
+        return None
+    return None if row is None else str(row[0])
+
+
+def version_of(conn: sqlite3.Connection, where: str = "campaign") -> int:
+    """The schema version of a campaign database, checked against its tables.
+
+    A missing, unreadable or impossible version is a :class:`CampaignError` in one line naming
+    ``where`` (the campaign folder). A version newer than this BridgeSurvey's is returned as it is
+    (the caller refuses it).
+    """
+    text = recorded_version(conn)
+    hint = ("run 'bridgesurvey repair' on the campaign folder to set it from the tables, or restore "
+            "campaign.sqlite from a backup")
+    try:
+        version = int(str(text).strip())
+    except ValueError:
+        version = -1
+    if text is None or version < 1:
+        what = "no schema version" if text is None else f"{text!r}"
+        raise CampaignError(f"{where}: campaign.sqlite has an unreadable schema version ({what}); {hint}")
+    if version > SCHEMA_VERSION:
+        return version
+    have = structural_version(conn)
+    if have == 0:
+        raise CampaignError(f"{where}: campaign.sqlite is not a campaign database (its tables are not a campaign's)")
+    # every mark up to the version must be there, and none after it
+    expected = max(v for v in MARKS if v <= version)
+    if have != expected:
+        raise CampaignError(f"{where}: campaign.sqlite has an unreadable schema version: it says {version} but its "
+                            f"tables are those of version {have if have != 7 else '7 or 8'}; {hint}")
+    return version
+
+
+def inferred_version(conn: sqlite3.Connection) -> int:
+    """The version to record for a database whose own record is damaged: what its tables show.
+
+    Version 8 leaves no mark, so tables of 7 give 7 (migration 8 only renames, and does no harm
+    when run again).
+    """
+    return structural_version(conn)
+
+
+def migrate(conn: sqlite3.Connection, from_version: int, to_version: Optional[int] = None) -> None:
+    """Upgrade an older campaign in place to ``to_version`` (default the current), each version in one transaction.
+
+    A migration that fails leaves the campaign at the version before it (a :class:`CampaignError`).
+    """
+    for v in range(from_version + 1, (SCHEMA_VERSION if to_version is None else to_version) + 1):
+        conn.execute("BEGIN IMMEDIATE")
+        try:
+            _apply(conn, MIGRATIONS[v])
             conn.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(v),))
+        except sqlite3.DatabaseError as exc:
+            conn.rollback()
+            raise CampaignError(f"the upgrade of the campaign from schema {v - 1} to {v} failed ({exc}); the "
+                                f"campaign is unchanged at version {v - 1}") from None
+        except BaseException:
+            conn.rollback()
+            raise
+        conn.commit()

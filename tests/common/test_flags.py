@@ -67,8 +67,10 @@ def test_older_codes_are_mapped_by_the_migration():
 
     conn = sqlite3.connect(":memory:")
     schema.create(conn)
-    conn.execute("INSERT INTO camera_series VALUES ('s', NULL, 'x', 'p', 'o', 'i', '{}', '{}', x'00')")
-    conn.execute("""INSERT INTO crossvals VALUES ('s', '{"pairs": [{"flags": ["no-camera-data"]}]}', 'now')""")
+    conn.execute("INSERT INTO camera_series(name, reflector, sha256, stored_path, original_path, imported, options, "
+                 "summary, arrays) VALUES ('s', NULL, 'x', 'p', 'o', 'i', '{}', '{}', x'00')")
+    conn.execute("""INSERT INTO crossvals(series, summary, created)
+                    VALUES ('s', '{"pairs": [{"flags": ["no-camera-data"]}]}', 'now')""")
     conn.executescript(schema.MIGRATIONS[8])
     summary = conn.execute("SELECT summary FROM crossvals").fetchone()[0]
     assert '"no_camera_data"' in summary and "no-camera-data" not in summary

@@ -153,6 +153,7 @@ def test_a_worker_killed_mid_task_loses_nothing(fleet, serial_reference):
         assert killed, "no task was seen running"
         run = out["run"]
         assert run.failed == 0 and run.tasks == 6
+        assert any(n.startswith("worker lost, task retried: epoch ") for n in run.notes), run.notes
     for folder in find_campaigns([fleet]):
         assert _tables(folder) == serial_reference
 

@@ -1,0 +1,156 @@
+"""Checksums stored with every result: each blob and each group of rows carries the digest of its values.
+
+``pragma integrity_check`` sees a damaged page structure, not a changed value: eight bytes changed
+inside a stored displacement, or a flipped bit in a compressed map preview, pass it. So every stored
+result is written with a digest of its values (BLAKE2b, 128 bits, over a canonical encoding of the
+rows as the database returns them), and checked when it is read: a result whose digest does not
+match is treated as not there (stale, recomputed by ``process``), never served.
+
+A *group* is what is written together: an epoch's plan, its map preview, its stage-1 result with its
+centroids, its displacement set with the displacements and reference checks, a series' arrays, a
+prediction, a cross-validation, a comparison. :data:`GROUPS` says where each digest is kept and which
+rows it covers; :func:`group_digest` computes one from the database, :func:`seal` stores it.
+"""
+from __future__ import annotations
+
+import hashlib
+import sqlite3
+import zlib
+from dataclasses import dataclass
+from typing import Iterable, Optional, Sequence
+
+
+def value_digest(rows: Iterable[Sequence]) -> str:
+    """The digest of rows of SQL values (None, int, float, str, bytes), hex.
+
+    Text and numbers enter BLAKE2b exactly; a blob enters as its length and CRC-32 (blobs are the
+    large map previews and series arrays: CRC-32 reads them five times faster, and any damage that
+    changes a blob changes its CRC with certainty for bursts up to 32 bits, and otherwise but for
+    a chance of one in four billion).
+
+    Examples
+    --------
+    >>> value_digest([(1, 0.5, "a", None, b"x")]) == value_digest([(1, 0.5, "a", None, b"x")])
+    True
+    >>> value_digest([(1.0,)]) == value_digest([(1,)])  # a REAL is not an INTEGER
+    False
+    """
+    parts: list[bytes] = []
+    for row in rows:
+        parts.append(b"(")
+        for v in row:
+            if v is None:
+                parts.append(b"N")
+            elif isinstance(v, (bytes, bytearray, memoryview)):
+                parts.append(b"B%d:%08x;" % (len(v), zlib.crc32(v)))
+            elif isinstance(v, int):
+                parts.append(b"I%d;" % int(v))
+            elif isinstance(v, float):
+                parts.append(b"F" + float.hex(v).encode() + b";")
+            else:
+                s = str(v).encode()
+                parts.append(b"S%d:" % len(s))
+                parts.append(s)
+        parts.append(b")")
+    return hashlib.blake2b(b"".join(parts), digest_size=16).hexdigest()
+
+
+@dataclass(frozen=True)
+class Group:
+    """Where a group's digest lives and which rows it covers.
+
+    Attributes
+    ----------
+    name : str
+        What it is, for messages ("plan", "map preview", ...).
+    table : str
+        The table whose ``digest`` column holds it.
+    key : tuple of str
+        The key columns of that table that name one group.
+    queries : tuple of str
+        SELECTs (with one ``?`` per key column) whose rows, in order, the digest covers.
+    """
+
+    name: str
+    table: str
+    key: tuple[str, ...]
+    queries: tuple[str, ...]
+
+
+GROUPS: dict[str, Group] = {g.table: g for g in (
+    Group("plan", "plans", ("epoch",), ("SELECT epoch, json, inputs_hash, created FROM plans WHERE epoch = ?",)),
+    Group("map preview", "map_previews", ("epoch",),
+          ("SELECT epoch, inputs_hash, arrays, annotations FROM map_previews WHERE epoch = ?",)),
+    Group("centroids", "epoch_results", ("epoch",), (
+        "SELECT epoch, stage, inputs_hash, processed FROM epoch_results WHERE epoch = ?",
+        "SELECT epoch, reflector, found, x, y, z, cov, n, threshold, separability, sigma_range_m, flags, n_window "
+        "FROM centroids WHERE epoch = ? ORDER BY reflector")),
+    Group("displacements", "displacement_sets", ("epoch",), (
+        "SELECT epoch, baseline, inputs_hash, normal, reference_point, reference_ids, normal_mode, flags, processed "
+        "FROM displacement_sets WHERE epoch = ?",
+        "SELECT epoch, reflector, displacement_m, sigma_m, vertical_m, baseline_vertical_m, flags FROM displacements "
+        "WHERE epoch = ? ORDER BY reflector",
+        "SELECT epoch, reflector, median_change_m, max_change_m, moved, missing, suspect FROM reference_checks "
+        "WHERE epoch = ? ORDER BY reflector")),
+    Group("camera series", "camera_series", ("name",), (
+        "SELECT name, reflector, sha256, stored_path, options, summary, arrays FROM camera_series WHERE name = ?",)),
+    Group("environment series", "env_series", ("name",), (
+        "SELECT name, kind, sha256, stored_path, options, summary, arrays FROM env_series WHERE name = ?",)),
+    Group("design prediction", "predictions", ("reflector",), (
+        "SELECT reflector, sha256, stored_path, options, arrays FROM predictions WHERE reflector = ?",)),
+    Group("cross-validation", "crossvals", ("series",), ("SELECT series, summary FROM crossvals WHERE series = ?",)),
+    Group("comparison", "comparisons", ("from_epoch", "to_epoch", "method"), (
+        "SELECT from_epoch, to_epoch, method, summary FROM comparisons "
+        "WHERE from_epoch = ? AND to_epoch = ? AND method = ?",)),
+)}
+
+
+def group_digest(conn: sqlite3.Connection, table: str, key: Sequence) -> str:
+    """The digest of one group (``table`` as in :data:`GROUPS`, ``key`` its key values) as stored now."""
+    g = GROUPS[table]
+    rows: list[Sequence] = []
+    for q in g.queries:
+        rows.append((q,))  # each query's rows are framed, so rows cannot move from one part to another
+        rows.extend(tuple(r) for r in conn.execute(q, tuple(key)))
+    return value_digest(rows)
+
+
+def _where(g: Group) -> str:
+    return " AND ".join(f"{k} = ?" for k in g.key)
+
+
+def seal(conn: sqlite3.Connection, table: str, key: Sequence) -> None:
+    """Store the digest of a group just written (inside the transaction that wrote it)."""
+    g = GROUPS[table]
+    conn.execute(f"UPDATE {table} SET digest = ? WHERE {_where(g)}", (group_digest(conn, table, key), *key))
+
+
+def stored_digest(conn: sqlite3.Connection, table: str, key: Sequence) -> Optional[str]:
+    """The digest stored with a group (None when the group does not exist or has none)."""
+    g = GROUPS[table]
+    row = conn.execute(f"SELECT digest FROM {table} WHERE {_where(g)}", tuple(key)).fetchone()
+    return None if row is None else row[0]
+
+
+def is_sound(conn: sqlite3.Connection, table: str, key: Sequence) -> bool:
+    """Whether a stored group still has the digest it was written with (False for a missing digest too)."""
+    stored = stored_digest(conn, table, key)
+    return stored is not None and stored == group_digest(conn, table, key)
+
+
+def keys_of(conn: sqlite3.Connection, table: str) -> list[tuple]:
+    """The keys of every group stored in ``table``."""
+    g = GROUPS[table]
+    return [tuple(r) for r in conn.execute(f"SELECT {', '.join(g.key)} FROM {table} ORDER BY {', '.join(g.key)}")]
+
+
+def damaged(conn: sqlite3.Connection, table: str) -> list[tuple]:
+    """Keys of the groups of ``table`` whose digest does not match their values."""
+    return [k for k in keys_of(conn, table) if not is_sound(conn, table, k)]
+
+
+def seal_all(conn: sqlite3.Connection) -> None:
+    """Store the digest of every group (the migration that introduced digests)."""
+    for table in GROUPS:
+        for key in keys_of(conn, table):
+            seal(conn, table, key)
