@@ -6,7 +6,7 @@ usually stands) at y < 0.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import Optional, Sequence, Union
 
 import numpy as np
@@ -385,3 +385,22 @@ def in_plane_axes(normal: ArrayLike, up_hint: Optional[np.ndarray] = None) -> tu
     e2 /= np.linalg.norm(e2)
     e1 = np.cross(e2, n)
     return e1, e2
+
+
+def model_to_dict(model: BridgeModel) -> dict:
+    """Every parameter of a bridge model and its targets, as JSON-ready values (see :func:`model_from_dict`)."""
+    d = {f.name: getattr(model, f.name) for f in fields(model) if f.name != "targets"}
+    for k in ("spans_m", "deck_fractions", "girder_lines_m"):
+        d[k] = list(d[k])
+    d["targets"] = [{"id": t.id, "group": t.group, "centre_m": list(t.centre_m), "normal": list(t.normal),
+                     "diameter_m": t.diameter_m} for t in model.targets]
+    return d
+
+
+def model_from_dict(d: dict) -> BridgeModel:
+    """The bridge model written by :func:`model_to_dict`."""
+    known = {f.name for f in fields(BridgeModel)}
+    kw: dict = {k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items() if k in known and k != "targets"}
+    targets = tuple(Target(t["id"], t["group"], tuple(t["centre_m"]), tuple(t["normal"]), float(t["diameter_m"]))
+                    for t in d.get("targets", ()))
+    return BridgeModel(**kw, targets=targets)
