@@ -32,7 +32,7 @@ if TYPE_CHECKING:
 SCENE_FORMAT_VERSION = 2  # 2: the bridge model and the systematic effects (written only when not the defaults)
 
 
-def _conditions_to_dict(c: EpochConditions) -> dict:
+def conditions_to_dict(c: EpochConditions) -> dict:
     """The conditions as JSON values: today's keys always, each new effect only when it is on."""
     d: dict = {
         "midspan_displacement_m": c.midspan_displacement_m,
@@ -51,7 +51,8 @@ def _conditions_to_dict(c: EpochConditions) -> dict:
     return d
 
 
-def _conditions_from_dict(c: dict) -> EpochConditions:
+def conditions_from_dict(c: dict) -> EpochConditions:
+    """The conditions written by :func:`conditions_to_dict`."""
     return EpochConditions(
         c["midspan_displacement_m"], c["moved_targets"], tuple(c["occluded"]), tuple(c["cable_ties"]),
         tuple(c["removed"]), bool(c["saturated"]), span_displacements_m=tuple(c.get("span_displacements_m", ())),
@@ -68,7 +69,7 @@ def save_scene(folder: Path, setup: ScannerSetup, conditions: EpochConditions, s
     The bridge model is written when it is not the default one; a scene of today's bridge without any of
     the new effects is written exactly as before (format 1).
     """
-    cond = _conditions_to_dict(conditions)
+    cond = conditions_to_dict(conditions)
     spec: dict = {
         "format_version": 1,
         "setup": asdict(setup),
@@ -102,7 +103,7 @@ def load_scene(folder: Path) -> tuple[ScannerSetup, EpochConditions, int, float]
     """Read a visit folder's ``scene.json``: (set-up, conditions, seed, coarse step in degrees)."""
     d = _scene_spec(folder)
     setup = ScannerSetup(**{**d["setup"], "position_m": tuple(d["setup"]["position_m"])})
-    return setup, _conditions_from_dict(d["conditions"]), int(d["seed"]), float(d["coarse_step_deg"])
+    return setup, conditions_from_dict(d["conditions"]), int(d["seed"]), float(d["coarse_step_deg"])
 
 
 def load_scene_model(folder: Path) -> BridgeModel:

@@ -50,6 +50,9 @@ def truth_plan_for(*, min_points: int = 1000, position_noise_m: float = 0.01, cl
                    seed: int = 0) -> PlanFor:
     """A plan callback planning from the simulator's truth (no coarse-scan processing), for tests and studies.
 
+    Every target whose face turns toward the scanner gets a window (occlusion is not checked), in the
+    model's target order.
+
     Parameters
     ----------
     min_points : int, keyword-only
@@ -73,9 +76,11 @@ def truth_plan_for(*, min_points: int = 1000, position_noise_m: float = 0.01, cl
         targets = []
         for t in scene.truth().targets:
             c = np.asarray(t.centre_socs_m)
-            cos_inc = abs(np.asarray(t.normal_socs) @ (c / np.linalg.norm(c)))
+            facing = -float(np.asarray(t.normal_socs) @ (c / np.linalg.norm(c)))
+            if facing <= 0.05:  # its face turned away from the scanner: nothing to plan
+                continue
             targets.append(PlanTarget(t.id, t.group, tuple(c + rng.normal(0, position_noise_m, 3)),
-                                      scene.model.target(t.id).diameter_m, False, cos_inc))
+                                      scene.model.target(t.id).diameter_m, False, facing))
         rois = list(plan_fine_scans(targets, min_points=min_points).rois)
         if closure is not None:
             first = next((r for r in rois if r.reflector == closure), None)
