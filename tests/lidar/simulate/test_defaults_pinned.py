@@ -6,6 +6,7 @@ the LAS point records with their scales, offsets and point format (not the heade
 sets to the day the file is written).
 """
 import hashlib
+import json
 from pathlib import Path
 
 import laspy
@@ -59,7 +60,10 @@ def test_visit_files_are_unchanged(tmp_path, name):
     c = CONDITIONS[name]
     coarse, _ = simulate_coarse(tmp_path, setup=SETUP, conditions=c, seed=7, coarse_step_deg=0.1)
     assert las_digest(coarse) == PINNED[f"coarse_{name}"]
-    assert laspy.read(coarse).header.point_format.id == 6
+    las = laspy.read(coarse)
+    assert las.header.point_format.id == 6 and not np.any(las.gps_time)  # no times by default
+    scene = json.loads((tmp_path / "scene.json").read_text())
+    assert scene["format_version"] == 1 and "model" not in scene
     plan = plan_from_truth(BridgeScene(BridgeModel(), c, SETUP), min_points=300, rng=np.random.default_rng(3))
     fine, truth = simulate_fine(tmp_path, plan.rois)
     assert las_digest(fine) == PINNED[f"fine_{name}"]
@@ -74,6 +78,7 @@ def test_fine_epoch_centroids_are_unchanged(name):
     assert ",".join(keys) == PINNED[f"epoch_ids_{name}"]
     assert digest(np.array([cents[k].xyz_socs for k in keys]), np.array([cents[k].cov for k in keys]),
                   fine.xyz_socs, fine.intensity) == PINNED[f"epoch_{name}"]
+    assert fine.time_s is None
 
 
 def test_centroid_level_observe_is_unchanged():
