@@ -102,3 +102,38 @@ def test_foreign_sample_reads_with_times_and_thirty_second_gaps():
     gaps = d[d > 5.0]
     assert gaps.size == 9  # ten windows
     np.testing.assert_allclose(gaps, 30.0, atol=0.01)
+
+
+def test_e57_time_stamps_flagged_invalid_read_as_nan(tmp_path):
+    import uuid
+
+    import pye57
+    from pye57 import libe57
+
+    path = str(tmp_path / "inv.e57")
+    e = pye57.E57(path, mode="w")
+    imf = e.image_file
+    node = libe57.StructureNode(imf)
+    node.set("guid", libe57.StringNode(imf, "{%s}" % uuid.uuid4()))
+    proto = libe57.StructureNode(imf)
+    for f in ("cartesianX", "cartesianY", "cartesianZ"):
+        proto.set(f, libe57.FloatNode(imf, 0.0, libe57.E57_DOUBLE, -100.0, 100.0))
+    proto.set("timeStamp", libe57.FloatNode(imf, 0.0, libe57.E57_SINGLE, 0.0, 1000.0))  # single, as some tools
+    proto.set("isTimeStampInvalid", libe57.IntegerNode(imf, 0, 0, 1))
+    points = libe57.CompressedVectorNode(imf, proto, libe57.VectorNode(imf, True))
+    node.set("points", points)
+    e.data3d.append(node)
+    n = 100
+    arrays = {"cartesianX": np.linspace(1, 2, n), "cartesianY": np.ones(n), "cartesianZ": np.ones(n),
+              "timeStamp": np.arange(n) * 0.5, "isTimeStampInvalid": (np.arange(n) % 10 == 0).astype(np.int8)}
+    buffers = libe57.VectorSourceDestBuffer()
+    for k, a in arrays.items():
+        buffers.append(libe57.SourceDestBuffer(imf, k, a, n, True, True))
+    w = points.writer(buffers)
+    w.write(n)
+    w.close()
+    e.close()
+    (scan,) = read_e57(path)
+    assert scan.metadata["has_time"] is True
+    assert np.isnan(scan.time_s[::10]).all()
+    np.testing.assert_array_equal(scan.time_s[1:10], np.arange(1, 10) * 0.5)
