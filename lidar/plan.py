@@ -55,9 +55,11 @@ class RoiPlan:
     expected_seconds: float
     predicted: bool = False
     notes: tuple[str, ...] = ()
+    closure: bool = False  # a window scanned again at the end of the visit (listed last); in JSON only when True
 
     def to_json(self) -> dict:
         w = self.window
+        closure = {"closure": True} if self.closure else {}
         return {
             "reflector": self.reflector, "group": self.group,
             "phi_min_deg": float(w.phi_min_deg), "phi_max_deg": float(w.phi_max_deg),
@@ -67,6 +69,7 @@ class RoiPlan:
             "expected_seconds": round(self.expected_seconds, 2),
             "expected_target_points": int(self.expected_target_points),
             "incidence_deg": round(self.incidence_deg, 2), "predicted": self.predicted, "notes": list(self.notes),
+            **closure,
         }
 
     @classmethod
@@ -77,7 +80,7 @@ class RoiPlan:
             return cls(str(d["reflector"]), str(d.get("group", "")), w, float(d["range_m"]),
                        float(d.get("incidence_deg", float("nan"))), int(d.get("expected_points", 0)),
                        int(d.get("expected_target_points", 0)), float(d.get("expected_seconds", 0.0)),
-                       bool(d.get("predicted", False)), tuple(d.get("notes", ())))
+                       bool(d.get("predicted", False)), tuple(d.get("notes", ())), bool(d.get("closure", False)))
         except KeyError as exc:
             raise InputError(f"plan ROI is missing the field {exc.args[0]!r}") from None
         except (TypeError, ValueError) as exc:
