@@ -9,7 +9,7 @@ pull it; each doubt is flagged.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Literal, Mapping, Optional, Sequence, overload
 
 import numpy as np
@@ -70,6 +70,13 @@ class TargetCentroid:
         Range noise measured from the disc's flatness.
     normal_socs : (3,) array
         Disc plane normal (towards the scanner).
+    time_s : float
+        Median time of the disc's points, seconds (NaN when the scan has no point times).
+    time_span_s : float
+        From the first to the last of the disc's points, seconds (NaN without point times).
+    clipped_fraction : float
+        Share of the disc's points at the window's intensity ceiling: a plateau there means the
+        receiver clipped the target's returns.
     """
 
     reflector: str
@@ -83,6 +90,18 @@ class TargetCentroid:
     n_rejected_bright: int = 0
     sigma_range_m: float = float("nan")
     normal_socs: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    time_s: float = float("nan")
+    time_span_s: float = float("nan")
+    clipped_fraction: float = 0.0
+
+    @property
+    def cos_incidence(self) -> float:
+        """|cos| of the incidence: the disc's normal against the line of sight (NaN when unknown)."""
+        n = np.asarray(self.normal_socs, dtype=np.float64)
+        x = np.asarray(self.xyz_socs, dtype=np.float64)
+        if not (np.all(np.isfinite(n)) and np.all(np.isfinite(x))) or not np.any(x):
+            return float("nan")
+        return float(abs(n @ x) / (np.linalg.norm(n) * np.linalg.norm(x)))
 
     @property
     def found(self) -> bool:
@@ -161,20 +180,23 @@ class CentroidTrace:
 def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: str = "",
                     expected_xyz: Optional[ArrayLike] = None, diameter_m: float = 0.05,
                     window: Optional[AngularWindow] = None, profile: ScannerProfile = VZ1000,
-                    min_points: int = 30, trace: Literal[False] = False) -> TargetCentroid: ...
+                    min_points: int = 30, time_s: Optional[np.ndarray] = None,
+                    trace: Literal[False] = False) -> TargetCentroid: ...
 
 
 @overload
 def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: str = "",
                     expected_xyz: Optional[ArrayLike] = None, diameter_m: float = 0.05,
                     window: Optional[AngularWindow] = None, profile: ScannerProfile = VZ1000,
-                    min_points: int = 30, trace: Literal[True]) -> tuple[TargetCentroid, CentroidTrace]: ...
+                    min_points: int = 30, time_s: Optional[np.ndarray] = None,
+                    trace: Literal[True]) -> tuple[TargetCentroid, CentroidTrace]: ...
 
 
 def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: str = "",
                     expected_xyz: Optional[ArrayLike] = None, diameter_m: float = 0.05,
                     window: Optional[AngularWindow] = None, profile: ScannerProfile = VZ1000,
-                    min_points: int = 30, trace: bool = False) -> TargetCentroid | tuple[TargetCentroid, CentroidTrace]:
+                    min_points: int = 30, time_s: Optional[np.ndarray] = None,
+                    trace: bool = False) -> TargetCentroid | tuple[TargetCentroid, CentroidTrace]:
     """Robust centroid of the target in one fine-scan window.
 
     Stages: Otsu's split of the intensities (:func:`_bright`), the compact bright cluster nearest
@@ -198,6 +220,8 @@ def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: s
         Footprint model. Default VZ-1000.
     min_points : int, keyword-only
         Fewer disc points than this: not found. Default 30.
+    time_s : (N,) float64 array, optional, keyword-only
+        Each point's time (seconds); gives the centroid's ``time_s`` and ``time_span_s``.
     trace : bool, keyword-only
         Also return a :class:`CentroidTrace` (the masks of each stage, for display). Default False.
 
@@ -215,6 +239,14 @@ def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: s
     result = _centroid_stages(xyz[ok], inten[ok], np.nonzero(ok)[0], tr, reflector=reflector,
                               expected_xyz=expected_xyz, diameter_m=diameter_m, window=window, profile=profile,
                               min_points=min_points)
+    if time_s is not None and result.found:
+        t = np.asarray(time_s, dtype=np.float64)
+        if t.shape != (xyz.shape[0],):
+            raise InputError("target_centroid needs one time per point")
+        td = t[tr.disc]
+        td = td[np.isfinite(td)]
+        if td.size:
+            result = replace(result, time_s=float(np.median(td)), time_span_s=float(np.ptp(td)))
     return (result, tr) if trace else result
 
 
@@ -315,7 +347,8 @@ def _doubts(*, n: int, rejected: int, sep: float, saturated: int, rms_r: float, 
     if sep < 0.6:
         flags.append(FLAG_LOW_SEPARABILITY)
     if saturated > 0.2 * n:
-        flags.append(FLAG_SATURATED)
+        flags.append(f"{FLAG_SATURATED}: {100.0 * saturated / n:.0f} % of the target's points at the intensity "
+                     "ceiling")
     if not 0.6 * radius / np.sqrt(2) <= rms_r <= 1.4 * (radius + footprint / 2) / np.sqrt(2):
         flags.append(FLAG_SIZE)
     if expected is not None and np.linalg.norm(centre - expected) > max(0.05, 1.5 * diameter_m):
@@ -372,43 +405,94 @@ def _centroid_stages(xyz: np.ndarray, inten: np.ndarray, ok_idx: np.ndarray, tr:
         return _not_found(reflector, n_window, thr, sep, (FLAG_NOT_COMPACT,))
     top = float(inten.max())
     saturated = int(np.count_nonzero(inten[bright][best][keep] >= top - 1e-6))
+    clipped = saturated / n if saturated >= max(5, 0.05 * n) else 0.0  # a plateau at the ceiling, not one point
     rms_r = float(np.sqrt(np.mean(np.sum(((disc - centre) @ axes2.T) ** 2, axis=1))))
     flags = _doubts(n=n, rejected=rejected, sep=sep, saturated=saturated, rms_r=rms_r, radius=radius,
                     footprint=footprint, centre=centre, expected=expected, diameter_m=diameter_m, window=window,
                     disc=disc)
     return TargetCentroid(reflector, centre, cov, n, thr, sep, tuple(flags), n_window, max(0, rejected),
-                          sigma_r, normal2)
+                          sigma_r, normal2, clipped_fraction=float(clipped))
 
 
 def centroids_from_scan(xyz_socs: np.ndarray, intensity: np.ndarray, rois: Sequence[RoiPlan], *,
-                        diameters_m: Optional[Mapping[str, float]] = None,
-                        profile: ScannerProfile = VZ1000) -> dict[str, TargetCentroid]:
-    """Centroids of every planned target from the fine-scan points of one set-up.
+                        diameters_m: Optional[Mapping[str, float]] = None, profile: ScannerProfile = VZ1000,
+                        time_s: Optional[np.ndarray] = None) -> dict[str, TargetCentroid]:
+    """Centroids of every planned target from the fine-scan points of one set-up (closure windows left out).
+
+    See :func:`measure_windows`, which also measures the plan's closure windows.
+    """
+    return measure_windows(xyz_socs, intensity, rois, diameters_m=diameters_m, profile=profile, time_s=time_s)[0]
+
+
+#: Points of one window more than this apart in time belong to different passes (the closure scans the first
+#: target's window again at the end of the visit), seconds.
+PASS_GAP_S = 5.0
+
+
+def _passes(mask: np.ndarray, time_s: Optional[np.ndarray]) -> list[np.ndarray]:
+    """The window's points split into passes by gaps in their times (one pass without times)."""
+    idx = np.nonzero(mask)[0]
+    if time_s is None or idx.size == 0:
+        return [idx]
+    t = time_s[idx]
+    if not np.all(np.isfinite(t)):
+        return [idx]
+    order = np.argsort(t, kind="stable")
+    cuts = np.nonzero(np.diff(t[order]) > PASS_GAP_S)[0] + 1
+    return [np.sort(part) for part in np.split(idx[order], cuts)]
+
+
+def measure_windows(xyz_socs: np.ndarray, intensity: np.ndarray, rois: Sequence[RoiPlan], *,
+                    diameters_m: Optional[Mapping[str, float]] = None, profile: ScannerProfile = VZ1000,
+                    time_s: Optional[np.ndarray] = None
+                    ) -> tuple[dict[str, TargetCentroid], dict[str, TargetCentroid]]:
+    """Centroids of every planned target, and of the targets the plan scans again at its end (its closure).
 
     Parameters
     ----------
     xyz_socs : (N, 3) float64 array
-        All fine-scan points of the epoch (one or many windows).
+        All fine-scan points of the set-up (one or many windows).
     intensity : (N,) array
     rois : sequence of RoiPlan
-        The plan's windows; each point is used by every window it falls in.
-    diameters_m : mapping reflector -> diameter, optional
+        The plan's windows; each point is used by every window it falls in. A closure window
+        (``roi.closure``) covers a window scanned earlier: with point times, the window's points
+        split into passes by time and the first pass is the target's, the last its closure's.
+    diameters_m : mapping reflector -> diameter, optional, keyword-only
         Default 0.05 m each.
+    profile : ScannerProfile, keyword-only
+    time_s : (N,) float64 array, optional, keyword-only
+        Point times (seconds); without them a closure window cannot be told from its first pass and
+        is not measured.
 
     Returns
     -------
-    dict reflector -> TargetCentroid
+    (centroids, closures) : dicts reflector -> TargetCentroid
     """
     from lidar.angles import direction_from_angles
 
     theta, phi, _ = spherical_from_xyz(np.asarray(xyz_socs), out_dtype=np.float32)
-    out = {}
+    times = None if time_s is None else np.asarray(time_s, dtype=np.float64)
+    repeated = {r.reflector for r in rois if getattr(r, "closure", False)}
+    out: dict[str, TargetCentroid] = {}
+    closures: dict[str, TargetCentroid] = {}
     for roi in rois:
+        is_closure = bool(getattr(roi, "closure", False))
         mask = roi.window.contains(theta, phi)
+        if roi.reflector in repeated:
+            passes = _passes(mask, times)
+            if len(passes) < 2:
+                if is_closure:
+                    continue  # no times, or no second pass: the closure is not told apart from the first
+                sel = passes[0]
+            else:
+                sel = passes[-1] if is_closure else passes[0]
+        else:
+            sel = np.nonzero(mask)[0]
         tc, pc = roi.window.centre
         expected = direction_from_angles(tc, pc) * roi.range_m
         d = 0.05 if diameters_m is None else float(diameters_m.get(roi.reflector, 0.05))
-        out[roi.reflector] = target_centroid(xyz_socs[mask], intensity[mask], reflector=roi.reflector,
-                                             expected_xyz=expected, diameter_m=d, window=roi.window,
-                                             profile=profile)
-    return out
+        c = target_centroid(xyz_socs[sel], intensity[sel], reflector=roi.reflector, expected_xyz=expected,
+                            diameter_m=d, window=roi.window, profile=profile,
+                            time_s=None if times is None else times[sel])
+        (closures if is_closure else out)[roi.reflector] = c
+    return out, closures

@@ -278,6 +278,7 @@ def plan_roi(target: PlanTarget, *, n_points: float, profile: ScannerProfile = V
 
 
 def plan_fine_scans(targets: Sequence[PlanTarget], *, epoch: str = "", profile: ScannerProfile = VZ1000,
+                    closure: bool = False,
                     min_points: int = 1000, budget_seconds: float = 3600.0, margin_m: float = 0.10) -> ScanPlan:
     """Plan the fine scans of an epoch.
 
@@ -297,6 +298,9 @@ def plan_fine_scans(targets: Sequence[PlanTarget], *, epoch: str = "", profile: 
     margin_m : float, keyword-only
         Background around each target inside its window (each side), metres;
         2.5x for predicted targets. Default 0.10 m.
+    closure : bool, keyword-only
+        End the plan with a closure window: the first reference target's window again, so that the
+        set-up's drift during the visit can be measured (:mod:`lidar.systematic`). Default False.
 
     Returns
     -------
@@ -331,6 +335,12 @@ def plan_fine_scans(targets: Sequence[PlanTarget], *, epoch: str = "", profile: 
     if n < min_points:
         warnings.append(f"over the time budget with {min_points} points per target: reduced to about "
                         f"{int(n)} points per target to fit {budget_seconds / 60:.0f} min")
+    if closure:
+        first = next((r for r in rois if r.group == "reference"), None)
+        if first is not None:
+            rois.append(replace(first, closure=True, notes=first.notes + (
+                "closure: the first reference target again, at the end, for the set-up's drift",)))
+            total += first.expected_seconds
     if total > budget_seconds * 1.0001:
         warnings.append(f"the plan takes {total / 60:.1f} min, over the budget of {budget_seconds / 60:.0f} min")
     return ScanPlan(epoch, profile, tuple(rois), int(min_points), int(n), float(budget_seconds), tuple(warnings))

@@ -41,7 +41,7 @@ ARCSEC = math.pi / 180.0 / 3600.0
 #: Prior standard deviations: range-walk coefficients (mm), scale (ppm), drift (arcsec per hour).
 PRIOR_BIAS_MM = 2.0
 PRIOR_SCALE_PPM = 300.0
-PRIOR_DRIFT_ARCSEC_H = 60.0
+PRIOR_DRIFT_ARCSEC_H = 30.0
 #: Added to every centroid covariance: what a centroid's own covariance leaves out (m^2 per axis).
 MODEL_FLOOR_M2 = (2e-5) ** 2
 #: Tukey's constant on a block's normalised residual.
@@ -176,8 +176,9 @@ class _Problem:
     """The unknowns, their ordering and the linearised equations of one adjustment."""
 
     def __init__(self, visits: Sequence[VisitSightings], groups: Mapping[str, str], basis: tuple[str, ...],
-                 start: Optional["_Problem"] = None):
+                 start: Optional["_Problem"] = None, drift: bool = True):
         self.basis = basis
+        self.drift = drift
         base = visits[0]
         ref_ids = sorted({s.target for v in visits for s in v.sightings if groups.get(s.target) == "reference"})
         deck_ids = sorted({s.target for v in visits for s in v.sightings if groups.get(s.target) == "measurement"})
@@ -200,11 +201,12 @@ class _Problem:
             self.x_ref, self.a_deck = start.x_ref.copy(), start.a_deck.copy()
             for mine, theirs in zip(self.visits, start.visits):
                 mine.q, mine.d, mine.kappa_ppm = theirs.q.copy(), theirs.d.copy(), theirs.kappa_ppm
-                mine.omega, mine.weights = theirs.omega.copy(), dict(theirs.weights)
+                mine.omega = theirs.omega.copy() if mine.timed else np.zeros(3)
+                mine.weights = dict(theirs.weights)
 
     def _visit(self, v: VisitSightings, is_base: bool, groups) -> _Visit:
         times = np.array([s.time_s for s in v.sightings], dtype=np.float64)
-        timed = bool(np.all(np.isfinite(times)) and times.size and np.ptp(times) > 1.0)
+        timed = bool(self.drift and np.all(np.isfinite(times)) and times.size and np.ptp(times) > 1.0)
         refs = [(s, self.ref_ids.index(s.target)) for s in v.sightings if s.target in self.ref_ids]
         decks = [(s, self.deck_ids.index(s.target)) for s in v.sightings if s.target in self.deck_ids]
         return _Visit(v.label, refs, decks, timed, float(np.median(times)) if timed else 0.0, is_base=is_base)
@@ -453,8 +455,7 @@ def fit_field_model(visits: Sequence[VisitSightings], groups: Mapping[str, str],
     if not visits:
         raise InputError("the field model needs at least one visit")
     if not select_range_walk or len(visits) < 3:
-        p = _Problem(visits, groups, ())
-        sol, left = _adjust(p)
+        p, sol, left = _with_or_without_drift(visits, groups, (), None)
         return _model(p, sol, left, visits[0].label)
     general = _Problem(visits, groups, ("1", "sat_strength"))
     _adjust(general)
@@ -488,12 +489,27 @@ def fit_field_model(visits: Sequence[VisitSightings], groups: Mapping[str, str],
             if min(steps, key=lambda t: steps[t]) == best_t:
                 break
     chosen = min(scores, key=lambda b: scores[b])
-    p = _Problem(visits, groups, chosen, start=general)
-    sol, left = _adjust(p)
+    p, sol, left = _with_or_without_drift(visits, groups, chosen, general)
     best = scores[chosen]
     near = [b for b in scores if scores[b] - best < ALTERNATIVE_BIC]
     alts = tuple((b, thetas[b], float(math.exp(-0.5 * (scores[b] - best)))) for b in near)
     return _model(p, sol, left, visits[0].label, alts, [[kappas[b][k] for b in near] for k in range(len(visits))])
+
+
+def _with_or_without_drift(visits: Sequence[VisitSightings], groups: Mapping[str, str], basis: tuple[str, ...],
+                           start: Optional[_Problem]) -> tuple[_Problem, _Solution, list]:
+    """The range walk ``basis`` fitted with and without the set-ups' drift; the one BIC prefers.
+
+    A drift the data cannot show (no point times, a plan's time model only) is left out rather than
+    fitted to noise.
+    """
+    p = _Problem(visits, groups, basis, start=start)
+    sol, left = _adjust(p)
+    if not any(v.timed for v in p.visits):
+        return p, sol, left
+    q = _Problem(visits, groups, basis, start=start, drift=False)
+    sol_q, left_q = _adjust(q)
+    return (p, sol, left) if _bic(sol) < _bic(sol_q) else (q, sol_q, left_q)
 
 
 def _model(p: _Problem, sol: _Solution, left_out: list, baseline: str, alternatives: tuple = (),

@@ -18,7 +18,7 @@ import numpy as np
 from lidar.displacement import compute_displacements
 from lidar.displacement_result import Displacement, EpochDisplacements, Observation
 from lidar.systematic.adjustment import FieldModel
-from lidar.systematic.corrections import CorrectionJacobian, correct_visit
+from lidar.systematic.corrections import CorrectionJacobian, correct_visit, cos_incidence_of
 from lidar.systematic.range_walk import design
 
 
@@ -31,7 +31,7 @@ def _side(centroids: Mapping[str, object], model: FieldModel, label: str):
         y = np.asarray(getattr(c, "xyz_socs"), dtype=np.float64)
         r = float(np.linalg.norm(y))
         u = y / r
-        sp = float(model.range_walk.spread_m(r, float(getattr(c, "cos_incidence", 1.0)))[0])
+        sp = float(model.range_walk.spread_m(r, cos_incidence_of(c))[0])
         s = sp ** 2 * np.outer(u, u)
         obs[k] = Observation(pos[k], np.asarray(getattr(c, "cov"), dtype=np.float64) + s)
         spread[k] = s
@@ -147,12 +147,12 @@ def _deviations(centroids: Mapping[str, object], model: FieldModel, label: str, 
         y = np.asarray(getattr(c, "xyz_socs"), dtype=np.float64)
         r = float(np.linalg.norm(y))
         u = y / r
-        ci = float(getattr(c, "cos_incidence", 1.0))
+        ci = cos_incidence_of(c)
         best = float(rw.bias_m(r, ci)[0])
         dev = np.zeros((n, 3))
         for a, (basis, coef, _) in enumerate(rw.alternatives):
             dev[a] = (float((design(basis, r, ci) @ coef)[0]) - best) * u
-            if vis.alternative_scale_ppm and label != model.baseline:
+            if len(vis.alternative_scale_ppm) == n and label != model.baseline:
                 dev[a] -= corrected[k] * 1e-6 * (vis.alternative_scale_ppm[a] - vis.scale_ppm)
         out[k] = dev
     return out

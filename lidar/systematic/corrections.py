@@ -52,12 +52,54 @@ def correct_centroid(xyz_socs: np.ndarray, cos_incidence: float, time_s: float, 
     return z, jac
 
 
+def cos_incidence_of(centroid: object) -> float:
+    """A centroid's |cos| of incidence, 1 (head-on) when it is not known (a centroid stored without its normal)."""
+    c = float(getattr(centroid, "cos_incidence", float("nan")))
+    return c if np.isfinite(c) else 1.0
+
+
 def correct_visit(centroids: Mapping[str, object], *, range_walk: RangeWalkModel, visit: VisitSystematics
                   ) -> tuple[dict[str, np.ndarray], dict[str, CorrectionJacobian]]:
     """Corrected positions and Jacobians of a visit's centroids (``xyz_socs``, ``cos_incidence``, ``time_s``)."""
     out, jacs = {}, {}
     for k, c in centroids.items():
-        z, j = correct_centroid(np.asarray(getattr(c, "xyz_socs")), float(getattr(c, "cos_incidence", 1.0)),
+        z, j = correct_centroid(np.asarray(getattr(c, "xyz_socs")), cos_incidence_of(c),
                                 float(getattr(c, "time_s", float("nan"))), range_walk=range_walk, visit=visit)
         out[k], jacs[k] = z, j
     return out, jacs
+
+
+@dataclass(frozen=True)
+class ClosureDrift:
+    """How far the set-up turned between a target's first window and its closure window.
+
+    ``angle_arcsec`` is the turn seen across the line of sight (a rotation about the line of sight itself
+    does not move a point), with its ``sigma_arcsec`` from both centroids' covariances, over ``dt_s``
+    seconds; ``rate_arcsec_h`` the same per hour.
+    """
+
+    reflector: str
+    angle_arcsec: float
+    sigma_arcsec: float
+    dt_s: float
+
+    @property
+    def rate_arcsec_h(self) -> float:
+        return self.angle_arcsec / self.dt_s * 3600.0 if self.dt_s > 0 else float("nan")
+
+
+def closure_drift(first: object, closure: object) -> ClosureDrift:
+    """The set-up's turn between a target's first centroid and its closure centroid (same target, same visit)."""
+    a = np.asarray(getattr(first, "xyz_socs"), dtype=np.float64)
+    b = np.asarray(getattr(closure, "xyz_socs"), dtype=np.float64)
+    r = float(np.linalg.norm(a))
+    u = a / r
+    perp = np.eye(3) - np.outer(u, u)
+    d = perp @ (b - a)
+    cov = perp @ (np.asarray(getattr(first, "cov")) + np.asarray(getattr(closure, "cov"))) @ perp
+    dist = float(np.linalg.norm(d))
+    var = float(d @ cov @ d) / dist ** 2 if dist > 0 else float(np.trace(cov)) / 2.0
+    to_arcsec = 1.0 / r / ARCSEC
+    dt = float(getattr(closure, "time_s", np.nan)) - float(getattr(first, "time_s", np.nan))
+    return ClosureDrift(str(getattr(first, "reflector", "")), dist * to_arcsec, float(np.sqrt(var)) * to_arcsec,
+                        dt if np.isfinite(dt) else float("nan"))

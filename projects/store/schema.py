@@ -4,8 +4,9 @@ from __future__ import annotations
 import sqlite3
 
 from common.flags import RENAMED
+from projects.store.field_tables import SCHEMA as FIELD_SCHEMA
 
-SCHEMA_VERSION = 8
+SCHEMA_VERSION = 9
 
 SCHEMA_V1 = """
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -179,6 +180,9 @@ MIGRATIONS: dict[int, str] = {
     #    older versions are renamed in the stored summaries (common.flags.RENAMED).
     8: "".join(f"""UPDATE crossvals SET summary = replace(summary, '"{old}"', '"{new}"');\n"""
                for old, new in RENAMED.items()),
+    # 9: the field error budget: centroid times and incidences, closure centroids, along-span movements and
+    #    budgets, each epoch's scale and drift, and the campaign's field model (projects.store.field_tables).
+    9: FIELD_SCHEMA,
 }
 
 
