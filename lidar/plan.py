@@ -336,6 +336,7 @@ def plan_fine_scans(targets: Sequence[PlanTarget], *, epoch: str = "", profile: 
         warnings.append(f"over the time budget with {min_points} points per target: reduced to about "
                         f"{int(n)} points per target to fit {budget_seconds / 60:.0f} min")
     if closure:
+        rois = _interleave_references(rois)
         first = next((r for r in rois if r.group == "reference"), None)
         if first is not None:
             rois.append(replace(first, closure=True, notes=first.notes + (
@@ -344,6 +345,25 @@ def plan_fine_scans(targets: Sequence[PlanTarget], *, epoch: str = "", profile: 
     if total > budget_seconds * 1.0001:
         warnings.append(f"the plan takes {total / 60:.1f} min, over the budget of {budget_seconds / 60:.0f} min")
     return ScanPlan(epoch, profile, tuple(rois), int(min_points), int(n), float(budget_seconds), tuple(warnings))
+
+
+def _interleave_references(rois: list) -> list:
+    """The windows in an order that spreads the reference targets over the visit.
+
+    Each reference window opens a share of the deck windows: the reference targets are then seen at
+    times spread over the whole visit, and with the closure at its end they fix the set-up's drift in
+    all three axes (a deck target's window, whose target moves, says little about it).
+    """
+    refs = [r for r in rois if r.group == "reference"]
+    others = [r for r in rois if r.group != "reference"]
+    if not refs or not others:
+        return list(rois)
+    out: list = []
+    chunks = np.array_split(np.arange(len(others)), len(refs))
+    for ref, chunk in zip(refs, chunks):
+        out.append(ref)
+        out.extend(others[i] for i in chunk)
+    return out
 
 
 def _plan_full_dome(targets: Sequence[PlanTarget], *, epoch: str, profile: ScannerProfile, min_points: int,

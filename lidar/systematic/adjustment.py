@@ -101,6 +101,7 @@ class VisitSystematics:
     scale_determined: bool = True
     left_out: tuple[str, ...] = ()
     alternative_scale_ppm: tuple[float, ...] = ()  # the visit's scale under each of the range walk's alternatives
+    misfit: float = 1.0  # RMS normalised residual of the visit's centroids in the adjustment (1: as their sigmas say)
 
     @property
     def drift_sigma_arcsec_h(self) -> np.ndarray:
@@ -351,12 +352,13 @@ class _Problem:
 
 @dataclass
 class _Solution:
-    chi2: float
+    chi2: float  # every row, priors included
     n_rows: int
     n_unknowns: int
     cov_shared: np.ndarray
     cov_local: list
-    cost_rows: int = 0
+    chi2_data: float = 0.0  # the centroids' rows only, for comparing models
+    n_data: int = 0
 
 
 def _solve_once(p: _Problem) -> tuple[_Solution, float]:
@@ -371,10 +373,14 @@ def _solve_once(p: _Problem) -> tuple[_Solution, float]:
         b_s[ns - nb:] -= p.theta / PRIOR_BIAS_MM ** 2
     parts = []
     chi2, n_rows = float(nb and np.sum((p.theta / PRIOR_BIAS_MM) ** 2)), nb
+    chi2_data, n_data = 0.0, 0
     for v in p.visits:
-        jl, js, res, _ = p.visit_rows(v)
+        jl, js, res, blocks = p.visit_rows(v)
         chi2 += float(res @ res)
         n_rows += res.size
+        nd = sum(n for _, _, n in blocks)
+        chi2_data += float(res[:nd] @ res[:nd])
+        n_data += sum(n for kind, j, n in blocks if v.weights.get((kind, j), 1.0) > 0)
         n_ll = jl.T @ jl + 1e-12 * np.eye(v.n_local)
         n_ls = jl.T @ js
         inv_ll = np.linalg.pinv(n_ll) if v.n_local else np.zeros((0, 0))
@@ -394,7 +400,7 @@ def _solve_once(p: _Problem) -> tuple[_Solution, float]:
         step = max(step, float(np.max(np.abs(dx_l))) if dx_l.size else 0.0)
     p.apply_shared(dx_s)
     n_unk = ns + sum(v.n_local for v in p.visits)
-    return _Solution(chi2, n_rows, n_unk, cov_s, cov_l), step
+    return _Solution(chi2, n_rows, n_unk, cov_s, cov_l, chi2_data, n_data), step
 
 
 def _reweight(p: _Problem) -> list[tuple[str, str]]:
@@ -429,7 +435,8 @@ def _adjust(p: _Problem, *, iterations: int = 8, robust: bool = True) -> tuple[_
 
 
 def _bic(sol: _Solution) -> float:
-    return sol.chi2 + math.log(max(sol.n_rows, 2)) * sol.n_unknowns
+    """BIC on the centroids' rows (priors left out), for models fitted with the same down-weighting."""
+    return sol.chi2_data + math.log(max(sol.n_data, 2)) * sol.n_unknowns
 
 
 def fit_field_model(visits: Sequence[VisitSightings], groups: Mapping[str, str], *,
@@ -507,9 +514,11 @@ def _with_or_without_drift(visits: Sequence[VisitSightings], groups: Mapping[str
     sol, left = _adjust(p)
     if not any(v.timed for v in p.visits):
         return p, sol, left
-    q = _Problem(visits, groups, basis, start=start, drift=False)
-    sol_q, left_q = _adjust(q)
-    return (p, sol, left) if _bic(sol) < _bic(sol_q) else (q, sol_q, left_q)
+    # without drift, with the drift fit's down-weighting (re-weighting would discard the very blocks - the
+    # closures - that show the drift, and make the model without it look better than it is)
+    q = _Problem(visits, groups, basis, start=p, drift=False)
+    sol_q, _ = _adjust(q, robust=False)
+    return (p, sol, left) if _bic(sol) < _bic(sol_q) else (q, sol_q, left)
 
 
 def _model(p: _Problem, sol: _Solution, left_out: list, baseline: str, alternatives: tuple = (),
@@ -526,7 +535,12 @@ def _model(p: _Problem, sol: _Solution, left_out: list, baseline: str, alternati
                      "is widened to what a plausible bias would cause")
     rw = RangeWalkModel(p.basis, p.theta * 1e-3, cov_theta, determined, tuple(notes), alternatives)
     out = {}
+    dof_ratio = max(1.0 - sol.n_unknowns / max(sol.n_rows, 1), 0.1)
     for k, (v, cl) in enumerate(zip(p.visits, sol.cov_local)):
+        _, _, res, blocks = p.visit_rows(v)
+        n_data = sum(n for _, _, n in blocks)
+        kept = [(kind, j) for kind, j, _ in blocks if v.weights.get((kind, j), 1.0) > 0]
+        misfit = math.sqrt(float(res[:n_data] @ res[:n_data]) / max(n_data, 1) / dof_ratio) if kept else 1.0
         cl = cl * f
         off = 0 if v.is_base else 7
         s_ppm = 0.0 if v.is_base else float(math.sqrt(max(cl[6, 6], 0.0)))
@@ -535,5 +549,5 @@ def _model(p: _Problem, sol: _Solution, left_out: list, baseline: str, alternati
         out[v.label] = VisitSystematics(v.label, 0.0 if v.is_base else v.kappa_ppm, s_ppm,
                                         v.omega.copy() if v.timed else np.zeros(3), dcov, v.t_ref, v.timed,
                                         v.is_base or s_ppm < SCALE_DETERMINED_PPM, left,
-                                        tuple(alternative_kappas[k]) if alternative_kappas else ())
+                                        tuple(alternative_kappas[k]) if alternative_kappas else (), misfit)
     return FieldModel(baseline, rw, out, s0, sol.n_rows, tuple(notes))

@@ -23,8 +23,13 @@ from lidar.systematic.range_walk import design
 
 
 def _side(centroids: Mapping[str, object], model: FieldModel, label: str):
-    """Corrected observations (covariance widened by the range walk's spread), Jacobians and spreads."""
+    """Corrected observations (covariance widened by the range walk's spread and the visit's misfit), Jacobians, spreads.
+
+    A visit whose centroids the field model fits worse than their covariances say (``misfit`` > 1: something
+    the model does not hold) has every centroid covariance scaled by the misfit squared.
+    """
     vis = model.visit(label)
+    inflate = max(1.0, vis.misfit) ** 2
     pos, jac = correct_visit(centroids, range_walk=model.range_walk, visit=vis)
     obs, spread = {}, {}
     for k, c in centroids.items():
@@ -33,7 +38,7 @@ def _side(centroids: Mapping[str, object], model: FieldModel, label: str):
         u = y / r
         sp = float(model.range_walk.spread_m(r, cos_incidence_of(c))[0])
         s = sp ** 2 * np.outer(u, u)
-        obs[k] = Observation(pos[k], np.asarray(getattr(c, "cov"), dtype=np.float64) + s)
+        obs[k] = Observation(pos[k], inflate * np.asarray(getattr(c, "cov"), dtype=np.float64) + s)
         spread[k] = s
     return obs, jac, spread
 

@@ -151,7 +151,7 @@ def visit_to_json(v: VisitSystematics) -> dict:
     return {"label": v.label, "scale_ppm": v.scale_ppm, "scale_sigma_ppm": v.scale_sigma_ppm,
             "drift_arcsec_h": np.asarray(v.drift_arcsec_h).tolist(), "drift_cov": np.asarray(v.drift_cov).tolist(),
             "time_ref_s": v.time_ref_s, "timed": v.timed, "scale_determined": v.scale_determined,
-            "left_out": list(v.left_out), "alternative_scale_ppm": list(v.alternative_scale_ppm)}
+            "left_out": list(v.left_out), "alternative_scale_ppm": list(v.alternative_scale_ppm), "misfit": v.misfit}
 
 
 def visit_from_json(d: dict) -> VisitSystematics:
@@ -159,7 +159,8 @@ def visit_from_json(d: dict) -> VisitSystematics:
     return VisitSystematics(d["label"], float(d["scale_ppm"]), float(d["scale_sigma_ppm"]),
                             np.asarray(d["drift_arcsec_h"], dtype=float), np.asarray(d["drift_cov"], dtype=float),
                             float(d["time_ref_s"]), bool(d["timed"]), bool(d["scale_determined"]),
-                            tuple(d.get("left_out", ())), tuple(float(x) for x in d.get("alternative_scale_ppm", ())))
+                            tuple(d.get("left_out", ())), tuple(float(x) for x in d.get("alternative_scale_ppm", ())),
+                            float(d.get("misfit", 1.0)))
 
 
 def field_model_to_json(m: FieldModel) -> dict:

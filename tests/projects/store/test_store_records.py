@@ -91,7 +91,8 @@ def test_no_sql_outside_the_store():
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[3]
-    allowed = {"projects/store/campaign.py", "projects/store/series.py", "projects/store/schema.py"}
+    allowed = {"projects/store/campaign.py", "projects/store/series.py", "projects/store/schema.py",
+               "projects/store/field_tables.py"}
     offenders = []
     for pkg in ("app", "projects"):
         for path in sorted((root / pkg).rglob("*.py")):
