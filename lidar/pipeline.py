@@ -13,7 +13,7 @@ from numpy.typing import ArrayLike
 from lidar.centroid import TargetCentroid, measure_windows
 from lidar.detection import DetectionResult, detect_reflectors
 from common.errors import InputError
-from lidar.guided_detection import recover_predicted
+from lidar.guided_detection import bright_near, recover_predicted, seen_through
 from lidar.identification import MAX_TILT_DEG, Identification, identify_reflectors
 from lidar.layout import Layout, target_normals
 from lidar.plan import PlanTarget, ScanPlan, incidence_from_map, plan_fine_scans
@@ -41,6 +41,16 @@ def _need_intensity(scan: Scan, what: str) -> np.ndarray:
     return scan.intensity
 
 
+def _map_evidence(rmap: ReflectanceMap, threshold: float, tolerance_m: float):
+    """``evidence(xyz)`` for :func:`lidar.identification.identify_reflectors`, from the coarse map."""
+
+    def evidence(xyz: np.ndarray) -> object:
+        if seen_through(rmap, xyz):
+            return "through"
+        return bright_near(rmap, xyz, threshold, tolerance_m=tolerance_m)
+    return evidence
+
+
 def analyse_coarse(scan: Scan, layout: Layout, *, step_deg: Optional[float] = None, threshold: Optional[float] = None,
                    tolerance_m: float = 0.15, max_tilt_deg: Optional[float] = MAX_TILT_DEG,
                    up_layout: ArrayLike = (0.0, 0.0, 1.0),
@@ -56,7 +66,7 @@ def analyse_coarse(scan: Scan, layout: Layout, *, step_deg: Optional[float] = No
     det = detect_reflectors(rmap, target_diameter_m=diameter, threshold=threshold)
     report(progress, 0.9, "identifying reflectors")
     ident = identify_reflectors(det.xyz(), layout, tolerance_m=tolerance_m, max_tilt_deg=max_tilt_deg,
-                                up_layout=up_layout)
+                                up_layout=up_layout, evidence=_map_evidence(rmap, det.threshold, tolerance_m))
     det, ident = recover_predicted(rmap, det, ident, tolerance_m=tolerance_m)
     inc = {m.id: incidence_from_map(rmap, m.xyz_socs) for m in ident.matches}
     report(progress, 1.0, "coarse scan analysed")

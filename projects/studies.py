@@ -5,7 +5,7 @@ every visit's fine scans with the product's own planner (the coarse scan importe
 planned, as a surveyor would on site), imports the fine scans, processes, and compares every reported
 displacement, along-span movement and scale with the simulator's truth. :class:`StudyScore` says how far
 the errors are from zero and from their sigmas, and how many are beyond 3 sigma without a warning on their
-own row or their epoch.
+own row.
 """
 from __future__ import annotations
 
@@ -39,7 +39,7 @@ class StudyScore:
 
     errors_mm: list = field(default_factory=list)
     sigmas_mm: list = field(default_factory=list)
-    warned: list = field(default_factory=list)  # the row or its epoch carries a warning or a problem
+    warned: list = field(default_factory=list)  # the row itself carries a warning or a problem flag
     along_errors_mm: list = field(default_factory=list)
     along_sigmas_mm: list = field(default_factory=list)
     scale_errors_ppm: list = field(default_factory=list)
@@ -63,7 +63,7 @@ class StudyScore:
 
     @property
     def silent_beyond_3sigma(self) -> float:
-        """Share of displacements off by more than 3 sigma with no warning on their row or epoch."""
+        """Share of displacements off by more than 3 sigma with no warning or problem flag on their own row."""
         e, s, w = np.abs(self.errors_mm), np.asarray(self.sigmas_mm), np.asarray(self.warned, dtype=bool)
         return float(np.mean((e > 3 * s) & ~w)) if e.size else float("nan")
 
@@ -172,7 +172,7 @@ def score_campaign(camp: Path, field_dir: Path, labels: dict) -> StudyScore:
             true = t.target(r.reflector).vertical_displacement_m - tb.target(r.reflector).vertical_displacement_m
             sc.errors_mm.append((r.displacement_m - true) * 1e3)
             sc.sigmas_mm.append(r.sigma_m * 1e3)
-            sc.warned.append(any(severity(f) in (WARNING, PROBLEM) for f in r.flags + r.epoch_flags))
+            sc.warned.append(any(severity(f) in (WARNING, PROBLEM) for f in r.flags))
             along_t = getattr(t.target(r.reflector), "along_span_m", None)
             if r.along_m is not None and along_t is not None:
                 sc.along_errors_mm.append((r.along_m - (along_t - tb.target(r.reflector).along_span_m)) * 1e3)
