@@ -78,6 +78,10 @@ FLAG_OFF_EXPECTED = _flag("off_expected_position", WARNING, "centroid away from 
 FLAG_LOW_CONTRAST = _flag("no_bright_target", WARNING, "no bright target in the window", "lidar.centroid")
 FLAG_NOT_COMPACT = _flag("no_compact_target", WARNING, "bright points but no disc-shaped cluster",
                          "lidar.centroid")
+FLAG_GRAZING = _flag("grazing", WARNING, "seen at grazing incidence: the disc is barely wider than the beam, its "
+                     "sigma is widened for the bias of a partly resolved disc", "lidar.centroid")
+FLAG_UNRESOLVED = _flag("unresolved", WARNING, "not measured: at this range and incidence the disc is narrower "
+                        "than the beam (measure it from another station)", "lidar.centroid")
 
 # ---- a target's displacement and the epoch's reference check (lidar.displacement, lidar.pier_moves)
 FLAG_MISSING = _flag("missing", WARNING, "no value this epoch (target not found)", "lidar.displacement")

@@ -9,6 +9,7 @@ pull it; each doubt is flagged.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Literal, Mapping, Optional, Sequence, overload
 
@@ -22,6 +23,8 @@ from lidar.angles import AngularWindow, spherical_from_xyz
 from common.errors import InputError
 from common.flags import (
     FLAG_CLIPPED,
+    FLAG_GRAZING,
+    FLAG_UNRESOLVED,
     FLAG_FEW_POINTS,
     FLAG_LOW_CONTRAST,
     FLAG_LOW_SEPARABILITY,
@@ -181,6 +184,7 @@ def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: s
                     expected_xyz: Optional[ArrayLike] = None, diameter_m: float = 0.05,
                     window: Optional[AngularWindow] = None, profile: ScannerProfile = VZ1000,
                     min_points: int = 30, time_s: Optional[np.ndarray] = None,
+                    incidence_cos: Optional[float] = None,
                     trace: Literal[False] = False) -> TargetCentroid: ...
 
 
@@ -189,6 +193,7 @@ def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: s
                     expected_xyz: Optional[ArrayLike] = None, diameter_m: float = 0.05,
                     window: Optional[AngularWindow] = None, profile: ScannerProfile = VZ1000,
                     min_points: int = 30, time_s: Optional[np.ndarray] = None,
+                    incidence_cos: Optional[float] = None,
                     trace: Literal[True]) -> tuple[TargetCentroid, CentroidTrace]: ...
 
 
@@ -196,6 +201,7 @@ def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: s
                     expected_xyz: Optional[ArrayLike] = None, diameter_m: float = 0.05,
                     window: Optional[AngularWindow] = None, profile: ScannerProfile = VZ1000,
                     min_points: int = 30, time_s: Optional[np.ndarray] = None,
+                    incidence_cos: Optional[float] = None,
                     trace: bool = False) -> TargetCentroid | tuple[TargetCentroid, CentroidTrace]:
     """Robust centroid of the target in one fine-scan window.
 
@@ -222,6 +228,9 @@ def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: s
         Fewer disc points than this: not found. Default 30.
     time_s : (N,) float64 array, optional, keyword-only
         Each point's time (seconds); gives the centroid's ``time_s`` and ``time_span_s``.
+    incidence_cos : float, optional, keyword-only
+        The target's |cos| of incidence where it is known (the plan's, from the layout's normals); default
+        the disc's own fitted plane, which few points at grazing incidence tilt.
     trace : bool, keyword-only
         Also return a :class:`CentroidTrace` (the masks of each stage, for display). Default False.
 
@@ -238,7 +247,7 @@ def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: s
     tr = CentroidTrace.empty(len(ok))
     result = _centroid_stages(xyz[ok], inten[ok], np.nonzero(ok)[0], tr, reflector=reflector,
                               expected_xyz=expected_xyz, diameter_m=diameter_m, window=window, profile=profile,
-                              min_points=min_points)
+                              min_points=min_points, incidence_cos=incidence_cos)
     if time_s is not None and result.found:
         t = np.asarray(time_s, dtype=np.float64)
         if t.shape != (xyz.shape[0],):
@@ -304,6 +313,35 @@ def _trim_disc(cluster: np.ndarray, axes: np.ndarray, r_trim: float) -> tuple[np
     return centre, keep
 
 
+#: A disc whose projected short axis is narrower than this fraction of the beam's footprint is not measured.
+UNRESOLVED_RATIO = 0.35
+#: Below this fraction it is measured, flagged ``grazing``, with its range-direction sigma widened.
+GRAZING_RATIO = 0.7
+
+
+def resolvability(diameter_m: float, cos_incidence: float, range_m: float, profile: ScannerProfile) -> float:
+    """The disc's projected short axis over the beam's footprint at its range (dimensionless).
+
+    A 50 mm disc at 80 deg incidence is 9 mm wide across its short axis; at 50 m a VZ-1000's beam is
+    22 mm wide: 0.4. Below :data:`UNRESOLVED_RATIO` every return is a mixed pixel and the centroid is off
+    by millimetres along the line of sight; below :data:`GRAZING_RATIO` it is measured with
+    :func:`grazing_variance` added.
+    """
+    return float(diameter_m * max(cos_incidence, 0.0) / max(float(profile.footprint_m(range_m)), 1e-4))
+
+
+def grazing_variance(diameter_m: float, cos_incidence: float, ratio: float) -> float:
+    """Range-direction variance (m^2) of a partly resolved disc's centroid: its rim's depth, by how unresolved.
+
+    The disc spans ``D sin(incidence)`` in depth; mixed pixels at its near and far rims pull the centroid
+    along the line of sight by a share of that, growing as the disc narrows against the beam.
+    """
+    if ratio >= GRAZING_RATIO:
+        return 0.0
+    depth = diameter_m * math.sqrt(max(0.0, 1.0 - cos_incidence ** 2))
+    return (0.01 * depth * (GRAZING_RATIO / max(ratio, 1e-3)) ** 2) ** 2
+
+
 def rim_variance(radius_m: float, n_points: float, spacing_m: float) -> float:
     """In-plane variance (m^2, per axis) of a disc centroid from its rim.
 
@@ -365,7 +403,7 @@ def _doubts(*, n: int, rejected: int, sep: float, saturated: int, rms_r: float, 
 
 
 def _centroid_stages(xyz: np.ndarray, inten: np.ndarray, ok_idx: np.ndarray, tr: CentroidTrace, *, reflector,
-                     expected_xyz, diameter_m, window, profile, min_points) -> TargetCentroid:
+                     expected_xyz, diameter_m, window, profile, min_points, incidence_cos=None) -> TargetCentroid:
     n_window = len(xyz)
     if n_window < min_points:
         return _not_found(reflector, n_window)
@@ -389,6 +427,12 @@ def _centroid_stages(xyz: np.ndarray, inten: np.ndarray, ok_idx: np.ndarray, tr:
     if normal @ view < 0:
         normal = -normal
     cos_inc = float(abs(normal @ view))
+    cos_known = cos_inc if incidence_cos is None else float(incidence_cos)
+    ratio = resolvability(diameter_m, cos_known, rng, profile)
+    if ratio < UNRESOLVED_RATIO:
+        return _not_found(reflector, n_window, thr, sep, (
+            f"{FLAG_UNRESOLVED}: the disc is {100 * ratio:.0f} % of the beam's width at {rng:.0f} m and "
+            f"{math.degrees(math.acos(min(cos_known, 1.0))):.0f} deg incidence",))
     footprint = profile.footprint_m(rng) / np.sqrt(max(cos_inc, 0.1))
     r_trim = radius + float(np.clip(footprint / 2, 0.002, 0.012))
     centre, keep = _trim_disc(cluster, axes, r_trim)
@@ -399,6 +443,9 @@ def _centroid_stages(xyz: np.ndarray, inten: np.ndarray, ok_idx: np.ndarray, tr:
     if n < min_points:
         return _not_found(reflector, n_window, thr, sep)
     cov, sigma_r, normal2, axes2 = _covariance(disc, view, radius, spacing)
+    graze = grazing_variance(diameter_m, cos_known, ratio)
+    if graze > 0:
+        cov = cov + graze * np.outer(view, view)
     near = np.linalg.norm(pts - centre, axis=1) <= 3 * diameter_m
     rejected = int(np.count_nonzero(near)) - n
     if rejected > 2 * n:  # a bright surface, not a disc: the disc is only a cut-out of it
@@ -410,6 +457,8 @@ def _centroid_stages(xyz: np.ndarray, inten: np.ndarray, ok_idx: np.ndarray, tr:
     flags = _doubts(n=n, rejected=rejected, sep=sep, saturated=saturated, rms_r=rms_r, radius=radius,
                     footprint=footprint, centre=centre, expected=expected, diameter_m=diameter_m, window=window,
                     disc=disc)
+    if graze > 0:
+        flags.append(f"{FLAG_GRAZING}: the disc is {100 * ratio:.0f} % of the beam's width")
     return TargetCentroid(reflector, centre, cov, n, thr, sep, tuple(flags), n_window, max(0, rejected),
                           sigma_r, normal2, clipped_fraction=float(clipped))
 
@@ -491,8 +540,9 @@ def measure_windows(xyz_socs: np.ndarray, intensity: np.ndarray, rois: Sequence[
         tc, pc = roi.window.centre
         expected = direction_from_angles(tc, pc) * roi.range_m
         d = 0.05 if diameters_m is None else float(diameters_m.get(roi.reflector, 0.05))
+        inc = math.cos(math.radians(roi.incidence_deg)) if math.isfinite(roi.incidence_deg) else None
         c = target_centroid(xyz_socs[sel], intensity[sel], reflector=roi.reflector, expected_xyz=expected,
                             diameter_m=d, window=roi.window, profile=profile,
-                            time_s=None if times is None else times[sel])
+                            time_s=None if times is None else times[sel], incidence_cos=inc)
         (closures if is_closure else out)[roi.reflector] = c
     return out, closures

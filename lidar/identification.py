@@ -179,21 +179,31 @@ def _unseen(r: np.ndarray, t: np.ndarray, layout: Layout, matched: set, det: np.
     return count
 
 
-def _congruent_solutions(best, candidates: dict, lay: np.ndarray, det: np.ndarray, d_lay: np.ndarray,
-                         d_det: np.ndarray, tol: float, max_tilt_deg: Optional[float], up_layout: ArrayLike) -> None:
-    """Add to ``candidates`` every solution that maps the best one's detected triangle onto another layout triangle.
+#: Detection triangles (the largest) tried as seeds against every congruent layout triangle.
+DETECTION_SEEDS = 10
+
+
+def _best_triangle(best, lay: np.ndarray, det: np.ndarray, tol: float) -> Optional[tuple[int, int, int]]:
+    """The largest triangle of the detections a solution matched (None with fewer than three)."""
+    _, r, t = best
+    dets = [p[1] for p in _assign(lay @ np.asarray(r).T + t, det, tol)]
+    if len(dets) < 3:
+        return None
+    return max(combinations(dets, 3), key=lambda c: _triangle_area(det[list(c)]))
+
+
+def _congruent_solutions(tri: Optional[tuple[int, int, int]], candidates: dict, lay: np.ndarray, det: np.ndarray,
+                         d_lay: np.ndarray, d_det: np.ndarray, tol: float, max_tilt_deg: Optional[float],
+                         up_layout: ArrayLike) -> None:
+    """Add to ``candidates`` every solution mapping the detection triangle ``tri`` onto a congruent layout triangle.
 
     A layout that repeats itself (identical spans, identical piers) has several places the detected part
     of it fits; seeds drawn from the whole layout may find one of them only. Every layout triangle
-    congruent with the best-conditioned triangle of the detections the best solution matched gives a
-    solution here, so that :func:`_settle_rivals` sees them all.
+    congruent with a triangle of detections (the best solution's largest, and the largest of all the
+    detections) gives a solution here, so that :func:`_settle_rivals` sees them all.
     """
-    _, r, t = best
-    pairs = _assign(lay @ np.asarray(r).T + t, det, tol)
-    if len(pairs) < 3:
+    if tri is None:
         return
-    dets = [p[1] for p in pairs]
-    tri = max(combinations(dets, 3), key=lambda c: _triangle_area(det[list(c)]))
     i, j, k = tri
     n = len(lay)
     wide = 2.0 * tol  # the layout's errors add up over a triangle's sides: search wide, judge by the assignment
@@ -337,10 +347,17 @@ def identify_reflectors(detections_xyz: np.ndarray, layout: Layout, *, tolerance
             extra_seeds += 1
             if extra_seeds > TIE_SEEDS:
                 break
+    # seeds from the detections' own largest triangles too: when few targets were detected, the layout's
+    # best triangles rarely consist of detected ones only
+    for tri in sorted(combinations(range(len(det)), 3), key=lambda c: -_triangle_area(det[list(c)]))[:DETECTION_SEEDS]:
+        _congruent_solutions(tri, candidates, lay, det, d_lay, d_det, tolerance_m, max_tilt_deg, up_layout)
+    if candidates:
+        best = max(candidates.values(), key=lambda v: v[0])
     if best is None or best[0][1] < 3:
         raise ProcessingError("the detections do not match the layout: no three detected reflectors have the "
                               "layout's distances (check the layout coordinates, the target diameter and the coarse scan)")
-    _congruent_solutions(best, candidates, lay, det, d_lay, d_det, tolerance_m, max_tilt_deg, up_layout)
+    _congruent_solutions(_best_triangle(best, lay, det, tolerance_m), candidates, lay, det, d_lay, d_det, tolerance_m,
+                         max_tilt_deg, up_layout)
     best = max(candidates.values(), key=lambda v: v[0])
     best = _settle_rivals(best, candidates, layout, det, evidence, up_layout)
     _, r, t = best

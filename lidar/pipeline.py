@@ -10,6 +10,7 @@ from typing import Mapping, Optional
 import numpy as np
 from numpy.typing import ArrayLike
 
+from common.flags import FLAG_NOT_FOUND, FLAG_UNRESOLVED
 from lidar.centroid import TargetCentroid, measure_windows
 from lidar.detection import DetectionResult, detect_reflectors
 from common.errors import InputError
@@ -142,6 +143,9 @@ def measure_fine(fine: Scan, plan: ScanPlan, layout: Optional[Layout] = None, *,
     times = getattr(fine, "time_s", None)
     cents, closures = measure_windows(fine.xyz_socs, intensity, plan.rois, diameters_m=diam,
                                       profile=profile or plan.profile, time_s=times)
+    for rid, why in plan.skipped:  # not planned from this station: not found, and why
+        cents.setdefault(rid, TargetCentroid(rid, np.full(3, np.nan), np.full((3, 3), np.nan), 0, float("nan"), 0.0,
+                                             (FLAG_NOT_FOUND, f"{FLAG_UNRESOLVED}: {why}"), 0))
     if times is not None:
         return FineMeasurement(cents, closures, "points")
     t_plan = plan_times(plan)

@@ -100,6 +100,7 @@ class ScanPlan:
     warnings: tuple[str, ...] = ()
     dome_seconds: float = 0.0
     dome_step_deg: Optional[float] = None
+    skipped: tuple[tuple[str, str], ...] = ()  # (reflector, why): targets this station cannot measure
 
     @property
     def total_seconds(self) -> float:
@@ -136,6 +137,7 @@ class ScanPlan:
             "windowed": self.profile.windowed, "dome_seconds": round(self.dome_seconds, 2),
             "dome_step_deg": self.dome_step_deg, "angle_convention": self.profile.angle_convention(),
             "rois": [dict(r.to_json(), instrument=self.instrument_window(r)) for r in self.rois],
+            **({"skipped": [{"reflector": k, "reason": why} for k, why in self.skipped]} if self.skipped else {}),
         }
 
     @classmethod
@@ -156,7 +158,8 @@ class ScanPlan:
         return cls(str(d.get("epoch", "")), profile, rois, int(d.get("min_points", 1000)),
                    int(d.get("points_per_target", d.get("min_points", 1000))),
                    float(d.get("budget_seconds", 3600.0)), tuple(d.get("warnings", ())),
-                   float(d.get("dome_seconds", 0.0) or 0.0), None if dome_step is None else float(dome_step))
+                   float(d.get("dome_seconds", 0.0) or 0.0), None if dome_step is None else float(dome_step),
+                   tuple((str(x["reflector"]), str(x["reason"])) for x in d.get("skipped", ())))
 
     def save(self, path: str | os.PathLike) -> Path:
         from common.files import write_atomic
@@ -312,9 +315,14 @@ def plan_fine_scans(targets: Sequence[PlanTarget], *, epoch: str = "", profile: 
         raise InputError("the time budget must be positive")
     if not targets:
         raise InputError("nothing to plan: no targets")
+    targets, skipped = _measurable(targets, profile)
+    if not targets:
+        raise InputError("nothing to plan: no target can be measured from this station ("
+                         + "; ".join(f"{k} {why}" for k, why in skipped) + ")")
     if not profile.windowed:
-        return _plan_full_dome(targets, epoch=epoch, profile=profile, min_points=min_points,
+        dome = _plan_full_dome(targets, epoch=epoch, profile=profile, min_points=min_points,
                                budget_seconds=budget_seconds, margin_m=margin_m)
+        return replace(dome, skipped=tuple(skipped)) if skipped else dome
     n = float(min_points)
     warnings: list[str] = []
     for _ in range(30):
@@ -344,7 +352,33 @@ def plan_fine_scans(targets: Sequence[PlanTarget], *, epoch: str = "", profile: 
             total += first.expected_seconds
     if total > budget_seconds * 1.0001:
         warnings.append(f"the plan takes {total / 60:.1f} min, over the budget of {budget_seconds / 60:.0f} min")
-    return ScanPlan(epoch, profile, tuple(rois), int(min_points), int(n), float(budget_seconds), tuple(warnings))
+    if skipped:
+        warnings.append("not planned (narrower than the beam from here, measure from another station): "
+                        + ", ".join(k for k, _ in skipped))
+    return ScanPlan(epoch, profile, tuple(rois), int(min_points), int(n), float(budget_seconds), tuple(warnings),
+                    skipped=tuple(skipped))
+
+
+def _measurable(targets: Sequence[PlanTarget], profile: ScannerProfile) -> tuple[list, list]:
+    """The targets a fine scan can measure from this station, and why each other one cannot.
+
+    A disc whose projected short axis is narrower than :data:`lidar.centroid.UNRESOLVED_RATIO` of the beam
+    at its range returns only mixed pixels: its window would spend the visit's time on a centroid that
+    would be refused.
+    """
+    from lidar.centroid import UNRESOLVED_RATIO, resolvability
+
+    keep, skipped = [], []
+    for t in targets:
+        r = float(np.linalg.norm(t.xyz_socs))
+        cos = t.incidence_cos if t.incidence_cos is not None else DEFAULT_INCIDENCE_COS
+        q = resolvability(t.diameter_m, cos, r, profile)
+        if q < UNRESOLVED_RATIO:
+            skipped.append((t.id, f"at {r:.0f} m and {math.degrees(math.acos(min(max(cos, 0.0), 1.0))):.0f} deg "
+                                  f"incidence the disc is {100 * q:.0f} % of the beam's width"))
+        else:
+            keep.append(t)
+    return keep, skipped
 
 
 def _interleave_references(rois: list) -> list:

@@ -18,8 +18,8 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from common.flags import (FLAG_CHAINED, FLAG_DECK_NOT_MEASURED, FLAG_MISSING, FLAG_NO_DISPLACEMENT,
-                          FLAG_PIERS_NOT_MEASURED, PROBLEM, severity)
+from common.flags import (FLAG_CHAINED, FLAG_DECK_NOT_MEASURED, FLAG_MISSING, FLAG_NO_DISPLACEMENT, FLAG_NOT_FOUND,
+                          FLAG_PIERS_NOT_MEASURED, PROBLEM, code, has, severity)
 from lidar.displacement import Displacement, EpochDisplacements
 from lidar.systematic.budget import corrected_displacements
 from common.errors import InputError, ProcessingError, SurveyError
@@ -467,7 +467,21 @@ def _epoch_displacements(c: Campaign, lab: str, bases: list, baseline: str, foun
         chained = {d.reflector for d in extra}
         result = replace(result, displacements=tuple(d for d in result.displacements if d.reflector not in chained)
                          + tuple(extra))
-    return result
+    return _why_missing(c, lab, result)
+
+
+def _why_missing(c: Campaign, lab: str, result: EpochDisplacements) -> EpochDisplacements:
+    """A target without a value carries, on its row, why its centroid was not found (beside ``missing``)."""
+    if not any(has(d.flags, FLAG_MISSING) for d in result.displacements):
+        return result
+    cents = c.centroids(lab)
+    rows = []
+    for d in result.displacements:
+        tc = cents.get(d.reflector)
+        if has(d.flags, FLAG_MISSING) and tc is not None and not tc.found:
+            d = replace(d, flags=tuple(d.flags) + tuple(f for f in tc.flags if code(f) != FLAG_NOT_FOUND))
+        rows.append(d)
+    return replace(result, displacements=tuple(rows))
 
 
 def _failed_result(groups: dict, base: dict, cents: dict, baseline: str, reason: str) -> EpochDisplacements:
