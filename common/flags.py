@@ -78,6 +78,10 @@ FLAG_OFF_EXPECTED = _flag("off_expected_position", WARNING, "centroid away from 
 FLAG_LOW_CONTRAST = _flag("no_bright_target", WARNING, "no bright target in the window", "lidar.centroid")
 FLAG_NOT_COMPACT = _flag("no_compact_target", WARNING, "bright points but no disc-shaped cluster",
                          "lidar.centroid")
+FLAG_GRAZING = _flag("grazing", WARNING, "seen at grazing incidence: the disc is barely wider than the beam, its "
+                     "sigma is widened for the bias of a partly resolved disc", "lidar.centroid")
+FLAG_UNRESOLVED = _flag("unresolved", WARNING, "not measured: at this range and incidence the disc is narrower "
+                        "than the beam (measure it from another station)", "lidar.centroid")
 
 # ---- a target's displacement and the epoch's reference check (lidar.displacement, lidar.pier_moves)
 FLAG_MISSING = _flag("missing", WARNING, "no value this epoch (target not found)", "lidar.displacement")
@@ -94,6 +98,21 @@ FLAG_NORMAL_FROM_EPOCH = _flag("normal_refitted_in_epoch", INFO, "deck normal re
                                "lidar.displacement")
 FLAG_REFERENCE_AMBIGUOUS = _flag("reference_change_ambiguous", WARNING, "the reference group changed and the "
                                  "moved target could not be singled out", "lidar.displacement")
+
+# ---- the field error budget: scale, range walk, drift (lidar.systematic, projects.processing)
+FLAG_SCALE_UNDETERMINED = _flag("scale_undetermined", INFO, "the reference targets cannot determine the "
+                                "atmosphere's range scale (too close together): its sigma is a plausible "
+                                "atmosphere's", "projects.processing")
+FLAG_RANGE_WALK_UNDETERMINED = _flag("range_walk_undetermined", INFO, "too few or too alike stations to determine "
+                                     "the retro-reflector range walk: sigma widened to what a plausible bias "
+                                     "would cause", "projects.processing")
+FLAG_DRIFT_FROM_PLAN = _flag("drift_from_plan_times", INFO, "the fine scans carry no point times: the set-up's "
+                             "drift was fitted on the plan's window order and time model", "projects.processing")
+FLAG_DRIFT_BEYOND_SPEC = _flag("drift_beyond_tolerance", WARNING, "the set-up turned more during the visit than "
+                               "the instrument allows for: re-scan advised", "projects.processing")
+FLAG_ATMOSPHERE_DISAGREES = _flag("scale_disagrees_with_atmosphere", WARNING, "the range scale measured on the "
+                                  "piers disagrees with what the air's temperature and pressure predict",
+                                  "projects.processing")
 
 # ---- an epoch with no result, or a history (projects.processing)
 FLAG_DECK_NOT_MEASURED = _flag("deck_not_measured", PROBLEM, "too few deck targets measured for a "
@@ -138,6 +157,15 @@ def code(flag: str) -> str:
     'deck_not_measured'
     """
     return flag.split(":", 1)[0].strip()
+
+
+def has(flags: Iterable[str], flag_code: str) -> bool:
+    """Whether ``flags`` hold a flag of code ``flag_code`` (with or without its reason).
+
+    >>> has(["saturated: 40 % at the ceiling"], "saturated"), has(["missing"], "saturated")
+    (True, False)
+    """
+    return any(code(f) == flag_code for f in flags)
 
 
 def lookup(flag: str) -> Flag:

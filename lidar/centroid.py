@@ -9,7 +9,8 @@ pull it; each doubt is flagged.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import math
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Literal, Mapping, Optional, Sequence, overload
 
 import numpy as np
@@ -22,6 +23,8 @@ from lidar.angles import AngularWindow, spherical_from_xyz
 from common.errors import InputError
 from common.flags import (
     FLAG_CLIPPED,
+    FLAG_GRAZING,
+    FLAG_UNRESOLVED,
     FLAG_FEW_POINTS,
     FLAG_LOW_CONTRAST,
     FLAG_LOW_SEPARABILITY,
@@ -70,6 +73,13 @@ class TargetCentroid:
         Range noise measured from the disc's flatness.
     normal_socs : (3,) array
         Disc plane normal (towards the scanner).
+    time_s : float
+        Median time of the disc's points, seconds (NaN when the scan has no point times).
+    time_span_s : float
+        From the first to the last of the disc's points, seconds (NaN without point times).
+    clipped_fraction : float
+        Share of the disc's points at the window's intensity ceiling: a plateau there means the
+        receiver clipped the target's returns.
     """
 
     reflector: str
@@ -83,6 +93,18 @@ class TargetCentroid:
     n_rejected_bright: int = 0
     sigma_range_m: float = float("nan")
     normal_socs: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    time_s: float = float("nan")
+    time_span_s: float = float("nan")
+    clipped_fraction: float = 0.0
+
+    @property
+    def cos_incidence(self) -> float:
+        """|cos| of the incidence: the disc's normal against the line of sight (NaN when unknown)."""
+        n = np.asarray(self.normal_socs, dtype=np.float64)
+        x = np.asarray(self.xyz_socs, dtype=np.float64)
+        if not (np.all(np.isfinite(n)) and np.all(np.isfinite(x))) or not np.any(x):
+            return float("nan")
+        return float(abs(n @ x) / (np.linalg.norm(n) * np.linalg.norm(x)))
 
     @property
     def found(self) -> bool:
@@ -161,20 +183,26 @@ class CentroidTrace:
 def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: str = "",
                     expected_xyz: Optional[ArrayLike] = None, diameter_m: float = 0.05,
                     window: Optional[AngularWindow] = None, profile: ScannerProfile = VZ1000,
-                    min_points: int = 30, trace: Literal[False] = False) -> TargetCentroid: ...
+                    min_points: int = 30, time_s: Optional[np.ndarray] = None,
+                    incidence_cos: Optional[float] = None,
+                    trace: Literal[False] = False) -> TargetCentroid: ...
 
 
 @overload
 def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: str = "",
                     expected_xyz: Optional[ArrayLike] = None, diameter_m: float = 0.05,
                     window: Optional[AngularWindow] = None, profile: ScannerProfile = VZ1000,
-                    min_points: int = 30, trace: Literal[True]) -> tuple[TargetCentroid, CentroidTrace]: ...
+                    min_points: int = 30, time_s: Optional[np.ndarray] = None,
+                    incidence_cos: Optional[float] = None,
+                    trace: Literal[True]) -> tuple[TargetCentroid, CentroidTrace]: ...
 
 
 def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: str = "",
                     expected_xyz: Optional[ArrayLike] = None, diameter_m: float = 0.05,
                     window: Optional[AngularWindow] = None, profile: ScannerProfile = VZ1000,
-                    min_points: int = 30, trace: bool = False) -> TargetCentroid | tuple[TargetCentroid, CentroidTrace]:
+                    min_points: int = 30, time_s: Optional[np.ndarray] = None,
+                    incidence_cos: Optional[float] = None,
+                    trace: bool = False) -> TargetCentroid | tuple[TargetCentroid, CentroidTrace]:
     """Robust centroid of the target in one fine-scan window.
 
     Stages: Otsu's split of the intensities (:func:`_bright`), the compact bright cluster nearest
@@ -198,6 +226,11 @@ def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: s
         Footprint model. Default VZ-1000.
     min_points : int, keyword-only
         Fewer disc points than this: not found. Default 30.
+    time_s : (N,) float64 array, optional, keyword-only
+        Each point's time (seconds); gives the centroid's ``time_s`` and ``time_span_s``.
+    incidence_cos : float, optional, keyword-only
+        The target's |cos| of incidence where it is known (the plan's, from the layout's normals); default
+        the disc's own fitted plane, which few points at grazing incidence tilt.
     trace : bool, keyword-only
         Also return a :class:`CentroidTrace` (the masks of each stage, for display). Default False.
 
@@ -214,7 +247,15 @@ def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: s
     tr = CentroidTrace.empty(len(ok))
     result = _centroid_stages(xyz[ok], inten[ok], np.nonzero(ok)[0], tr, reflector=reflector,
                               expected_xyz=expected_xyz, diameter_m=diameter_m, window=window, profile=profile,
-                              min_points=min_points)
+                              min_points=min_points, incidence_cos=incidence_cos)
+    if time_s is not None and result.found:
+        t = np.asarray(time_s, dtype=np.float64)
+        if t.shape != (xyz.shape[0],):
+            raise InputError("target_centroid needs one time per point")
+        td = t[tr.disc]
+        td = td[np.isfinite(td)]
+        if td.size:
+            result = replace(result, time_s=float(np.median(td)), time_span_s=float(np.ptp(td)))
     return (result, tr) if trace else result
 
 
@@ -272,6 +313,35 @@ def _trim_disc(cluster: np.ndarray, axes: np.ndarray, r_trim: float) -> tuple[np
     return centre, keep
 
 
+#: A disc whose projected short axis is narrower than this fraction of the beam's footprint is not measured.
+UNRESOLVED_RATIO = 0.35
+#: Below this fraction it is measured, flagged ``grazing``, with its range-direction sigma widened.
+GRAZING_RATIO = 0.7
+
+
+def resolvability(diameter_m: float, cos_incidence: float, range_m: float, profile: ScannerProfile) -> float:
+    """The disc's projected short axis over the beam's footprint at its range (dimensionless).
+
+    A 50 mm disc at 80 deg incidence is 9 mm wide across its short axis; at 50 m a VZ-1000's beam is
+    22 mm wide: 0.4. Below :data:`UNRESOLVED_RATIO` every return is a mixed pixel and the centroid is off
+    by millimetres along the line of sight; below :data:`GRAZING_RATIO` it is measured with
+    :func:`grazing_variance` added.
+    """
+    return float(diameter_m * max(cos_incidence, 0.0) / max(float(profile.footprint_m(range_m)), 1e-4))
+
+
+def grazing_variance(diameter_m: float, cos_incidence: float, ratio: float) -> float:
+    """Range-direction variance (m^2) of a partly resolved disc's centroid: its rim's depth, by how unresolved.
+
+    The disc spans ``D sin(incidence)`` in depth; mixed pixels at its near and far rims pull the centroid
+    along the line of sight by a share of that, growing as the disc narrows against the beam.
+    """
+    if ratio >= GRAZING_RATIO:
+        return 0.0
+    depth = diameter_m * math.sqrt(max(0.0, 1.0 - cos_incidence ** 2))
+    return (0.01 * depth * (GRAZING_RATIO / max(ratio, 1e-3)) ** 2) ** 2
+
+
 def rim_variance(radius_m: float, n_points: float, spacing_m: float) -> float:
     """In-plane variance (m^2, per axis) of a disc centroid from its rim.
 
@@ -315,7 +385,8 @@ def _doubts(*, n: int, rejected: int, sep: float, saturated: int, rms_r: float, 
     if sep < 0.6:
         flags.append(FLAG_LOW_SEPARABILITY)
     if saturated > 0.2 * n:
-        flags.append(FLAG_SATURATED)
+        flags.append(f"{FLAG_SATURATED}: {100.0 * saturated / n:.0f} % of the target's points at the intensity "
+                     "ceiling")
     if not 0.6 * radius / np.sqrt(2) <= rms_r <= 1.4 * (radius + footprint / 2) / np.sqrt(2):
         flags.append(FLAG_SIZE)
     if expected is not None and np.linalg.norm(centre - expected) > max(0.05, 1.5 * diameter_m):
@@ -332,7 +403,7 @@ def _doubts(*, n: int, rejected: int, sep: float, saturated: int, rms_r: float, 
 
 
 def _centroid_stages(xyz: np.ndarray, inten: np.ndarray, ok_idx: np.ndarray, tr: CentroidTrace, *, reflector,
-                     expected_xyz, diameter_m, window, profile, min_points) -> TargetCentroid:
+                     expected_xyz, diameter_m, window, profile, min_points, incidence_cos=None) -> TargetCentroid:
     n_window = len(xyz)
     if n_window < min_points:
         return _not_found(reflector, n_window)
@@ -356,6 +427,12 @@ def _centroid_stages(xyz: np.ndarray, inten: np.ndarray, ok_idx: np.ndarray, tr:
     if normal @ view < 0:
         normal = -normal
     cos_inc = float(abs(normal @ view))
+    cos_known = cos_inc if incidence_cos is None else float(incidence_cos)
+    ratio = resolvability(diameter_m, cos_known, rng, profile)
+    if ratio < UNRESOLVED_RATIO:
+        return _not_found(reflector, n_window, thr, sep, (
+            f"{FLAG_UNRESOLVED}: the disc is {100 * ratio:.0f} % of the beam's width at {rng:.0f} m and "
+            f"{math.degrees(math.acos(min(cos_known, 1.0))):.0f} deg incidence",))
     footprint = profile.footprint_m(rng) / np.sqrt(max(cos_inc, 0.1))
     r_trim = radius + float(np.clip(footprint / 2, 0.002, 0.012))
     centre, keep = _trim_disc(cluster, axes, r_trim)
@@ -366,49 +443,106 @@ def _centroid_stages(xyz: np.ndarray, inten: np.ndarray, ok_idx: np.ndarray, tr:
     if n < min_points:
         return _not_found(reflector, n_window, thr, sep)
     cov, sigma_r, normal2, axes2 = _covariance(disc, view, radius, spacing)
+    graze = grazing_variance(diameter_m, cos_known, ratio)
+    if graze > 0:
+        cov = cov + graze * np.outer(view, view)
     near = np.linalg.norm(pts - centre, axis=1) <= 3 * diameter_m
     rejected = int(np.count_nonzero(near)) - n
     if rejected > 2 * n:  # a bright surface, not a disc: the disc is only a cut-out of it
         return _not_found(reflector, n_window, thr, sep, (FLAG_NOT_COMPACT,))
     top = float(inten.max())
     saturated = int(np.count_nonzero(inten[bright][best][keep] >= top - 1e-6))
+    clipped = saturated / n if saturated >= max(5, 0.05 * n) else 0.0  # a plateau at the ceiling, not one point
     rms_r = float(np.sqrt(np.mean(np.sum(((disc - centre) @ axes2.T) ** 2, axis=1))))
     flags = _doubts(n=n, rejected=rejected, sep=sep, saturated=saturated, rms_r=rms_r, radius=radius,
                     footprint=footprint, centre=centre, expected=expected, diameter_m=diameter_m, window=window,
                     disc=disc)
+    if graze > 0:
+        flags.append(f"{FLAG_GRAZING}: the disc is {100 * ratio:.0f} % of the beam's width")
     return TargetCentroid(reflector, centre, cov, n, thr, sep, tuple(flags), n_window, max(0, rejected),
-                          sigma_r, normal2)
+                          sigma_r, normal2, clipped_fraction=float(clipped))
 
 
 def centroids_from_scan(xyz_socs: np.ndarray, intensity: np.ndarray, rois: Sequence[RoiPlan], *,
-                        diameters_m: Optional[Mapping[str, float]] = None,
-                        profile: ScannerProfile = VZ1000) -> dict[str, TargetCentroid]:
-    """Centroids of every planned target from the fine-scan points of one set-up.
+                        diameters_m: Optional[Mapping[str, float]] = None, profile: ScannerProfile = VZ1000,
+                        time_s: Optional[np.ndarray] = None) -> dict[str, TargetCentroid]:
+    """Centroids of every planned target from the fine-scan points of one set-up (closure windows left out).
+
+    See :func:`measure_windows`, which also measures the plan's closure windows.
+    """
+    return measure_windows(xyz_socs, intensity, rois, diameters_m=diameters_m, profile=profile, time_s=time_s)[0]
+
+
+#: Points of one window more than this apart in time belong to different passes (the closure scans the first
+#: target's window again at the end of the visit), seconds.
+PASS_GAP_S = 5.0
+
+
+def _passes(mask: np.ndarray, time_s: Optional[np.ndarray]) -> list[np.ndarray]:
+    """The window's points split into passes by gaps in their times (one pass without times)."""
+    idx = np.nonzero(mask)[0]
+    if time_s is None or idx.size == 0:
+        return [idx]
+    t = time_s[idx]
+    if not np.all(np.isfinite(t)):
+        return [idx]
+    order = np.argsort(t, kind="stable")
+    cuts = np.nonzero(np.diff(t[order]) > PASS_GAP_S)[0] + 1
+    return [np.sort(part) for part in np.split(idx[order], cuts)]
+
+
+def measure_windows(xyz_socs: np.ndarray, intensity: np.ndarray, rois: Sequence[RoiPlan], *,
+                    diameters_m: Optional[Mapping[str, float]] = None, profile: ScannerProfile = VZ1000,
+                    time_s: Optional[np.ndarray] = None
+                    ) -> tuple[dict[str, TargetCentroid], dict[str, TargetCentroid]]:
+    """Centroids of every planned target, and of the targets the plan scans again at its end (its closure).
 
     Parameters
     ----------
     xyz_socs : (N, 3) float64 array
-        All fine-scan points of the epoch (one or many windows).
+        All fine-scan points of the set-up (one or many windows).
     intensity : (N,) array
     rois : sequence of RoiPlan
-        The plan's windows; each point is used by every window it falls in.
-    diameters_m : mapping reflector -> diameter, optional
+        The plan's windows; each point is used by every window it falls in. A closure window
+        (``roi.closure``) covers a window scanned earlier: with point times, the window's points
+        split into passes by time and the first pass is the target's, the last its closure's.
+    diameters_m : mapping reflector -> diameter, optional, keyword-only
         Default 0.05 m each.
+    profile : ScannerProfile, keyword-only
+    time_s : (N,) float64 array, optional, keyword-only
+        Point times (seconds); without them a closure window cannot be told from its first pass and
+        is not measured.
 
     Returns
     -------
-    dict reflector -> TargetCentroid
+    (centroids, closures) : dicts reflector -> TargetCentroid
     """
     from lidar.angles import direction_from_angles
 
     theta, phi, _ = spherical_from_xyz(np.asarray(xyz_socs), out_dtype=np.float32)
-    out = {}
+    times = None if time_s is None else np.asarray(time_s, dtype=np.float64)
+    repeated = {r.reflector for r in rois if getattr(r, "closure", False)}
+    out: dict[str, TargetCentroid] = {}
+    closures: dict[str, TargetCentroid] = {}
     for roi in rois:
+        is_closure = bool(getattr(roi, "closure", False))
         mask = roi.window.contains(theta, phi)
+        if roi.reflector in repeated:
+            passes = _passes(mask, times)
+            if len(passes) < 2:
+                if is_closure:
+                    continue  # no times, or no second pass: the closure is not told apart from the first
+                sel = passes[0]
+            else:
+                sel = passes[-1] if is_closure else passes[0]
+        else:
+            sel = np.nonzero(mask)[0]
         tc, pc = roi.window.centre
         expected = direction_from_angles(tc, pc) * roi.range_m
         d = 0.05 if diameters_m is None else float(diameters_m.get(roi.reflector, 0.05))
-        out[roi.reflector] = target_centroid(xyz_socs[mask], intensity[mask], reflector=roi.reflector,
-                                             expected_xyz=expected, diameter_m=d, window=roi.window,
-                                             profile=profile)
-    return out
+        inc = math.cos(math.radians(roi.incidence_deg)) if math.isfinite(roi.incidence_deg) else None
+        c = target_centroid(xyz_socs[sel], intensity[sel], reflector=roi.reflector, expected_xyz=expected,
+                            diameter_m=d, window=roi.window, profile=profile,
+                            time_s=None if times is None else times[sel], incidence_cos=inc)
+        (closures if is_closure else out)[roi.reflector] = c
+    return out, closures

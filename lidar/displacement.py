@@ -49,7 +49,7 @@ from common.flags import (
     FLAG_REFERENCE_MOVED,
 )
 from common.rigid import fit_rigid
-from lidar.displacement_result import Displacement, EpochDisplacements, Observation, ReferenceCheck
+from lidar.displacement_result import Displacement, EpochDisplacements, Observation, ReferenceCheck, Sensitivity
 from lidar.pier_moves import resolve_ambiguous_move, verify_single_move
 from lidar.reference_motion import across_axis, fit_reference_motion
 
@@ -206,49 +206,53 @@ class MotionWeights:
     across: Optional[np.ndarray]  # unit across-span axis in the baseline frame, or None
 
 
-def _motion_rotation(base: dict, ep: dict, refs, mw: MotionWeights) -> np.ndarray:
+def _motion(base: dict, ep: dict, refs, mw: MotionWeights) -> tuple[np.ndarray, np.ndarray]:
+    """(R, t) with ``epoch ~= R base + t``, from the reference targets and the deck's across-span stability."""
     b_ref = np.array([base[r] for r in refs])
     e_ref = np.array([ep[r] for r in refs])
     if mw.across is None or not mw.deck_ids:
-        rot, _ = fit_reference_motion(b_ref, e_ref, mw.ref_var)
-        return rot
-    rot, _ = fit_reference_motion(b_ref, e_ref, mw.ref_var, deck_base=np.array([base[m] for m in mw.deck_ids]),
-                                  deck_epoch=np.array([ep[m] for m in mw.deck_ids]), deck_var_across=mw.deck_var,
-                                  across_base=mw.across)
-    return rot
+        return fit_reference_motion(b_ref, e_ref, mw.ref_var)
+    return fit_reference_motion(b_ref, e_ref, mw.ref_var, deck_base=np.array([base[m] for m in mw.deck_ids]),
+                                deck_epoch=np.array([ep[m] for m in mw.deck_ids]), deck_var_across=mw.deck_var,
+                                across_base=mw.across)
 
 
-def _normals(base: dict, ep: dict, refs, meas_base, meas,
-             mw: MotionWeights) -> tuple[np.ndarray, Optional[np.ndarray], Optional[np.ndarray]]:
-    """(g1, g_ref, g_epoch): the deck normal of the baseline, carried, and re-fitted.
+def _normals(base: dict, ep: dict, refs, meas_base, meas, mw: MotionWeights):
+    """(g1, g_ref, g_epoch, motion): the deck normal of the baseline, carried, re-fitted, and the frame motion.
 
     The baseline deck normal, carried into the epoch by the frame motion (None with fewer than
-    three reference targets), and re-fitted on the epoch's own deck targets (None with fewer than three).
+    three reference targets), and re-fitted on the epoch's own deck targets (None with fewer than three);
+    the motion ``(R, t)`` (None with fewer than three reference targets).
     """
     g1 = deck_normal(np.array([base[m] for m in meas_base]))
-    g_ref = _motion_rotation(base, ep, refs, mw) @ g1 if len(refs) >= 3 else None
+    motion = _motion(base, ep, refs, mw) if len(refs) >= 3 else None
+    g_ref = motion[0] @ g1 if motion is not None else None
     g_ep = deck_normal(np.array([ep[m] for m in meas])) if len(meas) >= 3 else None
-    return g1, g_ref, g_ep
+    return g1, g_ref, g_ep, motion
 
 
 def _vertical_positions(base: dict, ep: dict, refs, meas_base, meas, mode: str, w_ref: np.ndarray,
-                        mw: MotionWeights, gain: Optional[np.ndarray] = None):
-    """H at baseline and epoch for ``meas`` ids, given position dicts id -> (3,) array.
+                        mw: MotionWeights, gain: Optional[np.ndarray] = None, along_axis: Optional[np.ndarray] = None):
+    """(h1, hk, gk, sk, along) for ``meas`` ids, given position dicts id -> (3,) array.
 
     The reference point is the same weighted mean of the same targets in both
     epochs (weights fixed beforehand), so it is the same physical point. In
     ``auto`` mode the epoch normal is ``g_ref + gain (g_epoch - g_ref)``,
-    normalised, with the 3x3 ``gain`` fixed beforehand by :func:`normal_gain`.
+    normalised, with the 3x3 ``gain`` fixed beforehand by :func:`normal_gain`. ``along`` is each
+    target's movement along ``along_axis`` (baseline frame) through the frame motion (None without one).
     """
     b_ref = np.array([base[r] for r in refs])
     e_ref = np.array([ep[r] for r in refs])
     s1 = w_ref @ b_ref
     sk = w_ref @ e_ref
+    motion = None
     if mode == "epoch":
         g1 = deck_normal(np.array([base[m] for m in meas]))
         gk = deck_normal(np.array([ep[m] for m in meas]))
+        if along_axis is not None and len(refs) >= 3:
+            motion = _motion(base, ep, refs, mw)
     else:
-        g1, g_ref, g_ep = _normals(base, ep, refs, meas_base, meas, mw)
+        g1, g_ref, g_ep, motion = _normals(base, ep, refs, meas_base, meas, mw)
         if g_ref is None:
             raise ProcessingError("the deck normal cannot be carried into the epoch: fewer than three reference "
                                   "targets were found in both epochs")
@@ -258,7 +262,11 @@ def _vertical_positions(base: dict, ep: dict, refs, meas_base, meas, mode: str, 
             gk = gk / np.linalg.norm(gk)
     h1 = np.array([g1 @ (base[m] - s1) for m in meas])
     hk = np.array([gk @ (ep[m] - sk) for m in meas])
-    return h1, hk, gk, sk
+    along = None
+    if motion is not None and along_axis is not None:
+        rot, t = motion
+        along = np.array([along_axis @ (rot.T @ (ep[m] - t) - base[m]) for m in meas])
+    return h1, hk, gk, sk, along
 
 
 def _tangent_basis(g: np.ndarray) -> np.ndarray:
@@ -361,7 +369,8 @@ def motion_weights(base: Mapping[str, Observation], ep: Mapping[str, Observation
 
 def compute_displacements(baseline: Mapping[str, object], epoch: Mapping[str, object], groups: Mapping[str, str], *,
                           normal_mode: str = "auto", moved_tolerance_m: Optional[float] = None,
-                          weighted: bool = True, expected_sigmas: bool = False) -> EpochDisplacements:
+                          weighted: bool = True, expected_sigmas: bool = False,
+                          first_reference: Optional[str] = None) -> EpochDisplacements:
     """Vertical displacements of an epoch against the baseline epoch.
 
     Parameters
@@ -384,6 +393,9 @@ def compute_displacements(baseline: Mapping[str, object], epoch: Mapping[str, ob
     expected_sigmas : bool, keyword-only
         The sigmas expected before the epoch is measured, for planning (see
         :func:`normal_gain`); the displacements themselves are unchanged. Default False.
+    first_reference : str, optional, keyword-only
+        A reference target on the first pier: the along-span movements are positive away from it.
+        Default: the first reference target of ``groups`` found in both epochs.
 
     Returns
     -------
@@ -404,7 +416,8 @@ def compute_displacements(baseline: Mapping[str, object], epoch: Mapping[str, ob
 
     def solve(stable_ids, checks_, flags_):
         return _solve(base, ep, meas_ids, list(stable_ids), checks_, list(flags_), normal_mode, weighted,
-                      expected_sigmas)
+                      expected_sigmas, first_reference if first_reference is not None else
+                      next((r for r in ref_ids if r in base and r in ep), None))
 
     result = solve(stable, checks, flags)
     # A moved pier target: the deck's shape (zero at the supports) tells which one it was.
@@ -418,7 +431,8 @@ def compute_displacements(baseline: Mapping[str, object], epoch: Mapping[str, ob
 
 
 def _solve(base: dict, ep: dict, meas_ids: list, stable: list, checks, flags: list, normal_mode: str,
-           weighted: bool, expected_sigmas: bool = False) -> EpochDisplacements:
+           weighted: bool, expected_sigmas: bool = False, first_reference: Optional[str] = None
+           ) -> EpochDisplacements:
     """Displacements of ``meas_ids`` with the reference point and frame motion from ``stable``."""
     if not stable:
         raise ProcessingError("no reference target was measured in both this epoch and the baseline; "
@@ -454,36 +468,90 @@ def _solve(base: dict, ep: dict, meas_ids: list, stable: list, checks, flags: li
         cov[3 * j:3 * j + 3, 3 * j:3 * j + 3] = ep[k].cov
     gain, bias_cov, weight_epoch = None, np.zeros((3, 3)), 0.0
     if mode == "auto":
-        gain, bias_cov, weight_epoch = normal_gain(lambda x: _normals(*split(x), stable, meas_base, meas, mw)[1:],  # type: ignore[call-arg]
+        gain, bias_cov, weight_epoch = normal_gain(lambda x: _normals(*split(x), stable, meas_base, meas, mw)[1:3],  # type: ignore[call-arg]
                                                    x0, cov, expected=expected_sigmas)
         if weight_epoch > 0.5:
             flags.append(FLAG_NORMAL_FROM_EPOCH)
 
+    axis = _oriented_along_axis(base, meas_base, stable, up, first_reference)
+
     def f(x):
         xb, xe = split(x)
-        return _vertical_positions(xb, xe, stable, meas_base, meas, mode, w_ref, mw, gain)
+        return _vertical_positions(xb, xe, stable, meas_base, meas, mode, w_ref, mw, gain, axis)
 
-    h1, hk, gk, sk = f(x0)
+    h1, hk, gk, sk, along0 = f(x0)
     u0 = hk - h1
-    step = 1e-6
-    jac = np.empty((len(meas), x0.size))
-    for j in range(x0.size):
-        xp, xm = x0.copy(), x0.copy()
-        xp[j] += step
-        xm[j] -= step
-        hp1, hpk = f(xp)[:2]
-        hm1, hmk = f(xm)[:2]
-        jac[:, j] = ((hpk - hp1) - (hmk - hm1)) / (2 * step)
+    jac, jac_al = _jacobians(f, x0, len(meas), along0 is not None)
     var = np.einsum("ij,jk,ik->i", jac, cov, jac)
+    own = _own_variance(jac, cov, meas, involved_b, involved_e)
     # the deformation bias the combined normal may still carry, through each target's lever p = b - s
-    var += np.array([(ep[m].xyz - sk) @ bias_cov @ (ep[m].xyz - sk) for m in meas])
-    sigma = np.sqrt(np.maximum(var, 0.0))
+    normal_var = np.array([(ep[m].xyz - sk) @ bias_cov @ (ep[m].xyz - sk) for m in meas])
+    var_al = np.einsum("ij,jk,ik->i", jac_al, cov, jac_al) if jac_al is not None else None
     out = []
     for m in meas_ids:
         if m in meas:
             i = meas.index(m)
-            out.append(Displacement(m, float(u0[i]), float(sigma[i]), float(hk[i]), float(h1[i])))
+            noise = float(np.sqrt(max(own[i], 0.0)))
+            frame = float(np.sqrt(max(var[i] - own[i] + normal_var[i], 0.0)))
+            al = (float(along0[i]), float(np.sqrt(max(var_al[i], 0.0)))) if var_al is not None else (np.nan, np.nan)
+            out.append(Displacement(m, float(u0[i]), float(np.hypot(noise, frame)), float(hk[i]), float(h1[i]),
+                                    along_m=al[0], along_sigma_m=al[1], budget={"noise": noise, "frame": frame}))
         else:
             flag = FLAG_MISSING_AT_BASELINE if m not in base else FLAG_MISSING
             out.append(Displacement(m, float("nan"), float("nan"), float("nan"), float("nan"), (flag,)))
-    return EpochDisplacements(tuple(out), tuple(stable), checks, gk, sk, mode, tuple(flags))
+    inputs = tuple(("baseline", k) for k in involved_b) + tuple(("epoch", k) for k in involved_e)
+    sens = Sensitivity(tuple(meas), inputs, jac, jac_al if jac_al is not None else np.full_like(jac, np.nan))
+    return EpochDisplacements(tuple(out), tuple(stable), checks, gk, sk, mode, tuple(flags), sens)
+
+
+def _jacobians(f: Callable, x0: np.ndarray, n: int, with_along: bool, step: float = 1e-6
+               ) -> tuple[np.ndarray, Optional[np.ndarray]]:
+    """Central-difference Jacobians of the displacements (and the along-span movements) over the inputs."""
+    jac = np.empty((n, x0.size))
+    jac_al = np.empty((n, x0.size)) if with_along else None
+    for j in range(x0.size):
+        xp, xm = x0.copy(), x0.copy()
+        xp[j] += step
+        xm[j] -= step
+        hp1, hpk, _, _, ap = f(xp)
+        hm1, hmk, _, _, am = f(xm)
+        jac[:, j] = ((hpk - hp1) - (hmk - hm1)) / (2 * step)
+        if jac_al is not None:
+            jac_al[:, j] = (ap - am) / (2 * step)
+    return jac, jac_al
+
+
+def _own_variance(jac: np.ndarray, cov: np.ndarray, meas: list, involved_b: list, involved_e: list) -> np.ndarray:
+    """Each target's variance from its own two centroids (baseline and epoch) alone."""
+    nb = len(involved_b)
+    out = np.zeros(len(meas))
+    for i, m in enumerate(meas):
+        cols = []
+        if m in involved_b:
+            k = involved_b.index(m)
+            cols += [3 * k, 3 * k + 1, 3 * k + 2]
+        if m in involved_e:
+            k = nb + involved_e.index(m)
+            cols += [3 * k, 3 * k + 1, 3 * k + 2]
+        jj = jac[i, cols]
+        out[i] = float(jj @ cov[np.ix_(cols, cols)] @ jj)
+    return out
+
+
+def _oriented_along_axis(base: dict, meas_base: list, stable: list, up: np.ndarray,
+                         first_reference: Optional[str]) -> Optional[np.ndarray]:
+    """The bridge axis in the baseline frame, horizontal, pointing away from the first pier (None if unknown).
+
+    The deck targets' long horizontal axis, oriented so that ``first_reference`` (default: the first
+    stable reference target) lies behind the deck's centre.
+    """
+    axis = across_axis(np.array([base[m].xyz for m in meas_base]), up)
+    if axis is None:
+        return None
+    along = np.cross(axis, up)
+    along /= np.linalg.norm(along)
+    ref = first_reference if first_reference in base else (stable[0] if stable else None)
+    if ref is None:
+        return None
+    centre = np.mean([base[m].xyz for m in meas_base], axis=0)
+    return along if along @ (base[ref].xyz - centre) < 0 else -along

@@ -5,7 +5,8 @@ its result without importing it.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Mapping, Optional
 
 import numpy as np
 
@@ -32,9 +33,20 @@ class ReferenceCheck:
     suspect: bool = False  # one of two targets that may have moved; left out of the reference point
 
 
+#: The terms of a displacement's sigma, in the order the report and the CSV give them.
+BUDGET_TERMS = ("noise", "frame", "scale", "bias", "drift")
+
+
 @dataclass(frozen=True)
 class Displacement:
-    """Vertical displacement of one measurement target against the baseline (positive up)."""
+    """Vertical displacement of one measurement target against the baseline (positive up).
+
+    ``along_m`` is its movement along the bridge axis (positive away from the first pier), with
+    ``along_sigma_m``. ``budget`` holds the terms of ``sigma_m`` (metres, :data:`BUDGET_TERMS`):
+    ``noise`` the target's own centroids, ``frame`` the reference motion and the deck normal, and,
+    when a field model corrected the centroids, ``scale``, ``bias`` (range walk) and ``drift``;
+    ``sigma_m`` is their sum in quadrature.
+    """
 
     reflector: str
     displacement_m: float
@@ -42,6 +54,9 @@ class Displacement:
     vertical_m: float
     baseline_vertical_m: float
     flags: tuple[str, ...] = ()
+    along_m: float = float("nan")
+    along_sigma_m: float = float("nan")
+    budget: Mapping[str, float] = field(default_factory=dict)
 
     @property
     def displacement_mm(self) -> float:
@@ -50,6 +65,20 @@ class Displacement:
     @property
     def sigma_mm(self) -> float:
         return self.sigma_m * 1000.0
+
+
+@dataclass(frozen=True, eq=False)
+class Sensitivity:
+    """How an epoch's displacements and along-span movements move with its input coordinates.
+
+    ``vertical`` and ``along`` are (n_targets, 3 n_inputs) Jacobians (m per m) of the targets ``targets``;
+    ``inputs`` names each input centroid as ``("baseline" | "epoch", id)``, its three columns in order.
+    """
+
+    targets: tuple[str, ...]
+    inputs: tuple[tuple[str, str], ...]
+    vertical: np.ndarray
+    along: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -63,6 +92,7 @@ class EpochDisplacements:
     reference_point_socs: np.ndarray
     normal_mode: str
     flags: tuple[str, ...] = ()
+    sensitivity: Optional[Sensitivity] = None
 
     def of(self, reflector: str) -> Displacement:
         for d in self.displacements:

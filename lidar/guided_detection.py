@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from typing import Optional
 
 import numpy as np
 
@@ -34,6 +35,65 @@ def _patch(rmap: ReflectanceMap, row: float, col: float, half: int) -> tuple[np.
     if rows.size == 0 or cols.size == 0:
         return rows, cols, np.empty((0, 0), dtype=np.float32)
     return rows, cols, rmap.max_intensity[np.ix_(rows, cols)]
+
+
+def bright_near(rmap: ReflectanceMap, xyz_socs: np.ndarray, threshold: float, *, tolerance_m: float = 0.15,
+                range_tolerance_m: float = 0.3) -> Optional[bool]:
+    """Whether the map shows a target where one is predicted: True (a local peak at the range), False, None.
+
+    None when the map cannot tell (the direction is outside it, or it holds no return there).
+    """
+    xyz = np.asarray(xyz_socs, dtype=np.float64)
+    theta, phi, rng = spherical_from_xyz(xyz[None])
+    r = float(rng[0])
+    if not r > 0.5:
+        return None
+    row, col = rmap.cells_of(theta, phi)
+    if not (0 <= row[0] < rmap.shape[0]) or (not rmap.full_circle and not 0 <= col[0] < rmap.shape[1]):
+        return None
+    k = max(2, int(math.ceil(math.degrees(tolerance_m / r) / rmap.step_deg)) + 1)
+    rows, cols, near = _patch(rmap, row[0], col[0], k)
+    _, _, wide = _patch(rmap, row[0], col[0], 3 * k)
+    if near.size == 0 or not np.any(np.isfinite(near)):
+        return None
+    bg = float(np.nanmedian(wide))
+    mad = 1.4826 * float(np.nanmedian(np.abs(wide - bg)))
+    a, b = (int(v) for v in np.unravel_index(int(np.nanargmax(near)), near.shape))
+    if float(near[a, b]) < bg + max(MIN_CONTRAST * (threshold - bg), MIN_MAD_FACTOR * mad, 0.05):
+        return False
+    cell_range = float(rmap.range_m[rows[a], cols[b]])
+    return bool(np.isfinite(cell_range) and abs(cell_range - r) <= range_tolerance_m + tolerance_m)
+
+
+def seen_through(rmap: ReflectanceMap, xyz_socs: np.ndarray, *, margin_m: float = 1.0) -> Optional[bool]:
+    """Whether the scan looked straight through a position: nothing there, only farther surfaces (or none).
+
+    True when every cell around the position's direction returned from beyond it (by ``margin_m``) or held
+    no return at all, inside the scanned area; False when something returned at or before it; None
+    outside the map. A target predicted where the scan saw through cannot be there.
+    """
+    xyz = np.asarray(xyz_socs, dtype=np.float64)
+    theta, phi, rng = spherical_from_xyz(xyz[None])
+    r = float(rng[0])
+    if not r > 0.5:
+        return None
+    row, col = rmap.cells_of(theta, phi)
+    if not (1 <= row[0] < rmap.shape[0] - 1) or (not rmap.full_circle and not 1 <= col[0] < rmap.shape[1] - 1):
+        return None
+    ranges = _patch_ranges(rmap, row[0], col[0], 1)
+    if ranges.size == 0:
+        return None
+    return bool(np.all(~np.isfinite(ranges) | (ranges > r + margin_m)))
+
+
+def _patch_ranges(rmap: ReflectanceMap, row: float, col: float, half: int) -> np.ndarray:
+    h, w = rmap.shape
+    r0, c0 = int(round(row)), int(round(col))
+    rows = np.arange(r0 - half, r0 + half + 1)
+    cols = np.arange(c0 - half, c0 + half + 1)
+    rows = rows[(rows >= 0) & (rows < h)]
+    cols = np.mod(cols, w) if rmap.full_circle else cols[(cols >= 0) & (cols < w)]
+    return rmap.range_m[np.ix_(rows, cols)] if rows.size and cols.size else np.empty((0, 0), np.float32)
 
 
 def recover_predicted(rmap: ReflectanceMap, detections: DetectionResult, identification: Identification, *,

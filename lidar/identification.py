@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from itertools import combinations
-from typing import Optional
+from typing import Callable, Optional
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -123,17 +123,138 @@ MAX_TILT_DEG = 2.0
 TIE_SEEDS = 6
 
 
-def _rival(best, candidates: dict) -> Optional[str]:
-    """Describe another levelled solution as good as the best one (a different assignment), or None."""
+def _rivals(best, candidates: dict) -> list:
+    """Other levelled solutions as good as the best one (different assignments), best first.
+
+    As good: as many matches, and residuals no larger than the layout's own errors could make them
+    (1.5 times the best's, or 2 cm a match more).
+    """
     (lev, count, neg_sum), _, _ = best
-    best_key = next(k for k, v in candidates.items() if v[0] == best[0])
-    for key, ((lev2, count2, neg_sum2), _, _) in candidates.items():
-        if key == best_key or lev2 != lev or count2 != count:
+    out = []
+    for key, (score, r, t) in candidates.items():
+        lev2, count2, neg_sum2 = score
+        if score == best[0] or lev2 != lev or count2 != count:
             continue
-        if -neg_sum2 <= -neg_sum * 1.5 + 0.01 * count:
-            swapped = sorted(set(key) - set(best_key))
-            return f"{len(swapped)} reflector(s) would be assigned differently"
-    return None
+        if -neg_sum2 <= max(-neg_sum * 1.5, -neg_sum + 0.02 * count) + 0.01 * count:
+            out.append((key, score, r, t))
+    return sorted(out, key=lambda x: x[1], reverse=True)
+
+
+#: A solution is preferred to its rival when it leaves this many fewer visible targets unseen.
+EVIDENCE_MARGIN = 2
+#: A target is expected in the coarse scan when it faces the scanner at least this well (|cos| of incidence),
+#: and lies within this many times the farthest detection's range.
+EVIDENCE_MIN_COS = 0.35
+EVIDENCE_REACH = 2.5
+
+
+def _unseen(r: np.ndarray, t: np.ndarray, layout: Layout, matched: set, det: np.ndarray,
+            evidence: Callable[[np.ndarray], object], up_layout: ArrayLike) -> int:
+    """How many targets a solution puts where the coarse scan says they are not, less those it explains.
+
+    ``evidence(xyz)`` says, for a target the solution did not match to a detection: False where a target
+    facing the scanner within reach should have shown and the map shows nothing bright; ``"through"``
+    where the scan looked straight through the position (a target hanging in the air), whatever its
+    facing; True where the map does show a target there (one the blob search missed). The first two
+    count against the solution, the third for it.
+    """
+    from lidar.layout import target_normals
+
+    normals = target_normals(layout, up=up_layout) @ np.asarray(r).T
+    pred = layout.xyz @ np.asarray(r).T + t
+    reach = EVIDENCE_REACH * float(np.max(np.linalg.norm(det, axis=1)))
+    count = 0
+    for i in range(len(layout.ids)):
+        if i in matched:
+            continue
+        rng = float(np.linalg.norm(pred[i]))
+        if not rng > 0.5:
+            continue
+        verdict = evidence(pred[i])
+        facing = rng <= reach and float(normals[i] @ (-pred[i] / rng)) >= EVIDENCE_MIN_COS
+        if verdict == "through" or (verdict is False and facing):
+            count += 1
+        elif verdict is True:
+            count -= 1
+    return count
+
+
+#: Detection triangles (the largest) tried as seeds against every congruent layout triangle.
+DETECTION_SEEDS = 10
+
+
+def _best_triangle(best, lay: np.ndarray, det: np.ndarray, tol: float) -> Optional[tuple[int, int, int]]:
+    """The largest triangle of the detections a solution matched (None with fewer than three)."""
+    _, r, t = best
+    dets = [p[1] for p in _assign(lay @ np.asarray(r).T + t, det, tol)]
+    if len(dets) < 3:
+        return None
+    return max(combinations(dets, 3), key=lambda c: _triangle_area(det[list(c)]))
+
+
+def _congruent_solutions(tri: Optional[tuple[int, int, int]], candidates: dict, lay: np.ndarray, det: np.ndarray,
+                         d_lay: np.ndarray, d_det: np.ndarray, tol: float, max_tilt_deg: Optional[float],
+                         up_layout: ArrayLike) -> None:
+    """Add to ``candidates`` every solution mapping the detection triangle ``tri`` onto a congruent layout triangle.
+
+    A layout that repeats itself (identical spans, identical piers) has several places the detected part
+    of it fits; seeds drawn from the whole layout may find one of them only. Every layout triangle
+    congruent with a triangle of detections (the best solution's largest, and the largest of all the
+    detections) gives a solution here, so that :func:`_settle_rivals` sees them all.
+    """
+    if tri is None:
+        return
+    i, j, k = tri
+    n = len(lay)
+    wide = 2.0 * tol  # the layout's errors add up over a triangle's sides: search wide, judge by the assignment
+    ab = np.argwhere(np.abs(d_lay - d_det[i, j]) <= wide)
+    for a, b in ab:
+        if a == b:
+            continue
+        cs = np.nonzero((np.abs(d_lay[a] - d_det[i, k]) <= wide) & (np.abs(d_lay[b] - d_det[j, k]) <= wide))[0]
+        for c in cs:
+            if c in (a, b) or c >= n:
+                continue
+            seed = fit_rigid(lay[[a, b, c]], det[[i, j, k]])
+            cand = _assign(seed.apply(lay), det, tol)
+            for _ in range(2):  # refine on everything it matched, as the identification's own refinement does
+                if len(cand) < 3:
+                    break
+                seed = fit_rigid(lay[[q[0] for q in cand]], det[[q[1] for q in cand]])
+                cand = _assign(seed.apply(lay), det, tol)
+            levelled = max_tilt_deg is None or tilt_deg(seed.rotation, up_layout) <= max_tilt_deg
+            score = (levelled, len(cand), -sum(p[2] for p in cand))
+            key = frozenset((p[0], p[1]) for p in cand)
+            if key not in candidates or score > candidates[key][0]:
+                candidates[key] = (score, seed.rotation, seed.translation)
+
+
+def _triangle_area(xyz: np.ndarray) -> float:
+    """The area of a triangle of three points: the largest fixes a rigid fit best."""
+    return float(0.5 * np.linalg.norm(np.cross(xyz[1] - xyz[0], xyz[2] - xyz[0])))
+
+
+def _settle_rivals(best, candidates: dict, layout: Layout, det: np.ndarray,
+                   evidence: Optional[Callable[[np.ndarray], object]], up_layout: ArrayLike):
+    """The best solution, or a rival the coarse scan's evidence prefers; refused when nothing tells them apart."""
+    rivals = _rivals(best, candidates)
+    if not rivals:
+        return best
+    best_key = next(k for k, v in candidates.items() if v[0] == best[0])
+    if evidence is not None:
+        options = [(best_key, *best)] + rivals
+        unseen = [_unseen(r, t, layout, {i for i, _ in key}, det, evidence, up_layout)
+                  for key, _, r, t in options]
+        order = np.argsort(unseen, kind="stable")
+        if unseen[order[1]] - unseen[order[0]] >= EVIDENCE_MARGIN:
+            _, score, r, t = options[order[0]]
+            return (score, r, t)
+    swapped = sorted(set(rivals[0][0]) - set(best_key))
+    raise ProcessingError(
+        f"two identifications fit the {best[0][1]} detected reflectors equally well (the layout is symmetric "
+        f"for what was detected: {len(swapped)} reflector(s) would be assigned differently); refusing to guess. "
+        "Scan so that more of the bridge is seen (a second set-up, or a station where an end pier's targets face "
+        "the scanner), add an asymmetric target, or remove the wrong window by hand")
 
 
 def tilt_deg(rotation: np.ndarray, up_layout: ArrayLike = (0.0, 0.0, 1.0)) -> float:
@@ -151,7 +272,8 @@ def tilt_deg(rotation: np.ndarray, up_layout: ArrayLike = (0.0, 0.0, 1.0)) -> fl
 
 def identify_reflectors(detections_xyz: np.ndarray, layout: Layout, *, tolerance_m: float = 0.15,
                         max_seeds: int = 60, max_tilt_deg: Optional[float] = MAX_TILT_DEG,
-                        up_layout: ArrayLike = (0.0, 0.0, 1.0)) -> Identification:
+                        up_layout: ArrayLike = (0.0, 0.0, 1.0),
+                        evidence: Optional[Callable[[np.ndarray], object]] = None) -> Identification:
     """Match detections (scanner frame) to the layout (any frame).
 
     Parameters
@@ -172,6 +294,11 @@ def identify_reflectors(detections_xyz: np.ndarray, layout: Layout, *, tolerance
         them exactly as well). None for set-ups without a compensator.
     up_layout : (3,) sequence, keyword-only
         The layout's up axis (default +z).
+    evidence : callable, optional, keyword-only
+        ``evidence(xyz_socs) -> True | False | "through" | None``: whether the coarse scan shows a target at a
+        position, shows none, looked straight through it (nothing there but farther surfaces), or cannot tell. When two solutions fit the detections equally well - a layout that repeats
+        itself, like the identical spans of a multi-span bridge, seen in part - the one that leaves
+        :data:`EVIDENCE_MARGIN` fewer targets unseen where it puts them facing the scanner wins.
 
     Returns
     -------
@@ -220,15 +347,19 @@ def identify_reflectors(detections_xyz: np.ndarray, layout: Layout, *, tolerance
             extra_seeds += 1
             if extra_seeds > TIE_SEEDS:
                 break
+    # seeds from the detections' own largest triangles too: when few targets were detected, the layout's
+    # best triangles rarely consist of detected ones only
+    for tri in sorted(combinations(range(len(det)), 3), key=lambda c: -_triangle_area(det[list(c)]))[:DETECTION_SEEDS]:
+        _congruent_solutions(tri, candidates, lay, det, d_lay, d_det, tolerance_m, max_tilt_deg, up_layout)
+    if candidates:
+        best = max(candidates.values(), key=lambda v: v[0])
     if best is None or best[0][1] < 3:
         raise ProcessingError("the detections do not match the layout: no three detected reflectors have the "
                               "layout's distances (check the layout coordinates, the target diameter and the coarse scan)")
-    rival = _rival(best, candidates)
-    if rival is not None:
-        raise ProcessingError(
-            f"two identifications fit the {best[0][1]} detected reflectors equally well (the layout is symmetric "
-            f"for what was detected: {rival}); refusing to guess. Scan so that a deck target is detected, add "
-            "an asymmetric target, or remove the wrong window by hand")
+    _congruent_solutions(_best_triangle(best, lay, det, tolerance_m), candidates, lay, det, d_lay, d_det, tolerance_m,
+                         max_tilt_deg, up_layout)
+    best = max(candidates.values(), key=lambda v: v[0])
+    best = _settle_rivals(best, candidates, layout, det, evidence, up_layout)
     _, r, t = best
     fit = Transform.from_rt(r, t)
     for _ in range(4):  # refine on all matches

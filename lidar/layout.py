@@ -215,12 +215,50 @@ def bridge_axis(layout: Layout, *, up: ArrayLike = (0.0, 0.0, 1.0)) -> np.ndarra
     return a / np.linalg.norm(a)
 
 
+#: Reference targets closer than this along the bridge (m) are on one pier.
+PIER_GAP_M = 4.0
+
+
+def _reference_facing(ref_along: np.ndarray, deck_along: np.ndarray) -> np.ndarray:
+    """+1 or -1 per reference target: which way along the bridge axis its pier face looks.
+
+    Reference targets are grouped by pier (along-axis gaps over :data:`PIER_GAP_M`). An end pier (deck
+    targets on one side only) has its targets facing the deck; on an inner pier each target faces the
+    span on its own side of the pier (the pier's middle between its targets, or, for a lone target, the
+    nearer of the deck targets on either side).
+    """
+    out = np.ones(len(ref_along))
+    if not len(ref_along):
+        return out
+    order = np.argsort(ref_along)
+    groups, cur = [], [order[0]]
+    for a, b in zip(order[:-1], order[1:]):
+        if ref_along[b] - ref_along[a] > PIER_GAP_M:
+            groups.append(cur)
+            cur = []
+        cur.append(b)
+    groups.append(cur)
+    for g in groups:
+        centre = float(np.mean(ref_along[g]))
+        left = deck_along[deck_along < centre - 1.0]
+        right = deck_along[deck_along > centre + 1.0]
+        for k in g:
+            if not left.size or not right.size:  # an end pier: its face looks into the span
+                out[k] = 1.0 if right.size else -1.0
+            elif len(g) > 1 and abs(ref_along[k] - centre) > 0.25:
+                out[k] = -1.0 if ref_along[k] < centre else 1.0
+            else:
+                out[k] = -1.0 if centre - left.max() < right.min() - centre else 1.0
+    return out
+
+
 def target_normals(layout: Layout, *, up: ArrayLike = (0.0, 0.0, 1.0)) -> np.ndarray:
     """(N, 3) unit normal of every target in the layout's frame.
 
     The layout's own normals (``nx,ny,nz``) where given. Otherwise a measurement target faces
     down (glued under the deck) and a reference target faces along the bridge axis, toward the
-    span (glued on the pier face looking into it).
+    span (glued on the pier face looking into it; on an inner pier, the span on its own side, see
+    :func:`_reference_facing`).
     """
     u = np.asarray(up, dtype=np.float64)
     u = u / np.linalg.norm(u)
@@ -230,11 +268,9 @@ def target_normals(layout: Layout, *, up: ArrayLike = (0.0, 0.0, 1.0)) -> np.nda
         return out
     axis = bridge_axis(layout, up=u)
     meas = np.array([g == "measurement" for g in layout.groups])
-    centre = layout.xyz[meas].mean(axis=0) if np.any(meas) else layout.xyz.mean(axis=0)
+    deck_along = layout.xyz[meas] @ axis if np.any(meas) else layout.xyz @ axis
+    refs = [k for k in range(len(layout.ids)) if layout.groups[k] != "measurement"]
+    facing = _reference_facing(layout.xyz[refs] @ axis, deck_along)
     for k in np.nonzero(missing)[0]:
-        if layout.groups[k] == "measurement":
-            out[k] = -u
-        else:
-            along = float((centre - layout.xyz[k]) @ axis)
-            out[k] = axis if along >= 0 else -axis
+        out[k] = -u if layout.groups[k] == "measurement" else axis * facing[refs.index(int(k))]
     return out

@@ -4,16 +4,17 @@ Each step is also available on its own in its module; these functions only chain
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Mapping, Optional
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from lidar.centroid import TargetCentroid, centroids_from_scan
+from common.flags import FLAG_NOT_FOUND, FLAG_UNRESOLVED
+from lidar.centroid import TargetCentroid, measure_windows
 from lidar.detection import DetectionResult, detect_reflectors
 from common.errors import InputError
-from lidar.guided_detection import recover_predicted
+from lidar.guided_detection import bright_near, recover_predicted, seen_through
 from lidar.identification import MAX_TILT_DEG, Identification, identify_reflectors
 from lidar.layout import Layout, target_normals
 from lidar.plan import PlanTarget, ScanPlan, incidence_from_map, plan_fine_scans
@@ -41,6 +42,16 @@ def _need_intensity(scan: Scan, what: str) -> np.ndarray:
     return scan.intensity
 
 
+def _map_evidence(rmap: ReflectanceMap, threshold: float, tolerance_m: float):
+    """``evidence(xyz)`` for :func:`lidar.identification.identify_reflectors`, from the coarse map."""
+
+    def evidence(xyz: np.ndarray) -> object:
+        if seen_through(rmap, xyz):
+            return "through"
+        return bright_near(rmap, xyz, threshold, tolerance_m=tolerance_m)
+    return evidence
+
+
 def analyse_coarse(scan: Scan, layout: Layout, *, step_deg: Optional[float] = None, threshold: Optional[float] = None,
                    tolerance_m: float = 0.15, max_tilt_deg: Optional[float] = MAX_TILT_DEG,
                    up_layout: ArrayLike = (0.0, 0.0, 1.0),
@@ -56,7 +67,7 @@ def analyse_coarse(scan: Scan, layout: Layout, *, step_deg: Optional[float] = No
     det = detect_reflectors(rmap, target_diameter_m=diameter, threshold=threshold)
     report(progress, 0.9, "identifying reflectors")
     ident = identify_reflectors(det.xyz(), layout, tolerance_m=tolerance_m, max_tilt_deg=max_tilt_deg,
-                                up_layout=up_layout)
+                                up_layout=up_layout, evidence=_map_evidence(rmap, det.threshold, tolerance_m))
     det, ident = recover_predicted(rmap, det, ident, tolerance_m=tolerance_m)
     inc = {m.id: incidence_from_map(rmap, m.xyz_socs) for m in ident.matches}
     report(progress, 1.0, "coarse scan analysed")
@@ -84,24 +95,67 @@ def layout_incidence(identification: Identification, layout: Layout, *,
 
 def plan_from_coarse(coarse: CoarseAnalysis, layout: Layout, *, epoch: str = "", profile: ScannerProfile = VZ1000,
                      min_points: int = 1000, budget_seconds: float = 3600.0, margin_m: float = 0.10,
-                     up_layout: ArrayLike = (0.0, 0.0, 1.0)) -> ScanPlan:
+                     up_layout: ArrayLike = (0.0, 0.0, 1.0), closure: bool = False) -> ScanPlan:
     """Fine-scan plan for every layout reflector (detected or predicted).
 
     Incidence comes from the layout's target normals carried into the scanner frame
     (:func:`layout_incidence`), for detected and predicted targets alike: the surface around a
-    target in a coarse map is often another face (a pier corner, the deck edge).
+    target in a coarse map is often another face (a pier corner, the deck edge). ``closure`` ends the
+    plan with the first reference target's window again (see :func:`lidar.plan.plan_fine_scans`).
     """
     inc = layout_incidence(coarse.identification, layout, up_layout=up_layout)
     targets = [PlanTarget(m.id, m.group, m.xyz_socs, float(layout.diameters_m[layout.index(m.id)]), m.predicted,
                           max(inc[m.id], 0.05)) for m in coarse.identification.matches]
     return plan_fine_scans(targets, epoch=epoch, profile=profile, min_points=min_points,
-                           budget_seconds=budget_seconds, margin_m=margin_m)
+                           budget_seconds=budget_seconds, margin_m=margin_m, closure=closure)
+
+
+@dataclass(frozen=True, eq=False)
+class FineMeasurement:
+    """The centroids of an epoch's fine scans, its closure centroids, and where their times come from.
+
+    ``time_source`` is ``points`` (the scans carry point times), ``plan`` (they do not: each centroid's
+    time is its window's in the plan's order and time model, and the closure cannot be told from its
+    first pass) or ``none`` (the plan has no time model either).
+    """
+
+    centroids: Mapping[str, TargetCentroid]
+    closures: Mapping[str, TargetCentroid]
+    time_source: str
+
+
+def plan_times(plan: ScanPlan) -> dict[str, float]:
+    """Each (non-closure) window's mid time in the plan's order and time model, seconds from its start."""
+    out: dict[str, float] = {}
+    t = 0.0
+    for roi in plan.rois:
+        if not getattr(roi, "closure", False):
+            out.setdefault(roi.reflector, t + roi.expected_seconds / 2)
+        t += roi.expected_seconds
+    return out
+
+
+def measure_fine(fine: Scan, plan: ScanPlan, layout: Optional[Layout] = None, *,
+                 profile: Optional[ScannerProfile] = None) -> FineMeasurement:
+    """Centroids (and closure centroids) of every planned target from the epoch's fine scans (concatenated)."""
+    intensity = _need_intensity(fine, "the target centroids")
+    diam = None if layout is None else {i: float(d) for i, d in zip(layout.ids, layout.diameters_m)}
+    times = getattr(fine, "time_s", None)
+    cents, closures = measure_windows(fine.xyz_socs, intensity, plan.rois, diameters_m=diam,
+                                      profile=profile or plan.profile, time_s=times)
+    for rid, why in plan.skipped:  # not planned from this station: not found, and why
+        cents.setdefault(rid, TargetCentroid(rid, np.full(3, np.nan), np.full((3, 3), np.nan), 0, float("nan"), 0.0,
+                                             (FLAG_NOT_FOUND, f"{FLAG_UNRESOLVED}: {why}"), 0))
+    if times is not None:
+        return FineMeasurement(cents, closures, "points")
+    t_plan = plan_times(plan)
+    if not any(r.expected_seconds > 0 for r in plan.rois):
+        return FineMeasurement(cents, {}, "none")
+    timed = {k: replace(c, time_s=t_plan.get(k, float("nan"))) if c.found else c for k, c in cents.items()}
+    return FineMeasurement(timed, {}, "plan")
 
 
 def measure_targets(fine: Scan, plan: ScanPlan, layout: Optional[Layout] = None, *,
                     profile: Optional[ScannerProfile] = None) -> dict[str, TargetCentroid]:
-    """Centroids of every planned target from the epoch's fine scans (concatenated)."""
-    intensity = _need_intensity(fine, "the target centroids")
-    diam = None if layout is None else {i: float(d) for i, d in zip(layout.ids, layout.diameters_m)}
-    return centroids_from_scan(fine.xyz_socs, intensity, plan.rois, diameters_m=diam,
-                               profile=profile or plan.profile)
+    """Centroids of every planned target from the epoch's fine scans (concatenated; see :func:`measure_fine`)."""
+    return dict(measure_fine(fine, plan, layout, profile=profile).centroids)

@@ -55,9 +55,11 @@ class RoiPlan:
     expected_seconds: float
     predicted: bool = False
     notes: tuple[str, ...] = ()
+    closure: bool = False  # a window scanned again at the end of the visit (listed last); in JSON only when True
 
     def to_json(self) -> dict:
         w = self.window
+        closure = {"closure": True} if self.closure else {}
         return {
             "reflector": self.reflector, "group": self.group,
             "phi_min_deg": float(w.phi_min_deg), "phi_max_deg": float(w.phi_max_deg),
@@ -67,6 +69,7 @@ class RoiPlan:
             "expected_seconds": round(self.expected_seconds, 2),
             "expected_target_points": int(self.expected_target_points),
             "incidence_deg": round(self.incidence_deg, 2), "predicted": self.predicted, "notes": list(self.notes),
+            **closure,
         }
 
     @classmethod
@@ -77,7 +80,7 @@ class RoiPlan:
             return cls(str(d["reflector"]), str(d.get("group", "")), w, float(d["range_m"]),
                        float(d.get("incidence_deg", float("nan"))), int(d.get("expected_points", 0)),
                        int(d.get("expected_target_points", 0)), float(d.get("expected_seconds", 0.0)),
-                       bool(d.get("predicted", False)), tuple(d.get("notes", ())))
+                       bool(d.get("predicted", False)), tuple(d.get("notes", ())), bool(d.get("closure", False)))
         except KeyError as exc:
             raise InputError(f"plan ROI is missing the field {exc.args[0]!r}") from None
         except (TypeError, ValueError) as exc:
@@ -97,6 +100,7 @@ class ScanPlan:
     warnings: tuple[str, ...] = ()
     dome_seconds: float = 0.0
     dome_step_deg: Optional[float] = None
+    skipped: tuple[tuple[str, str], ...] = ()  # (reflector, why): targets this station cannot measure
 
     @property
     def total_seconds(self) -> float:
@@ -133,6 +137,7 @@ class ScanPlan:
             "windowed": self.profile.windowed, "dome_seconds": round(self.dome_seconds, 2),
             "dome_step_deg": self.dome_step_deg, "angle_convention": self.profile.angle_convention(),
             "rois": [dict(r.to_json(), instrument=self.instrument_window(r)) for r in self.rois],
+            **({"skipped": [{"reflector": k, "reason": why} for k, why in self.skipped]} if self.skipped else {}),
         }
 
     @classmethod
@@ -153,7 +158,8 @@ class ScanPlan:
         return cls(str(d.get("epoch", "")), profile, rois, int(d.get("min_points", 1000)),
                    int(d.get("points_per_target", d.get("min_points", 1000))),
                    float(d.get("budget_seconds", 3600.0)), tuple(d.get("warnings", ())),
-                   float(d.get("dome_seconds", 0.0) or 0.0), None if dome_step is None else float(dome_step))
+                   float(d.get("dome_seconds", 0.0) or 0.0), None if dome_step is None else float(dome_step),
+                   tuple((str(x["reflector"]), str(x["reason"])) for x in d.get("skipped", ())))
 
     def save(self, path: str | os.PathLike) -> Path:
         from common.files import write_atomic
@@ -275,6 +281,7 @@ def plan_roi(target: PlanTarget, *, n_points: float, profile: ScannerProfile = V
 
 
 def plan_fine_scans(targets: Sequence[PlanTarget], *, epoch: str = "", profile: ScannerProfile = VZ1000,
+                    closure: bool = False,
                     min_points: int = 1000, budget_seconds: float = 3600.0, margin_m: float = 0.10) -> ScanPlan:
     """Plan the fine scans of an epoch.
 
@@ -294,6 +301,9 @@ def plan_fine_scans(targets: Sequence[PlanTarget], *, epoch: str = "", profile: 
     margin_m : float, keyword-only
         Background around each target inside its window (each side), metres;
         2.5x for predicted targets. Default 0.10 m.
+    closure : bool, keyword-only
+        End the plan with a closure window: the first reference target's window again, so that the
+        set-up's drift during the visit can be measured (:mod:`lidar.systematic`). Default False.
 
     Returns
     -------
@@ -305,9 +315,14 @@ def plan_fine_scans(targets: Sequence[PlanTarget], *, epoch: str = "", profile: 
         raise InputError("the time budget must be positive")
     if not targets:
         raise InputError("nothing to plan: no targets")
+    targets, skipped = _measurable(targets, profile)
+    if not targets:
+        raise InputError("nothing to plan: no target can be measured from this station ("
+                         + "; ".join(f"{k} {why}" for k, why in skipped) + ")")
     if not profile.windowed:
-        return _plan_full_dome(targets, epoch=epoch, profile=profile, min_points=min_points,
+        dome = _plan_full_dome(targets, epoch=epoch, profile=profile, min_points=min_points,
                                budget_seconds=budget_seconds, margin_m=margin_m)
+        return replace(dome, skipped=tuple(skipped)) if skipped else dome
     n = float(min_points)
     warnings: list[str] = []
     for _ in range(30):
@@ -328,9 +343,61 @@ def plan_fine_scans(targets: Sequence[PlanTarget], *, epoch: str = "", profile: 
     if n < min_points:
         warnings.append(f"over the time budget with {min_points} points per target: reduced to about "
                         f"{int(n)} points per target to fit {budget_seconds / 60:.0f} min")
+    if closure:
+        rois = _interleave_references(rois)
+        first = next((r for r in rois if r.group == "reference"), None)
+        if first is not None:
+            rois.append(replace(first, closure=True, notes=first.notes + (
+                "closure: the first reference target again, at the end, for the set-up's drift",)))
+            total += first.expected_seconds
     if total > budget_seconds * 1.0001:
         warnings.append(f"the plan takes {total / 60:.1f} min, over the budget of {budget_seconds / 60:.0f} min")
-    return ScanPlan(epoch, profile, tuple(rois), int(min_points), int(n), float(budget_seconds), tuple(warnings))
+    if skipped:
+        warnings.append("not planned (narrower than the beam from here, measure from another station): "
+                        + ", ".join(k for k, _ in skipped))
+    return ScanPlan(epoch, profile, tuple(rois), int(min_points), int(n), float(budget_seconds), tuple(warnings),
+                    skipped=tuple(skipped))
+
+
+def _measurable(targets: Sequence[PlanTarget], profile: ScannerProfile) -> tuple[list, list]:
+    """The targets a fine scan can measure from this station, and why each other one cannot.
+
+    A disc whose projected short axis is narrower than :data:`lidar.centroid.UNRESOLVED_RATIO` of the beam
+    at its range returns only mixed pixels: its window would spend the visit's time on a centroid that
+    would be refused.
+    """
+    from lidar.centroid import UNRESOLVED_RATIO, resolvability
+
+    keep, skipped = [], []
+    for t in targets:
+        r = float(np.linalg.norm(t.xyz_socs))
+        cos = t.incidence_cos if t.incidence_cos is not None else DEFAULT_INCIDENCE_COS
+        q = resolvability(t.diameter_m, cos, r, profile)
+        if q < UNRESOLVED_RATIO:
+            skipped.append((t.id, f"at {r:.0f} m and {math.degrees(math.acos(min(max(cos, 0.0), 1.0))):.0f} deg "
+                                  f"incidence the disc is {100 * q:.0f} % of the beam's width"))
+        else:
+            keep.append(t)
+    return keep, skipped
+
+
+def _interleave_references(rois: list) -> list:
+    """The windows in an order that spreads the reference targets over the visit.
+
+    Each reference window opens a share of the deck windows: the reference targets are then seen at
+    times spread over the whole visit, and with the closure at its end they fix the set-up's drift in
+    all three axes (a deck target's window, whose target moves, says little about it).
+    """
+    refs = [r for r in rois if r.group == "reference"]
+    others = [r for r in rois if r.group != "reference"]
+    if not refs or not others:
+        return list(rois)
+    out: list = []
+    chunks = np.array_split(np.arange(len(others)), len(refs))
+    for ref, chunk in zip(refs, chunks):
+        out.append(ref)
+        out.extend(others[i] for i in chunk)
+    return out
 
 
 def _plan_full_dome(targets: Sequence[PlanTarget], *, epoch: str, profile: ScannerProfile, min_points: int,

@@ -31,6 +31,14 @@ def _skew(v: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
+def _skews(v: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) cross-product matrices of (n, 3) vectors."""
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
+    return out
+
+
 def _rotvec_matrix(w: np.ndarray) -> np.ndarray:
     theta = float(np.linalg.norm(w))
     if theta < 1e-15:
@@ -96,26 +104,20 @@ def fit_reference_motion(ref_base: np.ndarray, ref_epoch: np.ndarray, ref_var: n
     # Work about the reference targets' centroid for a well-conditioned system.
     c = (w_ref @ ref_base) / w_ref.sum()
     rot, t = r0, t0 + r0 @ c - c  # t now maps (x - c): epoch ~= rot (x - c) + c + t
+    nr, nd = len(ref_base), len(deck_base)
+    eye_rows = np.tile(np.eye(3), (nr, 1))  # d(residual)/dt of the reference rows
     for _ in range(iterations):
-        rows, rhs, wts = [], [], []
         a = rot @ across_base
-        for b, e, w in zip(ref_base, ref_epoch, w_ref):
-            q = rot @ (b - c)
-            res = e - (q + c + t)
-            jw = -_skew(q)  # d(q)/d(omega) for rot <- (I + [omega]x) rot
-            for k in range(3):
-                rows.append(np.concatenate([jw[k], np.eye(3)[k]]))
-                rhs.append(res[k])
-                wts.append(w)
-        for b, e, w in zip(deck_base, deck_epoch, w_deck):
-            q = rot @ (b - c)
-            res = (e - (q + c + t)) @ a
-            rows.append(np.concatenate([a @ -_skew(q), a]))
-            rhs.append(res)
-            wts.append(w)
-        jac = np.array(rows)
-        sw = np.sqrt(np.array(wts))
-        step, *_ = np.linalg.lstsq(jac * sw[:, None], np.array(rhs) * sw, rcond=None)
+        q = (ref_base - c) @ rot.T
+        res_r = (ref_epoch - (q + c + t)).reshape(-1)
+        jw_r = -_skews(q).reshape(-1, 3)  # d(q)/d(omega) for rot <- (I + [omega]x) rot
+        qd = (deck_base - c) @ rot.T
+        res_d = (deck_epoch - (qd + c + t)) @ a
+        jw_d = np.cross(qd, a)  # a . (-[q]x omega) = (q x a) . omega
+        jac = np.vstack([np.hstack([jw_r, eye_rows]), np.hstack([jw_d, np.tile(a, (nd, 1))])])
+        rhs = np.concatenate([res_r, res_d])
+        sw = np.sqrt(np.concatenate([np.repeat(w_ref, 3), w_deck]))
+        step, *_ = np.linalg.lstsq(jac * sw[:, None], rhs * sw, rcond=None)
         rot = _rotvec_matrix(step[:3]) @ rot
         t = t + step[3:]
     return rot, t + c - rot @ c

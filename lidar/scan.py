@@ -71,6 +71,9 @@ class Scan:
         (row, col) of each point in the scanner's angular grid, if the file has one.
     metadata : mapping
         Format details (format, version, point format, scales, counts of dropped points...).
+    time_s : (N,) float64 array or None
+        Time of each point, seconds (LAS ``gps_time``, E57 ``timeStamp``); only differences within one
+        visit mean anything. None when the file has no times.
     """
 
     xyz_socs: np.ndarray
@@ -81,6 +84,7 @@ class Scan:
     name: str = ""
     grid_index: Optional[np.ndarray] = None
     metadata: Mapping[str, Any] = field(default_factory=dict)
+    time_s: Optional[np.ndarray] = None
 
     def __post_init__(self) -> None:
         xyz = self.xyz_socs
@@ -100,6 +104,11 @@ class Scan:
             if pose.shape != (4, 4) or not np.all(np.isfinite(pose)):
                 raise InputError(f"scan {self.name or self.source!r}: pose must be a finite 4x4 matrix")
             object.__setattr__(self, "pose", pose)
+        if self.time_s is not None:
+            ts = np.asarray(self.time_s, dtype=np.float64)
+            if ts.shape != (n,):
+                raise InputError(f"scan {self.name or self.source!r}: time_s must have shape ({n},), got {ts.shape}")
+            object.__setattr__(self, "time_s", ts)
         if self.grid_index is not None and self.grid_index.shape != (n, 2):
             raise InputError(f"scan {self.name or self.source!r}: grid_index must have shape ({n}, 2)")
         object.__setattr__(self, "metadata", MappingProxyType(dict(self.metadata)))
@@ -109,7 +118,7 @@ class Scan:
 
     def __reduce__(self):  # the read-only metadata proxy does not pickle; rebuild from a plain dict
         return (Scan, (self.xyz_socs, self.intensity, self.intensity_raw, self.pose, self.source, self.name,
-                       self.grid_index, dict(self.metadata)))
+                       self.grid_index, dict(self.metadata), self.time_s))
 
     @property
     def has_intensity(self) -> bool:
@@ -136,11 +145,15 @@ class Scan:
             name=self.name,
             grid_index=take(self.grid_index),
             metadata=self.metadata,
+            time_s=take(self.time_s),
         )
 
     @classmethod
     def concatenate(cls, scans: "list[Scan]", *, name: str = "") -> "Scan":
-        """Join scans of one set-up (same SOCS) into one, e.g. several fine-scan files."""
+        """Join scans of one set-up (same SOCS) into one, e.g. several fine-scan files.
+
+        Point times are kept when every scan has them (else the result has none).
+        """
         if not scans:
             raise InputError("no scans to concatenate")
         has_i = all(s.intensity is not None for s in scans)
@@ -155,4 +168,5 @@ class Scan:
             source=";".join(s.source for s in scans),
             name=name or scans[0].name,
             metadata={"parts": [s.name or s.source for s in scans]},
+            time_s=np.concatenate([s.time_s for s in scans]) if all(s.time_s is not None for s in scans) else None,
         )

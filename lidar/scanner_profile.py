@@ -80,6 +80,11 @@ class ScannerProfile:
     quality : str
         The quality (noise-averaging) setting the rate assumes, for instruments that have one
         ("4x" on a FARO); entered with every window.
+    wavelength_nm : float
+        The ranging laser's wavelength, for the air's refractive index (:mod:`lidar.systematic.atmosphere`).
+    drift_tolerance_arcsec : float
+        How far the set-up may turn during one visit before its drift is worth a warning (tilt or twist,
+        arcseconds from the first window to the last).
     sources : tuple of (field, source)
         Where each value comes from.
     notes : str
@@ -105,12 +110,15 @@ class ScannerProfile:
     vertical_reference: str = "zenith"
     resolution_label: str = "step"
     quality: str = ""
+    wavelength_nm: float = 1550.0
+    drift_tolerance_arcsec: float = 10.0
     sources: tuple[tuple[str, str], ...] = ()
     notes: str = ""
 
     def __post_init__(self) -> None:
         for k in ("pulse_rate_hz", "range_noise_m", "min_theta_step_deg", "min_phi_step_deg", "max_line_rate_hz",
-                  "window_overhead_s", "beam_divergence_mrad", "beam_exit_diameter_m", "max_range_m"):
+                  "window_overhead_s", "beam_divergence_mrad", "beam_exit_diameter_m", "max_range_m",
+                  "wavelength_nm", "drift_tolerance_arcsec"):
             v = getattr(self, k)
             if isinstance(v, bool) or not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise InputError(f"scanner profile {self.name!r}: {k} must be a positive number, got {v!r}")

@@ -4,7 +4,7 @@ For a levelled scanner at a position of the layout's frame, each target's range,
 incidence (from the layout's normals) give the fine-scan plan the planner would make
 (:func:`lidar.plan.plan_fine_scans`, same instrument, same points and time budget), hence the points
 on each target and its centroid covariance (:mod:`lidar.prediction`). Those covariances go through
-the very computation that processing runs (:func:`lidar.displacement.compute_displacements`), against
+the very computation that processing runs (:func:`lidar.systematic.budget.corrected_displacements`), against
 the baseline's stored centroids when there is a baseline, so the predicted sigma is the one
 processing would report.
 
@@ -16,13 +16,16 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Mapping, Optional, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from lidar.displacement import Observation, compute_displacements
+from lidar.pipeline import plan_times
+from lidar.systematic.adjustment import FieldModel, VisitSystematics
+from lidar.systematic.budget import corrected_displacements
+from lidar.systematic.range_walk import RangeWalkModel
 from common.errors import InputError, SurveyError
 from lidar.layout import Layout, bridge_axis, target_normals
 from lidar.plan import PlanTarget, plan_fine_scans
@@ -164,11 +167,41 @@ class Obstacles:
         return int(np.count_nonzero(np.isfinite(dist))) >= 2
 
 
+@dataclass(frozen=True, eq=False)
+class _Sighted:
+    """A centroid as the displacement budget reads it (position, covariance, incidence, time)."""
+
+    xyz_socs: np.ndarray
+    cov: np.ndarray
+    cos_incidence: float = float("nan")
+    time_s: float = float("nan")
+
+
+def _as_sighted(o: object) -> _Sighted:
+    xyz = getattr(o, "xyz_socs", None)
+    if xyz is None:
+        xyz = getattr(o, "xyz")
+    return _Sighted(np.asarray(xyz, dtype=np.float64), np.asarray(getattr(o, "cov"), dtype=np.float64),
+                    float(getattr(o, "cos_incidence", float("nan"))), float(getattr(o, "time_s", float("nan"))))
+
+
+def _typical_visit(field: FieldModel, label: str) -> VisitSystematics:
+    """A visit as the campaign's visits have been: their median scale sigma, drift covariance and misfit."""
+    others = [v for k, v in field.visits.items() if k != field.baseline] or list(field.visits.values())
+    if not others:
+        return VisitSystematics(label)
+    timed = [v for v in others if v.timed]
+    drift = np.median([v.drift_cov for v in timed], axis=0) if timed else np.zeros((3, 3))
+    return VisitSystematics(label, 0.0, float(np.median([v.scale_sigma_ppm for v in others])), np.zeros(3), drift,
+                            0.0, bool(timed), True, (), (), float(np.median([v.misfit for v in others])))
+
+
 def predict_station(layout: Layout, station_layout: Sequence[float], *, profile: ScannerProfile,
                     min_points: int = 1000, budget_seconds: float = 3600.0, up: ArrayLike = (0.0, 0.0, 1.0),
-                    baseline: Optional[Mapping[str, Observation]] = None,
+                    baseline: Optional[Mapping[str, object]] = None,
                     normals: Optional[np.ndarray] = None, piers: Optional[_Piers] = None,
-                    obstacles: Optional[Obstacles] = None) -> StationPrediction:
+                    obstacles: Optional[Obstacles] = None, field_model: Optional[FieldModel] = None,
+                    closure: bool = False) -> StationPrediction:
     """Predicted plan time, points and displacement sigma of every target from one station.
 
     Parameters
@@ -181,13 +214,19 @@ def predict_station(layout: Layout, station_layout: Sequence[float], *, profile:
         The planner's settings (the campaign's ``min_points`` and ``budget_min``).
     up : (3,), keyword-only
         The layout's up axis.
-    baseline : mapping id -> Observation, optional, keyword-only
+    baseline : mapping id -> centroid, optional, keyword-only
         The baseline epoch's centroids (its own scanner frame). Default: a baseline taken from
         this same station (same covariances, independent noise).
     normals : (N, 3) array, optional, keyword-only
         Target normals in the layout frame (default :func:`lidar.layout.target_normals`).
     obstacles : Obstacles, optional, keyword-only
         Surfaces a previous scan saw (the last epoch's coarse scan): lines of sight through them are blocked.
+    field_model : FieldModel, optional, keyword-only
+        The campaign's field model (:mod:`lidar.systematic`): the prediction then carries the terms processing
+        adds (the range walk's uncertainty at this station's ranges and incidences, a typical visit's scale,
+        drift over this plan's duration and misfit), so a station that leaves them large ranks lower.
+    closure : bool, keyword-only
+        Plan a closure window, as processing does (default False).
     """
     u = np.asarray(up, dtype=np.float64)
     u = u / np.linalg.norm(u)
@@ -224,20 +263,32 @@ def predict_station(layout: Layout, station_layout: Sequence[float], *, profile:
         normal_socs[tid] = n_s
     if not targets:
         return StationPrediction(tuple(float(v) for v in s), 0.0, {}, tuple(hidden), {}, reasons, usable=False)
-    plan = plan_fine_scans(targets, profile=profile, min_points=min_points, budget_seconds=budget_seconds)
+    plan = plan_fine_scans(targets, profile=profile, min_points=min_points, budget_seconds=budget_seconds,
+                           closure=closure)
+    times = plan_times(plan)
     epoch, points = {}, {}
-    for t, roi in zip(targets, plan.rois):
+    by_id = {t.id: t for t in targets}
+    for roi in plan.rois:
+        t = by_id[roi.reflector]
+        if roi.closure or t.id in epoch:
+            continue
         n = max(roi.expected_target_points, 1)
         points[t.id] = int(n)
-        epoch[t.id] = Observation(np.asarray(t.xyz_socs), centroid_covariance(
-            t.xyz_socs, normal_socs[t.id], n, diameter_m=t.diameter_m, range_noise_m=profile.range_noise_m))
-    base = dict(baseline) if baseline is not None else dict(epoch)
+        epoch[t.id] = _Sighted(np.asarray(t.xyz_socs), centroid_covariance(
+            t.xyz_socs, normal_socs[t.id], n, diameter_m=t.diameter_m, range_noise_m=profile.range_noise_m),
+            float(t.incidence_cos or 1.0), times.get(t.id, float("nan")))
+    base = {k: _as_sighted(v) for k, v in baseline.items()} if baseline is not None else dict(epoch)
     if baseline is not None:  # same geometry as the baseline: positions from it, so nothing looks moved
         carried = _carry(base, epoch)
-        epoch = {k: Observation(carried.get(k, o.xyz), o.cov) for k, o in epoch.items()}
+        epoch = {k: replace(o, xyz_socs=carried.get(k, o.xyz_socs)) for k, o in epoch.items()}
     groups = dict(zip(layout.ids, layout.groups))
+    model = field_model if field_model is not None and baseline is not None else FieldModel("__baseline__", RangeWalkModel(), {})
+    label = "__station__"
+    model = FieldModel(model.baseline, model.range_walk, {**dict(model.visits), label: _typical_visit(model, label)},
+                       model.sigma0)
     try:
-        res = compute_displacements(base, epoch, groups, expected_sigmas=True)
+        res = corrected_displacements(base, epoch, groups, model=model, baseline_label=model.baseline,
+                                      epoch_label=label, expected_sigmas=True)
     except SurveyError:
         return StationPrediction(tuple(float(v) for v in s), plan.total_seconds, {}, tuple(hidden), points, reasons,
                                  usable=False)
@@ -246,7 +297,7 @@ def predict_station(layout: Layout, station_layout: Sequence[float], *, profile:
                              usable=bool(sig))
 
 
-def _carry(base: Mapping[str, Observation], epoch: Mapping[str, Observation]) -> dict[str, np.ndarray]:
+def _carry(base: Mapping[str, _Sighted], epoch: Mapping[str, _Sighted]) -> dict[str, np.ndarray]:
     """Epoch positions such that the epoch is the baseline seen from the station (no change).
 
     A rigid fit of the shared targets carries the baseline positions into the station's frame.
@@ -256,8 +307,8 @@ def _carry(base: Mapping[str, Observation], epoch: Mapping[str, Observation]) ->
     shared = [i for i in epoch if i in base]
     if len(shared) < 3:
         return {}
-    motion = fit_rigid(np.array([base[i].xyz for i in shared]), np.array([epoch[i].xyz for i in shared]))
-    return {k: motion.apply(np.asarray(base[k].xyz)) for k in shared}
+    motion = fit_rigid(np.array([base[i].xyz_socs for i in shared]), np.array([epoch[i].xyz_socs for i in shared]))
+    return {k: motion.apply(np.asarray(base[k].xyz_socs)) for k in shared}
 
 
 def default_area(layout: Layout, *, up: ArrayLike = (0.0, 0.0, 1.0), reach_m: float = 25.0,
@@ -314,8 +365,9 @@ def _predict_chunk(args) -> list[StationPrediction]:
 
 def survey_stations(layout: Layout, positions_layout: np.ndarray, *, profile: ScannerProfile,
                     min_points: int = 1000, budget_seconds: float = 3600.0, up: ArrayLike = (0.0, 0.0, 1.0),
-                    baseline: Optional[Mapping[str, Observation]] = None, workers: Optional[int] = None,
-                    obstacles_xyz: Optional[np.ndarray] = None,
+                    baseline: Optional[Mapping[str, object]] = None, workers: Optional[int] = None,
+                    obstacles_xyz: Optional[np.ndarray] = None, field_model: Optional[FieldModel] = None,
+                    closure: bool = False,
                     progress: Optional[ProgressCallback] = None) -> tuple[StationPrediction, ...]:
     """:func:`predict_station` at every position of an (M, 3) array, best first.
 
@@ -335,7 +387,8 @@ def survey_stations(layout: Layout, positions_layout: np.ndarray, *, profile: Sc
         raise InputError("no candidate station: the allowed area holds no grid position")
     u = np.asarray(up, dtype=np.float64)
     u = u / np.linalg.norm(u)
-    kwargs = dict(profile=profile, min_points=min_points, budget_seconds=budget_seconds, up=u, baseline=baseline)
+    kwargs = dict(profile=profile, min_points=min_points, budget_seconds=budget_seconds, up=u, baseline=baseline,
+                  field_model=field_model, closure=closure)
     if obstacles_xyz is not None:
         kwargs["obstacles_xyz"] = np.asarray(obstacles_xyz, dtype=np.float32).reshape(-1, 3)
     n_workers = min(4, os.cpu_count() or 1) if workers is None else max(1, int(workers))

@@ -129,14 +129,22 @@ def cmd_check(args) -> int:
         table([t.to_json() for t in result.targets],
               ["reflector", "group", "status", "points", "planned_points", "points_ratio", "sigma_mm", "goal_sigma_mm",
                "note"])
-        if not result.short:
+        cl = result.closure
+        if cl is not None and cl.status == "not measured":
+            print(f"closure ({cl.reflector}): not measured; {cl.note}")
+        elif cl is not None:
+            print(f"closure ({cl.reflector}): the set-up turned {cl.angle_arcsec:.1f}\" +- {cl.sigma_arcsec:.1f}\" in "
+                  f"{cl.minutes:.0f} min ({'within' if cl.status == 'ok' else 'BEYOND'} the instrument's "
+                  f"{cl.tolerance_arcsec:g}\"){'; ' + cl.note if cl.note else ''}")
+        if not result.short and (cl is None or cl.status != "drifted"):
             print(f"epoch {args.epoch}: every target is good; the visit is complete")
         else:
             names = ", ".join(t.reflector for t in result.short)
             where = f"wrote the re-scan plan {args.out}" if args.out else "give --out FILE for a re-scan plan"
             print(f"epoch {args.epoch}: re-scan {names} before leaving "
                   f"({result.rescan.total_seconds / 60:.1f} min); {where}")
-    return 0 if not result.short else EXIT_SHORT
+    drifted = result.closure is not None and result.closure.status == "drifted"
+    return 0 if not result.short and not drifted else EXIT_SHORT
 
 
 def cmd_stations(args) -> int:

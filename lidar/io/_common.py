@@ -46,6 +46,7 @@ def make_scan(
     grid_index: Optional[np.ndarray] = None,
     metadata: Optional[dict] = None,
     finite: bool = False,
+    time_s: Optional[np.ndarray] = None,
 ) -> Scan:
     """Build a Scan from decoded arrays: drop non-finite points, normalise intensity.
 
@@ -53,7 +54,8 @@ def make_scan(
     and skips that check. ``limits`` is an intensity range the file declares;
     without one the vendor convention is recognised from the values
     (:mod:`lidar.io.intensity`). Raises ScanFormatError when nothing valid is
-    left or the header's pose is not a finite rigid transform.
+    left or the header's pose is not a finite rigid transform. ``time_s`` (N,) point times, seconds,
+    are kept with their points.
     """
     meta = {"format": fmt, **(metadata or {})}
     xyz = np.asarray(xyz, dtype=np.float64)
@@ -69,6 +71,7 @@ def make_scan(
         xyz = xyz[ok]
         raw = raw[ok] if raw is not None else None
         grid_index = grid_index[ok] if grid_index is not None else None
+        time_s = time_s[ok] if time_s is not None else None
         meta["dropped_nonfinite_points"] = dropped
     if xyz.shape[0] == 0:
         raise ScanFormatError(path, "holds no valid points" + (f" ({dropped} were NaN/inf)" if dropped else ""))
@@ -97,6 +100,7 @@ def make_scan(
         name=name or path.stem,
         grid_index=grid_index,
         metadata=meta,
+        time_s=time_s,
     )
 
 

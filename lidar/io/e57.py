@@ -97,6 +97,43 @@ def read_e57(path: str | os.PathLike, *, progress: Optional[ProgressCallback] = 
     return scans
 
 
+#: Point fields pye57's buffers do not know, read through libE57 directly: (name, numpy dtype).
+_TIME_FIELDS = (("timeStamp", np.float64), ("isTimeStampInvalid", np.int8))
+
+
+def _read_fields(e57, header, p: Path, i: int) -> dict:
+    """The point fields we use of scan ``i``, as arrays (times included when the scan has them)."""
+    from pye57 import libe57
+
+    # Read only what we use: other fields (colour, return counts...) may have value
+    # ranges pye57's fixed buffer types cannot hold.
+    wanted = [f for f in header.point_fields if f in _WANTED]
+    n = header.point_count
+    data, buffers = e57.make_buffers(wanted, n)
+    for f, dtype in _TIME_FIELDS:
+        if f in header.point_fields:
+            data[f] = np.empty(n, dtype)
+            buffers.append(libe57.SourceDestBuffer(e57.image_file, f, data[f], n, True, True))
+    reader = header.points.reader(buffers)
+    try:
+        got = reader.read()
+    finally:
+        reader.close()
+    if got != n:
+        raise ScanFormatError(p, f"truncated: scan {i} declares {n} points, {got} could be read")
+    return data
+
+
+def _times(data: dict) -> Optional[np.ndarray]:
+    """(N,) ``timeStamp`` seconds (NaN where flagged invalid), or None when the scan has no usable times."""
+    if "timeStamp" not in data:
+        return None
+    t = np.asarray(data["timeStamp"], dtype=np.float64).copy()
+    if "isTimeStampInvalid" in data:
+        t[np.asarray(data["isTimeStampInvalid"]) != 0] = np.nan
+    return None if not np.any(np.isfinite(t)) else t
+
+
 def _read_one(e57, p: Path, i: int, version: str) -> Scan:
     with quiet_stderr():
         header = e57.get_header(i)
@@ -105,17 +142,7 @@ def _read_one(e57, p: Path, i: int, version: str) -> Scan:
         if header.point_count == 0:
             raise ScanFormatError(p, f"scan {i} ({name}) holds no points")
         fields = set(header.point_fields)
-        # Read only what we use: other fields (colour, return counts...) may have value
-        # ranges pye57's fixed buffer types cannot hold.
-        wanted = [f for f in header.point_fields if f in _WANTED]
-        data, buffers = e57.make_buffers(wanted, header.point_count)
-        reader = header.points.reader(buffers)
-        try:
-            got = reader.read()
-        finally:
-            reader.close()
-        if got != header.point_count:
-            raise ScanFormatError(p, f"truncated: scan {i} declares {header.point_count} points, {got} could be read")
+        data = _read_fields(e57, header, p, i)
     if {"cartesianX", "cartesianY", "cartesianZ"} <= data.keys():
         xyz = np.column_stack([data["cartesianX"], data["cartesianY"], data["cartesianZ"]]).astype(np.float64)
         invalid = data.get("cartesianInvalidState")
@@ -128,6 +155,7 @@ def _read_one(e57, p: Path, i: int, version: str) -> Scan:
     else:
         raise ScanFormatError(p, f"scan {i} ({name}) has neither cartesian nor spherical coordinates")
     raw = np.asarray(data["intensity"]) if "intensity" in data else None
+    times = _times(data)
     grid = None
     if "rowIndex" in data and "columnIndex" in data:
         grid = np.column_stack([data["rowIndex"], data["columnIndex"]]).astype(np.int32)
@@ -136,16 +164,22 @@ def _read_one(e57, p: Path, i: int, version: str) -> Scan:
         xyz = xyz[keep]
         raw = raw[keep] if raw is not None else None
         grid = grid[keep] if grid is not None else None
+        times = times[keep] if times is not None else None
     limits = _intensity_limits(node) if raw is not None else None
     pose = pose_from_quaternion(header.rotation, header.translation)
     return make_scan(
-        p, xyz, raw, fmt="E57", limits=limits, pose=pose, name=name, grid_index=grid,
-        metadata={"scan_index": i, "fields": sorted(fields), "version": version},
+        p, xyz, raw, fmt="E57", limits=limits, pose=pose, name=name, grid_index=grid, time_s=times,
+        metadata={"scan_index": i, "fields": sorted(fields), "version": version, "has_time": times is not None},
     )
 
 
 def write_e57(scans: Scan | list[Scan], path: str | os.PathLike) -> Path:
-    """Write one or several scans (each with its pose) to an E57 file."""
+    """Write one or several scans (each with its pose) to an E57 file.
+
+    A scan with point times (``time_s``) gets a double-precision ``timeStamp`` field holding them as they
+    are (seconds) and its ``acquisitionStart`` set to the first; a scan without times is written by
+    pye57 exactly as before times were written.
+    """
     import pye57
 
     if isinstance(scans, Scan):
@@ -163,11 +197,75 @@ def write_e57(scans: Scan | list[Scan], path: str | os.PathLike) -> Path:
                     }
                     if scan.intensity is not None:
                         data["intensity"] = raw_for_writing(scan).astype(np.float64)
-                    kwargs: dict[str, object] = {"name": scan.name or "scan"}
-                    if scan.pose is not None:
-                        q, t = quaternion_from_pose(scan.pose)
-                        kwargs.update(rotation=q, translation=t)
-                    e57.write_scan_raw(data, **kwargs)
+                    q, t = quaternion_from_pose(scan.pose) if scan.pose is not None else (None, None)
+                    if scan.time_s is None:
+                        kwargs: dict[str, object] = {"name": scan.name or "scan"}
+                        if q is not None:
+                            kwargs.update(rotation=q, translation=t)
+                        e57.write_scan_raw(data, **kwargs)
+                    else:
+                        _write_timed_scan(e57, data, scan.time_s, name=scan.name or "scan", rotation=q,
+                                          translation=t)
             finally:
                 e57.close()
     return final
+
+
+def _write_timed_scan(e57, data: dict, time_s: np.ndarray, *, name: str, rotation: Optional[np.ndarray],
+                      translation: Optional[np.ndarray]) -> None:
+    """One scan with a ``timeStamp`` field, through libE57 (pye57's writer knows no times).
+
+    Coordinates and intensity are stored as pye57 stores them (single precision), the times in double.
+    """
+    import uuid
+
+    from pye57 import libe57
+
+    imf = e57.image_file
+    node = libe57.StructureNode(imf)
+    node.set("guid", libe57.StringNode(imf, "{%s}" % uuid.uuid4()))
+    node.set("name", libe57.StringNode(imf, name))
+    node.set("description", libe57.StringNode(imf, "BridgeSurvey"))
+    xyz = np.column_stack([data["cartesianX"], data["cartesianY"], data["cartesianZ"]])
+    lo, hi = xyz.min(axis=0), xyz.max(axis=0)
+    data["timeStamp"] = np.ascontiguousarray(time_s, dtype=np.float64)
+    if "intensity" in data:
+        limits = libe57.StructureNode(imf)
+        limits.set("intensityMinimum", libe57.FloatNode(imf, float(data["intensity"].min())))
+        limits.set("intensityMaximum", libe57.FloatNode(imf, float(data["intensity"].max())))
+        node.set("intensityLimits", limits)
+    if rotation is not None and translation is not None:
+        pose = libe57.StructureNode(imf)
+        rot = libe57.StructureNode(imf)
+        for k, v in zip("wxyz", rotation):
+            rot.set(k, libe57.FloatNode(imf, float(v)))
+        tr = libe57.StructureNode(imf)
+        for k, v in zip("xyz", translation):
+            tr.set(k, libe57.FloatNode(imf, float(v)))
+        pose.set("rotation", rot)
+        pose.set("translation", tr)
+        node.set("pose", pose)
+    start = libe57.StructureNode(imf)
+    start.set("dateTimeValue", libe57.FloatNode(imf, float(np.nanmin(time_s))))
+    start.set("isAtomicClockReferenced", libe57.IntegerNode(imf, 0))
+    node.set("acquisitionStart", start)
+    proto = libe57.StructureNode(imf)
+    for axis, f in enumerate(("cartesianX", "cartesianY", "cartesianZ")):
+        proto.set(f, libe57.FloatNode(imf, float((lo[axis] + hi[axis]) / 2), libe57.E57_SINGLE, float(lo[axis]),
+                                      float(hi[axis])))
+    if "intensity" in data:
+        i_lo, i_hi = float(data["intensity"].min()), float(data["intensity"].max())
+        proto.set("intensity", libe57.FloatNode(imf, i_lo, libe57.E57_SINGLE, i_lo, i_hi))
+    t_lo, t_hi = float(np.nanmin(time_s)), float(np.nanmax(time_s))
+    proto.set("timeStamp", libe57.FloatNode(imf, t_lo, libe57.E57_DOUBLE, t_lo, t_hi))
+    points = libe57.CompressedVectorNode(imf, proto, libe57.VectorNode(imf, True))
+    node.set("points", points)
+    e57.data3d.append(node)
+    buffers = libe57.VectorSourceDestBuffer()
+    arrays = {f: np.ascontiguousarray(data[f], dtype=np.float64) for f in data}
+    n = xyz.shape[0]
+    for f, a in arrays.items():
+        buffers.append(libe57.SourceDestBuffer(imf, f, a, n, True, True))
+    writer = points.writer(buffers)
+    writer.write(n)
+    writer.close()

@@ -62,8 +62,11 @@ def read_las(path: str | os.PathLike, *, progress: Optional[ProgressCallback] = 
     Returns
     -------
     Scan with float64 xyz in the file's frame (taken as SOCS), intensity
-    normalised over the file, the raw uint16 intensity, and the pose stored by
-    BridgeSurvey's own writer, if any.
+    normalised over the file, the raw uint16 intensity, the pose stored by
+    BridgeSurvey's own writer, if any, and the point times (``time_s``) from
+    ``gps_time`` when the point format has it and the times are not all zero
+    (``metadata["has_time"]`` says which; a format with ``gps_time`` written
+    without times holds zeros there).
 
     Raises
     ------
@@ -84,14 +87,17 @@ def read_las(path: str | os.PathLike, *, progress: Optional[ProgressCallback] = 
             offsets = np.asarray(header.offsets, dtype=np.float64)
             xyz = np.empty((n, 3), dtype=np.float64)
             raw = np.empty(n, dtype=np.uint16)
+            times = np.empty(n, dtype=np.float64) if "gps_time" in header.point_format.dimension_names else None
             compressed = header.are_points_compressed
             if compressed:
                 chunk_points = chunk_points or LAZ_CHUNK_POINTS
-                _decode_laz(reader, p, xyz, raw, scales, offsets, chunk_points, progress)
+                _decode_laz(reader, p, (xyz, raw, times), scales, offsets, chunk_points, progress)
             else:
                 chunk_points = chunk_points or LAS_CHUNK_POINTS
-                _decode_las(p, header, xyz, raw, scales, offsets, chunk_points, progress)
+                _decode_las(p, header, (xyz, raw, times), scales, offsets, chunk_points, progress)
             pose = _pose_from_header(header)
+            if times is not None and not np.any(times):
+                times = None  # the format has the field but the writer left it empty
             meta = {
                 "version": str(header.version),
                 "point_format": int(header.point_format.id),
@@ -99,22 +105,27 @@ def read_las(path: str | os.PathLike, *, progress: Optional[ProgressCallback] = 
                 "offsets": tuple(float(o) for o in offsets),
                 "compressed": bool(compressed),
                 "point_count": n,
+                "has_time": times is not None,
             }
     except ScanFormatError:
         raise
     except (laspy.errors.LaspyException, ValueError, OSError, RuntimeError, struct.error) as exc:
         raise ScanFormatError(p, f"not a readable LAS/LAZ file ({first_line(exc)})") from exc
     # Scaled 32-bit integers are always finite: skip the (costly) finiteness scan.
-    return make_scan(p, xyz, raw, fmt="LAZ" if compressed else "LAS", pose=pose, metadata=meta, finite=True)
+    return make_scan(p, xyz, raw, fmt="LAZ" if compressed else "LAS", pose=pose, metadata=meta, finite=True,
+                     time_s=times)
 
 
-def _scale_into(xyz, raw, start, records: np.ndarray, scales, offsets):
-    """Scale the X, Y, Z integers of packed point records into ``xyz[start:]`` and copy the intensity.
+def _scale_into(out_arrays, start, records: np.ndarray, scales, offsets):
+    """Scale the X, Y, Z integers of packed point records into ``xyz[start:]``, copy the intensity (and times).
+
+    ``out_arrays`` is (xyz, raw, times); times is None when they are not read.
 
     Converting each field into a contiguous float64 temporary, scaling it there
     and then storing it into the (strided) output column is about twice as fast
     as letting numpy cast straight into the strided column.
     """
+    xyz, raw, times = out_arrays
     m = records.shape[0]
     out = xyz[start:start + m]
     for k, name in enumerate(("X", "Y", "Z")):
@@ -123,14 +134,16 @@ def _scale_into(xyz, raw, start, records: np.ndarray, scales, offsets):
         tmp += offsets[k]
         out[:, k] = tmp
     raw[start:start + m] = records["intensity"]
+    if times is not None:
+        times[start:start + m] = records["gps_time"]
 
 
-def _decode_las(p: Path, header, xyz, raw, scales, offsets, chunk_points, progress):
+def _decode_las(p: Path, header, out_arrays, scales, offsets, chunk_points, progress):
     """Read point records chunk by chunk with two threads (I/O of one overlaps scaling of the other).
 
     Peak memory is the output arrays plus one record buffer per thread.
     """
-    n = xyz.shape[0]
+    n = out_arrays[0].shape[0]
     dtype = header.point_format.dtype()
     first = int(header.offset_to_point_data)
     size = p.stat().st_size
@@ -149,7 +162,7 @@ def _decode_las(p: Path, header, xyz, raw, scales, offsets, chunk_points, progre
         got = os.preadv(fd, [view], first + start * dtype.itemsize)  # type: ignore[list-item]
         if got != view.size:
             raise ScanFormatError(p, "truncated: the point records end early")
-        _scale_into(xyz, raw, start, view.view(dtype), scales, offsets)
+        _scale_into(out_arrays, start, view.view(dtype), scales, offsets)
         return start + m
 
     try:
@@ -160,18 +173,18 @@ def _decode_las(p: Path, header, xyz, raw, scales, offsets, chunk_points, progre
         os.close(fd)
 
 
-def _decode_laz(reader, p: Path, xyz, raw, scales, offsets, chunk_points, progress):
+def _decode_laz(reader, p: Path, out_arrays, scales, offsets, chunk_points, progress):
     """Decode LAZ chunk by chunk.
 
     lazrs decompresses each chunk on all cores, holding the GIL, so a prefetch thread would gain nothing.
     """
-    n = xyz.shape[0]
+    n = out_arrays[0].shape[0]
     start = 0
     for chunk in reader.chunk_iterator(chunk_points):
         m = len(chunk)
         if start + m > n:
             raise ScanFormatError(p, "holds more points than its header declares")
-        _scale_into(xyz, raw, start, chunk.array, scales, offsets)
+        _scale_into(out_arrays, start, chunk.array, scales, offsets)
         start += m
         report(progress, start / n, "decoding LAZ")
     if start != n:
@@ -180,6 +193,9 @@ def _decode_laz(reader, p: Path, xyz, raw, scales, offsets, chunk_points, progre
 
 def write_las(scan: Scan, path: str | os.PathLike, *, scale_m: Optional[float] = None) -> Path:
     """Write a scan as LAS or LAZ (chosen by the suffix), LAS 1.4 point format 6.
+
+    Point format 6 has ``gps_time``: the scan's ``time_s`` goes there (seconds); a scan without
+    times leaves it 0 for every point, as before times were written.
 
     Parameters
     ----------
@@ -223,6 +239,8 @@ def write_las(scan: Scan, path: str | os.PathLike, *, scale_m: Optional[float] =
         lo_i, hi_i = float(raw64.min()), float(raw64.max())
         raw = np.round((raw64 - lo_i) / (hi_i - lo_i) * 65535 if hi_i > lo_i else raw64 * 0).astype(np.uint16)
     las.intensity = raw
+    if scan.time_s is not None:
+        las.gps_time = scan.time_s
     compress = final.suffix.lower() == ".laz"
     with atomic_output(final) as tmp:
         las.write(tmp, do_compress=compress, laz_backend=_laz_backend() if compress else None)

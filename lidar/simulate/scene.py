@@ -20,8 +20,9 @@ from lidar.simulate.bridge import (
     pier_meshes,
     plate_mesh,
 )
+from lidar.simulate.effects import DriftModel, RangeWalk, VisitTiming, return_strength, walk_to_dict
 from lidar.simulate.setup import ScannerSetup
-from lidar.simulate.truth import ScanTruth, TargetTruth
+from lidar.simulate.truth import ScanTruth, TargetTruth, WindowTruth
 
 # Surface reflectances (before the incidence and range factors).
 REFLECTANCE = {"ground": 0.16, "pier": 0.26, "deck": 0.24, "occluder": 0.20}
@@ -35,12 +36,15 @@ CABLE_TIE_SIZE_M = (0.010, 0.050)  # width (radial), length (tangential): a tie 
 
 @dataclass(frozen=True)
 class EpochConditions:
-    """The state of the bridge at one visit.
+    """The state of the bridge, the air and the instrument at one visit.
+
+    Every effect after ``saturated`` is off by default and draws no random numbers.
 
     Attributes
     ----------
     midspan_displacement_m : float
-        Vertical displacement at midspan, positive up (a sag is negative).
+        Vertical displacement at midspan, positive up (a sag is negative); every span's when
+        ``span_displacements_m`` is empty.
     moved_targets : mapping id -> (3,) offset in metres
         Targets knocked or re-glued since the baseline (e.g. a moved reference target).
     occluded : tuple of ids
@@ -52,6 +56,28 @@ class EpochConditions:
         Targets that fell off (no disc at all).
     saturated : bool
         Target returns saturate the receiver (intensity clipped at the top).
+    span_displacements_m : tuple of float
+        Midspan displacement of each span (positive up), one per span. Default (empty): all
+        ``midspan_displacement_m``.
+    deck_strain : float
+        Deck strain along x, dL / L (e.g. 12e-6 /degC times the temperature change): every deck point (the
+        deck's mesh and the measurement targets under it) moves along x by ``deck_strain * (x - fixed
+        bearing)``; piers and their targets do not. Default 0.
+    fixed_bearing_x_m : float, optional
+        x of the fixed bearing. Default None: the first pier (x = 0).
+    range_scale_ppm : float
+        Atmosphere: every measured range is multiplied by ``1 + ppm * 1e-6``. Default 0.
+    range_walk : RangeWalk, optional
+        Bias of retro-reflector (target and cable-tie) ranges, see :mod:`lidar.simulate.effects`. Default none.
+    clipped_fraction : float
+        Fraction of the target points, the strongest returns, whose raw intensity is clipped at the
+        file's ceiling (65535). Default 0.
+    drift : DriftModel, optional
+        Rotation of the instrument during the visit (points are reported in its frame of the moment). Default
+        none. Implies times.
+    timing : VisitTiming, optional
+        When points are measured; every point then carries a time. Default none (no times, unless drifting:
+        then ``VisitTiming()``).
     """
 
     midspan_displacement_m: float = 0.0
@@ -60,6 +86,14 @@ class EpochConditions:
     cable_ties: tuple[str, ...] = ()
     removed: tuple[str, ...] = ()
     saturated: bool = False
+    span_displacements_m: tuple[float, ...] = ()
+    deck_strain: float = 0.0
+    fixed_bearing_x_m: Optional[float] = None
+    range_scale_ppm: float = 0.0
+    range_walk: Optional[RangeWalk] = None
+    clipped_fraction: float = 0.0
+    drift: Optional[DriftModel] = None
+    timing: Optional[VisitTiming] = None
 
     def __post_init__(self) -> None:
         if not np.isfinite(self.midspan_displacement_m):
@@ -68,6 +102,38 @@ class EpochConditions:
             {k: tuple(float(x) for x in v) for k, v in dict(self.moved_targets).items()}))
         for name in ("occluded", "cable_ties", "removed"):
             object.__setattr__(self, name, tuple(getattr(self, name)))
+        object.__setattr__(self, "span_displacements_m", tuple(float(v) for v in self.span_displacements_m))
+        scalars = (self.deck_strain, self.range_scale_ppm, *self.span_displacements_m,
+                   0.0 if self.fixed_bearing_x_m is None else self.fixed_bearing_x_m)
+        if not all(np.isfinite(scalars)):
+            raise InputError("epoch conditions: strain, range scale, span displacements and bearing must be finite")
+        if abs(self.deck_strain) > 0.01 or abs(self.range_scale_ppm) > 10_000:
+            raise InputError("epoch conditions: deck strain beyond 1 % or a range scale beyond 10,000 ppm")
+        if not 0.0 <= self.clipped_fraction <= 1.0:
+            raise InputError(f"clipped fraction must lie in [0, 1], got {self.clipped_fraction}")
+
+    @property
+    def timed(self) -> bool:
+        """Whether points get times (a timing or a drift is given)."""
+        return self.timing is not None or self.drift is not None
+
+    @property
+    def visit_timing(self) -> VisitTiming:
+        return self.timing or VisitTiming()
+
+    @property
+    def fixed_x_m(self) -> float:
+        """The fixed bearing's x, metres (0, the first pier, by default)."""
+        return 0.0 if self.fixed_bearing_x_m is None else float(self.fixed_bearing_x_m)
+
+    def amplitudes(self, n_spans: int) -> float | tuple[float, ...]:
+        """What :meth:`BridgeModel.deflection_m` takes: one midspan displacement for all spans, or one per span."""
+        if not self.span_displacements_m:
+            return self.midspan_displacement_m
+        if len(self.span_displacements_m) != n_spans:
+            raise InputError(f"epoch conditions give {len(self.span_displacements_m)} span displacements for a "
+                             f"bridge of {n_spans} spans")
+        return self.span_displacements_m
 
 
 @dataclass(frozen=True)
@@ -86,6 +152,30 @@ def _overlap(offset, half_size, footprint):
     return np.clip((hi - lo) / footprint, 0.0, 1.0)
 
 
+class _Returns:
+    """Rays whose range a retro-reflector (disc or cable tie) set: index, range, cos incidence, cover.
+
+    Collected only when a range walk or clipping needs them; a ray painted twice keeps the last painting,
+    as the scan's ranges do.
+    """
+
+    def __init__(self) -> None:
+        self.parts: list[tuple[np.ndarray, ...]] = []
+
+    def add(self, idx: np.ndarray, range_m: np.ndarray, cos_inc: np.ndarray, cover: np.ndarray) -> None:
+        self.parts.append((idx, range_m, cos_inc, cover))
+
+    def final(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(index, range, cos incidence, strength) of every painted ray, once each."""
+        if not self.parts:
+            e = np.zeros(0)
+            return np.zeros(0, np.int64), e, e, e
+        idx, r, c, cov = (np.concatenate(a) for a in zip(*self.parts))
+        _, first_rev = np.unique(idx[::-1], return_index=True)
+        last = idx.size - 1 - first_rev
+        return idx[last], r[last], c[last], return_strength(r[last], c[last], cov[last])
+
+
 class BridgeScene:
     """The bridge in one state, seen from one scanner set-up.
 
@@ -94,8 +184,9 @@ class BridgeScene:
     model : BridgeModel
     conditions : EpochConditions
     setup : ScannerSetup
+        The instrument's pose at the start of the visit (drift turns it from there).
     profile : ScannerProfile, keyword-only
-        Noise and footprint model. Default: Riegl VZ-1000.
+        Noise, footprint and measurement-rate model. Default: Riegl VZ-1000.
     """
 
     def __init__(self, model: BridgeModel, conditions: EpochConditions, setup: ScannerSetup, *,
@@ -108,13 +199,15 @@ class BridgeScene:
             unknown = set(ids) - known
             if unknown:
                 raise InputError(f"epoch conditions name unknown targets: {sorted(unknown)}")
+        self.amplitudes = conditions.amplitudes(model.n_spans)
         self.discs = self._discs()
         self._scene = o3d.t.geometry.RaycastingScene()
         self._kind: dict[int, str] = {}
         self._add("ground", *ground_mesh(model))
         for mesh in pier_meshes(model):
             self._add("pier", *mesh)
-        self._add("deck", *deck_mesh(model, conditions.midspan_displacement_m))
+        self._add("deck", *deck_mesh(model, self.amplitudes, strain=conditions.deck_strain,
+                                     fixed_x_m=conditions.fixed_x_m))
         origin = np.asarray(setup.position_m)
         for d in self.discs:
             if d.target.id in conditions.occluded:
@@ -131,30 +224,126 @@ class BridgeScene:
         self._kind[int(gid)] = kind
 
     def _discs(self) -> list[_Disc]:
+        """Every disc still glued on, deformed: measurement targets ride on the deck (deflection and strain)."""
         out = []
+        c = self.conditions
         for t in self.model.targets:
-            if t.id in self.conditions.removed:
+            if t.id in c.removed:
                 continue
             c0 = np.asarray(t.centre_m)
             disp = np.zeros(3)
             if t.group == "measurement":
-                disp[2] = float(self.model.deflection_m(c0[0], self.conditions.midspan_displacement_m))
-            disp += np.asarray(self.conditions.moved_targets.get(t.id, (0.0, 0.0, 0.0)))
+                disp[2] = float(self.model.deflection_m(c0[0], self.amplitudes))
+                if c.deck_strain:
+                    disp[0] = c.deck_strain * (c0[0] - c.fixed_x_m)
+            disp += np.asarray(c.moved_targets.get(t.id, (0.0, 0.0, 0.0)))
             out.append(_Disc(t, c0 + disp, np.asarray(t.normal), t.diameter_m / 2, disp))
         return out
 
+    # ------------------------------------------------------------------ timing
+    @property
+    def rate_hz(self) -> float:
+        """Measurement rate of the visit's timing, points per second."""
+        return float(self.conditions.visit_timing.rate_hz or self.profile.pulse_rate_hz)
+
+    def _line_seconds(self, window: AngularWindow) -> float:
+        p = self.profile
+        return max(p.line_sweep_deg / window.theta_step_deg / self.rate_hz, 1.0 / p.max_line_rate_hz)
+
+    def scan_seconds(self, window: AngularWindow) -> float:
+        """How long scanning a window takes (see :class:`~lidar.simulate.effects.VisitTiming`), seconds."""
+        if self.conditions.visit_timing.duration == "lines":
+            return window.shape[1] * self._line_seconds(window)
+        return window.n_directions / self.rate_hz
+
+    def ray_times(self, window: AngularWindow, start_s: float) -> np.ndarray:
+        """(N,) time of every grid direction of a window (in :meth:`AngularWindow.grid` order), seconds."""
+        n = window.n_directions
+        if self.conditions.visit_timing.duration == "lines":
+            rows = window.shape[0]
+            k = np.arange(n)
+            return float(start_s) + (k // rows) * self._line_seconds(window) + (k % rows) / self.rate_hz
+        return float(start_s) + np.arange(n) / self.rate_hz
+
+    def _world_directions(self, d_socs: np.ndarray, times: Optional[np.ndarray]) -> np.ndarray:
+        """(N, 3) bridge-frame directions of rays the instrument sends along ``d_socs`` (its frame of the moment)."""
+        drift = self.conditions.drift
+        if drift is not None and times is not None:
+            d_socs = drift.to_start(d_socs, times - self.conditions.visit_timing.start_s)
+        return d_socs @ self.setup.rotation.T
+
     # ------------------------------------------------------------------ scanning
     def scan(self, window: AngularWindow, *, rng: np.random.Generator, range_noise_m: Optional[float] = None,
-             name: str = "") -> tuple[Scan, ScanTruth]:
-        """Scan an angular window; returns the points (SOCS) and the ground truth."""
-        import open3d as o3d
+             name: str = "", start_s: Optional[float] = None) -> tuple[Scan, ScanTruth]:
+        """Scan an angular window; returns the points (SOCS) and the ground truth.
 
+        Parameters
+        ----------
+        window : AngularWindow
+        rng : numpy Generator
+            Draws the intensity noise, then the range noise (one each per grid direction).
+        range_noise_m : float, keyword-only
+            Range standard deviation, metres. Default: the profile's.
+        name : str, keyword-only
+        start_s : float, keyword-only
+            Time of the window's first grid direction, seconds. Default: the visit timing's start when the
+            conditions are timed (else no times unless given). Directions are measured in grid order
+            (:meth:`ray_times`).
+
+        Returns
+        -------
+        Scan (with ``time_s`` when timed) and its ScanTruth.
+        """
         sigma = self.profile.range_noise_m if range_noise_m is None else float(range_noise_m)
         theta, phi = window.grid()
         d_socs = direction_from_angles(theta, phi)
-        rot = self.setup.rotation
-        d_world = d_socs @ rot.T
+        if start_s is None and self.conditions.timed:
+            start_s = self.conditions.visit_timing.start_s
+        times = None if start_s is None else self.ray_times(window, start_s)
+        d_world = self._world_directions(d_socs, times)
         origin = np.asarray(self.setup.position_m)
+        t, hit, intensity = self._cast(origin, d_world)
+
+        c = self.conditions
+        returns = _Returns() if (c.range_walk is not None or c.clipped_fraction > 0) else None
+        on_target = np.zeros(len(t), dtype=np.int32) - 1
+        counts = {}
+        for k, disc in enumerate(self.discs):
+            n_on = self._paint_disc(disc, k, origin, d_world, t, hit, intensity, on_target, returns)
+            counts[disc.target.id] = n_on
+            if disc.target.id in c.cable_ties:
+                self._paint_cable_tie(disc, origin, d_world, t, hit, intensity, returns)
+
+        intensity *= np.clip(1.0 - 0.004 * np.where(hit, t, 0.0), 0.6, 1.0)  # mild range attenuation
+        intensity += rng.normal(0.0, INTENSITY_NOISE, len(t))
+        np.clip(intensity, 0.0, 1.0, out=intensity)
+        if c.saturated:
+            intensity[on_target >= 0] = 1.0
+        rng_noisy = t + rng.normal(0.0, sigma, len(t))
+        if returns is not None:
+            self._walk_and_clip(returns.final(), on_target, rng_noisy, intensity)
+        if c.range_scale_ppm:
+            rng_noisy *= 1.0 + c.range_scale_ppm * 1e-6
+        keep = hit & (rng_noisy > 0)
+        xyz = d_socs[keep] * rng_noisy[keep, None]
+        raw = np.round(intensity[keep] * 65535.0).astype(np.uint16)
+        scan = Scan(
+            xyz_socs=np.ascontiguousarray(xyz), intensity=normalise_intensity(raw, (0, 65535)), intensity_raw=raw,
+            pose=None, source="", name=name or "simulated",
+            metadata={"format": "simulated", "range_noise_m": sigma, "window": window.__dict__.copy()},
+            time_s=None if times is None else times[keep],
+        )
+        if times is None:
+            return scan, self.truth(counts)
+        when = {d.target.id: float(times[on_target == k].mean()) for k, d in enumerate(self.discs)
+                if counts[d.target.id]}
+        span = WindowTruth(name or "simulated", float(times[0]), float(times[0]) + self.scan_seconds(window))
+        return scan, self.truth(counts, times_s=when, windows=(span,))
+
+    def _cast(self, origin: np.ndarray, d_world: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Cast rays on the meshes: (N,) distance along each ray (inf: nothing), hit mask and surface intensity."""
+        import open3d as o3d
+
         rays = np.empty((len(d_world), 6), dtype=np.float32)
         rays[:, :3] = origin
         rays[:, 3:] = d_world
@@ -169,31 +358,19 @@ class BridgeScene:
         for g, kind in self._kind.items():
             sel = gid == g
             refl[sel] = REFLECTANCE[kind]
-        intensity = refl * (0.35 + 0.65 * cos_inc)
+        return t, hit, refl * (0.35 + 0.65 * cos_inc)
 
-        on_target = np.zeros(len(t), dtype=np.int32) - 1
-        counts = {}
-        for k, disc in enumerate(self.discs):
-            n_on = self._paint_disc(disc, k, origin, d_world, t, hit, intensity, on_target)
-            counts[disc.target.id] = n_on
-            if disc.target.id in self.conditions.cable_ties:
-                self._paint_cable_tie(disc, origin, d_world, t, hit, intensity)
-
-        intensity *= np.clip(1.0 - 0.004 * np.where(hit, t, 0.0), 0.6, 1.0)  # mild range attenuation
-        intensity += rng.normal(0.0, INTENSITY_NOISE, len(t))
-        np.clip(intensity, 0.0, 1.0, out=intensity)
-        if self.conditions.saturated:
-            intensity[on_target >= 0] = 1.0
-        rng_noisy = t + rng.normal(0.0, sigma, len(t))
-        keep = hit & (rng_noisy > 0)
-        xyz = d_socs[keep] * rng_noisy[keep, None]
-        raw = np.round(intensity[keep] * 65535.0).astype(np.uint16)
-        scan = Scan(
-            xyz_socs=np.ascontiguousarray(xyz), intensity=normalise_intensity(raw, (0, 65535)), intensity_raw=raw,
-            pose=None, source="", name=name or "simulated",
-            metadata={"format": "simulated", "range_noise_m": sigma, "window": window.__dict__.copy()},
-        )
-        return scan, self.truth(counts)
+    def _walk_and_clip(self, returns: tuple[np.ndarray, ...], on_target: np.ndarray, range_m: np.ndarray,
+                       intensity: np.ndarray) -> None:
+        """Shorten retro-reflector ranges by the range walk; clip the strongest target returns' intensity."""
+        idx, r, cos_inc, strength = returns
+        c = self.conditions
+        if c.range_walk is not None and idx.size:
+            range_m[idx] -= c.range_walk.bias_m(r, cos_inc, strength)
+        on = on_target[idx] >= 0
+        if c.clipped_fraction > 0 and np.any(on):
+            limit = np.quantile(strength[on], 1.0 - c.clipped_fraction)
+            intensity[idx[on & (strength >= limit)]] = 1.0
 
     @staticmethod
     def _plane_hits(centre, normal, reach_m: float, origin, d_world, t, hit):
@@ -217,14 +394,16 @@ class BridgeScene:
         q = origin + d * t_d[:, None]
         return cand, q, t_d, visible, np.clip(-denom, 1e-3, 1.0)
 
-    def _paint_disc(self, disc: _Disc, k: int, origin, d_world, t, hit, intensity, on_target) -> int:
+    def _paint_disc(self, disc: _Disc, k: int, origin, d_world, t, hit, intensity, on_target,
+                    returns: Optional[_Returns] = None) -> int:
         reach = disc.radius + 3 * float(self.profile.footprint_m(np.linalg.norm(disc.centre - origin)))
         cand, q, t_d, visible, cos_inc = self._plane_hits(disc.centre, disc.normal, reach, origin, d_world, t, hit)
         if cand.size == 0:
             return 0
         r = np.linalg.norm(q - disc.centre, axis=1)
         fp = self.profile.footprint_m(t_d) / np.sqrt(cos_inc)
-        cover = np.clip((disc.radius + fp / 2 - r) / fp, 0.0, 1.0)
+        with np.errstate(invalid="ignore"):  # rays that never meet the plane: inf - inf, cleared below
+            cover = np.clip((disc.radius + fp / 2 - r) / fp, 0.0, 1.0)
         cover[~visible] = 0.0
         sel = cover > 0
         idx = cand[sel]
@@ -233,13 +412,16 @@ class BridgeScene:
         t[idx] = t_d[sel]
         hit[idx] = True
         on_target[cand[cover >= 0.5]] = k
+        if returns is not None:
+            returns.add(idx, t_d[sel], cos_inc[sel], cover[sel])
         return int(np.count_nonzero(cover >= 0.5))
 
-    def _paint_cable_tie(self, disc: _Disc, origin, d_world, t, hit, intensity) -> None:
+    def _paint_cable_tie(self, disc: _Disc, origin, d_world, t, hit, intensity,
+                         returns: Optional[_Returns] = None) -> None:
         e1, e2 = in_plane_axes(disc.normal, up_hint=np.array([1.0, 0, 0]) if abs(disc.normal[2]) > 0.9 else None)
         centre = disc.centre - CABLE_TIE_OFFSET_M * e2  # below the target on a pier face
         half_w, half_l = CABLE_TIE_SIZE_M[0] / 2, CABLE_TIE_SIZE_M[1] / 2
-        cand, q, t_d, visible, _ = self._plane_hits(centre, disc.normal, half_l + 0.05, origin, d_world, t, hit)
+        cand, q, t_d, visible, cos_inc = self._plane_hits(centre, disc.normal, half_l + 0.05, origin, d_world, t, hit)
         if cand.size == 0:
             return
         rel = q - centre
@@ -252,33 +434,67 @@ class BridgeScene:
         intensity[idx] = np.maximum(intensity[idx], cover[sel] * CABLE_TIE_REFLECTANCE)
         t[idx] = t_d[sel]
         hit[idx] = True
+        if returns is not None:
+            returns.add(idx, t_d[sel], cos_inc[sel], cover[sel])
 
     # ------------------------------------------------------------------ truth
-    def truth(self, points_on_target: Optional[Mapping[str, Optional[int]]] = None) -> ScanTruth:
-        """Ground truth of this state and set-up: target centres in both frames."""
+    def _target_truth(self, disc: _Disc, points: Optional[int], time_s: Optional[float]) -> TargetTruth:
+        """One target's truth: where it is, how it faces the scanner, and what a noise-free instrument reports."""
+        c, tid = self.conditions, disc.target.id
+        socs = self.setup.to_socs(disc.centre[None])[0]
+        normal_socs = disc.normal @ self.setup.rotation
+        rng_m = float(np.linalg.norm(socs))
+        cos_inc = float(abs(normal_socs @ socs) / rng_m)
+        bias = 0.0 if c.range_walk is None else float(
+            c.range_walk.bias_m(rng_m, cos_inc, return_strength(rng_m, cos_inc))[()])
+        observed = None
+        if time_s is not None or c.range_walk is not None or c.range_scale_ppm:
+            seen = socs if c.drift is None or time_s is None else \
+                c.drift.to_current(socs[None], time_s - c.visit_timing.start_s)[0]
+            observed = tuple(float(v) for v in seen / rng_m * (rng_m - bias) * (1.0 + c.range_scale_ppm * 1e-6))
+        return TargetTruth(
+            id=tid, group=disc.target.group,
+            centre_bridge_m=tuple(disc.centre),
+            centre_socs_m=tuple(socs),
+            normal_socs=tuple(normal_socs),
+            vertical_displacement_m=float(disc.displacement[2]),
+            moved=tid in c.moved_targets,
+            occluded=tid in c.occluded,
+            cable_tie=tid in c.cable_ties,
+            points_on_target=points,
+            along_span_m=float(disc.displacement[0]) if disc.target.group == "measurement" else 0.0,
+            cos_incidence=cos_inc, range_m=rng_m, range_bias_m=bias, time_s=time_s,
+            centre_observed_socs_m=observed,
+        )
+
+    def truth(self, points_on_target: Optional[Mapping[str, Optional[int]]] = None, *,
+              times_s: Optional[Mapping[str, float]] = None, windows: tuple[WindowTruth, ...] = ()) -> ScanTruth:
+        """Ground truth of this state and set-up: target centres in both frames and the visit's effects.
+
+        ``times_s`` maps target ids to the time they were scanned; ``windows`` are the visit's scans in order.
+        """
+        c = self.conditions
         targets = []
         for disc in self.discs:
             tid = disc.target.id
-            targets.append(TargetTruth(
-                id=tid, group=disc.target.group,
-                centre_bridge_m=tuple(disc.centre),
-                centre_socs_m=tuple(self.setup.to_socs(disc.centre[None])[0]),
-                normal_socs=tuple(disc.normal @ self.setup.rotation),
-                vertical_displacement_m=float(disc.displacement[2]),
-                moved=tid in self.conditions.moved_targets,
-                occluded=tid in self.conditions.occluded,
-                cable_tie=tid in self.conditions.cable_ties,
-                points_on_target=None if points_on_target is None else int(points_on_target.get(tid) or 0),
-            ))
+            pts = None if points_on_target is None else int(points_on_target.get(tid) or 0)
+            targets.append(self._target_truth(disc, pts, None if times_s is None else times_s.get(tid)))
+        amps = self.amplitudes
         return ScanTruth(
-            scanner_pose=self.setup.pose, midspan_displacement_m=self.conditions.midspan_displacement_m,
-            targets=tuple(targets), removed=tuple(self.conditions.removed), range_noise_m=self.profile.range_noise_m,
+            scanner_pose=self.setup.pose, midspan_displacement_m=c.midspan_displacement_m,
+            targets=tuple(targets), removed=tuple(c.removed), range_noise_m=self.profile.range_noise_m,
+            spans_m=self.model.spans_m,
+            span_displacements_m=tuple(float(a) for a in np.broadcast_to(amps, (self.model.n_spans,))),
+            deck_strain=c.deck_strain, fixed_bearing_x_m=c.fixed_x_m, range_scale_ppm=c.range_scale_ppm,
+            range_walk=walk_to_dict(c.range_walk), clipped_fraction=c.clipped_fraction,
+            drift=None if c.drift is None else c.drift.to_dict(),
+            timing=c.visit_timing.to_dict() if c.timed else None, windows=windows,
         )
 
     def coarse_window(self, step_deg: float = 0.05, margin_deg: float = 3.0) -> AngularWindow:
         """A window covering the whole bridge from this set-up, inside the scanner's vertical field of view."""
         m = self.model
-        xs = (-m.overhang_m - m.pier_length_m, m.span_m + m.overhang_m + m.pier_length_m)
+        xs = (-m.overhang_m - m.pier_length_m, m.length_m + m.overhang_m + m.pier_length_m)
         ys = (-m.deck_width_m / 2, m.deck_width_m / 2)
         zs = (0.0, m.deck_bottom_m + m.deck_depth_m)
         # Points along every edge of the bounding box: its nearest part may lie mid-span.

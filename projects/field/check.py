@@ -14,6 +14,7 @@ from typing import Optional
 import numpy as np
 
 from lidar.angles import direction_from_angles
+from lidar.systematic.corrections import closure_drift
 from lidar.plan import PlanTarget, ScanPlan, plan_fine_scans
 from lidar.prediction import centroid_covariance
 from common.progress import ProgressCallback
@@ -59,12 +60,58 @@ class TargetCheck:
 
 
 @dataclass(frozen=True)
+class ClosureCheck:
+    """The plan's closure window: how far the set-up turned during the visit, against what the instrument allows.
+
+    ``status`` is ``ok``, ``drifted`` (beyond the instrument's tolerance by more than 3 sigma: re-scan
+    advised) or ``not measured`` (the scans carry no point times, so the closure cannot be told from the
+    first window).
+    """
+
+    reflector: str
+    status: str
+    angle_arcsec: float = float("nan")
+    sigma_arcsec: float = float("nan")
+    minutes: float = float("nan")
+    tolerance_arcsec: float = float("nan")
+    note: str = ""
+
+    def to_json(self) -> dict:
+        def num(v: float) -> Optional[float]:
+            return None if not math.isfinite(v) else round(v, 2)
+
+        return {"reflector": self.reflector, "status": self.status, "drift_arcsec": num(self.angle_arcsec),
+                "drift_sigma_arcsec": num(self.sigma_arcsec), "minutes": num(self.minutes),
+                "tolerance_arcsec": num(self.tolerance_arcsec), "note": self.note}
+
+
+def _closure_check(plan: ScanPlan, cents: dict, closures: dict) -> Optional[ClosureCheck]:
+    """The closure verdict of a measured epoch (None when its plan has no closure window)."""
+    roi = next((r for r in plan.rois if r.closure), None)
+    if roi is None:
+        return None
+    tol = float(plan.profile.drift_tolerance_arcsec)
+    first, last = cents.get(roi.reflector), closures.get(roi.reflector)
+    if first is None or last is None or not first.found or not last.found:
+        why = "the fine scans carry no point times" if last is None else "the target was not found in both windows"
+        return ClosureCheck(roi.reflector, "not measured", tolerance_arcsec=tol,
+                            note=f"{why}: the set-up's drift cannot be read off the closure")
+    d = closure_drift(first, last)
+    drifted = d.angle_arcsec - 3 * d.sigma_arcsec > tol
+    note = (f"the set-up turned {d.angle_arcsec:.1f}\" +- {d.sigma_arcsec:.1f}\" in {d.dt_s / 60:.0f} min, beyond "
+            f"the {tol:g}\" the instrument allows: re-scan advised") if drifted else ""
+    return ClosureCheck(roi.reflector, "drifted" if drifted else "ok", d.angle_arcsec, d.sigma_arcsec, d.dt_s / 60.0,
+                        tol, note)
+
+
+@dataclass(frozen=True)
 class EpochCheck:
     """The on-site check of an epoch's fine scans: each target's verdict and the re-scan plan (or None)."""
 
     epoch: str
     targets: tuple[TargetCheck, ...]
     rescan: Optional[ScanPlan]
+    closure: Optional[ClosureCheck] = None
 
     @property
     def short(self) -> tuple[TargetCheck, ...]:
@@ -72,7 +119,8 @@ class EpochCheck:
 
     def to_json(self) -> dict:
         return {"epoch": self.epoch, "ok": not self.short, "targets": [t.to_json() for t in self.targets],
-                "rescan": None if self.rescan is None else self.rescan.to_json()}
+                "rescan": None if self.rescan is None else self.rescan.to_json(),
+                "closure": None if self.closure is None else self.closure.to_json()}
 
 
 def check_epoch(c: Campaign, label: str, *, goal_sigma_mm: Optional[float] = None,
@@ -88,12 +136,18 @@ def check_epoch(c: Campaign, label: str, *, goal_sigma_mm: Optional[float] = Non
     result = run_stage1(job, progress=progress)  # the plan it measured with, and the centroids
     save_stage1(c, result)
     cents, plan = result.centroids, result.plan
+    closures = result.closures or {}
     layout = job.layout
     diam = {i: float(d) for i, d in zip(layout.ids, layout.diameters_m)}
     rows, retry = [], []
     for roi in plan.rois:
+        if roi.closure:
+            continue
         cent = cents.get(roi.reflector)
-        planned = int(roi.expected_target_points)
+        # without point times the closure window's points add to the first window's
+        planned = int(roi.expected_target_points) + sum(int(r.expected_target_points) for r in plan.rois
+                                                        if r.closure and r.reflector == roi.reflector
+                                                        and r.reflector not in closures)
         d = diam.get(roi.reflector, 0.05)
         if cent is None or not cent.found:
             rows.append(TargetCheck(roi.reflector, roi.group, False, 0 if cent is None else int(cent.n_points), planned,
@@ -120,7 +174,8 @@ def check_epoch(c: Campaign, label: str, *, goal_sigma_mm: Optional[float] = Non
         rows.append(TargetCheck(roi.reflector, roi.group, True, int(cent.n_points), planned, sigma, goal, status, note))
         if status != "ok":
             retry.append((roi, cent, ratio))
-    return EpochCheck(label, tuple(rows), _rescan_plan(plan, retry, diam) if retry else None)
+    return EpochCheck(label, tuple(rows), _rescan_plan(plan, retry, diam) if retry else None,
+                      _closure_check(plan, cents, closures))
 
 
 def _rescan_plan(plan: ScanPlan, retry, diam: dict) -> ScanPlan:

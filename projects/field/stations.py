@@ -14,7 +14,6 @@ from typing import Optional
 
 import numpy as np
 
-from lidar.displacement import Observation
 from common.errors import InputError
 from common.files import write_atomic
 from common.progress import ProgressCallback, scaled
@@ -159,16 +158,22 @@ def advise_stations(c: Campaign, *, area_xy: Optional[np.ndarray] = None, height
     base_label = baseline_epoch(c)
     baseline = None
     if base_label is not None:
-        baseline = {k: Observation(v.xyz_socs, v.cov) for k, v in c.centroids(base_label).items() if v.found}
-        baseline = baseline or None
+        baseline = {k: v for k, v in c.centroids(base_label).items() if v.found} or None
     seen = seen_surfaces(c, last, progress=scaled(progress, 0.0, 0.2)) if use_last_scan and last else None
     seen_label = None if seen is None else last.label
     stations = survey_stations(layout, positions, profile=c.profile, min_points=int(params["min_points"]),
                                budget_seconds=float(params["budget_min"]) * 60.0, up=up, baseline=baseline,
-                               obstacles_xyz=seen, progress=scaled(progress, 0.2, 1.0))
+                               obstacles_xyz=seen, field_model=_field_model(c, params),
+                               closure=bool(params["closure"]), progress=scaled(progress, 0.2, 1.0))
     return StationAdvice(stations, area, gz, source, float(height_m), float(grid_m), c.profile.name,
                          base_label if baseline else None,
                          None if station is None else tuple(float(v) for v in station), seen_label)
+
+
+def _field_model(c: Campaign, params: dict):
+    """The campaign's stored field model, when processing uses one."""
+    got = c.field_model() if params.get("field_model", True) else None
+    return None if got is None else got[0]
 
 
 def station_map_figure(advice: StationAdvice, layout, *, title: str = ""):

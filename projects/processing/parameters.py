@@ -118,6 +118,12 @@ PARAMETERS: tuple[Parameter, ...] = (
               "auto | a number > 0", added_later=True),
     Parameter("layout_up", "0,0,1", _vector, "plan", "the layout frame's up direction", "x,y,z (not all zero)",
               added_later=True),
+    Parameter("closure", True, _boolean, "plan",
+              "end every plan with the first reference target's window again, to measure the set-up's drift",
+              "true | false", added_later=True),
+    Parameter("field_model", True, _boolean, "displacements",
+              "correct the atmosphere's scale, the retro-reflector range walk and the set-up's drift, estimated "
+              "from the campaign's own targets (false: rigid motion only, as before)", "true | false"),
     Parameter("normal_mode", "auto", _normal_mode, "displacements",
               "deck normal: carried from the baseline, re-fitted each epoch, or both combined (auto)",
               "auto | reference | epoch"),

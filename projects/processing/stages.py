@@ -18,16 +18,18 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from common.flags import (FLAG_CHAINED, FLAG_DECK_NOT_MEASURED, FLAG_MISSING, FLAG_NO_DISPLACEMENT,
-                          FLAG_PIERS_NOT_MEASURED, PROBLEM, severity)
-from lidar.displacement import Displacement, EpochDisplacements, compute_displacements
+from common.flags import (FLAG_CHAINED, FLAG_DECK_NOT_MEASURED, FLAG_MISSING, FLAG_NO_DISPLACEMENT, FLAG_NOT_FOUND,
+                          FLAG_PIERS_NOT_MEASURED, PROBLEM, code, has, severity)
+from lidar.displacement import Displacement, EpochDisplacements
+from lidar.systematic.budget import corrected_displacements
 from common.errors import InputError, ProcessingError, SurveyError
 from lidar.identification import MAX_TILT_DEG
 from lidar.io import read_scan
-from lidar.pipeline import analyse_coarse, measure_targets, plan_from_coarse
+from lidar.pipeline import analyse_coarse, measure_fine, plan_from_coarse
 from lidar.plan import ScanPlan
 from common.progress import ProgressCallback, report, scaled
 from lidar.scan import Scan
+from projects.processing.field import epoch_flags, systematics_json, update_field_model, visit_digest
 from projects.processing.parameters import DEFAULTS, parameter, stage1_params, stage2_params
 from projects.store.previews import encode_preview
 from projects.store.records import EpochInputs, ScanFile
@@ -39,7 +41,8 @@ PIPELINE_VERSION = "1"
 #: Profile fields added later: they enter the input hash only when they differ from their default.
 _LATER_PROFILE_FIELDS = {"max_tilt_deg": MAX_TILT_DEG, "kind": "line", "step_presets": [], "windowed": True,
                          "horizontal_direction": "ccw", "horizontal_zero_deg": 0.0, "vertical_reference": "zenith",
-                         "resolution_label": "step", "quality": ""}
+                         "resolution_label": "step", "quality": "", "wavelength_nm": 1550.0,
+                         "drift_tolerance_arcsec": 10.0}
 
 
 def _profile_key(profile) -> dict:
@@ -206,6 +209,8 @@ class Stage1Result:
     new_plan_json: Optional[dict]
     preview: Optional[tuple[bytes, str]]
     centroids: Optional[dict]
+    closures: Optional[dict] = None
+    time_source: str = "none"
 
 
 def stage1_job(c: Campaign, label: str) -> Stage1Job:
@@ -231,19 +236,23 @@ def run_stage1(job: Stage1Job, *, progress: Optional[ProgressCallback] = None) -
         del coarse
         plan = plan_from_coarse(analysis, job.layout, epoch=job.label, profile=job.profile,
                                 min_points=int(job.params["min_points"]),
-                                budget_seconds=float(job.params["budget_min"]) * 60.0, up_layout=layout_up(job.params))
+                                budget_seconds=float(job.params["budget_min"]) * 60.0, up_layout=layout_up(job.params),
+                                closure=bool(job.params["closure"]))
         new_plan = plan.to_json()
         new_plan["identification"] = {"missing": list(analysis.identification.missing),
                                       "extra_detections": len(analysis.identification.extra_detections),
                                       "fit_rms_m": analysis.identification.rms_m,
                                       "detections": len(analysis.detections.detections)}
         preview = encode_preview(analysis)
-    cents = None
+    measured = None
     if job.fine_paths:
         fine = read_paths(job.fine_paths, scaled(progress, 0.4, 0.8))
-        cents = measure_targets(fine, plan, job.layout, profile=plan.profile)
-    report(progress, 1.0, "measured" if cents is not None else "planned")
-    return Stage1Result(job, plan, new_plan, preview, cents)
+        measured = measure_fine(fine, plan, job.layout, profile=plan.profile)
+    report(progress, 1.0, "measured" if measured is not None else "planned")
+    if measured is None:
+        return Stage1Result(job, plan, new_plan, preview, None)
+    return Stage1Result(job, plan, new_plan, preview, dict(measured.centroids), dict(measured.closures),
+                        measured.time_source)
 
 
 def save_stage1(c: Campaign, result: Stage1Result) -> None:
@@ -252,7 +261,8 @@ def save_stage1(c: Campaign, result: Stage1Result) -> None:
     if result.new_plan_json is not None:
         c.save_plan(job.label, result.new_plan_json, job.plan_hash, preview=result.preview)
     if result.centroids is not None:
-        c.save_centroids(job.label, result.centroids, job.measure_hash, stage1_params(job.params))
+        c.save_centroids(job.label, result.centroids, job.measure_hash, stage1_params(job.params),
+                         closures=result.closures, time_source=result.time_source)
 
 
 def plan_epoch(c: Campaign, label: str, *, progress: Optional[ProgressCallback] = None) -> ScanPlan:
@@ -375,7 +385,11 @@ def _stage1_hash(c: Campaign, label: str) -> Optional[str]:
 
 
 def update_displacements(c: Campaign, baseline: str) -> list[str]:
-    """(Re)compute the displacements of every measured epoch whose inputs changed; returns those epochs."""
+    """(Re)compute the displacements of every measured epoch whose inputs changed; returns those epochs.
+
+    The campaign's field model (:mod:`projects.processing.field`) is fitted first over every measured
+    epoch; each epoch's displacements depend on it through its digest of the two visits' terms.
+    """
     params = parameters(c)
     refl = {r.id: r for r in c.reflectors()}
     groups = {rid: r.group for rid, r in refl.items()}
@@ -394,59 +408,91 @@ def update_displacements(c: Campaign, baseline: str) -> list[str]:
     for lab in measured[start:]:
         for rid in found(lab):
             first_seen.setdefault(rid, lab)
+    model = update_field_model(c, baseline, measured, groups, found, enabled=bool(params["field_model"]))
     done = []
     for pos, lab in enumerate(measured):
-        cents = found(lab)
-        meas_here = [m for m in cents if groups.get(m) == "measurement"]
+        meas_here = [m for m in found(lab) if groups.get(m) == "measurement"]
         if pos < start:  # dated before the baseline: negative time against it, never a new baseline
             bases = [baseline]
         else:
             bases = sorted({first_seen[m] for m in meas_here} | {baseline}, key=measured.index)
         key = {"v": PIPELINE_VERSION, "epoch": _stage1_hash(c, lab), "params": stage2_params(params),
-               "bases": {b: _stage1_hash(c, b) for b in bases}, "reflectors": sorted((k, repr(v)) for k, v in refl.items())}
+               "bases": {b: _stage1_hash(c, b) for b in bases}, "reflectors": sorted((k, repr(v)) for k, v in refl.items()),
+               "field": {b: visit_digest(model, b, lab) for b in bases}}
         h = _hash(key)
         stored = c.displacement_set(lab)
         if stored is not None and stored.inputs_hash == h:
             continue
-        result = None
-        extra = []
-        failure = None
-        for b in bases:
-            targets = [m for m in meas_here if first_seen.get(m) == b] if b != baseline else \
-                [m for m in groups if groups[m] == "measurement" and first_seen.get(m, baseline) == baseline]
-            if not targets:
-                continue
-            sub_groups = {r: g for r, g in groups.items() if g == "reference" or r in targets}
-            try:
-                res = compute_displacements(found(b), cents, sub_groups, normal_mode=params["normal_mode"],
-                                            moved_tolerance_m=params["moved_tolerance_m"],
-                                            weighted=bool(params["weighted_references"]))
-            except SurveyError as exc:
-                log.warning("epoch %s against %s: %s", lab, b, exc)
-                if b == baseline:
-                    failure = str(exc).splitlines()[0].replace(";", ",")
-                continue
-            if b == baseline:
-                result = res
-            else:
-                extra += [_chain(c, d, b, refl) for d in res.displacements]
+        result = _epoch_displacements(c, lab, bases, baseline, found, groups, first_seen, params, model, refl)
         if result is None:
-            if failure is None:
-                continue
-            result = _failed_result(groups, found(baseline), cents, baseline, failure)
-        elif not any(np.isfinite(d.displacement_m) for d in result.displacements):
-            n_meas = sum(1 for g in groups.values() if g == "measurement")
-            result = replace(result, flags=tuple(result.flags) + (
-                f"{FLAG_DECK_NOT_MEASURED}: none of the {n_meas} deck targets was found in this epoch",))
-        if lab == baseline:  # the baseline against itself: zero by definition, exactly known
-            result = replace(result, displacements=tuple(
-                replace(d, displacement_m=0.0, sigma_m=0.0) if np.isfinite(d.displacement_m) else d
-                for d in result.displacements))
-        if extra:
-            result = replace(result, displacements=tuple(result.displacements) + tuple(extra))
-        c.save_displacements(lab, baseline, result, h)
+            continue
+        time_source = c.time_source(lab)
+        result = replace(result, flags=tuple(result.flags) + tuple(epoch_flags(model, lab, time_source)))
+        c.save_displacements(lab, baseline, result, h, systematics=systematics_json(model, lab, time_source))
         done.append(lab)
     return done
+
+
+def _epoch_displacements(c: Campaign, lab: str, bases: list, baseline: str, found, groups: dict, first_seen: dict,
+                         params: dict, model, refl: dict) -> Optional[EpochDisplacements]:
+    """One epoch's displacements against the baseline (and the later baselines of targets that replaced others)."""
+    cents = found(lab)
+    meas_here = [m for m in cents if groups.get(m) == "measurement"]
+    result = None
+    extra: list = []
+    failure = None
+    for b in bases:
+        targets = [m for m in meas_here if first_seen.get(m) == b] if b != baseline else \
+            [m for m in groups if groups[m] == "measurement" and first_seen.get(m, baseline) == baseline]
+        if not targets:
+            continue
+        sub_groups = {r: g for r, g in groups.items() if g == "reference" or r in targets}
+        try:
+            res = corrected_displacements(found(b), cents, sub_groups, model=model, baseline_label=b, epoch_label=lab,
+                                          normal_mode=params["normal_mode"],
+                                          moved_tolerance_m=params["moved_tolerance_m"],
+                                          weighted=bool(params["weighted_references"]))
+        except SurveyError as exc:
+            log.warning("epoch %s against %s: %s", lab, b, exc)
+            if b == baseline:
+                failure = str(exc).splitlines()[0].replace(";", ",")
+            continue
+        if b == baseline:
+            result = res
+        else:
+            extra += [_chain(c, d, b, refl) for d in res.displacements]
+    if result is None:
+        if failure is None:
+            return None
+        result = _failed_result(groups, found(baseline), cents, baseline, failure)
+    elif not any(np.isfinite(d.displacement_m) for d in result.displacements):
+        n_meas = sum(1 for g in groups.values() if g == "measurement")
+        result = replace(result, flags=tuple(result.flags) + (
+            f"{FLAG_DECK_NOT_MEASURED}: none of the {n_meas} deck targets was found in this epoch",))
+    if lab == baseline:  # the baseline against itself: zero by definition, exactly known
+        result = replace(result, displacements=tuple(
+            replace(d, displacement_m=0.0, sigma_m=0.0, along_m=0.0, along_sigma_m=0.0,
+                    budget={k: 0.0 for k in d.budget}) if np.isfinite(d.displacement_m) else d
+            for d in result.displacements))
+    if extra:  # a target measured against a later baseline replaces its row against this one
+        chained = {d.reflector for d in extra}
+        result = replace(result, displacements=tuple(d for d in result.displacements if d.reflector not in chained)
+                         + tuple(extra))
+    return _why_missing(c, lab, result)
+
+
+def _why_missing(c: Campaign, lab: str, result: EpochDisplacements) -> EpochDisplacements:
+    """A target without a value carries, on its row, why its centroid was not found (beside ``missing``)."""
+    if not any(has(d.flags, FLAG_MISSING) for d in result.displacements):
+        return result
+    cents = c.centroids(lab)
+    rows = []
+    for d in result.displacements:
+        tc = cents.get(d.reflector)
+        if has(d.flags, FLAG_MISSING) and tc is not None and not tc.found:
+            d = replace(d, flags=tuple(d.flags) + tuple(f for f in tc.flags if code(f) != FLAG_NOT_FOUND))
+        rows.append(d)
+    return replace(result, displacements=tuple(rows))
 
 
 def _failed_result(groups: dict, base: dict, cents: dict, baseline: str, reason: str) -> EpochDisplacements:

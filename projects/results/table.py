@@ -12,7 +12,28 @@ from projects.store.campaign import Campaign
 
 DISPLACEMENT_COLUMNS = ["epoch", "datetime", "reflector", "displacement_mm", "sigma_mm", "flags", "state",
                         "warning_mm", "alarm_mm", "baseline", "epoch_flags", "days_from_baseline", "severity",
-                        "concrete_age_days", "predicted_mm", "departure_mm"]
+                        "concrete_age_days", "predicted_mm", "departure_mm", "along_mm", "along_sigma_mm",
+                        "scale_ppm", "scale_sigma_ppm", "sigma_noise_mm", "sigma_frame_mm", "sigma_scale_mm",
+                        "sigma_bias_mm", "sigma_drift_mm"]
+#: The error budget's terms as columns: a displacement's sigma is their sum in quadrature.
+BUDGET_COLUMNS = ("sigma_noise_mm", "sigma_frame_mm", "sigma_scale_mm", "sigma_bias_mm", "sigma_drift_mm")
+
+
+def _mm(v) -> object:
+    return None if v is None else round(float(v) * 1000.0, 4) + 0.0
+
+
+def field_columns(r) -> dict:
+    """The along-span movement, the epoch's scale and the budget of one displacement record, in mm and ppm."""
+    sysm = r.systematics or {}
+    out = {"along_mm": _mm(r.along_m), "along_sigma_mm": _mm(r.along_sigma_m),
+           "scale_ppm": None if "scale_ppm" not in sysm else round(float(sysm["scale_ppm"]), 2) + 0.0,
+           "scale_sigma_ppm": None if "scale_sigma_ppm" not in sysm else round(float(sysm["scale_sigma_ppm"]), 2)}
+    for col in BUDGET_COLUMNS:
+        out[col] = _mm(r.budget.get(col[6:-3]))
+    if r.displacement_m is None:
+        out.update({"along_mm": None, "along_sigma_mm": None, **{col: None for col in BUDGET_COLUMNS}})
+    return out
 
 
 def displacement_table(c: Campaign) -> list[dict]:
@@ -48,7 +69,7 @@ def displacement_table(c: Campaign) -> list[dict]:
             "severity": worst(r.flags + r.epoch_flags) or "",
             "concrete_age_days": None if casting is None else
             round((when[r.epoch] - casting).total_seconds() / 86400.0, 3),
-            "predicted_mm": None, "departure_mm": None,
+            "predicted_mm": None, "departure_mm": None, **field_columns(r),
         })
         p = preds.get(r.reflector)
         t_ns = int(when[r.epoch].timestamp() * 1e9)

@@ -36,6 +36,7 @@ from projects.store.imports import (IMPORT_DIRS, SCANS_DIR, Copied, clean_temp_f
 from projects.store.imports import CAMERA_DIR, ENV_DIR, PREDICTION_DIR  # noqa: F401  (importers name them here)
 from projects.store.lock import LOCK_NAME, CampaignLock  # noqa: F401  (LOCK_NAME: likewise)
 from projects.store.errors import CampaignError, CampaignLockedError, DuplicateImportError, InputError
+from projects.store import field_tables
 from projects.store.repositories import (ComparisonRepository, CrossvalRepository, EventRepository,
                                          PredictionRepository, SeriesRepository)
 from projects.store.records import (DisplacementRecord, DisplacementSet, Epoch, EpochInputs, EpochResult, LimitRecord,
@@ -650,7 +651,9 @@ class Campaign:
             return None
         return EpochResult(**dict(row))
 
-    def save_centroids(self, epoch: str, cents: dict, inputs_hash: str, params: dict) -> None:
+    def save_centroids(self, epoch: str, cents: dict, inputs_hash: str, params: dict, *,
+                       closures: Optional[dict] = None, time_source: str = "points") -> None:
+        """Store an epoch's centroids (and its closure centroids) as its measured stage-1 result."""
         with self.transaction() as c:
             c.execute("DELETE FROM centroids WHERE epoch = ?", (epoch,))
             for rid, tc in cents.items():
@@ -660,6 +663,7 @@ class Campaign:
                           (epoch, rid, int(tc.found), *xyz, json.dumps(np.nan_to_num(tc.cov, nan=0.0).tolist()),
                            int(tc.n_points), _f(tc.threshold), _f(tc.separability), _f(tc.sigma_range_m),
                            json.dumps(list(tc.flags)), int(tc.n_window)))
+            field_tables.write_centroid_extras(c, epoch, cents, closures or {}, time_source)
             c.execute("INSERT OR REPLACE INTO epoch_results(epoch, stage, inputs_hash, processed) VALUES (?, ?, ?, ?)",
                       (epoch, "measured", inputs_hash, now_iso()))
             digests.seal(c, "epoch_results", (epoch,))
@@ -667,9 +671,13 @@ class Campaign:
                                              "found": sum(int(t.found) for t in cents.values())})
 
     def centroids(self, epoch: str) -> dict[str, TargetCentroid]:
-        """An epoch's stored centroids by target (none when they fail their digest: stale)."""
+        """An epoch's stored centroids by target, with their times, incidences and clipped fractions.
+
+        None when they fail their digest (stale: processing measures the epoch again).
+        """
         if self._exists("epoch_results", epoch) and not self.is_sound("epoch_results", (epoch,)):
             return {}
+        extras = field_tables.read_centroid_extras(self.conn, epoch)
         out = {}
         for r in self.conn.execute("SELECT * FROM centroids WHERE epoch = ? ORDER BY reflector", (epoch,)):
             xyz = np.array([np.nan if r[k] is None else r[k] for k in ("x", "y", "z")], dtype=float)
@@ -678,9 +686,35 @@ class Campaign:
                 _nan(r["threshold"]), _nan(r["separability"]), tuple(json.loads(r["flags"])),
                 -1 if r["n_window"] is None else int(r["n_window"]),  # -1: not recorded (schema 1)
                 sigma_range_m=_nan(r["sigma_range_m"]))
+            out[r["reflector"]] = field_tables.with_extra(out[r["reflector"]], extras.get(r["reflector"]))
         return out
 
-    def save_displacements(self, epoch: str, baseline: str, res, inputs_hash: str) -> None:
+    def closure_centroids(self, epoch: str) -> dict[str, TargetCentroid]:
+        """The epoch's closure centroids: targets its plan scanned again at the end of the visit."""
+        return field_tables.read_closures(self.conn, epoch)
+
+    def time_source(self, epoch: str) -> Optional[str]:
+        """Where the epoch's centroid times come from: ``points``, ``plan`` or None (not measured)."""
+        extras = field_tables.read_centroid_extras(self.conn, epoch)
+        return next((e.get("time_source") for e in extras.values()), None)
+
+    def field_model(self):
+        """The campaign's stored field model and its digest, or None before processing fitted one."""
+        got = field_tables.read_field_model(self.conn)
+        return None if got is None else (field_tables.field_model_from_json(got[0]), got[1])
+
+    def save_field_model(self, model, digest: str) -> None:
+        """Store the campaign's field model (:class:`lidar.systematic.adjustment.FieldModel`)."""
+        with self.transaction() as c:
+            field_tables.write_field_model(c, field_tables.field_model_to_json(model), digest, now_iso())
+
+    def systematics(self, epoch: str) -> dict:
+        """The scale and drift an epoch's displacements were computed with (empty before)."""
+        return field_tables.read_set_extras(self.conn, epoch)
+
+    def save_displacements(self, epoch: str, baseline: str, res, inputs_hash: str, *,
+                           systematics: Optional[dict] = None) -> None:
+        """Store an epoch's displacements, their budgets and the systematics they were corrected for."""
         with self.transaction() as c:
             c.execute("DELETE FROM displacement_sets WHERE epoch = ?", (epoch,))
             c.execute("INSERT INTO displacement_sets(epoch, baseline, inputs_hash, normal, reference_point, "
@@ -698,6 +732,7 @@ class Campaign:
                           "missing, suspect) VALUES (?, ?, ?, ?, ?, ?, ?)",
                           (epoch, rc.reflector, _f(rc.median_change_m), _f(rc.max_change_m), int(rc.moved),
                            int(rc.missing), int(rc.suspect)))
+            field_tables.write_displacement_extras(c, epoch, res, systematics)
             digests.seal(c, "displacement_sets", (epoch,))
             self.log_action(c, "displacements", epoch, {"baseline": baseline, "inputs_hash": inputs_hash})
 
@@ -723,9 +758,11 @@ class Campaign:
         """
         order = "DESC" if newest_first else "ASC"
         q = f"""SELECT e.label AS epoch, e.datetime AS datetime, d.reflector, d.displacement_m, d.sigma_m,
-                      d.flags AS flags, s.flags AS epoch_flags, s.baseline
+                      d.flags AS flags, s.flags AS epoch_flags, s.baseline, x.extra AS extra, sx.extra AS set_extra
                FROM displacements d JOIN displacement_sets s ON s.epoch = d.epoch
-               JOIN epochs e ON e.label = d.epoch {'WHERE ' + where if where else ''}
+               JOIN epochs e ON e.label = d.epoch
+               LEFT JOIN displacement_extras x ON x.epoch = d.epoch AND x.reflector = d.reflector
+               LEFT JOIN displacement_set_extras sx ON sx.epoch = d.epoch {'WHERE ' + where if where else ''}
                ORDER BY e.datetime {order}, e.label {order}, d.reflector"""
         sound: dict[str, bool] = {}
         out = []
@@ -736,7 +773,8 @@ class Campaign:
             if sound[ep]:  # a damaged epoch's values are never served
                 out.append(DisplacementRecord(ep, r["datetime"], r["reflector"], r["displacement_m"], r["sigma_m"],
                                               tuple(json.loads(r["flags"])), tuple(json.loads(r["epoch_flags"])),
-                                              r["baseline"]))
+                                              r["baseline"], json.loads(r["extra"]) if r["extra"] else {},
+                                              json.loads(r["set_extra"]) if r["set_extra"] else {}))
                 if limit and len(out) >= limit:
                     break
         return out

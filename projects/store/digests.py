@@ -84,14 +84,18 @@ GROUPS: dict[str, Group] = {g.table: g for g in (
     Group("centroids", "epoch_results", ("epoch",), (
         "SELECT epoch, stage, inputs_hash, processed FROM epoch_results WHERE epoch = ?",
         "SELECT epoch, reflector, found, x, y, z, cov, n, threshold, separability, sigma_range_m, flags, n_window "
-        "FROM centroids WHERE epoch = ? ORDER BY reflector")),
+        "FROM centroids WHERE epoch = ? ORDER BY reflector",
+        "SELECT epoch, reflector, extra FROM centroid_extras WHERE epoch = ? ORDER BY reflector",
+        "SELECT epoch, reflector, centroid FROM closure_centroids WHERE epoch = ? ORDER BY reflector")),
     Group("displacements", "displacement_sets", ("epoch",), (
         "SELECT epoch, baseline, inputs_hash, normal, reference_point, reference_ids, normal_mode, flags, processed "
         "FROM displacement_sets WHERE epoch = ?",
         "SELECT epoch, reflector, displacement_m, sigma_m, vertical_m, baseline_vertical_m, flags FROM displacements "
         "WHERE epoch = ? ORDER BY reflector",
         "SELECT epoch, reflector, median_change_m, max_change_m, moved, missing, suspect FROM reference_checks "
-        "WHERE epoch = ? ORDER BY reflector")),
+        "WHERE epoch = ? ORDER BY reflector",
+        "SELECT epoch, reflector, extra FROM displacement_extras WHERE epoch = ? ORDER BY reflector",
+        "SELECT epoch, extra FROM displacement_set_extras WHERE epoch = ?")),
     Group("camera series", "camera_series", ("name",), (
         "SELECT name, reflector, sha256, stored_path, options, summary, arrays FROM camera_series WHERE name = ?",)),
     Group("environment series", "env_series", ("name",), (

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import datetime as dt
 from dataclasses import asdict, dataclass, field
-from typing import Any, Optional
+from typing import Any, Mapping, Optional
 
 import numpy as np
 
@@ -189,10 +189,26 @@ class DisplacementRecord:
     flags: tuple[str, ...]
     epoch_flags: tuple[str, ...]
     baseline: str
+    extra: Mapping[str, Any] = field(default_factory=dict)  # along_m, along_sigma_m, budget (metres)
+    systematics: Mapping[str, Any] = field(default_factory=dict)  # the epoch's scale_ppm, drift...
 
     @property
     def when(self) -> dt.datetime:
         return dt.datetime.fromisoformat(self.datetime)
+
+    @property
+    def along_m(self) -> Optional[float]:
+        """Movement along the bridge axis (positive away from the first pier), metres; None without one."""
+        return self.extra.get("along_m")
+
+    @property
+    def along_sigma_m(self) -> Optional[float]:
+        return self.extra.get("along_sigma_m")
+
+    @property
+    def budget(self) -> Mapping[str, Optional[float]]:
+        """The terms of ``sigma_m`` (metres): noise, frame, scale, bias, drift (absent when not stored)."""
+        return self.extra.get("budget") or {}
 
 
 @dataclass(frozen=True)

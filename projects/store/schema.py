@@ -13,8 +13,9 @@ from typing import Callable, Optional, Union
 from common.flags import RENAMED
 from projects.store import digests
 from projects.store.errors import CampaignError
+from projects.store.field_tables import SCHEMA as FIELD_SCHEMA
 
-SCHEMA_VERSION = 9
+SCHEMA_VERSION = 10
 
 SCHEMA_V1 = """
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -101,7 +102,7 @@ CREATE INDEX files_by_epoch ON files(epoch);
 
 
 def _add_digests(conn: sqlite3.Connection) -> None:
-    """Migration 9: a digest column on every table of results, filled for what is stored already."""
+    """Migration 10: a digest column on every table of results, filled for what is stored already."""
     for table in digests.GROUPS:
         conn.execute(f"ALTER TABLE {table} ADD COLUMN digest TEXT")
     digests.seal_all(conn)
@@ -198,16 +199,20 @@ MIGRATIONS: dict[int, Migration] = {
     #    older versions are renamed in the stored summaries (common.flags.RENAMED).
     8: "".join(f"""UPDATE crossvals SET summary = replace(summary, '"{old}"', '"{new}"');\n"""
                for old, new in RENAMED.items()),
-    # 9: every stored result carries the digest of its values (projects.store.digests), so damage that
-    #    passes integrity_check is found by 'verify' and the result recomputed instead of served.
-    9: _add_digests,
+    # 9: the field error budget: centroid times and incidences, closure centroids, along-span movements and
+    #    budgets, each epoch's scale and drift, and the campaign's field model (projects.store.field_tables).
+    9: FIELD_SCHEMA,
+    # 10: every stored result carries the digest of its values (projects.store.digests), so damage that
+    #     passes integrity_check is found by 'verify' and the result recomputed instead of served.
+    10: _add_digests,
 }
 
 #: What each migration leaves that can be seen in the tables: version -> (table, column or None).
 #: Version 8 renames codes inside stored documents only and leaves no mark.
 MARKS: dict[int, tuple[str, Optional[str]]] = {
     1: ("displacements", None), 2: ("map_previews", None), 3: ("comparisons", None), 4: ("camera_series", None),
-    5: ("reflectors", "nx"), 6: ("env_series", None), 7: ("predictions", None), 9: ("plans", "digest"),
+    5: ("reflectors", "nx"), 6: ("env_series", None), 7: ("predictions", None), 9: ("field_models", None),
+    10: ("plans", "digest"),
 }
 
 

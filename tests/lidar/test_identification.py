@@ -127,3 +127,38 @@ def test_a_layout_with_another_up_axis_is_declared_and_levelled():
     ident = identify_reflectors(det, yup, up_layout=(0.0, 1.0, 0.0))
     assert ident.tilt_deg < 0.5
     assert [ident.match(r).detection for r in ("R1", "R2", "R3", "R4")] == [0, 1, 2, 3]
+
+
+def _periodic_case(seed):
+    """A three-span bridge seen in part: one inner-pier target and the first span's deck targets (a shift by
+    one span fits them as well), in a levelled scanner frame near the first end pier."""
+    model = BridgeModel(spans_m=(39.9, 39.9, 39.9))
+    rng = np.random.default_rng(seed)
+    layout = layout_from_model(model, noise_m=0.03, rng=rng)
+    rot = Rotation.from_euler("z", rng.uniform(0, 360), degrees=True).as_matrix()
+    station = np.array([-4.0, -12.0, 1.5])
+    seen = ["R3", "M1", "M2", "M3", "M4", "M5"]
+    true = {t.id: (np.asarray(t.centre_m) - station) @ rot for t in model.targets}
+    det = np.array([true[i] for i in seen]) + rng.normal(0, 0.01, (len(seen), 3))
+    return layout, det, seen, true
+
+
+def _evidence_from(true, dark_radius=0.3):
+    """What the coarse scan would say: a target where one is, the scan sees through empty air elsewhere."""
+    def evidence(xyz):
+        d = min(np.linalg.norm(xyz - p) for p in true.values())
+        return True if d < dark_radius else "through"
+    return evidence
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_repeating_layout_is_told_apart_by_the_coarse_scan_or_refused(seed):
+    layout, det, seen, true = _periodic_case(seed)
+    with pytest.raises(ProcessingError, match="equally well"):
+        identify_reflectors(det, layout)  # without evidence: a guess either way, so no answer
+    ident = identify_reflectors(det, layout, evidence=_evidence_from(true))
+    got = {m.id for m in ident.matches if m.detection is not None}
+    assert got == set(seen)
+    for m in ident.matches:
+        if m.detection is None:  # the predicted positions are the true ones, not a span away
+            assert np.linalg.norm(np.asarray(m.xyz_socs) - true[m.id]) < 0.2

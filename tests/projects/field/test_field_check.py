@@ -137,20 +137,23 @@ def test_scanner_choice_per_campaign_and_per_epoch(processed_copy, tmp_path):
 
 def test_predicted_sigma_matches_what_processing_reports(processed):
     """The advisor's sigma for the stations of visits 2 and 3 against the sigma their processing reported."""
-    from lidar.displacement import Observation
     from lidar.stations import predict_station
     from tests.projects.conftest import VISITS
 
     with Campaign.open(processed, writable=False) as c:
         layout = c.layout()
-        base = {k: Observation(v.xyz_socs, v.cov) for k, v in c.centroids(LABEL).items() if v.found}
+        base = {k: v for k, v in c.centroids(LABEL).items() if v.found}
         rows = c.displacements()
+        model, _ = c.field_model()
         for k, label in ((1, "2026-03-09"), (2, "2026-03-16")):
-            pred = predict_station(layout, VISITS[k][0].position_m, profile=c.profile, baseline=base)
+            pred = predict_station(layout, VISITS[k][0].position_m, profile=c.profile, baseline=base,
+                                   field_model=model, closure=True)
             got = {r.reflector: r.sigma_m * 1000 for r in rows if r.epoch == label}
             ratios = [pred.predicted_sigma_mm[m] / got[m] for m in got]
             assert not pred.hidden
-            assert all(0.7 <= q <= 1.3 for q in ratios), (label, ratios)
+            # processing's frame term depends on how far the epoch's own deck normal falls from the carried one,
+            # which no prediction knows (it takes its expectation): within -30 % and +40 %
+            assert all(0.7 <= q <= 1.4 for q in ratios), (label, ratios)
 
 
 def test_stations_cli_with_an_area_writes_json_and_map(processed_copy, tmp_path):

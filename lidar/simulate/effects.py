@@ -1,0 +1,343 @@
+"""Systematic errors of a real scanner, for the simulator: range walk on retro-reflectors, drift, timing.
+
+Every effect is a small frozen class; all are off unless a visit's
+:class:`~lidar.simulate.scene.EpochConditions` names them, and none draws
+random numbers.
+
+Return strength
+    What a range walk or the receiver's saturation depends on: the power a
+    return brings back, relative to a retro-reflective disc filling the beam
+    head-on at :data:`STRENGTH_REFERENCE_RANGE_M` (15 m)::
+
+        strength = cover * cos_incidence * (15 m / range) ** 2
+
+    (``cover`` is the fraction of the footprint on the disc). A full disc seen
+    head-on at 15 m has strength 1, at 30 m 0.25.
+
+Range walk
+    On a retro-reflector the range reads short by ``bias_m(range_m,
+    cos_incidence, strength)`` metres (positive = short), growing with the
+    return's strength. Forms: :class:`LinearIncidenceWalk`,
+    :class:`InverseSquareWalk`, :class:`StrengthStepWalk`,
+    :class:`LogisticStrengthWalk`, :class:`ExponentialStrengthWalk`.
+
+Drift
+    :class:`DriftModel`: the instrument turns slowly during a visit (tilts about
+    its x and y axes, twist about z), each angle linear in the time since the
+    visit started plus an optional quadratic term. A point is reported in the
+    instrument's frame at the time it was measured.
+
+Timing
+    :class:`VisitTiming`: when each point of a visit is measured (the coarse
+    scan, then the fine windows in order, each ``gap_s`` after the last).
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields
+from typing import ClassVar, Optional, Union
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from common.errors import InputError
+
+STRENGTH_REFERENCE_RANGE_M = 15.0
+ARCSEC = np.pi / (180.0 * 3600.0)  # radians in one arcsecond
+
+
+def return_strength(range_m: ArrayLike, cos_incidence: ArrayLike, cover: ArrayLike = 1.0) -> np.ndarray:
+    """Relative strength of a retro-reflector return (1 for a full disc head-on at 15 m), see the module text.
+
+    Parameters
+    ----------
+    range_m : (N,) ranges, metres.
+    cos_incidence : (N,) |cos| of the incidence angle on the disc.
+    cover : (N,) or scalar, fraction of the footprint on the disc. Default 1.
+
+    Returns
+    -------
+    (N,) float64, dimensionless.
+    """
+    r = np.asarray(range_m, dtype=np.float64)
+    return np.asarray(cover, dtype=np.float64) * np.asarray(cos_incidence, dtype=np.float64) * \
+        (STRENGTH_REFERENCE_RANGE_M / np.maximum(r, 1e-3)) ** 2
+
+
+def _positive(name: str, value: float, *, zero_ok: bool = True) -> None:
+    if not np.isfinite(value) or value < 0 or (value == 0 and not zero_ok):
+        raise InputError(f"{name} must be {'non-negative' if zero_ok else 'positive'} and finite, got {value}")
+
+
+@dataclass(frozen=True)
+class LinearIncidenceWalk:
+    """Range walk linear in the cosine of the incidence angle: ``bias = amplitude_m * cos_incidence``.
+
+    Attributes
+    ----------
+    amplitude_m : float
+        Bias seen head-on (cos = 1), metres, positive = reads short. Default 1 mm.
+    """
+
+    amplitude_m: float = 0.001
+    form: ClassVar[str] = "linear_incidence"
+
+    def __post_init__(self) -> None:
+        if not np.isfinite(self.amplitude_m):
+            raise InputError("range walk amplitude must be finite")
+
+    def bias_m(self, range_m: ArrayLike, cos_incidence: ArrayLike, strength: ArrayLike) -> np.ndarray:
+        """(N,) range bias, metres (positive: the range reads short)."""
+        shape = np.broadcast(np.asarray(range_m), np.asarray(cos_incidence), np.asarray(strength)).shape
+        return np.broadcast_to(self.amplitude_m * np.abs(np.asarray(cos_incidence, dtype=np.float64)), shape).copy()
+
+
+@dataclass(frozen=True)
+class InverseSquareWalk:
+    """Range walk saturating in 1/range^2: ``bias = max_m * u / (1 + u)``, ``u = cos * (half_range_m / range)^2``.
+
+    Attributes
+    ----------
+    max_m : float
+        Bias approached at very short range, metres. Default 3 mm.
+    half_range_m : float
+        Range at which a head-on return has half of it, metres. Default 15 m (so 1.5 mm at 15 m head-on).
+    """
+
+    max_m: float = 0.003
+    half_range_m: float = 15.0
+    form: ClassVar[str] = "inverse_square"
+
+    def __post_init__(self) -> None:
+        _positive("range walk half range", self.half_range_m, zero_ok=False)
+        if not np.isfinite(self.max_m):
+            raise InputError("range walk maximum must be finite")
+
+    def bias_m(self, range_m: ArrayLike, cos_incidence: ArrayLike, strength: ArrayLike) -> np.ndarray:
+        """(N,) range bias, metres (positive: the range reads short)."""
+        r = np.maximum(np.asarray(range_m, dtype=np.float64), 1e-3)
+        u = np.abs(np.asarray(cos_incidence, dtype=np.float64)) * (self.half_range_m / r) ** 2
+        shape = np.broadcast(r, u, np.asarray(strength)).shape
+        return np.broadcast_to(self.max_m * u / (1.0 + u), shape).copy()
+
+
+@dataclass(frozen=True)
+class StrengthStepWalk:
+    """Range walk stepping at a strength threshold: ``high_m`` at or above ``threshold``, ``low_m`` below.
+
+    Attributes
+    ----------
+    high_m, low_m : float
+        Bias of strong and of weak returns, metres. Defaults 1.2 mm and 0.2 mm.
+    threshold : float
+        Return strength of the step. Default 0.5 (a head-on disc at about 21 m).
+    """
+
+    high_m: float = 0.0012
+    low_m: float = 0.0002
+    threshold: float = 0.5
+    form: ClassVar[str] = "strength_step"
+
+    def __post_init__(self) -> None:
+        _positive("range walk threshold", self.threshold)
+        if not (np.isfinite(self.high_m) and np.isfinite(self.low_m)):
+            raise InputError("range walk levels must be finite")
+
+    def bias_m(self, range_m: ArrayLike, cos_incidence: ArrayLike, strength: ArrayLike) -> np.ndarray:
+        """(N,) range bias, metres (positive: the range reads short)."""
+        s = np.asarray(strength, dtype=np.float64)
+        shape = np.broadcast(np.asarray(range_m), np.asarray(cos_incidence), s).shape
+        return np.broadcast_to(np.where(s >= self.threshold, self.high_m, self.low_m), shape).astype(np.float64)
+
+
+@dataclass(frozen=True)
+class LogisticStrengthWalk:
+    """Range walk logistic in strength: ``bias = max_m / (1 + exp(-(strength - midpoint) / width))``.
+
+    Attributes
+    ----------
+    max_m : float
+        Bias of the strongest returns, metres. Default 1.5 mm.
+    midpoint : float
+        Strength at which the bias is half of it. Default 0.5.
+    width : float
+        Strength over which it rises (e-folding). Default 0.15.
+    """
+
+    max_m: float = 0.0015
+    midpoint: float = 0.5
+    width: float = 0.15
+    form: ClassVar[str] = "logistic_strength"
+
+    def __post_init__(self) -> None:
+        _positive("range walk width", self.width, zero_ok=False)
+        if not (np.isfinite(self.max_m) and np.isfinite(self.midpoint)):
+            raise InputError("range walk parameters must be finite")
+
+    def bias_m(self, range_m: ArrayLike, cos_incidence: ArrayLike, strength: ArrayLike) -> np.ndarray:
+        """(N,) range bias, metres (positive: the range reads short)."""
+        s = np.asarray(strength, dtype=np.float64)
+        shape = np.broadcast(np.asarray(range_m), np.asarray(cos_incidence), s).shape
+        z = np.clip((s - self.midpoint) / self.width, -500.0, 500.0)
+        return np.broadcast_to(self.max_m / (1.0 + np.exp(-z)), shape).copy()
+
+
+@dataclass(frozen=True)
+class ExponentialStrengthWalk:
+    """Range walk saturating exponentially in strength: ``bias = max_m * (1 - exp(-strength / scale))``.
+
+    Attributes
+    ----------
+    max_m : float
+        Bias approached by the strongest returns, metres. Default 1.5 mm.
+    scale : float
+        Strength scale of the rise. Default 0.5 (a head-on disc at 15 m has 86 % of ``max_m``).
+    """
+
+    max_m: float = 0.0015
+    scale: float = 0.5
+    form: ClassVar[str] = "exponential_strength"
+
+    def __post_init__(self) -> None:
+        _positive("range walk scale", self.scale, zero_ok=False)
+        if not np.isfinite(self.max_m):
+            raise InputError("range walk maximum must be finite")
+
+    def bias_m(self, range_m: ArrayLike, cos_incidence: ArrayLike, strength: ArrayLike) -> np.ndarray:
+        """(N,) range bias, metres (positive: the range reads short)."""
+        s = np.asarray(strength, dtype=np.float64)
+        shape = np.broadcast(np.asarray(range_m), np.asarray(cos_incidence), s).shape
+        return np.broadcast_to(self.max_m * (1.0 - np.exp(-np.maximum(s, 0.0) / self.scale)), shape).copy()
+
+
+RangeWalk = Union[LinearIncidenceWalk, InverseSquareWalk, StrengthStepWalk, LogisticStrengthWalk,
+                  ExponentialStrengthWalk]
+RANGE_WALK_FORMS: dict[str, type] = {c.form: c for c in (LinearIncidenceWalk, InverseSquareWalk, StrengthStepWalk,
+                                                         LogisticStrengthWalk, ExponentialStrengthWalk)}
+
+
+def walk_to_dict(walk: Optional[RangeWalk]) -> Optional[dict]:
+    """``{"form": name, **parameters}`` of a range walk (None for none), for JSON."""
+    return None if walk is None else {"form": walk.form, **asdict(walk)}
+
+
+def walk_from_dict(d: Optional[dict]) -> Optional[RangeWalk]:
+    """The range walk written by :func:`walk_to_dict`."""
+    if d is None:
+        return None
+    d = dict(d)
+    cls = RANGE_WALK_FORMS.get(str(d.pop("form", "")))
+    if cls is None:
+        raise InputError(f"unknown range walk form in {d}; known: {', '.join(RANGE_WALK_FORMS)}")
+    return cls(**{f.name: float(d[f.name]) for f in fields(cls) if f.name in d})
+
+
+@dataclass(frozen=True)
+class DriftModel:
+    """Slow rotation of the instrument during a visit, arcseconds.
+
+    At ``elapsed`` hours since the visit started the instrument's frame is its
+    starting frame turned by the rotation vector ``(a_x, a_y, a_z)`` (about its
+    own starting x, y and z axes), each ``rate * elapsed + quadratic * elapsed**2``.
+    Points are reported in the frame of the moment they are measured.
+
+    Attributes
+    ----------
+    tilt_x_arcsec_per_h, tilt_y_arcsec_per_h, twist_arcsec_per_h : float
+        Linear rates about x, y (tilts) and z (twist). Default 0.
+    tilt_x_arcsec_per_h2, tilt_y_arcsec_per_h2, twist_arcsec_per_h2 : float
+        Quadratic terms. Default 0.
+    """
+
+    tilt_x_arcsec_per_h: float = 0.0
+    tilt_y_arcsec_per_h: float = 0.0
+    twist_arcsec_per_h: float = 0.0
+    tilt_x_arcsec_per_h2: float = 0.0
+    tilt_y_arcsec_per_h2: float = 0.0
+    twist_arcsec_per_h2: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not all(np.isfinite(getattr(self, f.name)) for f in fields(self)):
+            raise InputError("drift rates must be finite")
+
+    def angles_rad(self, elapsed_s: ArrayLike) -> np.ndarray:
+        """(N, 3) rotation vector (about x, y, z of the starting frame), radians, at ``elapsed_s`` seconds."""
+        h = np.atleast_1d(np.asarray(elapsed_s, dtype=np.float64)) / 3600.0
+        lin = np.array([self.tilt_x_arcsec_per_h, self.tilt_y_arcsec_per_h, self.twist_arcsec_per_h])
+        quad = np.array([self.tilt_x_arcsec_per_h2, self.tilt_y_arcsec_per_h2, self.twist_arcsec_per_h2])
+        return (h[:, None] * lin + (h ** 2)[:, None] * quad) * ARCSEC
+
+    def to_start(self, vectors_current: np.ndarray, elapsed_s: ArrayLike) -> np.ndarray:
+        """(N, 3) vectors given in the instrument's frame at ``elapsed_s``, expressed in its starting frame."""
+        return _rotate(vectors_current, self.angles_rad(elapsed_s))
+
+    def to_current(self, vectors_start: np.ndarray, elapsed_s: ArrayLike) -> np.ndarray:
+        """(N, 3) vectors of the starting frame as the instrument reports them at ``elapsed_s`` (inverse of to_start)."""
+        return _rotate(vectors_start, -self.angles_rad(elapsed_s))
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: Optional[dict]) -> Optional["DriftModel"]:
+        return None if d is None else cls(**{f.name: float(d.get(f.name, 0.0)) for f in fields(cls)})
+
+
+def _rotate(v: np.ndarray, rotvec: np.ndarray) -> np.ndarray:
+    """Rodrigues' rotation of (N, 3) vectors by (N, 3) (or (1, 3)) rotation vectors, radians."""
+    v = np.asarray(v, dtype=np.float64)
+    theta = np.linalg.norm(rotvec, axis=1, keepdims=True)
+    safe = np.where(theta > 0, theta, 1.0)
+    k = rotvec / safe
+    cos, sin = np.cos(theta), np.sin(theta)
+    kxv = np.cross(k, v)
+    kdv = np.einsum("ij,ij->i", np.broadcast_to(k, v.shape), v)[:, None]
+    return v * cos + kxv * sin + k * kdv * (1.0 - cos)
+
+
+@dataclass(frozen=True)
+class VisitTiming:
+    """When the points of a visit are measured.
+
+    The coarse scan starts at ``start_s``; each fine window starts ``gap_s`` after the previous scan ended (the
+    windows in the plan's order, closure windows last). Within a scan the grid directions are measured in order,
+    one vertical line (one azimuth) after the other.
+
+    Attributes
+    ----------
+    start_s : float
+        Time of the visit's first point, seconds (any offset: only differences matter). Default 0.
+    gap_s : float
+        Seconds between the end of one scan and the start of the next (turning to the window). Default 30.
+    rate_hz : float, optional
+        Measurement rate, points per second. Default None: the scanner profile's pulse rate.
+    duration : {"points", "lines"}
+        "points": a scan of ``n`` grid directions lasts ``n / rate`` (every direction one measurement).
+        "lines": as the instrument spends it (:class:`~lidar.scanner_profile.ScannerProfile`): every vertical
+        line costs a full mirror sweep (``sweep / theta_step / rate``, at least one line period), the window's
+        own directions measured at the rate from the line's start. Default "points".
+    """
+
+    start_s: float = 0.0
+    gap_s: float = 30.0
+    rate_hz: Optional[float] = None
+    duration: str = "points"
+
+    def __post_init__(self) -> None:
+        if not np.isfinite(self.start_s):
+            raise InputError("visit start time must be finite")
+        _positive("gap between windows", self.gap_s)
+        if self.rate_hz is not None:
+            _positive("measurement rate", self.rate_hz, zero_ok=False)
+        if self.duration not in ("points", "lines"):
+            raise InputError(f"visit timing duration must be 'points' or 'lines', not {self.duration!r}")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: Optional[dict]) -> Optional["VisitTiming"]:
+        if d is None:
+            return None
+        rate = d.get("rate_hz")
+        return cls(float(d.get("start_s", 0.0)), float(d.get("gap_s", 30.0)), None if rate is None else float(rate),
+                   str(d.get("duration", "points")))

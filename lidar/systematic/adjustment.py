@@ -1,0 +1,553 @@
+"""One adjustment of every visit of a campaign: the scanner's systematic errors from what does not move.
+
+Every visit re-measures, from a new station, what does not move: the reference targets' mutual geometry
+and the deck targets' across-span coordinates (a deck sags and slides along the span with temperature,
+but not sideways). Each centroid ``y`` (the visit's scanner frame) of target ``i`` in visit ``k`` is
+modelled as::
+
+    R(omega_k (t - t_k)) (y + b(r, c) u)  =  (1 + kappa_k) (Q_k X_i + d_k)        (reference targets)
+    across . Q_k^T (R(omega_k (t - t_k)) (y + b u) / (1 + kappa_k) - d_k)  =  a_i    (deck targets)
+
+with, per visit, a similarity (rotation ``Q_k``, translation ``d_k`` and the atmosphere's scale
+``kappa_k``; the baseline's is the identity) and the set-up's drift ``omega_k`` (rotation rates about
+the scanner's axes, linear in time); shared by all visits, the reference targets' positions ``X_i`` and
+the deck targets' across-span coordinates ``a_i`` in the baseline's frame, and the range walk ``b``
+(:mod:`lidar.systematic.range_walk`; ``u`` the line of sight, ``r`` the range, ``c`` the cosine of the
+incidence).
+
+It is solved by Gauss-Newton with every visit's own unknowns eliminated first (the normal equations are
+block-arrowhead: visits share only the targets and the range walk), weighted by every centroid's
+covariance, with weak priors on the range walk, the scale and the drift (so that an undetermined term
+keeps the prior's sigma instead of a guess) and a Tukey down-weighting of blocks that do not fit (a
+reference target that moved between visits). The range walk's family is chosen by BIC among
+:func:`lidar.systematic.range_walk.candidate_bases`.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Mapping, Optional, Sequence
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from common.errors import InputError
+from lidar.displacement import deck_normal
+from lidar.reference_motion import across_axis
+from lidar.systematic.range_walk import (STEP_PROXIES, RangeWalkModel, candidate_bases, design, refine_thresholds,
+                                         step_name, step_thresholds)
+
+ARCSEC = math.pi / 180.0 / 3600.0
+#: Prior standard deviations: range-walk coefficients (mm), scale (ppm), drift (arcsec per hour).
+PRIOR_BIAS_MM = 2.0
+PRIOR_SCALE_PPM = 300.0
+PRIOR_DRIFT_ARCSEC_H = 30.0
+#: Added to every centroid covariance: what a centroid's own covariance leaves out (m^2 per axis).
+MODEL_FLOOR_M2 = (2e-5) ** 2
+#: Tukey's constant on a block's normalised residual.
+TUKEY_C = 4.685
+#: Range-walk families within this BIC of the best widen the sigma where they disagree.
+ALTERNATIVE_BIC = 10.0
+#: A scale whose sigma exceeds this is not determined by the reference geometry (ppm).
+SCALE_DETERMINED_PPM = 15.0
+
+
+@dataclass(frozen=True, eq=False)
+class Sighting:
+    """One centroid as the adjustment sees it.
+
+    Attributes
+    ----------
+    target : str
+    xyz_socs : (3,) float64 array, metres
+    cov : (3, 3) float64 array, m^2
+    cos_incidence : float
+        |cos| of the incidence on the target (its disc normal against the line of sight).
+    time_s : float
+        When it was scanned (seconds, any origin; only differences within a visit matter); NaN: unknown.
+    """
+
+    target: str
+    xyz_socs: np.ndarray
+    cov: np.ndarray
+    cos_incidence: float
+    time_s: float = float("nan")
+
+
+@dataclass(frozen=True, eq=False)
+class VisitSightings:
+    """Every centroid of one visit (a target may be sighted twice: the plan's closure window)."""
+
+    label: str
+    sightings: tuple[Sighting, ...]
+
+
+@dataclass(frozen=True, eq=False)
+class VisitSystematics:
+    """One visit's scale and drift as the adjustment found them.
+
+    ``scale_ppm`` is relative to the baseline (ranges read ``1 + scale_ppm 1e-6`` times the baseline's);
+    ``drift_arcsec_h`` are the rotation rates about the scanner's x, y (tilt) and z (twist) axes,
+    ``time_ref_s`` the time at which the drift correction is zero.
+    """
+
+    label: str
+    scale_ppm: float = 0.0
+    scale_sigma_ppm: float = 0.0
+    drift_arcsec_h: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    drift_cov: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
+    time_ref_s: float = 0.0
+    timed: bool = False
+    scale_determined: bool = True
+    left_out: tuple[str, ...] = ()
+    alternative_scale_ppm: tuple[float, ...] = ()  # the visit's scale under each of the range walk's alternatives
+    misfit: float = 1.0  # RMS normalised residual of the visit's centroids in the adjustment (1: as their sigmas say)
+
+    @property
+    def drift_sigma_arcsec_h(self) -> np.ndarray:
+        return np.sqrt(np.maximum(np.diag(self.drift_cov), 0.0))
+
+
+@dataclass(frozen=True, eq=False)
+class FieldModel:
+    """The campaign's systematic errors: the range walk and every visit's scale and drift."""
+
+    baseline: str
+    range_walk: RangeWalkModel
+    visits: Mapping[str, VisitSystematics]
+    sigma0: float = 1.0
+    n_observations: int = 0
+    notes: tuple[str, ...] = ()
+
+    def visit(self, label: str) -> VisitSystematics:
+        return self.visits.get(label) or VisitSystematics(label)
+
+
+@dataclass
+class _Visit:
+    label: str
+    refs: list  # (Sighting, target index)
+    decks: list  # (Sighting, deck index)
+    timed: bool
+    t_ref: float
+    q: np.ndarray = field(default_factory=lambda: np.eye(3))
+    d: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    kappa_ppm: float = 0.0
+    omega: np.ndarray = field(default_factory=lambda: np.zeros(3))  # arcsec per hour
+    weights: dict = field(default_factory=dict)  # (kind, j) -> IRLS weight
+    arrays: dict = field(default_factory=dict)  # what does not change between iterations
+
+    @property
+    def n_local(self) -> int:
+        return (0 if self.is_base else 7) + (3 if self.timed else 0)
+
+    is_base: bool = False
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def _drift_rotation(omega_arcsec_h: np.ndarray, dt_s: float) -> np.ndarray:
+    return Rotation.from_rotvec(np.asarray(omega_arcsec_h) * ARCSEC * dt_s / 3600.0).as_matrix()
+
+
+def _skews(v: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) cross-product matrices of (n, 3) vectors."""
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
+    return out
+
+
+def _rotations(rotvecs: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) rotation matrices of (n, 3) rotation vectors (Rodrigues)."""
+    theta = np.linalg.norm(rotvecs, axis=1)
+    k = _skews(rotvecs / np.maximum(theta, 1e-300)[:, None])
+    s, c = np.sin(theta)[:, None, None], (1.0 - np.cos(theta))[:, None, None]
+    return np.eye(3)[None] + s * k + c * (k @ k)
+
+
+def _whiten(cov: np.ndarray) -> np.ndarray:
+    """L^-1 with L L^T = cov + floor."""
+    return np.linalg.inv(np.linalg.cholesky(cov + MODEL_FLOOR_M2 * np.eye(3)))
+
+
+class _Problem:
+    """The unknowns, their ordering and the linearised equations of one adjustment."""
+
+    def __init__(self, visits: Sequence[VisitSightings], groups: Mapping[str, str], basis: tuple[str, ...],
+                 start: Optional["_Problem"] = None, drift: bool = True):
+        self.basis = basis
+        self.drift = drift
+        base = visits[0]
+        ref_ids = sorted({s.target for v in visits for s in v.sightings if groups.get(s.target) == "reference"})
+        deck_ids = sorted({s.target for v in visits for s in v.sightings if groups.get(s.target) == "measurement"})
+        self.ref_ids, self.deck_ids = ref_ids, deck_ids
+        b_deck = {s.target: s.xyz_socs for s in base.sightings if s.target in deck_ids}
+        self.across: Optional[np.ndarray] = None
+        if len(b_deck) >= 3:
+            up = deck_normal(np.array(list(b_deck.values())), up=(0.0, 0.0, 1.0))
+            self.across = across_axis(np.array(list(b_deck.values())), up)
+        if self.across is None:
+            deck_ids = self.deck_ids = []
+        self.n_shared = 3 * len(ref_ids) + len(deck_ids) + len(basis)
+        self.x_ref = np.zeros((len(ref_ids), 3))
+        self.a_deck = np.zeros(len(deck_ids))
+        self.theta = np.zeros(len(basis))  # mm
+        self.visits = [self._visit(v, k == 0, groups) for k, v in enumerate(visits)]
+        if start is None:
+            self._initialise()
+        else:  # the poses, targets and down-weighting of a solved problem on the same visits
+            self.x_ref, self.a_deck = start.x_ref.copy(), start.a_deck.copy()
+            for mine, theirs in zip(self.visits, start.visits):
+                mine.q, mine.d, mine.kappa_ppm = theirs.q.copy(), theirs.d.copy(), theirs.kappa_ppm
+                mine.omega = theirs.omega.copy() if mine.timed else np.zeros(3)
+                mine.weights = dict(theirs.weights)
+
+    def _visit(self, v: VisitSightings, is_base: bool, groups) -> _Visit:
+        times = np.array([s.time_s for s in v.sightings], dtype=np.float64)
+        timed = bool(self.drift and np.all(np.isfinite(times)) and times.size and np.ptp(times) > 1.0)
+        refs = [(s, self.ref_ids.index(s.target)) for s in v.sightings if s.target in self.ref_ids]
+        decks = [(s, self.deck_ids.index(s.target)) for s in v.sightings if s.target in self.deck_ids]
+        return _Visit(v.label, refs, decks, timed, float(np.median(times)) if timed else 0.0, is_base=is_base)
+
+    def _initialise(self) -> None:
+        from common.rigid import fit_rigid
+
+        base = self.visits[0]
+        seen = np.zeros(len(self.ref_ids), bool)
+        for s, i in base.refs:
+            self.x_ref[i] = s.xyz_socs
+            seen[i] = True
+        for v in self.visits[1:]:
+            common = [(s, i) for s, i in v.refs if seen[i]]
+            if len(common) >= 3:
+                t = fit_rigid(np.array([self.x_ref[i] for _, i in common]), np.array([s.xyz_socs for s, _ in common]))
+                v.q, v.d = t.rotation, t.translation
+            for s, i in v.refs:
+                if not seen[i]:
+                    self.x_ref[i] = v.q.T @ (s.xyz_socs - v.d)
+                    seen[i] = True
+        if self.across is not None:
+            got = np.zeros(len(self.deck_ids), bool)
+            for v in self.visits:
+                for s, m in v.decks:
+                    if not got[m]:
+                        self.a_deck[m] = self.across @ (v.q.T @ (s.xyz_socs - v.d))
+                        got[m] = True
+
+    # ---------------------------------------------------------------- equations of one visit
+    def _prepare(self, v: _Visit) -> None:
+        """Per-visit arrays that do not change between iterations (positions, whitening, basis values)."""
+        sights = [s for s, _ in v.refs] + [s for s, _ in v.decks]
+        y = np.array([s.xyz_socs for s in sights], dtype=np.float64).reshape(-1, 3)
+        r = np.linalg.norm(y, axis=1)
+        c = np.array([s.cos_incidence for s in sights], dtype=np.float64)
+        t = np.array([s.time_s for s in sights], dtype=np.float64)
+        v.arrays = {
+            "y": y, "u": y / r[:, None], "phi": design(self.basis, r, c),
+            "dt": np.where(np.isfinite(t), t - v.t_ref, 0.0) if v.timed else np.zeros(len(sights)),
+            "lw": np.array([_whiten(s.cov) for s, _ in v.refs]).reshape(-1, 3, 3),
+            "cov_deck": np.array([s.cov for s, _ in v.decks]).reshape(-1, 3, 3),
+            "ref_idx": np.array([i for _, i in v.refs], dtype=int),
+            "deck_idx": np.array([m for _, m in v.decks], dtype=int),
+        }
+
+    def _corrected(self, v: _Visit) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(z (n, 3), dz/dtheta (n, 3, P), dz/domega (n, 3, 3)) of every sighting at the current unknowns."""
+        a = v.arrays
+        w = a["y"] + 1e-3 * (a["phi"] @ self.theta)[:, None] * a["u"]
+        k = ARCSEC * a["dt"] / 3600.0
+        rot = _rotations(v.omega[None, :] * k[:, None])
+        z = np.einsum("nij,nj->ni", rot, w)
+        dz_dtheta = np.einsum("nij,nj,np->nip", rot, a["u"], a["phi"]) * 1e-3
+        dz_domega = -_skews(z) * k[:, None, None]
+        return z, dz_dtheta, dz_domega
+
+    def visit_rows(self, v: _Visit) -> tuple[np.ndarray, np.ndarray, np.ndarray, list]:
+        """Whitened (rows x local), (rows x shared) Jacobians and residuals of one visit, and its blocks."""
+        if not v.arrays:
+            self._prepare(v)
+        a = v.arrays
+        nl, ns, nb = v.n_local, self.n_shared, len(self.basis)
+        nr, nd = len(v.refs), len(v.decks)
+        sc = 1.0 + 1e-6 * v.kappa_ppm
+        off_w = 0 if v.is_base else 7
+        z, dth, dom = self._corrected(v)
+        blocks = [("r", j, 3) for j in range(nr)] + [("d", j, 1) for j in range(nd)]
+        wr = np.sqrt(np.array([v.weights.get(("r", j), 1.0) for j in range(nr)]))
+        wd = np.array([v.weights.get(("d", j), 1.0) for j in range(nd)])
+        # reference targets: 3 rows each
+        qx = self.x_ref[a["ref_idx"]] @ v.q.T
+        e = z[:nr] - sc * (qx + v.d)
+        al = np.zeros((nr, 3, nl))
+        if not v.is_base:
+            al[:, :, 0:3] = sc * _skews(qx) * 1e-3
+            al[:, :, 3:6] = -sc * np.eye(3)
+            al[:, :, 6] = -(qx + v.d) * 1e-6
+        if v.timed:
+            al[:, :, off_w:off_w + 3] = dom[:nr]
+        ash = np.zeros((nr, 3, ns))
+        for j, i in enumerate(a["ref_idx"]):
+            ash[j, :, 3 * i:3 * i + 3] = -sc * v.q
+        if nb:
+            ash[:, :, ns - nb:] = dth[:nr]
+        lw = a["lw"] * wr[:, None, None]
+        jl = [np.einsum("nij,njk->nik", lw, al).reshape(3 * nr, nl)]
+        js = [np.einsum("nij,njk->nik", lw, ash).reshape(3 * nr, ns)]
+        res = [np.einsum("nij,nj->ni", lw, e).reshape(-1)]
+        # deck targets: 1 row each, across the span
+        if nd:
+            qa = v.q @ self.across
+            zz = z[nr:]
+            vv = zz / sc - v.d
+            ed = vv @ qa - self.a_deck[a["deck_idx"]]
+            ald = np.zeros((nd, nl))
+            if not v.is_base:
+                ald[:, 0:3] = np.cross(qa[None, :], vv) * 1e-3
+                ald[:, 3:6] = -qa
+                ald[:, 6] = -(zz @ qa) / sc ** 2 * 1e-6
+            if v.timed:
+                ald[:, off_w:off_w + 3] = np.einsum("i,nij->nj", qa, dom[nr:]) / sc
+            asd = np.zeros((nd, ns))
+            asd[np.arange(nd), 3 * len(self.ref_ids) + a["deck_idx"]] = -1.0
+            if nb:
+                asd[:, ns - nb:] = np.einsum("i,nip->np", qa, dth[nr:]) / sc
+            var = np.einsum("i,nij,j->n", qa, a["cov_deck"], qa) + MODEL_FLOOR_M2
+            wt = np.sqrt(wd / var)
+            jl.append(ald * wt[:, None])
+            js.append(asd * wt[:, None])
+            res.append(ed * wt)
+        # priors on the visit's scale (ppm) and drift (arcsec/h)
+        if not v.is_base:
+            row = np.zeros((1, nl))
+            row[0, 6] = 1.0 / PRIOR_SCALE_PPM
+            jl.append(row)
+            js.append(np.zeros((1, ns)))
+            res.append(np.array([v.kappa_ppm / PRIOR_SCALE_PPM]))
+        if v.timed:
+            rows = np.zeros((3, nl))
+            rows[:, off_w:off_w + 3] = np.eye(3) / PRIOR_DRIFT_ARCSEC_H
+            jl.append(rows)
+            js.append(np.zeros((3, ns)))
+            res.append(v.omega / PRIOR_DRIFT_ARCSEC_H)
+        return np.vstack(jl), np.vstack(js), np.concatenate(res), blocks
+
+    def apply_step(self, v: _Visit, dx_local: np.ndarray) -> None:
+        if not v.is_base:
+            v.q = Rotation.from_rotvec(dx_local[0:3] * 1e-3).as_matrix() @ v.q
+            v.d = v.d + dx_local[3:6]
+            v.kappa_ppm += float(dx_local[6])
+        if v.timed:
+            off = 0 if v.is_base else 7
+            v.omega = v.omega + dx_local[off:off + 3]
+
+    def apply_shared(self, dx: np.ndarray) -> None:
+        nr = 3 * len(self.ref_ids)
+        self.x_ref = self.x_ref + dx[:nr].reshape(-1, 3)
+        self.a_deck = self.a_deck + dx[nr:nr + len(self.deck_ids)]
+        self.theta = self.theta + dx[nr + len(self.deck_ids):]
+
+
+@dataclass
+class _Solution:
+    chi2: float  # every row, priors included
+    n_rows: int
+    n_unknowns: int
+    cov_shared: np.ndarray
+    cov_local: list
+    chi2_data: float = 0.0  # the centroids' rows only, for comparing models
+    n_data: int = 0
+
+
+def _solve_once(p: _Problem) -> tuple[_Solution, float]:
+    """One Gauss-Newton step with every visit's unknowns eliminated; returns the solution and the step size."""
+    ns = p.n_shared
+    n_ss = np.zeros((ns, ns))
+    b_s = np.zeros(ns)
+    # the range walk's prior
+    nb = len(p.basis)
+    if nb:
+        n_ss[ns - nb:, ns - nb:] += np.eye(nb) / PRIOR_BIAS_MM ** 2
+        b_s[ns - nb:] -= p.theta / PRIOR_BIAS_MM ** 2
+    parts = []
+    chi2, n_rows = float(nb and np.sum((p.theta / PRIOR_BIAS_MM) ** 2)), nb
+    chi2_data, n_data = 0.0, 0
+    for v in p.visits:
+        jl, js, res, blocks = p.visit_rows(v)
+        chi2 += float(res @ res)
+        n_rows += res.size
+        nd = sum(n for _, _, n in blocks)
+        chi2_data += float(res[:nd] @ res[:nd])
+        n_data += sum(n for kind, j, n in blocks if v.weights.get((kind, j), 1.0) > 0)
+        n_ll = jl.T @ jl + 1e-12 * np.eye(v.n_local)
+        n_ls = jl.T @ js
+        inv_ll = np.linalg.pinv(n_ll) if v.n_local else np.zeros((0, 0))
+        b_l = -jl.T @ res
+        n_ss += js.T @ js - n_ls.T @ inv_ll @ n_ls
+        b_s += -js.T @ res - n_ls.T @ inv_ll @ b_l
+        parts.append((inv_ll, n_ls, b_l))
+    cov_s = np.linalg.pinv(n_ss)
+    dx_s = cov_s @ b_s
+    step = float(np.max(np.abs(dx_s))) if dx_s.size else 0.0
+    cov_l = []
+    for v, (inv_ll, n_ls, b_l) in zip(p.visits, parts):
+        dx_l = inv_ll @ (b_l - n_ls @ dx_s)
+        p.apply_step(v, dx_l)
+        k = inv_ll @ n_ls
+        cov_l.append(inv_ll + k @ cov_s @ k.T)
+        step = max(step, float(np.max(np.abs(dx_l))) if dx_l.size else 0.0)
+    p.apply_shared(dx_s)
+    n_unk = ns + sum(v.n_local for v in p.visits)
+    return _Solution(chi2, n_rows, n_unk, cov_s, cov_l, chi2_data, n_data), step
+
+
+def _reweight(p: _Problem) -> list[tuple[str, str]]:
+    """Tukey weights of every block from its normalised residual; returns the (visit, target) left out."""
+    out = []
+    for v in p.visits:
+        v.weights = {}
+        _, _, res, blocks = p.visit_rows(v)
+        pos = 0
+        for kind, j, n in blocks:
+            rho = float(np.sqrt(np.sum(res[pos:pos + n] ** 2) / n))
+            pos += n
+            wt = (1 - (rho / TUKEY_C) ** 2) ** 2 if rho < TUKEY_C else 0.0
+            v.weights[(kind, j)] = wt
+            if wt == 0.0:
+                s = (v.refs if kind == "r" else v.decks)[j][0]
+                out.append((v.label, s.target))
+    return out
+
+
+def _adjust(p: _Problem, *, iterations: int = 8, robust: bool = True) -> tuple[_Solution, list]:
+    sol = None
+    left_out: list = []
+    for it in range(iterations):
+        sol, step = _solve_once(p)
+        if robust and it in (2, 4, 6):
+            left_out = _reweight(p)
+        elif step < 1e-7 and it > 6:
+            break
+    sol, _ = _solve_once(p)  # the covariance at the final point
+    return sol, left_out
+
+
+def _bic(sol: _Solution) -> float:
+    """BIC on the centroids' rows (priors left out), for models fitted with the same down-weighting."""
+    return sol.chi2_data + math.log(max(sol.n_data, 2)) * sol.n_unknowns
+
+
+def fit_field_model(visits: Sequence[VisitSightings], groups: Mapping[str, str], *,
+                    select_range_walk: bool = True) -> FieldModel:
+    """The campaign's range walk and every visit's scale and drift, from every visit's centroids.
+
+    The range walk's family is chosen by BIC: the smooth families of
+    :func:`lidar.systematic.range_walk.candidate_bases` and steps at a strength threshold are screened with
+    the down-weighting of a general family held fixed, and the best is fitted again on its own.
+
+    Parameters
+    ----------
+    visits : sequence of VisitSightings
+        The baseline first, then every other processed visit (found centroids only).
+    groups : mapping target id -> "reference" | "measurement"
+    select_range_walk : bool, keyword-only
+        Choose the range walk's family (default True); False fits none.
+
+    Returns
+    -------
+    FieldModel
+    """
+    if not visits:
+        raise InputError("the field model needs at least one visit")
+    if not select_range_walk or len(visits) < 3:
+        p, sol, left = _with_or_without_drift(visits, groups, (), None)
+        return _model(p, sol, left, visits[0].label)
+    general = _Problem(visits, groups, ("1", "sat_strength"))
+    _adjust(general)
+    r = np.array([np.linalg.norm(s.xyz_socs) for v in visits for s in v.sightings])
+    c = np.array([s.cos_incidence for v in visits for s in v.sightings])
+    scores: dict[tuple[str, ...], float] = {}
+    thetas: dict[tuple[str, ...], np.ndarray] = {}
+    kappas: dict[tuple[str, ...], list[float]] = {}
+
+    def screen(basis: tuple[str, ...]) -> float:
+        if basis not in scores:
+            p = _Problem(visits, groups, basis, start=general)
+            for _ in range(3):
+                sol, _ = _solve_once(p)
+            scores[basis] = _bic(sol)
+            thetas[basis] = p.theta * 1e-3
+            kappas[basis] = [v.kappa_ppm for v in p.visits]
+        return scores[basis]
+
+    for basis in candidate_bases():
+        screen(basis)
+    for proxy, g in STEP_PROXIES.items():
+        values = g(r, c)
+        steps = {t: screen(("1", step_name(proxy, t))) for t in step_thresholds(values)}
+        for _ in range(6):  # walk the threshold downhill until the best has no better neighbour
+            if not steps:
+                break
+            best_t = min(steps, key=lambda t: steps[t])
+            new = {t: screen(("1", step_name(proxy, t))) for t in refine_thresholds(values, best_t) if t not in steps}
+            steps.update(new)
+            if min(steps, key=lambda t: steps[t]) == best_t:
+                break
+    chosen = min(scores, key=lambda b: scores[b])
+    p, sol, left = _with_or_without_drift(visits, groups, chosen, general)
+    best = scores[chosen]
+    near = [b for b in scores if scores[b] - best < ALTERNATIVE_BIC]
+    alts = tuple((b, thetas[b], float(math.exp(-0.5 * (scores[b] - best)))) for b in near)
+    return _model(p, sol, left, visits[0].label, alts, [[kappas[b][k] for b in near] for k in range(len(visits))])
+
+
+def _with_or_without_drift(visits: Sequence[VisitSightings], groups: Mapping[str, str], basis: tuple[str, ...],
+                           start: Optional[_Problem]) -> tuple[_Problem, _Solution, list]:
+    """The range walk ``basis`` fitted with and without the set-ups' drift; the one BIC prefers.
+
+    A drift the data cannot show (no point times, a plan's time model only) is left out rather than
+    fitted to noise.
+    """
+    p = _Problem(visits, groups, basis, start=start)
+    sol, left = _adjust(p)
+    if not any(v.timed for v in p.visits):
+        return p, sol, left
+    # without drift, with the drift fit's down-weighting (re-weighting would discard the very blocks - the
+    # closures - that show the drift, and make the model without it look better than it is)
+    q = _Problem(visits, groups, basis, start=p, drift=False)
+    sol_q, _ = _adjust(q, robust=False)
+    return (p, sol, left) if _bic(sol) < _bic(sol_q) else (q, sol_q, left)
+
+
+def _model(p: _Problem, sol: _Solution, left_out: list, baseline: str, alternatives: tuple = (),
+           alternative_kappas: Optional[list] = None) -> FieldModel:
+    dof = max(sol.n_rows - sol.n_unknowns, 1)
+    s0 = math.sqrt(sol.chi2 / dof)
+    f = max(1.0, s0) ** 2
+    nb = len(p.basis)
+    cov_theta = sol.cov_shared[p.n_shared - nb:, p.n_shared - nb:] * f * 1e-6
+    determined = bool(nb == 0 or np.all(np.sqrt(np.diag(cov_theta)) * 1e3 < 0.5 * PRIOR_BIAS_MM))
+    notes = []
+    if not determined:
+        notes.append("the campaign's stations are too few or too alike to determine the range walk: its sigma "
+                     "is widened to what a plausible bias would cause")
+    rw = RangeWalkModel(p.basis, p.theta * 1e-3, cov_theta, determined, tuple(notes), alternatives)
+    out = {}
+    dof_ratio = max(1.0 - sol.n_unknowns / max(sol.n_rows, 1), 0.1)
+    for k, (v, cl) in enumerate(zip(p.visits, sol.cov_local)):
+        _, _, res, blocks = p.visit_rows(v)
+        n_data = sum(n for _, _, n in blocks)
+        kept = [(kind, j) for kind, j, _ in blocks if v.weights.get((kind, j), 1.0) > 0]
+        misfit = math.sqrt(float(res[:n_data] @ res[:n_data]) / max(n_data, 1) / dof_ratio) if kept else 1.0
+        cl = cl * f
+        off = 0 if v.is_base else 7
+        s_ppm = 0.0 if v.is_base else float(math.sqrt(max(cl[6, 6], 0.0)))
+        dcov = cl[off:off + 3, off:off + 3] if v.timed else np.zeros((3, 3))
+        left = tuple(t for lab, t in left_out if lab == v.label)
+        out[v.label] = VisitSystematics(v.label, 0.0 if v.is_base else v.kappa_ppm, s_ppm,
+                                        v.omega.copy() if v.timed else np.zeros(3), dcov, v.t_ref, v.timed,
+                                        v.is_base or s_ppm < SCALE_DETERMINED_PPM, left,
+                                        tuple(alternative_kappas[k]) if alternative_kappas else (), misfit)
+    return FieldModel(baseline, rw, out, s0, sol.n_rows, tuple(notes))

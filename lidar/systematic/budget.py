@@ -1,0 +1,170 @@
+"""Displacements from corrected centroids, with the error budget of every target.
+
+:func:`corrected_displacements` corrects both visits' centroids with the campaign's
+:class:`~lidar.systematic.adjustment.FieldModel` (:mod:`lidar.systematic.corrections`), runs the
+displacement computation on them, and splits each displacement's variance into its terms (see
+:data:`lidar.displacement_result.BUDGET_TERMS`): the target's own centroids (``noise``), the reference
+motion and the deck normal (``frame``), the visit's atmospheric scale (``scale``), the range walk with the
+spread of the families the data support (``bias``) and both visits' drift (``drift``). The reported sigma
+is their sum in quadrature. The along-span movements carry the same terms.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Mapping
+
+import numpy as np
+
+from lidar.displacement import compute_displacements
+from lidar.displacement_result import Displacement, EpochDisplacements, Observation
+from lidar.systematic.adjustment import FieldModel
+from lidar.systematic.corrections import CorrectionJacobian, correct_visit, cos_incidence_of
+from lidar.systematic.range_walk import design
+
+
+def _side(centroids: Mapping[str, object], model: FieldModel, label: str):
+    """Corrected observations (covariance widened by the range walk's spread and the visit's misfit), Jacobians, spreads.
+
+    A visit whose centroids the field model fits worse than their covariances say (``misfit`` > 1: something
+    the model does not hold) has every centroid covariance scaled by the misfit squared.
+    """
+    vis = model.visit(label)
+    inflate = max(1.0, vis.misfit) ** 2
+    pos, jac = correct_visit(centroids, range_walk=model.range_walk, visit=vis)
+    obs, spread = {}, {}
+    for k, c in centroids.items():
+        y = np.asarray(getattr(c, "xyz_socs"), dtype=np.float64)
+        r = float(np.linalg.norm(y))
+        u = y / r
+        sp = float(model.range_walk.spread_m(r, cos_incidence_of(c))[0])
+        s = sp ** 2 * np.outer(u, u)
+        obs[k] = Observation(pos[k], inflate * np.asarray(getattr(c, "cov"), dtype=np.float64) + s)
+        spread[k] = s
+    return obs, jac, spread
+
+
+def corrected_displacements(baseline: Mapping[str, object], epoch: Mapping[str, object], groups: Mapping[str, str],
+                            *, model: FieldModel, baseline_label: str, epoch_label: str,
+                            **options: object) -> EpochDisplacements:
+    """Displacements of ``epoch`` against ``baseline`` after the field model's corrections, with their budget.
+
+    Parameters
+    ----------
+    baseline, epoch : mapping reflector id -> centroid
+        Found centroids with ``xyz_socs`` (3,) m, ``cov`` (3, 3) m^2, ``cos_incidence`` and ``time_s``
+        (e.g. :class:`lidar.centroid.TargetCentroid`), each in its own visit's scanner frame.
+    groups : mapping reflector id -> "reference" | "measurement"
+    model : FieldModel, keyword-only
+    baseline_label, epoch_label : str, keyword-only
+        The two visits' labels in the model.
+    **options
+        Passed to :func:`lidar.displacement.compute_displacements`.
+
+    Returns
+    -------
+    EpochDisplacements
+        Each displacement's ``budget`` holds every term; ``sigma_m`` is their sum in quadrature.
+    """
+    b_obs, b_jac, b_spread = _side(baseline, model, baseline_label)
+    e_obs, e_jac, e_spread = _side(epoch, model, epoch_label)
+    res = compute_displacements(b_obs, e_obs, groups, **options)  # type: ignore[arg-type]
+    sens = res.sensitivity
+    if sens is None:
+        return res
+    jacs = {"baseline": b_jac, "epoch": e_jac}
+    spreads = {"baseline": b_spread, "epoch": e_spread}
+    devs = {"baseline": _deviations(baseline, model, baseline_label, {k: o.xyz for k, o in b_obs.items()}),
+            "epoch": _deviations(epoch, model, epoch_label, {k: o.xyz for k, o in e_obs.items()})}
+    weights = np.array([a[2] for a in model.range_walk.alternatives])
+    cov_theta = model.range_walk.covariance_m2
+    v_base, v_ep = model.visit(baseline_label), model.visit(epoch_label)
+    out = []
+    for d in res.displacements:
+        if d.reflector not in sens.targets:
+            out.append(d)
+            continue
+        i = sens.targets.index(d.reflector)
+        terms = _terms(sens.vertical[i], sens.inputs, jacs, spreads, cov_theta, v_base, v_ep, d.reflector, devs,
+                       weights)
+        noise2 = max(d.budget.get("noise", 0.0) ** 2 - terms["spread_own"], 0.0)
+        frame2 = max(d.budget.get("frame", 0.0) ** 2 - terms["spread_other"], 0.0)
+        bias2 = terms["theta"] + terms["alternatives"]
+        budget = {"noise": np.sqrt(noise2), "frame": np.sqrt(frame2), "scale": np.sqrt(terms["scale"]),
+                  "bias": np.sqrt(bias2), "drift": np.sqrt(terms["drift"])}
+        sigma = float(np.sqrt(sum(v ** 2 for v in budget.values())))
+        along_sigma = d.along_sigma_m
+        if np.isfinite(d.along_m):
+            ta = _terms(sens.along[i], sens.inputs, jacs, spreads, cov_theta, v_base, v_ep, d.reflector, devs,
+                        weights)
+            along_sigma = float(np.sqrt(max(d.along_sigma_m ** 2 - ta["spread_own"] - ta["spread_other"], 0.0)
+                                        + ta["theta"] + ta["alternatives"] + ta["scale"] + ta["drift"]))
+        out.append(replace(d, sigma_m=sigma, along_sigma_m=along_sigma,
+                           budget={k: float(v) for k, v in budget.items()}))
+    return replace(res, displacements=tuple(out))
+
+
+def _terms(row: np.ndarray, inputs, jacs: Mapping[str, Mapping[str, CorrectionJacobian]],
+           spreads: Mapping[str, Mapping[str, np.ndarray]], cov_theta: np.ndarray, v_base, v_ep,
+           target: str, devs: Mapping[str, Mapping[str, np.ndarray]], weights: np.ndarray) -> dict:
+    """Variance terms (m^2) of one output (a row of the sensitivity) from the corrections' uncertainties.
+
+    ``devs[side][id]`` is (n_alternatives, 3): how each supported range-walk family would move that
+    corrected centroid against the chosen one; ``weights`` their BIC weights.
+    """
+    p = cov_theta.shape[0]
+    j_theta = np.zeros(p)
+    j_scale = 0.0
+    j_drift = {"baseline": np.zeros(3), "epoch": np.zeros(3)}
+    spread_own = spread_other = 0.0
+    alt = np.zeros(weights.size)
+    for n, (side, k) in enumerate(inputs):
+        jb = row[3 * n:3 * n + 3]
+        cj = jacs[side].get(k)
+        if cj is None:
+            continue
+        j_theta += jb @ cj.d_theta
+        if side == "epoch":
+            j_scale += float(jb @ cj.d_scale)
+        j_drift[side] += jb @ cj.d_drift
+        var_s = float(jb @ spreads[side][k] @ jb)
+        if k == target:
+            spread_own += var_s
+        else:
+            spread_other += var_s
+        if weights.size:
+            alt += devs[side][k] @ jb
+    return {"theta": float(j_theta @ cov_theta @ j_theta) if p else 0.0,
+            "scale": j_scale ** 2 * (v_ep.scale_sigma_ppm ** 2),
+            "drift": float(j_drift["baseline"] @ v_base.drift_cov @ j_drift["baseline"]
+                           + j_drift["epoch"] @ v_ep.drift_cov @ j_drift["epoch"]),
+            "spread_own": spread_own, "spread_other": spread_other,
+            "alternatives": float(weights @ alt ** 2 / weights.sum()) if weights.size else 0.0}
+
+
+def _deviations(centroids: Mapping[str, object], model: FieldModel, label: str, corrected: Mapping[str, np.ndarray]
+                ) -> dict[str, np.ndarray]:
+    """(n_alternatives, 3) per centroid: the corrected position under each supported family minus the chosen one."""
+    rw = model.range_walk
+    vis = model.visit(label)
+    n = len(rw.alternatives)
+    out = {}
+    for k, c in centroids.items():
+        y = np.asarray(getattr(c, "xyz_socs"), dtype=np.float64)
+        r = float(np.linalg.norm(y))
+        u = y / r
+        ci = cos_incidence_of(c)
+        best = float(rw.bias_m(r, ci)[0])
+        dev = np.zeros((n, 3))
+        for a, (basis, coef, _) in enumerate(rw.alternatives):
+            dev[a] = (float((design(basis, r, ci) @ coef)[0]) - best) * u
+            if len(vis.alternative_scale_ppm) == n and label != model.baseline:
+                dev[a] -= corrected[k] * 1e-6 * (vis.alternative_scale_ppm[a] - vis.scale_ppm)
+        out[k] = dev
+    return out
+
+
+def displacement_terms_mm(d: Displacement) -> dict[str, float]:
+    """A displacement's budget in millimetres (``sigma_noise_mm`` ...), NaN for terms it does not have."""
+    return {f"sigma_{k}_mm": float(d.budget.get(k, np.nan)) * 1e3 for k in ("noise", "frame", "scale", "bias",
+                                                                              "drift")}
+

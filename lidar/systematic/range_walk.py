@@ -1,0 +1,189 @@
+"""The range walk of retro-reflective targets: a range bias that grows with the strength of the return.
+
+A retro-reflector returns far more light than the concrete around it; the receiver saturates and the range
+read on the target is biased, usually short, the more so the stronger the return: short ranges and
+head-on incidence (Alba, Roncoroni & Scaioni on a Riegl LMS-Z420i; Pesci et al. on an Optech ILRIS). Its
+shape differs between instruments and target types and is not known in advance, so the bias is a linear
+combination of a few basis functions of the range ``r`` and the cosine of the incidence ``c`` (the return's
+strength is taken as ``s = c (r0 / r)^2``, ``r0 = 15 m``), and the campaign's data choose the combination
+(:func:`candidate_bases` lists the families tried; :mod:`lidar.systematic.adjustment` selects one by BIC).
+
+A bias ``b`` (metres, positive = the range reads short) moves a centroid toward the scanner along its line
+of sight ``u``: the measured position is ``y = p - b u``, corrected by ``p = y + b u``.
+
+A bias proportional to the range is a scale, which every visit's own scale already absorbs: no basis
+function is linear in ``r``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from common.errors import InputError
+
+#: Range at which the strength proxy is 1 for a head-on return, metres.
+R0_M = 15.0
+#: Format version of a range-walk model's JSON form.
+RANGE_WALK_FORMAT_VERSION = 1
+
+
+def strength(range_m: ArrayLike, cos_incidence: ArrayLike) -> np.ndarray:
+    """The return-strength proxy ``s = c (r0 / r)^2`` (1 for a head-on target at 15 m), shape of the inputs."""
+    r = np.maximum(np.asarray(range_m, dtype=np.float64), 0.5)
+    return np.clip(np.asarray(cos_incidence, dtype=np.float64), 0.0, 1.0) * (R0_M / r) ** 2
+
+
+def _r(r) -> np.ndarray:
+    return np.maximum(np.asarray(r, dtype=np.float64), 0.5)
+
+
+#: Basis functions by name: ``f(range_m, cos_incidence) -> values``; all of order 1 for a head-on target at
+#: 15 m. Saturating forms level off where the receiver saturates.
+FUNCTIONS: dict[str, Callable] = {
+    "1": lambda r, c: np.ones_like(_r(r)),
+    "cos": lambda r, c: np.clip(np.asarray(c, dtype=np.float64), 0.0, 1.0),
+    "inv_r2": lambda r, c: np.minimum((R0_M / _r(r)) ** 2, 4.0),
+    "sat_r2": lambda r, c: np.minimum((R0_M / _r(r)) ** 2, 1.0),
+    "soft_r2": lambda r, c: 1.0 / (1.0 + (_r(r) / R0_M) ** 2) * 2.0,
+    "strength": lambda r, c: np.minimum(strength(r, c), 4.0),
+    "sat_strength": lambda r, c: np.minimum(strength(r, c), 1.0),
+    "soft_strength": lambda r, c: 2.0 * strength(r, c) / (1.0 + strength(r, c)),
+    "log_strength": lambda r, c: np.log(np.clip(strength(r, c), 1e-3, 4.0)),
+}
+
+
+#: What a step can be at: the strength, the incidence's cosine or the range's (r0 / r)^2.
+STEP_PROXIES: dict[str, Callable] = {
+    "s": lambda r, c: strength(r, c),
+    "c": lambda r, c: np.clip(np.asarray(c, dtype=np.float64), 0.0, 1.0),
+    "q": lambda r, c: (R0_M / _r(r)) ** 2,
+}
+
+
+def _step(proxy: str, threshold: float) -> Callable:
+    g = STEP_PROXIES[proxy]
+
+    def f(r, c):
+        return (g(r, c) > threshold).astype(np.float64)
+    return f
+
+
+def step_name(proxy: str, threshold: float) -> str:
+    """The basis-function name of a step of ``proxy`` (s, c or q) at ``threshold``."""
+    return f"step_{proxy}@{threshold:.6g}"
+
+
+def basis_function(name: str) -> Callable:
+    """The basis function called ``name`` (``step_s@S`` is a step at strength ``S``, see :func:`step_name`)."""
+    if name.startswith("step_"):
+        proxy, _, value = name[5:].partition("@")
+        if proxy in STEP_PROXIES:
+            return _step(proxy, float(value))
+    try:
+        return FUNCTIONS[name]
+    except KeyError:
+        raise InputError(f"unknown range-walk basis function {name!r}") from None
+
+
+def design(basis: Sequence[str], range_m: ArrayLike, cos_incidence: ArrayLike) -> np.ndarray:
+    """(N, P) values of the basis functions ``basis`` at N returns."""
+    r = np.atleast_1d(np.asarray(range_m, dtype=np.float64))
+    c = np.atleast_1d(np.asarray(cos_incidence, dtype=np.float64))
+    return np.column_stack([basis_function(b)(r, c) for b in basis]) if basis else np.zeros((r.size, 0))
+
+
+def candidate_bases() -> list[tuple[str, ...]]:
+    """The smooth families tried on a campaign: none, one function, a constant plus one function, two shapes.
+
+    Steps at a strength threshold are searched separately (:func:`step_thresholds`).
+    """
+    shapes = [k for k in FUNCTIONS if k != "1"]
+    return [(), ("1",)] + [(k,) for k in shapes] + [("1", k) for k in shapes] + \
+        [("cos", "sat_r2"), ("cos", "inv_r2"), ("cos", "soft_r2")]
+
+
+def step_thresholds(values: ArrayLike, count: int = 9) -> list[float]:
+    """Thresholds to try a step at: midpoints between the campaign's values of its proxy, at ``count`` quantiles."""
+    s = np.unique(np.asarray(values, dtype=np.float64)[np.isfinite(values)])
+    if s.size < 6:
+        return []
+    mids = 0.5 * (s[1:] + s[:-1])
+    idx = np.unique(np.round(np.linspace(0.1, 0.9, count) * (mids.size - 1)).astype(int))
+    return [float(mids[i]) for i in idx]
+
+
+def refine_thresholds(values: ArrayLike, best: float, count: int = 6) -> list[float]:
+    """Midpoints between the campaign's values of a step's proxy next to ``best``: ``count`` on each side."""
+    s = np.unique(np.asarray(values, dtype=np.float64)[np.isfinite(values)])
+    mids = 0.5 * (s[1:] + s[:-1])
+    if mids.size == 0:
+        return []
+    k = int(np.argmin(np.abs(mids - best)))
+    return [float(m) for m in mids[max(0, k - count):k + count + 1] if m != best]
+
+
+@dataclass(frozen=True, eq=False)
+class RangeWalkModel:
+    """A fitted range walk: ``bias_m(r, c) = design(basis, r, c) @ coefficients_m``.
+
+    Attributes
+    ----------
+    basis : tuple of str
+        Basis function names (empty: no range walk).
+    coefficients_m : (P,) float64 array, metres
+    covariance_m2 : (P, P) float64 array, m^2
+    determined : bool
+        Whether the campaign's data determine it (False: its sigma is the prior's, see the notes).
+    notes : tuple of str
+    alternatives : tuple of (basis, coefficients_m, weight)
+        Other families the data support about as well (BIC weights, the chosen one included): where
+        they disagree, :meth:`spread_m` widens the sigma.
+    """
+
+    basis: tuple[str, ...] = ()
+    coefficients_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    covariance_m2: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    determined: bool = True
+    notes: tuple[str, ...] = ()
+    alternatives: tuple[tuple[tuple[str, ...], np.ndarray, float], ...] = ()
+
+    def bias_m(self, range_m: ArrayLike, cos_incidence: ArrayLike) -> np.ndarray:
+        """Range bias (metres, positive = reads short) at the given returns."""
+        return design(self.basis, range_m, cos_incidence) @ self.coefficients_m
+
+    def sigma_m(self, range_m: ArrayLike, cos_incidence: ArrayLike) -> np.ndarray:
+        """Standard deviation of :meth:`bias_m` from the coefficients' covariance, metres."""
+        a = design(self.basis, range_m, cos_incidence)
+        return np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", a, self.covariance_m2, a), 0.0))
+
+    def spread_m(self, range_m: ArrayLike, cos_incidence: ArrayLike) -> np.ndarray:
+        """Spread (metres) of the bias among the families the data support (:attr:`alternatives`)."""
+        r = np.atleast_1d(np.asarray(range_m, dtype=np.float64))
+        if not self.alternatives:
+            return np.zeros(r.size)
+        best = self.bias_m(r, cos_incidence)
+        w = np.array([a[2] for a in self.alternatives])
+        dev = np.array([design(b, r, cos_incidence) @ coef - best for b, coef, _ in self.alternatives])
+        return np.sqrt(np.maximum((w[:, None] * dev ** 2).sum(axis=0) / w.sum(), 0.0))
+
+    def to_json(self) -> dict:
+        return {"format_version": RANGE_WALK_FORMAT_VERSION, "basis": list(self.basis),
+                "coefficients_mm": (self.coefficients_m * 1e3).tolist(),
+                "covariance_mm2": (self.covariance_m2 * 1e6).tolist(), "determined": self.determined,
+                "notes": list(self.notes), "strength": f"cos(incidence) * ({R0_M:g} m / range)^2",
+                "alternatives": [{"basis": list(b), "coefficients_mm": (c * 1e3).tolist(), "weight": w}
+                                 for b, c, w in self.alternatives]}
+
+    @classmethod
+    def from_json(cls, d: dict) -> "RangeWalkModel":
+        if int(d.get("format_version", 1)) > RANGE_WALK_FORMAT_VERSION:
+            raise InputError("range-walk model written by a newer BridgeSurvey")
+        p = len(d["basis"])
+        alts = tuple((tuple(a["basis"]), np.asarray(a["coefficients_mm"], dtype=np.float64) / 1e3, float(a["weight"]))
+                     for a in d.get("alternatives", ()))
+        return cls(tuple(d["basis"]), np.asarray(d["coefficients_mm"], dtype=np.float64).reshape(p) / 1e3,
+                   np.asarray(d["covariance_mm2"], dtype=np.float64).reshape(p, p) / 1e6,
+                   bool(d.get("determined", True)), tuple(d.get("notes", ())), alts)

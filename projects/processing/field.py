@@ -1,0 +1,149 @@
+"""The campaign's field model in processing: fitted over every measured epoch, kept while it holds.
+
+Stage 2 corrects every epoch's centroids for the atmosphere's scale, the retro-reflector range walk and
+the set-up's drift (:mod:`lidar.systematic`) before computing its displacements. The model is fitted over
+every measured epoch at once; when epochs arrive, it is fitted again, and the stored model is replaced
+only when the new one differs materially (a range walk changing by more than
+:data:`MATERIAL_BIAS_M` anywhere the campaign measured, a visit's scale by more than
+:data:`MATERIAL_SCALE_PPM`, its drift by more than :data:`MATERIAL_DRIFT_ARCSEC_H`); otherwise the new
+visits' own terms are added to it. So adding an epoch recomputes that epoch's displacements, and all of
+them only when the campaign's knowledge of its instrument has changed.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+from dataclasses import replace
+from typing import Callable, Mapping, Optional, Sequence
+
+import numpy as np
+
+from common.files import write_atomic
+from common.flags import FLAG_DRIFT_FROM_PLAN, FLAG_RANGE_WALK_UNDETERMINED, FLAG_SCALE_UNDETERMINED
+from lidar.centroid import TargetCentroid
+from lidar.systematic.adjustment import FieldModel, Sighting, VisitSightings, VisitSystematics, fit_field_model
+from lidar.systematic.corrections import cos_incidence_of
+from lidar.systematic.range_walk import RangeWalkModel
+from projects.store.campaign import Campaign
+from projects.store.field_tables import field_model_to_json
+
+log = logging.getLogger(__name__)
+
+MATERIAL_BIAS_M = 1e-5
+MATERIAL_SCALE_PPM = 0.3
+MATERIAL_DRIFT_ARCSEC_H = 0.5
+#: The campaign's field model as a file (versioned JSON, :data:`projects.store.field_tables.FIELD_MODEL_FORMAT_VERSION`).
+BIAS_FILE = "bias.json"
+
+
+def sightings(cents: Mapping[str, TargetCentroid], closures: Optional[Mapping[str, TargetCentroid]] = None) -> tuple:
+    """The found centroids (and closure centroids) of one epoch as the field model's sightings."""
+    out = []
+    for c in list(cents.values()) + list((closures or {}).values()):
+        if not c.found:
+            continue
+        out.append(Sighting(c.reflector, np.asarray(c.xyz_socs, dtype=np.float64), np.asarray(c.cov, dtype=np.float64),
+                            cos_incidence_of(c), float(c.time_s)))
+    return tuple(out)
+
+
+def identity_model(baseline: str) -> FieldModel:
+    """A field model that corrects nothing (the campaign cannot be modelled yet)."""
+    return FieldModel(baseline, RangeWalkModel(), {})
+
+
+def _usable(cents: Mapping[str, TargetCentroid], groups: Mapping[str, str]) -> bool:
+    return sum(1 for k, c in cents.items() if c.found and groups.get(k) == "reference") >= 3
+
+
+def _material(new: FieldModel, old: FieldModel, visits: Sequence[VisitSightings]) -> bool:
+    if new.baseline != old.baseline or bool(new.range_walk.basis) != bool(old.range_walk.basis):
+        return True
+    r = np.array([np.linalg.norm(s.xyz_socs) for v in visits for s in v.sightings])
+    c = np.array([s.cos_incidence for v in visits for s in v.sightings])
+    if r.size and np.max(np.abs(new.range_walk.bias_m(r, c) - old.range_walk.bias_m(r, c))) > MATERIAL_BIAS_M:
+        return True
+    for label, v_old in old.visits.items():
+        v_new = new.visits.get(label)
+        if v_new is None:
+            continue
+        if abs(v_new.scale_ppm - v_old.scale_ppm) > MATERIAL_SCALE_PPM or \
+                np.max(np.abs(v_new.drift_arcsec_h - v_old.drift_arcsec_h)) > MATERIAL_DRIFT_ARCSEC_H:
+            return True
+    return False
+
+
+def _merged(old: FieldModel, new: FieldModel) -> FieldModel:
+    """The stored model with the new fit's terms for the visits it did not have."""
+    visits = dict(old.visits)
+    for label, v in new.visits.items():  # its scales under the new fit's alternatives do not apply to the old ones
+        visits.setdefault(label, replace(v, alternative_scale_ppm=()))
+    return FieldModel(old.baseline, old.range_walk, visits, old.sigma0, new.n_observations, old.notes)
+
+
+def digest_of(model: FieldModel) -> str:
+    """A digest of the whole model (what is stored beside it)."""
+    return hashlib.sha256(json.dumps(field_model_to_json(model), sort_keys=True).encode()).hexdigest()[:24]
+
+
+def visit_digest(model: FieldModel, baseline: str, label: str) -> str:
+    """A digest of what one epoch's displacements depend on: the range walk and both visits' terms."""
+    part = {"rw": model.range_walk.to_json(), "base": _visit_key(model.visit(baseline)),
+            "epoch": _visit_key(model.visit(label))}
+    return hashlib.sha256(json.dumps(part, sort_keys=True).encode()).hexdigest()[:24]
+
+
+def _visit_key(v: VisitSystematics) -> dict:
+    return {"scale": round(v.scale_ppm, 4), "scale_sigma": round(v.scale_sigma_ppm, 4),
+            "drift": np.round(v.drift_arcsec_h, 4).tolist(), "drift_cov": np.round(v.drift_cov, 4).tolist(),
+            "t": round(v.time_ref_s, 3), "timed": v.timed}
+
+
+def update_field_model(c: Campaign, baseline: str, labels: Sequence[str], groups: Mapping[str, str],
+                       found: Callable[[str], Mapping[str, TargetCentroid]], *, enabled: bool = True) -> FieldModel:
+    """Fit the campaign's field model over ``labels`` (the baseline's first), keep or replace the stored one.
+
+    Epochs with fewer than three reference targets found cannot be placed and are left out; a baseline
+    without three, or ``enabled=False``, gives a model that corrects nothing.
+    """
+    if not enabled or not _usable(found(baseline), groups):
+        return identity_model(baseline)
+    order = [baseline] + [lab for lab in labels if lab != baseline and _usable(found(lab), groups)]
+    visits = [VisitSightings(lab, sightings(found(lab), {k: v for k, v in c.closure_centroids(lab).items()
+                                                          if k in found(lab)})) for lab in order]
+    new = fit_field_model(visits, groups)
+    got = c.field_model()
+    model = new
+    if got is not None:
+        old, _ = got
+        if not _material(new, old, visits):
+            model = _merged(old, new)
+    if got is None or digest_of(model) != got[1]:
+        digest = digest_of(model)
+        c.save_field_model(model, digest)
+        write_atomic(c.folder / BIAS_FILE, json.dumps(field_model_to_json(model), indent=1) + "\n")
+    return model
+
+
+def systematics_json(model: FieldModel, label: str, time_source: Optional[str]) -> dict:
+    """What an epoch's displacements were corrected for, as stored beside them (and in the CSV)."""
+    v = model.visit(label)
+    return {"scale_ppm": float(v.scale_ppm), "scale_sigma_ppm": float(v.scale_sigma_ppm),
+            "scale_determined": bool(v.scale_determined), "drift_arcsec_h": np.asarray(v.drift_arcsec_h).tolist(),
+            "drift_sigma_arcsec_h": v.drift_sigma_arcsec_h.tolist(), "timed": bool(v.timed),
+            "time_source": time_source or "none", "range_walk": list(model.range_walk.basis),
+            "left_out": list(v.left_out)}
+
+
+def epoch_flags(model: FieldModel, label: str, time_source: Optional[str]) -> list[str]:
+    """The epoch flags the field model adds: what it could not determine, and how times were had."""
+    v = model.visit(label)
+    out = []
+    if label != model.baseline and label in model.visits and not v.scale_determined:
+        out.append(f"{FLAG_SCALE_UNDETERMINED}: sigma {v.scale_sigma_ppm:.0f} ppm")
+    if model.range_walk.basis and not model.range_walk.determined:
+        out.append(FLAG_RANGE_WALK_UNDETERMINED)
+    if time_source == "plan" and v.timed:
+        out.append(FLAG_DRIFT_FROM_PLAN)
+    return out

@@ -1,0 +1,192 @@
+"""What the field error budget keeps: centroid details, closure centroids, budgets and the campaign's field model.
+
+The core tables (centroids, displacements, displacement sets) keep their columns; what the field
+error budget adds lives beside them, keyed the same way and written in the same transactions:
+
+* ``centroid_extras`` - each centroid's time, incidence, disc normal and clipped fraction (JSON);
+* ``closure_centroids`` - the plan's closure windows: a target scanned again at the end of a visit;
+* ``displacement_extras`` - each displacement's along-span movement and error budget (JSON);
+* ``displacement_set_extras`` - each epoch's scale and drift as its displacements used them (JSON);
+* ``field_models`` - the campaign's field model (:class:`lidar.systematic.adjustment.FieldModel`), JSON of
+  :data:`FIELD_MODEL_FORMAT_VERSION`, with the digest processing hashes.
+"""
+from __future__ import annotations
+
+import json
+import sqlite3
+from typing import Any, Mapping, Optional
+
+import numpy as np
+
+from lidar.centroid import TargetCentroid
+from lidar.systematic.adjustment import FieldModel, VisitSystematics
+from lidar.systematic.range_walk import RangeWalkModel
+
+#: Format version of a stored field model (and of the campaign's ``bias.json``).
+FIELD_MODEL_FORMAT_VERSION = 1
+
+SCHEMA = """
+CREATE TABLE centroid_extras (
+    epoch TEXT NOT NULL REFERENCES epochs(label) ON DELETE CASCADE,
+    reflector TEXT NOT NULL,
+    extra TEXT NOT NULL,                -- JSON: time_s, time_span_s, time_source, normal, clipped_fraction
+    PRIMARY KEY (epoch, reflector)
+);
+CREATE TABLE closure_centroids (
+    epoch TEXT NOT NULL REFERENCES epochs(label) ON DELETE CASCADE,
+    reflector TEXT NOT NULL,
+    centroid TEXT NOT NULL,             -- JSON: the centroid (position, covariance, points, flags, time)
+    PRIMARY KEY (epoch, reflector)
+);
+CREATE TABLE displacement_extras (
+    epoch TEXT NOT NULL REFERENCES epochs(label) ON DELETE CASCADE,
+    reflector TEXT NOT NULL,
+    extra TEXT NOT NULL,                -- JSON: along_m, along_sigma_m, budget (m)
+    PRIMARY KEY (epoch, reflector)
+);
+CREATE TABLE displacement_set_extras (
+    epoch TEXT PRIMARY KEY REFERENCES epochs(label) ON DELETE CASCADE,
+    extra TEXT NOT NULL                 -- JSON: scale_ppm, scale_sigma_ppm, drift, time source, model digest
+);
+CREATE TABLE field_models (
+    id INTEGER PRIMARY KEY CHECK (id = 1),
+    model TEXT NOT NULL,                -- JSON, see projects.store.field_tables
+    digest TEXT NOT NULL,
+    created TEXT NOT NULL
+);
+"""
+
+
+def _num(v: Any) -> Optional[float]:
+    f = float(v)
+    return f if np.isfinite(f) else None
+
+
+def _nan(v: Any) -> float:
+    return float("nan") if v is None else float(v)
+
+
+def centroid_extra(tc: TargetCentroid, time_source: str) -> dict:
+    """The JSON of what the core centroid row does not hold."""
+    return {"time_s": _num(tc.time_s), "time_span_s": _num(tc.time_span_s), "time_source": time_source,
+            "normal": [_num(v) for v in np.asarray(tc.normal_socs, dtype=np.float64)],
+            "clipped_fraction": _num(tc.clipped_fraction)}
+
+
+def with_extra(tc: TargetCentroid, extra: Optional[dict]) -> TargetCentroid:
+    """A stored centroid with its extra details put back."""
+    from dataclasses import replace
+
+    if not extra:
+        return tc
+    normal = np.array([_nan(v) for v in extra.get("normal") or [None] * 3], dtype=np.float64)
+    return replace(tc, time_s=_nan(extra.get("time_s")), time_span_s=_nan(extra.get("time_span_s")),
+                   normal_socs=normal, clipped_fraction=_nan(extra.get("clipped_fraction")) if
+                   extra.get("clipped_fraction") is not None else 0.0)
+
+
+def centroid_to_json(tc: TargetCentroid) -> dict:
+    """A whole centroid as JSON (for the closure table)."""
+    return {"reflector": tc.reflector, "xyz": [_num(v) for v in tc.xyz_socs],
+            "cov": np.nan_to_num(tc.cov, nan=0.0).tolist(), "n": int(tc.n_points), "threshold": _num(tc.threshold),
+            "separability": _num(tc.separability), "flags": list(tc.flags), "n_window": int(tc.n_window),
+            "sigma_range_m": _num(tc.sigma_range_m), **centroid_extra(tc, "points")}
+
+
+def centroid_from_json(d: dict) -> TargetCentroid:
+    """The inverse of :func:`centroid_to_json`."""
+    tc = TargetCentroid(d["reflector"], np.array([_nan(v) for v in d["xyz"]]), np.array(d["cov"], dtype=float),
+                        int(d["n"]), _nan(d["threshold"]), _nan(d["separability"]), tuple(d["flags"]),
+                        int(d["n_window"]), sigma_range_m=_nan(d["sigma_range_m"]))
+    return with_extra(tc, d)
+
+
+def write_centroid_extras(conn: sqlite3.Connection, epoch: str, cents: Mapping[str, TargetCentroid],
+                          closures: Mapping[str, TargetCentroid], time_source: str) -> None:
+    """Replace an epoch's centroid details and closure centroids (inside the caller's transaction)."""
+    conn.execute("DELETE FROM centroid_extras WHERE epoch = ?", (epoch,))
+    conn.execute("DELETE FROM closure_centroids WHERE epoch = ?", (epoch,))
+    conn.executemany("INSERT INTO centroid_extras VALUES (?, ?, ?)",
+                     [(epoch, rid, json.dumps(centroid_extra(tc, time_source))) for rid, tc in cents.items()])
+    conn.executemany("INSERT INTO closure_centroids VALUES (?, ?, ?)",
+                     [(epoch, rid, json.dumps(centroid_to_json(tc))) for rid, tc in closures.items()])
+
+
+def read_centroid_extras(conn: sqlite3.Connection, epoch: str) -> dict[str, dict]:
+    """Each reflector's details (JSON dict) in one epoch."""
+    return {r[0]: json.loads(r[1]) for r in
+            conn.execute("SELECT reflector, extra FROM centroid_extras WHERE epoch = ?", (epoch,))}
+
+
+def read_closures(conn: sqlite3.Connection, epoch: str) -> dict[str, TargetCentroid]:
+    """The closure centroids of one epoch (empty when its plan had none or the scans carry no times)."""
+    return {r[0]: centroid_from_json(json.loads(r[1])) for r in
+            conn.execute("SELECT reflector, centroid FROM closure_centroids WHERE epoch = ? ORDER BY reflector",
+                         (epoch,))}
+
+
+def write_displacement_extras(conn: sqlite3.Connection, epoch: str, res: Any, systematics: Optional[dict]) -> None:
+    """Each displacement's along-span movement and budget, and the epoch's systematics (caller's transaction)."""
+    conn.execute("DELETE FROM displacement_extras WHERE epoch = ?", (epoch,))
+    conn.execute("DELETE FROM displacement_set_extras WHERE epoch = ?", (epoch,))
+    rows = []
+    for d in res.displacements:
+        extra = {"along_m": _num(d.along_m), "along_sigma_m": _num(d.along_sigma_m),
+                 "budget": {k: _num(v) for k, v in dict(d.budget).items()}}
+        rows.append((epoch, d.reflector, json.dumps(extra)))
+    conn.executemany("INSERT INTO displacement_extras VALUES (?, ?, ?)", rows)
+    if systematics is not None:
+        conn.execute("INSERT INTO displacement_set_extras VALUES (?, ?)", (epoch, json.dumps(systematics)))
+
+
+def read_set_extras(conn: sqlite3.Connection, epoch: str) -> dict:
+    """The systematics an epoch's displacements were computed with (empty when none were stored)."""
+    r = conn.execute("SELECT extra FROM displacement_set_extras WHERE epoch = ?", (epoch,)).fetchone()
+    return {} if r is None else json.loads(r[0])
+
+
+# ---------------------------------------------------------------------------------------------- field model
+def visit_to_json(v: VisitSystematics) -> dict:
+    """One visit's scale and drift as JSON."""
+    return {"label": v.label, "scale_ppm": v.scale_ppm, "scale_sigma_ppm": v.scale_sigma_ppm,
+            "drift_arcsec_h": np.asarray(v.drift_arcsec_h).tolist(), "drift_cov": np.asarray(v.drift_cov).tolist(),
+            "time_ref_s": v.time_ref_s, "timed": v.timed, "scale_determined": v.scale_determined,
+            "left_out": list(v.left_out), "alternative_scale_ppm": list(v.alternative_scale_ppm), "misfit": v.misfit}
+
+
+def visit_from_json(d: dict) -> VisitSystematics:
+    """The inverse of :func:`visit_to_json`."""
+    return VisitSystematics(d["label"], float(d["scale_ppm"]), float(d["scale_sigma_ppm"]),
+                            np.asarray(d["drift_arcsec_h"], dtype=float), np.asarray(d["drift_cov"], dtype=float),
+                            float(d["time_ref_s"]), bool(d["timed"]), bool(d["scale_determined"]),
+                            tuple(d.get("left_out", ())), tuple(float(x) for x in d.get("alternative_scale_ppm", ())),
+                            float(d.get("misfit", 1.0)))
+
+
+def field_model_to_json(m: FieldModel) -> dict:
+    """A field model as the versioned JSON of ``bias.json``."""
+    return {"format_version": FIELD_MODEL_FORMAT_VERSION, "baseline": m.baseline,
+            "range_walk": m.range_walk.to_json(), "sigma0": m.sigma0, "n_observations": m.n_observations,
+            "notes": list(m.notes), "visits": [visit_to_json(v) for v in m.visits.values()]}
+
+
+def field_model_from_json(d: dict) -> FieldModel:
+    """The inverse of :func:`field_model_to_json` (a newer format is an error)."""
+    from common.errors import InputError
+
+    if int(d.get("format_version", 1)) > FIELD_MODEL_FORMAT_VERSION:
+        raise InputError("the campaign's field model was written by a newer BridgeSurvey")
+    visits = {v["label"]: visit_from_json(v) for v in d.get("visits", ())}
+    return FieldModel(d["baseline"], RangeWalkModel.from_json(d["range_walk"]), visits, float(d.get("sigma0", 1.0)),
+                      int(d.get("n_observations", 0)), tuple(d.get("notes", ())))
+
+
+def write_field_model(conn: sqlite3.Connection, model_json: dict, digest: str, created: str) -> None:
+    """Replace the stored field model (caller's transaction)."""
+    conn.execute("INSERT OR REPLACE INTO field_models VALUES (1, ?, ?, ?)", (json.dumps(model_json), digest, created))
+
+
+def read_field_model(conn: sqlite3.Connection) -> Optional[tuple[dict, str]]:
+    """The stored field model's JSON and digest, or None."""
+    r = conn.execute("SELECT model, digest FROM field_models WHERE id = 1").fetchone()
+    return None if r is None else (json.loads(r[0]), r[1])

@@ -1,0 +1,210 @@
+"""Simulated campaigns processed exactly like real ones and scored against their truth (benchmarks, tests).
+
+:func:`run_study` writes a campaign of visits with :func:`lidar.simulate.campaign.write_campaign`, planning
+every visit's fine scans with the product's own planner (the coarse scan imported into a campaign and
+planned, as a surveyor would on site), imports the fine scans, processes, and compares every reported
+displacement, along-span movement and scale with the simulator's truth. :class:`StudyScore` says how far
+the errors are from zero and from their sigmas, and how many are beyond 3 sigma without a warning on their
+own row.
+"""
+from __future__ import annotations
+
+import datetime as dt
+import json
+import math
+import shutil
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Optional, Sequence
+
+import numpy as np
+
+from common.flags import PROBLEM, WARNING, code, severity
+from lidar.layout import read_layout_csv
+from lidar.plan import ScanPlan
+from lidar.simulate.bridge import BridgeModel
+from lidar.simulate.campaign import write_campaign
+from lidar.simulate.scene import EpochConditions
+from lidar.simulate.setup import ScannerSetup
+from lidar.simulate.truth import ScanTruth
+from projects.processing.stages import plan_epoch, process, set_parameter
+from projects.store.campaign import Campaign
+
+START = dt.datetime(2026, 1, 5, 9, 0, tzinfo=dt.timezone.utc)
+
+
+@dataclass
+class StudyScore:
+    """Errors of every reported value against the truth (millimetres, ppm)."""
+
+    errors_mm: list = field(default_factory=list)
+    sigmas_mm: list = field(default_factory=list)
+    warned: list = field(default_factory=list)  # the row itself carries a warning or a problem flag
+    along_errors_mm: list = field(default_factory=list)
+    along_sigmas_mm: list = field(default_factory=list)
+    scale_errors_ppm: list = field(default_factory=list)
+    reference_flags: list = field(default_factory=list)  # (epoch, flag) of reference-check flags raised
+    missing: int = 0
+    expected: int = 0
+
+    @property
+    def rms_mm(self) -> float:
+        e = np.asarray(self.errors_mm, dtype=float)
+        return float(np.sqrt(np.mean(e ** 2))) if e.size else float("nan")
+
+    @property
+    def max_mm(self) -> float:
+        return float(np.max(np.abs(self.errors_mm))) if self.errors_mm else float("nan")
+
+    @property
+    def within_2sigma(self) -> float:
+        e, s = np.abs(self.errors_mm), np.asarray(self.sigmas_mm)
+        return float(np.mean(e <= 2 * s)) if e.size else float("nan")
+
+    @property
+    def silent_beyond_3sigma(self) -> float:
+        """Share of displacements off by more than 3 sigma with no warning or problem flag on their own row."""
+        e, s, w = np.abs(self.errors_mm), np.asarray(self.sigmas_mm), np.asarray(self.warned, dtype=bool)
+        return float(np.mean((e > 3 * s) & ~w)) if e.size else float("nan")
+
+    @property
+    def along_bad(self) -> float:
+        """Share of along-span movements off by more than max(3 sigma, 0.3 mm)."""
+        e, s = np.abs(self.along_errors_mm), np.asarray(self.along_sigmas_mm)
+        return float(np.mean(e > np.maximum(3 * s, 0.3))) if e.size else float("nan")
+
+    @property
+    def scale_max_ppm(self) -> float:
+        return float(np.max(np.abs(self.scale_errors_ppm))) if self.scale_errors_ppm else float("nan")
+
+    def row(self) -> dict:
+        return {"rms_mm": self.rms_mm, "max_mm": self.max_mm, "within_2sigma": self.within_2sigma,
+                "silent_beyond_3sigma": self.silent_beyond_3sigma, "along_bad": self.along_bad,
+                "scale_max_ppm": self.scale_max_ppm, "reference_flags": len(self.reference_flags),
+                "measured": f"{self.expected - self.missing}/{self.expected}"}
+
+
+class ProductPlanner:
+    """The ``plan_for`` callback of :func:`lidar.simulate.campaign.write_campaign`: plans with the product."""
+
+    def __init__(self, campaign_dir: Path, layout_csv: Path, *, span_m: Optional[float],
+                 settings: Optional[dict] = None):
+        self.dir, self.layout_csv, self.span_m = campaign_dir, layout_csv, span_m
+        self.settings = settings or {}
+        self.count = 0
+        self.labels: dict[Path, str] = {}
+
+    def __call__(self, folder: Path, coarse: Path) -> list:
+        from common.errors import SurveyError
+
+        if not (self.dir / "campaign.sqlite").exists():
+            with Campaign.create(self.dir, name="study", layout=read_layout_csv(self.layout_csv),
+                                 span_m=self.span_m) as c:
+                for k, v in self.settings.items():
+                    set_parameter(c, k, str(v))
+        when = START + dt.timedelta(days=7 * self.count)
+        label = f"v{self.count + 1:03d}"
+        self.count += 1
+        self.labels[Path(folder)] = label
+        with Campaign.open(self.dir) as c:
+            c.add_epoch(label, when.isoformat(), coarse)
+            try:
+                plan: ScanPlan = plan_epoch(c, label)
+            except SurveyError:
+                return []
+        return list(plan.rois)
+
+
+def run_study(root: Path, model: BridgeModel, visits: Sequence[EpochConditions], *, seed: int = 0,
+              stations: Optional[Sequence[Sequence[ScannerSetup]]] = None, coarse_step_deg: float = 0.05,
+              settings: Optional[dict] = None, compare_without: bool = False) -> dict[str, StudyScore]:
+    """Simulate, plan, import and process a campaign; score it (and, optionally, the same without corrections).
+
+    Returns ``{"corrected": score}`` (and ``"uncorrected"``: the same scans with ``field_model false``).
+    """
+    root = Path(root)
+    field_dir, camp = root / "field", root / "campaign"
+    for p in (field_dir, camp):
+        shutil.rmtree(p, ignore_errors=True)
+    planner = ProductPlanner(camp, field_dir / "layout.csv", span_m=model.span_m, settings=settings)
+    written = write_campaign(field_dir, model, visits, plan_for=planner, stations=stations, seed=seed,
+                             coarse_step_deg=coarse_step_deg)
+    with Campaign.open(camp) as c:
+        for v in written:
+            label = planner.labels.get(field_dir / v.folder)
+            fine = field_dir / v.folder / "fine.laz"
+            if label is not None and fine.exists():
+                c.import_files(label, [fine], "fine")
+        process(c)
+    out = {"corrected": score_campaign(camp, field_dir, planner.labels)}
+    if compare_without:
+        other = root / "campaign-uncorrected"
+        shutil.rmtree(other, ignore_errors=True)
+        shutil.copytree(camp, other, ignore=shutil.ignore_patterns(".lock"))
+        with Campaign.open(other) as c:
+            set_parameter(c, "field_model", "false")
+            process(c)
+        out["uncorrected"] = score_campaign(other, field_dir, planner.labels)
+    return out
+
+
+def _truth(folder: Path) -> ScanTruth:
+    return ScanTruth.load(folder / "truth.json")
+
+
+def score_campaign(camp: Path, field_dir: Path, labels: dict) -> StudyScore:
+    """Every displacement, along-span movement and scale of a processed study campaign against the truth."""
+    by_label = {lab: _truth(folder) for folder, lab in labels.items() if (folder / "truth.json").exists()}
+    sc = StudyScore()
+    with Campaign.open(camp, writable=False) as c:
+        base = c.settings().get("baseline")
+        if base not in by_label:
+            return sc
+        tb = by_label[base]
+        for r in c.displacements():
+            if r.epoch == base or r.epoch not in by_label:
+                continue
+            sc.expected += 1
+            t = by_label[r.epoch]
+            if r.displacement_m is None or r.sigma_m is None or not math.isfinite(r.displacement_m):
+                sc.missing += 1
+                continue
+            true = t.target(r.reflector).vertical_displacement_m - tb.target(r.reflector).vertical_displacement_m
+            sc.errors_mm.append((r.displacement_m - true) * 1e3)
+            sc.sigmas_mm.append(r.sigma_m * 1e3)
+            sc.warned.append(any(severity(f) in (WARNING, PROBLEM) for f in r.flags))
+            along_t = getattr(t.target(r.reflector), "along_span_m", None)
+            if r.along_m is not None and along_t is not None:
+                sc.along_errors_mm.append((r.along_m - (along_t - tb.target(r.reflector).along_span_m)) * 1e3)
+                sc.along_sigmas_mm.append((r.along_sigma_m or 0.0) * 1e3)
+        for e in c.epochs():
+            if e.label == base or e.label not in by_label:
+                continue
+            ds = c.displacement_set(e.label)
+            sysm = c.systematics(e.label)
+            if "scale_ppm" in sysm and sysm.get("scale_determined", True):
+                truth_ppm = getattr(by_label[e.label], "range_scale_ppm", 0.0) - getattr(tb, "range_scale_ppm", 0.0)
+                sc.scale_errors_ppm.append(float(sysm["scale_ppm"]) - truth_ppm)
+            if ds is not None:
+                sc.reference_flags += [(e.label, f) for f in ds.flags if code(f).startswith("reference_")]
+    return sc
+
+
+def print_table(rows: dict[str, dict[str, StudyScore]]) -> str:
+    """The scores as a Markdown table (one line per scenario and correction)."""
+    head = "| scenario | corrections | RMS mm | max mm | within 2σ | beyond 3σ silent | along bad | scale max ppm | " \
+           "reference flags | measured |"
+    lines = [head, "|" + "---|" * 10]
+    for name, scores in rows.items():
+        for kind, s in scores.items():
+            r = s.row()
+            lines.append(f"| {name} | {kind} | {r['rms_mm']:.3f} | {r['max_mm']:.3f} | {r['within_2sigma']:.0%} | "
+                         f"{r['silent_beyond_3sigma']:.1%} | {r['along_bad']:.0%} | {r['scale_max_ppm']:.1f} | "
+                         f"{r['reference_flags']} | {r['measured']} |")
+    return "\n".join(lines)
+
+
+def save_scores(path: Path, rows: dict[str, dict[str, StudyScore]]) -> Path:
+    """The scores as JSON."""
+    path.write_text(json.dumps({n: {k: s.row() for k, s in v.items()} for n, v in rows.items()}, indent=1))
+    return path
