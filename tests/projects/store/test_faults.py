@@ -29,7 +29,7 @@ import pytest
 
 from app.cli.main import main
 from projects.store import campaign as campaign_module
-from projects.store import imports, journal
+from projects.store import imports, journal, schema
 from projects.store.campaign import DB_NAME, Campaign
 from tests.projects.campaign_helpers import snapshot
 
