@@ -128,7 +128,7 @@ def test_the_digest_migration_seals_an_existing_campaign(processed_copy):
     conn = sqlite3.connect(processed_copy / DB_NAME)
     for table in digests.GROUPS:
         conn.execute(f"ALTER TABLE {table} DROP COLUMN digest")
-    conn.execute("UPDATE meta SET value = '8' WHERE key = 'schema_version'")
+    conn.execute("UPDATE meta SET value = '9' WHERE key = 'schema_version'")  # the version before the digests
     conn.commit()
     conn.close()
     with Campaign.open(processed_copy) as c:
