@@ -55,7 +55,7 @@ def test_refusals_name_the_file(images, tmp_path, capsys):
     (bad / "main" / "frame_0003.png").write_bytes(b"\x89PNG\r\n\x1a\n broken")
     cases = [
         (lambda: _calibrate(d, tmp_path / "s.json", **{"--board": "20by12"}), "COLSxROWS"),
-        (lambda: _calibrate(d, tmp_path / "s.json", **{"--zhang": tmp_path / "none"}), "not a folder"),
+        (lambda: _calibrate(d, tmp_path / "s.json", **{"--zhang": tmp_path / "none"}), "none: no such folder"),
         (lambda: _calibrate(d, tmp_path / "s.json", **{"--main": bad / "main", "--sub": bad / "sub"}),
          "frame_0003.png: not a readable image"),
         (lambda: _calibrate(d, tmp_path / "s.json", **{"--pattern": d / "truth.csv"}), "x_mm,y_mm"),

@@ -41,7 +41,7 @@ def test_detect_plan_simulate_centroids_loop(visit, capsys):
 
 @pytest.mark.parametrize("argv, message", [
     (["detect", "{v}/absent.laz", "--layout", "{v}/layout.csv"], "absent.laz: no such file"),
-    (["detect", "{v}/coarse.laz", "--layout", "{v}/nolayout.csv"], "nolayout.csv: layout file not found"),
+    (["detect", "{v}/coarse.laz", "--layout", "{v}/nolayout.csv"], "nolayout.csv: no such file"),
     (["centroids", "{v}/coarse.laz", "--plan", "{v}/layout.csv"], "layout.csv: not a JSON plan"),
     (["simulate", "{v}/x", "--position", "1,2"], "--position expects x,y,z"),
 ])
