@@ -42,7 +42,7 @@ COMMAND_GROUPS: tuple[tuple[str, tuple[str, ...]], ...] = (
 
 #: Path options of commands whose parsers another module owns: (command, dest) -> kind, checked like the rest.
 FOREIGN_PATHS = {("compare", "out"): OUTPUT_FOLDER, ("plan-file", "out"): OUTPUT_FILE,
-                 ("plan-file", "png"): OUTPUT_FILE}
+                 ("plan-file", "png"): OUTPUT_FILE, ("convert", "output"): OUTPUT_FILE}
 
 
 class Parser(argparse.ArgumentParser):

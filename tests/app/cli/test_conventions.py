@@ -136,3 +136,21 @@ def test_no_help_breaks_a_word_at_its_hyphen(monkeypatch):
         text = parser.format_help()
         broken += [f"{' '.join(path)}: {m.group(0)!r}" for m in re.finditer(r"\w+-\n", text)]
     assert not broken, broken
+
+
+def test_every_path_option_of_another_module_is_found_and_checked():
+    from app.cli.args import path_kind
+    from app.cli.main import FOREIGN_PATHS
+
+    parsers = {path: p for path, p in _parsers()}
+    for (command, dest), kind in FOREIGN_PATHS.items():
+        actions = [a for a in parsers[(command,)]._actions if a.dest == dest]
+        assert len(actions) == 1 and path_kind(actions[0]) == kind, (command, dest)
+
+
+def test_every_output_option_is_checked():
+    from app.cli.args import path_kind
+
+    unchecked = [f"{' '.join(path)} {a.dest}" for path, p in _parsers() for a in p._actions
+                 if a.dest in ("out", "png", "sheet", "output") and path_kind(a) is None]
+    assert not unchecked, unchecked

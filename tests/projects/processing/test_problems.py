@@ -164,7 +164,12 @@ def test_centroid_flags_decide_the_state_everywhere_reference_targets_included(p
 
 
 def test_decide_state_uses_every_flag():
+    import doctest
+
+    import projects.results.state
     from projects.results.state import decide_state
+
+    assert doctest.testmod(projects.results.state).failed == 0
 
     assert decide_state("processed", []) == "processed"
     assert decide_state("processed", ["saturated: R2", "normal_refitted_in_epoch"]) == "processed"
