@@ -10,6 +10,7 @@ import pytest
 
 from app.cli.main import main
 from projects.store.campaign import Campaign
+from tests.app.cli.conftest import error_lines
 from tests.projects.campaign_helpers import snapshot
 
 DATES = ("2026-03-02T09:00", "2026-03-09T10:00", "2026-03-16T08:30")
@@ -122,7 +123,7 @@ def test_bad_inputs_leave_the_campaign_unchanged(campaign, field_copy, capsys, t
         code = main(argv)
         err = capsys.readouterr().err.strip()
         assert code == 1, argv
-        assert message in err and len(err.splitlines()) == 1, (argv, err)
+        assert message in err and len(error_lines(err)) == 1, (argv, err)
         assert snapshot(campaign) == before, argv
     bad_layout = tmp_path / "layout.csv"
     bad_layout.write_text("id,group,x,y\nR1,reference,0,0\n")

@@ -42,7 +42,9 @@ def test_every_option_and_command_has_help():
     assert not missing, "\n".join(missing)
 
 
-def test_commands_are_listed_once_in_the_order_of_a_visit(capsys):
+@pytest.mark.parametrize("columns", ["50", "80", "200"])
+def test_commands_are_listed_once_in_the_order_of_a_visit(columns, capsys, monkeypatch):
+    monkeypatch.setenv("COLUMNS", columns)
     top = build_parser()
     sub = next(a for a in top._actions if isinstance(a, argparse._SubParsersAction))
     grouped = [n for _, names in COMMAND_GROUPS for n in names]
@@ -51,7 +53,8 @@ def test_commands_are_listed_once_in_the_order_of_a_visit(capsys):
         main(["--help"])
     out = capsys.readouterr().out
     lines = out.splitlines()
-    listed = [ln.split()[0] for ln in lines if ln.startswith("    ") and ln.split()[0] in sub.choices]
+    # a command's line starts with it at 4 spaces; its help's next lines are indented further (any width)
+    listed = [ln.split()[0] for ln in lines if ln[:4] == "    " and ln[4:5] != " " and ln.split()[0] in sub.choices]
     assert listed == grouped  # the visit's order, not the alphabet nor the registration order
     assert " ".join(DIR_EXPLAINED.split()) in " ".join(out.split())  # the positional DIR, explained once
     assert "other" not in [ln.strip() for ln in lines]

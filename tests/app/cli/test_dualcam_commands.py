@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from app.cli.main import main
+from tests.app.cli.conftest import error_lines
 
 
 @pytest.fixture(scope="module")
@@ -64,7 +65,7 @@ def test_refusals_name_the_file(images, tmp_path, capsys):
         capsys.readouterr()
         assert run() == 1
         err = capsys.readouterr().err.strip()
-        assert message in err and len(err.splitlines()) == 1
+        assert message in err and len(error_lines(err)) == 1
         assert not (tmp_path / "s.json").exists()
     newer = tmp_path / "newer.json"
     newer.write_text(json.dumps({"format": "bridgesurvey-dualcam-setup", "version": 99}))

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from app.cli.main import main
+from tests.app.cli.conftest import error_lines
 
 
 @pytest.fixture(scope="module")
@@ -48,7 +49,7 @@ def test_detect_plan_simulate_centroids_loop(visit, capsys):
 def test_bad_input_is_one_clear_line(visit, capsys, argv, message):
     code = main([a.format(v=visit) for a in argv])
     err = capsys.readouterr().err.strip()
-    assert code == 1 and message in err and len(err.splitlines()) == 1
+    assert code == 1 and message in err and len(error_lines(err)) == 1
 
 
 def test_layout_missing_a_column(visit, tmp_path, capsys):
