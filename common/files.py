@@ -141,3 +141,52 @@ def csv_text(rows: Sequence[Mapping[str, Any]], columns: Sequence[str]) -> str:
     for r in rows:
         w.writerow({k: ("" if r.get(k) is None else r.get(k)) for k in columns})
     return buf.getvalue()
+
+
+def check_output(path: str | os.PathLike, *, folder: bool = False, suffixes: Sequence[str] = ()) -> Path:
+    """Refuse an output path that cannot be written, in one line, before any computing starts.
+
+    A file output needs an existing folder it may write in, and must not be a folder itself; a folder
+    output (``folder=True``) must not be a file, and is either a folder it may write in or can be
+    created (its nearest existing parent is a folder it may write in). ``suffixes`` (lower case, with
+    the dot) are the file endings the writer understands. Nothing is created.
+
+    Raises
+    ------
+    common.errors.InputError
+        The path, and what is wrong with it.
+
+    >>> check_output("no-such-folder/plan.json")
+    Traceback (most recent call last):
+    ...
+    common.errors.InputError: no-such-folder/plan.json: the folder no-such-folder does not exist; create it first
+    """
+    from common.errors import InputError
+
+    out = Path(path)
+    if folder:
+        if out.exists() and not out.is_dir():
+            raise InputError(f"{out}: is a file, not a folder; give a folder for the outputs (it is created if "
+                             "missing)")
+        parent = out
+        while not parent.exists() and parent != parent.parent:
+            parent = parent.parent
+        if not parent.is_dir():
+            raise InputError(f"{out}: cannot create a folder inside {parent}, which is a file")
+        if not os.access(parent, os.W_OK | os.X_OK):
+            raise InputError(f"{out}: no permission to write in {parent}")
+        return out
+    if out.is_dir() or str(path).endswith(("/", os.sep)):
+        ending = f", ending in {' or '.join(suffixes)}" if suffixes else ""
+        raise InputError(f"{out}: is a folder; give the name of the file to write{ending}")
+    if suffixes and out.suffix.lower() not in suffixes:
+        raise InputError(f"{out}: cannot write '{out.suffix or '(no suffix)'}' here; give a name ending in "
+                         + " or ".join(suffixes))
+    parent = out.parent
+    if not parent.exists():
+        raise InputError(f"{out}: the folder {parent} does not exist; create it first")
+    if not parent.is_dir():
+        raise InputError(f"{out}: {parent} is a file, not a folder")
+    if not os.access(parent, os.W_OK | os.X_OK) or (out.exists() and not os.access(out, os.W_OK)):
+        raise InputError(f"{out}: no permission to write {'it' if out.exists() else 'in ' + str(parent)}")
+    return out

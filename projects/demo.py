@@ -24,9 +24,42 @@ from projects.store.history import histories
 from projects.processing.stages import plan_epoch, process
 from projects.store.campaign import DB_NAME, Campaign
 
-START = dt.datetime(2026, 1, 5, 9, 0, tzinfo=dt.timezone.utc)
+#: Visits are on Mondays at this time (UTC); the last one is the latest Monday before the day the demo is built,
+#: so a fresh demo never holds a visit, a temperature or a camera reading from the future.
+VISIT_TIME = dt.time(9, 0)
 CABLE_TIE_WEEK = 20
 OCCLUDED_WEEK = 30
+
+
+def demo_start(weeks: int, *, today: Optional[dt.date] = None) -> dt.datetime:
+    """The first visit of a ``weeks``-week demo whose last visit is the latest Monday before ``today``.
+
+    >>> demo_start(52, today=dt.date(2026, 12, 1)).isoformat()  # a Tuesday: the last visit is the day before
+    '2025-12-08T09:00:00+00:00'
+    >>> demo_start(2, today=dt.date(2026, 11, 30)).isoformat()  # a Monday: the last visit is a week before
+    '2026-11-16T09:00:00+00:00'
+    """
+    today = today or dt.datetime.now(dt.timezone.utc).date()
+    last = today - dt.timedelta(days=today.weekday() or 7)
+    return dt.datetime.combine(last, VISIT_TIME, tzinfo=dt.timezone.utc) - dt.timedelta(weeks=weeks - 1)
+
+
+def _start_of(c: Campaign, weeks: int) -> dt.datetime:
+    """The demo campaign's first visit: as stored when it was created (a resumed demo keeps its dates)."""
+    stored = c.meta("demo_start")
+    if stored:
+        return dt.datetime.fromisoformat(stored)
+    epochs = c.epochs()  # built before the start was stored: its first epoch is week 1
+    start = dt.datetime.fromisoformat(epochs[0].datetime) if epochs else demo_start(weeks)
+    c.set_meta("demo_start", start.isoformat())
+    return start
+
+
+def _not_after_now(t_ns: int) -> int:
+    """``t_ns``, or the current hour when that is earlier (series end at the time the demo is built)."""
+    hour = 3600 * 10 ** 9
+    now = int(dt.datetime.now(dt.timezone.utc).timestamp()) * 10 ** 9 // hour * hour
+    return min(int(t_ns), now)
 
 
 def midspan_history_m(week: int) -> float:
@@ -87,10 +120,11 @@ def build_demo(folder: str | os.PathLike, *, weeks: int = 52, seed: int = 2026,
         c.set_meta("demo", "1")
         c.set_limit("*", "kr-rail:0-200")
     with c:
+        start = _start_of(c, weeks)
         field_dir = folder / "field"
         done = {e.label for e in c.epochs()}
         for w in range(weeks):
-            when = START + dt.timedelta(weeks=w)
+            when = start + dt.timedelta(weeks=w)
             label = when.date().isoformat()
             report(progress, w / weeks, f"week {w + 1}/{weeks}")
             res = c.result(label) if label in done else None
@@ -122,9 +156,9 @@ def build_demo(folder: str | os.PathLike, *, weeks: int = 52, seed: int = 2026,
         csv_path = write_atomic(folder / "displacements.csv", to_csv(rows))
         xlsx = export(c, folder / "campaign.xlsx")
         report(progress, 0.975, "camera series")
-        cv_dir = add_demo_camera(c, folder, weeks=weeks, seed=seed)
+        cv_dir = add_demo_camera(c, folder, weeks=weeks, seed=seed, start=start)
         report(progress, 0.978, "temperature, events, design prediction, analysis")
-        story = add_demo_story(c, folder, weeks=weeks, seed=seed)
+        story = add_demo_story(c, folder, weeks=weeks, seed=seed, start=start)
         report(progress, 0.98, "report")
         from projects.outputs.report import write_report
 
@@ -135,7 +169,9 @@ def build_demo(folder: str | os.PathLike, *, weeks: int = 52, seed: int = 2026,
         plot = save_figure(displacement_history_figure(histories(c), title=c.name, context=plot_context(c)),
                            folder / "displacement_history.png")
         pdf = write_report(c, folder / "report.pdf", author="BridgeSurvey demo")
-        notes = [f"week {CABLE_TIE_WEEK + 1}: a cable tie beside R1; week {OCCLUDED_WEEK + 1}: M2 occluded"] + story
+        day = lambda w: (start + dt.timedelta(weeks=w)).date().isoformat()  # noqa: E731
+        notes = [f"week {CABLE_TIE_WEEK + 1} ({day(CABLE_TIE_WEEK)}): a cable tie beside R1; week "
+                 f"{OCCLUDED_WEEK + 1} ({day(OCCLUDED_WEEK)}): M2 occluded"] + story
         report(progress, 1.0, "done")
         return DemoResult(folder, len(c.epochs()), csv_path, xlsx, plot, pdf, cv_dir, notes)
 
@@ -145,15 +181,22 @@ DEAD_LOAD_WEEKS = ((6, "superstructure dead load", 3.0), (18, "track and ballast
 DESIGN_OFFSET_MM = 21.59  # the dissertation's alignment of its finite-element curve
 
 
-def demo_temperature(t_ns: np.ndarray) -> np.ndarray:
-    """Air temperature of the demo (degC): the seasonal swing the history follows and a daily one."""
-    t0 = np.datetime64(START.replace(tzinfo=None), "ns").astype(np.int64)
+def _ns(when: dt.datetime) -> int:
+    return int(np.datetime64(when.astimezone(dt.timezone.utc).replace(tzinfo=None), "ns").astype(np.int64))
+
+
+def demo_temperature(t_ns: np.ndarray, start: dt.datetime) -> np.ndarray:
+    """Air temperature of the demo (degC) at ``t_ns`` (UTC ns): the seasonal swing the history follows and a daily one.
+
+    ``start`` is the demo's first visit (:func:`demo_start`).
+    """
+    t0 = _ns(start)
     w = (t_ns - t0) / (7 * 86400 * 10 ** 9)
     hour = (t_ns / 3.6e12) % 24
     return 12.0 + 10.0 * np.sin(2 * np.pi * (w - 16) / 52.0) + 3.0 * np.sin(2 * np.pi * (hour - 9) / 24.0)
 
 
-def add_demo_story(c: Campaign, folder: Path, *, weeks: int, seed: int) -> list[str]:
+def add_demo_story(c: Campaign, folder: Path, *, weeks: int, seed: int, start: dt.datetime) -> list[str]:
     """The field story told by the demo's imports and analysis.
 
     An hourly temperature series, the two dead-load events, the design prediction (no temperature,
@@ -165,11 +208,11 @@ def add_demo_story(c: Campaign, folder: Path, *, weeks: int, seed: int) -> list[
 
     field = folder / "field"
     field.mkdir(exist_ok=True)
-    t0 = np.datetime64(START.replace(tzinfo=None), "ns").astype(np.int64)
+    t0 = _ns(start)
     hour = 3600 * 10 ** 9
     if not any(r.name == "air-temperature" for r in env_records(c)):
-        t = np.arange(t0 - 7 * 24 * hour, t0 + (weeks + 1) * 7 * 24 * hour, hour)
-        temp = demo_temperature(t) + np.random.default_rng(seed + 11).normal(0, 0.3, t.size)
+        t = np.arange(t0 - 7 * 24 * hour, _not_after_now(t0 + (weeks + 1) * 7 * 24 * hour), hour)
+        temp = demo_temperature(t, start) + np.random.default_rng(seed + 11).normal(0, 0.3, t.size)
         lines = ["time,temperature_degC"] + [
             f"{np.datetime_as_string(np.datetime64(int(a), 'ns'), unit='m')}Z,{b:.2f}" for a, b in zip(t, temp)]
         (field / "temperature.csv").write_text("\n".join(lines) + "\n")
@@ -177,7 +220,7 @@ def add_demo_story(c: Campaign, folder: Path, *, weeks: int, seed: int) -> list[
     if not events(c):
         for w, label, _ in DEAD_LOAD_WEEKS:
             if w < weeks - 2:
-                add_event(c, date=(START + dt.timedelta(weeks=w - 0.5)).isoformat(), kind="construction", label=label)
+                add_event(c, date=(start + dt.timedelta(weeks=w - 0.5)).isoformat(), kind="construction", label=label)
     mid = max(2, min(8, weeks - 1))
     if not predictions(c) and weeks > 10:
         rows = ["date,M1,M2,M3,M4,M5"]
@@ -189,11 +232,11 @@ def add_demo_story(c: Campaign, folder: Path, *, weeks: int, seed: int) -> list[
                 u -= 3.0 + 1.5 * (1 - math.exp(-(w - 6) / 15.0))
             if w >= 18:
                 u -= 2.0
-            when = (START + dt.timedelta(days=day)).date().isoformat()
+            when = (start + dt.timedelta(days=day)).date().isoformat()
             rows.append(when + "," + ",".join(f"{u * math.sin(math.pi * f):.3f}" for f in fractions))
         (field / "design-prediction.csv").write_text("\n".join(rows) + "\n")
         import_prediction(c, field / "design-prediction.csv",
-                          align_at=(START + dt.timedelta(weeks=mid)).date().isoformat())
+                          align_at=(start + dt.timedelta(weeks=mid)).date().isoformat())
     notes = []
     if c.limit_for("M3") is not None and len(c.epochs()) >= 4:
         doc, _ = write_analysis(c, folder / "analysis")
@@ -208,7 +251,7 @@ def add_demo_story(c: Campaign, folder: Path, *, weeks: int, seed: int) -> list[
     return notes
 
 
-def add_demo_camera(c: Campaign, folder: Path, *, weeks: int, seed: int) -> Path:
+def add_demo_camera(c: Campaign, folder: Path, *, weeks: int, seed: int, start: dt.datetime) -> Path:
     """The dual-camera system's 1-minute series of the midspan target over the campaign.
 
     Its own zero, 0.2 mm noise, a ten-day outage, a few empty readings), imported and cross-validated.
@@ -217,14 +260,14 @@ def add_demo_camera(c: Campaign, folder: Path, *, weeks: int, seed: int) -> Path
     from projects.series.camera import import_series
     from vision.simulate.series import simulate_series, write_series_csv
 
-    t0 = np.datetime64(START.replace(tzinfo=None), "ns").astype(np.int64)
+    t0 = _ns(start)
     week_ns = 7 * 86400 * 10 ** 9
 
     def truth_mm(t):
         return np.array([midspan_history_m(w) for w in (t - t0) / week_ns]) * 1000.0
 
     if not any(r.name == "midspan-camera" for r in series_records(c)):
-        end = t0 + (weeks - 1) * week_ns + 86400 * 10 ** 9
+        end = _not_after_now(t0 + (weeks - 1) * week_ns + 86400 * 10 ** 9)
         grid = np.arange(t0 - 86400 * 10 ** 9, end + 1, 3600 * 10 ** 9)
         smooth = truth_mm(grid)  # hourly truth, interpolated to minutes (the history is smooth)
         outage = t0 + 34 * week_ns + 2 * 86400 * 10 ** 9

@@ -1,8 +1,8 @@
 """Camera commands: import a dual-camera displacement series, list them, cross-validate with LiDAR."""
 from __future__ import annotations
 
-from pathlib import Path
 
+from app.cli.args import add_dir, add_json, input_file, output_folder
 from app.cli.output import dump_json, table
 from common.flags import FLAG_NO_CAMERA_DATA
 
@@ -18,19 +18,19 @@ def register(sub) -> None:
                                        "date + time, or unix seconds), displacement/disp/deflection/value (unit in "
                                        "the name, e.g. displacement_mm), optional unit and tz columns. Bad rows are "
                                        "left out and reported with their line numbers.")
-    q.add_argument("dir", type=Path)
-    q.add_argument("file", type=Path)
+    add_dir(q)
+    input_file(q, "file", help="the series file (CSV or TXT)")
     q.add_argument("--name", default=None, help="series name (default: the file name)")
     q.add_argument("--reflector", default=None, help="LiDAR target the camera watches (default: the one at midspan)")
     q.add_argument("--column", default=None, help="value column, when the file has several")
     q.add_argument("--timezone", default="UTC", help="zone of times without an offset: IANA name or +hh:mm (UTC)")
     q.add_argument("--unit", default=None, help="unit of the values when the file does not say (default mm)")
     q.add_argument("--positive", choices=("up", "down"), default="up", help="the file's sign convention (up)")
-    q.add_argument("--json", action="store_true", help="print the import summary as JSON")
+    add_json(q, help="print the import summary as JSON")
     q.set_defaults(func=cmd_camera_import)
     q = actions.add_parser("list", help="list the imported series")
-    q.add_argument("dir", type=Path)
-    q.add_argument("--json", action="store_true")
+    add_dir(q)
+    add_json(q)
     q.set_defaults(func=cmd_camera_list)
 
     p = sub.add_parser("crossval", help="cross-validate a camera series against the LiDAR epochs",
@@ -38,13 +38,13 @@ def register(sub) -> None:
                                    "camera's zero (at a date, or by least squares), and report bias, RMSE and "
                                    "correlation. Writes crossval.json, crossval.csv, overlay.png, difference.png "
                                    "and scatter.png.")
-    p.add_argument("dir", type=Path)
-    p.add_argument("--out", type=Path, required=True, help="output folder")
+    add_dir(p)
+    output_folder(p, "--out", required=True, help="output folder (created when missing)")
     p.add_argument("--align-at", default=None, help="align both series at the epoch nearest this date")
     p.add_argument("--series", default=None, help="camera series (when there are several)")
     p.add_argument("--reflector", default=None, help="LiDAR target (default: the series' own)")
     p.add_argument("--window-min", type=float, default=30.0, help="pairing window, +- minutes (30)")
-    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    add_json(p, help="print the summary as JSON")
     p.set_defaults(func=cmd_crossval)
 
 

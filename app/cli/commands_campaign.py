@@ -1,23 +1,26 @@
 """Campaign commands: init, add-epoch, add-fine, plan, process, displacements, status, reflector, limit, export, demo."""
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
 
+from app.cli.args import RawDescriptionHelpFormatter, add_dir, add_epoch, add_json, input_file, output_file, output_folder
 from app.cli.output import dump_json, table
 from app.cli.progress import progress_bar
 from common.errors import InputError
-from common.flags import FLAG_DEPARTS, describe, severity
+from common.flags import FLAG_DEPARTS, describe, severity, worst
+
+#: Epochs 'status' lists without --all.
+STATUS_EPOCHS = 12
 
 
 def register(sub) -> None:
     p = sub.add_parser("init", help="create a campaign for one bridge",
                        description="Create a campaign folder with its reflector layout.")
-    p.add_argument("dir", type=Path)
+    add_dir(p)
     p.add_argument("--name", required=True, help="structure / campaign name")
-    p.add_argument("--layout", type=Path, required=True, help="layout.csv: id,group,x,y,z[,diameter_mm]")
+    input_file(p, "--layout", required=True, help="layout.csv: id,group,x,y,z[,diameter_mm][,nx,ny,nz]")
     p.add_argument("--target-diameter-mm", type=float, default=50.0, help="diameter when the layout has none (50)")
     p.add_argument("--span-m", type=float, default=None, help="span length, for span-fraction limits")
     p.add_argument("--scanner", default=None,
@@ -27,10 +30,10 @@ def register(sub) -> None:
     p = sub.add_parser("add-epoch", help="import a visit: its coarse scan (and fine scans, if any)",
                        description="Import the scans of one visit. Files are checked, copied into the campaign "
                                    "once and never modified.")
-    p.add_argument("dir", type=Path)
-    p.add_argument("--date", required=True, help="ISO 8601 date or date-time of the visit")
-    p.add_argument("--coarse", type=Path, required=True)
-    p.add_argument("--fine", type=Path, nargs="*", default=[])
+    add_dir(p)
+    p.add_argument("--date", required=True, help="ISO 8601 date or date-time of the visit (UTC unless it says)")
+    input_file(p, "--coarse", required=True, help="the visit's coarse scan (LAS, LAZ, E57, PLY, PCD, PTX, PTS, XYZ)")
+    input_file(p, "--fine", nargs="*", default=[], help="its fine scans, when already made (or later: add-fine)")
     p.add_argument("--label", default=None, help="epoch label (default: the date)")
     p.add_argument("--notes", default="", help="station notes")
     p.add_argument("--scanner", default=None, help="this visit's scanner when it is not the campaign's "
@@ -39,93 +42,116 @@ def register(sub) -> None:
                    help="accept a date more than 3 years from the campaign's other epochs (it is refused otherwise)")
     p.set_defaults(func=cmd_add_epoch)
 
-    p = sub.add_parser("add-fine", help="import the fine scans of an epoch")
-    p.add_argument("dir", type=Path)
-    p.add_argument("--epoch", required=True)
-    p.add_argument("files", type=Path, nargs="+")
+    p = sub.add_parser("add-fine", help="import the fine scans of an epoch",
+                       description="Import the fine scans of an epoch (made from its plan). Files are checked, "
+                                   "copied into the campaign once and never modified.")
+    add_dir(p)
+    add_epoch(p)
+    input_file(p, "files", nargs="+", metavar="FILE", help="fine scan file(s); one file may hold many windows")
     p.set_defaults(func=cmd_add_fine)
 
-    p = sub.add_parser("plan", help="plan the fine scans of an epoch from its coarse scan")
-    p.add_argument("dir", type=Path)
-    p.add_argument("--epoch", required=True)
-    p.add_argument("--out", type=Path, required=True, help="plan JSON to write")
-    p.add_argument("--sheet", type=Path, default=None, help="also write the printable field sheet (PDF)")
+    p = sub.add_parser("plan", help="plan the fine scans of an epoch from its coarse scan",
+                       description="Find and identify the targets in the epoch's coarse scan and plan a fine-scan "
+                                   "window for each: angles, steps, expected points and seconds, and the total "
+                                   "against the visit's time budget. Writes the plan JSON (and, with --sheet, the "
+                                   "printable field sheet).")
+    add_dir(p)
+    add_epoch(p)
+    output_file(p, "--out", required=True, help="plan JSON to write")
+    output_file(p, "--sheet", default=None, help="also write the printable field sheet (PDF)", suffixes=(".pdf",))
     p.set_defaults(func=cmd_plan)
 
     p = sub.add_parser("process", help="bring epochs up to date: plans, centroids, displacements",
-                       description="Process new or changed epochs only; up-to-date ones are not recomputed.")
-    p.add_argument("dir", type=Path)
-    p.add_argument("--epoch", action="append", default=None, help="only this epoch (repeatable)")
-    p.add_argument("--json", action="store_true")
+                       description="Process new or changed epochs only; up-to-date ones are not recomputed. Prints "
+                                   "one line per epoch computed and a summary. Exit 3 when an epoch has no "
+                                   "trustworthy result (a problem flag).")
+    add_dir(p)
+    add_epoch(p, required=False, action="append", default=None,
+              help="only this epoch (repeatable; default: every epoch)")
+    add_json(p, help="print what was done as JSON (every epoch, with its action and state)")
     p.set_defaults(func=cmd_process)
 
-    p = sub.add_parser("displacements", help="print or write the displacement history")
-    p.add_argument("dir", type=Path)
-    p.add_argument("--format", choices=("csv", "json"), default="csv")
-    p.add_argument("--out", type=Path, default=None, help="write to a file instead of the terminal")
+    p = sub.add_parser("displacements", help="print or write the displacement history",
+                       description="One row per processed epoch and measurement target: displacement (mm, "
+                                   "positive up, against the baseline), sigma, flags, limit state and the "
+                                   "epoch's state (epoch_state), as CSV or JSON.")
+    add_dir(p)
+    p.add_argument("--format", choices=("csv", "json"), default="csv", help="csv (default) or json")
+    output_file(p, "--out", default=None, help="write to this file instead of the terminal")
     p.set_defaults(func=cmd_displacements)
 
-    p = sub.add_parser("status", help="epochs, what is stale, and the alarm state of every target")
-    p.add_argument("dir", type=Path)
-    p.add_argument("--json", action="store_true")
+    p = sub.add_parser("status", help="epochs, what is stale, and the alarm state of every target",
+                       description="The campaign at a glance: the latest epochs with their state (imported, "
+                                   "planned, scanned, measured, processed, warning, problem) and flags, which "
+                                   "epochs have warnings or problems, and the latest displacement of every "
+                                   "measurement target against its limits.")
+    add_dir(p)
+    p.add_argument("--all", action="store_true", help=f"list every epoch (default: the last {STATUS_EPOCHS})")
+    add_json(p, help="print the whole status as JSON (every epoch)")
     p.set_defaults(func=cmd_status)
 
-    p = sub.add_parser("reflector", help="list, add, retire or replace reflectors")
-    p.add_argument("dir", type=Path)
+    p = sub.add_parser("reflector", help="list, add, retire or replace reflectors",
+                       description="The campaign's reflector targets: list them, add one, retire one, or replace "
+                                   "one by another whose history continues the old one's.")
+    add_dir(p)
     rs = p.add_subparsers(dest="action", metavar="ACTION")
     rs.required = True
-    q = rs.add_parser("list")
-    q.add_argument("--json", action="store_true")
-    q = rs.add_parser("add")
-    q.add_argument("id")
-    q.add_argument("--group", required=True, choices=("reference", "measurement"))
+    q = rs.add_parser("list", help="every reflector with its group, position and life")
+    add_json(q)
+    q = rs.add_parser("add", help="a new reflector (from a date on)")
+    q.add_argument("id", help="the new reflector's id")
+    q.add_argument("--group", required=True, choices=("reference", "measurement"),
+                   help="reference (on a pier) or measurement (under the deck)")
     q.add_argument("--xyz", required=True, help="approximate x,y,z in the layout's frame (m)")
-    q.add_argument("--diameter-mm", type=float, default=50.0)
+    q.add_argument("--diameter-mm", type=float, default=50.0, help="target diameter (50)")
     q.add_argument("--installed", default=None, help="ISO date from which scans should hold it")
-    q = rs.add_parser("retire")
-    q.add_argument("id")
-    q.add_argument("--date", required=True)
-    q = rs.add_parser("replace")
-    q.add_argument("old")
-    q.add_argument("new")
-    q.add_argument("--date", required=True)
+    q = rs.add_parser("retire", help="a reflector that is gone (kept in the history)")
+    q.add_argument("id", help="the reflector's id")
+    q.add_argument("--date", required=True, help="ISO date from which it is gone")
+    q = rs.add_parser("replace", help="a new reflector continuing an old one's history")
+    q.add_argument("old", help="the id of the reflector replaced")
+    q.add_argument("new", help="the id of its replacement")
+    q.add_argument("--date", required=True, help="ISO date of the replacement")
     q.add_argument("--xyz", default=None, help="new position if not the same place")
     p.set_defaults(func=cmd_reflector)
 
     p = sub.add_parser("limit", help="set warning/alarm limits",
-                       description="Rules: abs:WARN_MM,ALARM_MM | span:NW,NA (L/NW, L/NA) | kr-rail:0-200|200-270|270-350")
-    p.add_argument("dir", type=Path)
-    p.add_argument("--rule", required=True)
+                       description="Rules: abs:WARN_MM,ALARM_MM | span:NW,NA (L/NW, L/NA) | kr-rail:0-200|200-270|270-350"
+                                   " | prediction:TOL_MM (flag a departure from the design prediction)")
+    add_dir(p)
+    p.add_argument("--rule", required=True, help="the rule (see above)")
     p.add_argument("--reflector", default="*", help="one target (default: every measurement target)")
     p.set_defaults(func=cmd_limit)
 
     from projects.processing.parameters import help_text
 
     p = sub.add_parser("settings", help="show or change processing parameters (marks what becomes stale)",
-                       formatter_class=argparse.RawDescriptionHelpFormatter,
+                       formatter_class=RawDescriptionHelpFormatter,
                        description="Without KEY: list the parameters. With KEY VALUE: change one; 'process' then "
                                    "recomputes exactly the results it affects\n(stale: plan = plans and centroids "
                                    "of every epoch, displacements = displacements only, baseline = every "
                                    "displacement).\n\n" + help_text() + "\n  scanner (NAME | FILE.json): the "
                                    "campaign's instrument (with --epoch: one visit's)")
-    p.add_argument("dir", type=Path)
-    p.add_argument("key", nargs="?")
-    p.add_argument("value", nargs="?")
-    p.add_argument("--epoch", default=None, help="with 'scanner': set the scanner of this epoch only")
+    add_dir(p)
+    p.add_argument("key", nargs="?", help="the parameter to change (see above; none: list them all)")
+    p.add_argument("value", nargs="?", help="its new value (none: back to the default)")
+    add_epoch(p, required=False, help="with 'scanner': set the scanner of this epoch only")
     p.set_defaults(func=cmd_settings)
 
     p = sub.add_parser("export", help="export tables: .xlsx (everything) or .csv (displacements)")
-    p.add_argument("dir", type=Path)
-    p.add_argument("--out", type=Path, required=True)
+    add_dir(p)
+    output_file(p, "--out", required=True, help="the file to write: .xlsx (every table) or .csv (displacements)",
+                suffixes=(".xlsx", ".csv"))
     p.set_defaults(func=cmd_export)
 
     p = sub.add_parser("demo", help="build and process a simulated one-year demo campaign",
                        description="Simulate a year of weekly visits of a 40 m bridge (scanner somewhere new each "
                                    "week, dead-load steps, creep, seasonal swings, a cable tie, an occluded target), "
-                                   "import and process them like real data.")
-    p.add_argument("dir", type=Path)
-    p.add_argument("--weeks", type=int, default=52)
-    p.add_argument("--seed", type=int, default=2026)
+                                   "import and process them like real data. The last visit is the Monday before "
+                                   "today. Run it again to resume.")
+    output_folder(p, "dir", metavar="DIR", help="the folder for the demo campaign (created; resumed when it holds one)")
+    p.add_argument("--weeks", type=int, default=52, help="weekly visits to simulate (52)")
+    p.add_argument("--seed", type=int, default=2026, help="random seed of the simulation (2026)")
     p.set_defaults(func=cmd_demo)
 
 
@@ -212,17 +238,21 @@ EXIT_PROBLEM = 3
 
 def cmd_process(args) -> int:
     from projects.processing.stages import process
+    from projects.results.state import epoch_states
 
     with _open(args.dir) as c:
+        had_displacements = {e.label for e in c.epochs() if c.displacement_set(e.label) is not None}
         with progress_bar("processing") as cb:
             summary = process(c, args.epoch, progress=cb)
+        states = epoch_states(c)
+    rows = _process_rows(summary, states, had_displacements)
     if args.json:
-        dump_json({"baseline": summary.baseline, "epochs": [o.__dict__ for o in summary.outcomes],
-                   "displacements_updated": summary.displacement_epochs})
+        dump_json({"baseline": summary.baseline, "epochs": rows, "displacements_updated": summary.displacement_epochs})
     else:
-        table([o.__dict__ for o in summary.outcomes], ["epoch", "action", "message"])
-        print(f"baseline: {summary.baseline or '(none yet)'}; displacements updated for "
-              f"{len(summary.displacement_epochs)} epoch(s)")
+        done = [r for r in rows if r["action"] != "up-to-date"]
+        if done:
+            table(done, ["epoch", "action", "state", "note"])
+        print(_process_summary(rows, summary.baseline))
     if summary.failed:
         print(f"bridgesurvey: error: {len(summary.failed)} epoch(s) failed: " +
               "; ".join(f"{o.epoch}: {o.message}" for o in summary.failed), file=sys.stderr)
@@ -232,6 +262,47 @@ def cmd_process(args) -> int:
               "; ".join(f"{lab}: {flag}" for lab, flag in summary.problems.items()), file=sys.stderr)
         return EXIT_PROBLEM
     return 0
+
+
+def _process_rows(summary, states: dict, had_displacements: set) -> list[dict]:
+    """One row per epoch: what processing did to it (its stage-1 action, or its displacements) and its state.
+
+    An epoch whose centroids were measured earlier (by 'check') and whose displacements were computed
+    now is 'processed', one whose displacements were recomputed 'displacements', not 'up-to-date'.
+    """
+    updated = set(summary.displacement_epochs)
+    outcomes = {o.epoch: o for o in summary.outcomes}
+    rows = []
+    for lab in list(outcomes) + [lab for lab in states if lab in updated and lab not in outcomes]:
+        o = outcomes.get(lab)
+        action, message = (o.action, o.message) if o is not None else ("up-to-date", "")
+        if action == "up-to-date" and lab in updated:
+            action, message = (("displacements", "recomputed (parameters, baseline or reflectors changed)")
+                               if lab in had_displacements else
+                               ("processed", "displacements computed from the centroids measured earlier "
+                                             "(e.g. by 'check')"))
+        st = states.get(lab)
+        serious = [f for f in (st.flags if st else ()) if severity(f) in ("warning", "problem")]
+        note = "; ".join(x for x in (message, ", ".join(serious)) if x)
+        rows.append({"epoch": lab, "action": action, "message": message,
+                     "state": st.state if st else "", "note": note})
+    return rows
+
+
+def _process_summary(rows: list[dict], baseline) -> str:
+    counts: dict[str, int] = {}
+    for r in rows:
+        counts[r["action"]] = counts.get(r["action"], 0) + 1
+    order = ("measured", "planned", "processed", "displacements", "failed")
+    words = {"displacements": "with displacements recomputed"}
+    parts = [f"{counts[a]} {words.get(a, a)}" for a in order if counts.get(a)]
+    up = counts.get("up-to-date", 0)
+    if up:
+        parts.append(f"{up} up to date")
+    head = f"{len(rows)} epoch(s): " + ", ".join(parts) if parts else "no epoch yet"
+    if not any(counts.get(a) for a in order):
+        head = "nothing to do: " + head
+    return f"{head}; baseline {baseline or '(none yet)'}"
 
 
 def cmd_displacements(args) -> int:
@@ -257,17 +328,23 @@ def cmd_status(args) -> int:
     if args.json:
         dump_json(data)
         return 0
+    epochs = data["epochs"]
     print(f"campaign '{data['name']}', span {data['span_m'] or '?'} m, baseline {data['baseline'] or '-'}, "
-          f"{len(data['epochs'])} epoch(s)")
-    shown = data["epochs"][-12:]
+          f"{len(epochs)} epoch(s)")
+    shown = epochs if args.all else epochs[-STATUS_EPOCHS:]
     table([{**e, "flags": describe(e["flag_list"])} for e in shown],
           ["epoch", "datetime", "state", "stale", "flags"])
-    tally = {s: sum(e["severity"][s] > 0 for e in data["epochs"]) for s in ("problem", "warning", "info")}
+    if len(shown) < len(epochs):
+        print(f"(last {len(shown)} of {len(epochs)} epochs; --all for every epoch)")
+    levels = {e["epoch"]: worst(e["flag_list"]) for e in epochs}
+    tally = {s: sum(w == s for w in levels.values()) for s in ("problem", "warning", "info")}
     print(f"epochs with problems: {tally['problem']}, with warnings: {tally['warning']}, "
-          f"with information flags: {tally['info']}")
-    for e in data["epochs"]:
-        if e["state"] == "problem":
-            print(f"PROBLEM in {e['epoch']}: " + "; ".join(f for f in e["flag_list"] if severity(f) == "problem"))
+          f"with information flags only: {tally['info']}")
+    for e in epochs:
+        level = levels[e["epoch"]]
+        if level in ("problem", "warning"):
+            print(f"{level.upper()} in {e['epoch']}: " +
+                  "; ".join(f for f in e["flag_list"] if severity(f) in ("problem", "warning")))
     print("latest displacement of each measurement target:")
     table(data["targets"], ["reflector", "epoch", "displacement_mm", "sigma_mm", "state", "warning_mm", "alarm_mm",
                             "flags"])

@@ -16,7 +16,7 @@ def register(sub) -> None:
     p.add_argument("dir", type=Path)
     p.add_argument("--from", dest="start", required=True, help="first epoch")
     p.add_argument("--to", dest="end", required=True, help="second epoch")
-    p.add_argument("--method", choices=("c2c", "m3c2"), default="m3c2")
+    p.add_argument("--method", choices=("c2c", "m3c2"), default="m3c2", help="change computation: c2c or m3c2 (m3c2)")
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--registration", choices=("icp", "ndt", "targets"), default=None,
                    help="refine the target registration on the stable parts with Open3D ICP (default), PCL's NDT "

@@ -2,10 +2,13 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
-
+from app.cli.args import input_file, input_folder, output_file, output_folder
 from app.cli.progress import progress_bar
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 def register(sub) -> None:
@@ -17,23 +20,23 @@ def register(sub) -> None:
     actions.required = True
     q = actions.add_parser("calibrate", help="calibrate a set-up: Zhang views, then the rig moved with both "
                                              "targets still (first frame = rest)")
-    q.add_argument("--zhang", type=Path, required=True, help="folder of sub-camera images of the board, tilted")
-    q.add_argument("--main", type=Path, required=True, help="folder of main-camera calibration frames")
-    q.add_argument("--sub", type=Path, required=True, help="folder of sub-camera calibration frames")
-    q.add_argument("--pattern", type=Path, required=True, help="CSV x_mm,y_mm of the main target's features (y up)")
+    input_folder(q, "--zhang", required=True, help="folder of sub-camera images of the board, tilted")
+    input_folder(q, "--main", required=True, help="folder of main-camera calibration frames")
+    input_folder(q, "--sub", required=True, help="folder of sub-camera calibration frames")
+    input_file(q, "--pattern", required=True, help="CSV x_mm,y_mm of the main target's features (y up)")
     q.add_argument("--board", required=True, help="inner corners of the checkerboard, COLSxROWS (e.g. 20x12)")
     q.add_argument("--square-mm", type=float, required=True, help="checkerboard square size")
-    q.add_argument("--out", type=Path, required=True, help="set-up file to write (JSON)")
+    output_file(q, "--out", required=True, help="set-up file to write (JSON)")
     q.set_defaults(func=cmd_calibrate)
     q = actions.add_parser("measure", help="compensated displacement of every measurement frame")
-    q.add_argument("--setup", type=Path, required=True)
-    q.add_argument("--main", type=Path, required=True)
-    q.add_argument("--sub", type=Path, required=True)
-    q.add_argument("--times", type=Path, default=None, help="CSV frame,timestamp (default: frame numbers only)")
-    q.add_argument("--out", type=Path, required=True, help="series CSV (readable by 'camera import')")
+    input_file(q, "--setup", required=True, help="the set-up file 'dualcam calibrate' wrote")
+    input_folder(q, "--main", required=True, help="folder of main-camera measurement frames")
+    input_folder(q, "--sub", required=True, help="folder of sub-camera measurement frames (same order)")
+    input_file(q, "--times", default=None, help="CSV frame,timestamp (default: frame numbers only)")
+    output_file(q, "--out", required=True, help="series CSV (readable by 'camera import')")
     q.set_defaults(func=cmd_measure)
     q = actions.add_parser("simulate", help="render a synthetic image set with ground truth (lab geometry)")
-    q.add_argument("dir", type=Path)
+    output_folder(q, "dir", metavar="FOLDER", help="folder to write the image set into (created when missing)")
     q.add_argument("--frames", type=int, default=24, help="measurement frames (24)")
     q.add_argument("--motions", type=int, default=21, help="calibration motions of the rig (21)")
     q.set_defaults(func=cmd_simulate)
@@ -51,7 +54,9 @@ def _board(text: str) -> tuple[int, int]:
         raise InputError(f"--board expects the inner corners as COLSxROWS (e.g. 20x12), got {text!r}") from None
 
 
-def _pattern(path: Path) -> np.ndarray:
+def _pattern(path: Path) -> "np.ndarray":
+    import numpy as np
+
     from common.errors import InputError
 
     try:
@@ -67,6 +72,8 @@ def _pattern(path: Path) -> np.ndarray:
 
 
 def cmd_calibrate(args) -> int:
+    import numpy as np
+
     from common.errors import ProcessingError
     from vision.compensation import calibrate_dual_camera
     from vision.images import detect_boards, detect_sequence, list_images
@@ -101,6 +108,8 @@ def cmd_measure(args) -> int:
     import csv
     import io
 
+    import numpy as np
+
     from common.files import write_atomic
     from vision.compensation import measure_dual_camera
     from vision.images import detect_sequence, list_images
@@ -133,6 +142,8 @@ def cmd_measure(args) -> int:
 
 def _infer_board(setup) -> tuple[int, int]:
     """Inner corners (cols, rows) from the stored board points (row by row)."""
+    import numpy as np
+
     pts = setup.board_points_m
     cols = int(np.sum(np.isclose(pts[:, 1], pts[0, 1])))
     return cols, len(pts) // cols

@@ -3,7 +3,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from app.cli.args import add_json, output_file
 from app.cli.output import dump_json, table
+
+ROOT_HELP = "a folder holding campaigns, a campaign folder (DIR), or a fleet file listing such folders"
 from app.cli.progress import progress_bar
 
 
@@ -14,14 +17,14 @@ def register(sub) -> None:
     fs = p.add_subparsers(dest="fleet_command", metavar="ACTION")
     fs.required = True
     q = fs.add_parser("status", help="every bridge: last epoch, work left, worst alarm state")
-    q.add_argument("roots", type=Path, nargs="+", metavar="ROOT")
+    q.add_argument("roots", type=Path, nargs="+", metavar="ROOT", help=ROOT_HELP)
     q.add_argument("--overdue-days", type=int, default=10, help="a bridge not visited for longer is overdue (10)")
-    q.add_argument("--json", action="store_true")
+    add_json(q)
     q.set_defaults(func=cmd_fleet_status)
     q = fs.add_parser("report", help="fleet summary PDF: an overview and one line per bridge")
-    q.add_argument("roots", type=Path, nargs="+", metavar="ROOT")
-    q.add_argument("--out", type=Path, required=True)
-    q.add_argument("--overdue-days", type=int, default=10)
+    q.add_argument("roots", type=Path, nargs="+", metavar="ROOT", help=ROOT_HELP)
+    output_file(q, "--out", required=True, help="the PDF to write", suffixes=(".pdf",))
+    q.add_argument("--overdue-days", type=int, default=10, help="a bridge not visited for longer is overdue (10)")
     q.set_defaults(func=cmd_fleet_report)
     q = fs.add_parser("process", help="bring every campaign up to date on a Dask cluster",
                       description="Runs each stale epoch's stage 1 (plan and centroids from its scans) as a "
@@ -30,10 +33,10 @@ def register(sub) -> None:
                                   "--scheduler uses a running cluster whose workers have BridgeSurvey installed "
                                   "and see the campaign folders at the same paths. A campaign another process is "
                                   "writing is skipped. Ctrl-C stops cleanly (what is saved stays).")
-    q.add_argument("roots", type=Path, nargs="+", metavar="ROOT")
+    q.add_argument("roots", type=Path, nargs="+", metavar="ROOT", help=ROOT_HELP)
     q.add_argument("--scheduler", default=None, help="address of a running Dask scheduler, e.g. tcp://host:8786")
     q.add_argument("--workers", type=int, default=None, help="worker processes of the local cluster (default: cores)")
-    q.add_argument("--json", action="store_true")
+    add_json(q, help="print what was done as JSON")
     q.set_defaults(func=cmd_fleet_process)
 
 

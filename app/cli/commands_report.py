@@ -1,8 +1,8 @@
 """The ``report`` command: a PDF survey report of one visit, a period or the whole campaign."""
 from __future__ import annotations
 
-from pathlib import Path
 
+from app.cli.args import add_dir, add_epoch, output_file
 from app.cli.progress import progress_bar
 
 
@@ -11,12 +11,12 @@ def register(sub) -> None:
                        description="A PDF for the bridge owner: summary with alarm states, layout and target "
                                    "state, displacement histories, every epoch's map, plan and centroids, and a "
                                    "processing log with versions, parameters and file checksums.")
-    p.add_argument("dir", type=Path)
-    p.add_argument("--out", type=Path, required=True, help="output file (.pdf)")
+    add_dir(p)
+    output_file(p, "--out", required=True, help="the PDF to write", suffixes=(".pdf",))
     g = p.add_mutually_exclusive_group()
-    g.add_argument("--epoch", help="report on one visit (with the history up to it)")
-    g.add_argument("--from", dest="start", help="first epoch of the period")
-    p.add_argument("--to", dest="end", help="last epoch of the period")
+    add_epoch(g, required=False, help="report on one visit (with the history up to it): its label")
+    g.add_argument("--from", dest="start", metavar="LABEL", help="first epoch of the period")
+    p.add_argument("--to", dest="end", metavar="LABEL", help="last epoch of the period")
     p.add_argument("--author", help="who prepared the report (default: your login name)")
     p.set_defaults(func=cmd_report)
 

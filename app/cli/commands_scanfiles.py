@@ -22,7 +22,7 @@ def register(sub) -> None:
                                    "raw intensity are kept (LAS/LAZ store intensity as 16-bit: other ranges "
                                    "are rescaled). Files with several scans convert to E57, or one scan at a "
                                    "time with --scan.")
-    p.add_argument("input", type=Path)
+    p.add_argument("input", type=Path, help="the scan file to convert (LAS, LAZ, E57, PLY, PCD, PTX, PTS or XYZ)")
     p.add_argument("output", type=Path, help="suffix: .las .laz .e57 .ply .pcd .ptx .pts .xyz .txt")
     p.add_argument("--scan", type=int, default=None, metavar="K", help="only scan K (0-based) of a multi-scan file")
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")

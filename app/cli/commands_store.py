@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from app.cli.args import add_dir, add_json
 from app.cli.output import dump_json
 from app.cli.progress import progress_bar
 
@@ -17,8 +18,8 @@ def register(sub) -> None:
                                    "against the checksum stored with it, and whether the results match their "
                                    "inputs. Changes nothing. Each problem is one line with what to do; exit status 3 "
                                    "when there is any.")
-    p.add_argument("dir", type=Path)
-    p.add_argument("--json", action="store_true")
+    add_dir(p)
+    add_json(p)
     p.set_defaults(func=cmd_verify)
 
     p = sub.add_parser("repair", help="register again the files the database lost; never deletes anything",
@@ -27,8 +28,8 @@ def register(sub) -> None:
                                    "(an older campaign.sqlite restored over a newer folder) when its checksum and "
                                    "header still match its import; reads damaged series again from their files. "
                                    "Damaged results are recomputed by 'process'. Says what it did.")
-    p.add_argument("dir", type=Path)
-    p.add_argument("--json", action="store_true")
+    add_dir(p)
+    add_json(p)
     p.set_defaults(func=cmd_repair)
 
 

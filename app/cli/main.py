@@ -1,48 +1,159 @@
 """Entry point of the ``bridgesurvey`` command.
 
-Every command is registered by a module of this package; errors the product
-raises on purpose (``SurveyError``) are printed as one line and give exit
-status 1; wrong arguments give status 2 (argparse).
+Every command is registered by a module of this package and listed in the help in the order of a
+visit (:data:`COMMAND_GROUPS`). Before a command runs, every path it will read or write is checked
+(:func:`app.cli.args.check_paths`): a mistake gets one line before any computing. Errors the product
+raises on purpose (``SurveyError``) are printed as one line and give exit status 1; wrong arguments give
+status 2 with the usage of the command they were given to.
+
+Building the parser imports no numpy, pandas, scipy, Qt or processing code (the commands import what
+they need when they run): ``bridgesurvey --help`` and a refused command start in a fraction of a second.
 """
 from __future__ import annotations
 
 import argparse
+import difflib
 import logging
 import os
+import shutil
 import sys
+import textwrap
 from typing import Optional, Sequence
 
+from app.cli.args import (DIR_EXPLAINED, DIR_HELP, OUTPUT_FILE, OUTPUT_FOLDER, HelpFormatter,
+                          RawDescriptionHelpFormatter, check_paths, mark)
 from common.errors import SurveyError
 
 EXIT_ERROR = 1
 
+DESCRIPTION = "Long-term bridge displacement from weekly terrestrial laser scans of reflector targets."
+
+#: The commands in the order of the work, by group, as the top-level help lists them.
+COMMAND_GROUPS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("set-up, once per bridge", ("init", "reflector", "limit", "settings", "demo")),
+    ("each visit, in this order", ("add-epoch", "plan", "field-sheet", "add-fine", "check", "process")),
+    ("results", ("status", "displacements", "report", "export")),
+    ("when something goes wrong", ("verify", "repair")),
+    ("analysis and cross-checks", ("compare", "env", "event", "prediction", "analyse", "camera", "crossval")),
+    ("in the field: the instrument and where to stand", ("scanners", "stations")),
+    ("scan and image files, outside a campaign", ("info", "convert", "detect", "plan-file", "centroids", "simulate",
+                                                   "dualcam")),
+    ("many bridges", ("fleet",)),
+)
+
+#: Path options of commands whose parsers another module owns: (command, dest) -> kind, checked like the rest.
+FOREIGN_PATHS = {("compare", "out"): OUTPUT_FOLDER, ("plan-file", "out"): OUTPUT_FILE,
+                 ("plan-file", "png"): OUTPUT_FILE, ("convert", "output"): OUTPUT_FILE}
+
+
+class Parser(argparse.ArgumentParser):
+    """An argument parser whose sub-commands record their one-line help and get a description from it."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
+        self.register("action", "parsers", CommandParsers)
+
+
+class CommandParsers(argparse._SubParsersAction):
+    """Sub-command registry: remembers each command's help, defaults its description to that help."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.helps: dict[str, str] = {}
+
+    def add_parser(self, name, **kwargs):
+        text = kwargs.get("help")
+        if text:
+            self.helps[name] = text
+            kwargs.setdefault("description", text[0].upper() + text[1:] + ("" if text.endswith((".", "?")) else "."))
+        return super().add_parser(name, **kwargs)
+
+
+def _command_list(helps: dict[str, str], width: int) -> str:
+    grouped = [name for _, names in COMMAND_GROUPS for name in names]
+    groups = list(COMMAND_GROUPS) + [("other", tuple(n for n in helps if n not in grouped))]
+    col = 4 + max(len(n) for n in helps) + 2
+    lines = ["commands, in the order of the work:"]
+    for title, names in groups:
+        names = tuple(n for n in names if n in helps)
+        if not names:
+            continue
+        lines.append(f"  {title}")
+        for n in names:
+            wrapped = textwrap.wrap(helps[n], max(30, width - col), break_on_hyphens=False) or [""]
+            lines.append(f"    {n.ljust(col - 4)}{wrapped[0]}")
+            lines += [" " * col + w for w in wrapped[1:]]
+    return "\n".join(lines)
+
+
+def _walk(parser: argparse.ArgumentParser, path: tuple[str, ...] = ()):
+    """Every parser of the tree with its command path (('',) for the top, ('fleet', 'status'), ...)."""
+    yield path, parser
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                yield from _walk(sub, path + (name,))
+
+
+def _finish(parser: argparse.ArgumentParser) -> None:
+    """Explain every campaign DIR, check the foreign commands' paths, and let each parser be found from its args."""
+    for path, p in _walk(parser):
+        p.set_defaults(_parser=p)
+        for action in p._actions:
+            if action.dest == "dir" and not action.option_strings and action.help is None:
+                action.help, action.metavar = DIR_HELP, "DIR"
+            kind = FOREIGN_PATHS.get((path[0] if path else "", action.dest))
+            if kind is not None and len(path) == 1:
+                mark(action, kind)
+
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``bridgesurvey`` parser with every command (imports nothing heavy)."""
     from app.cli import (commands_analysis, commands_camera, commands_campaign, commands_compare, commands_dualcam,
                          commands_field, commands_files, commands_fleet, commands_report, commands_scanfiles)
 
-    parser = argparse.ArgumentParser(
-        prog="bridgesurvey",
-        description="Long-term bridge displacement from weekly terrestrial laser scans of reflector targets.",
-        epilog="Run 'bridgesurvey COMMAND --help' for the options of a command.",
-    )
+    width = min(100, shutil.get_terminal_size((100, 24)).columns) - 2
+    parser = Parser(prog="bridgesurvey", usage="bridgesurvey [-h] [-v] COMMAND [DIR] [OPTIONS]",
+                    formatter_class=RawDescriptionHelpFormatter,
+                    epilog="Run 'bridgesurvey COMMAND --help' for what a command does and its options.")
     parser.add_argument("-v", "--verbose", action="store_true", help="log what is being done")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", help=argparse.SUPPRESS, prog="bridgesurvey")
     sub.required = True
-    for module in (commands_campaign, commands_compare, commands_camera, commands_dualcam, commands_report,
-                   commands_files, commands_scanfiles, commands_field, commands_fleet, commands_analysis):
+    for module in (commands_campaign, commands_field, commands_report, commands_analysis, commands_compare,
+                   commands_camera, commands_scanfiles, commands_files, commands_dualcam, commands_fleet):
         module.register(sub)
     from app.cli import commands_store  # verify, repair
+
     commands_store.register(sub)
+    _finish(parser)
+    fill = lambda text: textwrap.fill(text, width, break_on_hyphens=False)  # noqa: E731
+    parser.description = "\n\n".join((fill(DESCRIPTION), _command_list(sub.helps, width), fill(DIR_EXPLAINED)))
     return parser
+
+
+def _refuse_unknown(parser: argparse.ArgumentParser, extra: Sequence[str]) -> None:
+    """An unknown argument, reported with the usage of the command it was given to (exit 2)."""
+    options = [s for a in parser._actions for s in a.option_strings]
+    hint = ""
+    for word in extra:
+        close = difflib.get_close_matches(word.split("=", 1)[0], options, n=1) if word.startswith("-") else []
+        if close:
+            hint = f" (did you mean {close[0]}?)"
+            break
+    parser.error(f"unrecognized arguments: {' '.join(extra)}{hint}")
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    command_parser = getattr(args, "_parser", parser)
+    if extra:
+        _refuse_unknown(command_parser, extra)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
     try:
+        check_paths(command_parser, args)
         return int(args.func(args) or 0)
     except SurveyError as exc:
         print(f"bridgesurvey: error: {exc}", file=sys.stderr)

@@ -35,22 +35,42 @@ def _read_fleet_file(path: Path) -> list[Path]:
 
 
 def find_campaigns(roots: Sequence[str | os.PathLike]) -> list[Path]:
-    """Every campaign folder under ``roots`` (folders, campaign folders or fleet files), sorted, once each."""
+    """Every campaign folder under ``roots`` (folders, campaign folders or fleet files), sorted, once each.
+
+    A folder a fleet file lists that does not exist is an error here (see :func:`survey_roots`).
+    """
+    found, missing = survey_roots(roots)
+    if missing:
+        raise InputError(f"{missing[0][0]}: no such folder (listed in {missing[0][1]})")
+    return found
+
+
+def survey_roots(roots: Sequence[str | os.PathLike]) -> tuple[list[Path], list[tuple[Path, Path]]]:
+    """The campaign folders under ``roots``, and the folders fleet files list that do not exist.
+
+    Returns ``(campaigns sorted, once each; [(missing folder, the fleet file listing it)])``. A root given
+    itself that is neither a folder nor a fleet file is an :class:`InputError` (a mistake on the command
+    line); a missing folder listed in a fleet file is a bridge that cannot be read today, not a reason to
+    stop looking at the others.
+    """
     if not roots:
         raise InputError("give at least one folder (or fleet file) to look for campaigns in")
     found: dict[str, Path] = {}
     queue: list[Path] = []
+    missing: list[tuple[Path, Path]] = []
     for r in roots:
         p = Path(r)
         if p.is_file():
-            queue += _read_fleet_file(p)
+            for listed in _read_fleet_file(p):
+                if listed.is_dir():
+                    queue.append(listed)
+                else:
+                    missing.append((listed, p))
         elif p.is_dir():
             queue.append(p)
         else:
             raise InputError(f"{p}: no such folder or fleet file")
     for root in queue:
-        if not root.is_dir():
-            raise InputError(f"{root}: no such folder")
         base = len(root.resolve().parts)
         for dirpath, dirnames, filenames in os.walk(root):
             here = Path(dirpath)
@@ -60,7 +80,7 @@ def find_campaigns(roots: Sequence[str | os.PathLike]) -> list[Path]:
                 continue
             dirnames[:] = sorted(d for d in dirnames if not d.startswith(".") and
                                  len(Path(dirpath, d).resolve().parts) - base <= MAX_DEPTH)
-    return sorted(found.values(), key=lambda p: str(p))
+    return sorted(found.values(), key=lambda p: str(p)), missing
 
 
 @dataclass(frozen=True)
@@ -132,8 +152,14 @@ def bridge_status(folder: str | os.PathLike, *, today: Optional[dt.date] = None)
 
 def fleet_status(roots: Sequence[str | os.PathLike], *, today: Optional[dt.date] = None,
                  overdue_days: int = 10) -> dict:
-    """Every bridge's status plus an overview (counts by state, overdue bridges, work left)."""
-    bridges = [bridge_status(f, today=today) for f in find_campaigns(roots)]
+    """Every bridge's status plus an overview (counts by state, overdue bridges, work left).
+
+    A campaign that cannot be read, or a folder a fleet file lists that is not there, is a bridge with
+    its one-line ``error`` (unreadable), listed first; the others are summarised as usual.
+    """
+    folders, missing = survey_roots(roots)
+    bridges = [bridge_status(f, today=today) for f in folders]
+    bridges += [BridgeStatus(str(f), f.name, error=f"no such folder (listed in {listing})") for f, listing in missing]
     order = {s: k for k, s in enumerate(STATE_ORDER)}
     bridges.sort(key=lambda b: (b.error is None, order.get(b.state, 9), -(b.worst_ratio or 0), b.name))
     return {"bridges": [b.to_json() for b in bridges],

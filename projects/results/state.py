@@ -1,55 +1,190 @@
 """The state of a campaign at a glance: every epoch's stage and every target's latest displacement.
 
-Shared by ``bridgesurvey status`` and the desktop application's campaign tree.
+One home for an epoch's state: :func:`decide_state` turns a stage and *all* the epoch's flags (its own,
+its targets' displacement flags and its centroid flags, reference targets included) into the state that
+``bridgesurvey status``, the displacements CSV (``epoch_state``), the desktop application's campaign tree
+and the report show. :func:`epoch_states` gives it for every epoch of a campaign at once,
+:func:`epoch_state` for one.
 """
 from __future__ import annotations
 
-from common.flags import FLAG_REFERENCE_AMBIGUOUS, count, worst
+from dataclasses import dataclass
+from typing import Iterable, Mapping, Optional, Sequence
+
+from common.flags import FLAG_DEPARTS, FLAG_REFERENCE_AMBIGUOUS, PROBLEM, WARNING, code, count, worst
 from projects.store.campaign import Campaign
+from projects.store.records import DisplacementRecord
 
 #: Epoch stages, in the order work moves them along; the last three are processed epochs by the
 #: most serious flag they carry (see :mod:`common.flags`): none or information only, a warning, a problem.
 EPOCH_STATES = ("imported", "planned", "scanned", "measured", "processed", "warning", "problem")
 
+#: The stages before displacements exist; :func:`decide_state` passes them through unchanged.
+STAGES = ("imported", "planned", "scanned", "measured", "processed")
 
-def epoch_flags(c: Campaign, label: str) -> list[str]:
-    """The epoch's own flags, then its targets' (each distinct flag once).
 
-    An ambiguous reference change names its suspects.
+@dataclass(frozen=True)
+class EpochState:
+    """An epoch's state and every flag it carries.
+
+    Attributes
+    ----------
+    epoch : str
+        The epoch's label.
+    state : str
+        One of :data:`EPOCH_STATES`.
+    flags : tuple of str
+        The epoch's own flags first, then its targets' flags, each with the targets that carry it
+        (``second_bright_object: R1``, ``missing: M2 M4``).
     """
-    ds = c.displacement_set(label)
-    if ds is None:
-        return []
-    flags = list(ds.flags)
-    if FLAG_REFERENCE_AMBIGUOUS in flags:
+
+    epoch: str
+    state: str
+    flags: tuple[str, ...]
+
+    @property
+    def severity(self) -> Optional[str]:
+        """The most serious severity among the flags (None without flags)."""
+        return worst(self.flags)
+
+
+def decide_state(stage: str, flags: Iterable[str]) -> str:
+    """The state of an epoch at ``stage`` carrying ``flags``.
+
+    Before its displacements exist an epoch is at its stage (imported, planned, scanned, measured);
+    once processed, its most serious flag decides: a problem, a warning, or processed (information
+    flags only, or none). Every flag counts, a reference target's centroid flag as much as the epoch's.
+
+    >>> decide_state("processed", ["normal_refitted_in_epoch"])
+    'processed'
+    >>> decide_state("processed", ["second_bright_object: R1"])
+    'warning'
+    >>> decide_state("processed", ["missing: M2", "deck_not_measured"])
+    'problem'
+    >>> decide_state("measured", ["second_bright_object: R1"])
+    'measured'
+    """
+    if stage not in STAGES:
+        raise ValueError(f"unknown epoch stage {stage!r}")
+    if stage != "processed":
+        return stage
+    level = worst(flags)
+    return level if level in (WARNING, PROBLEM) else "processed"
+
+
+def target_flags(per_target: Mapping[str, Sequence[str]]) -> list[str]:
+    """Per-target flags as one entry per flag, naming the targets that carry it (targets sorted).
+
+    >>> target_flags({"R1": ["second_bright_object"], "M2": ["missing"], "M4": ["missing"]})
+    ['missing: M2 M4', 'second_bright_object: R1']
+    """
+    owners: dict[str, list[str]] = {}
+    for rid in sorted(per_target):
+        for f in per_target[rid]:
+            owners.setdefault(f, [])
+            if rid not in owners[f]:
+                owners[f].append(rid)
+    return [f"{f}: {' '.join(ids)}" if f == code(f) else f"{f} ({' '.join(ids)})" for f, ids in sorted(owners.items())]
+
+
+@dataclass(frozen=True)
+class Departure:
+    """A target's design prediction at an epoch and how far the measurement departs from it (mm, positive up).
+
+    ``departs`` is True when the departure exceeds the target's tolerance (``limit --rule prediction:TOL``):
+    the row then carries :data:`common.flags.FLAG_DEPARTS`.
+    """
+
+    predicted_mm: float
+    departure_mm: Optional[float]
+    departs: bool
+
+
+def departures(c: Campaign, records: Optional[Sequence[DisplacementRecord]] = None
+               ) -> dict[tuple[str, str], Departure]:
+    """``(epoch, reflector) -> Departure`` for every displacement (default: all stored) inside its prediction."""
+    from projects.series.predictions import predictions
+
+    preds = predictions(c)
+    if not preds:
+        return {}
+    import numpy as np
+
+    when = {e.label: e.when for e in c.epochs()}
+    tols = c.settings().get("prediction_tolerance_mm") or {}
+    out = {}
+    for r in c.displacements() if records is None else records:
+        p = preds.get(r.reflector)
+        t_ns = int(when[r.epoch].timestamp() * 1e9)
+        if p is None or not p[0][0] <= t_ns <= p[0][-1]:
+            continue
+        pred = float(np.interp(t_ns, p[0], p[1]))
+        dep = None if r.displacement_m is None else r.displacement_m * 1000.0 - pred
+        tol = tols.get(r.reflector, tols.get("*"))
+        out[(r.epoch, r.reflector)] = Departure(pred, dep, dep is not None and tol is not None and abs(dep) > tol)
+    return out
+
+
+def _own_flags(c: Campaign, label: str, flags: Sequence[str]) -> list[str]:
+    """The epoch's own flags, an ambiguous reference change naming its suspects."""
+    out = list(flags)
+    if FLAG_REFERENCE_AMBIGUOUS in out:
         suspects = [r.reflector for r in c.reference_checks(label) if r.suspect]
         if suspects:
-            flags[flags.index(FLAG_REFERENCE_AMBIGUOUS)] = \
+            out[out.index(FLAG_REFERENCE_AMBIGUOUS)] = \
                 f"{FLAG_REFERENCE_AMBIGUOUS}: {' or '.join(suspects)} moved (both left out)"
-    for f in c.displacement_flags(label):
-        if f not in flags:
-            flags.append(f)
-    return flags
+    return out
+
+
+def _stage(c: Campaign, label: str, has_displacements: bool) -> str:
+    if has_displacements:
+        return "processed"
+    res = c.result(label)
+    if res is None:
+        return "imported"
+    if res.stage == "planned":
+        return "scanned" if c.files(label, "fine") else "planned"
+    return "measured"
+
+
+def epoch_states(c: Campaign, labels: Optional[Sequence[str]] = None, *,
+                 departed: Optional[Mapping[tuple[str, str], Departure]] = None) -> dict[str, EpochState]:
+    """The :class:`EpochState` of every epoch (or of ``labels``), in date order.
+
+    Flags: the epoch's own (from its displacement computation), then every target's displacement flags
+    (a departure from the design prediction included) and centroid flags, with the targets named.
+    ``departed`` is :func:`departures` when the caller has it already.
+    """
+    wanted = [e.label for e in c.epochs()] if labels is None else list(labels)
+    per_target: dict[str, dict[str, list[str]]] = {lab: {} for lab in wanted}
+    records = c.displacements()
+    departed = departures(c, records) if departed is None else departed
+    for r in records:
+        if r.epoch in per_target:
+            extra = [FLAG_DEPARTS] if (d := departed.get((r.epoch, r.reflector))) is not None and d.departs else []
+            if r.flags or extra:
+                per_target[r.epoch].setdefault(r.reflector, []).extend(list(r.flags) + extra)
+    out = {}
+    for lab in wanted:
+        ds = c.displacement_set(lab)
+        targets = per_target[lab]
+        for rid, cent in c.centroids(lab).items():
+            targets.setdefault(rid, []).extend(cent.flags)
+        flags = (_own_flags(c, lab, ds.flags) if ds is not None else []) + target_flags(targets)
+        out[lab] = EpochState(lab, decide_state(_stage(c, lab, ds is not None), flags), tuple(flags))
+    return out
+
+
+def epoch_flags(c: Campaign, label: str) -> list[str]:
+    """Every flag of one epoch: its own, then its targets' (displacement and centroid) with the targets named."""
+    return list(epoch_states(c, [label])[label].flags)
 
 
 def epoch_state(c: Campaign, label: str) -> tuple[str, list[str]]:
-    """(state, flags) of one epoch.
-
-    The state is imported (coarse scan only), planned, scanned (fine scans not
-    measured yet), measured, or - once its displacements are computed - processed, warning or
-    problem by its most serious flag.
-    """
-    res = c.result(label)
-    ds = c.displacement_set(label)
-    if ds is not None:
-        flags = epoch_flags(c, label)
-        level = worst(flags)
-        return (level if level in ("warning", "problem") else "processed"), flags
-    if res is None:
-        return "imported", []
-    if res.stage == "planned":
-        return ("scanned" if c.files(label, "fine") else "planned"), []
-    return "measured", []
+    """(state, flags) of one epoch (see :func:`decide_state` and :func:`epoch_states`)."""
+    c.epoch(label)
+    s = epoch_states(c, [label])[label]
+    return s.state, list(s.flags)
 
 
 def campaign_status(c: Campaign) -> dict:
@@ -59,22 +194,23 @@ def campaign_status(c: Campaign) -> dict:
     checksum (not shown, recomputed by ``process``); ``unlisted_files`` the files of the
     import folders the database does not list (never deleted: ``bridgesurvey repair`` registers them).
     """
-    from projects.results.table import displacement_table
     from projects.processing.stages import baseline_epoch, stale_epochs
+    from projects.results.table import displacement_table
 
     stale = stale_epochs(c)
+    states = epoch_states(c)
     epochs = []
     for e in c.epochs():
-        state, flags = epoch_state(c, e.label)
-        epochs.append({"epoch": e.label, "datetime": e.datetime[:16], "state": state,
-                       "stale": stale.get(e.label, ""), "flags": "; ".join(flags), "flag_list": flags,
-                       "severity": count(flags)})
+        s = states[e.label]
+        epochs.append({"epoch": e.label, "datetime": e.datetime[:16], "state": s.state,
+                       "stale": stale.get(e.label, ""), "flags": "; ".join(s.flags), "flag_list": list(s.flags),
+                       "severity": count(s.flags)})
     from projects.store.verify import REMEDY, describe_group
 
     damaged = [f"stored {describe_group(t, k)}: damaged (fails its checksum), not shown; {REMEDY[t]}"
                for t, k in c.damaged_results()]
     latest = {}
-    for r in displacement_table(c):
+    for r in displacement_table(c, states=states):
         if r["displacement_mm"] is not None or r["reflector"] not in latest:  # keep the last good value
             latest[r["reflector"]] = r
     return {"name": c.name, "span_m": c.span_m, "baseline": baseline_epoch(c), "epochs": epochs,

@@ -1,20 +1,24 @@
 """The displacement table: one row per processed epoch x measurement target, with state and limits.
 
 The single source of the rows that ``displacements``, the exports, the report, ``status`` and the camera
-cross-check print (columns: :data:`DISPLACEMENT_COLUMNS`).
+cross-check print (columns: :data:`DISPLACEMENT_COLUMNS`). ``state`` is the target's limit state (ok,
+warning, alarm, unknown); ``epoch_state`` its epoch's state as ``status`` shows it
+(:func:`projects.results.state.decide_state`: processed, warning or problem, from every flag of the epoch,
+its centroid flags included).
 """
 from __future__ import annotations
 
-import numpy as np
+from typing import Mapping, Optional
 
 from common.files import csv_text
+from projects.results.state import EpochState, departures, epoch_states
 from projects.store.campaign import Campaign
 
 DISPLACEMENT_COLUMNS = ["epoch", "datetime", "reflector", "displacement_mm", "sigma_mm", "flags", "state",
                         "warning_mm", "alarm_mm", "baseline", "epoch_flags", "days_from_baseline", "severity",
                         "concrete_age_days", "predicted_mm", "departure_mm", "along_mm", "along_sigma_mm",
                         "scale_ppm", "scale_sigma_ppm", "sigma_noise_mm", "sigma_frame_mm", "sigma_scale_mm",
-                        "sigma_bias_mm", "sigma_drift_mm"]
+                        "sigma_bias_mm", "sigma_drift_mm", "epoch_state"]
 #: The error budget's terms as columns: a displacement's sigma is their sum in quadrature.
 BUDGET_COLUMNS = ("sigma_noise_mm", "sigma_frame_mm", "sigma_scale_mm", "sigma_bias_mm", "sigma_drift_mm")
 
@@ -36,53 +40,47 @@ def field_columns(r) -> dict:
     return out
 
 
-def displacement_table(c: Campaign) -> list[dict]:
-    """One row per processed epoch x measurement target (baseline = first epoch, positive up)."""
+def displacement_table(c: Campaign, *, states: Optional[Mapping[str, EpochState]] = None) -> list[dict]:
+    """One row per processed epoch x measurement target (baseline = first epoch, positive up).
+
+    ``states`` are the epochs' states when the caller has them already (default: computed here).
+    """
     from datetime import datetime
 
     from common.flags import FLAG_DEPARTS, worst
 
-    from projects.series.predictions import predictions
-
     when = {e.label: e.when for e in c.epochs()}
     settings = c.settings()
     casting = datetime.fromisoformat(settings["casting_date"]) if settings.get("casting_date") else None
-    preds = predictions(c)
-    tols = settings.get("prediction_tolerance_mm") or {}
-    rows = []
     records = c.displacements()
+    departed = departures(c, records)
+    states = epoch_states(c, departed=departed) if states is None else states
     limits = {rid: c.limit_for(rid) for rid in {r.reflector for r in records}}
+    rows = []
     for r in records:
         lim = limits[r.reflector]
         mm = None if r.displacement_m is None else r.displacement_m * 1000.0
+        dep = departed.get((r.epoch, r.reflector))
+        flags = list(r.flags) + ([FLAG_DEPARTS] if dep is not None and dep.departs else [])
         rows.append({
             "epoch": r.epoch, "datetime": r.datetime, "reflector": r.reflector,
             "displacement_mm": None if mm is None else round(mm, 4) + 0.0,
             "sigma_mm": None if r.sigma_m is None else round(r.sigma_m * 1000.0, 4),
-            "flags": ";".join(r.flags),
+            "flags": ";".join(flags),
             "state": lim.state(mm if mm is not None else float("nan")) if lim else ("unknown" if mm is None else "ok"),
             "warning_mm": None if lim is None else lim.warning_mm, "alarm_mm": None if lim is None else lim.alarm_mm,
             "baseline": r.baseline, "epoch_flags": ";".join(r.epoch_flags),
             # negative for an epoch dated before the baseline
             "days_from_baseline": round((when[r.epoch] - when[r.baseline]).total_seconds() / 86400.0, 4)
             if r.baseline in when else None,
-            "severity": worst(r.flags + r.epoch_flags) or "",
+            "severity": worst(flags + list(r.epoch_flags)) or "",
             "concrete_age_days": None if casting is None else
             round((when[r.epoch] - casting).total_seconds() / 86400.0, 3),
-            "predicted_mm": None, "departure_mm": None, **field_columns(r),
+            "predicted_mm": None if dep is None else round(dep.predicted_mm, 4),
+            "departure_mm": None if dep is None or dep.departure_mm is None else round(dep.departure_mm, 4),
+            **field_columns(r),
+            "epoch_state": states[r.epoch].state if r.epoch in states else "",
         })
-        p = preds.get(r.reflector)
-        t_ns = int(when[r.epoch].timestamp() * 1e9)
-        if p is not None and p[0][0] <= t_ns <= p[0][-1]:
-            pred = float(np.interp(t_ns, p[0], p[1]))
-            row = rows[-1]
-            row["predicted_mm"] = round(pred, 4)
-            if mm is not None:
-                row["departure_mm"] = round(mm - pred, 4)
-                tol = tols.get(r.reflector, tols.get("*"))
-                if tol is not None and abs(mm - pred) > tol:
-                    row["flags"] = ";".join(f for f in (row["flags"], FLAG_DEPARTS) if f)
-                    row["severity"] = worst(row["flags"].split(";") + list(r.epoch_flags)) or ""
     return rows
 
 

@@ -54,7 +54,9 @@ def parse_datetime(text: str) -> str:
     """Normalise an ISO 8601 date or date-time; naive values are taken as UTC."""
     try:
         value = dt.datetime.fromisoformat(str(text).strip().replace("Z", "+00:00"))
-    except ValueError:
+    except ValueError as exc:
+        if "isoformat" not in str(exc):  # ISO 8601 in form, but no such day or time (2027-02-30, 24:30)
+            raise InputError(f"date {text!r} is an impossible date: {exc}") from None
         raise InputError(f"date {text!r} is not ISO 8601 (e.g. 2026-03-14 or 2026-03-14T09:30)") from None
     if value.tzinfo is None:
         value = value.replace(tzinfo=dt.timezone.utc)

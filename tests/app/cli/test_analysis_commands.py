@@ -7,6 +7,7 @@ import sys
 import numpy as np
 import pytest
 
+from tests.app.cli.conftest import error_lines
 from tests.projects.campaign_helpers import snapshot
 
 
@@ -61,7 +62,7 @@ def test_events_and_analyse_write_the_contract(processed_copy, tmp_path):
     _cli("env", "import", processed_copy, _temperature_csv(tmp_path / "air.csv", unit="K"), "--kind", "temperature")
     before = snapshot(processed_copy)
     r = _cli("event", "add", processed_copy, "--date", "2020-01-01", "--kind", "load", "--label", "too early")
-    assert r.returncode == 1 and "outside the campaign" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    assert r.returncode == 1 and "outside the campaign" in r.stderr and len(error_lines(r.stderr)) == 1
     assert snapshot(processed_copy) == before
     r = _cli("event", "add", processed_copy, "--date", "2026-03-12", "--kind", "construction", "--label", "slab",
              "--load-kn-m", "12.5")

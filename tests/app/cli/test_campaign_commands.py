@@ -10,6 +10,7 @@ import pytest
 
 from app.cli.main import main
 from projects.store.campaign import Campaign
+from tests.app.cli.conftest import error_lines
 from tests.projects.campaign_helpers import snapshot
 
 DATES = ("2026-03-02T09:00", "2026-03-09T10:00", "2026-03-16T08:30")
@@ -43,9 +44,13 @@ def test_whole_flow_gives_true_displacements(campaign, field_copy, capsys):
     for k in range(3):
         add_visit(campaign, field_copy, k, capsys)
     assert main(["process", str(campaign)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert [ln.split()[:2] for ln in out[1:4]] == [[d[:10], "measured"] for d in DATES]  # one line per epoch computed
+    assert out[-1].startswith("3 epoch(s): 3 measured; baseline 2026-03-02") and len(out) == 5
     assert main(["displacements", str(campaign), "--format", "csv"]) == 0
-    rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out.split("baseline:")[-1].split("\n", 1)[1])))
-    assert {"epoch", "datetime", "reflector", "displacement_mm", "sigma_mm", "flags"} <= set(rows[0])
+    rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
+    assert {"epoch", "datetime", "reflector", "displacement_mm", "sigma_mm", "flags", "epoch_state"} <= set(rows[0])
+    assert {r["epoch_state"] for r in rows} <= {"processed", "warning"}
     assert len(rows) == 3 * 5
     truth = {k: json.loads((field_copy / f"v{k}" / "truth.json").read_text()) for k in range(3)}
     for r in rows:
@@ -54,8 +59,10 @@ def test_whole_flow_gives_true_displacements(campaign, field_copy, capsys):
         t0 = {x["id"]: x["vertical_displacement_m"] for x in truth[0]["targets"]}
         true_mm = (t[r["reflector"]] - t0[r["reflector"]]) * 1000
         assert abs(float(r["displacement_mm"]) - true_mm) < max(0.35, 4 * float(r["sigma_mm"] or 0)), r
-    # incremental: nothing to do the second time, identical numbers
+    # incremental: nothing to do the second time, identical numbers, one line to say so
     before = snapshot(campaign)
+    assert main(["process", str(campaign)]) == 0
+    assert capsys.readouterr().out == "nothing to do: 3 epoch(s): 3 up to date; baseline 2026-03-02\n"
     assert main(["process", str(campaign), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert all(e["action"] == "up-to-date" for e in out["epochs"]) and out["displacements_updated"] == []
@@ -94,6 +101,10 @@ def test_bad_inputs_leave_the_campaign_unchanged(campaign, field_copy, capsys, t
         (["add-epoch", str(campaign), "--date", "2026-04-01", "--coarse", str(tmp_path / "none.laz")], "no such file"),
         (["add-epoch", str(campaign), "--date", "yesterday", "--coarse", str(field_copy / "v1" / "coarse.laz")],
          "not ISO 8601"),
+        (["add-epoch", str(campaign), "--date", "2027-02-30", "--coarse", str(field_copy / "v1" / "coarse.laz")],
+         "'2027-02-30' is an impossible date"),
+        (["add-epoch", str(campaign), "--date", "2026-04-01", "--coarse", str(field_copy / "v1")],
+         "is a folder, not a file"),
         (["add-epoch", str(campaign), "--date", "2026-04-01", "--coarse", str(field_copy / "v0" / "coarse.laz")],
          "already in the campaign"),
         (["add-epoch", str(campaign), "--date", DATES[0], "--coarse", str(field_copy / "v1" / "coarse.laz")],
@@ -102,14 +113,17 @@ def test_bad_inputs_leave_the_campaign_unchanged(campaign, field_copy, capsys, t
         (["process", str(campaign), "--epoch", "nope"], "no epoch 'nope'"),
         (["reflector", str(campaign), "retire", "Q7", "--date", "2026-05-01"], "unknown reflector 'Q7'"),
         (["limit", str(campaign), "--rule", "banana"], "not understood"),
-        (["export", str(campaign), "--out", str(tmp_path / "x.doc")], "export writes"),
+        (["export", str(campaign), "--out", str(tmp_path / "x.doc")], "give a name ending in .xlsx or .csv"),
+        (["export", str(campaign), "--out", str(tmp_path / "nope" / "x.xlsx")], "does not exist"),
+        (["plan", str(campaign), "--epoch", DATES[0][:10], "--out", str(tmp_path / "nope" / "p.json")],
+         "does not exist"),
         (["process", str(tmp_path / "nowhere")], "no campaign here"),
     ]
     for argv, message in cases:
         code = main(argv)
         err = capsys.readouterr().err.strip()
         assert code == 1, argv
-        assert message in err and len(err.splitlines()) == 1, (argv, err)
+        assert message in err and len(error_lines(err)) == 1, (argv, err)
         assert snapshot(campaign) == before, argv
     bad_layout = tmp_path / "layout.csv"
     bad_layout.write_text("id,group,x,y\nR1,reference,0,0\n")
@@ -140,7 +154,8 @@ def test_changing_a_parameter_recomputes_exactly_what_it_affects(campaign, field
     assert main(["settings", str(campaign), "normal_mode", "epoch"]) == 0
     assert main(["process", str(campaign), "--json"]) == 0
     out = json.loads(capsys.readouterr().out.split("\n", 1)[1])
-    assert all(e["action"] == "up-to-date" for e in out["epochs"]) and len(out["displacements_updated"]) == 2
+    assert [e["action"] for e in out["epochs"]] == ["displacements", "displacements"]  # centroids not recomputed
+    assert len(out["displacements_updated"]) == 2
     # a measurement parameter: every epoch is re-measured
     assert main(["settings", str(campaign), "min_points", "800"]) == 0
     assert main(["process", str(campaign), "--json"]) == 0
@@ -148,3 +163,33 @@ def test_changing_a_parameter_recomputes_exactly_what_it_affects(campaign, field
     assert [e["action"] for e in out["epochs"]] == ["measured", "measured"]
     assert main(["settings", str(campaign), "min_points", "five"]) == 1
     assert "not a valid value" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_an_epoch_measured_by_check_is_measured_then_processed_never_up_to_date(campaign, field_copy, capsys):
+    for k in range(2):
+        add_visit(campaign, field_copy, k, capsys)
+    assert main(["process", str(campaign)]) == 0
+    label = add_visit(campaign, field_copy, 2, capsys)
+    assert main(["check", str(campaign), "--epoch", label]) in (0, 3)
+    capsys.readouterr()
+    assert main(["status", str(campaign), "--json"]) == 0
+    state = {e["epoch"]: e for e in json.loads(capsys.readouterr().out)["epochs"]}[label]
+    assert state["state"] == "measured" and state["stale"] == ""  # its centroids are kept, nothing stale
+    assert main(["process", str(campaign)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    mine = [ln for ln in lines if ln.startswith(label)]
+    assert len(mine) == 1 and mine[0].split()[1] == "processed" and "check" in mine[0]
+    assert lines[-1].startswith("3 epoch(s): 1 processed, 2 up to date")
+
+
+def test_status_lists_the_last_epochs_and_says_so(processed_copy, capsys, monkeypatch):
+    import app.cli.commands_campaign as cc
+
+    monkeypatch.setattr(cc, "STATUS_EPOCHS", 2)
+    assert main(["status", str(processed_copy)]) == 0
+    out = capsys.readouterr().out
+    assert "(last 2 of 3 epochs; --all for every epoch)" in out and "\n2026-03-02 " not in out
+    assert main(["status", str(processed_copy), "--all"]) == 0
+    out = capsys.readouterr().out
+    assert all(f"\n{d[:10]} " in out for d in DATES) and "--all for every epoch" not in out

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from app.cli.main import main
+from tests.app.cli.conftest import error_lines
 
 
 @pytest.fixture(scope="module")
@@ -55,7 +56,7 @@ def test_refusals_name_the_file(images, tmp_path, capsys):
     (bad / "main" / "frame_0003.png").write_bytes(b"\x89PNG\r\n\x1a\n broken")
     cases = [
         (lambda: _calibrate(d, tmp_path / "s.json", **{"--board": "20by12"}), "COLSxROWS"),
-        (lambda: _calibrate(d, tmp_path / "s.json", **{"--zhang": tmp_path / "none"}), "not a folder"),
+        (lambda: _calibrate(d, tmp_path / "s.json", **{"--zhang": tmp_path / "none"}), "none: no such folder"),
         (lambda: _calibrate(d, tmp_path / "s.json", **{"--main": bad / "main", "--sub": bad / "sub"}),
          "frame_0003.png: not a readable image"),
         (lambda: _calibrate(d, tmp_path / "s.json", **{"--pattern": d / "truth.csv"}), "x_mm,y_mm"),
@@ -64,7 +65,7 @@ def test_refusals_name_the_file(images, tmp_path, capsys):
         capsys.readouterr()
         assert run() == 1
         err = capsys.readouterr().err.strip()
-        assert message in err and len(err.splitlines()) == 1
+        assert message in err and len(error_lines(err)) == 1
         assert not (tmp_path / "s.json").exists()
     newer = tmp_path / "newer.json"
     newer.write_text(json.dumps({"format": "bridgesurvey-dualcam-setup", "version": 99}))

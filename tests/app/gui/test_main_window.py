@@ -136,7 +136,10 @@ def test_roi_move_resize_delete_add_and_save_then_process(window, processed_copy
     with Campaign.open(processed_copy, writable=False) as c:
         assert c.result("2026-03-09").stage == "measured"
         assert c.centroids("2026-03-09")["M3"].found and c.centroids("2026-03-09")["M5"].found
-    assert window.tree.item_for("epoch", "2026-03-09").text(1) == "processed"
+        from projects.results.state import epoch_state
+
+        state, flags = epoch_state(c, "2026-03-09")  # a hand-drawn window may leave a doubt: shown, not hidden
+    assert state in ("processed", "warning") and window.tree.item_for("epoch", "2026-03-09").text(1) == state, flags
 
 
 def test_fine_scan_view_shows_the_split_cluster_and_centroid(window, processed_copy, qtbot):
