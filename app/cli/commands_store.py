@@ -1,8 +1,6 @@
 """Store commands: verify a campaign end to end, and repair what a restore or damage left."""
 from __future__ import annotations
 
-from pathlib import Path
-
 from app.cli.args import add_dir, add_json
 from app.cli.output import dump_json
 from app.cli.progress import progress_bar
