@@ -28,7 +28,8 @@ from projects.store.campaign import Campaign, now_iso
 from registration.change import METHODS, ChangeResult, cloud_to_cloud, core_points_grid, m3c2
 from registration.icp import IcpResult, refine_icp, stable_mask
 from registration.ndt import refine_ndt
-from registration.profile import span_profile
+from projects.compare.span import SpanFrame, pivot, span_frame
+from registration.profile import SpanProfile, girder_lines, span_profile
 from registration.targets import TargetRegistration, register_targets
 from registration.transform import Transform
 
@@ -160,15 +161,16 @@ def compare_epochs(c: Campaign, from_label: str, to_label: str, *, method: str =
     stable = stable_mask(change.points, ref_base[np.isfinite(ref_base[:, 0])], exclude_above_m=_below_deck_m(meas_from))
     deck = _deck_mask(change.points, meas_from)
     report(progress, 0.93, "span profile")
-    prof = span_profile(xa, xb, meas_from, bin_m=bin_m)
+    prof, frame = _profile(c, base, (ea, eb), (xa, xb), bin_m=bin_m)
     # target displacements of the same two epochs, at their stations along the span
     rows = {(r["epoch"], r["reflector"]): r for r in displacement_table(c)}
     targets = []
     for rid, p in zip(meas, meas_from):
         a, b = rows.get((from_label, rid)), rows.get((to_label, rid))
         if a and b and a["displacement_mm"] is not None and b["displacement_mm"] is not None and np.isfinite(p[0]):
-            targets.append({"reflector": rid, "station_m": float(prof.station_of(p)[0]),
-                            "girder": int(prof.girder_of(p)[0]) + 1,
+            s_m, l_m, _ = frame.coords(p[None])[0]
+            targets.append({"reflector": rid, "station_m": float(s_m),
+                            "girder": int(prof.girder_of(np.array([l_m]))[0]) + 1,
                             "displacement_mm": b["displacement_mm"] - a["displacement_mm"],
                             "sigma_mm": float(np.hypot(a["sigma_mm"] or 0, b["sigma_mm"] or 0))})
     summary = {
@@ -178,13 +180,51 @@ def compare_epochs(c: Campaign, from_label: str, to_label: str, *, method: str =
         "registration_error_mm": reg_err * 1e3,
         "change": {"all": change.summary(), "stable_parts": change.summary(stable), "deck": change.summary(deck),
                    "parameters": change.parameters},
-        "span_profile": {"bin_m": prof.bin_m, "girder_offsets_m": list(prof.girder_offsets_m),
-                         "bins": prof.table()},
+        "span_profile": _profile_json(prof, frame),
         "targets": targets, "created": now_iso(),
     }
     summary["_arrays"] = {"change": change, "profile": prof}
     report(progress, 1.0, "compared")
     return summary
+
+
+def _profile(c: Campaign, base: str, epochs: tuple[EpochInFrame, EpochInFrame], clouds: tuple[np.ndarray, np.ndarray],
+             *, bin_m: float) -> tuple[SpanProfile, SpanFrame]:
+    """The span profile of two epochs in span coordinates tied to the layout, with their registration σ."""
+    from projects.processing.stages import layout_up, parameters
+
+    layout = c.layout()
+    ids = list(layout.ids)
+    base_xyz, _ = _centroid_arrays(c, base, ids)
+    frame = span_frame(layout, ids, base_xyz, layout_up(parameters(c)))
+    meas = layout.ids_in("measurement")
+    refs = layout.ids_in("reference")
+    from_xyz, _ = _centroid_arrays(c, epochs[0].label, meas)
+    slh_targets = frame.coords(epochs[0].transform.apply(from_xyz))
+    lay_slh = frame.from_layout(np.array([layout.xyz[layout.index(i)] for i in meas]))
+    lines = girder_lines(lay_slh[:, :2], slh_targets[:, 2])
+    sig = []
+    for e in epochs:
+        if e.registration is None:
+            sig.append(None)
+            continue
+        ref_xyz, _ = _centroid_arrays(c, base, refs)
+        used = np.array([r.used for r in e.registration.residuals])
+        sig.append(frame.registration_sigma(e.transform, pivot(ref_xyz, used)))
+    prof = span_profile(frame.coords(clouds[0]), frame.coords(clouds[1]), lines,
+                        stations_m=(frame.first_pier_m, frame.last_pier_m), bin_m=bin_m,
+                        registration=(sig[0], sig[1]))
+    return prof, frame
+
+
+def _profile_json(prof: SpanProfile, frame: SpanFrame) -> dict:
+    return {"bin_m": prof.bin_m, "frame": "layout: station along the layout's x from its first pier, lateral "
+                                          "offset, height along the layout's up",
+            "girder_offsets_m": list(prof.girder_offsets_m), "first_pier_station_m": frame.first_pier_m,
+            "last_pier_station_m": frame.last_pier_m, "selection": {
+                "half_width_m": prof.half_width_m, "band_m": prof.band_m, "max_tilt_deg": prof.max_tilt_deg,
+                "underside_extent_m": list(prof.underside_extent_m)},
+            "notes": list(prof.notes), "bins": prof.table()}
 
 
 def _registration_json(e: EpochInFrame) -> dict:
