@@ -26,17 +26,16 @@ def register(sub) -> None:
     p = sub.add_parser("convert", help="convert a scan file to another format (pose and intensity kept)",
                        description="Convert between the supported formats by suffix. The scanner pose and the "
                                    "raw intensity are kept (LAS/LAZ store intensity as 16-bit: other ranges "
-                                   "are rescaled). Files with several scans convert to E57, or one scan at a "
-                                   "time with --scan.")
+                                   "are rescaled); LAS/LAZ to LAS/LAZ copies every point record as it is. Files "
+                                   "with several scans convert to E57, or one scan at a time with --scan. LAS, "
+                                   "LAZ, E57, binary PLY and binary PCD inputs are read in chunks and written in "
+                                   "chunks to LAS, LAZ, PLY, PCD, XYZ and PTS, in memory bounded whatever the "
+                                   "file's size.")
     p.add_argument("input", type=Path)
     p.add_argument("output", type=Path, help="suffix: .las .laz .e57 .ply .pcd .ptx .pts .xyz .txt")
     p.add_argument("--scan", type=int, default=None, metavar="K", help="only scan K (0-based) of a multi-scan file")
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
     p.set_defaults(func=cmd_convert)
-
-
-#: Formats that cannot hold a scanner pose (others carry it in their header).
-NO_POSE = (".pts",)
 
 
 def _fmt_xyz(v) -> str:
@@ -85,8 +84,8 @@ def _print_scan(s) -> None:
 
 
 def cmd_convert(args) -> int:
-    from lidar.io import WRITE_SUFFIXES, read_scans, write_scan
-    from lidar.io.e57 import write_e57
+    from lidar.io import WRITE_SUFFIXES
+    from lidar.io.convert import convert_file
 
     suffix = args.output.suffix.lower()
     if suffix not in WRITE_SUFFIXES:
@@ -96,24 +95,14 @@ def cmd_convert(args) -> int:
         raise InputError(f"{args.output}: already exists; choose another name or add --force")
     if args.output.resolve() == args.input.resolve():
         raise InputError(f"{args.output}: is the input file; write the conversion to a new file")
-    scans = read_scans(args.input)
-    if args.scan is not None:
-        if not 0 <= args.scan < len(scans):
-            raise InputError(f"{args.input}: holds {len(scans)} scan(s); --scan must be 0-{len(scans) - 1}")
-        scans = [scans[args.scan]]
-    if len(scans) > 1 and suffix != ".e57":
-        raise InputError(f"{args.input}: holds {len(scans)} scans; convert to .e57 to keep them all, or pick one "
-                         "with --scan K")
-    if suffix == ".e57":
-        write_e57(scans, args.output)
-    else:
-        write_scan(scans[0], args.output)
-    n = sum(len(s) for s in scans)
-    if scans[0].pose is None:
+    done = convert_file(args.input, args.output, scan=args.scan)
+    if done.pose_kept is None:
         kept = "intensity kept (the input has no pose)"
-    elif suffix in NO_POSE:
+    elif not done.pose_kept:
         kept = f"intensity kept; the pose is not: {suffix[1:].upper()} has no place for it"
     else:
         kept = "pose and intensity kept"
-    print(f"{args.output}: {n:,} points from {args.input} ({kept})")
+    if done.lossless_copy:
+        kept = "every point record, dimension and VLR copied: " + kept
+    print(f"{args.output}: {done.points:,} points from {args.input} ({kept})")
     return 0
