@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import threading
 from dataclasses import dataclass
 from typing import Optional, Sequence
 
@@ -84,6 +85,23 @@ def _quiet_py4dgeo():
         for h in files:
             lg.addHandler(h)
         lg.setLevel(level)
+
+
+def prefetch_py4dgeo() -> threading.Thread:
+    """Start importing py4dgeo in a background thread (it takes about a second) while other work runs.
+
+    :func:`m3c2` imports it as usual: Python's import lock makes it wait for this import to finish, so
+    py4dgeo is imported once per process, and only by a job that runs M3C2.
+    """
+    def load() -> None:
+        try:
+            import py4dgeo  # noqa: F401
+        except Exception:  # pragma: no cover - m3c2() reports it
+            pass
+
+    thread = threading.Thread(target=load, name="import py4dgeo", daemon=True)
+    thread.start()
+    return thread
 
 
 def _check(name: str, a) -> np.ndarray:

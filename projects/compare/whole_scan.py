@@ -25,7 +25,7 @@ from common.files import write_atomic
 from projects.results.table import displacement_table
 from projects.processing.stages import baseline_epoch, read_files
 from projects.store.campaign import Campaign, now_iso
-from registration.change import METHODS, ChangeResult, cloud_to_cloud, core_points_grid, m3c2
+from registration.change import METHODS, ChangeResult, cloud_to_cloud, core_points_grid, m3c2, prefetch_py4dgeo
 from registration.icp import IcpResult, refine_icp, stable_mask
 from registration.ndt import refine_ndt
 from projects.compare.span import SpanFrame, pivot, span_frame
@@ -189,6 +189,8 @@ def compare_epochs(c: Campaign, from_label: str, to_label: str, *, method: str =
     base = baseline_epoch(c)
     if base is None:
         raise CampaignError("no measured epoch yet: process the campaign first ('bridgesurvey process')")
+    if method == "m3c2":
+        prefetch_py4dgeo()  # the import overlaps reading and registering
     report(progress, 0.0, f"reading {base}")
     base_xyz = read_files(c, c.files(base, "coarse")).xyz_socs  # once, for both epochs
     ea = bring_to_campaign_frame(c, from_label, base, refinement=refinement, base_xyz=base_xyz,
