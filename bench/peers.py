@@ -31,20 +31,33 @@ ENV = {**os.environ, "MPLBACKEND": "Agg", "PYTHONPATH": str(ROOT)}
 ROWS: list[tuple[str, str, str, str]] = []
 
 
+#: Runs a command and reports its wall time and peak memory. A small launcher process forks it, so the
+#: child's peak resident memory is its own (a child forked from this process would count our arrays too).
+_LAUNCHER = """
+import json, resource, subprocess, sys, time
+t0 = time.perf_counter()
+p = subprocess.run(sys.argv[1:], capture_output=True)
+dt = time.perf_counter() - t0
+sys.stderr.buffer.write(p.stderr)
+sys.stdout.buffer.write(p.stdout)
+print("@@" + json.dumps({"rc": p.returncode, "seconds": dt,
+                         "peak_mb": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0}))
+"""
+
+
 def run(cmd: list[str], *, repeat: int = 3, cwd: Path = OUT) -> dict:
     """Best wall time of ``cmd`` (fresh process each time) and its largest peak resident memory (MiB)."""
-    best, peak = None, 0.0
+    best, peak, out = None, 0.0, ""
     for _ in range(repeat):
-        t0 = time.perf_counter()
-        proc = subprocess.Popen(cmd, cwd=cwd, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-        _, status, usage = os.wait4(proc.pid, 0)
-        dt = time.perf_counter() - t0
-        out, err = proc.communicate()
-        if os.waitstatus_to_exitcode(status) != 0:
-            raise RuntimeError(f"{' '.join(cmd)} failed: {err.decode()[-1500:]}")
-        best = dt if best is None else min(best, dt)
-        peak = max(peak, usage.ru_maxrss / 1024.0)
-    return {"seconds": best, "peak_mb": peak, "stdout": out.decode()}
+        proc = subprocess.run([PY, "-c", _LAUNCHER, *cmd], cwd=cwd, env=ENV, capture_output=True, text=True)
+        lines = proc.stdout.splitlines()
+        r = json.loads(lines[-1][2:]) if lines and lines[-1].startswith("@@") else {"rc": -1}
+        if r["rc"] != 0:
+            raise RuntimeError(f"{' '.join(cmd)} failed: {proc.stderr[-1500:]}")
+        best = r["seconds"] if best is None else min(best, r["seconds"])
+        peak = max(peak, r["peak_mb"])
+        out = "\n".join(lines[:-1])
+    return {"seconds": best, "peak_mb": peak, "stdout": out}
 
 
 def script(code: str) -> list[str]:

@@ -91,7 +91,8 @@ def prefetch_py4dgeo() -> threading.Thread:
     """Start importing py4dgeo in a background thread (it takes about a second) while other work runs.
 
     :func:`m3c2` imports it as usual: Python's import lock makes it wait for this import to finish, so
-    py4dgeo is imported once per process, and only by a job that runs M3C2.
+    py4dgeo is imported once per process, and only by a job that runs M3C2. Import what the calling thread
+    needs meanwhile before starting it: some packages (Open3D) walk ``sys.modules`` while they set up.
     """
     def load() -> None:
         try:
@@ -203,10 +204,16 @@ def core_points_grid(xyz: np.ndarray, spacing_m: float = 0.25) -> np.ndarray:
     if not spacing_m > 0:
         raise InputError(f"core point spacing must be positive, got {spacing_m}")
     off = xyz.min(axis=0)
-    cell = np.floor((xyz - off) / spacing_m).astype(np.int64)
-    centre_dist = np.sum(((xyz - off) / spacing_m - cell - 0.5) ** 2, axis=1)
+    scaled_xyz = (xyz - off) / spacing_m
+    cell = np.floor(scaled_xyz).astype(np.int64)
+    scaled_xyz -= cell
+    scaled_xyz -= 0.5
+    centre_dist = np.einsum("ij,ij->i", scaled_xyz, scaled_xyz)
     key = (cell[:, 0] * 1_000_003 + cell[:, 1]) * 1_000_033 + cell[:, 2]
-    order = np.lexsort((centre_dist, key))
-    first = np.ones(len(order), bool)
-    first[1:] = key[order][1:] != key[order][:-1]
-    return xyz[order[first]]
+    _, inv = np.unique(key, return_inverse=True)  # one sort of the cells
+    inv = inv.reshape(-1)
+    best = np.full(int(inv.max()) + 1, np.inf)
+    np.minimum.at(best, inv, centre_dist)
+    cand = np.flatnonzero(centre_dist == best[inv])  # the point nearest each cube's centre (ties: the first)
+    _, first = np.unique(inv[cand], return_index=True)
+    return xyz[cand[first]][np.argsort(inv[cand[first]], kind="stable")]

@@ -193,20 +193,25 @@ def stable_mask(xyz: np.ndarray, anchors_xyz: np.ndarray, *, radius_m: float = 4
     -------
     (N,) bool array
     """
-    from scipy.spatial import cKDTree
-
     xyz = np.asarray(xyz, dtype=np.float64)
     up_v = np.asarray(up, dtype=np.float64)
     up_v = up_v / np.linalg.norm(up_v)
     anchors = np.asarray(anchors_xyz, dtype=np.float64).reshape(-1, 3)
     if len(anchors) == 0:
         raise InputError("stable areas need at least one anchor (a reference target)")
-
-    def horizontal(a):
-        return a - np.outer(a @ up_v, up_v)
-
-    d, _ = cKDTree(horizontal(anchors)).query(horizontal(xyz), distance_upper_bound=radius_m)
-    mask = np.isfinite(d)
+    # two horizontal axes: distances in that plane, anchor by anchor (a handful), no temporaries of (N, 3)
+    e1 = np.cross(up_v, [1.0, 0.0, 0.0] if abs(up_v[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(up_v, e1)
+    u, v = xyz @ e1, xyz @ e2
+    mask = np.zeros(len(xyz), bool)
+    r2 = radius_m * radius_m
+    for a in anchors:
+        du, dv = u - float(a @ e1), v - float(a @ e2)
+        du *= du
+        dv *= dv
+        du += dv
+        mask |= du <= r2
     if exclude_above_m is not None:
         mask &= (xyz @ up_v) < exclude_above_m
     return mask

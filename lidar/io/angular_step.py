@@ -65,12 +65,19 @@ class AngularSteps:
         return max(self.theta_deg or 0.0, self.phi_deg or 0.0)
 
 
-def angles_deg(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(theta, phi) in degrees (float64) of points in the scanner frame; phi in [0, 360)."""
-    xyz = np.asarray(xyz, dtype=np.float64)
-    horiz = np.hypot(xyz[:, 0], xyz[:, 1])
-    theta = np.degrees(np.arctan2(horiz, xyz[:, 2]))
-    phi = np.degrees(np.arctan2(xyz[:, 1], xyz[:, 0])) % 360.0
+def angles_deg(xyz: np.ndarray, dtype: type = np.float64) -> tuple[np.ndarray, np.ndarray]:
+    """(theta, phi) in degrees of points in the scanner frame; phi in [0, 360). ``dtype`` float32 is cheaper."""
+    x: np.ndarray = np.asarray(xyz[:, 0], dtype=dtype)
+    y: np.ndarray = np.asarray(xyz[:, 1], dtype=dtype)
+    z: np.ndarray = np.asarray(xyz[:, 2], dtype=dtype)
+    deg: np.ndarray = np.asarray(180.0 / np.pi, dtype=dtype)
+    turn: np.ndarray = np.asarray(360.0, dtype=dtype)
+    theta = np.arctan2(np.hypot(x, y), z)
+    theta *= deg
+    phi = np.arctan2(y, x)
+    phi *= deg
+    phi[phi < 0] += turn
+    phi[phi >= turn] -= turn
     return theta, phi
 
 
@@ -220,6 +227,10 @@ class PatchSampler:
         h ^= h >> np.uint64(29)
         h = (h * np.uint64(0xBF58476D1CE4E5B9)) & np.uint64((1 << 61) - 1)
         return (h >> np.uint64(8)).astype(np.float64) / float(1 << 53)
+
+    def wanted(self, theta_deg: np.ndarray, phi_deg: np.ndarray) -> np.ndarray:
+        """(N,) bool: which of these directions fall in cells the sampler keeps (float32 angles will do)."""
+        return self._ranks(np.asarray(theta_deg), np.asarray(phi_deg)) < self.limit
 
     def add(self, theta_deg: np.ndarray, phi_deg: np.ndarray) -> None:
         """Offer a chunk of directions (degrees)."""

@@ -117,8 +117,10 @@ class _Stats:
             self.i_lo, self.i_hi = min(self.i_lo, float(c.raw.min())), max(self.i_hi, float(c.raw.max()))
             if self.i_integral and c.raw.dtype.kind == "f":
                 self.i_integral = bool(np.all(c.raw == np.round(c.raw)))
-        if rng.min() < FAR_FROM_SCANNER_M:
-            self.patches.add(*angles_deg(xyz))
+        if rng.min() < FAR_FROM_SCANNER_M:  # cells from cheap float32 angles, the kept points' in float64
+            keep = self.patches.wanted(*angles_deg(xyz, np.float32))
+            if keep.any():
+                self.patches.add(*angles_deg(xyz[keep]))
         h = _point_hash(xyz)
         self.dup_hashes.append(h[h % np.uint64(self.dup_every) == 0])
 

@@ -171,6 +171,19 @@ def _deck_mask(xyz: np.ndarray, targets: np.ndarray, radius_m: float = 1.0, band
     return out
 
 
+def _prefetch(refinement: str) -> None:
+    """Import py4dgeo in the background while the epochs are read and registered.
+
+    What this thread imports meanwhile is imported first: Open3D's package set-up walks ``sys.modules`` and
+    fails if another thread adds to it at that moment.
+    """
+    import scipy.spatial  # noqa: F401  (the stable-part masks)
+
+    if refinement == "icp":
+        import open3d  # noqa: F401
+    prefetch_py4dgeo()
+
+
 def compare_epochs(c: Campaign, from_label: str, to_label: str, *, method: str = "m3c2", refinement: str = "icp",
                    bin_m: float = 2.5, options: ChangeOptions = ChangeOptions(),
                    progress: Optional[ProgressCallback] = None) -> dict:
@@ -190,7 +203,7 @@ def compare_epochs(c: Campaign, from_label: str, to_label: str, *, method: str =
     if base is None:
         raise CampaignError("no measured epoch yet: process the campaign first ('bridgesurvey process')")
     if method == "m3c2":
-        prefetch_py4dgeo()  # the import overlaps reading and registering
+        _prefetch(refinement)
     report(progress, 0.0, f"reading {base}")
     base_xyz = read_files(c, c.files(base, "coarse")).xyz_socs  # once, for both epochs
     ea = bring_to_campaign_frame(c, from_label, base, refinement=refinement, base_xyz=base_xyz,
