@@ -219,14 +219,24 @@ class PatchSampler:
         self._phi: list[np.ndarray] = []
         self._rank: list[np.ndarray] = []
         self._kept = 0
+        self._table: Optional[np.ndarray] = None
 
     def _ranks(self, theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
-        row = np.floor(theta / self.cell_deg).astype(np.uint64)
-        col = np.floor(phi / self.cell_deg).astype(np.uint64)
-        h = (row * np.uint64(0x9E3779B97F4A7C15) + col * np.uint64(0xC2B2AE3D27D4EB4F)) & np.uint64((1 << 61) - 1)
-        h ^= h >> np.uint64(29)
-        h = (h * np.uint64(0xBF58476D1CE4E5B9)) & np.uint64((1 << 61) - 1)
-        return (h >> np.uint64(8)).astype(np.float64) / float(1 << 53)
+        """Each direction's cell rank, looked up in a table of every cell's rank (a few thousand cells)."""
+        rows, cols = int(np.ceil(180.0 / self.cell_deg)) + 1, int(np.ceil(360.0 / self.cell_deg)) + 1
+        if self._table is None:
+            r = np.repeat(np.arange(rows, dtype=np.uint64), cols)
+            c = np.tile(np.arange(cols, dtype=np.uint64), rows)
+            h = (r * np.uint64(0x9E3779B97F4A7C15) + c * np.uint64(0xC2B2AE3D27D4EB4F)) & np.uint64((1 << 61) - 1)
+            h ^= h >> np.uint64(29)
+            h = (h * np.uint64(0xBF58476D1CE4E5B9)) & np.uint64((1 << 61) - 1)
+            self._table = (h >> np.uint64(8)).astype(np.float64) / float(1 << 53)
+        inv = 1.0 / self.cell_deg
+        row = np.clip((theta * inv).astype(np.int32), 0, rows - 1)
+        col = np.clip((phi * inv).astype(np.int32), 0, cols - 1)
+        row *= cols
+        row += col
+        return self._table[row]
 
     def wanted(self, theta_deg: np.ndarray, phi_deg: np.ndarray) -> np.ndarray:
         """(N,) bool: which of these directions fall in cells the sampler keeps (float32 angles will do)."""
