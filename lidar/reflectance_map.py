@@ -416,8 +416,18 @@ class _LasPoints:
         return out[0], out[1], out[2]
 
     def strided(self, stride: int) -> tuple[np.ndarray, np.ndarray]:
-        rec = np.memmap(self.path, dtype=self.dtype, mode="r", offset=self.first, shape=(self.n,))[::stride]
-        t, p, _ = _angles_of(*self._xyz32(np.ascontiguousarray(rec)))
+        """Every ``stride``-th point's angles: records read in chunks into one reused buffer (memory stays small)."""
+        step = max(1, CHUNK // stride) * stride
+        size = self.dtype.itemsize
+        buf = np.empty(step * size, np.uint8)
+        parts = []
+        for start in range(0, self.n, step):
+            m = min(step, self.n - start)
+            view = buf[: m * size]
+            if os.preadv(self.fd, [view], self.first + start * size) != view.size:  # type: ignore[list-item]
+                raise ScanFormatError(self.path, "truncated: the point records end early")
+            parts.append(view.view(self.dtype)[::stride].copy())
+        t, p, _ = _angles_of(*self._xyz32(np.concatenate(parts)))
         return t, p
 
     def chunk(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
