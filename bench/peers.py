@@ -5,7 +5,7 @@ Peers: py4dgeo and Open3D (in the project's environment), laspy, and CloudCompar
 (simulated once into ``bench/out/peers``, see ``_peers_data.py``): the tests' three visits of the 40 m bridge
 (coarse scans at 0.06 degrees, 1.2-1.3 M points, 0 / -4 / -7 mm at midspan), processed as a campaign, and a
 whole-bridge coarse scan of about 19 M points as LAS. Every figure is the best of three fresh processes; every
-ratio is against a peer measured in the same run. Usage: ``./run bench peers``.
+ratio is against a peer measured in the same run. Usage: ``./run bench peers [epochs | files]``.
 """
 from __future__ import annotations
 
@@ -342,8 +342,13 @@ theta = np.degrees(np.arctan2(np.hypot(x, y), z)); phi = np.degrees(np.arctan2(y
         f"{ratio(plan['seconds'], bare['seconds'])} (in-process {ratio(inproc['seconds'], bare_in['seconds'])})")
 
 
-def main() -> None:
+def main(only: tuple[str, ...] = ()) -> None:
+    """Every row, or only the rows of the groups named (``epochs``, ``files``)."""
     OUT.mkdir(parents=True, exist_ok=True)
+    if only == ("files",):
+        file_jobs()
+        _table()
+        return
     camp = campaign()
     npz = arrays(camp)
     print(f"epochs: {np.load(npz)['xa'].shape[0]:,} and {np.load(npz)['xb'].shape[0]:,} points after cropping",
@@ -352,11 +357,16 @@ def main() -> None:
     registration_row(camp)
     compare_job(camp, npz)
     c2c_step(npz)
-    file_jobs()
+    if only != ("epochs",):
+        file_jobs()
+    _table()
+
+
+def _table() -> None:
     print("\n| job | BridgeSurvey | peer | ratio / verdict |\n|---|---|---|---|")
     for r in ROWS:
         print("| " + " | ".join(r) + " |")
 
 
 if __name__ == "__main__":
-    main()
+    main(tuple(sys.argv[1:]))

@@ -13,7 +13,7 @@ import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
+from typing import Optional, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -122,12 +122,23 @@ def estimate_step_deg(theta_deg: np.ndarray, phi_deg: np.ndarray, *, n_total: Op
     return float(np.round(step / mag, 1) * mag)
 
 
+class PointSource(Protocol):
+    """What :func:`binned_map` reads points from (held in memory, or a file's records)."""
+
+    n: int
+    limits: Optional[tuple[float, float]]
+
+    def strided(self, stride: int) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def chunk(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]: ...
+
+
 class _ArrayPoints:
     """Points held in memory (float64 xyz, normalised intensity), handed out in float32 chunks."""
 
     def __init__(self, xyz: np.ndarray, intensity: np.ndarray):
-        self.xyz, self.intensity, self.n = xyz, intensity, xyz.shape[0]
-        self.limits = (0.0, 1.0)
+        self.xyz, self.intensity, self.n = xyz, intensity, int(xyz.shape[0])
+        self.limits: Optional[tuple[float, float]] = (0.0, 1.0)
 
     def strided(self, stride: int) -> tuple[np.ndarray, np.ndarray]:
         t, p, _ = _angles32(self.xyz[::stride])
@@ -178,7 +189,7 @@ def _check_step(step_deg: Optional[float]) -> None:
         raise InputError(f"reflectance map step must be in (0, 10] degrees, got {step_deg}")
 
 
-def binned_map(points, *, step_deg: Optional[float] = None,
+def binned_map(points: PointSource, *, step_deg: Optional[float] = None,
                progress: Optional[ProgressCallback] = None) -> ReflectanceMap:
     """The reflectance map of a point source (see :func:`reflectance_map`, :func:`reflectance_map_from_file`).
 
@@ -387,7 +398,7 @@ class _LasPoints:
         self.path, self.n, self.first = path, facts.point_count, facts.offset_to_points
         self.scales = np.asarray(facts.scales, np.float64)
         self.offsets = np.asarray(facts.offsets, np.float64)
-        self.limits = None
+        self.limits: Optional[tuple[float, float]] = None
         self.fd = os.open(path, os.O_RDONLY)
         self.local = threading.local()
         if facts.point_count == 0:
