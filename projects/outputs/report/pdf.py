@@ -450,8 +450,9 @@ def comparison_section(content: ReportContent, ss) -> list:
     out = [PageBreak(), Paragraph("Epoch comparison and span profile", ss["Heading1"]),
            Paragraph("The conventional whole-scan approach, for context: both epochs registered into the campaign "
                      "frame (reference targets as tie points, then ICP on the piers and the ground around them), "
-                     "their change computed point by point, and the mean height of the deck underside compared per "
-                     "bin along the girder lines. Compare its spread with the targets' uncertainty.", ss["Small"])]
+                     "their change computed point by point, and the height of the deck underside (only its points, a "
+                     "plane fitted per 2.5 m bin) compared along the girder lines. Each RMS below says what it is "
+                     "computed on. Compare the spread with the targets' uncertainty.", ss["Small"])]
     for s in content.extras["comparisons"]:
         out.append(Paragraph(f"{_esc(s['from'])} → {_esc(s['to'])} ({s['method'].upper()})", ss["Heading2"]))
         lines = [line + "".join(f" — warning: {w}" for w in s["registration"][lab]["targets"]["warnings"])
