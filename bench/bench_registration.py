@@ -57,7 +57,7 @@ core = core_points_grid(tgt, 0.25)
 
 OURS_M3C2 = """
 from registration.change import m3c2
-res = m3c2(tgt, src, core, normal_radius_m=0.5, cylinder_radius_m=0.25, max_distance_m=0.5)
+res = m3c2(tgt, src, core, normal_radii=(0.5,), cyl_radius=0.25, max_distance=0.5)
 """
 
 PLAIN_M3C2 = """

@@ -8,19 +8,23 @@ last columns are neighbours.
 """
 from __future__ import annotations
 
+import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import Optional
+from pathlib import Path
+from typing import Optional, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from lidar.angles import direction_from_angles, wrap_phi
 from common.validation import require_points
-from common.errors import InputError
+from common.errors import InputError, ScanFormatError
 from common.progress import ProgressCallback, report
 
-CHUNK = 1_000_000
+#: Points per chunk: small enough that a chunk's float32 temporaries stay in the caches.
+CHUNK = 262_144
 #: The automatic cell size keeps maps below this many cells: a few cells across a target are enough
 #: to find it, and detection time and memory grow with the cell count.
 MAX_AUTO_CELLS = 4_000_000
@@ -84,14 +88,16 @@ class ReflectanceMap:
 
 
 def _angles32(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    x = xyz[:, 0].astype(np.float32)
-    y = xyz[:, 1].astype(np.float32)
-    z = xyz[:, 2].astype(np.float32)
+    return _angles_of(xyz[:, 0].astype(np.float32), xyz[:, 1].astype(np.float32), xyz[:, 2].astype(np.float32))
+
+
+def _angles_of(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(theta, phi in [0, 360), range) in float32 of float32 coordinates; ``x`` and ``y`` are overwritten."""
     horiz = np.hypot(x, y)
     rng = np.hypot(horiz, z)
-    theta = np.arctan2(horiz, z)
+    theta = np.arctan2(horiz, z, out=horiz)
     theta *= np.float32(180.0 / np.pi)
-    phi = np.arctan2(y, x)
+    phi = np.arctan2(y, x, out=x)
     phi *= np.float32(180.0 / np.pi)
     phi[phi < 0] += np.float32(360.0)
     return theta, phi, rng
@@ -116,6 +122,33 @@ def estimate_step_deg(theta_deg: np.ndarray, phi_deg: np.ndarray, *, n_total: Op
     return float(np.round(step / mag, 1) * mag)
 
 
+class PointSource(Protocol):
+    """What :func:`binned_map` reads points from (held in memory, or a file's records)."""
+
+    n: int
+    limits: Optional[tuple[float, float]]
+
+    def strided(self, stride: int) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def chunk(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]: ...
+
+
+class _ArrayPoints:
+    """Points held in memory (float64 xyz, normalised intensity), handed out in float32 chunks."""
+
+    def __init__(self, xyz: np.ndarray, intensity: np.ndarray):
+        self.xyz, self.intensity, self.n = xyz, intensity, int(xyz.shape[0])
+        self.limits: Optional[tuple[float, float]] = (0.0, 1.0)
+
+    def strided(self, stride: int) -> tuple[np.ndarray, np.ndarray]:
+        t, p, _ = _angles32(self.xyz[::stride])
+        return t, p
+
+    def chunk(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        t, p, r = _angles32(self.xyz[start:stop])
+        return t, p, r, np.asarray(self.intensity[start:stop], dtype=np.float32)
+
+
 def reflectance_map(xyz_socs: np.ndarray, intensity: np.ndarray, *, step_deg: Optional[float] = None,
                     progress: Optional[ProgressCallback] = None) -> ReflectanceMap:
     """Bin a scan into a reflectance map.
@@ -138,94 +171,138 @@ def reflectance_map(xyz_socs: np.ndarray, intensity: np.ndarray, *, step_deg: Op
 
     Notes
     -----
-    Two passes over the points in chunks, recomputing the (cheap, float32)
-    angles rather than keeping them: the first finds the grid (zenith range,
-    azimuth origin, step), the second accumulates. Cells are indexed column
-    by column, so a chunk of a line scanner's points (a few vertical lines)
-    touches a compact range of cells. Extra memory is 16 bytes per cell plus
-    one chunk.
+    One pass over the points in chunks on two threads, angles and binning fused: a strided survey of
+    about two million points (every point of smaller scans) gives the step and the azimuth origin, then each
+    chunk's (cheap, float32) angles are binned at once on absolute zenith rows, so the zenith range needs no
+    pass of its own. Cells are indexed column by column, so a chunk of a line scanner's points (a few
+    vertical lines) touches a compact range of cells. Extra memory is 16 bytes per cell plus two chunks.
     """
     xyz_socs = require_points(xyz_socs, "reflectance map", finite=False, dtype=None)
     intensity = np.asarray(intensity)
     if intensity.shape != (xyz_socs.shape[0],):
         raise InputError("reflectance map: intensity must have one value per point")
+    return binned_map(_ArrayPoints(xyz_socs, intensity), step_deg=step_deg, progress=progress)
+
+
+def _check_step(step_deg: Optional[float]) -> None:
     if step_deg is not None and not (np.isfinite(step_deg) and 0 < step_deg <= 10):
         raise InputError(f"reflectance map step must be in (0, 10] degrees, got {step_deg}")
-    n = xyz_socs.shape[0]
-    starts = list(range(0, n, CHUNK))
+
+
+def binned_map(points: PointSource, *, step_deg: Optional[float] = None,
+               progress: Optional[ProgressCallback] = None) -> ReflectanceMap:
+    """The reflectance map of a point source (see :func:`reflectance_map`, :func:`reflectance_map_from_file`).
+
+    ``points`` has ``n``, ``limits`` (the raw intensity range mapped onto [0, 1]; None: found while binning),
+    ``strided(stride) -> (theta, phi)`` and ``chunk(start, stop) -> (theta, phi, range, intensity)`` in float32
+    degrees (phi in [0, 360)).
+    """
+    _check_step(step_deg)
+    n = points.n
     stride = max(1, n // 2_000_000)
-
-    def survey(start: int):
-        t, p, _ = _angles32(xyz_socs[start:start + CHUNK])
-        hist = np.bincount(np.clip((p * 10).astype(np.int32), 0, 3599), minlength=3600)
-        return float(t.min()), float(t.max()), hist, t[::stride], p[::stride]
-
-    with ThreadPoolExecutor(max_workers=2) as pool:
-        parts = list(pool.map(survey, starts))
-    report(progress, 0.25, "angles")
-    t_lo = min(x[0] for x in parts)
-    t_hi = max(x[1] for x in parts)
-    hist = np.sum([x[2] for x in parts], axis=0)
+    t_s, p_s = points.strided(stride)
+    hist = np.bincount(np.clip((p_s * 10).astype(np.int32), 0, 3599), minlength=3600)
+    report(progress, 0.1, "angles")
     if step_deg is None:
-        t_s, p_s = np.concatenate([x[3] for x in parts]), np.concatenate([x[4] for x in parts])
         step_deg = 1.2 * estimate_step_deg(t_s, p_s, n_total=n)
         floor = float(np.sqrt(occupied_area_deg2(t_s, p_s) / MAX_AUTO_CELLS))
         if floor > step_deg:
             step_deg = float(np.ceil(floor * 1e4) / 1e4)
-    del parts
     phi0, full = _azimuth_origin_from_hist(hist)
-    theta0 = float(np.floor(t_lo / step_deg) * step_deg)
-    height = int(np.floor((t_hi - theta0) / step_deg)) + 1
-    width = int(np.ceil(360.0 / step_deg)) if full else int(np.ceil(_azimuth_span(hist, phi0) / step_deg)) + 1
+    inv = np.float32(1.0 / step_deg)
+    # rows are absolute (floor(theta / step)); the survey's range plus a margin holds every point
+    margin = int(np.ceil(2.0 / step_deg)) + 2
+    row_lo = max(0, int(np.floor(float(t_s.min()) / step_deg)) - margin)
+    row_hi = int(np.floor(float(t_s.max()) / step_deg)) + margin
+    height = row_hi - row_lo + 1
+    width = int(np.ceil(360.0 / step_deg)) if full else \
+        min(int(np.ceil(_azimuth_span(hist, phi0) / step_deg)) + 1 + margin, int(np.ceil(360.0 / step_deg)))
     if height * width > 80_000_000:
         raise InputError(f"reflectance map of {height}x{width} cells is too large; use a coarser step than "
                          f"{step_deg:.4f} deg")
-    cells = height * width
-    count = np.zeros(cells, np.int32)
-    sum_i = np.zeros(cells, np.float32)
-    sum_r = np.zeros(cells, np.float32)
-    max_i = np.full(cells, -1.0, np.float32)
-    inv = np.float32(1.0 / step_deg)
+    del t_s, p_s
+    acc = _Accumulator(height * width)
+    starts = list(range(0, n, CHUNK))
 
-    def cell_index(start: int):
-        t, p, r = _angles32(xyz_socs[start:start + CHUNK])
+    lock = threading.Lock()
+
+    def bin_chunk(start: int) -> int:
+        t, p, r, inten = points.chunk(start, min(start + CHUNK, n))
         p -= np.float32(phi0)
         p[p < 0] += np.float32(360.0)
         p[p >= 360.0] -= np.float32(360.0)
-        row = ((t - np.float32(theta0)) * inv).astype(np.int64)
-        col = (p * inv).astype(np.int64)
+        t *= inv
+        row = t.astype(np.int32)
+        row -= row_lo
+        p *= inv
+        col = p.astype(np.int32)
         np.clip(row, 0, height - 1, out=row)
         np.clip(col, 0, width - 1, out=col)
-        idx = col * height + row  # column-major: a few scan lines are a compact index range
-        lo = int(idx.min())
-        idx -= lo
-        return lo, idx, r
+        idx = col.astype(np.int64)
+        idx *= height
+        idx += row  # column-major: a few scan lines are a compact index range
+        with lock:  # one chunk's temporaries per thread: memory stays bounded however fast the reads
+            acc.add(idx, r, inten)
+        return min(start + CHUNK, n)
 
     with ThreadPoolExecutor(max_workers=2) as pool:
-        for k, (lo, idx, r) in enumerate(pool.map(cell_index, starts)):
-            start = starts[k]
-            inten = intensity[start:start + CHUNK]
-            span = int(idx.max()) + 1
-            sl = slice(lo, lo + span)
-            count[sl] += np.bincount(idx, minlength=span).astype(np.int32)
-            sum_i[sl] += np.bincount(idx, weights=inten, minlength=span).astype(np.float32)
-            sum_r[sl] += np.bincount(idx, weights=r, minlength=span).astype(np.float32)
-            np.maximum.at(max_i[sl], idx, inten.astype(np.float32, copy=False))
-            report(progress, 0.25 + 0.75 * min(n, start + CHUNK) / n, "binning")
-    empty = count == 0
-    with np.errstate(invalid="ignore", divide="ignore"):
-        sum_i /= count  # in place: the sums become means
-        sum_r /= count
-    max_i[empty] = np.nan
+        for done in pool.map(bin_chunk, starts):
+            report(progress, 0.1 + 0.9 * done / n, "binning")
+    return acc.finish(points.limits, height, width, row_lo, phi0, float(step_deg), full, n)
 
-    def grid(a):  # column-major storage -> (rows=theta, cols=phi) view
-        return a.reshape(width, height).T
 
-    return ReflectanceMap(
-        theta0_deg=theta0, phi0_deg=float(phi0), step_deg=float(step_deg),
-        max_intensity=grid(max_i), mean_intensity=grid(sum_i), range_m=grid(sum_r), count=grid(count),
-        full_circle=full, n_points=n,
-    )
+class _Accumulator:
+    """Per-cell count, intensity sum and maximum, range sum over chunks of cell indices."""
+
+    def __init__(self, cells: int):
+        self.count = np.zeros(cells, np.int32)
+        self.sum_i = np.zeros(cells, np.float32)
+        self.sum_r = np.zeros(cells, np.float32)
+        self.max_i = np.full(cells, -np.inf, np.float32)
+        self.i_lo, self.i_hi = np.inf, -np.inf
+
+    def add(self, idx: np.ndarray, r: np.ndarray, inten: np.ndarray) -> None:
+        if idx.size == 0:
+            return
+        lo = int(idx.min())
+        idx -= lo
+        span = int(idx.max()) + 1
+        sl = slice(lo, lo + span)
+        self.count[sl] += np.bincount(idx, minlength=span).astype(np.int32)
+        self.sum_i[sl] += np.bincount(idx, weights=inten, minlength=span).astype(np.float32)
+        self.sum_r[sl] += np.bincount(idx, weights=r, minlength=span).astype(np.float32)
+        np.maximum.at(self.max_i[sl], idx, inten)
+        self.i_lo, self.i_hi = min(self.i_lo, float(inten.min())), max(self.i_hi, float(inten.max()))
+
+    def finish(self, limits, height, width, row_lo, phi0, step, full, n) -> ReflectanceMap:
+        lo, hi = limits if limits is not None else (self.i_lo, self.i_hi)
+        scale = np.float32(1.0 / (hi - lo)) if hi > lo else np.float32(0.0)
+        count, sum_i, sum_r, max_i = self.count, self.sum_i, self.sum_r, self.max_i
+        empty = count == 0
+        with np.errstate(invalid="ignore", divide="ignore"):
+            sum_i /= count  # in place: the sums become means
+            sum_r /= count
+        if limits != (0.0, 1.0):  # raw values binned: normalise the cells (an affine map commutes with means)
+            for a in (sum_i, max_i):
+                a -= np.float32(lo)
+                a *= scale
+                np.clip(a, 0.0, 1.0, out=a)
+        max_i[empty] = np.nan
+
+        def grid(a):  # column-major storage -> (rows=theta, cols=phi) view
+            return a.reshape(width, height).T
+
+        # trim the survey's margins: empty rows above and below, empty columns on the right
+        rows = np.flatnonzero(grid(count).any(axis=1))
+        cols = np.flatnonzero(grid(count).any(axis=0))
+        r0, r1 = (int(rows[0]), int(rows[-1]) + 1) if rows.size else (0, height)
+        c1 = width if full or not cols.size else int(cols[-1]) + 1
+        cut = (slice(r0, r1), slice(0, c1))
+        return ReflectanceMap(
+            theta0_deg=float((row_lo + r0) * step), phi0_deg=float(phi0), step_deg=float(step),
+            max_intensity=grid(max_i)[cut], mean_intensity=grid(sum_i)[cut], range_m=grid(sum_r)[cut],
+            count=grid(count)[cut], full_circle=full, n_points=n,
+        )
 
 
 def _azimuth_origin_from_hist(hist: np.ndarray) -> tuple[float, bool]:
@@ -300,3 +377,117 @@ def reduce_map(rmap: ReflectanceMap, *, max_cells: int = 1_000_000) -> Reflectan
                           max_intensity=mx.astype(np.float32), mean_intensity=w_mean.astype(np.float32),
                           range_m=w_range.astype(np.float32), count=count.astype(np.int32),
                           full_circle=rmap.full_circle, n_points=rmap.n_points)
+
+
+class _LasPoints:
+    """An uncompressed LAS file's point records, read by ``os.preadv`` into reused buffers, in float32.
+
+    Only X, Y, Z and the intensity of each record are touched: the scan is never held as float64 arrays.
+    The raw intensity is binned and the map normalised over the file's own range afterwards, exactly as
+    :func:`lidar.io.read_scan` normalises a LAS file's intensity.
+    """
+
+    def __init__(self, path: Path):
+        import laspy
+
+        from lidar.io.las_header import check_las_header
+
+        facts = check_las_header(path)
+        with laspy.open(path) as reader:
+            self.dtype = reader.header.point_format.dtype()
+        self.path, self.n, self.first = path, facts.point_count, facts.offset_to_points
+        self.scales = np.asarray(facts.scales, np.float64)
+        self.offsets = np.asarray(facts.offsets, np.float64)
+        self.limits: Optional[tuple[float, float]] = None
+        self.fd = os.open(path, os.O_RDONLY)
+        self.local = threading.local()
+        if facts.point_count == 0:
+            raise ScanFormatError(path, "the LAS header declares 0 points; nothing to read")
+
+    def close(self) -> None:
+        os.close(self.fd)
+
+    def _records(self, start: int, stop: int) -> np.ndarray:
+        size = self.dtype.itemsize
+        buf = getattr(self.local, "buf", None)
+        if buf is None or buf.size < (stop - start) * size:
+            buf = self.local.buf = np.empty(CHUNK * size, np.uint8)
+        view = buf[: (stop - start) * size]
+        if os.preadv(self.fd, [view], self.first + start * size) != view.size:  # type: ignore[list-item]
+            raise ScanFormatError(self.path, "truncated: the point records end early")
+        return view.view(self.dtype)
+
+    def _xyz32(self, rec: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        out = []
+        for k, name in enumerate(("X", "Y", "Z")):  # scaled in float64 as the reader does, then rounded once
+            v = rec[name].astype(np.float64)
+            v *= self.scales[k]
+            v += self.offsets[k]
+            out.append(v.astype(np.float32))
+        return out[0], out[1], out[2]
+
+    def strided(self, stride: int) -> tuple[np.ndarray, np.ndarray]:
+        """Every ``stride``-th point's angles: records read in chunks into one reused buffer (memory stays small)."""
+        step = max(1, CHUNK // stride) * stride
+        size = self.dtype.itemsize
+        buf = np.empty(step * size, np.uint8)
+        parts = []
+        for start in range(0, self.n, step):
+            m = min(step, self.n - start)
+            view = buf[: m * size]
+            if os.preadv(self.fd, [view], self.first + start * size) != view.size:  # type: ignore[list-item]
+                raise ScanFormatError(self.path, "truncated: the point records end early")
+            parts.append(view.view(self.dtype)[::stride].copy())
+        t, p, _ = _angles_of(*self._xyz32(np.concatenate(parts)))
+        return t, p
+
+    def chunk(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        rec = self._records(start, stop)
+        t, p, r = _angles_of(*self._xyz32(rec))
+        return t, p, r, rec["intensity"].astype(np.float32)
+
+
+def reflectance_map_from_file(path: str | os.PathLike, *, step_deg: Optional[float] = None,
+                              progress: Optional[ProgressCallback] = None) -> ReflectanceMap:
+    """The reflectance map of a scan file, without holding the scan in memory where the format allows it.
+
+    Uncompressed LAS is read straight from its point records in parallel chunks, its angles computed and
+    binned in the same pass (:func:`binned_map`): the map is the one :func:`reflectance_map` makes of the
+    scan :func:`lidar.io.read_scan` reads. Other formats are read whole first.
+
+    Parameters
+    ----------
+    path : path-like
+        A single-scan file.
+    step_deg : float, optional, keyword-only
+        Cell size (default: from the scan, see :func:`reflectance_map`).
+    progress : callable, optional
+
+    Returns
+    -------
+    ReflectanceMap
+
+    Raises
+    ------
+    ScanFormatError
+        The file cannot be read.
+    InputError
+        The scan has no intensity.
+    """
+    from lidar.io import read_scan, sniff_format
+
+    p = Path(path)
+    if sniff_format(p) == "las":
+        from lidar.io.las_header import check_las_header
+
+        if not check_las_header(p).compressed:
+            points = _LasPoints(p)
+            try:
+                return binned_map(points, step_deg=step_deg, progress=progress)
+            finally:
+                points.close()
+    scan = read_scan(p, progress=progress)
+    if scan.intensity is None:
+        raise InputError(f"{p}: the scan has no intensity values; reflector detection needs them "
+                         "(export the scan with intensity/reflectance)")
+    return reflectance_map(scan.xyz_socs, scan.intensity, step_deg=step_deg, progress=progress)

@@ -31,7 +31,11 @@ class IcpResult:
     fitness : float
         Share of the source points (finest level) with a correspondence.
     rms_m : float
-        RMS point-to-plane distance of the correspondences at the finest level, metres.
+        Open3D's inlier RMSE at the finest level: the RMS *point-to-point* distance between corresponding
+        downsampled points, metres (of the order of the voxel size, not a registration error).
+    plane_rms_m : float
+        RMS point-to-plane distance of the same correspondences after the fit, metres (the stable parts'
+        surface noise plus what the fit leaves).
     iterations : tuple of int
         Iterations run at each level (coarse to fine).
     voxels_m : tuple of float
@@ -51,6 +55,7 @@ class IcpResult:
     n_source: int
     n_target: int
     offset: np.ndarray
+    plane_rms_m: float = float("nan")
 
 
 @contextlib.contextmanager
@@ -136,9 +141,11 @@ def refine_icp(source_xyz: np.ndarray, target_xyz: np.ndarray, initial: Transfor
         iterations.append(len(_ITER.findall(out["text"])))
         current = np.asarray(last.transformation)
         n_src, n_tgt = len(s.points), len(t.points)
+        finest = (s, t, 2.5 * v)
     if last is None or last.fitness < 0.2:
         raise RegistrationError(f"ICP found correspondences for only {0 if last is None else last.fitness:.0%} of the "
                                 "stable points; the initial registration is too far off or the stable areas differ")
+    plane_rms = _plane_rms(*finest, current)
     corr_reduced = Transform.from_matrix(current)
     # correction in the target frame: x -> off + C (x - off)
     correction = shift.then(corr_reduced).then(shift.inverse())
@@ -149,7 +156,23 @@ def refine_icp(source_xyz: np.ndarray, target_xyz: np.ndarray, initial: Transfor
     return IcpResult(result, Transform(correction.rotation, correction.translation, 1.0, initial.target_frame,
                                        initial.target_frame, method="icp"),
                      float(last.fitness), float(last.inlier_rmse), tuple(iterations), tuple(float(v) for v in voxels_m),
-                     n_src, n_tgt, off)
+                     n_src, n_tgt, off, plane_rms)
+
+
+def _plane_rms(source, target, max_distance_m: float, transform: np.ndarray) -> float:
+    """RMS point-to-plane distance from the moved source points to their nearest target point's plane."""
+    from scipy.spatial import cKDTree
+
+    src = np.asarray(source.points) @ transform[:3, :3].T + transform[:3, 3]
+    tgt = np.asarray(target.points)
+    normals = np.asarray(target.normals)
+    d, k = cKDTree(tgt, balanced_tree=False, compact_nodes=False).query(src, distance_upper_bound=max_distance_m,
+                                                                           workers=-1)
+    ok = np.isfinite(d)
+    if not ok.any():
+        return float("nan")
+    res = np.einsum("ij,ij->i", src[ok] - tgt[k[ok]], normals[k[ok]])
+    return float(np.sqrt(np.mean(res ** 2)))
 
 
 def stable_mask(xyz: np.ndarray, anchors_xyz: np.ndarray, *, radius_m: float = 4.0,
@@ -170,20 +193,25 @@ def stable_mask(xyz: np.ndarray, anchors_xyz: np.ndarray, *, radius_m: float = 4
     -------
     (N,) bool array
     """
-    from scipy.spatial import cKDTree
-
     xyz = np.asarray(xyz, dtype=np.float64)
     up_v = np.asarray(up, dtype=np.float64)
     up_v = up_v / np.linalg.norm(up_v)
     anchors = np.asarray(anchors_xyz, dtype=np.float64).reshape(-1, 3)
     if len(anchors) == 0:
         raise InputError("stable areas need at least one anchor (a reference target)")
-
-    def horizontal(a):
-        return a - np.outer(a @ up_v, up_v)
-
-    d, _ = cKDTree(horizontal(anchors)).query(horizontal(xyz), distance_upper_bound=radius_m)
-    mask = np.isfinite(d)
+    # two horizontal axes: distances in that plane, anchor by anchor (a handful), no temporaries of (N, 3)
+    e1 = np.cross(up_v, [1.0, 0.0, 0.0] if abs(up_v[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(up_v, e1)
+    u, v = xyz @ e1, xyz @ e2
+    mask = np.zeros(len(xyz), bool)
+    r2 = radius_m * radius_m
+    for a in anchors:
+        du, dv = u - float(a @ e1), v - float(a @ e2)
+        du *= du
+        dv *= dv
+        du += dv
+        mask |= du <= r2
     if exclude_above_m is not None:
         mask &= (xyz @ up_v) < exclude_above_m
     return mask

@@ -23,39 +23,70 @@ def register(sub) -> None:
                         "(pcl_ndt3d, Debian pcl-tools) or not at all (targets)")
     p.add_argument("--no-icp", action="store_true", help="register on the targets only (= --registration targets)")
     p.add_argument("--bin-m", type=float, default=2.5, help="span profile bin length (default 2.5 m)")
+    m = p.add_argument_group("change parameters (py4dgeo's names, metres)")
+    m.add_argument("--normal-radii", type=float, nargs="+", default=[0.5], metavar="R",
+                   help="M3C2 normal radii; several make the normals multi-scale (default 0.5)")
+    m.add_argument("--cyl-radius", type=float, default=0.25, metavar="R",
+                   help="M3C2 projection cylinder radius (default 0.25)")
+    m.add_argument("--max-distance", type=float, default=None, metavar="D",
+                   help="M3C2 cylinder half-length (default 0.5); C2C search distance (default 1.0)")
+    m.add_argument("--corepoints", default="0.25", metavar="STEP|FILE",
+                   help="M3C2 core points: a grid step over the first epoch (default 0.25) or a point file in "
+                        "the campaign frame (any scan format)")
+    m.add_argument("--registration-error", default="measured", metavar="E|measured",
+                   help="added to M3C2's level of detection: metres, or 'measured' (default: the two target "
+                        "registrations' RMS combined)")
+    m.add_argument("--robust-aggr", action="store_true",
+                   help="M3C2 median and inter-quartile spread instead of mean and standard deviation")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=cmd_compare)
 
 
+def _options(args):
+    from common.errors import InputError
+    from projects.compare.whole_scan import ChangeOptions
+
+    try:
+        core: float | Path = float(args.corepoints)
+    except ValueError:
+        core = Path(args.corepoints)
+    if args.registration_error == "measured":
+        reg = None
+    else:
+        try:
+            reg = float(args.registration_error)
+        except ValueError:
+            raise InputError(f"--registration-error expects metres or 'measured', got {args.registration_error!r}") \
+                from None
+    return ChangeOptions(normal_radii=tuple(args.normal_radii), cyl_radius=args.cyl_radius,
+                         max_distance=args.max_distance, corepoints=core, registration_error=reg,
+                         robust_aggr=args.robust_aggr).check()
+
+
 def cmd_compare(args) -> int:
-    from projects.compare.whole_scan import compare_epochs, save_comparison, write_outputs
+    from projects.compare.whole_scan import (change_lines, compare_epochs, registration_lines, save_comparison,
+                                             write_outputs)
     from projects.store.campaign import Campaign
 
+    options = _options(args)
     with Campaign.open(args.dir) as c:
         with progress_bar("comparing") as cb:
             summary = compare_epochs(c, args.start, args.end, method=args.method,
                                      refinement=args.registration or ("targets" if args.no_icp else "icp"),
-                                     bin_m=args.bin_m, progress=cb)
+                                     bin_m=args.bin_m, options=options, progress=cb)
         paths = write_outputs(summary, args.out)
         save_comparison(c, summary)
     public = {k: v for k, v in summary.items() if k != "_arrays"}
     if args.json:
         print(json.dumps(public, indent=2, default=float))
         return 0
-    ch = public["change"]
     print(f"compared {args.start} -> {args.end} ({args.method}) in the campaign frame of {public['baseline']}")
-    for lab, reg in public["registration"].items():
-        if "targets" in reg:
-            icp = reg.get("icp")
-            print(f"  {lab}: targets RMS {reg['targets']['rms_mm']:.2f} mm" +
-                  (f"; {icp.get('method', 'icp').upper()} fitness {icp['fitness']:.2f}, RMS {icp['rms_mm']:.1f} mm, iterations {icp['iterations']}, "
-                   f"moved the result {icp['change_from_targets_mm']:.2f} mm" if icp else ""))
-            for w in reg["targets"]["warnings"]:
-                print(f"  warning: {w}")
-    for part in ("stable_parts", "deck"):
-        s = ch[part]
-        if s["n"]:
-            print(f"  {part}: median {s['median_mm']:+.2f} mm, std {s['std_mm']:.2f} mm over {s['n']} points" +
-                  (f", median LoD {s['median_lod_mm']:.2f} mm" if "median_lod_mm" in s else ""))
+    for _, line in registration_lines(public):
+        print(f"  {line}")
+    for reg in public["registration"].values():
+        for w in reg.get("targets", {}).get("warnings", []):
+            print(f"  warning: {w}")
+    for line in change_lines(public):
+        print(f"  {line}")
     print("wrote " + ", ".join(str(p) for p in paths))
     return 0

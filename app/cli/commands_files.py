@@ -77,14 +77,14 @@ def _layout(path: Path, diameter_mm):
 
 
 def _analyse(args):
-    from lidar.pipeline import analyse_coarse
+    from lidar.pipeline import analyse_map
+    from lidar.reflectance_map import reflectance_map_from_file
 
     layout = _layout(args.layout, args.diameter_mm)
-    with progress_bar("reading") as cb:
-        scan = _load(args.scan, cb)
+    with progress_bar("reading and binning") as cb:  # an uncompressed LAS file is binned as it is read
+        rmap = reflectance_map_from_file(args.scan, step_deg=getattr(args, "step_deg", None), progress=cb)
     with progress_bar("analysing") as cb:
-        coarse = analyse_coarse(scan, layout, step_deg=getattr(args, "step_deg", None),
-                                threshold=getattr(args, "threshold", None), progress=cb)
+        coarse = analyse_map(rmap, layout, threshold=getattr(args, "threshold", None), progress=cb)
     return layout, coarse
 
 

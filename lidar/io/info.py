@@ -1,9 +1,11 @@
 """What a scan file holds, for a surveyor deciding whether to use it (``bridgesurvey info``).
 
-:func:`describe_file` reads a file with the same bounded readers as every
-other command and summarises each scan in it: points, bounds, pose, the
-intensity convention recognised, the angular step estimated from the points
-(and what it means as point spacing at 10 m), and the problems found.
+:func:`describe_file` works at header speed: for LAS/LAZ, E57, PLY and PCD it reports what the header knows
+(format, version, scans, point counts, bounds, scales, pose, point format) with the same checks as every
+reader, and the angular steps from a few runs of consecutive points. With ``stats=True`` it reads every point
+in chunks (memory bounded by the chunk, whatever the file's size) for the bounds, ranges, the intensity range
+and its vendor convention, duplicates, NaN points, and the angular steps from whole angular patches of the
+scan. PTX, PTS and XYZ files have no header that tells the points: they are always read whole.
 """
 from __future__ import annotations
 
@@ -14,148 +16,260 @@ from typing import Optional
 
 import numpy as np
 
-from lidar.scan import Scan
+from common.progress import ProgressCallback, report
+from lidar.io.angular_step import AngularSteps, PatchSampler, angles_deg, steps_along_lines, steps_from_neighbours
+from lidar.io.intensity import detect_convention
+from lidar.io.stream import CHUNK_POINTS, Chunk, ScanStream, StreamScan, open_stream
 
-#: Points used for the step and duplicate estimates (a seeded sample of larger scans).
-SAMPLE_POINTS = 200_000
 #: A scan whose nearest point is farther than this is not in its scanner's frame.
 FAR_FROM_SCANNER_M = 2000.0
 #: Coordinates coarser than this lose what a target centroid needs.
 COARSE_SCALE_M = 0.001
+#: Points whose duplicates are counted exactly (a hash-chosen share of larger scans, scaled up).
+DUPLICATE_SAMPLE = 2_000_000
 
 
 @dataclass(frozen=True)
 class ScanInfo:
-    """Summary of one scan (one set-up) of a file. Lengths in metres, angles in degrees."""
+    """Summary of one scan (one set-up) of a file. Lengths in metres, angles in degrees.
+
+    Fields the header does not know are None until the points are read (``stats``).
+    """
 
     name: str
     points: int
-    bounds_min: tuple[float, ...]
-    bounds_max: tuple[float, ...]
+    bounds_min: Optional[tuple[float, ...]]
+    bounds_max: Optional[tuple[float, ...]]
     pose: Optional[list[list[float]]]
-    intensity_convention: str
+    intensity_convention: Optional[str]
     intensity_raw_range: Optional[tuple[float, float]]
     angular_step_deg: Optional[float]
+    theta_step_deg: Optional[float]
+    phi_step_deg: Optional[float]
+    step_from: str
     spacing_at_10m_mm: Optional[float]
-    range_m: tuple[float, float]
-    duplicate_points: int
+    range_m: Optional[tuple[float, float]]
+    duplicate_points: Optional[int]
     problems: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
 class FileInfo:
-    """Summary of a scan file."""
+    """Summary of a scan file; ``stats`` tells whether every point was read."""
 
     path: str
     format: str
     version: str
     size_bytes: int
     scans: tuple[ScanInfo, ...]
+    stats: bool
     details: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return asdict(self)
 
 
-def estimate_angular_step_deg(xyz_socs: np.ndarray, *, seed: int = 0) -> Optional[float]:
-    """Typical angular spacing of neighbouring points seen from the scanner (degrees).
-
-    Uses the median nearest-neighbour distance on the unit sphere of a sample
-    of at most :data:`SAMPLE_POINTS` points, corrected for the sampling
-    (a subsample of a regular grid is sparser by sqrt(N / n)).
+def estimate_angular_steps(xyz_socs: np.ndarray) -> AngularSteps:
+    """Both angular steps of points holding whole neighbourhoods (a scan, or consecutive points of one).
 
     Parameters
     ----------
     xyz_socs : (N, 3) float64 array
-        Points in the scanner's own frame, metres.
+        Points in the scanner's own frame, metres, in file order.
 
     Returns
     -------
-    float or None
-        None for fewer than 10 points.
+    AngularSteps
+        From the file order when it is a scan order, else from each point's angular neighbours.
     """
-    from scipy.spatial import cKDTree
-
-    n = xyz_socs.shape[0]
-    if n < 10:
-        return None
-    rng = np.random.default_rng(seed)
-    sample = xyz_socs if n <= SAMPLE_POINTS else xyz_socs[rng.choice(n, SAMPLE_POINTS, replace=False)]
-    r = np.linalg.norm(sample, axis=1)
-    unit = sample[r > 0] / r[r > 0, None]
-    if unit.shape[0] < 10:
-        return None
-    d, _ = cKDTree(unit).query(unit, k=2)
-    nn = d[:, 1]
-    nn = nn[nn > 0]
-    if nn.size == 0:
-        return None
-    step = float(np.degrees(np.median(nn))) * np.sqrt(unit.shape[0] / n)
-    return step
+    theta, phi = angles_deg(xyz_socs)
+    lines = steps_along_lines(theta, phi)
+    if lines.regular:
+        return lines
+    return steps_from_neighbours(theta, phi)
 
 
-def _duplicates(xyz: np.ndarray, seed: int = 0) -> int:
-    n = xyz.shape[0]
-    if n <= SAMPLE_POINTS * 5:
-        return int(n - np.unique(xyz, axis=0).shape[0])
-    rng = np.random.default_rng(seed)
-    idx = rng.choice(n, SAMPLE_POINTS * 5, replace=False)
-    return int(round((idx.size - np.unique(xyz[idx], axis=0).shape[0]) * n / idx.size))
+class _Stats:
+    """Accumulates one scan's statistics over its chunks, in bounded memory."""
+
+    def __init__(self, declared_points: int):
+        self.n = 0
+        self.lo = np.full(3, np.inf)
+        self.hi = np.full(3, -np.inf)
+        self.r = [np.inf, -np.inf]
+        self.i_lo, self.i_hi, self.i_integral = np.inf, -np.inf, True
+        self.i_dtype: Optional[np.dtype] = None
+        self.patches = PatchSampler()
+        self.dup_every = max(1, declared_points // DUPLICATE_SAMPLE)
+        self.dup_hashes: list[np.ndarray] = []
+
+    def add(self, c: Chunk) -> None:
+        xyz = c.xyz
+        if len(xyz) == 0:
+            return
+        self.n += len(xyz)
+        np.minimum(self.lo, xyz.min(axis=0), out=self.lo)
+        np.maximum(self.hi, xyz.max(axis=0), out=self.hi)
+        rng = np.linalg.norm(xyz, axis=1)
+        self.r = [min(self.r[0], float(rng.min())), max(self.r[1], float(rng.max()))]
+        if c.raw is not None and len(c.raw):
+            self.i_dtype = c.raw.dtype
+            self.i_lo, self.i_hi = min(self.i_lo, float(c.raw.min())), max(self.i_hi, float(c.raw.max()))
+            if self.i_integral and c.raw.dtype.kind == "f":
+                self.i_integral = bool(np.all(c.raw == np.round(c.raw)))
+        if rng.min() < FAR_FROM_SCANNER_M:  # cells from cheap float32 angles, the kept points' in float64
+            keep = self.patches.wanted(*angles_deg(xyz, np.float32))
+            if keep.any():
+                self.patches.add(*angles_deg(xyz[keep]))
+        h = _point_hash(xyz)
+        self.dup_hashes.append(h[h % np.uint64(self.dup_every) == 0])
+
+    def duplicates(self) -> int:
+        h = np.concatenate(self.dup_hashes) if self.dup_hashes else np.zeros(0, np.uint64)
+        return int(round((h.size - np.unique(h).size) * self.dup_every))
+
+    def convention(self) -> tuple[Optional[str], Optional[tuple[float, float]]]:
+        if self.i_dtype is None:
+            return None, None
+        sample = np.array([self.i_lo, self.i_hi] if self.i_integral else
+                          [self.i_lo, self.i_hi, self.i_lo + (self.i_hi - self.i_lo) * 0.5 + 1e-3]).astype(self.i_dtype)
+        name, _ = detect_convention(sample)
+        return name, (self.i_lo, self.i_hi)
 
 
-def scan_info(scan: Scan) -> ScanInfo:
-    """Summarise one scan."""
-    xyz = scan.xyz_socs
-    meta = dict(scan.metadata)
-    problems = []
-    if meta.get("dropped_nonfinite_points"):
-        problems.append(f"{meta['dropped_nonfinite_points']} NaN/infinite points dropped")
-    for k, s in enumerate(meta.get("scales", ()) or ()):
-        if abs(s) > COARSE_SCALE_M:
-            problems.append(f"{'xyz'[k]} coordinates are quantised to {abs(s) * 1000:g} mm (coarser than 1 mm)")
-    dup = _duplicates(xyz)
-    if dup:
-        problems.append(f"{dup} duplicate points")
-    if scan.intensity is None:
+def _point_hash(xyz: np.ndarray) -> np.ndarray:
+    """64-bit hash of each point's exact coordinates (equal points, equal hashes)."""
+    b = np.ascontiguousarray(xyz, dtype=np.float64).view(np.uint64)
+    h = b[:, 0] * np.uint64(0x9E3779B97F4A7C15)
+    h ^= b[:, 1] * np.uint64(0xC2B2AE3D27D4EB4F) + (h >> np.uint64(31))
+    h ^= b[:, 2] * np.uint64(0x165667B19E3779F9) + (h >> np.uint64(27))
+    h ^= h >> np.uint64(33)
+    return h
+
+
+def _step_fields(steps: Optional[AngularSteps], source: str) -> dict:
+    if steps is None or not steps.regular:
+        return {"angular_step_deg": None, "theta_step_deg": None, "phi_step_deg": None, "spacing_at_10m_mm": None,
+                "step_from": source}
+    step = float(steps.step_deg)  # type: ignore[arg-type]
+    return {"angular_step_deg": step, "theta_step_deg": float(steps.theta_deg),  # type: ignore[arg-type]
+            "phi_step_deg": float(steps.phi_deg), "spacing_at_10m_mm": float(np.radians(step) * 10.0 * 1000.0),  # type: ignore[arg-type]
+            "step_from": f"{source} ({steps.method}, {steps.regular_share:.0%} of the neighbours one step apart)"}
+
+
+def _scale_problems(details: dict) -> list[str]:
+    return [f"{'xyz'[k]} coordinates are quantised to {abs(s) * 1000:g} mm (coarser than 1 mm)"
+            for k, s in enumerate(details.get("scales", ()) or ()) if abs(s) > COARSE_SCALE_M]
+
+
+def _not_regular(steps: Optional[AngularSteps]) -> list[str]:
+    if steps is None or steps.points < 20 or steps.regular:
+        return []
+    return ["the points are not on a regular angular grid seen from the origin (a registered, merged or "
+            "resampled cloud, or not a scanner's own frame): no angular step"]
+
+
+def _header_scan(stream: ScanStream, k: int, s: StreamScan) -> ScanInfo:
+    """What the header knows of scan ``k``, with the steps from a few runs of consecutive points."""
+    problems = _scale_problems(stream.details)
+    blocks = stream.sample_blocks(k)
+    xyz = np.vstack([b.xyz for b in blocks]) if blocks else np.empty((0, 3))
+    steps, source = None, "not estimated: --stats reads every point"
+    if len(xyz):
+        if np.linalg.norm(xyz, axis=1).min() > FAR_FROM_SCANNER_M:
+            problems.append(_far_problem(float(np.linalg.norm(xyz, axis=1).min())))
+        else:
+            per_block = [estimate_angular_steps(b.xyz) for b in blocks if len(b.xyz) >= 20]
+            good = [b for b in per_block if b.regular]
+            steps = good[0] if good else (per_block[0] if per_block else None)
+            source = f"{sum(len(b.xyz) for b in blocks):,} consecutive points sampled in the file"
+            if steps is not None and not steps.regular:
+                source += "; not in scan order: --stats looks at whole angular patches"
+                steps = None
+    if not s.has_intensity:
         problems.append("no intensity: reflectors cannot be detected in this file")
-    raw_range = None
-    if scan.intensity_raw is not None:
-        raw_range = (float(np.min(scan.intensity_raw)), float(np.max(scan.intensity_raw)))
-        if raw_range[0] == raw_range[1]:
-            problems.append("intensity is constant: reflectors cannot be detected in this file")
-    rng_m = np.linalg.norm(xyz, axis=1)
-    step = None
-    if rng_m.min() > FAR_FROM_SCANNER_M:
-        problems.append(f"every point is more than {rng_m.min() / 1000:.0f} km from the origin: the coordinates are "
-                        "in a project frame, not the scanner's own (SOCS); angles and steps are not meaningful")
-    else:
-        step = estimate_angular_step_deg(xyz)
-    return ScanInfo(
-        name=scan.name, points=len(scan),
-        bounds_min=tuple(float(v) for v in xyz.min(axis=0)), bounds_max=tuple(float(v) for v in xyz.max(axis=0)),
-        pose=scan.pose.tolist() if scan.pose is not None else None,
-        intensity_convention=str(meta.get("intensity_convention", "none")),
-        intensity_raw_range=raw_range,
-        angular_step_deg=step, spacing_at_10m_mm=None if step is None else float(np.radians(step) * 10.0 * 1000.0),
-        range_m=(float(rng_m.min()), float(rng_m.max())), duplicate_points=dup, problems=tuple(problems),
-    )
+    bounds = s.bounds
+    conv = "declared limits" if s.intensity_limits else None
+    return ScanInfo(name=s.name, points=s.points, bounds_min=bounds[0] if bounds else None,
+                    bounds_max=bounds[1] if bounds else None, pose=None if s.pose is None else s.pose.tolist(),
+                    intensity_convention=conv, intensity_raw_range=s.intensity_limits, range_m=None,
+                    duplicate_points=None, problems=tuple(problems), **_step_fields(steps, source))
 
 
-def describe_file(path: str | os.PathLike) -> FileInfo:
-    """Read a scan file (any supported format) and summarise it.
+def _far_problem(r_min: float) -> str:
+    return (f"every point is more than {r_min / 1000:.0f} km from the origin: the coordinates are in a project "
+            "frame, not the scanner's own (SOCS); angles and steps are not meaningful")
+
+
+def _full_scan(stream: ScanStream, k: int, s: StreamScan, progress: Optional[ProgressCallback]) -> ScanInfo:
+    """Every point of scan ``k`` read in chunks."""
+    acc = _Stats(s.points)
+    for c in stream.chunks(k, CHUNK_POINTS):
+        acc.add(c)
+        report(progress, min(acc.n / max(s.points, 1), 1.0), f"reading {s.name}")
+    problems = _scale_problems(stream.details)
+    dropped = s.points - acc.n
+    if stream.loaded is not None:  # read whole: the reader counted what it dropped
+        dropped = int(dict(stream.loaded[k].metadata).get("dropped_nonfinite_points", 0))
+    if dropped > 0 and stream.kind != "e57":
+        problems.append(f"{dropped} NaN/infinite points dropped")
+    elif dropped > 0:
+        problems.append(f"{dropped} points flagged invalid in the file")
+    if acc.n == 0:
+        problems.append("holds no valid points")
+    dup = acc.duplicates()
+    if dup:
+        problems.append(f"{dup} duplicate points" + (" (estimated from a share of the points)" if acc.dup_every > 1
+                                                     else ""))
+    conv, raw_range = acc.convention()
+    if s.intensity_limits:
+        conv, raw_range = "declared limits", s.intensity_limits
+    if not s.has_intensity or conv is None:
+        problems.append("no intensity: reflectors cannot be detected in this file")
+    elif raw_range is not None and raw_range[0] == raw_range[1]:
+        problems.append("intensity is constant: reflectors cannot be detected in this file")
+    steps = None
+    if acc.n and acc.r[0] > FAR_FROM_SCANNER_M:
+        problems.append(_far_problem(acc.r[0]))
+    elif acc.n:
+        steps = acc.patches.steps()
+        problems += _not_regular(steps)
+    ok = acc.n > 0
+    return ScanInfo(name=s.name, points=acc.n, bounds_min=tuple(float(v) for v in acc.lo) if ok else None,
+                    bounds_max=tuple(float(v) for v in acc.hi) if ok else None,
+                    pose=None if s.pose is None else s.pose.tolist(), intensity_convention=conv,
+                    intensity_raw_range=raw_range, range_m=(float(acc.r[0]), float(acc.r[1])) if ok else None,
+                    duplicate_points=dup, problems=tuple(problems),
+                    **_step_fields(steps, f"every point ({acc.n:,})"))
+
+
+def describe_file(path: str | os.PathLike, *, stats: bool = False,
+                  progress: Optional[ProgressCallback] = None) -> FileInfo:
+    """Describe a scan file (any supported format): at header speed, or reading every point (``stats``).
+
+    Parameters
+    ----------
+    path : path-like
+    stats : bool, keyword-only
+        Read every point in chunks (bounded memory) for bounds, ranges, intensity, duplicates and the
+        angular steps from whole angular patches. Default False: what the header knows, and the steps from
+        a few runs of consecutive points. Files without a point-describing header (PTX, PTS, XYZ) are
+        read whole either way.
+    progress : callable, optional
 
     Raises
     ------
     ScanFormatError
         The file cannot be read; the message names the file and the problem.
     """
-    from lidar.io import read_scans
-
     p = Path(path)
-    scans = read_scans(p)
-    meta = dict(scans[0].metadata)
-    version = str(meta.get("version", ""))
-    details = {k: v for k, v in meta.items() if k in ("point_format", "scales", "offsets", "compressed", "pcd_data",
-                                                        "ply_format", "fields", "properties", "columns")}
-    return FileInfo(path=str(p), format=str(meta.get("format", "")), version=version,
-                    size_bytes=p.stat().st_size, scans=tuple(scan_info(s) for s in scans), details=details)
+    stream = open_stream(p)
+    full = stats or stream.loaded is not None
+    scans = tuple(_full_scan(stream, k, s, progress) if full else _header_scan(stream, k, s)
+                  for k, s in enumerate(stream.scans))
+    d = stream.details
+    details = {k: v for k, v in d.items() if k in ("point_format", "record_length", "scales", "offsets",
+                                                   "compressed", "pcd_data", "ply_format", "fields",
+                                                   "properties", "dimensions", "vlrs", "evlrs", "images")}
+    return FileInfo(path=str(p), format=str(d.get("format", "")), version=str(d.get("version", "")),
+                    size_bytes=p.stat().st_size, scans=scans, stats=full, details=details)

@@ -5,7 +5,7 @@ import numpy as np
 
 
 def span_profile_figure(summary: dict):
-    """Span profile of a comparison: per-bin height change (±2σ) and spread, with the targets' displacements."""
+    """Span profile of a comparison: per-bin underside height change (±2σ) and spread, with the targets' changes."""
     from matplotlib.figure import Figure
 
     prof = summary["span_profile"]
@@ -19,7 +19,8 @@ def span_profile_figure(summary: dict):
             ch = np.array([b["change_mm"] for b in bins])
             sig = np.array([b["sigma_change_mm"] for b in bins])
             spread = np.array([np.hypot(b["std_from_mm"], b["std_to_mm"]) for b in bins])
-            ax.bar(s, ch, width=prof["bin_m"] * 0.9, color="0.8", edgecolor="0.5", label=f"scan bins ({prof['bin_m']:g} m)")
+            ax.bar(s, ch, width=prof["bin_m"] * 0.9, color="0.8", edgecolor="0.5",
+                   label=f"deck underside, {prof['bin_m']:g} m bins (±2σ with the registration)")
             ax.errorbar(s, ch, yerr=2 * sig, fmt="none", ecolor="0.3", capsize=2)
             ax.fill_between(s, -spread, spread, color="tab:orange", alpha=0.15, step="mid",
                             label="point spread per bin (±1 std)")
@@ -32,10 +33,18 @@ def span_profile_figure(summary: dict):
                 ax.annotate(t["reflector"], (t["station_m"], t["displacement_mm"]), xytext=(4, 4),
                             textcoords="offset points", fontsize=7, color="tab:blue")
         ax.axhline(0, color="0.5", lw=0.6)
-        ax.set_ylabel(f"girder {g}\nchange [mm]")
+        ax.set_ylabel(f"girder line {g}\nchange [mm]")
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, loc="lower left")
-    axes[0].set_title(f"Span profile {summary['from']} → {summary['to']}: mean height change per bin vs targets",
-                      fontsize=10)
-    axes[-1].set_xlabel("station along the span [m]")
+    handles, labels = axes[0].get_legend_handles_labels()
+    for ax in axes[1:]:
+        for h, lab in zip(*ax.get_legend_handles_labels()):
+            if lab not in labels:
+                handles.append(h)
+                labels.append(lab)
+    if handles:
+        axes[0].legend(handles, labels, fontsize=7, loc="lower left", bbox_to_anchor=(0.0, 1.0), ncol=3,
+                       frameon=False)
+    fig.suptitle(f"Span profile {summary['from']} → {summary['to']}: underside height change per bin "
+                 "(plane fitted at the bin centre) and the targets", fontsize=10)
+    axes[-1].set_xlabel("station along the layout's x from the first pier [m]")
     return fig

@@ -25,14 +25,71 @@ from common.files import write_atomic
 from projects.results.table import displacement_table
 from projects.processing.stages import baseline_epoch, read_files
 from projects.store.campaign import Campaign, now_iso
-from registration.change import METHODS, ChangeResult, cloud_to_cloud, core_points_grid, m3c2
+from registration.change import METHODS, ChangeResult, cloud_to_cloud, core_points_grid, m3c2, prefetch_py4dgeo
 from registration.icp import IcpResult, refine_icp, stable_mask
 from registration.ndt import refine_ndt
-from registration.profile import span_profile
+from projects.compare.span import SpanFrame, pivot, span_frame
+from registration.profile import SpanProfile, girder_lines, span_profile
 from registration.targets import TargetRegistration, register_targets
 from registration.transform import Transform
 
 SUMMARY_VERSION = 1
+
+
+@dataclass(frozen=True)
+class ChangeOptions:
+    """How the change is computed, with py4dgeo's parameter names (metres).
+
+    Attributes
+    ----------
+    normal_radii : tuple of float
+        M3C2 normal radii (default 0.5 m; several: multi-scale).
+    cyl_radius : float
+        M3C2 projection cylinder radius (default 0.25 m).
+    max_distance : float
+        M3C2 cylinder half-length, and the C2C search distance (default 0.5 m for M3C2; C2C keeps 1 m unless
+        given).
+    corepoints : float or path
+        A grid step (default 0.25 m: one core point per occupied cube of the first epoch) or a point file.
+    registration_error : float or None
+        Given (metres), or None: measured, the two target registrations' RMS combined.
+    robust_aggr : bool
+        M3C2 median and inter-quartile spread instead of mean and standard deviation.
+    """
+
+    normal_radii: tuple[float, ...] = (0.5,)
+    cyl_radius: float = 0.25
+    max_distance: Optional[float] = None
+    corepoints: float | Path = 0.25
+    registration_error: Optional[float] = None
+    robust_aggr: bool = False
+
+    def check(self) -> "ChangeOptions":
+        """The options, or InputError naming the first impossible one (before any computing)."""
+        for name, v in (("--normal-radii", min(self.normal_radii, default=float("nan"))),
+                        ("--cyl-radius", self.cyl_radius), ("--max-distance", self.max_distance)):
+            if v is not None and not (np.isfinite(v) and v > 0):
+                raise InputError(f"{name} must be positive metres, got {v}")
+        if self.registration_error is not None and not (np.isfinite(self.registration_error)
+                                                        and self.registration_error >= 0):
+            raise InputError(f"--registration-error must be zero or positive metres, got {self.registration_error}")
+        if isinstance(self.corepoints, Path):
+            from lidar.io.stream import open_stream
+
+            open_stream(self.corepoints)  # a missing or damaged file: one line now, not after the registration
+        elif not (np.isfinite(self.corepoints) and self.corepoints > 0):
+            raise InputError(f"--corepoints must be a positive grid step in metres or a point file, "
+                             f"got {self.corepoints}")
+        return self
+
+    def core_points(self, xyz_first: np.ndarray) -> tuple[np.ndarray, str]:
+        """Core points in the campaign frame, and how they were chosen."""
+        if isinstance(self.corepoints, Path):
+            from lidar.io import read_scans
+
+            pts = np.vstack([s.xyz_socs for s in read_scans(self.corepoints)])
+            return pts, f"file {self.corepoints} ({len(pts)} points, campaign frame)"
+        return core_points_grid(xyz_first, float(self.corepoints)), f"grid of {self.corepoints:g} m"
 
 
 @dataclass(frozen=True, eq=False)
@@ -114,15 +171,30 @@ def _deck_mask(xyz: np.ndarray, targets: np.ndarray, radius_m: float = 1.0, band
     return out
 
 
+def _prefetch(refinement: str) -> None:
+    """Import py4dgeo in the background while the epochs are read and registered.
+
+    What this thread imports meanwhile is imported first: Open3D's package set-up walks ``sys.modules`` and
+    fails if another thread adds to it at that moment.
+    """
+    import scipy.spatial  # noqa: F401  (the stable-part masks)
+
+    if refinement == "icp":
+        import open3d  # noqa: F401
+    prefetch_py4dgeo()
+
+
 def compare_epochs(c: Campaign, from_label: str, to_label: str, *, method: str = "m3c2", refinement: str = "icp",
-                   bin_m: float = 2.5, core_spacing_m: float = 0.25,
+                   bin_m: float = 2.5, options: ChangeOptions = ChangeOptions(),
                    progress: Optional[ProgressCallback] = None) -> dict:
     """Register two epochs into the campaign frame and compute their change and span profile.
 
-    Returns a JSON-ready summary; the arrays are under the private key ``_arrays``.
+    ``options`` holds the M3C2/C2C parameters (py4dgeo's names). Returns a JSON-ready summary; the arrays are
+    under the private key ``_arrays``.
     """
     if method not in METHODS:
         raise InputError(f"unknown comparison method {method!r}; use c2c or m3c2")
+    options.check()
     for lab in (from_label, to_label):
         c.epoch(lab)
     if from_label == to_label:
@@ -130,6 +202,8 @@ def compare_epochs(c: Campaign, from_label: str, to_label: str, *, method: str =
     base = baseline_epoch(c)
     if base is None:
         raise CampaignError("no measured epoch yet: process the campaign first ('bridgesurvey process')")
+    if method == "m3c2":
+        _prefetch(refinement)
     report(progress, 0.0, f"reading {base}")
     base_xyz = read_files(c, c.files(base, "coarse")).xyz_socs  # once, for both epochs
     ea = bring_to_campaign_frame(c, from_label, base, refinement=refinement, base_xyz=base_xyz,
@@ -141,7 +215,8 @@ def compare_epochs(c: Campaign, from_label: str, to_label: str, *, method: str =
     ref_base, _ = _centroid_arrays(c, base, refs)
     meas_from, _ = _centroid_arrays(c, from_label, meas)
     meas_from = ea.transform.apply(meas_from)
-    reg_err = float(np.sqrt(sum((e.registration.rms_m if e.registration else 0.0) ** 2 for e in (ea, eb))))
+    measured_err = float(np.sqrt(sum((e.registration.rms_m if e.registration else 0.0) ** 2 for e in (ea, eb))))
+    reg_err = measured_err if options.registration_error is None else float(options.registration_error)
     # The region worth comparing: the bridge (targets) and 5 m around it, ground included.
     anchors = np.vstack([ref_base[np.isfinite(ref_base[:, 0])], meas_from[np.isfinite(meas_from[:, 0])]])
     lo, hi = anchors.min(axis=0) - 5.0, anchors.max(axis=0) + 5.0
@@ -152,23 +227,31 @@ def compare_epochs(c: Campaign, from_label: str, to_label: str, *, method: str =
 
     xa, xb = crop(ea.xyz), crop(eb.xyz)
     report(progress, 0.72, f"change ({method})")
+    core_how = None
     if method == "m3c2":
-        change = m3c2(xa, xb, core_points_grid(xa, core_spacing_m), registration_error_m=reg_err,
-                      progress=scaled(progress, 0.72, 0.92))
+        core, core_how = options.core_points(xa)
+        change = m3c2(xa, xb, core, normal_radii=options.normal_radii, cyl_radius=options.cyl_radius,
+                      max_distance=options.max_distance or 0.5, registration_error=reg_err,
+                      robust_aggr=options.robust_aggr, progress=scaled(progress, 0.72, 0.92))
     else:
-        change = cloud_to_cloud(xa, xb, registration_error_m=reg_err)
+        change = cloud_to_cloud(xa, xb, max_distance_m=options.max_distance or 1.0, registration_error_m=reg_err)
+    parameters = {**change.parameters, "registration_error_source":
+                  "measured: the target registrations' RMS" if options.registration_error is None else "given"}
+    if core_how:
+        parameters["corepoints_from"] = core_how
     stable = stable_mask(change.points, ref_base[np.isfinite(ref_base[:, 0])], exclude_above_m=_below_deck_m(meas_from))
     deck = _deck_mask(change.points, meas_from)
     report(progress, 0.93, "span profile")
-    prof = span_profile(xa, xb, meas_from, bin_m=bin_m)
+    prof, frame = _profile(c, base, (ea, eb), (xa, xb), bin_m=bin_m)
     # target displacements of the same two epochs, at their stations along the span
     rows = {(r["epoch"], r["reflector"]): r for r in displacement_table(c)}
     targets = []
     for rid, p in zip(meas, meas_from):
         a, b = rows.get((from_label, rid)), rows.get((to_label, rid))
         if a and b and a["displacement_mm"] is not None and b["displacement_mm"] is not None and np.isfinite(p[0]):
-            targets.append({"reflector": rid, "station_m": float(prof.station_of(p)[0]),
-                            "girder": int(prof.girder_of(p)[0]) + 1,
+            s_m, l_m, _ = frame.coords(p[None])[0]
+            targets.append({"reflector": rid, "station_m": float(s_m),
+                            "girder": int(prof.girder_of(np.array([l_m]))[0]) + 1,
                             "displacement_mm": b["displacement_mm"] - a["displacement_mm"],
                             "sigma_mm": float(np.hypot(a["sigma_mm"] or 0, b["sigma_mm"] or 0))})
     summary = {
@@ -176,10 +259,11 @@ def compare_epochs(c: Campaign, from_label: str, to_label: str, *, method: str =
         "frame": f"campaign (scanner frame of baseline epoch {base})",
         "registration": {e.label: _registration_json(e) for e in (ea, eb)},
         "registration_error_mm": reg_err * 1e3,
-        "change": {"all": change.summary(), "stable_parts": change.summary(stable), "deck": change.summary(deck),
-                   "parameters": change.parameters},
-        "span_profile": {"bin_m": prof.bin_m, "girder_offsets_m": list(prof.girder_offsets_m),
-                         "bins": prof.table()},
+        "change": {"all": {**change.summary(), "computed_on": PARTS["all"]},
+                   "stable_parts": {**change.summary(stable), "computed_on": PARTS["stable_parts"]},
+                   "deck": {**change.summary(deck), "computed_on": PARTS["deck"]},
+                   "parameters": parameters},
+        "span_profile": _profile_json(prof, frame),
         "targets": targets, "created": now_iso(),
     }
     summary["_arrays"] = {"change": change, "profile": prof}
@@ -187,19 +271,110 @@ def compare_epochs(c: Campaign, from_label: str, to_label: str, *, method: str =
     return summary
 
 
+def _profile(c: Campaign, base: str, epochs: tuple[EpochInFrame, EpochInFrame], clouds: tuple[np.ndarray, np.ndarray],
+             *, bin_m: float) -> tuple[SpanProfile, SpanFrame]:
+    """The span profile of two epochs in span coordinates tied to the layout, with their registration σ."""
+    from projects.processing.stages import layout_up, parameters
+
+    layout = c.layout()
+    ids = list(layout.ids)
+    base_xyz, _ = _centroid_arrays(c, base, ids)
+    frame = span_frame(layout, ids, base_xyz, layout_up(parameters(c)))
+    meas = layout.ids_in("measurement")
+    refs = layout.ids_in("reference")
+    from_xyz, _ = _centroid_arrays(c, epochs[0].label, meas)
+    slh_targets = frame.coords(epochs[0].transform.apply(from_xyz))
+    lay_slh = frame.from_layout(np.array([layout.xyz[layout.index(i)] for i in meas]))
+    lines = girder_lines(lay_slh[:, :2], slh_targets[:, 2])
+    sig = []
+    for e in epochs:
+        if e.registration is None:
+            sig.append(None)
+            continue
+        ref_xyz, _ = _centroid_arrays(c, base, refs)
+        used = np.array([r.used for r in e.registration.residuals])
+        sig.append(frame.registration_sigma(e.transform, pivot(ref_xyz, used)))
+    prof = span_profile(frame.coords(clouds[0]), frame.coords(clouds[1]), lines,
+                        stations_m=(frame.first_pier_m, frame.last_pier_m), bin_m=bin_m,
+                        registration=(sig[0], sig[1]))
+    return prof, frame
+
+
+def _profile_json(prof: SpanProfile, frame: SpanFrame) -> dict:
+    return {"bin_m": prof.bin_m, "frame": "layout: station along the layout's x from its first pier, lateral "
+                                          "offset, height along the layout's up",
+            "girder_offsets_m": list(prof.girder_offsets_m), "first_pier_station_m": frame.first_pier_m,
+            "last_pier_station_m": frame.last_pier_m, "selection": {
+                "half_width_m": prof.half_width_m, "band_m": prof.band_m, "max_tilt_deg": prof.max_tilt_deg,
+                "underside_extent_m": list(prof.underside_extent_m)},
+            "notes": list(prof.notes), "bins": prof.table()}
+
+
+#: What each part of the change statistics is computed on.
+PARTS = {"stable_parts": "the stable parts (piers and the ground around them, below the deck)",
+         "deck": "the deck underside within 1 m of a measurement target",
+         "all": "everything compared (the bridge and 5 m around it)"}
+
+
 def _registration_json(e: EpochInFrame) -> dict:
     if e.registration is None:
         return {"role": "baseline (defines the campaign frame)", "transform": e.transform.to_json()}
-    out = {"targets": {"rms_mm": e.registration.rms_m * 1e3, "mode": e.registration.mode,
-                       "residuals": e.registration.table(), "warnings": list(e.registration.warnings)},
+    used = len(e.registration.used_ids)
+    out = {"targets": {"rms_mm": e.registration.rms_m * 1e3,
+                       "rms_on": f"{used} reference targets (tie-point residuals after the fit)",
+                       "mode": e.registration.mode, "residuals": e.registration.table(),
+                       "warnings": list(e.registration.warnings)},
            "transform": e.transform.to_json()}
     if e.icp is not None:
         from registration.transform import pose_difference
 
         dt_m, dr_deg = pose_difference(e.registration.transform, e.icp.transform)
-        out["icp"] = {"method": e.icp.correction.method, "fitness": e.icp.fitness, "rms_mm": e.icp.rms_m * 1e3, "iterations": list(e.icp.iterations),
+        voxel_cm = e.icp.voxels_m[-1] * 100
+        out["icp"] = {"method": e.icp.correction.method, "fitness": e.icp.fitness,
+                      "rms_mm": e.icp.rms_m * 1e3,
+                      "rms_on": f"stable parts, {e.icp.n_source} / {e.icp.n_target} points at {voxel_cm:.0f} cm "
+                                "voxels: point-to-point distance of the correspondences (of the order of the voxel "
+                                "size, not a registration error)",
+                      "plane_rms_mm": e.icp.plane_rms_m * 1e3,
+                      "plane_rms_on": "stable parts, the same correspondences: distance to the surface's plane",
+                      "iterations": list(e.icp.iterations),
                       "voxels_m": list(e.icp.voxels_m), "points": [e.icp.n_source, e.icp.n_target],
                       "change_from_targets_mm": dt_m * 1e3, "change_from_targets_deg": dr_deg}
+    return out
+
+
+def registration_lines(summary: dict) -> list[tuple[str, str]]:
+    """(epoch label, line) per registered epoch: each RMS and what it is computed on (CLI and report)."""
+    lines = []
+    for lab, reg in summary["registration"].items():
+        if "targets" not in reg:
+            continue
+        t = reg["targets"]
+        text = f"{lab}: target registration RMS {t['rms_mm']:.2f} mm on {t.get('rms_on', 'the reference targets')}"
+        icp = reg.get("icp")
+        if icp:
+            name = icp.get("method", "icp").upper()
+            plane = icp.get("plane_rms_mm")
+            text += (f"; {name} on the stable parts: fitness {icp['fitness']:.2f}, "
+                     + (f"point-to-plane RMS {plane:.1f} mm, " if plane is not None and np.isfinite(plane) else "")
+                     + f"correspondence distance RMS {icp['rms_mm']:.1f} mm (point-to-point at "
+                     f"{icp['voxels_m'][-1] * 100:.0f} cm voxels), iterations "
+                     f"{'/'.join(map(str, icp['iterations']))}, moved the pose {icp['change_from_targets_mm']:.2f} mm")
+        lines.append((lab, text))
+    return lines
+
+
+def change_lines(summary: dict) -> list[str]:
+    """One line per part of the change statistics, saying what it is computed on (CLI)."""
+    out = []
+    what = "M3C2 core points" if summary["method"] == "m3c2" else "compared points"
+    for part in ("stable_parts", "deck", "all"):
+        s = summary["change"][part]
+        if s["n"]:
+            out.append(f"{part.replace('_', ' ')}: median {s['median_mm']:+.2f} mm, RMS {s.get('rms_mm', float('nan')):.2f} "
+                       f"mm, std {s['std_mm']:.2f} mm over {s['n']} {what} on "
+                       + s.get("computed_on", PARTS[part])
+                       + (f"; median LoD {s['median_lod_mm']:.2f} mm" if s.get("median_lod_mm") is not None else ""))
     return out
 
 

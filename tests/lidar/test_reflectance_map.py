@@ -93,3 +93,25 @@ def test_reduce_map_keeps_small_bright_targets_and_geometry():
     assert abs(t - t0) <= red.step_deg and abs(p - p0) <= red.step_deg
     assert np.isnan(red.max_intensity[0, 0]) and np.allclose(red.range_m[-1, :-1], 20.0)
     assert reduce_map(rmap, max_cells=10 ** 7) is rmap
+
+
+@pytest.mark.parametrize("suffix", [".las", ".laz", ".ply"])
+def test_the_map_of_a_file_is_the_map_of_its_scan(tmp_path, suffix):
+    """Binned straight from the LAS records (one fused pass) or read whole first: the same map."""
+    from lidar.io import read_scan, write_scan
+    from lidar.reflectance_map import reflectance_map_from_file
+    from lidar.scan import Scan, normalise_intensity
+
+    xyz, inten = grid_scan((60, 100), (350, 380), 0.04, bright=[(85, 5, 0.1)])
+    raw = np.round(inten * 40000 + 1000).astype(np.uint16)
+    scan = Scan(xyz_socs=xyz * np.linspace(0.5, 2.0, len(xyz))[:, None], intensity=normalise_intensity(raw),
+                intensity_raw=raw)
+    path = write_scan(scan, tmp_path / f"s{suffix}")
+    back = read_scan(path)
+    a = reflectance_map(back.xyz_socs, back.intensity)
+    b = reflectance_map_from_file(path)
+    assert (a.theta0_deg, a.phi0_deg, a.step_deg, a.shape, a.full_circle) == \
+        (b.theta0_deg, b.phi0_deg, b.step_deg, b.shape, b.full_circle)
+    np.testing.assert_array_equal(a.count, b.count)
+    for name in ("max_intensity", "mean_intensity", "range_m"):
+        np.testing.assert_allclose(getattr(b, name), getattr(a, name), atol=1e-5, equal_nan=True)

@@ -402,32 +402,26 @@ def comparison_section(content: ReportContent, ss: Any) -> list:
     from reportlab.platypus import PageBreak, Paragraph, Spacer
 
     from projects.compare.figures import span_profile_figure
+    from projects.compare.whole_scan import registration_lines
 
     out = [PageBreak(), Paragraph("Epoch comparison and span profile", ss["Heading1"]),
            Paragraph("The conventional whole-scan approach, for context: both epochs registered into the campaign "
                      "frame (reference targets as tie points, then ICP on the piers and the ground around them), "
-                     "their change computed point by point, and the mean height of the deck underside compared per "
-                     "bin along the girder lines. Compare its spread with the targets' uncertainty.", ss["Small"])]
+                     "their change computed point by point, and the height of the deck underside (only its points, a "
+                     "plane fitted per 2.5 m bin) compared along the girder lines. Each RMS below says what it is "
+                     "computed on. Compare the spread with the targets' uncertainty.", ss["Small"])]
     for s in content.extras["comparisons"]:
         out.append(Paragraph(f"{_esc(s['from'])} → {_esc(s['to'])} ({s['method'].upper()})", ss["Heading2"]))
-        lines = []
-        for lab, reg in s["registration"].items():
-            if "targets" not in reg:
-                continue
-            text = f"{lab}: target registration RMS {reg['targets']['rms_mm']:.2f} mm"
-            if "icp" in reg:
-                i = reg["icp"]
-                text += (f"; ICP fitness {i['fitness']:.2f}, RMS {i['rms_mm']:.1f} mm, iterations "
-                         f"{'/'.join(map(str, i['iterations']))}, changed the pose by {i['change_from_targets_mm']:.2f} mm")
-            lines.append(text + "".join(f" — warning: {w}" for w in reg["targets"]["warnings"]))
+        lines = [line + "".join(f" — warning: {w}" for w in s["registration"][lab]["targets"]["warnings"])
+                 for lab, line in registration_lines(s)]
         out += [Paragraph(_esc(t), ss["Small"]) for t in lines]
-        table = [["Part", "Points", "Median [mm]", "Std [mm]", "95 % |d| [mm]", "Median LoD [mm]"]]
-        for part, name in (("stable_parts", "piers and ground (stable)"), ("deck", "deck underside near targets"),
-                           ("all", "everything compared")):
+        table = [["Computed on", "Points", "Median [mm]", "RMS [mm]", "Std [mm]", "95 % |d| [mm]", "Median LoD [mm]"]]
+        for part, name in (("stable_parts", "stable parts: piers and ground"), ("deck", "deck underside near targets"),
+                           ("all", "all points compared")):
             st = s["change"][part]
-            table.append([name, str(st["n"]), _num(st.get("median_mm")), _num(st.get("std_mm")),
+            table.append([name, str(st["n"]), _num(st.get("median_mm")), _num(st.get("rms_mm")), _num(st.get("std_mm")),
                           _num(st.get("p95_abs_mm")), _num(st.get("median_lod_mm"))])
-        out += [Spacer(1, 3), _table(table, (50, 20, 25, 22, 25, 28), ss), Spacer(1, 4)]
+        out += [Spacer(1, 3), _table(table, (46, 18, 22, 20, 20, 24, 26), ss), Spacer(1, 4)]
         if s["span_profile"]["bins"]:
             out.append(figure_flowable(span_profile_figure(s), 172))
             spread = [np.hypot(b["std_from_mm"], b["std_to_mm"]) / np.sqrt(2) for b in s["span_profile"]["bins"]]

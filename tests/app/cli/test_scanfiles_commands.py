@@ -21,6 +21,9 @@ SUFFIXES = [".las", ".laz", ".e57", ".ply", ".pcd", ".ptx", ".pts", ".xyz"]
 @pytest.mark.parametrize("path", GOOD, ids=lambda p: p.name)
 def test_info_describes_every_sample_file(path, capsys):
     assert main(["info", str(path), "--json"]) == 0
+    (header,) = json.loads(capsys.readouterr().out)
+    assert not header["stats"] and [s["points"] for s in header["scans"]] == [len(s) for s in read_scans(path)]
+    assert main(["info", str(path), "--stats", "--json"]) == 0
     (info,) = json.loads(capsys.readouterr().out)
     scans = read_scans(path)
     assert info["path"] == str(path)
@@ -29,9 +32,10 @@ def test_info_describes_every_sample_file(path, capsys):
     for s, scan in zip(info["scans"], scans):
         np.testing.assert_allclose(s["bounds_min"], scan.xyz_socs.min(axis=0))
         assert (s["intensity_raw_range"] is None) == (scan.intensity_raw is None)
-    assert main(["info", str(path)]) == 0
-    text = capsys.readouterr().out
-    assert str(path) in text and "points" in text
+    for flags in ([], ["--full"]):
+        assert main(["info", str(path), *flags]) == 0
+        text = capsys.readouterr().out
+        assert str(path) in text and "points" in text
 
 
 @pytest.mark.parametrize("path", BAD, ids=lambda p: p.name)

@@ -52,6 +52,18 @@ def handle(req: dict) -> dict:
                 "message": " | ".join(lines)[:300], "unchanged": unchanged}
     from lidar.io import read_scans
 
+    if req.get("info"):  # bridgesurvey info at header speed, or --stats
+        from lidar.io.info import describe_file
+
+        try:
+            with redirect_stderr(io.StringIO()):
+                describe_file(path, stats=req["info"] == "stats")
+        except SurveyError as exc:
+            msg = str(exc)
+            return {"outcome": "refused" if "\n" not in msg and path in msg else "bug", "message": msg[:300]}
+        except BaseException as exc:  # noqa: BLE001 - anything else is a bug
+            return {"outcome": "bug", "message": f"{type(exc).__name__}: {exc}"[:300]}
+        return {"outcome": "ok", "message": ""}
     try:
         scans = read_scans(path)
     except ScanFormatError as exc:

@@ -46,6 +46,15 @@ def test_every_damaged_file_is_read_or_refused_in_one_line(cases):
         assert any(r.outcome == "refused" and r.name.startswith(family) for r in results), family
 
 
+@pytest.mark.parametrize("mode", ["header", "stats"])
+def test_info_describes_or_refuses_every_damaged_file_in_one_line(cases, mode):
+    """``info`` (header speed and --stats) reads its own way: chunks, blocks, memory-mapped records."""
+    results = run_cases([(name, {"path": str(path), "info": mode}) for name, path in cases])
+    assert len(results) == len(cases)
+    assert _report(results) == ""
+    assert sum(r.outcome == "refused" for r in results) > len(cases) / 3
+
+
 def test_reported_attacks_are_refused_quickly(cases):
     names = [n for n, _ in cases if n.startswith("lasf-random") or n in
              ("las-field100-max", "las12-field107-max", "las-field131-0", "las-field131-nan", "e57-xml-count-huge")]

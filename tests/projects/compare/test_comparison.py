@@ -104,9 +104,13 @@ def test_outputs_profile_and_report_section(compared, tmp_path):
         assert (out / name).stat().st_size > 0
     s = json.loads((out / "summary.json").read_text())
     bins = s["span_profile"]["bins"]
-    assert len(s["span_profile"]["girder_offsets_m"]) == 2 and len(bins) >= 16
-    mid = [b for b in bins if 15 <= b["station_m"] <= 25]
-    assert mid and all(-12 < b["change_mm"] < -2 for b in mid)  # a 7 mm sag, seen through 5 mm noise
+    assert len(s["span_profile"]["girder_offsets_m"]) == 2
+    for g in (1, 2):  # every station from the first pier to the last, on both girder lines
+        assert [b["station_m"] for b in bins if b["girder"] == g] == pytest.approx(np.arange(1.25, 40, 2.5))
+    for b in bins:  # the 7 mm midspan sag of visit 2, at stations along the layout's x
+        truth_mm = (MODEL.deflection_m(b["station_m"], -0.007) - MODEL.deflection_m(b["station_m"], 0.0)) * 1e3
+        assert abs(b["change_mm"] - truth_mm) <= max(3 * b["sigma_change_mm"], 0.5), (b, truth_mm)
+        assert b["sigma_registration_mm"] > 0
     assert {t["reflector"] for t in s["targets"]} == {"M1", "M2", "M3", "M4", "M5"}
     with Campaign.open(camp, writable=False) as c:
         from projects.compare.whole_scan import comparisons
@@ -130,3 +134,54 @@ def test_bad_compare_arguments_leave_the_campaign_unchanged(processed_copy, tmp_
     err = capsys.readouterr().err.strip()
     assert message in err and len(err.splitlines()) == 1
     assert snapshot(processed_copy) == before
+
+
+def test_each_rms_says_what_it_is_computed_on(compared, capsys):
+    camp, out = compared
+    s = json.loads((out / "summary.json").read_text())
+    reg = s["registration"]["2026-03-16"]
+    assert "reference targets" in reg["targets"]["rms_on"]
+    assert "stable parts" in reg["icp"]["rms_on"] and "stable parts" in reg["icp"]["plane_rms_on"]
+    assert reg["icp"]["plane_rms_mm"] < reg["icp"]["rms_mm"]  # the plane distance is the noise, not the voxel
+    for part, words in (("stable_parts", "stable parts"), ("deck", "deck underside"), ("all", "everything")):
+        assert words in s["change"][part]["computed_on"] and s["change"][part]["rms_mm"] > 0
+    from projects.compare.whole_scan import change_lines, registration_lines
+
+    (lab, line), = registration_lines(s)
+    assert lab == "2026-03-16" and "on 4 reference targets" in line and "ICP on the stable parts" in line
+    assert all(" on " in text for text in change_lines(s))
+
+
+def test_m3c2_takes_py4dgeo_parameters_and_records_them(processed_copy, tmp_path, capsys):
+    from lidar.io import write_scan
+    from lidar.scan import Scan
+
+    core = tmp_path / "core.xyz"
+    pts = np.column_stack([np.linspace(5, 35, 40), np.full(40, -2.0), np.full(40, 7.0)])
+    write_scan(Scan(xyz_socs=pts), core)
+    out = tmp_path / "o"
+    args = ["compare", str(processed_copy), "--from", "2026-03-02", "--to", "2026-03-09", "--out", str(out),
+            "--registration", "targets", "--normal-radii", "0.3", "0.6", "--cyl-radius", "0.3", "--max-distance",
+            "0.8", "--corepoints", str(core), "--registration-error", "0.001", "--robust-aggr", "--json"]
+    assert main(args) == 0
+    p = json.loads(capsys.readouterr().out)["change"]["parameters"]
+    assert p["normal_radii"] == [0.3, 0.6] and p["cyl_radius"] == 0.3 and p["max_distance"] == 0.8
+    assert p["registration_error"] == 0.001 and p["registration_error_source"] == "given" and p["robust_aggr"]
+    assert p["corepoints"] == 40 and str(core) in p["corepoints_from"]
+    saved = json.loads((out / "summary.json").read_text())["change"]["parameters"]
+    assert saved == p
+
+
+@pytest.mark.parametrize("extra, words", [
+    (["--cyl-radius", "0"], "--cyl-radius must be positive"),
+    (["--registration-error", "big"], "--registration-error expects metres"),
+    (["--corepoints", "nope.xyz"], "nope.xyz"),
+    (["--normal-radii", "-1"], "--normal-radii must be positive"),
+])
+def test_bad_m3c2_parameters_are_refused_in_one_line_before_computing(processed_copy, tmp_path, capsys, extra, words):
+    before = snapshot(processed_copy)
+    assert main(["compare", str(processed_copy), "--from", "2026-03-02", "--to", "2026-03-09", "--out",
+                 str(tmp_path / "o"), *extra]) == 1
+    err = capsys.readouterr().err.strip()
+    assert words in err and len(err.splitlines()) == 1
+    assert snapshot(processed_copy) == before and not (tmp_path / "o").exists()
