@@ -49,11 +49,11 @@ def test_tree_details_and_selection_follow_each_other(window, processed_copy, qt
     assert [t.item_for("epoch", e) is not None for e in ("2026-03-02", "2026-03-09", "2026-03-16")] == [True] * 3
     assert t.item_for("epoch", "2026-03-16").text(1) == "processed"
     t.select_key("reflector", "M3")
-    assert window.session.reflector == "M3"
+    assert window.state.selection.reflector == "M3"
     assert "Reflector M3" in window.details.toPlainText() and "Latest" in window.details.toPlainText()
     assert window.displacements.target.currentText() == "M3"
     t.select_key("epoch", "2026-03-09")
-    assert window.session.epoch == "2026-03-09"
+    assert window.state.selection.epoch == "2026-03-09"
     assert "Centroids" in window.details.toPlainText()
 
 
@@ -71,7 +71,7 @@ def test_displacement_view_hover_values_and_click_selects_the_epoch(window, proc
     v.canvas.callbacks.process("motion_notify_event", MouseEvent("motion_notify_event", v.canvas, px, py))
     assert v.hover.text().startswith(f"M3 {epoch}: ") and "±" in v.hover.text()
     v.canvas.callbacks.process("button_press_event", MouseEvent("button_press_event", v.canvas, px, py, button=1))
-    assert window.session.epoch == epoch
+    assert window.state.selection.epoch == epoch
 
 
 def test_roi_move_resize_delete_add_and_save_then_process(window, processed_copy, qtbot, monkeypatch):
@@ -141,7 +141,7 @@ def test_roi_move_resize_delete_add_and_save_then_process(window, processed_copy
 
 def test_fine_scan_view_shows_the_split_cluster_and_centroid(window, processed_copy, qtbot):
     window.open_campaign(processed_copy)
-    window.session.select(epoch="2026-03-16", reflector="M3")
+    window.state.select(epoch="2026-03-16", reflector="M3")
     window.commands.show_fine()
     wait_job(qtbot, window)
     ins = window.fine_view.inspection
@@ -160,8 +160,8 @@ def test_new_campaign_add_epoch_plan_and_a_bad_file(window, field_copy, tmp_path
     monkeypatch.setattr(NewCampaignDialog, "values", lambda self: {
         "folder": str(camp), "name": "GUI bridge", "layout": str(field_copy / "layout.csv"), "span_m": 40.0,
         "diameter_mm": 50.0})
-    window.new_campaign()
-    assert window.session is not None and window.session.name == "GUI bridge"
+    window.commands.new_campaign()
+    assert window.state.is_open and window.state.name == "GUI bridge"
     values = {"datetime": "2026-04-01T09:00:00Z", "label": "2026-04-01", "coarse": str(field_copy / "v0" / "coarse.laz"),
               "fines": [], "notes": "from the GUI"}
     monkeypatch.setattr(AddEpochDialog, "exec", lambda self: AddEpochDialog.Accepted)
@@ -258,8 +258,13 @@ def test_3d_view_says_why_it_is_missing_offscreen(window):
 
 
 def test_limits_reflectors_and_parameters_from_the_menus(window, processed_copy, monkeypatch, errors):
-    answers = iter(["abs:3,5", "M5b", "2026-03-20", "2000", "not-a-date"])
+    from app.gui.dialogs import SetLimitDialog
+
+    answers = iter(["M5b", "2026-03-20", "2000", "not-a-date"])
     monkeypatch.setattr("app.gui.commands.QInputDialog.getText", lambda *a, **k: (next(answers), True))
+    monkeypatch.setattr(SetLimitDialog, "exec", lambda self: SetLimitDialog.Accepted)
+    monkeypatch.setattr(SetLimitDialog, "values", lambda self: {"reflector": self.target.currentData(),
+                                                                "rule": "abs:3,5"})
     monkeypatch.setattr("app.gui.commands.QInputDialog.getItem", lambda *a, **k: ("min_points", True))
     window.open_campaign(processed_copy)
     window.tree.select_key("reflector", "M3")
@@ -281,7 +286,7 @@ def test_limits_reflectors_and_parameters_from_the_menus(window, processed_copy,
 def test_welcome_opens_the_demo_campaign(window, processed_copy):
     window.demo_dir = processed_copy  # a built demo campaign is opened directly
     window.open_demo()
-    assert window.session is not None and window.session.folder == processed_copy
+    assert window.state.folder == processed_copy
     assert window.stack.currentWidget() is window.tabs
 
 
@@ -290,7 +295,7 @@ def test_field_sheet_check_stations_and_scanner_from_the_menus(window, processed
     from app.gui import commands
 
     window.open_campaign(processed_copy)
-    window.session.select(epoch="2026-03-09")
+    window.state.select(epoch="2026-03-09")
     sheet = tmp_path / "sheet.pdf"
     monkeypatch.setattr(commands, "ask_save_path", lambda *a, **k: sheet)
     window.commands.field_sheet()
@@ -325,14 +330,14 @@ def test_fleet_page_lists_the_bridges_and_opens_one(window, processed_copy, tmp_
     root.mkdir()
     shutil.copytree(processed_copy, root / "bridge-a", ignore=shutil.ignore_patterns(".lock"))
     shutil.copytree(processed_copy, root / "bridge-b", ignore=shutil.ignore_patterns(".lock"))
-    window.open_fleet(str(root))
+    window.commands.open_fleet(str(root))
     wait_job(qtbot, window)
-    view = window.fleet_view
+    view = window.commands.fleet_view
     assert view.table.rowCount() == 2 and "2 bridges" in view.summary.text()
     assert view.table.item(0, 1).text() in ("ok", "warning", "alarm")
     view.table.selectRow(1)
     view.open_btn.click()
-    assert window.session is not None and str(window.session.folder).endswith(view.folders[1].split("/")[-1])
+    assert window.state.is_open and str(window.state.folder).endswith(view.folders[1].split("/")[-1])
     assert not errors
 
 
