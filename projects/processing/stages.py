@@ -21,7 +21,7 @@ import numpy as np
 from common.flags import (FLAG_CHAINED, FLAG_DECK_NOT_MEASURED, FLAG_MISSING, FLAG_NO_DISPLACEMENT,
                           FLAG_PIERS_NOT_MEASURED, PROBLEM, severity)
 from lidar.displacement import Displacement, EpochDisplacements, compute_displacements
-from common.errors import InputError, ProcessingError, SurveyError
+from common.errors import CancelledError, InputError, ProcessingError, SurveyError
 from lidar.identification import MAX_TILT_DEG
 from lidar.io import read_scan
 from lidar.pipeline import analyse_coarse, measure_targets, plan_from_coarse
@@ -333,6 +333,8 @@ def process(c: Campaign, labels: Optional[Sequence[str]] = None, *,
                 plan = plan_epoch(c, lab, progress=sub)
                 summary.outcomes.append(EpochOutcome(lab, "planned", f"{len(plan.rois)} windows, "
                                                      f"{plan.total_seconds / 60:.1f} min; add its fine scans"))
+        except CancelledError:
+            raise  # the user stopped the whole run, not this epoch (the epochs done so far are kept)
         except SurveyError as exc:
             log.warning("epoch %s: %s", lab, exc)
             summary.outcomes.append(EpochOutcome(lab, "failed", str(exc)))

@@ -229,11 +229,13 @@ def test_long_work_can_be_cancelled_and_errors_never_freeze(window, qtbot, error
 
     window.run_job("Slow work", slow)
     qtbot.waitUntil(lambda: window.progress.isVisible() and window.progress.value() > 0, timeout=5000)
-    assert window.cancel_btn.isVisible()
+    assert window.cancel_btn.isVisible() and window.statusBar().currentMessage().startswith("Slow work: step")
     window.cancel_btn.click()
+    assert window.statusBar().currentMessage() == "Slow work: cancelling…"
+    assert window.cancel_btn.text() == "Cancelling…" and not window.cancel_btn.isEnabled()
     wait_job(qtbot, window, 5000)
-    assert not errors and "cancelled" in window.statusBar().currentMessage()
-    assert not window.progress.isVisible()
+    assert not errors and window.statusBar().currentMessage() == "Slow work: cancelled"
+    assert not window.progress.isVisible() and not window.cancel_btn.isVisible()
 
     def fails(progress):
         raise InputError("x.laz: not a scan; check the file")
@@ -241,6 +243,7 @@ def test_long_work_can_be_cancelled_and_errors_never_freeze(window, qtbot, error
     window.run_job("Failing work", fails)
     wait_job(qtbot, window, 5000)
     assert errors[-1] == ("Failing work", "x.laz: not a scan; check the file")
+    assert window.statusBar().currentMessage() == "Failing work failed: x.laz: not a scan; check the file"
 
     def bug(progress):
         raise ZeroDivisionError("oops")
