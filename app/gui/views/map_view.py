@@ -413,6 +413,7 @@ class MapView(QWidget):
         self.geometry_: Optional[MapGeometry] = None
         self.items: list[RoiItem] = []
         self._syncing = False
+        self._selecting = False
         map_state.preview_changed.connect(self._draw_preview)
         map_state.message.connect(self.show_message)
         self.editor.changed.connect(self._editor_changed)
@@ -609,10 +610,11 @@ class MapView(QWidget):
     def _on_scene_selection(self) -> None:
         sel = [k for k, it in enumerate(self.items) if it.isSelected()]
         if sel:
-            self._syncing = True
+            was, self._syncing = self._syncing, True
             self.table.selectRow(sel[0])
-            self._syncing = False
-            self.reflectorPicked.emit(self.items[sel[0]].roi.reflector)
+            self._syncing = was
+            if not self._selecting:  # the user's pick (not the selection shown from the state)
+                self.reflectorPicked.emit(self.items[sel[0]].roi.reflector)
 
     def _on_table_selection(self) -> None:
         if self._syncing:
@@ -622,12 +624,18 @@ class MapView(QWidget):
             it.setSelected(k in rows)
 
     def select_reflector(self, rid: Optional[str]) -> None:
-        """Select a target's window and bring it into view (the zoom stays as it is)."""
-        for it in self.items:
-            if it.roi.reflector == rid and not it.isSelected():
-                self.scene.clearSelection()
-                it.setSelected(True)
-                self.view.ensureVisible(it, 40, 40)
+        """Select a target's window and bring it into view (the zoom stays as it is); not a user's pick,
+        so it is not reported back (``reflectorPicked``)."""
+        it = next((it for it in self.items if it.roi.reflector == rid), None)
+        if it is None or it.isSelected():
+            return
+        self._selecting = True
+        try:
+            self.scene.clearSelection()
+            it.setSelected(True)
+        finally:
+            self._selecting = False
+        self.view.ensureVisible(it, 40, 40)
 
     def zoom_to(self, rid: str) -> None:
         """Zoom on a target's window with its surroundings."""

@@ -4,33 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from PySide6.QtCore import QEvent, QPointF, Qt
-from PySide6.QtGui import QMouseEvent
+from PySide6.QtCore import QPointF
 
 from projects.store.campaign import Campaign
 from tests.app.gui.conftest import wait_job
+from tests.app.gui.helpers import drag
 from tests.projects.campaign_helpers import snapshot
 
 pytestmark = pytest.mark.gui
-
-
-def _send(widget, kind, pos, buttons):
-    button = Qt.LeftButton if kind != QEvent.MouseMove else Qt.NoButton
-    ev = QMouseEvent(kind, QPointF(pos), widget.mapToGlobal(QPointF(pos)), button, buttons, Qt.NoModifier)
-    from PySide6.QtWidgets import QApplication
-
-    QApplication.sendEvent(widget, ev)
-
-
-def drag(view, start, end, steps=5):
-    """Press, move and release the left button in a graphics view's viewport (scene coordinates)."""
-    vp = view.viewport()
-    a, b = view.mapFromScene(start), view.mapFromScene(end)
-    _send(vp, QEvent.MouseButtonPress, a, Qt.LeftButton)
-    for k in range(1, steps + 1):
-        p = a + (b - a) * (k / steps)
-        _send(vp, QEvent.MouseMove, p, Qt.LeftButton)
-    _send(vp, QEvent.MouseButtonRelease, b, Qt.NoButton)
 
 
 def test_welcome_page_without_campaign_and_recent_list(window, processed_copy):
