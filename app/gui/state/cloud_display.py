@@ -54,8 +54,8 @@ class ChangeScale:
 
     @property
     def legend(self) -> str:
-        return (f"colours ±{self.limit:.1f} mm: {SCALE_PERCENTILE:g}th percentile of |change| on {self.source} "
-                f"({self.n_points:,} points)")
+        return (f"colours ±{self.limit:.1f} mm: {SCALE_PERCENTILE:g}th percentile of the absolute change on "
+                f"{self.source} ({self.n_points:,} points)")
 
 
 def change_scale(xyz: np.ndarray, values: np.ndarray, markers_xyz: np.ndarray, *, min_points: int = 200) -> ChangeScale:

@@ -3,7 +3,8 @@ projection in a table, and the selected target's temperature-corrected history."
 from __future__ import annotations
 
 from PySide6.QtCore import Signal
-from PySide6.QtWidgets import QHBoxLayout, QLabel, QPushButton, QTableWidget, QTableWidgetItem, QVBoxLayout, QWidget
+from PySide6.QtWidgets import (QHBoxLayout, QHeaderView, QLabel, QPushButton, QTableWidget, QTableWidgetItem,
+                               QVBoxLayout, QWidget)
 
 from app.gui.views.mpl import PlotCanvas
 
@@ -44,9 +45,13 @@ class AnalysisView(QWidget):
         self.info.setWordWrap(True)
         self.table = QTableWidget(0, len(COLUMNS))
         self.table.setHorizontalHeaderLabels(COLUMNS)
-        self.table.setMaximumHeight(230)
+        self.table.setMaximumHeight(260)
         self.table.setMinimumHeight(90)
-        self.table.horizontalHeader().setStretchLastSection(True)
+        self.table.setWordWrap(True)
+        header = self.table.horizontalHeader()
+        for col in range(len(COLUMNS)):  # the two texts share what the numbers leave, wrapped
+            header.setSectionResizeMode(col, QHeaderView.Stretch if col >= 4 else QHeaderView.ResizeToContents)
+        self.table.verticalHeader().setSectionResizeMode(QHeaderView.ResizeToContents)
         self.table.currentCellChanged.connect(lambda r, *_: self._draw(r))
         self.canvas = PlotCanvas(self, figsize=(8, 4))
         bar = QHBoxLayout()
@@ -79,7 +84,6 @@ class AnalysisView(QWidget):
                 item = QTableWidgetItem(v)
                 item.setToolTip(v)
                 self.table.setItem(r, c, item)
-        self.table.resizeColumnsToContents()
         self.table.resizeRowsToContents()
         warn = " ".join(f"⚠ {w}" for w in doc["warnings"])
         self.info.setText(f"Temperature: {doc['temperature_source'] or 'none'}; {len(doc['events'])} event(s). {warn}")

@@ -338,3 +338,21 @@ def test_analysis_tab_and_event_overlay(window, processed_copy, tmp_path, qtbot,
     assert window.tabs.currentWidget() is view and view.table.rowCount() == 5
     assert "1 event" in view.info.text()
     assert not errors
+
+
+def test_every_tab_fits_a_1366x768_screen(window, processed_copy, qtbot):
+    from app.gui.main_window import SMALL_SCREEN
+    from tests.app.gui.helpers import controls_out_of_reach
+
+    window.resize(*SMALL_SCREEN)
+    assert window.minimumSizeHint().width() <= SMALL_SCREEN[0]  # the welcome page
+    window.open_campaign(processed_copy)
+    window.state.select(epoch="2026-03-09", reflector="M3")
+    for name, _title in window.TABS:
+        window.state.request_view(name)
+        qtbot.wait(30)
+        hint = window.minimumSizeHint()
+        assert hint.width() <= SMALL_SCREEN[0] and hint.height() <= SMALL_SCREEN[1], (name, hint)
+        assert controls_out_of_reach(window) == [], name
+    title = window.map_view.title  # the long title elides instead of widening the window; its tooltip has it all
+    assert window.map_view.items and title.minimumSizeHint().width() < 200 and title.toolTip() == title.full_text()
