@@ -356,3 +356,23 @@ def test_every_tab_fits_a_1366x768_screen(window, processed_copy, qtbot):
         assert controls_out_of_reach(window) == [], name
     title = window.map_view.title  # the long title elides instead of widening the window; its tooltip has it all
     assert window.map_view.items and title.minimumSizeHint().width() < 200 and title.toolTip() == title.full_text()
+
+
+def test_the_new_epochs_date_is_the_scan_files_own_time(qtbot, tmp_path):
+    from pathlib import Path
+
+    from app.gui.dialogs import AddEpochDialog
+    from app.gui.state.folders import LastFolders
+
+    data = Path(__file__).resolve().parents[2] / "data" / "las"
+    dlg = AddEpochDialog(None, LastFolders({}, fallback=str(tmp_path)))
+    qtbot.addWidget(dlg)
+    dlg.coarse.edit.setText(str(data / "simple1_4.las"))
+    assert dlg.values()["datetime"].startswith("2012-01-13T00:00") and "creation day" in dlg.when_source.text()
+    assert dlg.values()["label"] == "2012-01-13"
+    dlg.coarse.edit.setText(str(data / "test1_4.las"))  # another file: its points' GPS time
+    assert dlg.values()["datetime"].startswith("2014-") and "GPS time" in dlg.when_source.text()
+    dlg.when.setDateTime(dlg.when.dateTime().addDays(3))  # set by hand: kept from now on
+    by_hand = dlg.values()["datetime"]
+    dlg.coarse.edit.setText(str(data / "simple1_4.las"))
+    assert dlg.values()["datetime"] == by_hand and dlg.when_source.text() == "set by hand"
