@@ -351,7 +351,7 @@ def grid_in_polygon(polygon_xy: np.ndarray, grid_m: float) -> np.ndarray:
     return pts[inside]
 
 
-def _predict_chunk(args) -> list[StationPrediction]:
+def _predict_chunk(args, each=None) -> list[StationPrediction]:
     layout, positions, kwargs = args
     kwargs = dict(kwargs)
     u = np.asarray(kwargs["up"], dtype=np.float64)
@@ -359,8 +359,20 @@ def _predict_chunk(args) -> list[StationPrediction]:
     piers = _Piers.from_layout(layout, u)
     seen = kwargs.pop("obstacles_xyz", None)
     obstacles = Obstacles(seen) if seen is not None else None
-    return [predict_station(layout, p, normals=normals, piers=piers, obstacles=obstacles, **kwargs)
-            for p in positions]
+    out = []
+    for p in positions:
+        out.append(predict_station(layout, p, normals=normals, piers=piers, obstacles=obstacles, **kwargs))
+        if each is not None:
+            each(len(out))  # in this process only: the progress callback, which may cancel
+    return out
+
+
+def _terminate_workers(ex) -> None:
+    """Stop a process pool's workers now (a cancelled survey), instead of letting their chunks finish."""
+    procs = list((getattr(ex, "_processes", None) or {}).values())  # before shutdown forgets them
+    ex.shutdown(wait=False, cancel_futures=True)
+    for proc in procs:
+        proc.terminate()
 
 
 def survey_stations(layout: Layout, positions_layout: np.ndarray, *, profile: ScannerProfile,
@@ -377,7 +389,7 @@ def survey_stations(layout: Layout, positions_layout: np.ndarray, *, profile: Sc
     processing does), so a 600-position grid takes about half a minute on two cores.
     """
     import os
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
     from multiprocessing import get_context
     from pickle import PicklingError
@@ -398,20 +410,34 @@ def survey_stations(layout: Layout, positions_layout: np.ndarray, *, profile: Sc
     if n_workers > 1 and len(jobs) >= 3:
         try:
             # spawn, not fork: this may run in a GUI worker thread, where forking is unsafe
-            with ProcessPoolExecutor(n_workers, mp_context=get_context("spawn")) as ex:
-                futures = [ex.submit(_predict_chunk, job) for job in jobs]
-                for f in as_completed(futures):
-                    out.extend(f.result())
-                    report(progress, len(out) / len(pos), f"{len(out)} of {len(pos)} stations")
-        except (OSError, RuntimeError, BrokenProcessPool, PicklingError) as exc:
-            # no worker processes here (a frozen or embedded interpreter, a script without a main guard):
-            # the same work in this process
+            ex = ProcessPoolExecutor(n_workers, mp_context=get_context("spawn"))
+        except (OSError, RuntimeError) as exc:
             log.info("station survey without worker processes (%s)", exc)
-            out = []
+        else:
+            try:
+                pending = {ex.submit(_predict_chunk, job) for job in jobs}
+                while pending:
+                    # a progress call at least every 0.25 s: the callback may cancel, and then it stops at once
+                    done, pending = wait(pending, timeout=0.25, return_when=FIRST_COMPLETED)
+                    for f in done:
+                        out.extend(f.result())
+                    report(progress, len(out) / len(pos), f"{len(out)} of {len(pos)} stations")
+            except (OSError, RuntimeError, BrokenProcessPool, PicklingError) as exc:
+                # no worker processes here (a frozen or embedded interpreter, a script without a main guard):
+                # the same work in this process
+                log.info("station survey without worker processes (%s)", exc)
+                ex.shutdown(wait=False, cancel_futures=True)
+                out = []
+            except BaseException:
+                _terminate_workers(ex)  # cancelled (or interrupted): do not wait for the chunks under way
+                raise
+            else:
+                ex.shutdown(wait=True)
     if len(out) < len(pos):
         out = []
-        for k, job in enumerate(jobs):
-            out.extend(_predict_chunk(job))
-            report(progress, (k + 1) / len(jobs), f"{len(out)} of {len(pos)} stations")
+        for job in jobs:
+            before = len(out)
+            out.extend(_predict_chunk(job, each=lambda n: report(
+                progress, (before + n) / len(pos), f"{before + n} of {len(pos)} stations")))
     report(progress, 1.0, "stations evaluated")
     return tuple(sorted(out, key=StationPrediction.rank_key))

@@ -153,9 +153,12 @@ def report(session, path: Path, progress: Callable) -> Path:
         return write_report(c, path, progress=progress)
 
 
-def set_limit(session, reflector: str, rule: str) -> None:
+def set_limit(session, reflector: str, rule: str) -> str:
+    """Set a limit rule (also ``prediction:T``); returns what was set, in one line."""
+    from projects.store.limits import set_limit_rule
+
     with session.write() as c:
-        c.set_limit(reflector, rule)
+        return set_limit_rule(c, reflector, rule)
 
 
 def retire_reflector(session, rid: str, when: str) -> None:
@@ -225,3 +228,44 @@ def analyse(session) -> dict:
 
     with session.read() as c:
         return analyse_campaign(c)
+
+
+def import_env(session, v: dict, progress: Callable):
+    """Import an environment series (``v``: file, kind, name, column, unit, timezone)."""
+    from projects.series.environment import import_env as imp
+
+    if not v["file"]:
+        raise InputError("choose the series file")
+    progress(0.1, "reading the series")
+    with session.write() as c:
+        name, series = imp(c, v["file"], kind=v["kind"], name=v["name"], column=v["column"], unit=v["unit"],
+                           timezone=v["timezone"])
+    return name, series.summary()
+
+
+def add_event(session, v: dict) -> int:
+    """Record an event (``v``: date, kind, label, load_kn_m or None)."""
+    from projects.series.environment import add_event as add
+
+    with session.write() as c:
+        return add(c, date=v["date"], kind=v["kind"], label=v["label"], load_kn_m=v["load_kn_m"])
+
+
+def import_prediction(session, v: dict, progress: Callable) -> dict:
+    """Import a design prediction (``v``: file, align_at or None for least squares, casting_date or None)."""
+    from projects.processing.stages import set_parameter as setp
+    from projects.series.predictions import import_prediction as imp
+
+    if not v["file"]:
+        raise InputError("choose the prediction file")
+    progress(0.1, "reading the prediction")
+    with session.write() as c:
+        before = c.settings().get("casting_date")
+        if v.get("casting_date") and v["casting_date"] != before:
+            setp(c, "casting_date", v["casting_date"])  # a file by concrete age needs it
+        try:
+            return imp(c, v["file"], align_at=v["align_at"], lsq=v["align_at"] is None)
+        except BaseException:
+            if c.settings().get("casting_date") != before:
+                c.set_setting("casting_date", before)  # a refused import leaves the campaign as it was
+            raise

@@ -1,331 +1,433 @@
-"""The main window's commands: plan editing, epoch work, campaign settings, camera and exports.
+"""The window's commands: what the menus, the toolbar and the views' buttons do.
 
-A mixin of :class:`app.gui.main_window.MainWindow`; each command asks what it needs (dialogs),
-then runs the work as a background job through ``self.win.run_job`` and refreshes the views.
+Each command asks what it needs (dialogs), runs the work (:mod:`app.gui.actions`, plain functions)
+as a background job through its host, and tells the application's state what came of it
+(:class:`app.gui.state.app_state.AppState`: a refresh, a selection, a view to show, a result for a
+view, a status line). No command touches a view.
 """
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any, Callable, Optional, Protocol
 
-from PySide6.QtWidgets import QFileDialog, QInputDialog
+from PySide6.QtWidgets import QInputDialog
 
 from app.gui import actions
-from app.gui.state.map_geometry import window_from_cells
-from app.gui.views.map_view import cells
-from app.gui.dialogs import AddEpochDialog, CheckDialog, ImportCameraDialog, ask_save_path, show_error
+from app.gui.dialogs import (AddEpochDialog, AddEventDialog, CheckDialog, ImportCameraDialog, ImportEnvDialog,
+                             ImportPredictionDialog, NewCampaignDialog, SetLimitDialog, ask_files, ask_folder,
+                             ask_save_path)
+from app.gui.state.app_state import AppState
+from app.gui.state.folders import LastFolders
+from app.gui.state.words import in_app_words
 from common.errors import SurveyError
 
 
 class CommandHost(Protocol):
     """What the commands use of the window they serve."""
 
-    session: Any          # app.gui.session.Session: the open campaign, the selected epoch and reflector
-    status_data: dict     # projects.overview.campaign_status of the open campaign
-    tabs: Any             # QTabWidget holding the views below
-    map_view: Any
-    fine_view: Any
-    cloud_view: Any
-    camera_view: Any
-    stations_view: Any
-    analysis_view: Any
+    state: AppState
+    folders: LastFolders
 
     def run_job(self, title: str, fn: Callable, on_done: Optional[Callable] = None) -> bool: ...
 
-    def statusBar(self) -> Any: ...
-
-    def _changed(self, _result=None) -> None: ...
+    def dialog_parent(self) -> Any: ...
 
 
 class Commands:
-    """The slots behind the menus, toolbar and view buttons of ``win``."""
+    """The slots behind the menus, toolbar and view buttons of ``host``."""
 
-    def __init__(self, win: CommandHost):
-        self.win = win
-        self.check_dialog = None  # the last check's dialog, kept open
+    def __init__(self, host: CommandHost):
+        self.host = host
+        self.check_dialog: Optional[CheckDialog] = None  # the last check's dialog, kept open
+        self.fleet_view = None
+
+    @property
+    def state(self) -> AppState:
+        return self.host.state
+
+    @property
+    def parent(self):
+        return self.host.dialog_parent()
+
+    def _job(self, title: str, fn: Callable, on_done: Optional[Callable] = None) -> bool:
+        return self.host.run_job(title, fn, on_done)
+
+    def _refresh(self, _result=None) -> None:
+        self.state.refresh()
+
+    def _need_epoch(self, title: str, what: str = "an epoch") -> Optional[str]:
+        label = self.state.epoch_or_latest
+        if label is None:
+            self.state.report_error(title, f"The campaign has no epoch yet: add {what} first (Epoch ▸ Add epoch…).")
+        return label
+
+    def _quick(self, title: str, fn: Callable, done: Optional[Callable[[Any], str]] = None) -> bool:
+        """Small changes run in the GUI thread; errors are shown, the campaign is left as it was.
+
+        ``done(result)`` gives the status line saying what was changed."""
+        try:
+            result = fn()
+        except SurveyError as exc:
+            self.state.report_error(title, str(exc))
+            return False
+        self.state.refresh()
+        self.state.status.result(done(result) if done is not None else f"{title}: done")
+        return True
+
+    def run_next(self) -> None:
+        """Do the next step the state shows (:mod:`app.gui.state.next_step`)."""
+        step = self.state.next
+        if step is None:
+            return
+        if step.epoch is not None:
+            self.state.select(epoch=step.epoch)
+        {"add_epoch": self.add_epoch, "plan": self.plan_selected, "add_fine": self.add_fine,
+         "check": self.check_selected, "process": self.process, "report": self.write_report}[step.command]()
+
+    # ------------------------------------------------------------------ campaigns
+    def new_campaign(self) -> None:
+        dlg = NewCampaignDialog(self.parent, self.host.folders)
+        if dlg.exec() != NewCampaignDialog.Accepted:
+            return
+        try:
+            folder = actions.create_campaign(**dlg.values())
+        except SurveyError as exc:
+            self.state.report_error("New campaign", str(exc))
+            return
+        self.state.open(folder)
+
+    def build_demo(self, folder: Path) -> None:
+        self._job("Building the demo campaign", lambda p: actions.build_demo(folder, p),
+                  lambda _r: self.state.open(folder))
+
+    def open_fleet(self, folder: Optional[str] = None) -> None:
+        """List every campaign under a folder (worst state first) and open any of them."""
+        from app.gui.views.fleet_view import FleetView
+
+        folder = folder or ask_folder(self.parent, "Folder holding the campaigns", self.host.folders, "campaigns")
+        if not folder:
+            return
+
+        def done(status):
+            self.fleet_view = view = FleetView(self.parent)
+            view.openRequested.connect(lambda f: (self.state.open(f), view.close()))
+            view.show_status(status)
+            view.show()
+
+        self._job(f"Reading the campaigns under {folder}", lambda p: actions.fleet_status(folder), done)
 
     # ------------------------------------------------------------------ map and plan
-    def _load_map(self, *, reload: bool = False) -> None:
-        """Show the selected epoch's map and plan; the one already shown stays (its windows are live
-        items the user may be clicking) unless ``reload`` asks for what the campaign now holds."""
-        mv = self.win.map_view
-        label = self.win.session.epoch or self._last_epoch()
-        if label is None:
-            mv.show_message("No epoch yet: add one (Epoch ▸ Add epoch…).")
-            return
-        if mv.plan is not None and mv.label == label and (mv.dirty or not reload):
-            if self.win.session.reflector:
-                mv.select_reflector(self.win.session.reflector)
-            return  # the same epoch: keep what is shown, unsaved edits above all
-        with self.win.session.read() as c:
-            preview = c.map_preview(label)
-            plan = c.plan(label)
-        if preview is None:
-            self.win.map_view.show_message(f"Epoch {label} has not been planned yet: Epoch ▸ Plan, or Process.")
-            return
-        self.win.map_view.load(label, preview, plan)
-        if self.win.session.reflector:
-            self.win.map_view.select_reflector(self.win.session.reflector)
-
-    def _last_epoch(self) -> Optional[str]:
-        eps = self.win.status_data["epochs"]
-        return eps[-1]["epoch"] if eps else None
-
     def save_plan(self, plan) -> None:
-        label = self.win.map_view.label
+        label = self.state.map.label
         if plan is None or label is None:
             return
 
         def done(_r):
-            self.win.map_view.editor.mark_saved(plan.rois)
-            self.win._changed()
+            self.state.map.editor.mark_saved(plan.rois)
+            self.state.status.result(f"plan of {label} saved; Epoch ▸ Process measures {label} again with it")
+            self.state.refresh()
 
-        self.win.run_job(f"Saving the plan of {label}", lambda p: actions.save_plan(self.win.session, label, plan), done)
+        self._job(f"Saving the plan of {label}", lambda p: actions.save_plan(self.state.access, label, plan), done)
 
     def export_plan(self, plan) -> None:
         if plan is None:
             return
-        path = ask_save_path(self.win, "Export plan", f"plan-{plan.epoch}.json", "Plan (*.json)")
+        path = ask_save_path(self.parent, "Export plan", self.host.folders, f"plan-{plan.epoch}.json",
+                             "Plan (*.json)")
         if path is not None:
             try:
                 plan.save(path)
-                self.win.statusBar().showMessage(f"plan written to {path}", 8000)
             except (SurveyError, OSError) as exc:
-                show_error(self.win, "Export plan", str(exc))
+                self.state.report_error("Export plan", str(exc))
+                return
+            self.state.status.result(f"plan written to {path}")
 
     def add_window(self, rect) -> None:
-        """A window drawn on the map: ask which target it is for and add it with steps for that target."""
-        self.win.map_view.draw_btn.setChecked(False)
-        if self.win.map_view.plan is None:
+        """A window drawn on the map (a :class:`app.gui.state.map_geometry.CellRect`): ask which target it
+        is for and add it with steps for that target."""
+        if self.state.map.editor.plan is None:
             return
-        with self.win.session.read() as c:
-            refl = {r.id: r for r in c.reflectors() if not r.retired}
-        taken = {it.roi.reflector for it in self.win.map_view.items}
-        free = [rid for rid in refl if rid not in taken]
+        refl = {r.id: r for r in self.state.snapshot.reflectors}
+        free = self.state.map.free_targets(refl.values())
         if not free:
-            show_error(self.win, "Add window", "Every reflector has a window already; move or resize it instead.")
+            self.state.report_error("Add window", "Every reflector has a window already; move or resize it instead.")
             return
-        rid, ok = QInputDialog.getItem(self.win, "Add window", "Reflector:", free, 0, False)
+        rid, ok = QInputDialog.getItem(self.parent, "Add window", "Target of the new window:", free, 0, False)
         if not ok:
             return
         try:
-            roi = window_from_cells(self.win.map_view.preview, self.win.map_view.plan, cells(rect), rid, refl[rid])
+            roi = self.state.map.window_for(rect, refl[rid])
         except SurveyError as exc:
-            show_error(self.win, "Add window", str(exc))
+            self.state.report_error("Add window", str(exc))
             return
-        self.win.map_view.add_roi(roi)
+        self.state.map.editor.add(roi)
 
     # ------------------------------------------------------------------ epoch work
     def add_epoch(self) -> None:
-        dlg = AddEpochDialog(self.win)
+        dlg = AddEpochDialog(self.parent, self.host.folders)
         if dlg.exec() != AddEpochDialog.Accepted:
             return
         v = dlg.values()
-        self.win.run_job(f"Importing epoch {v['label']}", lambda p: actions.add_epoch(self.win.session, v, p),
-                     lambda label: (self.win._changed(), self.win.session.select(epoch=label)))
+
+        def done(label):
+            self.state.refresh()
+            self.state.select(epoch=label)
+            self.state.status.result(f"epoch {label} added; next: plan it (Epoch ▸ Plan the selected epoch)")
+
+        self._job(f"Importing epoch {v['label']}", lambda p: actions.add_epoch(self.state.access, v, p), done)
 
     def add_fine(self) -> None:
-        label = self.win.session.epoch
+        label = self._need_epoch("Add fine scans")
         if not label:
-            show_error(self.win, "Add fine scans", "Select an epoch in the campaign tree first.")
             return
-        from app.gui.dialogs import SCAN_FILTER
+        paths = ask_files(self.parent, f"Fine scans of {label}", self.host.folders, "scans")
+        if not paths:
+            return
 
-        paths, _ = QFileDialog.getOpenFileNames(self.win, f"Fine scans of {label}", "", SCAN_FILTER)
-        if paths:
-            self.win.run_job(f"Importing fine scans of {label}", lambda p: actions.add_fine(self.win.session, label, paths, p),
-                         self.win._changed)
+        def done(_r):
+            self.state.refresh()
+            self.state.status.result(f"{len(paths)} fine scan(s) added to {label}; next: check them before "
+                                     "leaving (Epoch ▸ Check the fine scans before leaving)")
+
+        self._job(f"Importing fine scans of {label}", lambda p: actions.add_fine(self.state.access, label, paths, p),
+                  done)
 
     def plan_selected(self) -> None:
-        label = self.win.session.epoch or self._last_epoch()
-        if label:
-            self.win.run_job(f"Planning {label}", lambda p: actions.plan(self.win.session, label, p), self.win._changed)
+        label = self._need_epoch("Plan")
+        if not label:
+            return
+
+        def done(plan):
+            self.state.refresh()
+            self.state.select(epoch=label)
+            self.state.request_view("map")
+            self.state.status.result(f"{label} planned: {len(plan.rois)} windows, {plan.total_seconds / 60:.1f} min; "
+                                     "export the plan for the scanner (Export plan JSON…) or print the field sheet")
+
+        self._job(f"Planning {label}", lambda p: actions.plan(self.state.access, label, p), done)
 
     def process(self) -> None:
-        self.win.run_job("Processing", lambda p: actions.process(self.win.session, p), self._processed)
+        def done(summary):
+            self.state.refresh()
+            if summary.failed:
+                self.state.report_error("Processing", "; ".join(f"{o.epoch}: {o.message}" for o in summary.failed))
 
-    def _processed(self, summary) -> None:
-        self.win._changed()
-        if summary.failed:
-            show_error(self.win, "Processing", "\n".join(f"{o.epoch}: {o.message}" for o in summary.failed))
+        self._job("Processing", lambda p: actions.process(self.state.access, p), done)
 
     def field_sheet(self) -> None:
-        label = self.win.session.epoch or self._last_epoch()
+        label = self._need_epoch("Field sheet", "an epoch (its coarse scan)")
         if not label:
-            show_error(self.win, "Field sheet", "Add an epoch (its coarse scan) first.")
             return
-        path = ask_save_path(self.win, "Field sheet", f"field-sheet-{label}.pdf", "PDF (*.pdf)")
+        path = ask_save_path(self.parent, "Field sheet", self.host.folders, f"field-sheet-{label}.pdf", "PDF (*.pdf)")
         if path is not None:
-            self.win.run_job(f"Writing the field sheet of {label}", lambda p: actions.field_sheet(self.win.session, label, path, p),
-                         lambda r: (self.win._changed(), self.win.statusBar().showMessage(f"field sheet written to {r}", 10000)))
+            def done(r):
+                self.state.refresh()
+                self.state.status.result(f"field sheet written to {r}")
+
+            self._job(f"Writing the field sheet of {label}",
+                      lambda p: actions.field_sheet(self.state.access, label, path, p), done)
 
     def check_selected(self) -> None:
-        label = self.win.session.epoch or self._last_epoch()
+        label = self._need_epoch("Check", "an epoch with fine scans")
         if not label:
-            show_error(self.win, "Check", "Select an epoch with fine scans first.")
             return
 
         def done(result):
-            self.win._changed()
-            self.check_dialog = CheckDialog(self.win, result)
+            self.state.refresh()
+            self.check_dialog = CheckDialog(self.parent, result, self.host.folders)
             self.check_dialog.show()
+            self.state.status.result(f"{label} checked: " + (
+                "every target is good; next: Epoch ▸ Process" if not result.short else
+                f"re-scan {', '.join(t.reflector for t in result.short)} before leaving"))
 
-        self.win.run_job(f"Checking the fine scans of {label}", lambda p: actions.check(self.win.session, label, p), done)
+        self._job(f"Checking the fine scans of {label}", lambda p: actions.check(self.state.access, label, p), done)
 
-    def evaluate_stations(self, grid_m: Optional[float] = None, height_m: Optional[float] = None) -> None:
-        view = self.win.stations_view
-        grid_m = view.grid.value() if grid_m is None else grid_m
-        height_m = view.height.value() if height_m is None else height_m
-        view.grid.setValue(grid_m)
-        view.height.setValue(height_m)
-        self.win.tabs.setCurrentWidget(view)
-        self.win.run_job("Evaluating scanner stations", lambda p: actions.stations(self.win.session, grid_m, height_m, p),
-                     lambda r: self.win.stations_view.show_advice(*r))
+    def evaluate_stations(self, grid_m: float, height_m: float) -> None:
+        self.state.request_view("stations")
+        self._job("Evaluating scanner stations", lambda p: actions.stations(self.state.access, grid_m, height_m, p),
+                  lambda r: self.state.outputs.stations.emit(*r))
 
     def run_analysis(self) -> None:
-        self.win.tabs.setCurrentWidget(self.win.analysis_view)
-        self.win.run_job("Analysing the displacements", lambda p: actions.analyse(self.win.session),
-                     self.win.analysis_view.show_analysis)
+        self.state.request_view("analysis")
+        def done(doc):
+            self.state.outputs.analysis.emit({**doc, "warnings": [in_app_words(w) for w in doc["warnings"]]})
+
+        self._job("Analysing the displacements", lambda p: actions.analyse(self.state.access), done)
 
     def choose_scanner(self) -> None:
-        with self.win.session.read() as c:
+        with self.state.read() as c:
             current = c.profile.name
         names = actions.scanner_names()
-        name, ok = QInputDialog.getItem(self.win, "Scanner", "The campaign's scanner (planning and noise model):", names,
-                                        names.index(current) if current in names else 0, False)
+        name, ok = QInputDialog.getItem(self.parent, "Scanner", "The campaign's scanner (planning and noise model):",
+                                        names, names.index(current) if current in names else 0, False)
         if ok:
-            self._quick("Scanner", lambda: actions.set_scanner(self.win.session, name))
+            self._quick("Scanner", lambda: actions.set_scanner(self.state.access, name),
+                        lambda _r: f"the campaign's scanner is now the {name}; plans from now on use it")
 
     def show_fine(self) -> None:
-        s = self.win.session
-        label, rid = s.epoch or self._last_epoch(), s.reflector
+        sel = self.state.selection
+        label, rid = self.state.epoch_or_latest, sel.reflector
+        self.state.request_view("fine")
         if not label or not rid:
-            self.win.fine_view.show_message("Select an epoch and a target (tree, map or 3-D view) first.")
-            self.win.tabs.setCurrentWidget(self.win.fine_view)
+            self.state.outputs.message.emit("fine", "Select an epoch and a target (tree, map or 3-D view), then "
+                                                    "Epoch ▸ Inspect the selected target's fine scan.")
             return
-        self.win.tabs.setCurrentWidget(self.win.fine_view)
-        self.win.run_job(f"Reading the window of {rid} in {label}", lambda p: actions.inspect(s, label, rid, p),
-                     self.win.fine_view.set_inspection)
+        self._job(f"Reading the window of {rid} in {label}",
+                  lambda p: actions.inspect(self.state.access, label, rid, p), self.state.outputs.inspection.emit)
 
     def show_cloud(self, mode: str) -> None:
-        s = self.win.session
-        label = s.epoch or self._last_epoch()
+        label = self._need_epoch("3-D view")
         if not label:
             return
-        self.win.cloud_view.mode.setCurrentIndex(0 if mode == "intensity" else 1)
         if mode == "intensity":
-            self.win.run_job(f"Loading the scan of {label}", lambda p: actions.epoch_cloud(s, label, p),
-                         self.win.cloud_view.set_cloud)
+            self._job(f"Loading the scan of {label}", lambda p: actions.epoch_cloud(self.state.access, label, p),
+                      self.state.outputs.cloud.emit)
         else:
-            self.win.run_job(f"Comparing {label} with the baseline", lambda p: actions.change_cloud(s, label, p),
-                         lambda r: (self.win.cloud_view.set_cloud(r), self.win._changed()))
+            def done(cloud):
+                self.state.outputs.cloud.emit(cloud)
+                self.state.refresh()
+
+            self._job(f"Comparing {label} with the baseline", lambda p: actions.change_cloud(self.state.access, label, p),
+                      done)
 
     # ------------------------------------------------------------------ campaign settings
     def _ask(self, title: str, label: str, text: str = "") -> Optional[str]:
-        value, ok = QInputDialog.getText(self.win, title, label, text=text)
+        value, ok = QInputDialog.getText(self.parent, title, label, text=text)
         return value.strip() if ok and value.strip() else None
 
-    def _quick(self, title: str, fn: Callable) -> None:
-        """Small changes run in the GUI thread; errors are shown, the campaign is left as it was."""
-        try:
-            fn()
-        except SurveyError as exc:
-            show_error(self.win, title, str(exc))
-            return
-        self.win._changed()
-
     def set_limit(self) -> None:
-        rid = self.win.session.reflector or "*"
-        rule = self._ask("Set limit", f"Limit rule for {'every measurement target' if rid == '*' else rid} "
-                                      "(kr-rail:0-200, abs:10,15 mm or span:1000,500):", "kr-rail:0-200")
-        if rule:
-            self._quick("Set limit", lambda: actions.set_limit(self.win.session, rid, rule))
+        meas = [r.id for r in self.state.snapshot.reflectors if not r.is_reference and not r.retired]
+        sel = self.state.selection.reflector
+        dlg = SetLimitDialog(self.parent, meas, sel if sel in meas else None)
+        if dlg.exec() != SetLimitDialog.Accepted:
+            return
+        v = dlg.values()
+        self._quick("Set limit", lambda: actions.set_limit(self.state.access, v["reflector"], v["rule"]), str)
 
     def retire_reflector(self) -> None:
-        rid = self.win.session.reflector
+        rid = self.state.selection.reflector
         if not rid:
-            show_error(self.win, "Retire reflector", "Select a reflector in the campaign tree first.")
+            self.state.report_error("Retire reflector", "Select a reflector in the campaign tree first.")
             return
-        when = self._ask("Retire reflector", f"Retire {rid} from (ISO date):")
+        when = self._ask("Retire reflector", f"Retire {rid} from (date, YYYY-MM-DD):")
         if when:
-            self._quick("Retire reflector", lambda: actions.retire_reflector(self.win.session, rid, when))
+            self._quick("Retire reflector", lambda: actions.retire_reflector(self.state.access, rid, when),
+                        lambda _r: f"{rid} retired from {when}")
 
     def replace_reflector(self) -> None:
-        rid = self.win.session.reflector
+        rid = self.state.selection.reflector
         if not rid:
-            show_error(self.win, "Replace reflector", "Select a reflector in the campaign tree first.")
+            self.state.report_error("Replace reflector", "Select a reflector in the campaign tree first.")
             return
-        new = self._ask("Replace reflector", f"New id of the target replacing {rid}:", f"{rid}b")
-        when = new and self._ask("Replace reflector", f"{new} replaces {rid} from (ISO date):")
+        new = self._ask("Replace reflector", f"Id of the new target replacing {rid}:", f"{rid}b")
+        when = new and self._ask("Replace reflector", f"{new} replaces {rid} from (date, YYYY-MM-DD):")
         if new and when:
-            self._quick("Replace reflector", lambda: actions.replace_reflector(self.win.session, rid, new, when))
+            self._quick("Replace reflector", lambda: actions.replace_reflector(self.state.access, rid, new, when),
+                        lambda _r: f"{new} replaces {rid} from {when}; its history continues {rid}'s")
 
     def set_parameter(self) -> None:
         from projects.processing.parameters import BY_NAME, PARAMETERS
         from projects.processing.stages import parameters
 
-        with self.win.session.read() as c:
+        with self.state.read() as c:
             current = {**parameters(c), **{k: v for k, v in c.settings().items() if k in BY_NAME}}
         keys = [p.name for p in PARAMETERS]
-        key, ok = QInputDialog.getItem(self.win, "Processing parameter", "Parameter:", keys, 0, False)
+        key, ok = QInputDialog.getItem(self.parent, "Processing parameter", "Parameter:", keys, 0, False)
         if not ok:
             return
         p = BY_NAME[key]
         text = self._ask("Processing parameter", f"{key}: {p.help}.\nValues: {p.values}. "
                                                  f"Now {current.get(key)}, default {p.default}.\nNew value:")
         if text is not None:
-            self._quick("Processing parameter", lambda: actions.set_parameter(self.win.session, key, text))
+            self._quick("Processing parameter", lambda: actions.set_parameter(self.state.access, key, text),
+                        lambda _r: f"{key} = {text}; Epoch ▸ Process computes what it changes")
 
     # ------------------------------------------------------------------ camera
-    def _load_camera(self) -> None:
-        from projects.series.camera import crossval_summaries, load_series
-        from vision.crossval import CrossValidation
-
-        with self.win.session.read() as c:
-            sums = crossval_summaries(c)
-            cam = load_series(c, sums[0]["series"])[1] if sums else None
-        if sums:
-            self.win.camera_view.set_result(CrossValidation.from_json(sums[0]), cam)
-        else:
-            self.win.camera_view.show_message("No cross-validation yet: import a camera series, then Camera ▸ "
-                                          "Cross-validate with LiDAR.")
-
     def import_camera(self) -> None:
         from projects.series.camera import midspan_reflector
 
-        with self.win.session.read() as c:
+        with self.state.read() as c:
             meas = [r.id for r in c.reflectors() if not r.is_reference and not r.retired]
             try:
                 default = midspan_reflector(c)
             except SurveyError:
                 default = None
-        dlg = ImportCameraDialog(meas, default, self.win)
+        dlg = ImportCameraDialog(meas, default, self.parent, self.host.folders)
         if dlg.exec() != ImportCameraDialog.Accepted:
             return
         v = dlg.values()
-        self.win.run_job("Importing the camera series", lambda p: actions.import_camera(self.win.session, v, p),
-                     self.win._changed)
+
+        def done(r):
+            name, summary = r
+            self.state.refresh()
+            self.state.status.result(f"camera series {name!r} imported: {summary['rows']:,} rows; next: Camera ▸ "
+                                     "Cross-validate with LiDAR")
+
+        self._job("Importing the camera series", lambda p: actions.import_camera(self.state.access, v, p), done)
 
     def crossval(self) -> None:
         def done(_r):
-            self.win._changed()
-            self.win.tabs.setCurrentWidget(self.win.camera_view)
-            self._load_camera()
+            self.state.refresh()
+            self.state.request_view("camera")
 
-        self.win.run_job("Cross-validating", lambda p: actions.crossval(self.win.session, p), done)
+        self._job("Cross-validating", lambda p: actions.crossval(self.state.access, p), done)
+
+    # ------------------------------------------------------------------ analysis inputs
+    def import_env(self) -> None:
+        dlg = ImportEnvDialog(self.parent, self.host.folders)
+        if dlg.exec() != ImportEnvDialog.Accepted:
+            return
+        v = dlg.values()
+
+        def done(r):
+            name, summary = r
+            self.state.refresh()
+            self.state.status.result(f"{v['kind']} series {name!r} imported: {summary['rows']:,} rows, "
+                                     f"{summary['bad_rows']} bad row(s); next: Analysis ▸ Analyse")
+
+        self._job("Importing the environment series", lambda p: actions.import_env(self.state.access, v, p), done)
+
+    def add_event(self) -> None:
+        dates = [e["datetime"][:10] for e in self.state.snapshot.status["epochs"]]
+        dlg = AddEventDialog(self.parent, dates[-1] if dates else None)
+        if dlg.exec() != AddEventDialog.Accepted:
+            return
+        v = dlg.values()
+        self._quick("Add event", lambda: actions.add_event(self.state.access, v),
+                    lambda _id: f"event '{v['label']}' on {v['date']} added; Analysis ▸ Analyse fits its step")
+
+    def import_prediction(self) -> None:
+        with self.state.read() as c:
+            casting = c.settings().get("casting_date")
+        dlg = ImportPredictionDialog(self.parent, self.host.folders, casting)
+        if dlg.exec() != ImportPredictionDialog.Accepted:
+            return
+        v = dlg.values()
+
+        def done(out):
+            self.state.refresh()
+            self.state.status.result(f"design prediction imported for {len(out)} target(s)")
+
+        self._job("Importing the design prediction", lambda p: actions.import_prediction(self.state.access, v, p),
+                  done)
 
     # ------------------------------------------------------------------ exports
     def export_csv(self) -> None:
-        path = ask_save_path(self.win, "Export displacements", "displacements.csv", "CSV (*.csv)")
+        path = ask_save_path(self.parent, "Export displacements", self.host.folders, "displacements.csv",
+                             "CSV (*.csv)")
         if path is not None:
-            self.win.run_job("Exporting displacements", lambda p: actions.export_csv(self.win.session, path))
+            self._job("Exporting displacements", lambda p: actions.export_csv(self.state.access, path),
+                      lambda r: self.state.status.result(f"displacements written to {r}"))
 
     def export_xlsx(self) -> None:
-        path = ask_save_path(self.win, "Export workbook", "campaign.xlsx", "Excel workbook (*.xlsx)")
+        path = ask_save_path(self.parent, "Export workbook", self.host.folders, "campaign.xlsx",
+                             "Excel workbook (*.xlsx)")
         if path is not None:
-            self.win.run_job("Exporting the workbook", lambda p: actions.export_xlsx(self.win.session, path))
+            self._job("Exporting the workbook", lambda p: actions.export_xlsx(self.state.access, path),
+                      lambda r: self.state.status.result(f"workbook written to {r}"))
 
     def write_report(self) -> None:
-        path = ask_save_path(self.win, "Write report", "report.pdf", "PDF (*.pdf)")
+        path = ask_save_path(self.parent, "Write report", self.host.folders, "report.pdf", "PDF (*.pdf)")
         if path is not None:
-            self.win.run_job("Writing the report", lambda p: actions.report(self.win.session, path, p),
-                         lambda r: self.win.statusBar().showMessage(f"report written to {r}", 10000))
+            self._job("Writing the report", lambda p: actions.report(self.state.access, path, p),
+                      lambda r: self.state.status.result(f"report written to {r}"))

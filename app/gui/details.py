@@ -1,4 +1,4 @@
-"""The details panel: the HTML of the selection (built in :mod:`app.gui.html`) in a text browser."""
+"""The details panel: the HTML of the selection (built in :mod:`app.gui.state.details_html`) in a text browser."""
 from __future__ import annotations
 
 from PySide6.QtWidgets import QTextBrowser
@@ -8,4 +8,4 @@ class DetailsPanel(QTextBrowser):
     def __init__(self, parent=None):
         super().__init__(parent)
         self.setOpenExternalLinks(False)
-        self.setMinimumWidth(260)
+        self.setMinimumWidth(200)

@@ -16,7 +16,7 @@ import numpy as np
 
 from common.errors import InputError
 from common.files import write_atomic
-from common.progress import ProgressCallback, scaled
+from common.progress import ProgressCallback, report, scaled
 from common.rigid import fit_rigid
 from lidar.stations import StationPrediction, default_area, grid_in_polygon, survey_stations
 from projects.store.campaign import Campaign
@@ -121,7 +121,8 @@ def seen_surfaces(c: Campaign, last: LastStation, *, voxel_m: float = 0.05,
 
     if not c.files(last.label, "coarse"):
         return None
-    scan = read_files(c, c.files(last.label, "coarse"), progress)
+    scan = read_files(c, c.files(last.label, "coarse"), scaled(progress, 0.0, 0.8))
+    report(progress, 0.8, "the scan's surfaces as obstacles")  # (a cancel stops here, before the voxels)
     xyz = (scan.xyz_socs - last.translation) @ last.rotation  # R^T (x - t), row-wise
     key = np.floor(xyz / voxel_m).astype(np.int64)
     _, first = np.unique(key, axis=0, return_index=True)

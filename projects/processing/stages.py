@@ -22,7 +22,7 @@ from common.flags import (FLAG_CHAINED, FLAG_DECK_NOT_MEASURED, FLAG_MISSING, FL
                           FLAG_PIERS_NOT_MEASURED, PROBLEM, code, has, severity)
 from lidar.displacement import Displacement, EpochDisplacements
 from lidar.systematic.budget import corrected_displacements
-from common.errors import InputError, ProcessingError, SurveyError
+from common.errors import CancelledError, InputError, ProcessingError, SurveyError
 from lidar.identification import MAX_TILT_DEG
 from lidar.io import read_scan
 from lidar.pipeline import analyse_coarse, measure_fine, plan_from_coarse
@@ -354,6 +354,8 @@ def process(c: Campaign, labels: Optional[Sequence[str]] = None, *,
                 plan = plan_epoch(c, lab, progress=sub)
                 summary.outcomes.append(EpochOutcome(lab, "planned", f"{len(plan.rois)} windows, "
                                                      f"{plan.total_seconds / 60:.1f} min; add its fine scans"))
+        except CancelledError:
+            raise  # the user stopped the whole run, not this epoch (the epochs done so far are kept)
         except SurveyError as exc:
             log.warning("epoch %s: %s", lab, exc)
             summary.outcomes.append(EpochOutcome(lab, "failed", str(exc)))

@@ -87,3 +87,29 @@ def parse_rule(rule: str, span_m: Optional[float]) -> Limit:
         if v is not None and not (np.isfinite(v) and v > 0):
             raise InputError(f"limit rule {rule!r}: thresholds must be positive")
     return lim
+
+
+def set_limit_rule(c, reflector: str, rule: str) -> str:
+    """Set a target's (or, with ``"*"``, every measurement target's) limit from its text form.
+
+    Besides the rules of :func:`parse_rule`, ``prediction:T`` sets the tolerance (mm) within which a
+    displacement must follow the design prediction (a larger departure is flagged). Returns a line
+    saying what was set.
+    """
+    if not rule.strip().lower().startswith("prediction:"):
+        c.set_limit(reflector, rule)
+        lim = c.limit_for(reflector)
+        return f"limit for {reflector}: warning {lim.warning_mm:.2f} mm, alarm {lim.alarm_mm:.2f} mm ({lim.rule})"
+    try:
+        tol = float(rule.split(":", 1)[1])
+    except ValueError:
+        tol = float("nan")
+    if not (tol == tol and 0 < tol < 1e4):
+        raise InputError(f"limit rule {rule!r}: the tolerance must be a positive number of millimetres")
+    if reflector != "*":
+        c.reflector(reflector)
+    tols = dict(c.settings().get("prediction_tolerance_mm") or {})
+    tols[reflector] = tol
+    c.set_setting("prediction_tolerance_mm", tols)
+    return (f"a displacement departing from the design prediction by more than {tol:g} mm is flagged for "
+            f"{'every target' if reflector == '*' else reflector}")

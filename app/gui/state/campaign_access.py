@@ -1,7 +1,7 @@
 """Opening the application's campaign briefly for each read and each change (no Qt here).
 
-:func:`app.gui.actions` functions take anything with these two methods; the window's
-:class:`app.gui.session.CampaignSession` is one, and tests use this class directly.
+:func:`app.gui.actions` functions take anything with these two methods: the application state's
+``access`` (:class:`app.gui.state.app_state.AppState`) is one of these.
 """
 from __future__ import annotations
 

@@ -26,6 +26,8 @@ from __future__ import annotations
 
 from typing import Callable, Iterable, Optional
 
+from psygnal import Signal
+
 from common.errors import SurveyError
 from lidar.plan import RoiPlan, ScanPlan, edit_roi, with_rois
 
@@ -41,11 +43,17 @@ class PlanEditor:
     stored : ScanPlan or None
         The plan as stored in the campaign (None: the epoch has no plan; nothing can be edited).
     on_change : callable, optional
-        Called with no arguments after every change of the windows (edit, undo, redo, revert).
+        Connected to :attr:`changed`.
+
+    Events: ``changed()`` after every change of the windows or of what is saved (load, edit, undo,
+    redo, revert, save).
     """
 
+    changed = Signal()
+
     def __init__(self, stored: Optional[ScanPlan] = None, *, on_change: Optional[Callable[[], None]] = None):
-        self.on_change = on_change
+        if on_change is not None:
+            self.changed.connect(on_change)
         self.load(stored)
 
     # ------------------------------------------------------------------ state
@@ -168,5 +176,4 @@ class PlanEditor:
         return True
 
     def _notify(self) -> None:
-        if self.on_change is not None:
-            self.on_change()
+        self.changed.emit()

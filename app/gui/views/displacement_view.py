@@ -7,6 +7,7 @@ from PySide6.QtCore import Signal
 from PySide6.QtWidgets import QCheckBox, QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
 from app.gui.views.mpl import PlotCanvas
+from app.gui.widgets import ElidedLabel
 
 
 class DisplacementView(QWidget):
@@ -17,6 +18,9 @@ class DisplacementView(QWidget):
         super().__init__(parent)
         self.canvas = PlotCanvas(self, figsize=(9, 5))
         self.target = QComboBox()
+        self.target.setSizeAdjustPolicy(QComboBox.AdjustToContents)
+        self.target.setMinimumContentsLength(len("all targets") + 1)
+        self.target.setToolTip("One target's history, or every target's")
         self.target.currentTextChanged.connect(lambda _t: self.redraw())
         self.limits = QCheckBox("limit lines")
         self.limits.setChecked(True)
@@ -25,14 +29,13 @@ class DisplacementView(QWidget):
         self.context_box.setChecked(True)
         self.context_box.toggled.connect(lambda _b: self.redraw())
         self.context = None
-        self.hover = QLabel(" ")
+        self.hover = ElidedLabel(" ", min_chars=8)
         bar = QHBoxLayout()
         bar.addWidget(QLabel("Target"))
         bar.addWidget(self.target)
         bar.addWidget(self.limits)
         bar.addWidget(self.context_box)
-        bar.addStretch(1)
-        bar.addWidget(self.hover)
+        bar.addWidget(self.hover, 1)
         lay = QVBoxLayout(self)
         lay.addLayout(bar)
         lay.addWidget(self.canvas, 1)
@@ -42,6 +45,18 @@ class DisplacementView(QWidget):
         self._annot = None  # the hover label of the current plot
         self.canvas.mpl_connect("motion_notify_event", self._on_move)
         self.canvas.mpl_connect("button_press_event", self._on_click)
+
+    def show_snapshot(self, snap) -> None:
+        """Draw the histories of an :class:`app.gui.state.app_state.Snapshot`."""
+        self.set_data(snap.histories, snap.context)
+
+    def show_selection(self, sel) -> None:
+        """Follow the selected target and epoch (an :class:`app.gui.state.app_state.Selection`)."""
+        if sel.reflector and self.target.findText(sel.reflector) >= 0 and self.target.currentText() != sel.reflector:
+            self.target.blockSignals(True)
+            self.target.setCurrentText(sel.reflector)
+            self.target.blockSignals(False)
+        self.select_epoch(sel.epoch)
 
     def set_data(self, histories: dict, context=None) -> None:
         """``histories`` from :func:`projects.history.histories` (reflector -> DisplacementHistory, with
@@ -65,6 +80,26 @@ class DisplacementView(QWidget):
     def select_epoch(self, label) -> None:
         self.selected_epoch = label
         self.redraw()
+
+    def _draw_events(self, ax) -> None:
+        """Event lines with horizontal labels along the top, staggered so that neighbours do not overlap."""
+        import matplotlib.dates as mdates
+
+        events = sorted(self.context.events) if self.context is not None else []
+        lo, hi = ax.get_xlim()
+        last_end = [-np.inf, -np.inf, -np.inf]  # per row: where the previous label ends (axes fraction)
+        for when, label in events:
+            x = mdates.date2num(when)
+            if not lo <= x <= hi:
+                continue
+            frac = (x - lo) / (hi - lo)
+            width = 0.0085 * len(label) + 0.01
+            row = next((k for k, end in enumerate(last_end) if frac > end), len(last_end) - 1)
+            last_end[row] = frac + width
+            right = frac + width > 0.98  # near the right edge: the label goes left of its line
+            ax.annotate(label, (x, 1.0), xycoords=("data", "axes fraction"), xytext=(-3 if right else 3, -4 - 12 * row),
+                        textcoords="offset points", ha="right" if right else "left", va="top", fontsize=7,
+                        color="tab:purple", bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.8))
 
     def redraw(self) -> None:
         fig = self.canvas.figure
@@ -126,7 +161,8 @@ class DisplacementView(QWidget):
         if self.context_box.isChecked() and self.context is not None:
             from projects.series.context import draw_context
 
-            draw_context(ax, self.context)
+            draw_context(ax, self.context, label_events=False)  # the lines; horizontal labels below
+            self._draw_events(ax)
         fig.autofmt_xdate()
         self.canvas.draw_idle()
 

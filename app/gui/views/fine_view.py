@@ -53,7 +53,7 @@ class FineScanView(QWidget):
             # 2-sigma circle drawn 50x enlarged, so sub-millimetre sigma is visible
             ax.add_patch(Ellipse((cx, cy), 2 * 2 * sig_mm * 50, 2 * 2 * sig_mm * 50, fill=False, color="yellow",
                                  ls="--", label="2σ × 50"))
-        fig.colorbar(sc, ax=ax, label="intensity", shrink=0.8)
+        fig.colorbar(sc, ax=ax, label="point intensity", shrink=0.8, pad=0.02)
         # zoom on the target; the whole window is in the title
         d_mm = ins.diameter_m * 1e3
         zx, zy = (cx, cy) if c.found else (0.0, 0.0)
@@ -65,13 +65,17 @@ class FineScanView(QWidget):
         ax.set_xlabel("across the view (mm at the target)")
         ax.set_ylabel("up (mm at the target)")
         ax.set_title(f"{ins.reflector} in {ins.epoch}: {len(ins.intensity):,} points in a "
-                     f"{np.ptp(x):.0f} × {np.ptp(y):.0f} mm window (zoomed)", fontsize=10)
-        ax.legend(loc="upper right", fontsize=7, markerscale=3)
+                     f"{np.ptp(x):.0f} × {np.ptp(y):.0f} mm window\n(zoomed on the target)", fontsize=9)
+        leg = ax.legend(loc="upper right", fontsize=7, framealpha=0.85)
+        for handle in leg.legend_handles:  # the scatter dots readable, the centroid cross its plain size
+            if hasattr(handle, "set_sizes"):
+                handle.set_sizes([18])
         hx.hist(ins.intensity, bins=80, color="0.5", log=True)
         if np.isfinite(c.threshold):
             hx.axvline(c.threshold, color="tab:red", lw=1.5, label=f"Otsu {c.threshold:.3f}")
             hx.legend(fontsize=7)
-        hx.set_xlabel("intensity")
+        hx.set_xlabel("point intensity")
+        hx.set_ylabel("points (log scale)")
         hx.set_title(f"separability {c.separability:.2f}")
         self.canvas.draw_idle()
         sig = np.sqrt(np.clip(np.diag(c.cov), 0, None)) * 1e3 if c.found else [np.nan] * 3

@@ -27,13 +27,15 @@ class StationsView(QWidget):
         self.height.setValue(1.5)
         self.height.setSuffix(" m instrument height")
         self.run_btn = QPushButton("Evaluate stations")
-        self.run_btn.clicked.connect(lambda: self.evaluateRequested.emit(self.grid.value(), self.height.value()))
+        self.run_btn.clicked.connect(self.request_evaluation)
         self.info = QLabel("Predicts, for scanner positions on a grid around the bridge, the sigma of every target's "
                            "displacement and the scan time.")
         self.info.setWordWrap(True)
         self.table = QTableWidget(0, 5)
         self.table.setHorizontalHeaderLabels(["x (m)", "y (m)", "minutes", "worst σ (mm)", "hidden"])
-        self.table.setMaximumHeight(220)
+        self.table.setMaximumHeight(200)
+        self.table.setMinimumHeight(90)
+        self.table.horizontalHeader().setStretchLastSection(True)
         bar = QHBoxLayout()
         for w in (self.grid, self.height, self.run_btn):
             bar.addWidget(w)
@@ -44,6 +46,17 @@ class StationsView(QWidget):
         lay.addWidget(self.canvas, 1)
         lay.addWidget(self.table)
         self.advice = None
+
+    def request_evaluation(self) -> None:
+        """Ask for an evaluation with the grid and height shown."""
+        self.evaluateRequested.emit(self.grid.value(), self.height.value())
+
+    def show_message(self, text: str) -> None:
+        self.advice = None
+        self.info.setText(text)
+        self.table.setRowCount(0)
+        self.canvas.figure.clear()
+        self.canvas.draw_idle()
 
     def show_advice(self, advice, layout) -> None:
         """Draw a :class:`projects.stations.StationAdvice` over its layout."""
@@ -56,10 +69,13 @@ class StationsView(QWidget):
         self.canvas.draw_idle()
         best = advice.stations[:TOP]
         self.table.setRowCount(len(best))
+        self.table.resizeColumnsToContents()
         for r, s in enumerate(best):
             worst = "–" if s.worst_sigma_mm == float("inf") else f"{s.worst_sigma_mm:.3f}"
             for c, v in enumerate((f"{s.xyz_layout[0]:.1f}", f"{s.xyz_layout[1]:.1f}", f"{s.seconds / 60:.1f}", worst,
                                    ", ".join(s.hidden) or "–")):
-                self.table.setItem(r, c, QTableWidgetItem(v))
+                item = QTableWidgetItem(v)
+                item.setToolTip(v)
+                self.table.setItem(r, c, item)
         self.info.setText(f"{len(advice.stations)} positions evaluated for a {advice.scanner}; ground at "
                           f"z = {advice.ground_z:.2f} m ({advice.ground_source}). Best first.")

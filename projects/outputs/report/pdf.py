@@ -240,6 +240,7 @@ def render_maps(sections: Sequence[EpochSection], preview_of: Optional[Callable]
 
     jobs = []
     for e in sections:
+        report(progress, 0.0, f"map of {e.label}")
         p = e.preview if e.preview is not None else (preview_of(e.label) if preview_of else None)
         if p is not None:  # reduce before sending to a worker: the figure never needs more
             p = MapPreview(reduce_map(p.reflectance_map, max_cells=300_000), p.detections, p.identification,
@@ -254,14 +255,19 @@ def render_maps(sections: Sequence[EpochSection], preview_of: Optional[Callable]
             images.append(_render_map_job(j))
     else:
         import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
+        from concurrent.futures import ProcessPoolExecutor, wait
 
         # spawn, not fork: safe inside the desktop application's threads
-        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-            images = []
-            for k, img in enumerate(pool.map(_render_map_job, todo, chunksize=2)):
-                report(progress, k / len(todo), "maps")
-                images.append(img)
+        pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
+        try:
+            futures = [pool.submit(_render_map_job, j) for j in todo]
+            pending = set(futures)
+            while pending:  # a progress call every 0.25 s: it may cancel, and the maps left are not waited for
+                pending = wait(pending, timeout=0.25).not_done
+                report(progress, 1.0 - len(pending) / len(todo), "maps")
+            images = [f.result() for f in futures]
+        finally:
+            pool.shutdown(wait=False, cancel_futures=True)
     it = iter(images)
     return [None if j is None else next(it) for j in jobs]
 
@@ -481,9 +487,14 @@ def build_pdf(content: ReportContent, path: str | os.PathLike, *, preview_of: Op
     ss = _styles()
     story = title_page(content, ss)
     report(progress, 0.02, "summary")
-    story += summary_section(content, ss) + layout_section(content, ss) + history_section(content, ss)
+    story += summary_section(content, ss)
+    report(progress, 0.04, "layout")  # between the sections: each call lets a cancel stop the report
+    story += layout_section(content, ss)
+    report(progress, 0.05, "history")
+    story += history_section(content, ss)
     for name, builder in EXTRA_SECTIONS.items():
         if name in content.extras:
+            report(progress, 0.08, name)
             story += builder(content, ss)
     if content.epochs:
         from reportlab.platypus import PageBreak, Paragraph

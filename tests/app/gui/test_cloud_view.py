@@ -39,7 +39,7 @@ SCRIPT = textwrap.dedent("""
         for _ in range(20):
             app.processEvents()
 
-    win.session.select(epoch="2026-03-16")
+    win.state.select(epoch="2026-03-16")
     win.tabs.setCurrentWidget(win.cloud_view)
     assert win.cloud_view.show_btn.isEnabled()
     win.cloud_view.cloud = None
@@ -51,11 +51,13 @@ SCRIPT = textwrap.dedent("""
     img = cv.plotter.screenshot(None, return_img=True)
     assert img.std() > 5, "the 3-D view drew nothing"
     cv.pick_target("M3")
-    assert win.session.reflector == "M3" and cv.selected == "M3"
+    assert win.state.selection.reflector == "M3" and cv.selected == "M3"
     assert win.displacements.target.currentText() == "M3"
     win.commands.show_cloud("change")
     wait()
     assert cv.cloud.value_name.startswith("M3C2 change") and np.isfinite(cv.cloud.values).mean() > 0.5
+    assert cv.scale.source == "the deck and piers" and cv.mode.currentData() == "change"
+    assert cv.plotter.render_timer.isActive() is False  # renders on demand only
     deck = np.abs(cv.cloud.values[np.isfinite(cv.cloud.values)])
     print("OK", len(cv.cloud.xyz), float(np.median(deck)))
     win.close()

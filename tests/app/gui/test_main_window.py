@@ -4,33 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from PySide6.QtCore import QEvent, QPointF, Qt
-from PySide6.QtGui import QMouseEvent
+from PySide6.QtCore import QPointF
 
 from projects.store.campaign import Campaign
 from tests.app.gui.conftest import wait_job
+from tests.app.gui.helpers import drag
 from tests.projects.campaign_helpers import snapshot
 
 pytestmark = pytest.mark.gui
-
-
-def _send(widget, kind, pos, buttons):
-    button = Qt.LeftButton if kind != QEvent.MouseMove else Qt.NoButton
-    ev = QMouseEvent(kind, QPointF(pos), widget.mapToGlobal(QPointF(pos)), button, buttons, Qt.NoModifier)
-    from PySide6.QtWidgets import QApplication
-
-    QApplication.sendEvent(widget, ev)
-
-
-def drag(view, start, end, steps=5):
-    """Press, move and release the left button in a graphics view's viewport (scene coordinates)."""
-    vp = view.viewport()
-    a, b = view.mapFromScene(start), view.mapFromScene(end)
-    _send(vp, QEvent.MouseButtonPress, a, Qt.LeftButton)
-    for k in range(1, steps + 1):
-        p = a + (b - a) * (k / steps)
-        _send(vp, QEvent.MouseMove, p, Qt.LeftButton)
-    _send(vp, QEvent.MouseButtonRelease, b, Qt.NoButton)
 
 
 def test_welcome_page_without_campaign_and_recent_list(window, processed_copy):
@@ -49,11 +30,11 @@ def test_tree_details_and_selection_follow_each_other(window, processed_copy, qt
     assert [t.item_for("epoch", e) is not None for e in ("2026-03-02", "2026-03-09", "2026-03-16")] == [True] * 3
     assert t.item_for("epoch", "2026-03-16").text(1) == "processed"
     t.select_key("reflector", "M3")
-    assert window.session.reflector == "M3"
+    assert window.state.selection.reflector == "M3"
     assert "Reflector M3" in window.details.toPlainText() and "Latest" in window.details.toPlainText()
     assert window.displacements.target.currentText() == "M3"
     t.select_key("epoch", "2026-03-09")
-    assert window.session.epoch == "2026-03-09"
+    assert window.state.selection.epoch == "2026-03-09"
     assert "Centroids" in window.details.toPlainText()
 
 
@@ -71,7 +52,7 @@ def test_displacement_view_hover_values_and_click_selects_the_epoch(window, proc
     v.canvas.callbacks.process("motion_notify_event", MouseEvent("motion_notify_event", v.canvas, px, py))
     assert v.hover.text().startswith(f"M3 {epoch}: ") and "±" in v.hover.text()
     v.canvas.callbacks.process("button_press_event", MouseEvent("button_press_event", v.canvas, px, py, button=1))
-    assert window.session.epoch == epoch
+    assert window.state.selection.epoch == epoch
 
 
 def test_roi_move_resize_delete_add_and_save_then_process(window, processed_copy, qtbot, monkeypatch):
@@ -144,7 +125,7 @@ def test_roi_move_resize_delete_add_and_save_then_process(window, processed_copy
 
 def test_fine_scan_view_shows_the_split_cluster_and_centroid(window, processed_copy, qtbot):
     window.open_campaign(processed_copy)
-    window.session.select(epoch="2026-03-16", reflector="M3")
+    window.state.select(epoch="2026-03-16", reflector="M3")
     window.commands.show_fine()
     wait_job(qtbot, window)
     ins = window.fine_view.inspection
@@ -163,8 +144,8 @@ def test_new_campaign_add_epoch_plan_and_a_bad_file(window, field_copy, tmp_path
     monkeypatch.setattr(NewCampaignDialog, "values", lambda self: {
         "folder": str(camp), "name": "GUI bridge", "layout": str(field_copy / "layout.csv"), "span_m": 40.0,
         "diameter_mm": 50.0})
-    window.new_campaign()
-    assert window.session is not None and window.session.name == "GUI bridge"
+    window.commands.new_campaign()
+    assert window.state.is_open and window.state.name == "GUI bridge"
     values = {"datetime": "2026-04-01T09:00:00Z", "label": "2026-04-01", "coarse": str(field_copy / "v0" / "coarse.laz"),
               "fines": [], "notes": "from the GUI"}
     monkeypatch.setattr(AddEpochDialog, "exec", lambda self: AddEpochDialog.Accepted)
@@ -232,11 +213,13 @@ def test_long_work_can_be_cancelled_and_errors_never_freeze(window, qtbot, error
 
     window.run_job("Slow work", slow)
     qtbot.waitUntil(lambda: window.progress.isVisible() and window.progress.value() > 0, timeout=5000)
-    assert window.cancel_btn.isVisible()
+    assert window.cancel_btn.isVisible() and window.statusBar().currentMessage().startswith("Slow work: step")
     window.cancel_btn.click()
+    assert window.statusBar().currentMessage() == "Slow work: cancelling…"
+    assert window.cancel_btn.text() == "Cancelling…" and not window.cancel_btn.isEnabled()
     wait_job(qtbot, window, 5000)
-    assert not errors and "cancelled" in window.statusBar().currentMessage()
-    assert not window.progress.isVisible()
+    assert not errors and window.statusBar().currentMessage() == "Slow work: cancelled"
+    assert not window.progress.isVisible() and not window.cancel_btn.isVisible()
 
     def fails(progress):
         raise InputError("x.laz: not a scan; check the file")
@@ -244,6 +227,7 @@ def test_long_work_can_be_cancelled_and_errors_never_freeze(window, qtbot, error
     window.run_job("Failing work", fails)
     wait_job(qtbot, window, 5000)
     assert errors[-1] == ("Failing work", "x.laz: not a scan; check the file")
+    assert window.statusBar().currentMessage() == "Failing work failed: x.laz: not a scan; check the file"
 
     def bug(progress):
         raise ZeroDivisionError("oops")
@@ -261,8 +245,13 @@ def test_3d_view_says_why_it_is_missing_offscreen(window):
 
 
 def test_limits_reflectors_and_parameters_from_the_menus(window, processed_copy, monkeypatch, errors):
-    answers = iter(["abs:3,5", "M5b", "2026-03-20", "2000", "not-a-date"])
+    from app.gui.dialogs import SetLimitDialog
+
+    answers = iter(["M5b", "2026-03-20", "2000", "not-a-date"])
     monkeypatch.setattr("app.gui.commands.QInputDialog.getText", lambda *a, **k: (next(answers), True))
+    monkeypatch.setattr(SetLimitDialog, "exec", lambda self: SetLimitDialog.Accepted)
+    monkeypatch.setattr(SetLimitDialog, "values", lambda self: {"reflector": self.target.currentData(),
+                                                                "rule": "abs:3,5"})
     monkeypatch.setattr("app.gui.commands.QInputDialog.getItem", lambda *a, **k: ("min_points", True))
     window.open_campaign(processed_copy)
     window.tree.select_key("reflector", "M3")
@@ -284,7 +273,7 @@ def test_limits_reflectors_and_parameters_from_the_menus(window, processed_copy,
 def test_welcome_opens_the_demo_campaign(window, processed_copy):
     window.demo_dir = processed_copy  # a built demo campaign is opened directly
     window.open_demo()
-    assert window.session is not None and window.session.folder == processed_copy
+    assert window.state.folder == processed_copy
     assert window.stack.currentWidget() is window.tabs
 
 
@@ -293,7 +282,7 @@ def test_field_sheet_check_stations_and_scanner_from_the_menus(window, processed
     from app.gui import commands
 
     window.open_campaign(processed_copy)
-    window.session.select(epoch="2026-03-09")
+    window.state.select(epoch="2026-03-09")
     sheet = tmp_path / "sheet.pdf"
     monkeypatch.setattr(commands, "ask_save_path", lambda *a, **k: sheet)
     window.commands.field_sheet()
@@ -328,14 +317,14 @@ def test_fleet_page_lists_the_bridges_and_opens_one(window, processed_copy, tmp_
     root.mkdir()
     shutil.copytree(processed_copy, root / "bridge-a", ignore=shutil.ignore_patterns(".lock"))
     shutil.copytree(processed_copy, root / "bridge-b", ignore=shutil.ignore_patterns(".lock"))
-    window.open_fleet(str(root))
+    window.commands.open_fleet(str(root))
     wait_job(qtbot, window)
-    view = window.fleet_view
+    view = window.commands.fleet_view
     assert view.table.rowCount() == 2 and "2 bridges" in view.summary.text()
     assert view.table.item(0, 1).text() in ("ok", "warning", "alarm")
     view.table.selectRow(1)
     view.open_btn.click()
-    assert window.session is not None and str(window.session.folder).endswith(view.folders[1].split("/")[-1])
+    assert window.state.is_open and str(window.state.folder).endswith(view.folders[1].split("/")[-1])
     assert not errors
 
 
@@ -352,3 +341,41 @@ def test_analysis_tab_and_event_overlay(window, processed_copy, tmp_path, qtbot,
     assert window.tabs.currentWidget() is view and view.table.rowCount() == 5
     assert "1 event" in view.info.text()
     assert not errors
+
+
+def test_every_tab_fits_a_1366x768_screen(window, processed_copy, qtbot):
+    from app.gui.main_window import SMALL_SCREEN
+    from tests.app.gui.helpers import controls_out_of_reach
+
+    window.resize(*SMALL_SCREEN)
+    assert window.minimumSizeHint().width() <= SMALL_SCREEN[0]  # the welcome page
+    window.open_campaign(processed_copy)
+    window.state.select(epoch="2026-03-09", reflector="M3")
+    for name, _title in window.TABS:
+        window.state.request_view(name)
+        qtbot.wait(30)
+        hint = window.minimumSizeHint()
+        assert hint.width() <= SMALL_SCREEN[0] and hint.height() <= SMALL_SCREEN[1], (name, hint)
+        assert controls_out_of_reach(window) == [], name
+    title = window.map_view.title  # the long title elides instead of widening the window; its tooltip has it all
+    assert window.map_view.items and title.minimumSizeHint().width() < 200 and title.toolTip() == title.full_text()
+
+
+def test_the_new_epochs_date_is_the_scan_files_own_time(qtbot, tmp_path):
+    from pathlib import Path
+
+    from app.gui.dialogs import AddEpochDialog
+    from app.gui.state.folders import LastFolders
+
+    data = Path(__file__).resolve().parents[2] / "data" / "las"
+    dlg = AddEpochDialog(None, LastFolders({}, fallback=str(tmp_path)))
+    qtbot.addWidget(dlg)
+    dlg.coarse.edit.setText(str(data / "simple1_4.las"))
+    assert dlg.values()["datetime"].startswith("2012-01-13T00:00") and "creation day" in dlg.when_source.text()
+    assert dlg.values()["label"] == "2012-01-13"
+    dlg.coarse.edit.setText(str(data / "test1_4.las"))  # another file: its points' GPS time
+    assert dlg.values()["datetime"].startswith("2014-") and "GPS time" in dlg.when_source.text()
+    dlg.when.setDateTime(dlg.when.dateTime().addDays(3))  # set by hand: kept from now on
+    by_hand = dlg.values()["datetime"]
+    dlg.coarse.edit.setText(str(data / "simple1_4.las"))
+    assert dlg.values()["datetime"] == by_hand and dlg.when_source.text() == "set by hand"

@@ -4,14 +4,21 @@ import sys
 
 from app.gui.state.map_geometry import CellRect, window_from_cells, window_of_cells
 
-QT_FREE = ["app.gui.actions", "app.gui.html", "app.gui.state.map_geometry", "app.gui.state.plan_edit",
-           "app.gui.state.campaign_access"]
+def qt_free_modules() -> list[str]:
+    """app.gui.actions and every module of app.gui.state."""
+    import pkgutil
+
+    import app.gui.state
+
+    return ["app.gui.actions"] + [f"app.gui.state.{m.name}" for m in pkgutil.iter_modules(app.gui.state.__path__)]
 
 
 def test_these_modules_do_not_import_qt():
+    mods = qt_free_modules()
+    assert "app.gui.state.app_state" in mods and "app.gui.state.status" in mods
     code = ("import sys, importlib\n"
-            f"for m in {QT_FREE!r}: importlib.import_module(m)\n"
-            "print([m for m in sys.modules if m.startswith(('PySide6', 'pyvistaqt'))])")
+            f"for m in {mods!r}: importlib.import_module(m)\n"
+            "print([m for m in sys.modules if m.startswith(('PySide6', 'shiboken6', 'pyvistaqt', 'qtpy', 'vtk'))])")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert r.stdout.strip() == "[]"
@@ -24,7 +31,7 @@ def test_window_of_cells_keeps_the_plan_contract_across_zero():
 
 
 def test_window_from_cells_and_the_details_html_on_a_campaign(processed_copy):
-    from app.gui.html import campaign_html, epoch_html, reflector_html
+    from app.gui.state.details_html import campaign_html, epoch_html, reflector_html
     from projects.results.state import campaign_status
     from projects.store.campaign import Campaign
 
@@ -46,3 +53,12 @@ def test_window_from_cells_and_the_details_html_on_a_campaign(processed_copy):
     assert abs(new.window.phi_min_deg - roi.window.phi_min_deg) < 1e-4
     assert new.expected_target_points > 0.5 * plan.min_points
     assert "Test bridge" in html_c and "2026-03-02" in html_e and "M3" in html_r
+
+
+def test_the_docstring_examples_of_the_state_run():
+    import doctest
+    import importlib
+
+    for name in qt_free_modules():
+        result = doctest.testmod(importlib.import_module(name), optionflags=doctest.ELLIPSIS)
+        assert result.failed == 0, name
