@@ -469,10 +469,18 @@ def new_roi(reflector: str, group: str, *, phi_min_deg: float, phi_max_deg: floa
 
 
 def with_rois(plan: ScanPlan, rois: Sequence[RoiPlan]) -> ScanPlan:
-    """The plan with another set of windows; the time budget is checked again."""
+    """The plan with another set of windows; the time budget is checked again.
+
+    A closure window is not given: the plan's closure follows its target's (edited) window, at the end.
+    """
+    rois = [r for r in rois if not r.closure]
     ids = [r.reflector for r in rois]
     if len(set(ids)) != len(ids):
         raise InputError("a plan holds one window per reflector; two windows name the same reflector")
+    closed = next((r.reflector for r in plan.rois if r.closure), None)
+    target = next((r for r in rois if r.reflector == closed), None)
+    if target is not None:
+        rois.append(replace(target, closure=True, notes=next(r.notes for r in plan.rois if r.closure)))
     total = sum(r.expected_seconds for r in rois)
     warnings = [w for w in plan.warnings if "over the budget" not in w and not w.startswith("the plan takes")]
     if total > plan.budget_seconds * 1.0001:

@@ -31,30 +31,13 @@ def register(sub) -> None:
     p.set_defaults(func=cmd_repair)
 
 
-def _stale(c) -> list:
-    """Results that do not match their inputs (processing's view), as findings."""
-    from projects.processing.stages import baseline_epoch, stale_epochs
-    from projects.store.verify import Finding
-
-    out = [Finding("stale", f"epoch {label}", f"results are stale ({why})", "run 'bridgesurvey process'")
-           for label, why in stale_epochs(c).items()]
-    base = baseline_epoch(c)
-    for e in c.epochs():
-        res, ds = c.result(e.label), c.displacement_set(e.label)
-        if res is not None and res.stage == "measured" and base is not None and (ds is None or ds.baseline != base):
-            out.append(Finding("stale", f"epoch {e.label}", "displacements missing or against another baseline",
-                               "run 'bridgesurvey process'"))
-    return out
-
-
 def cmd_verify(args) -> int:
+    from projects.results.integrity import verify_campaign
     from projects.store.campaign import Campaign
-    from projects.store.verify import verify_store
 
     with Campaign.open(args.dir, writable=False) as c:
         with progress_bar("verifying") as cb:
-            findings = verify_store(c, progress=cb)
-        findings += _stale(c)
+            findings = verify_campaign(c, progress=cb)
         n_files = len(c.listed_files())
     if args.json:
         dump_json({"ok": not findings, "files_checked": n_files,
@@ -68,42 +51,17 @@ def cmd_verify(args) -> int:
     return EXIT_FOUND if findings else 0
 
 
-def _reimporters() -> dict:
-    """How each kind of series file is read again (with the options of its import, from the journal)."""
-    from projects.series.camera import import_series
-    from projects.series.environment import import_env
-    from projects.series.predictions import import_prediction
-
-    def camera(c, path, e):
-        name, _ = import_series(c, path, name=e.get("name"), reflector=e.get("reflector"), **e.get("read", {}))
-        return f"{path.parent.name}/{path.name}: camera series {name!r} read again"
-
-    def environment(c, path, e):
-        name, _ = import_env(c, path, kind=e["series_kind"], name=e.get("name"), **e.get("read", {}))
-        return f"{path.parent.name}/{path.name}: environment series {name!r} read again"
-
-    def prediction(c, path, e):
-        targets = import_prediction(c, path, **e.get("read", {}))
-        return f"{path.parent.name}/{path.name}: design prediction of {', '.join(sorted(targets))} read again"
-
-    return {"camera": camera, "environment": environment, "prediction": prediction}
-
-
 def cmd_repair(args) -> int:
-    from projects.store.campaign import Campaign
-    from projects.store.repair import repair_campaign, repair_schema_version
+    from projects.results.integrity import repair_folder
 
-    schema_note = repair_schema_version(args.dir)
-    with Campaign.open(args.dir) as c:
-        rep = repair_campaign(c, _reimporters())
-    done = ([schema_note] if schema_note else []) + rep.done
+    done, left = repair_folder(args.dir)
     if args.json:
-        dump_json({"done": done, "left": rep.left})
+        dump_json({"done": done, "left": left})
     else:
         for line in done:
             print(f"repaired: {line}")
-        for line in rep.left:
+        for line in left:
             print(f"left: {line}")
-        print(f"{len(done)} repair(s), {len(rep.left)} left as they are; nothing was deleted"
-              + ("; run 'bridgesurvey process' to bring the results up to date" if rep.done else ""))
-    return EXIT_FOUND if rep.left else 0
+        print(f"{len(done)} repair(s), {len(left)} left as they are; nothing was deleted"
+              + ("; run 'bridgesurvey process' to bring the results up to date" if done else ""))
+    return EXIT_FOUND if left else 0

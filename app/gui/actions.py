@@ -269,3 +269,18 @@ def import_prediction(session, v: dict, progress: Callable) -> dict:
             if c.settings().get("casting_date") != before:
                 c.set_setting("casting_date", before)  # a refused import leaves the campaign as it was
             raise
+
+
+def verify(session, progress: Callable) -> list:
+    """Every problem of the open campaign, each with what to do (Campaign ▸ Verify campaign)."""
+    from projects.results.integrity import verify_campaign
+
+    with session.read() as c:
+        return verify_campaign(c, progress=progress)
+
+
+def repair(session) -> tuple[list[str], list[str]]:
+    """Repair the open campaign's folder (Campaign ▸ Repair campaign): what was done, what was left."""
+    from projects.results.integrity import repair_folder
+
+    return repair_folder(session.folder)

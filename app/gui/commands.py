@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Callable, Optional, Protocol
 
-from PySide6.QtWidgets import QInputDialog
+from PySide6.QtWidgets import QInputDialog, QMessageBox
 
 from app.gui import actions
 from app.gui.dialogs import (AddEpochDialog, AddEventDialog, CheckDialog, ImportCameraDialog, ImportEnvDialog,
@@ -425,6 +425,27 @@ class Commands:
         if path is not None:
             self._job("Exporting the workbook", lambda p: actions.export_xlsx(self.state.access, path),
                       lambda r: self.state.status.result(f"workbook written to {r}"))
+
+    def verify_campaign(self) -> None:
+        """Campaign ▸ Verify campaign: the database, every imported file and every stored result."""
+        def done(findings):
+            text = "\n".join(in_app_words(f.line()) for f in findings) or \
+                "The database, every imported file and every stored result are as they were stored."
+            QMessageBox.information(self.parent, "Verify campaign", text)
+            self.state.status.result("verify: " + (f"{len(findings)} thing(s) to do" if findings else "no problem"))
+
+        self._job("Verifying the campaign", lambda p: actions.verify(self.state.access, p), done)
+
+    def repair_campaign(self) -> None:
+        """Campaign ▸ Repair campaign: register again what a restored database lost (never deletes)."""
+        def fn():
+            done, left = actions.repair(self.state.access)
+            lines = [f"repaired: {d}" for d in done] + [f"left as it is: {x}" for x in left]
+            QMessageBox.information(self.parent, "Repair campaign", in_app_words(
+                "\n".join(lines) or "Nothing to repair; nothing was deleted."))
+            return len(done)
+
+        self._quick("Repair campaign", fn, lambda n: f"repair: {n} repair(s); nothing was deleted")
 
     def write_report(self) -> None:
         path = ask_save_path(self.parent, "Write report", self.host.folders, "report.pdf", "PDF (*.pdf)")

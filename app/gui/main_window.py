@@ -195,6 +195,9 @@ class MainWindow(QMainWindow):
         self._action(m, "Processing &parameter…", cmd.set_parameter)
         self._action(m, "&Scanner…", cmd.choose_scanner)
         self._action(m, "&Where to stand…", self.stations_view.request_evaluation)
+        m.addSeparator()
+        self._action(m, "&Verify campaign", cmd.verify_campaign)
+        self._action(m, "Re&pair campaign", cmd.repair_campaign)
         m = mb.addMenu("&Epoch")
         self.act_add_epoch = self._action(m, "&Add epoch…", cmd.add_epoch, "Ctrl+E",
                                           tip="Import the coarse scan of a visit (and its fine scans, if any)")

@@ -35,6 +35,11 @@ from lidar.plan import RoiPlan, ScanPlan, edit_roi, with_rois
 UNDO_DEPTH = 200
 
 
+def _editable(plan: Optional[ScanPlan]) -> tuple[RoiPlan, ...]:
+    """The windows a user edits: all but the closure, which repeats its target's window at the visit's end."""
+    return () if plan is None else tuple(r for r in plan.rois if not r.closure)
+
+
 class PlanEditor:
     """One epoch's plan under edit: its windows, whether they differ from the stored plan, undo and redo.
 
@@ -60,7 +65,8 @@ class PlanEditor:
     def load(self, stored: Optional[ScanPlan]) -> None:
         """Start editing ``stored`` afresh (no history)."""
         self.stored = stored
-        self._rois: tuple[RoiPlan, ...] = tuple(stored.rois) if stored is not None else ()
+        # the closure window follows its target's window (lidar.plan.with_rois): it is not edited on its own
+        self._rois: tuple[RoiPlan, ...] = _editable(stored)
         self._saved = self._rois
         self._undo: list[tuple[RoiPlan, ...]] = []
         self._redo: list[tuple[RoiPlan, ...]] = []
@@ -77,7 +83,7 @@ class PlanEditor:
         """The edited plan (the stored plan with the current windows), or None when there is none."""
         if self.stored is None:
             return None
-        return self.stored if self._rois == tuple(self.stored.rois) else with_rois(self.stored, self._rois)
+        return self.stored if self._rois == _editable(self.stored) else with_rois(self.stored, self._rois)
 
     @property
     def dirty(self) -> bool:
@@ -153,7 +159,7 @@ class PlanEditor:
 
     def mark_saved(self, rois: Optional[Iterable[RoiPlan]] = None) -> None:
         """The current windows (or ``rois``, the ones a save wrote) are now what the campaign holds."""
-        self._saved = self._rois if rois is None else tuple(rois)
+        self._saved = self._rois if rois is None else tuple(r for r in rois if not r.closure)
         self._notify()
 
     # ------------------------------------------------------------------ internals

@@ -34,6 +34,8 @@ MENUS = {
     "report": "Reports ▸ Write report (PDF)…",
     "export": "Reports ▸ Export workbook (XLSX)…",
     "field-sheet": "Epoch ▸ Field sheet of the selected epoch (PDF)…",
+    "verify": "Campaign ▸ Verify campaign",
+    "repair": "Campaign ▸ Repair campaign",
 }
 #: Command-line options -> the dialog field (or setting) holding the same value.
 FIELDS = {

@@ -190,7 +190,7 @@ def _analysis_inputs(v: Visit, tmp_path) -> None:
     assert v.win.tabs.currentWidget() is v.win.analysis_view and v.win.analysis_view.table.rowCount() == 5
 
 
-def _campaign_entries(v: Visit, camp, tmp_path) -> None:
+def _campaign_entries(v: Visit, camp, tmp_path, monkeypatch) -> None:
     win = v.win
     answer(QInputDialog, lambda d: (d.setTextValue("min_points"),
                                     answer(QInputDialog, lambda e: e.setTextValue("1000"))))
@@ -215,6 +215,12 @@ def _campaign_entries(v: Visit, camp, tmp_path) -> None:
     v.do("Epoch", "Plan the selected epoch")
     v.do("Epoch", "Check the fine scans before leaving")
     win.commands.check_dialog.close()
+    shown = []
+    monkeypatch.setattr(QMessageBox, "information", staticmethod(lambda parent, title, text: shown.append(text)))
+    v.do("Campaign", "Verify campaign")
+    assert v.status.startswith("verify: ") and shown
+    v.do("Campaign", "Repair campaign")  # a whole campaign: nothing to repair, nothing deleted
+    assert v.status.startswith("repair: ") and "nothing was deleted" in v.status
 
 
 def _reflector_entries(v: Visit) -> None:
@@ -326,7 +332,7 @@ def test_a_weekly_visit_through_the_application(qtbot, field_copy, tmp_path, mon
         _visit_by_hand(v, field_copy, camp, label, k, tmp_path)
     assert win.act_next.text() == "Next: write the report"
     _analysis_inputs(v, tmp_path)
-    _campaign_entries(v, camp, tmp_path)
+    _campaign_entries(v, camp, tmp_path, monkeypatch)
     _every_tab(v)
     _reflector_entries(v)
     _reports_and_files(v, camp, tmp_path, monkeypatch)

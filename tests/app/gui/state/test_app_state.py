@@ -272,5 +272,5 @@ def test_analysis_inputs_from_the_application_and_a_refused_prediction(processed
                                     lambda *a: None)
     assert set(out) == {"M1", "M3"}
     with Campaign.open(processed_copy, writable=False) as c:
-        assert c.settings()["casting_date"].startswith("2026-01-01") and len(c.events()) == 1
+        assert c.settings()["casting_date"].startswith("2026-01-01") and len(c.events.all()) == 1
     assert "flagged" in actions.set_limit(access, "M3", "prediction:2")
