@@ -110,6 +110,11 @@ FLAG_DRIFT_FROM_PLAN = _flag("drift_from_plan_times", INFO, "the fine scans carr
                              "drift was fitted on the plan's window order and time model", "projects.processing")
 FLAG_DRIFT_BEYOND_SPEC = _flag("drift_beyond_tolerance", WARNING, "the set-up turned more during the visit than "
                                "the instrument allows for: re-scan advised", "projects.processing")
+FLAG_ATMOSPHERE_UNCORRECTED = _flag("atmosphere_not_corrected_by_instrument", INFO, "the range scale measured on "
+                                    "the piers follows the air's temperature and pressure: the instrument did not "
+                                    "correct for the atmosphere (the scale is corrected here)", "projects.processing")
+FLAG_ATMOSPHERE_CORRECTED = _flag("atmosphere_corrected_by_instrument", INFO, "no range scale left where the air "
+                                  "predicts one: the instrument corrected for the atmosphere", "projects.processing")
 FLAG_ATMOSPHERE_DISAGREES = _flag("scale_disagrees_with_atmosphere", WARNING, "the range scale measured on the "
                                   "piers disagrees with what the air's temperature and pressure predict",
                                   "projects.processing")

@@ -546,7 +546,15 @@ def _model(p: _Problem, sol: _Solution, left_out: list, baseline: str, alternati
         s_ppm = 0.0 if v.is_base else float(math.sqrt(max(cl[6, 6], 0.0)))
         dcov = cl[off:off + 3, off:off + 3] if v.timed else np.zeros((3, 3))
         left = tuple(t for lab, t in left_out if lab == v.label)
-        out[v.label] = VisitSystematics(v.label, 0.0 if v.is_base else v.kappa_ppm, s_ppm,
+        kappa = 0.0 if v.is_base else v.kappa_ppm
+        if alternative_kappas and not v.is_base and alternatives:
+            # the range walk's families the data support each imply their own scale: their BIC-weighted mean,
+            # with their spread in the sigma (a scale must not hang on one family where several fit)
+            w = np.array([a[2] for a in alternatives])
+            ks = np.asarray(alternative_kappas[k], dtype=np.float64)
+            kappa = float(w @ ks / w.sum())
+            s_ppm = float(math.sqrt(s_ppm ** 2 + w @ (ks - kappa) ** 2 / w.sum()))
+        out[v.label] = VisitSystematics(v.label, kappa, s_ppm,
                                         v.omega.copy() if v.timed else np.zeros(3), dcov, v.t_ref, v.timed,
                                         v.is_base or s_ppm < SCALE_DETERMINED_PPM, left,
                                         tuple(alternative_kappas[k]) if alternative_kappas else (), misfit)

@@ -20,7 +20,8 @@ from typing import Callable, Mapping, Optional, Sequence
 import numpy as np
 
 from common.files import write_atomic
-from common.flags import FLAG_DRIFT_FROM_PLAN, FLAG_RANGE_WALK_UNDETERMINED, FLAG_SCALE_UNDETERMINED
+from common.flags import (FLAG_ATMOSPHERE_CORRECTED, FLAG_ATMOSPHERE_DISAGREES, FLAG_ATMOSPHERE_UNCORRECTED,
+                          FLAG_DRIFT_FROM_PLAN, FLAG_RANGE_WALK_UNDETERMINED, FLAG_SCALE_UNDETERMINED)
 from lidar.centroid import TargetCentroid
 from lidar.systematic.adjustment import FieldModel, Sighting, VisitSightings, VisitSystematics, fit_field_model
 from lidar.systematic.corrections import cos_incidence_of
@@ -134,6 +135,64 @@ def systematics_json(model: FieldModel, label: str, time_source: Optional[str]) 
             "drift_sigma_arcsec_h": v.drift_sigma_arcsec_h.tolist(), "timed": bool(v.timed),
             "time_source": time_source or "none", "range_walk": list(model.range_walk.basis),
             "left_out": list(v.left_out)}
+
+
+#: Environment readings within this of a visit's time describe its air (seconds).
+AIR_WINDOW_S = 3600.0
+
+
+def _air_at(c: Campaign, label: str) -> Optional[tuple[float, float, float]]:
+    """(temperature degC, pressure hPa, relative humidity 0..1) around a visit, or None without a temperature."""
+    from vision.series import CameraSeries
+
+    t_ns = int(c.epoch(label).when.timestamp() * 1e9)
+
+    def mean(kind: str) -> Optional[float]:
+        vals = []
+        for r in c.series.records("env_series", kind=kind):
+            times, values = CameraSeries.arrays_from_npz(c.series.arrays("env_series", r.name))
+            near = (np.abs(times - t_ns) <= AIR_WINDOW_S * 1e9) & np.isfinite(values)
+            vals += list(values[near])
+        return float(np.mean(vals)) if vals else None
+
+    temp = mean("temperature")
+    if temp is None:
+        return None
+    pres, hum = mean("pressure"), mean("humidity")
+    return temp, 1013.25 if pres is None else pres, 0.6 if hum is None else hum / 100.0
+
+
+def atmosphere_flags(c: Campaign, model: FieldModel, label: str) -> list[str]:
+    """What the air's temperature (and pressure) around the visit say of its estimated scale.
+
+    The scale the atmosphere predicts against the baseline (group refractivity for the scanner's
+    wavelength, :mod:`lidar.systematic.atmosphere`) is compared with the estimate: agreeing, the instrument
+    did not correct for the air (the correction is made here); an estimate near zero where the air
+    predicts a scale, it did; neither, a warning naming both numbers.
+    """
+    from lidar.systematic.atmosphere import range_scale_ppm
+
+    v = model.visit(label)
+    if label == model.baseline or label not in model.visits or not v.scale_determined:
+        return []
+    here, base = _air_at(c, label), _air_at(c, model.baseline)
+    if here is None or base is None:
+        return []
+    wl = c.profile_for(label).wavelength_nm
+    predicted = range_scale_ppm(*here[:2], relative_humidity=here[2], wavelength_nm=wl) - \
+        range_scale_ppm(*base[:2], relative_humidity=base[2], wavelength_nm=wl)
+    s = max(v.scale_sigma_ppm, 1e-6)
+    agrees, corrected = abs(v.scale_ppm - predicted) <= 3 * s, abs(v.scale_ppm) <= 3 * s
+    if agrees and not corrected:
+        return [f"{FLAG_ATMOSPHERE_UNCORRECTED}: measured {v.scale_ppm:+.1f} +- {s:.1f} ppm, the air predicts "
+                f"{predicted:+.1f} ppm"]
+    if corrected and not agrees:
+        return [f"{FLAG_ATMOSPHERE_CORRECTED}: measured {v.scale_ppm:+.1f} +- {s:.1f} ppm where the air predicts "
+                f"{predicted:+.1f} ppm"]
+    if not agrees:
+        return [f"{FLAG_ATMOSPHERE_DISAGREES}: measured {v.scale_ppm:+.1f} +- {s:.1f} ppm, the air predicts "
+                f"{predicted:+.1f} ppm"]
+    return []
 
 
 def epoch_flags(model: FieldModel, label: str, time_source: Optional[str]) -> list[str]:

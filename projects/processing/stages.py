@@ -29,7 +29,8 @@ from lidar.pipeline import analyse_coarse, measure_fine, plan_from_coarse
 from lidar.plan import ScanPlan
 from common.progress import ProgressCallback, report, scaled
 from lidar.scan import Scan
-from projects.processing.field import epoch_flags, systematics_json, update_field_model, visit_digest
+from projects.processing.field import (atmosphere_flags, epoch_flags, systematics_json, update_field_model,
+                                       visit_digest)
 from projects.processing.parameters import DEFAULTS, parameter, stage1_params, stage2_params
 from projects.store.previews import encode_preview
 from projects.store.records import EpochInputs, ScanFile
@@ -411,6 +412,8 @@ def update_displacements(c: Campaign, baseline: str) -> list[str]:
         for rid in found(lab):
             first_seen.setdefault(rid, lab)
     model = update_field_model(c, baseline, measured, groups, found, enabled=bool(params["field_model"]))
+    # the air's series decide the atmosphere's flags (projects.processing.field.atmosphere_flags)
+    air = sorted(r.sha256 for r in c.series.records("env_series") if r.kind in ("temperature", "pressure", "humidity"))
     done = []
     for pos, lab in enumerate(measured):
         meas_here = [m for m in found(lab) if groups.get(m) == "measurement"]
@@ -420,7 +423,7 @@ def update_displacements(c: Campaign, baseline: str) -> list[str]:
             bases = sorted({first_seen[m] for m in meas_here} | {baseline}, key=measured.index)
         key = {"v": PIPELINE_VERSION, "epoch": _stage1_hash(c, lab), "params": stage2_params(params),
                "bases": {b: _stage1_hash(c, b) for b in bases}, "reflectors": sorted((k, repr(v)) for k, v in refl.items()),
-               "field": {b: visit_digest(model, b, lab) for b in bases}}
+               "field": {b: visit_digest(model, b, lab) for b in bases}, "air": air}
         h = _hash(key)
         stored = c.displacement_set(lab)
         if stored is not None and stored.inputs_hash == h:
@@ -429,7 +432,8 @@ def update_displacements(c: Campaign, baseline: str) -> list[str]:
         if result is None:
             continue
         time_source = c.time_source(lab)
-        result = replace(result, flags=tuple(result.flags) + tuple(epoch_flags(model, lab, time_source)))
+        result = replace(result, flags=tuple(result.flags) + tuple(epoch_flags(model, lab, time_source))
+                         + tuple(atmosphere_flags(c, model, lab)))
         c.save_displacements(lab, baseline, result, h, systematics=systematics_json(model, lab, time_source))
         done.append(lab)
     return done
@@ -440,6 +444,12 @@ def _epoch_displacements(c: Campaign, lab: str, bases: list, baseline: str, foun
     """One epoch's displacements against the baseline (and the later baselines of targets that replaced others)."""
     cents = found(lab)
     meas_here = [m for m in cents if groups.get(m) == "measurement"]
+    base_deck = [m for m in found(baseline) if groups.get(m) == "measurement"]
+    if len(base_deck) < 3:  # nothing can be referred to this baseline: say so on every epoch, with what to do
+        n_meas = sum(1 for g in groups.values() if g == "measurement")
+        return _failed_result(groups, found(baseline), cents, baseline, "", flag=(
+            f"{FLAG_DECK_NOT_MEASURED}: the baseline {baseline} measured {len(base_deck)} of {n_meas} deck targets, "
+            "at least 3 needed: choose another baseline ('bridgesurvey settings DIR baseline LABEL') or re-scan it"))
     result = None
     extra: list = []
     failure = None
@@ -497,13 +507,16 @@ def _why_missing(c: Campaign, lab: str, result: EpochDisplacements) -> EpochDisp
     return replace(result, displacements=tuple(rows))
 
 
-def _failed_result(groups: dict, base: dict, cents: dict, baseline: str, reason: str) -> EpochDisplacements:
-    """An epoch with no displacement: every deck target missing, and a problem flag saying why."""
+def _failed_result(groups: dict, base: dict, cents: dict, baseline: str, reason: str, *,
+                   flag: Optional[str] = None) -> EpochDisplacements:
+    """An epoch with no displacement: every deck target missing, and a problem flag saying why (or ``flag``)."""
     refs = [r for r, g in groups.items() if g == "reference"]
     meas = [m for m, g in groups.items() if g == "measurement"]
     both = [r for r in refs if r in base and r in cents]
     found_meas = [m for m in meas if m in cents]
-    if not both:
+    if flag is not None:
+        pass
+    elif not both:
         flag = (f"{FLAG_PIERS_NOT_MEASURED}: no reference target was found in both this epoch and the baseline "
                 f"{baseline} ({len([r for r in refs if r in cents])} of {len(refs)} found here)")
     elif len(found_meas) < 3:

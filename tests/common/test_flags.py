@@ -25,6 +25,8 @@ def _literal_codes(path: Path) -> list[tuple[int, str]]:
             skip.add(id(node.slice))
         elif isinstance(node, ast.Call) and getattr(node.func, "attr", None) in ("get", "pop", "setdefault"):
             skip.update(id(a) for a in node.args[:1])
+        elif isinstance(node, ast.Set) and all(isinstance(e, ast.Constant) for e in node.elts):
+            skip.update(id(e) for e in node.elts)  # a set of field names (keys of a stored document)
     out = []
     for node in ast.walk(tree):
         if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in skip:

@@ -429,7 +429,7 @@ def test_flipped_bytes_in_stored_results_are_found_by_verify_and_recomputed_by_p
     assert rc == 3
     assert f"DAMAGED displacements of epoch {labels[-1]}" in out and f"DAMAGED map preview of epoch {labels[0]}" in out
     rc, out, _ = run(capsys, "process", processed_copy)
-    assert rc in (0, 3) and "displacements updated for 1 epoch(s)" in out
+    assert rc in (0, 3) and re.search(rf"^{labels[-1]}\s+(processed|measured)\b", out, re.M), out
     assert run(capsys, "verify", processed_copy)[0] == 0
     assert tables(processed_copy) == reference
     with Campaign.open(processed_copy, writable=False) as c:
