@@ -468,6 +468,11 @@ def new_roi(reflector: str, group: str, *, phi_min_deg: float, phi_max_deg: floa
                     theta_max_deg=theta_max_deg, profile=profile)
 
 
+def without_closure(plan: ScanPlan) -> ScanPlan:
+    """The plan without its closure window (the drift of the visit is then measured on the references only)."""
+    return replace(plan, rois=tuple(r for r in plan.rois if not r.closure))
+
+
 def with_rois(plan: ScanPlan, rois: Sequence[RoiPlan]) -> ScanPlan:
     """The plan with another set of windows; the time budget is checked again.
 

@@ -59,6 +59,9 @@ def register(sub) -> None:
     add_epoch(p)
     output_file(p, "--out", required=True, help="plan JSON to write")
     output_file(p, "--sheet", default=None, help="also write the printable field sheet (PDF)", suffixes=(".pdf",))
+    p.add_argument("--no-closure", action="store_true",
+                   help="leave out the closure window (the first reference target again at the end, which measures "
+                        "the set-up's drift during the visit); the campaign keeps its plan")
     p.set_defaults(func=cmd_plan)
 
     p = sub.add_parser("process", help="bring epochs up to date: plans, centroids, displacements",
@@ -218,6 +221,10 @@ def cmd_plan(args) -> int:
     with _open(args.dir) as c:
         with progress_bar("planning") as cb:
             plan = plan_epoch(c, args.epoch, progress=cb)
+        if args.no_closure:
+            from lidar.plan import without_closure
+
+            plan = without_closure(plan)
         if args.sheet is not None:
             from projects.outputs.field_sheet import write_field_sheet
 
