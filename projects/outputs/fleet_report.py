@@ -26,6 +26,9 @@ def write_fleet_report(status: dict, path: str | os.PathLike, *, title: str = "B
     if ov["overdue"]:
         story.append(Paragraph(_esc(f"Overdue (no visit for more than {ov['overdue_days']} days): "
                                     + ", ".join(ov["overdue"])), ss["Normal"]))
+    root = _common_root([b["folder"] for b in status["bridges"]])
+    if root:
+        story.append(Paragraph(_esc(f"Folders are under {root}."), ss["Normal"]))
     story.append(Spacer(1, 4 * mm))
     rows = [["Bridge", "State", "Worst target", "Displacement (mm)", "Alarm limit (mm)", "Last epoch",
              "Days since", "Work left", "Problems", "Cross-validation", "Folder"]]
@@ -33,13 +36,28 @@ def write_fleet_report(status: dict, path: str | os.PathLike, *, title: str = "B
     for k, b in enumerate(status["bridges"], start=1):
         cv = "; ".join(f"{x['series']}: RMSE {_num(x.get('rmse_mm'))} mm" for x in b["crossval"]) or "–"
         if b["error"]:
-            rows.append([b["name"], "unreadable", "–", "–", "–", "–", "–", "–", "–", "–", f"{b['folder']}: {b['error']}"])
+            rows.append([b["name"], "unreadable", "–", "–", "–", "–", "–", "–", "–", "–", f"{_short(b['folder'], root)}: {b['error']}"])
             colours.append((k, 1, STATE_COLOURS["unknown"]))
             continue
         rows.append([b["name"], b["state"], b["worst_target"] or "–", _num(b["worst_displacement_mm"]),
                      _num(b["worst_limit_mm"]), f"{b['last_epoch'] or '–'} {b['last_date'] or ''}",
                      "–" if b["days_since"] is None else str(b["days_since"]), str(b["work_left"]),
-                     str(b["problems"]), cv, b["folder"]])
+                     str(b["problems"]), cv, _short(b["folder"], root)])
         colours.append((k, 1, STATE_COLOURS.get(b["state"], "#eeeeee")))
     story.append(_table(rows, [38, 18, 18, 22, 20, 34, 14, 14, 15, 40, 44], ss, cell_colours=colours))
     return write_landscape_pdf(story, path, title=title)
+
+
+def _common_root(folders: list[str]) -> str:
+    """The folder all bridges share (so that the table shows short names that do not wrap), or ''."""
+    parents = [str(Path(f).parent) for f in folders]
+    if not parents:
+        return ""
+    try:
+        return os.path.commonpath(parents)
+    except ValueError:  # different drives
+        return ""
+
+
+def _short(folder: str, root: str) -> str:
+    return os.path.relpath(folder, root) if root else folder

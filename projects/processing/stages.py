@@ -116,6 +116,7 @@ class ProcessSummary:
 
     outcomes: list[EpochOutcome] = field(default_factory=list)
     displacement_epochs: list[str] = field(default_factory=list)
+    displacement_reasons: dict[str, str] = field(default_factory=dict)  # epoch -> why it was recomputed
     baseline: Optional[str] = None
     problems: dict[str, str] = field(default_factory=dict)  # epoch -> its first problem flag
 
@@ -373,7 +374,7 @@ def finish_displacements(c: Campaign, summary: ProcessSummary, labels: Sequence[
         # earlier date gets a negative time against it instead of silently re-referencing everything.
         c.set_setting("baseline", summary.baseline)
     if summary.baseline is not None:
-        summary.displacement_epochs = update_displacements(c, summary.baseline)
+        summary.displacement_epochs = update_displacements(c, summary.baseline, reasons=summary.displacement_reasons)
     for lab in labels:
         ds = c.displacement_set(lab)
         if ds is not None:
@@ -387,11 +388,13 @@ def _stage1_hash(c: Campaign, label: str) -> Optional[str]:
     return res.inputs_hash if res is not None and res.stage == "measured" else None
 
 
-def update_displacements(c: Campaign, baseline: str) -> list[str]:
+def update_displacements(c: Campaign, baseline: str, *, reasons: Optional[dict] = None) -> list[str]:
     """(Re)compute the displacements of every measured epoch whose inputs changed; returns those epochs.
 
     The campaign's field model (:mod:`projects.processing.field`) is fitted first over every measured
-    epoch; each epoch's displacements depend on it through its digest of the two visits' terms.
+    epoch; each epoch's displacements depend on it through its digest of the two visits' terms. The
+    stored digest is ``inputs:field`` so that ``reasons`` (epoch -> ``"field"`` or ``"inputs"``) can
+    say whether only the field model moved (a new epoch refines the campaign-wide range walk).
     """
     params = parameters(c)
     refl = {r.id: r for r in c.reflectors()}
@@ -423,11 +426,14 @@ def update_displacements(c: Campaign, baseline: str) -> list[str]:
             bases = sorted({first_seen[m] for m in meas_here} | {baseline}, key=measured.index)
         key = {"v": PIPELINE_VERSION, "epoch": _stage1_hash(c, lab), "params": stage2_params(params),
                "bases": {b: _stage1_hash(c, b) for b in bases}, "reflectors": sorted((k, repr(v)) for k, v in refl.items()),
-               "field": {b: visit_digest(model, b, lab) for b in bases}, "air": air}
-        h = _hash(key)
+               "air": air}
+        core = _hash(key)
+        h = f"{core}:{_hash({b: visit_digest(model, b, lab) for b in bases})}"
         stored = c.displacement_set(lab)
         if stored is not None and stored.inputs_hash == h:
             continue
+        if reasons is not None and stored is not None:
+            reasons[lab] = "field" if stored.inputs_hash.split(":")[0] == core else "inputs"
         result = _epoch_displacements(c, lab, bases, baseline, found, groups, first_seen, params, model, refl)
         if result is None:
             continue
