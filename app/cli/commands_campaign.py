@@ -284,7 +284,10 @@ def _process_rows(summary, states: dict, had_displacements: set) -> list[dict]:
         o = outcomes.get(lab)
         action, message = (o.action, o.message) if o is not None else ("up-to-date", "")
         if action == "up-to-date" and lab in updated:
-            action, message = (("displacements", "recomputed (parameters, baseline or reflectors changed)")
+            why = ("the campaign's field model was re-fitted with the new epochs (range walk, scales, drift)"
+                   if summary.displacement_reasons.get(lab) == "field" else
+                   "parameters, baseline, reflectors or the air's series changed")
+            action, message = (("displacements", f"recomputed ({why})")
                                if lab in had_displacements else
                                ("processed", "displacements computed from the centroids measured earlier "
                                              "(e.g. by 'check')"))
@@ -339,8 +342,8 @@ def cmd_status(args) -> int:
     print(f"campaign '{data['name']}', span {data['span_m'] or '?'} m, baseline {data['baseline'] or '-'}, "
           f"{len(epochs)} epoch(s)")
     shown = epochs if args.all else epochs[-STATUS_EPOCHS:]
-    table([{**e, "flags": describe(e["flag_list"])} for e in shown],
-          ["epoch", "datetime", "state", "stale", "flags"])
+    table([{**e, "flags": describe(e["flag_list"]), "scale": _scale_text(e, data["baseline"])} for e in shown],
+          ["epoch", "datetime", "state", "stale", "scale", "flags"])
     if len(shown) < len(epochs):
         print(f"(last {len(shown)} of {len(epochs)} epochs; --all for every epoch)")
     levels = {e["epoch"]: worst(e["flag_list"]) for e in epochs}
@@ -364,6 +367,15 @@ def cmd_status(args) -> int:
         print(f"warning: {len(data['unlisted_files'])} file(s) in the campaign folder that the database does not list "
               f"(kept; 'bridgesurvey repair {args.dir}' registers them again): {', '.join(data['unlisted_files'])}")
     return 0
+
+
+def _scale_text(e: dict, baseline: str | None) -> str:
+    """``+3.1±0.8 ppm`` (the range scale the field model found for the epoch), ``-`` without one."""
+    if e.get("scale_ppm") is None:
+        return "-"
+    if e["epoch"] == baseline:
+        return "0 (baseline)"
+    return f"{e['scale_ppm']:+.1f}±{e['scale_sigma_ppm']:.1f} ppm"
 
 
 def _xyz(text: str):

@@ -88,6 +88,25 @@ def basis_function(name: str) -> Callable:
         raise InputError(f"unknown range-walk basis function {name!r}") from None
 
 
+#: Each basis function in words (for reports).
+WORDS = {"1": "a constant", "cos": "cos(incidence)", "inv_r2": "(r0/range)^2", "sat_r2": "(r0/range)^2 saturating",
+         "soft_r2": "a soft (r0/range)^2", "strength": "the return strength", "sat_strength": "the strength, saturating",
+         "soft_strength": "the strength, softly saturating", "log_strength": "log(strength)"}
+PROXY_WORDS = {"s": "strength", "c": "cos(incidence)", "q": "(r0/range)^2"}
+
+
+def describe_basis(basis: Sequence[str]) -> str:
+    """``a constant + cos(incidence)``; ``a step at strength > 0.42``; ``none`` for an empty basis."""
+    words = []
+    for b in basis:
+        if b.startswith("step_"):
+            proxy, _, value = b[5:].partition("@")
+            words.append(f"a step at {PROXY_WORDS.get(proxy, proxy)} > {float(value):.3g}")
+        else:
+            words.append(WORDS.get(b, b))
+    return " + ".join(words) or "none"
+
+
 def design(basis: Sequence[str], range_m: ArrayLike, cos_incidence: ArrayLike) -> np.ndarray:
     """(N, P) values of the basis functions ``basis`` at N returns."""
     r = np.atleast_1d(np.asarray(range_m, dtype=np.float64))

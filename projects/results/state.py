@@ -8,6 +8,7 @@ and the report show. :func:`epoch_states` gives it for every epoch of a campaign
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Iterable, Mapping, Optional, Sequence
 
@@ -197,14 +198,21 @@ def campaign_status(c: Campaign) -> dict:
     from projects.processing.stages import baseline_epoch, stale_epochs
     from projects.results.table import displacement_table
 
+    from projects.results.corrections import epoch_corrections
+
     stale = stale_epochs(c)
     states = epoch_states(c)
     epochs = []
     for e in c.epochs():
         s = states[e.label]
+        corr = epoch_corrections(c.systematics(e.label))
         epochs.append({"epoch": e.label, "datetime": e.datetime[:16], "state": s.state,
                        "stale": stale.get(e.label, ""), "flags": "; ".join(s.flags), "flag_list": list(s.flags),
-                       "severity": count(s.flags)})
+                       "severity": count(s.flags),
+                       "scale_ppm": None if corr is None else round(corr.scale_ppm, 2) + 0.0,
+                       "scale_sigma_ppm": None if corr is None else round(corr.scale_sigma_ppm, 2) + 0.0,
+                       "drift_arcsec_h": None if corr is None or not corr.timed
+                       else round(math.hypot(corr.tilt_arcsec_h, corr.twist_arcsec_h), 1) + 0.0})
     from projects.store.verify import REMEDY, describe_group
 
     damaged = [f"stored {describe_group(t, k)}: damaged (fails its checksum), not shown; {REMEDY[t]}"

@@ -7,6 +7,8 @@ import numpy as np
 
 from common.flags import describe
 from projects.store.history import histories
+from projects.processing.stages import baseline_epoch
+from projects.results.corrections import corrections_line
 from projects.results.state import epoch_state
 
 
@@ -57,6 +59,9 @@ def epoch_html(c, label: str) -> str:
     if stored is not None:
         rows.append(("Plan", f"{len(stored.plan.rois)} windows, {stored.plan.total_seconds / 60:.1f} min"
                              + (" (edited by hand)" if stored.edited else "")))
+    corrected = corrections_line(c.systematics(label), baseline=label == baseline_epoch(c))
+    if corrected:
+        rows.append(("Corrected for", corrected))
     out = f"<h3>Epoch {html.escape(label)}</h3>" + _rows(rows)
     cents = c.centroids(label)
     if cents:

@@ -10,9 +10,11 @@ import datetime as dt
 import getpass
 import logging
 import platform
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import metadata
-from typing import Any, Optional
+from typing import Any, Optional, Sequence
+
+import numpy as np
 
 from common.errors import InputError, SurveyError
 from common.flags import FLAG_SECOND_OBJECT
@@ -71,6 +73,7 @@ class EpochSection:
     files: tuple[ScanFile, ...]
     state: str = "imported"  # as ``status`` gives it (projects.results.state.epoch_state)
     state_flags: tuple[str, ...] = ()
+    systematics: dict = field(default_factory=dict)  # what its displacements were corrected for (scale, drift)
 
 
 @dataclass(frozen=True, eq=False)
@@ -162,6 +165,19 @@ def _target_states(c: Campaign, last: Optional[EpochSection]) -> list[TargetStat
     return out
 
 
+def _field_extra(c: Campaign, sections: Sequence[EpochSection]) -> Optional[dict]:
+    """What the field error budget page shows: the model, each epoch's record, times, the centroids' geometry."""
+    from lidar.systematic.corrections import cos_incidence_of
+
+    stored = c.field_model()
+    if stored is None or not any(s.systematics for s in sections):
+        return None
+    measured = [(float(np.linalg.norm(t.xyz_socs)), cos_incidence_of(t))
+                for s in sections for t in s.centroids.values() if t.found]
+    return {"model": stored[0], "systematics": {s.label: s.systematics for s in sections},
+            "times": {s.label: s.datetime for s in sections}, "measured": measured}
+
+
 def gather(c: Campaign, scope: ReportScope = ReportScope(), *, author: Optional[str] = None,
            with_previews: bool = True) -> ReportContent:
     """Collect the report's facts for ``scope`` from an open campaign."""
@@ -175,7 +191,7 @@ def gather(c: Campaign, scope: ReportScope = ReportScope(), *, author: Optional[
             lab, e.datetime, e.notes, res.stage if res else "imported",
             c.stored_plan(lab), c.map_preview(lab) if with_previews else None,
             c.centroids(lab), tuple(c.reference_checks(lab)), c.displacement_set(lab), tuple(c.files(lab)),
-            state, tuple(state_flags)))
+            state, tuple(state_flags), c.systematics(lab)))
     last_time = chosen[-1].datetime
     first_time = chosen[0].datetime
     # A visit report shows the history up to the visit; a period report the period itself.
@@ -210,6 +226,9 @@ def gather(c: Campaign, scope: ReportScope = ReportScope(), *, author: Optional[
             extras["analysis"] = analyse_campaign(c)
         except SurveyError as exc:  # no displacements to analyse: the report says so elsewhere
             log.info("no analysis section: %s", exc)
+    field_extra = _field_extra(c, sections)
+    if field_extra is not None:
+        extras["field"] = field_extra
     log_rows = [r for r in c.log() if r.epoch is None or r.epoch in {s.label for s in sections}]
     return ReportContent(
         name=c.name, folder=str(c.folder), span_m=c.span_m, scanner=c.profile.name,

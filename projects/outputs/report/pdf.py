@@ -12,7 +12,9 @@ from common.flags import FLAG_NO_CAMERA_DATA, REGISTRY, code, describe, severity
 from common.progress import ProgressCallback, report, scaled
 from projects.outputs.report.analysis_page import analysis_section
 from projects.outputs.report.content import EpochSection, ReportContent
+from projects.outputs.report.field_page import field_section
 from projects.outputs.report.flowables import esc, figure_flowable, fonts, num, styles, table
+from projects.results.corrections import corrections_line
 from projects.series.context import WHOLE_DAY_COVERAGE
 
 PAGE_MARGIN_MM = 16
@@ -340,6 +342,9 @@ def epoch_section(e: EpochSection, content: ReportContent, ss: Any, *, new_page:
         out += [Spacer(1, 4), Paragraph("Displacements" + (f" (epoch flags, {_esc(describe(epoch_flags))})"
                                                            if epoch_flags else ""),
                                         ss["Small"]), _table(table, (20, 30, 20, 20, 88), ss)]
+        corrected = corrections_line(e.systematics, baseline=e.label == content.baseline)
+        if corrected:
+            out.append(Paragraph(_esc(f"Corrected for: {corrected}."), ss["Small"]))
         problems = [f for f in epoch_flags if severity(f) == "problem"]
         if problems:
             out.insert(0, Paragraph(f"<font color='#d62728'><b>PROBLEM:</b> {_esc('; '.join(problems))}</font>",
@@ -477,7 +482,7 @@ def crossval_section(content: ReportContent, ss: Any) -> list:
 #: Optional sections: name -> builder taking (content, ss) and returning flowables; called only when
 #: ``content.extras`` holds that name.
 EXTRA_SECTIONS: dict[str, Callable] = {"comparisons": comparison_section, "crossvals": crossval_section,
-                                       "analysis": analysis_section}
+                                       "analysis": analysis_section, "field": field_section}
 
 
 def build_pdf(content: ReportContent, path: str | os.PathLike, *, preview_of: Optional[Callable] = None,

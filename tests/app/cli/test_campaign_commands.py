@@ -204,3 +204,16 @@ def test_status_lists_the_last_epochs_and_says_so(processed_copy, capsys, monkey
     assert main(["status", str(processed_copy), "--all"]) == 0
     out = capsys.readouterr().out
     assert all(f"\n{d[:10]} " in out for d in DATES) and "--all for every epoch" not in out
+
+
+def test_status_shows_each_epochs_range_scale(processed_copy, capsys):
+    import re
+
+    assert main(["status", str(processed_copy), "--all"]) == 0
+    out = capsys.readouterr().out
+    assert "scale" in out.splitlines()[1]  # the table's header
+    assert "0 (baseline)" in out
+    assert len(re.findall(r"[+-]\d+\.\d±\d+\.\d ppm", out)) == 2  # the two later epochs, each with its sigma
+    assert main(["status", str(processed_copy), "--json"]) == 0
+    epochs = json.loads(capsys.readouterr().out)["epochs"]
+    assert all(isinstance(e["scale_ppm"], float) and e["scale_sigma_ppm"] >= 0 for e in epochs)

@@ -38,6 +38,10 @@ def test_whole_campaign_report_has_every_section_and_no_blank_page(processed, tm
         assert s in text, s
     for label in ("2026-03-02", "2026-03-09", "2026-03-16"):
         assert f"Epoch {label}" in text
+    # the field error budget page, and each epoch says what its displacements were corrected for
+    assert "Field error budget" in text and "Each visit's corrections" in text and "Range walk:" in text
+    assert text.count("Corrected for: scale") == 3 and "scale 0 ppm (the baseline defines it)" in text
+    assert "1970" not in text  # an empty drift panel keeps no time axis
     assert "A. Surveyor" in text and "Riegl VZ-1000" in text and "kr-rail:0-200" in text
     from projects.store.campaign import Campaign
 

@@ -1,0 +1,104 @@
+"""The report's field error budget: what the campaign's instrument did, and what each term of σ holds.
+
+One page: the range walk, each visit's scale and drift (figure and table), then per epoch the median of
+each budget term over its targets, so a reader sees what the displacements were corrected for and how
+much of their σ each correction costs.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from lidar.systematic.range_walk import describe_basis
+from projects.outputs.report.content import ReportContent
+from projects.outputs.report.flowables import esc, figure_flowable, num, table
+from projects.results.corrections import epoch_corrections
+from projects.results.table import BUDGET_COLUMNS
+
+FIGURE_SIZE_IN = (7.6, 2.7)
+INTRO = ("Each visit's centroids are corrected before their displacements are computed: for the atmosphere's "
+         "range scale (ppm against the baseline's visit), for the retro-reflectors' range walk (a bias along the "
+         "beam that depends on range and incidence, one law for the campaign), and for the set-up's drift during "
+         "the visit (tilt and twist rates, measured on the reference targets and on the closure window that scans "
+         "the first reference again at the end). They are fitted jointly over every visit; what the data cannot "
+         "tell apart widens σ instead of moving the value. The budget below splits σ into its terms: noise (the "
+         "centroids), frame (the reference targets' fit), scale, bias (range walk) and drift.")
+
+
+def _range_walk_text(content: ReportContent) -> str:
+    model = content.extras["field"]["model"]
+    rw = model.range_walk
+    text = f"Range walk: {describe_basis(rw.basis)}"
+    if rw.basis:
+        text += " (r0 = 15 m)" if any("r2" in b or "strength" in b or b.startswith("step_q") for b in rw.basis) else ""
+        text += "; determined by the campaign's data" if rw.determined else "; not determined: its prior is in σ"
+    if len(rw.alternatives) > 1:
+        ranked = sorted(rw.alternatives, key=lambda a: -a[2])
+        top = ranked[0][2]
+        close = [a for a in ranked if a[2] >= 0.05 * top]
+        text += (f"; of the {len(ranked)} families tried, {len(close)} fit about as well (weight at least 5% of the "
+                 f"best's), their spread is in σ ({', '.join(describe_basis(b) for b, _, _ in close[:3])}"
+                 f"{', …' if len(close) > 3 else ''})")
+    text += f". Adjustment: {model.n_observations} observations, σ0 {model.sigma0:.2f}."
+    notes = list(rw.notes) + list(model.notes)
+    return text + (" " + " ".join(notes) if notes else "")
+
+
+def visit_rows(content: ReportContent) -> list[list]:
+    """One row per epoch: scale, tilt and twist rates with σ, time source, misfit, targets left out."""
+    extra = content.extras["field"]
+    model = extra["model"]
+    rows: list[list] = [["Epoch", "Scale [ppm]", "Tilt [″/h]", "Twist [″/h]", "Times", "Misfit", "Left out"]]
+    for e in content.epochs:
+        corr = epoch_corrections(extra["systematics"].get(e.label) or {})
+        v = model.visits.get(e.label)
+        if corr is None:
+            rows.append([e.label, "–", "–", "–", "–", "–", "not processed with the field model"])
+            continue
+        base = e.label == model.baseline
+        scale = ("0 (baseline)" if base else num(corr.scale_ppm, "{:+.1f}") + " ± " + num(corr.scale_sigma_ppm, "{:.1f}")
+                 + ("" if corr.scale_determined else " (prior)"))
+        tilt = num(corr.tilt_arcsec_h, "{:.0f}") + " ± " + num(corr.tilt_sigma_arcsec_h, "{:.0f}") if corr.timed else "–"
+        twist = num(corr.twist_arcsec_h, "{:.0f}") + " ± " + num(corr.twist_sigma_arcsec_h, "{:.0f}") if corr.timed else "–"
+        rows.append([e.label, scale, tilt, twist, corr.time_source, num(None if v is None else v.misfit),
+                     ", ".join(corr.left_out) or "–"])
+    return rows
+
+
+def budget_rows(content: ReportContent) -> list[list]:
+    """Per epoch, the median over its targets of each σ term and of σ itself (mm)."""
+    names = [c[6:-3] for c in BUDGET_COLUMNS]
+    rows: list[list] = [["Epoch", "Targets"] + [f"σ {n} [mm]" for n in names] + ["σ [mm]"]]
+    for e in content.epochs:
+        mine = [r for r in content.displacements if r["epoch"] == e.label and r["displacement_mm"] is not None]
+        if not mine:
+            continue
+        med = [np.median([r[c] for r in mine if r.get(c) is not None] or [np.nan]) for c in BUDGET_COLUMNS]
+        rows.append([e.label, str(len(mine))] + [num(float(v), "{:.3f}") for v in med]
+                    + [num(float(np.median([r["sigma_mm"] for r in mine])), "{:.3f}")])
+    return rows
+
+
+def field_section(content: ReportContent, ss: Any) -> list:
+    """Flowables of the field error budget (``content.extras['field']``)."""
+    from reportlab.platypus import PageBreak, Paragraph, Spacer
+
+    from projects.outputs.field_figures import field_model_figure
+
+    extra = content.extras["field"]
+    out = [PageBreak(), Paragraph("Field error budget", ss["Heading1"]), Paragraph(esc(INTRO), ss["Small"]),
+           Spacer(1, 3),
+           figure_flowable(field_model_figure(extra["model"], extra["times"], measured=extra["measured"],
+                                              figsize=FIGURE_SIZE_IN), 176),
+           Paragraph(esc(_range_walk_text(content)), ss["Small"]), Spacer(1, 4),
+           Paragraph("Each visit's corrections", ss["Heading2"]),
+           table(visit_rows(content), (24, 30, 22, 22, 16, 14, 48), ss)]
+    budget = budget_rows(content)
+    if len(budget) > 1:
+        out += [Paragraph("The budget: median σ of each term over the epoch's targets", ss["Heading2"]),
+                table(budget, (24, 14, 20, 20, 20, 20, 20, 18), ss),
+                Paragraph("The terms add in quadrature except where they share a source (the frame and the scale "
+                          "both come from the reference targets); σ is the displacement's own, from the full "
+                          "covariance.", ss["Small"])]
+    return out
