@@ -51,13 +51,15 @@ def cmd_info(args) -> int:
             print(f"  {k}: {d}")
         for s in info.scans:
             print(f"  scan '{s.name}': {s.points:,} points")
-            print(f"    bounds (SOCS, m): {_fmt_xyz(s.bounds_min)} .. {_fmt_xyz(s.bounds_max)}; "
+            print(f"    bounds ({'project frame' if s.frame == 'project' else 'SOCS'}, m): {_fmt_xyz(s.bounds_min)} .. "
+                  f"{_fmt_xyz(s.bounds_max)}; "
                   f"range {s.range_m[0]:.2f}-{s.range_m[1]:.2f} m")
             if s.pose is not None:
                 t = [row[3] for row in s.pose[:3]]
                 print(f"    pose: translation {_fmt_xyz(t)} (4x4 with --json)")
             else:
-                print("    pose: none (points are in the scanner's frame)")
+                print("    pose: none (points are in " + ("a project frame)" if s.frame == "project" else
+                                                   "the scanner's frame)"))
             if s.intensity_raw_range is not None:
                 lo, hi = s.intensity_raw_range
                 print(f"    intensity: raw {lo:g}..{hi:g}, convention: {s.intensity_convention}")

@@ -14,12 +14,11 @@ from typing import Optional
 
 import numpy as np
 
+from lidar.io.poses import FAR_FROM_SCANNER_M, carry_to_scanner, in_project_frame  # noqa: F401  (the test, named here too)
 from lidar.scan import Scan
 
 #: Points used for the step and duplicate estimates (a seeded sample of larger scans).
 SAMPLE_POINTS = 200_000
-#: A scan whose nearest point is farther than this is not in its scanner's frame.
-FAR_FROM_SCANNER_M = 2000.0
 #: Coordinates coarser than this lose what a target centroid needs.
 COARSE_SCALE_M = 0.001
 
@@ -40,6 +39,7 @@ class ScanInfo:
     range_m: tuple[float, float]
     duplicate_points: int
     problems: tuple[str, ...] = ()
+    frame: str = "scanner"  # "scanner" (SOCS), or "project" (a project or national frame: see lidar.io.poses)
 
 
 @dataclass(frozen=True)
@@ -125,9 +125,13 @@ def scan_info(scan: Scan) -> ScanInfo:
             problems.append("intensity is constant: reflectors cannot be detected in this file")
     rng_m = np.linalg.norm(xyz, axis=1)
     step = None
-    if rng_m.min() > FAR_FROM_SCANNER_M:
+    frame = "project" if in_project_frame(xyz) else "scanner"
+    if frame == "project":
+        own = scan.pose is not None and not in_project_frame(carry_to_scanner(scan, scan.pose).xyz_socs)
         problems.append(f"every point is more than {rng_m.min() / 1000:.0f} km from the origin: the coordinates are "
-                        "in a project frame, not the scanner's own (SOCS); angles and steps are not meaningful")
+                        "in a project frame, not the scanner's own (SOCS); angles and steps are not meaningful"
+                        + ("; its own pose carries it into the scanner's frame at import" if own else
+                           "; importing it needs its scanner pose (--pose FILE or --origin X,Y,Z)"))
     else:
         step = estimate_angular_step_deg(xyz)
     return ScanInfo(
@@ -137,7 +141,7 @@ def scan_info(scan: Scan) -> ScanInfo:
         intensity_convention=str(meta.get("intensity_convention", "none")),
         intensity_raw_range=raw_range,
         angular_step_deg=step, spacing_at_10m_mm=None if step is None else float(np.radians(step) * 10.0 * 1000.0),
-        range_m=(float(rng_m.min()), float(rng_m.max())), duplicate_points=dup, problems=tuple(problems),
+        range_m=(float(rng_m.min()), float(rng_m.max())), duplicate_points=dup, problems=tuple(problems), frame=frame,
     )
 
 
