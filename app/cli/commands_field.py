@@ -4,7 +4,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from app.cli.commands_campaign import _open
+from app.cli.commands_campaign import _open, add_setup_option, setup_date, setup_of
 from app.cli.output import dump_json, table
 from app.cli.progress import progress_bar
 from common.errors import InputError
@@ -25,6 +25,7 @@ def register(sub) -> None:
     p.add_argument("dir", type=Path)
     p.add_argument("--epoch", required=True)
     p.add_argument("--out", type=Path, required=True, help="PDF to write")
+    add_setup_option(p)
     p.set_defaults(func=cmd_field_sheet)
 
     p = sub.add_parser("check", help="before leaving the site: is every target found, with enough points?",
@@ -37,6 +38,7 @@ def register(sub) -> None:
     p.add_argument("--out", type=Path, default=None, help="re-scan plan JSON to write (when a target falls short)")
     p.add_argument("--goal-mm", type=float, default=None, help="vertical centroid sigma goal (default: the plan's)")
     p.add_argument("--json", action="store_true")
+    add_setup_option(p)
     p.set_defaults(func=cmd_check)
 
     p = sub.add_parser("stations", help="where to stand: predicted sigma of every target from candidate positions",
@@ -102,11 +104,13 @@ def cmd_field_sheet(args) -> int:
     from projects.processing.stages import plan_epoch
 
     with _open(args.dir) as c:
+        c.epoch(args.epoch)
+        setup = setup_of(c, args)
         with progress_bar("planning") as cb:
-            plan = plan_epoch(c, args.epoch, progress=cb)
-        preview = c.map_preview(args.epoch)
-        ep = c.epoch(args.epoch)
-        path = write_field_sheet(plan, args.out, campaign_name=c.name, preview=preview, epoch_date=ep.date)
+            plan = plan_epoch(c, args.epoch, setup=setup, progress=cb)
+        preview = c.map_preview(args.epoch, setup)
+        path = write_field_sheet(plan, args.out, campaign_name=c.name, preview=preview,
+                                 epoch_date=setup_date(c, args.epoch, setup))
     print(f"wrote {path}: {len(plan.rois)} windows, {plan.total_seconds / 60:.1f} min "
           f"(budget {plan.budget_seconds / 60:.0f} min) on a {plan.profile.name}")
     return 0
@@ -119,8 +123,10 @@ def cmd_check(args) -> int:
     from projects.field.check import check_epoch
 
     with _open(args.dir) as c:
+        c.epoch(args.epoch)
+        setup = setup_of(c, args)
         with progress_bar("measuring the fine scans") as cb:
-            result = check_epoch(c, args.epoch, goal_sigma_mm=args.goal_mm, progress=cb)
+            result = check_epoch(c, args.epoch, goal_sigma_mm=args.goal_mm, setup=setup, progress=cb)
     if args.out is not None and result.rescan is not None:
         result.rescan.save(args.out)
     if args.json:
