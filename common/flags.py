@@ -126,6 +126,13 @@ FLAG_PIERS_NOT_MEASURED = _flag("piers_not_measured", PROBLEM, "no reference tar
                                 "epoch and the baseline", "projects.processing")
 FLAG_NO_DISPLACEMENT = _flag("no_displacement", PROBLEM, "the displacements could not be computed (the reason "
                              "follows)", "projects.processing")
+FLAG_SETUP_NOT_JOINED = _flag("setup_not_joined", PROBLEM, "a set-up of the visit could not be joined to the "
+                              "others (too few well-spread shared targets): its targets are left out",
+                              "projects.processing.setups")
+FLAG_SETUP_JOIN_MISFIT = _flag("setup_join_misfit", WARNING, "a target seen from two set-ups disagreed beyond its "
+                               "sigmas and was measured from one of them only", "projects.processing.setups")
+FLAG_SETUP_NOT_MEASURED = _flag("setup_not_measured", WARNING, "a set-up of the visit has no fine scans (or they "
+                                "failed): the targets only it sees are missing", "projects.processing")
 FLAG_CHAINED = _flag("chained_to_replaced_target", INFO, "history continues from a replaced target",
                      "projects.processing")
 FLAG_DEPARTS = _flag("departs_from_prediction", WARNING, "the displacement departs from the design prediction "

@@ -6,6 +6,10 @@ planned, as a surveyor would on site), imports the fine scans, processes, and co
 displacement, along-span movement and scale with the simulator's truth. :class:`StudyScore` says how far
 the errors are from zero and from their sigmas, and how many are beyond 3 sigma without a warning on their
 own row.
+
+A visit of several set-ups (``stations`` with two or more per visit) is imported as a surveyor would:
+``add-epoch`` with the first set-up's coarse scan, ``add-setup`` with each further one's, each set-up
+planned on its own and its fine scans added to it.
 """
 from __future__ import annotations
 
@@ -102,17 +106,29 @@ class ProductPlanner:
                                  span_m=self.span_m) as c:
                 for k, v in self.settings.items():
                     set_parameter(c, k, str(v))
-        when = START + dt.timedelta(days=7 * self.count)
-        label = f"v{self.count + 1:03d}"
-        self.count += 1
-        self.labels[Path(folder)] = label
+        setup = _setup_number(Path(folder))
         with Campaign.open(self.dir) as c:
-            c.add_epoch(label, when.isoformat(), coarse)
+            if setup > 1:  # another station of the visit just planned: add it to that epoch
+                label = self.labels[Path(folder).parent / "setup1"]
+                self.labels[Path(folder)] = label
+                (setup,) = c.add_setup(label, coarse)
+            else:
+                when = START + dt.timedelta(days=7 * self.count)
+                label = f"v{self.count + 1:03d}"
+                self.count += 1
+                self.labels[Path(folder)] = label
+                c.add_epoch(label, when.isoformat(), coarse)
             try:
-                plan: ScanPlan = plan_epoch(c, label)
+                plan: ScanPlan = plan_epoch(c, label, setup=setup)
             except SurveyError:
                 return []
         return list(plan.rois)
+
+
+def _setup_number(folder: Path) -> int:
+    """The set-up a simulated visit folder holds (``setup2`` -> 2; a visit of one set-up -> 1)."""
+    name = folder.name
+    return int(name[5:]) if name.startswith("setup") and name[5:].isdigit() else 1
 
 
 def run_study(root: Path, model: BridgeModel, visits: Sequence[EpochConditions], *, seed: int = 0,
@@ -127,14 +143,13 @@ def run_study(root: Path, model: BridgeModel, visits: Sequence[EpochConditions],
     for p in (field_dir, camp):
         shutil.rmtree(p, ignore_errors=True)
     planner = ProductPlanner(camp, field_dir / "layout.csv", span_m=model.span_m, settings=settings)
-    written = write_campaign(field_dir, model, visits, plan_for=planner, stations=stations, seed=seed,
-                             coarse_step_deg=coarse_step_deg)
+    write_campaign(field_dir, model, visits, plan_for=planner, stations=stations, seed=seed,
+                   coarse_step_deg=coarse_step_deg)
     with Campaign.open(camp) as c:
-        for v in written:
-            label = planner.labels.get(field_dir / v.folder)
-            fine = field_dir / v.folder / "fine.laz"
-            if label is not None and fine.exists():
-                c.import_files(label, [fine], "fine")
+        for folder, label in planner.labels.items():
+            fine = folder / "fine.laz"
+            if fine.exists():
+                c.import_files(label, [fine], "fine", setup=_setup_number(folder))
         process(c)
     out = {"corrected": score_campaign(camp, field_dir, planner.labels)}
     if compare_without:
@@ -153,8 +168,15 @@ def _truth(folder: Path) -> ScanTruth:
 
 
 def score_campaign(camp: Path, field_dir: Path, labels: dict) -> StudyScore:
-    """Every displacement, along-span movement and scale of a processed study campaign against the truth."""
-    by_label = {lab: _truth(folder) for folder, lab in labels.items() if (folder / "truth.json").exists()}
+    """Every displacement, along-span movement and scale of a processed study campaign against the truth.
+
+    ``labels`` maps each simulated visit (or set-up) folder to its epoch; the truth of a visit is its first
+    set-up's (the bridge is in one state for all of them).
+    """
+    by_label: dict[str, ScanTruth] = {}
+    for folder, lab in sorted(labels.items(), key=lambda kv: _setup_number(kv[0])):
+        if lab not in by_label and (folder / "truth.json").exists():
+            by_label[lab] = _truth(folder)
     sc = StudyScore()
     with Campaign.open(camp, writable=False) as c:
         base = c.settings().get("baseline")

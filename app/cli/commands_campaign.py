@@ -40,7 +40,21 @@ def register(sub) -> None:
                                                    "(a name from 'bridgesurvey scanners' or a profile .json)")
     p.add_argument("--allow-date", action="store_true",
                    help="accept a date more than 3 years from the campaign's other epochs (it is refused otherwise)")
+    add_pose_options(p)
     p.set_defaults(func=cmd_add_epoch)
+
+    p = sub.add_parser("add-setup", help="import another set-up (station) of a visit: its coarse and fine scans",
+                       description="A visit may need several stations (a long bridge, a pier hiding targets). Each "
+                                   "set-up is measured in its own scanner frame, then the set-ups are joined through "
+                                   "the targets they share (at least three, well spread).")
+    add_dir(p)
+    p.add_argument("--epoch", required=True, help="the visit (epoch label) the set-up belongs to")
+    input_file(p, "--coarse", required=True, help="the set-up's coarse scan")
+    input_file(p, "--fine", nargs="*", default=[], help="its fine scans, if any yet")
+    p.add_argument("--scanner", default=None, help="this set-up's scanner when it is not the visit's "
+                                                   "(a name from 'bridgesurvey scanners' or a profile .json)")
+    add_pose_options(p)
+    p.set_defaults(func=cmd_add_setup)
 
     p = sub.add_parser("add-fine", help="import the fine scans of an epoch",
                        description="Import the fine scans of an epoch (made from its plan). Files are checked, "
@@ -48,6 +62,8 @@ def register(sub) -> None:
     add_dir(p)
     add_epoch(p)
     input_file(p, "files", nargs="+", metavar="FILE", help="fine scan file(s); one file may hold many windows")
+    add_setup_option(p)
+    add_pose_options(p)
     p.set_defaults(func=cmd_add_fine)
 
     p = sub.add_parser("plan", help="plan the fine scans of an epoch from its coarse scan",
@@ -57,6 +73,7 @@ def register(sub) -> None:
                                    "printable field sheet).")
     add_dir(p)
     add_epoch(p)
+    add_setup_option(p)
     output_file(p, "--out", required=True, help="plan JSON to write")
     output_file(p, "--sheet", default=None, help="also write the printable field sheet (PDF)", suffixes=(".pdf",))
     p.add_argument("--no-closure", action="store_true",
@@ -158,17 +175,62 @@ def register(sub) -> None:
     p.set_defaults(func=cmd_demo)
 
 
+def add_setup_option(p) -> None:
+    """``--setup K``: which set-up of the visit (1-based; default the last one added)."""
+    p.add_argument("--setup", type=int, default=None, metavar="K",
+                   help="the set-up of the visit (1, 2...; default: the last one added)")
+
+
+def add_pose_options(p) -> None:
+    """``--pose``, ``--origin``, ``--up``: the scanner pose of scans exported in a project frame."""
+    p.add_argument("--pose", type=Path, default=None, metavar="FILE",
+                   help="the scanner pose of scans exported in a project frame: a 4x4 matrix, scanner frame to "
+                        "project frame, rows of four numbers, '#' comments (RiSCAN's SOP export, a Cyclone "
+                        "transformation text)")
+    p.add_argument("--origin", default=None, metavar="X,Y,Z",
+                   help="the scanner's position in the project frame, when only that is known (instead of --pose)")
+    p.add_argument("--up", default=None, metavar="UX,UY,UZ",
+                   help="with --origin: the scanner's vertical in the project frame (default 0,0,1)")
+
+
+def _given_pose(args):
+    """The pose the user gave (--pose FILE or --origin X,Y,Z [--up]) as a FileFrame, or None."""
+    from lidar.io.poses import FileFrame, parse_vector, pose_from_origin, read_pose_file
+
+    pose, origin, up = getattr(args, "pose", None), getattr(args, "origin", None), getattr(args, "up", None)
+    if pose is not None and origin is not None:
+        raise InputError("give the scanner pose with --pose FILE or its position with --origin X,Y,Z, not both")
+    if up is not None and origin is None:
+        raise InputError("--up goes with --origin (a pose file already holds the scanner's vertical)")
+    if pose is not None:
+        return FileFrame(pose=read_pose_file(pose), carry=True, source="pose", given=str(pose))
+    if origin is not None:
+        m = pose_from_origin(parse_vector(origin, "--origin"), None if up is None else parse_vector(up, "--up"))
+        return FileFrame(pose=m, carry=True, source="origin", given=origin + (f" up {up}" if up else ""))
+    return None
+
+
+def _frames_of(args):
+    """The import's file reader: each file checked and its set-ups' frames worked out (see lidar.io.poses)."""
+    from lidar.io.poses import file_frames
+
+    given = _given_pose(args)  # a bad pose file is refused before any scan is read
+
+    def frames_of(path: Path, fallback):
+        with progress_bar(f"checking {path.name}") as cb:
+            return file_frames(path, given=given, fallback=fallback, progress=cb)
+    return frames_of
+
+
+def setup_of(c, args) -> int:
+    """The set-up ``--setup`` names (checked), or the epoch's last one."""
+    return c.check_setup(args.epoch, args.setup) if args.setup is not None else c.last_setup(args.epoch)
+
+
 def _open(path: Path, writable: bool = True):
     from projects.store.campaign import Campaign
 
     return Campaign.open(path, writable=writable)
-
-
-def _validate(path: Path) -> None:
-    from lidar.io import read_scan
-
-    with progress_bar(f"checking {path.name}") as cb:
-        read_scan(path, progress=cb)
 
 
 def cmd_init(args) -> int:
@@ -195,23 +257,49 @@ def cmd_add_epoch(args) -> int:
     when = parse_datetime(args.date)
     label = args.label or when[:10]
     profile = get_scanner(args.scanner) if args.scanner else None
+    frames_of = _frames_of(args)
     with _open(args.dir) as c:
-        c.add_epoch(label, when, args.coarse, args.fine, notes=args.notes, validate=_validate,
+        c.add_epoch(label, when, args.coarse, args.fine, notes=args.notes, frames_of=frames_of,
                     allow_date=args.allow_date)
         if profile is not None:
             c.set_profile(profile, epoch=label)
         note = c.baseline_note(label)
-    print(f"added epoch {label} ({when}) with {1 + len(args.fine)} file(s)")
+        setups = c.setups(label)
+    print(f"added epoch {label} ({when}) with {1 + len(args.fine)} file(s)"
+          + (f": set-ups {', '.join(map(str, setups))} (one per scan position in the file)" if len(setups) > 1 else ""))
     if note:
         print(f"note: {note}")
     return 0
 
 
+def cmd_add_setup(args) -> int:
+    from lidar.scanner_catalogue import get_scanner
+
+    profile = get_scanner(args.scanner) if args.scanner else None
+    frames_of = _frames_of(args)
+    with _open(args.dir) as c:
+        new = c.add_setup(args.epoch, args.coarse, args.fine, frames_of=frames_of)
+        if profile is not None:
+            for k in new:
+                c.set_profile(profile, epoch=args.epoch, setup=k)
+    which = f"set-up {new[0]}" if len(new) == 1 else f"set-ups {', '.join(map(str, new))}"
+    print(f"added {which} to epoch {args.epoch} with {1 + len(args.fine)} file(s); plan it with "
+          f"'bridgesurvey plan {args.dir} --epoch {args.epoch} --setup {new[0]} --out plan.json'")
+    return 0
+
+
 def cmd_add_fine(args) -> int:
+    frames_of = _frames_of(args)
     with _open(args.dir) as c:
         c.epoch(args.epoch)
-        c.import_files(args.epoch, args.files, "fine", validate=_validate)
-    print(f"added {len(args.files)} fine scan file(s) to epoch {args.epoch}")
+        if args.setup is not None:
+            c.check_setup(args.epoch, args.setup)
+        c.import_files(args.epoch, args.files, "fine", setup=args.setup, frames_of=frames_of)
+        several = len(c.setups(args.epoch)) > 1
+        where = {k for f in c.files(args.epoch, "fine", setup=None) if str(f.original_path) in
+                 {str(p.resolve()) for p in args.files} for k in f.setups}
+    print(f"added {len(args.files)} fine scan file(s) to epoch {args.epoch}"
+          + (f", set-up {', '.join(map(str, sorted(where)))}" if several else ""))
     return 0
 
 
@@ -219,8 +307,10 @@ def cmd_plan(args) -> int:
     from projects.processing.stages import plan_epoch
 
     with _open(args.dir) as c:
+        c.epoch(args.epoch)
+        setup = setup_of(c, args)
         with progress_bar("planning") as cb:
-            plan = plan_epoch(c, args.epoch, progress=cb)
+            plan = plan_epoch(c, args.epoch, setup=setup, progress=cb)
         if args.no_closure:
             from lidar.plan import without_closure
 
@@ -228,15 +318,22 @@ def cmd_plan(args) -> int:
         if args.sheet is not None:
             from projects.outputs.field_sheet import write_field_sheet
 
-            write_field_sheet(plan, args.sheet, campaign_name=c.name, preview=c.map_preview(args.epoch),
-                              epoch_date=c.epoch(args.epoch).date)
+            write_field_sheet(plan, args.sheet, campaign_name=c.name, preview=c.map_preview(args.epoch, setup),
+                              epoch_date=setup_date(c, args.epoch, setup))
         warnings = c.layout_warnings(args.epoch)
+        several = len(c.setups(args.epoch)) > 1
     plan.save(args.out)
     print(f"wrote {args.out}: {len(plan.rois)} windows, {plan.total_seconds / 60:.1f} min"
-          + (f"; field sheet {args.sheet}" if args.sheet else ""))
+          + (f" (set-up {setup})" if several else "") + (f"; field sheet {args.sheet}" if args.sheet else ""))
     for w in [*plan.warnings, *warnings]:
         print(f"warning: {w}")
     return 0
+
+
+def setup_date(c, label: str, setup: int) -> str:
+    """The epoch's date as a field sheet names it (with the set-up when the visit has several)."""
+    date = c.epoch(label).date
+    return f"{date}, set-up {setup}" if len(c.setups(label)) > 1 else date
 
 
 #: Exit status of 'process' when an epoch was processed but carries a problem flag (no trustworthy result).

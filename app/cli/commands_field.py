@@ -1,10 +1,11 @@
 """Field commands: scanners (the instrument catalogue), field-sheet, check (before leaving the site), stations."""
 from __future__ import annotations
 
+import json
 import sys
 
 from app.cli.args import add_dir, add_epoch, add_json, input_file, output_file
-from app.cli.commands_campaign import _open
+from app.cli.commands_campaign import _open, add_setup_option, setup_date, setup_of
 from app.cli.output import dump_json, table
 from app.cli.progress import progress_bar
 from common.errors import InputError
@@ -25,6 +26,7 @@ def register(sub) -> None:
     add_dir(p)
     add_epoch(p)
     output_file(p, "--out", required=True, help="PDF to write", suffixes=(".pdf",))
+    add_setup_option(p)
     p.set_defaults(func=cmd_field_sheet)
 
     p = sub.add_parser("check", help="before leaving the site: is every target found, with enough points?",
@@ -38,6 +40,7 @@ def register(sub) -> None:
     output_file(p, "--out", default=None, help="re-scan plan JSON to write (when a target falls short)")
     p.add_argument("--goal-mm", type=float, default=None, help="vertical centroid sigma goal (default: the plan's)")
     add_json(p, help="print every target's check as JSON")
+    add_setup_option(p)
     p.set_defaults(func=cmd_check)
 
     p = sub.add_parser("stations", help="where to stand: predicted sigma of every target from candidate positions",
@@ -54,6 +57,9 @@ def register(sub) -> None:
                    help="ground height in the layout frame (default: from the last measured station)")
     output_file(p, "--png", default=None, help="also draw the station map (PNG)")
     p.add_argument("--top", type=int, default=5, help="stations to print (5)")
+    p.add_argument("--pair", action="store_true",
+                   help="also propose two set-ups for one visit: the best station and the second that most improves "
+                        "the worst target (proposed anyway when the best station hides a deck target)")
     p.set_defaults(func=cmd_stations)
 
 
@@ -103,11 +109,13 @@ def cmd_field_sheet(args) -> int:
     from projects.processing.stages import plan_epoch
 
     with _open(args.dir) as c:
+        c.epoch(args.epoch)
+        setup = setup_of(c, args)
         with progress_bar("planning") as cb:
-            plan = plan_epoch(c, args.epoch, progress=cb)
-        preview = c.map_preview(args.epoch)
-        ep = c.epoch(args.epoch)
-        path = write_field_sheet(plan, args.out, campaign_name=c.name, preview=preview, epoch_date=ep.date)
+            plan = plan_epoch(c, args.epoch, setup=setup, progress=cb)
+        preview = c.map_preview(args.epoch, setup)
+        path = write_field_sheet(plan, args.out, campaign_name=c.name, preview=preview,
+                                 epoch_date=setup_date(c, args.epoch, setup))
     print(f"wrote {path}: {len(plan.rois)} windows, {plan.total_seconds / 60:.1f} min "
           f"(budget {plan.budget_seconds / 60:.0f} min) on a {plan.profile.name}")
     return 0
@@ -116,12 +124,29 @@ def cmd_field_sheet(args) -> int:
 EXIT_SHORT = 3
 
 
+def _pair(advice, layout, asked: bool):
+    """The proposed pair of set-ups, when asked or when the best single station hides a deck target."""
+    from projects.field.station_pairs import propose_pair
+
+    best = next((s for s in advice.stations if s.predicted_sigma_mm), None)
+    deck = {t for t, g in zip(layout.ids, layout.groups) if g == "measurement"}
+    if not asked and (best is None or not deck & set(best.hidden)):
+        return None
+    pair = propose_pair(advice.stations, layout)
+    if pair is None and asked:
+        print("no second station shares three well-spread targets with the best one: no pair to propose",
+              file=sys.stderr)
+    return pair
+
+
 def cmd_check(args) -> int:
     from projects.field.check import check_epoch
 
     with _open(args.dir) as c:
+        c.epoch(args.epoch)
+        setup = setup_of(c, args)
         with progress_bar("measuring the fine scans") as cb:
-            result = check_epoch(c, args.epoch, goal_sigma_mm=args.goal_mm, progress=cb)
+            result = check_epoch(c, args.epoch, goal_sigma_mm=args.goal_mm, setup=setup, progress=cb)
     if args.out is not None and result.rescan is not None:
         result.rescan.save(args.out)
     if args.json:
@@ -160,12 +185,24 @@ def cmd_stations(args) -> int:
             advice = advise_stations(c, area_xy=area, height_m=args.height_m, grid_m=args.grid_m,
                                      ground_z=args.ground_z, progress=cb)
         layout = c.layout()
-    advice.save(args.out)
+    pair = _pair(advice, layout, args.pair)
+    if pair is None:
+        advice.save(args.out)
+    else:
+        from common.files import write_atomic
+
+        write_atomic(args.out, json.dumps({**advice.to_json(), "pair": pair.to_json()}, indent=1))
     if args.png is not None:
         save_figure(station_map_figure(advice, layout), args.png)
     rows = [{"x": s.xyz_layout[0], "y": s.xyz_layout[1], "z": s.xyz_layout[2], "minutes": s.seconds / 60,
              "worst_sigma_mm": s.worst_sigma_mm, "hidden": list(s.hidden)} for s in advice.stations[:args.top]]
     table(rows, ["x", "y", "z", "minutes", "worst_sigma_mm", "hidden"])
+    if pair is not None:
+        a, b = pair.first.xyz_layout, pair.second.xyz_layout
+        print(f"two set-ups: ({a[0]:.1f}, {a[1]:.1f}) and ({b[0]:.1f}, {b[1]:.1f}), worst target's sigma "
+              f"{pair.worst_sigma_mm:.3f} mm (one set-up: {pair.first.worst_sigma_mm:.3f} mm), "
+              f"{len(pair.shared)} targets shared to join them"
+              + (f"; still hidden: {', '.join(pair.hidden)}" if pair.hidden else ""))
     print(f"wrote {args.out}: {len(advice.stations)} stations evaluated (ground z {advice.ground_z:.2f} m: "
           f"{advice.ground_source})" + (f"; map {args.png}" if args.png else ""), file=sys.stderr)
     return 0

@@ -64,12 +64,14 @@ def _print_scan(s) -> None:
     print(f"  scan '{s.name}': {s.points:,} points")
     if s.bounds_min is not None:
         rng = f"; range {s.range_m[0]:.2f}-{s.range_m[1]:.2f} m" if s.range_m is not None else ""
-        print(f"    bounds (SOCS, m): {_fmt_xyz(s.bounds_min)} .. {_fmt_xyz(s.bounds_max)}{rng}")
+        frame = "project frame" if getattr(s, "frame", "socs") == "project" else "SOCS"
+        print(f"    bounds ({frame}, m): {_fmt_xyz(s.bounds_min)} .. {_fmt_xyz(s.bounds_max)}{rng}")
     if s.pose is not None:
         t = [row[3] for row in s.pose[:3]]
         print(f"    pose: translation {_fmt_xyz(t)} (4x4 with --json)")
     else:
-        print("    pose: none (points are in the scanner's frame)")
+        print("    pose: none (points are in " + ("a project frame)" if getattr(s, "frame", "socs") == "project"
+                                               else "the scanner's frame)"))
     if s.intensity_raw_range is not None:
         lo, hi = s.intensity_raw_range
         print(f"    intensity: raw {lo:g}..{hi:g}, convention: {s.intensity_convention}")

@@ -31,7 +31,7 @@ DESCRIPTION = "Long-term bridge displacement from weekly terrestrial laser scans
 #: The commands in the order of the work, by group, as the top-level help lists them.
 COMMAND_GROUPS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("set-up, once per bridge", ("init", "reflector", "limit", "settings", "demo")),
-    ("each visit, in this order", ("add-epoch", "plan", "field-sheet", "add-fine", "check", "process")),
+    ("each visit, in this order", ("add-epoch", "add-setup", "plan", "field-sheet", "add-fine", "check", "process")),
     ("results", ("status", "displacements", "report", "export")),
     ("when something goes wrong", ("verify", "repair")),
     ("analysis and cross-checks", ("compare", "env", "event", "prediction", "analyse", "camera", "crossval")),

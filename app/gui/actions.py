@@ -34,11 +34,12 @@ def create_campaign(*, folder: str, name: str, layout: str, span_m: Optional[flo
 
 
 def _validator(progress: Callable):
-    from lidar.io import read_scan
+    """The import's file reader: each file read and checked (a scan in a project frame needs its pose)."""
+    from lidar.io.poses import file_frames
 
-    def validate(path):
-        read_scan(path, progress=scaled(progress, 0.0, 0.5))
-    return validate
+    def frames_of(path, fallback):
+        return file_frames(path, fallback=fallback, progress=scaled(progress, 0.0, 0.5))
+    return frames_of
 
 
 def add_epoch(session, v: dict, progress: Callable) -> str:
@@ -48,14 +49,24 @@ def add_epoch(session, v: dict, progress: Callable) -> str:
         raise InputError("choose the coarse scan of the visit")
     when = parse_datetime(v["datetime"])
     with session.write() as c:
-        c.add_epoch(v["label"], when, v["coarse"], v["fines"], notes=v["notes"], validate=_validator(progress))
+        c.add_epoch(v["label"], when, v["coarse"], v["fines"], notes=v["notes"], frames_of=_validator(progress))
     return v["label"]
 
 
 def add_fine(session, label: str, paths, progress: Callable) -> None:
     with session.write() as c:
         c.epoch(label)
-        c.import_files(label, paths, "fine", validate=_validator(progress))
+        c.import_files(label, paths, "fine", frames_of=_validator(progress))
+
+
+def add_setup(session, label: str, coarse, progress: Callable) -> tuple[list[int], list]:
+    """Add another set-up (station) to an epoch from its coarse scan and plan it; (set-ups, their plans)."""
+    from projects.processing.stages import plan_epoch
+
+    with session.write() as c:
+        new = c.add_setup(label, coarse, frames_of=_validator(progress))
+        plans = [plan_epoch(c, label, setup=k, progress=scaled(progress, 0.5, 1.0)) for k in new]
+    return new, plans
 
 
 def plan(session, label: str, progress: Callable):

@@ -81,7 +81,7 @@ class Commands:
             return
         if step.epoch is not None:
             self.state.select(epoch=step.epoch)
-        {"add_epoch": self.add_epoch, "plan": self.plan_selected, "add_fine": self.add_fine,
+        {"add_epoch": self.add_epoch, "plan": self.plan_selected, "add_fine": self.add_fine, "add_setup": self.add_setup,
          "check": self.check_selected, "process": self.process, "report": self.write_report}[step.command]()
 
     # ------------------------------------------------------------------ campaigns
@@ -190,6 +190,29 @@ class Commands:
                                      "leaving (Epoch ▸ Check the fine scans before leaving)")
 
         self._job(f"Importing fine scans of {label}", lambda p: actions.add_fine(self.state.access, label, paths, p),
+                  done)
+
+    def add_setup(self) -> None:
+        label = self._need_epoch("Add set-up")
+        if not label:
+            return
+        paths = ask_files(self.parent, f"Coarse scan of another set-up (station) of {label}", self.host.folders,
+                          "scans")
+        if not paths:
+            return
+        if len(paths) != 1:
+            self.state.status.result("choose one coarse scan: each set-up has its own")
+            return
+
+        def done(result):
+            new, plans = result
+            self.state.refresh()
+            what = ", ".join(f"set-up {k}: {len(p.rois)} windows, {p.total_seconds / 60:.1f} min"
+                             for k, p in zip(new, plans))
+            self.state.status.result(f"{label}: {what}; next: scan them and add the fine scans (Epoch ▸ Add fine "
+                                     "scans to the selected epoch…, they go to the set-up added last)")
+
+        self._job(f"Adding a set-up to {label}", lambda p: actions.add_setup(self.state.access, label, paths[0], p),
                   done)
 
     def plan_selected(self) -> None:

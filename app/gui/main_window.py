@@ -202,6 +202,9 @@ class MainWindow(QMainWindow):
         self.act_add_epoch = self._action(m, "&Add epoch…", cmd.add_epoch, "Ctrl+E",
                                           tip="Import the coarse scan of a visit (and its fine scans, if any)")
         self.act_add_fine = self._action(m, "Add &fine scans to the selected epoch…", cmd.add_fine)
+        self._action(m, "Add a se&t-up to the selected epoch…", cmd.add_setup,
+                     tip="Another station of the same visit (a long bridge, a pier hiding targets): its coarse scan, "
+                         "planned at once; the set-ups are joined through the targets they share")
         self.act_plan = self._action(m, "&Plan the selected epoch", cmd.plan_selected, "Ctrl+P",
                                      tip="Find the targets in the coarse scan and plan a fine-scan window for each")
         self._action(m, "Field &sheet of the selected epoch (PDF)…", cmd.field_sheet)

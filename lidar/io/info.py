@@ -19,10 +19,9 @@ import numpy as np
 from common.progress import ProgressCallback, report
 from lidar.io.angular_step import AngularSteps, PatchSampler, angles_deg, steps_along_lines, steps_from_neighbours
 from lidar.io.intensity import detect_convention
+from lidar.io.poses import FAR_FROM_SCANNER_M, in_project_frame
 from lidar.io.stream import CHUNK_POINTS, Chunk, ScanStream, StreamScan, open_stream
 
-#: A scan whose nearest point is farther than this is not in its scanner's frame.
-FAR_FROM_SCANNER_M = 2000.0
 #: Coordinates coarser than this lose what a target centroid needs.
 COARSE_SCALE_M = 0.001
 #: Points whose duplicates are counted exactly (a hash-chosen share of larger scans, scaled up).
@@ -51,6 +50,7 @@ class ScanInfo:
     range_m: Optional[tuple[float, float]]
     duplicate_points: Optional[int]
     problems: tuple[str, ...] = ()
+    frame: str = "scanner"  # "scanner" (SOCS), or "project" (a project or national frame: see lidar.io.poses)
 
 
 @dataclass(frozen=True)
@@ -102,11 +102,17 @@ class _Stats:
         self.patches = PatchSampler()
         self.dup_every = max(1, declared_points // DUPLICATE_SAMPLE)
         self.dup_hashes: list[np.ndarray] = []
+        self.first: Optional[np.ndarray] = None  # the first chunk's first points (a project-frame scan's pose check)
+
+    def sample_xyz(self) -> np.ndarray:
+        return self.first if self.first is not None else np.empty((0, 3))
 
     def add(self, c: Chunk) -> None:
         xyz = c.xyz
         if len(xyz) == 0:
             return
+        if self.first is None:
+            self.first = np.array(xyz[:10_000], dtype=np.float64)
         self.n += len(xyz)
         np.minimum(self.lo, xyz.min(axis=0), out=self.lo)
         np.maximum(self.hi, xyz.max(axis=0), out=self.hi)
@@ -177,7 +183,7 @@ def _header_scan(stream: ScanStream, k: int, s: StreamScan) -> ScanInfo:
     steps, source = None, "not estimated: --stats reads every point"
     if len(xyz):
         if np.linalg.norm(xyz, axis=1).min() > FAR_FROM_SCANNER_M:
-            problems.append(_far_problem(float(np.linalg.norm(xyz, axis=1).min())))
+            problems.append(_far_problem(float(np.linalg.norm(xyz, axis=1).min()), xyz, s.pose))
         else:
             per_block = [estimate_angular_steps(b.xyz) for b in blocks if len(b.xyz) >= 20]
             good = [b for b in per_block if b.regular]
@@ -190,15 +196,24 @@ def _header_scan(stream: ScanStream, k: int, s: StreamScan) -> ScanInfo:
         problems.append("no intensity: reflectors cannot be detected in this file")
     bounds = s.bounds
     conv = "declared limits" if s.intensity_limits else None
+    far = bool(len(xyz)) and np.linalg.norm(xyz, axis=1).min() > FAR_FROM_SCANNER_M
     return ScanInfo(name=s.name, points=s.points, bounds_min=bounds[0] if bounds else None,
                     bounds_max=bounds[1] if bounds else None, pose=None if s.pose is None else s.pose.tolist(),
                     intensity_convention=conv, intensity_raw_range=s.intensity_limits, range_m=None,
-                    duplicate_points=None, problems=tuple(problems), **_step_fields(steps, source))
+                    duplicate_points=None, problems=tuple(problems), frame="project" if far else "scanner",
+                    **_step_fields(steps, source))
 
 
-def _far_problem(r_min: float) -> str:
+def _far_problem(r_min: float, xyz: np.ndarray, pose: Optional[np.ndarray]) -> str:
+    """Why a project-frame scan's angles mean nothing, and what its import needs (a pose, unless it has its own)."""
+    own = False
+    if pose is not None and len(xyz):
+        m = np.asarray(pose, dtype=np.float64)
+        own = not in_project_frame((np.asarray(xyz[:100_000], dtype=np.float64) - m[:3, 3]) @ m[:3, :3])
     return (f"every point is more than {r_min / 1000:.0f} km from the origin: the coordinates are in a project "
-            "frame, not the scanner's own (SOCS); angles and steps are not meaningful")
+            "frame, not the scanner's own (SOCS); angles and steps are not meaningful"
+            + ("; its own pose carries it into the scanner's frame at import" if own else
+               "; importing it needs its scanner pose (--pose FILE or --origin X,Y,Z)"))
 
 
 def _full_scan(stream: ScanStream, k: int, s: StreamScan, progress: Optional[ProgressCallback]) -> ScanInfo:
@@ -229,8 +244,9 @@ def _full_scan(stream: ScanStream, k: int, s: StreamScan, progress: Optional[Pro
     elif raw_range is not None and raw_range[0] == raw_range[1]:
         problems.append("intensity is constant: reflectors cannot be detected in this file")
     steps = None
-    if acc.n and acc.r[0] > FAR_FROM_SCANNER_M:
-        problems.append(_far_problem(acc.r[0]))
+    far = bool(acc.n) and acc.r[0] > FAR_FROM_SCANNER_M
+    if far:
+        problems.append(_far_problem(acc.r[0], acc.sample_xyz(), s.pose))
     elif acc.n:
         steps = acc.patches.steps()
         problems += _not_regular(steps)
@@ -239,7 +255,7 @@ def _full_scan(stream: ScanStream, k: int, s: StreamScan, progress: Optional[Pro
                     bounds_max=tuple(float(v) for v in acc.hi) if ok else None,
                     pose=None if s.pose is None else s.pose.tolist(), intensity_convention=conv,
                     intensity_raw_range=raw_range, range_m=(float(acc.r[0]), float(acc.r[1])) if ok else None,
-                    duplicate_points=dup, problems=tuple(problems),
+                    duplicate_points=dup, problems=tuple(problems), frame="project" if far else "scanner",
                     **_step_fields(steps, f"every point ({acc.n:,})"))
 
 

@@ -220,15 +220,22 @@ class _Problem:
         for s, i in base.refs:
             self.x_ref[i] = s.xyz_socs
             seen[i] = True
+        # deck targets' first positions in the baseline's frame: they start a visit sharing fewer than three
+        # reference targets with the visits before it (another set-up of a visit: the deck has not moved)
+        deck_at = {s.target: s.xyz_socs for s, _ in base.decks}
         for v in self.visits[1:]:
-            common = [(s, i) for s, i in v.refs if seen[i]]
+            common = [(self.x_ref[i], s.xyz_socs) for s, i in v.refs if seen[i]]
+            if len(common) < 3:
+                common += [(deck_at[s.target], s.xyz_socs) for s, _ in v.decks if s.target in deck_at]
             if len(common) >= 3:
-                t = fit_rigid(np.array([self.x_ref[i] for _, i in common]), np.array([s.xyz_socs for s, _ in common]))
+                t = fit_rigid(np.array([a for a, _ in common]), np.array([b for _, b in common]))
                 v.q, v.d = t.rotation, t.translation
             for s, i in v.refs:
                 if not seen[i]:
                     self.x_ref[i] = v.q.T @ (s.xyz_socs - v.d)
                     seen[i] = True
+            for s, _ in v.decks:
+                deck_at.setdefault(s.target, v.q.T @ (s.xyz_socs - v.d))
         if self.across is not None:
             got = np.zeros(len(self.deck_ids), bool)
             for v in self.visits:

@@ -123,14 +123,15 @@ class EpochCheck:
                 "closure": None if self.closure is None else self.closure.to_json()}
 
 
-def check_epoch(c: Campaign, label: str, *, goal_sigma_mm: Optional[float] = None,
+def check_epoch(c: Campaign, label: str, *, goal_sigma_mm: Optional[float] = None, setup: int = 1,
                 progress: Optional[ProgressCallback] = None) -> EpochCheck:
-    """Measure the epoch's fine scans and judge every planned target (see the module notes)."""
+    """Measure the epoch's (set-up's) fine scans and judge every planned target (see the module notes)."""
     from projects.processing.stages import run_stage1, save_stage1, stage1_job
 
-    job = stage1_job(c, label)  # one read of the store; an unknown epoch says so
+    job = stage1_job(c, label, setup)  # one read of the store; an unknown epoch says so
     if not job.fine_paths:
-        raise ProcessingError(f"epoch {label} has no fine scans yet; import them with 'bridgesurvey add-fine' first")
+        where = f"set-up {setup} of epoch {label}" if setup != 1 else f"epoch {label}"
+        raise ProcessingError(f"{where} has no fine scans yet; import them with 'bridgesurvey add-fine' first")
     if goal_sigma_mm is not None and not (math.isfinite(goal_sigma_mm) and goal_sigma_mm > 0):
         raise ProcessingError(f"the sigma goal must be a positive number of millimetres, got {goal_sigma_mm}")
     result = run_stage1(job, progress=progress)  # the plan it measured with, and the centroids

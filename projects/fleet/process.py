@@ -27,7 +27,7 @@ from common.progress import ProgressCallback, report
 from projects.store.errors import CampaignLockedError
 from projects.fleet.status import find_campaigns
 from projects.processing.stages import (EpochOutcome, ProcessSummary, finish_displacements, run_stage1, save_stage1,
-                                 stage1_job, stale_epochs)
+                                 stage1_jobs, stale_epochs)
 from projects.store.campaign import Campaign
 
 log = logging.getLogger(__name__)
@@ -140,8 +140,9 @@ def fleet_process(roots: Sequence[str | os.PathLike], *, scheduler: Optional[str
             for e in c.epochs():
                 if e.label in stale:
                     try:
-                        jobs.append((cr, stage1_job(c, e.label)))
-                        cr.tasks += 1
+                        for job in stage1_jobs(c, e.label):  # one task per stale set-up of the visit
+                            jobs.append((cr, job))
+                            cr.tasks += 1
                     except SurveyError as exc:
                         cr.summary.outcomes.append(EpochOutcome(e.label, "failed", str(exc)))
         run.tasks = len(jobs)

@@ -112,8 +112,12 @@ def field_model_figure(model: FieldModel, times: Mapping[str, str], *,
             label.set_fontsize(7)
         import matplotlib.dates as mdates
 
+        lo, hi = ax.get_xlim()
+        if hi - lo < 2.0:  # one visit: a week either side, so that the date axis has ticks to place
+            mid = 0.5 * (lo + hi)
+            ax.set_xlim(mid - 7.0, mid + 7.0)
         ax.xaxis.set_major_formatter(mdates.DateFormatter("%Y-%m-%d"))
-        ax.xaxis.set_major_locator(mdates.AutoDateLocator(maxticks=5))
+        ax.xaxis.set_major_locator(mdates.AutoDateLocator(minticks=2, maxticks=6))
     for ax in axes:
         ax.tick_params(labelsize=7)
         ax.xaxis.label.set_size(8)

@@ -102,16 +102,20 @@ def _visit_key(v: VisitSystematics) -> dict:
 
 
 def update_field_model(c: Campaign, baseline: str, labels: Sequence[str], groups: Mapping[str, str],
-                       found: Callable[[str], Mapping[str, TargetCentroid]], *, enabled: bool = True) -> FieldModel:
+                       found: Callable[[str], Mapping[str, TargetCentroid]], *, enabled: bool = True,
+                       closures: Optional[Callable[[str], Mapping[str, TargetCentroid]]] = None) -> FieldModel:
     """Fit the campaign's field model over ``labels`` (the baseline's first), keep or replace the stored one.
 
     Epochs with fewer than three reference targets found cannot be placed and are left out; a baseline
-    without three, or ``enabled=False``, gives a model that corrects nothing.
+    without three, or ``enabled=False``, gives a model that corrects nothing. ``labels`` are the model's
+    visits: epochs, or the set-ups of epochs (``closures(label)`` then gives a visit's closure centroids;
+    default the epoch's).
     """
     if not enabled or not _usable(found(baseline), groups):
         return identity_model(baseline)
+    closures = closures or c.closure_centroids
     order = [baseline] + [lab for lab in labels if lab != baseline and _usable(found(lab), groups)]
-    visits = [VisitSightings(lab, sightings(found(lab), {k: v for k, v in c.closure_centroids(lab).items()
+    visits = [VisitSightings(lab, sightings(found(lab), {k: v for k, v in closures(lab).items()
                                                           if k in found(lab)})) for lab in order]
     new = fit_field_model(visits, groups)
     got = c.field_model()

@@ -19,12 +19,13 @@ from typing import Optional, Sequence
 import numpy as np
 
 from common.flags import (FLAG_CHAINED, FLAG_DECK_NOT_MEASURED, FLAG_MISSING, FLAG_NO_DISPLACEMENT, FLAG_NOT_FOUND,
-                          FLAG_PIERS_NOT_MEASURED, PROBLEM, code, has, severity)
+                          FLAG_PIERS_NOT_MEASURED, FLAG_SETUP_NOT_MEASURED, PROBLEM, code, has, severity)
 from lidar.displacement import Displacement, EpochDisplacements
 from lidar.systematic.budget import corrected_displacements
 from common.errors import CancelledError, InputError, ProcessingError, SurveyError
 from lidar.identification import MAX_TILT_DEG
 from lidar.io import read_scan
+from lidar.io.poses import read_in_scanner_frame
 from lidar.pipeline import analyse_coarse, measure_fine, plan_from_coarse
 from lidar.plan import ScanPlan
 from common.progress import ProgressCallback, report, scaled
@@ -32,6 +33,7 @@ from lidar.scan import Scan
 from projects.processing.field import (atmosphere_flags, epoch_flags, systematics_json, update_field_model,
                                        visit_digest)
 from projects.processing.parameters import DEFAULTS, parameter, stage1_params, stage2_params
+from projects.processing.setups import CorrectedVisit, corrected_side, joined_displacements, visit_label
 from projects.store.previews import encode_preview
 from projects.store.records import EpochInputs, ScanFile
 from projects.store.campaign import Campaign
@@ -125,16 +127,22 @@ class ProcessSummary:
         return [o for o in self.outcomes if o.action == "failed"]
 
 
-def read_paths(paths, progress: Optional[ProgressCallback] = None) -> Scan:
-    """Scan files as one scan (each file's share of the progress in turn)."""
-    scans = [read_scan(p, progress=scaled(progress, k / len(paths), (k + 1) / len(paths)))
-             for k, p in enumerate(paths)]
+def read_paths(paths, progress: Optional[ProgressCallback] = None, frames: Sequence = ()) -> Scan:
+    """Scan files as one scan (each file's share of the progress in turn).
+
+    ``frames`` gives each file's :class:`lidar.io.poses.FileFrame` (which of its scans, the pose carrying
+    points exported in a project frame into the scanner's); empty or None entries read a file as it is.
+    """
+    frames = tuple(frames) or (None,) * len(paths)
+    scans = [read_in_scanner_frame(p, fr, progress=scaled(progress, k / len(paths), (k + 1) / len(paths)))
+             if fr is not None else read_scan(p, progress=scaled(progress, k / len(paths), (k + 1) / len(paths)))
+             for k, (p, fr) in enumerate(zip(paths, frames))]
     return scans[0] if len(scans) == 1 else Scan.concatenate(scans)
 
 
-def read_files(c: Campaign, files: Sequence[ScanFile], progress=None) -> Scan:
-    """The stored scan files ``files`` (from ``Campaign.files``) as one scan."""
-    return read_paths([c.path_of(f) for f in files], progress)
+def read_files(c: Campaign, files: Sequence[ScanFile], progress=None, *, setup: int = 1) -> Scan:
+    """The stored scan files ``files`` (from ``Campaign.files``) of one set-up as one scan, in its scanner frame."""
+    return read_paths([c.path_of(f) for f in files], progress, [f.frame_for(setup) for f in files])
 
 
 def plan_inputs(c: Campaign, label: str, params: dict) -> tuple[str, object]:
@@ -143,17 +151,24 @@ def plan_inputs(c: Campaign, label: str, params: dict) -> tuple[str, object]:
     return _plan_hash(inp, params), inp.layout
 
 
+def _file_key(f: ScanFile, setup: int):
+    """A file as it enters an input hash: its checksum, with how it is read when that is not as it is."""
+    frame = f.frame_for(setup)
+    return f.sha256 if frame is None else {"sha256": f.sha256, "frame": frame.key}
+
+
 def _plan_hash(inp: EpochInputs, params: dict) -> str:
     if not inp.coarse:
-        raise ProcessingError(f"epoch {inp.label} has no coarse scan")
-    key = {"v": PIPELINE_VERSION, "coarse": [f.sha256 for f in inp.coarse],
+        where = f"set-up {inp.setup} of epoch {inp.label}" if inp.setup != 1 else f"epoch {inp.label}"
+        raise ProcessingError(f"{where} has no coarse scan")
+    key = {"v": PIPELINE_VERSION, "coarse": [_file_key(f, inp.setup) for f in inp.coarse],
            "layout": inp.layout.to_rows(), "params": stage1_params(params),
            "profile": _profile_key(inp.profile)}
     return _hash(key)
 
 
 def _measure_hash(inp: EpochInputs, plan_hash: str) -> str:
-    return _hash({"plan": plan_hash, "fine": [f.sha256 for f in inp.fine]})
+    return _hash({"plan": plan_hash, "fine": [_file_key(f, inp.setup) for f in inp.fine]})
 
 
 def _tilt_limit(params: dict, profile) -> Optional[float]:
@@ -168,11 +183,11 @@ def _analyse(coarse: Scan, layout, params: dict, profile, progress: Optional[Pro
                           max_tilt_deg=_tilt_limit(params, profile), up_layout=layout_up(params), progress=progress)
 
 
-def analyse_epoch_coarse(c: Campaign, label: str, layout, params: dict, *,
+def analyse_epoch_coarse(c: Campaign, label: str, layout, params: dict, *, setup: int = 1,
                          progress: Optional[ProgressCallback] = None):
-    """Reflectance map, detections and identification of an epoch's coarse scan with the campaign's parameters."""
-    coarse = read_files(c, c.files(label, "coarse"), scaled(progress, 0.0, 0.5))
-    return _analyse(coarse, layout, params, c.profile_for(label), scaled(progress, 0.5, 1.0))
+    """Reflectance map, detections and identification of an epoch's (set-up's) coarse scan with the parameters."""
+    coarse = read_files(c, c.files(label, "coarse", setup=setup), scaled(progress, 0.0, 0.5), setup=setup)
+    return _analyse(coarse, layout, params, c.profile_for(label, setup), scaled(progress, 0.5, 1.0))
 
 
 @dataclass(frozen=True, eq=False)
@@ -184,7 +199,9 @@ class Stage1Job:
     result (:func:`save_stage1`).
 
     ``stored_plan`` is the epoch's plan JSON when its inputs are unchanged (it is reused, not
-    recomputed); ``measure_hash`` is None when the epoch has no fine scans yet.
+    recomputed); ``measure_hash`` is None when the epoch has no fine scans yet. ``setup`` is which
+    set-up of the visit it is, ``coarse_frames`` and ``fine_frames`` how each file is read (see
+    :func:`read_paths`).
     """
 
     folder: str
@@ -197,6 +214,9 @@ class Stage1Job:
     plan_hash: str
     stored_plan: Optional[dict]
     measure_hash: Optional[str]
+    setup: int = 1
+    coarse_frames: tuple = ()
+    fine_frames: tuple = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -215,16 +235,24 @@ class Stage1Result:
     time_source: str = "none"
 
 
-def stage1_job(c: Campaign, label: str) -> Stage1Job:
-    """An epoch's stage-1 job as plain values (its stored plan reused when its inputs are unchanged)."""
-    inp = c.epoch_inputs(label)  # one read: epoch, files, plan, layout, scanner, settings
+def stage1_job(c: Campaign, label: str, setup: int = 1) -> Stage1Job:
+    """An epoch's (set-up's) stage-1 job as plain values (its stored plan reused when its inputs are unchanged)."""
+    inp = c.epoch_inputs(label, setup=setup)  # one read: epoch, files, plan, layout, scanner, settings
+    if setup not in inp.setups:
+        c.check_setup(label, setup)
     params = _parameters_of(inp.settings)
     h = _plan_hash(inp, params)
     sp = inp.plan
     stored = sp.plan_json if sp is not None and sp.inputs_hash == h else None
     return Stage1Job(str(c.folder), label, tuple(str(c.path_of(r)) for r in inp.coarse),
                      tuple(str(c.path_of(r)) for r in inp.fine), inp.layout, params, inp.profile, h, stored,
-                     _measure_hash(inp, h) if inp.fine else None)
+                     _measure_hash(inp, h) if inp.fine else None, setup,
+                     tuple(r.frame_for(setup) for r in inp.coarse), tuple(r.frame_for(setup) for r in inp.fine))
+
+
+def stage1_jobs(c: Campaign, label: str) -> list[Stage1Job]:
+    """The stage-1 jobs of every set-up of an epoch whose stored results no longer match their inputs."""
+    return [stage1_job(c, label, k) for k in _stale_setups(c, label, parameters(c))]
 
 
 def run_stage1(job: Stage1Job, *, progress: Optional[ProgressCallback] = None) -> Stage1Result:
@@ -233,7 +261,7 @@ def run_stage1(job: Stage1Job, *, progress: Optional[ProgressCallback] = None) -
     if job.stored_plan is not None:
         plan = ScanPlan.from_json(job.stored_plan)
     else:
-        coarse = read_paths(job.coarse_paths, scaled(progress, 0.0, 0.25))
+        coarse = read_paths(job.coarse_paths, scaled(progress, 0.0, 0.25), job.coarse_frames)
         analysis = _analyse(coarse, job.layout, job.params, job.profile, scaled(progress, 0.25, 0.4))
         del coarse
         plan = plan_from_coarse(analysis, job.layout, epoch=job.label, profile=job.profile,
@@ -241,6 +269,8 @@ def run_stage1(job: Stage1Job, *, progress: Optional[ProgressCallback] = None) -
                                 budget_seconds=float(job.params["budget_min"]) * 60.0, up_layout=layout_up(job.params),
                                 closure=bool(job.params["closure"]))
         new_plan = plan.to_json()
+        if job.setup != 1:
+            new_plan["setup"] = job.setup
         new_plan["identification"] = {"missing": list(analysis.identification.missing),
                                       "extra_detections": len(analysis.identification.extra_detections),
                                       "fit_rms_m": analysis.identification.rms_m,
@@ -248,7 +278,7 @@ def run_stage1(job: Stage1Job, *, progress: Optional[ProgressCallback] = None) -
         preview = encode_preview(analysis)
     measured = None
     if job.fine_paths:
-        fine = read_paths(job.fine_paths, scaled(progress, 0.4, 0.8))
+        fine = read_paths(job.fine_paths, scaled(progress, 0.4, 0.8), job.fine_frames)
         measured = measure_fine(fine, plan, job.layout, profile=plan.profile)
     report(progress, 1.0, "measured" if measured is not None else "planned")
     if measured is None:
@@ -261,15 +291,15 @@ def save_stage1(c: Campaign, result: Stage1Result) -> None:
     """Store what :func:`run_stage1` computed (the campaign's single writer does this)."""
     job = result.job
     if result.new_plan_json is not None:
-        c.save_plan(job.label, result.new_plan_json, job.plan_hash, preview=result.preview)
+        c.save_plan(job.label, result.new_plan_json, job.plan_hash, preview=result.preview, setup=job.setup)
     if result.centroids is not None:
         c.save_centroids(job.label, result.centroids, job.measure_hash, stage1_params(job.params),
-                         closures=result.closures, time_source=result.time_source)
+                         closures=result.closures, time_source=result.time_source, setup=job.setup)
 
 
-def plan_epoch(c: Campaign, label: str, *, progress: Optional[ProgressCallback] = None) -> ScanPlan:
-    """The fine-scan plan of an epoch, from its coarse scan (reused when its inputs are unchanged)."""
-    job = stage1_job(c, label)
+def plan_epoch(c: Campaign, label: str, *, setup: int = 1, progress: Optional[ProgressCallback] = None) -> ScanPlan:
+    """The fine-scan plan of an epoch's set-up, from its coarse scan (reused when its inputs are unchanged)."""
+    job = stage1_job(c, label, setup)
     if job.stored_plan is not None:
         return ScanPlan.from_json(job.stored_plan)
     result = run_stage1(replace(job, fine_paths=(), measure_hash=None), progress=progress)
@@ -277,43 +307,63 @@ def plan_epoch(c: Campaign, label: str, *, progress: Optional[ProgressCallback] 
     return result.plan
 
 
-def measure_inputs(c: Campaign, label: str, params: dict, plan_hash: Optional[str] = None) -> str:
-    """Stage 1's input hash of an epoch with fine scans (``plan_hash`` when already computed)."""
-    inp = c.epoch_inputs(label, plan=False)
+def measure_inputs(c: Campaign, label: str, params: dict, plan_hash: Optional[str] = None, setup: int = 1) -> str:
+    """Stage 1's input hash of an epoch (set-up) with fine scans (``plan_hash`` when already computed)."""
+    inp = c.epoch_inputs(label, plan=False, setup=setup)
     return _measure_hash(inp, plan_hash if plan_hash is not None else _plan_hash(inp, params))
 
 
-def measure_epoch(c: Campaign, label: str, *, progress: Optional[ProgressCallback] = None) -> dict:
-    """Plan (when needed) and centroids of an epoch with fine scans, saved; returns the centroids."""
-    job = stage1_job(c, label)
+def measure_epoch(c: Campaign, label: str, *, setup: int = 1, progress: Optional[ProgressCallback] = None) -> dict:
+    """Plan (when needed) and centroids of an epoch's set-up with fine scans, saved; returns the centroids."""
+    job = stage1_job(c, label, setup)
     if not job.fine_paths:
-        raise ProcessingError(f"epoch {label} has no fine scans yet; import them with 'bridgesurvey add-fine' first")
+        where = f"set-up {setup} of epoch {label}" if setup != 1 else f"epoch {label}"
+        raise ProcessingError(f"{where} has no fine scans yet; import them with 'bridgesurvey add-fine' first")
     result = run_stage1(job, progress=progress)
     save_stage1(c, result)
     return result.centroids
 
 
+def _stale_reason(inp: EpochInputs, params: dict) -> Optional[str]:
+    """Why one set-up's stored stage-1 result no longer matches its inputs (None: up to date)."""
+    res = inp.result
+    if not inp.coarse:
+        return None
+    if inp.fine:
+        want = _measure_hash(inp, _plan_hash(inp, params))
+        if res is None or res.stage != "measured":
+            return "not measured yet"
+        if res.inputs_hash != want:
+            return "inputs or parameters changed"
+        return None
+    want = _plan_hash(inp, params)
+    if res is None:
+        return "not planned yet"
+    if res.inputs_hash != want and res.stage == "planned":
+        return "inputs or parameters changed"
+    return None
+
+
+def _stale_setups(c: Campaign, label: str, params: dict) -> dict[int, str]:
+    """The set-ups of an epoch whose stage-1 results are stale: set-up -> reason."""
+    first = c.epoch_inputs(label, plan=False)  # one read an epoch (more for further set-ups)
+    out = {}
+    for k in first.setups:
+        inp = first if k == 1 else c.epoch_inputs(label, plan=False, setup=k)
+        why = _stale_reason(inp, params)
+        if why is not None:
+            out[k] = why
+    return out
+
+
 def stale_epochs(c: Campaign) -> dict[str, str]:
-    """Epochs whose stored stage-1 results no longer match their inputs: label -> reason."""
+    """Epochs whose stored stage-1 results (of any set-up) no longer match their inputs: label -> reason."""
     params = parameters(c)
     out = {}
     for e in c.epochs():
-        inp = c.epoch_inputs(e.label, plan=False)  # one read an epoch
-        res = inp.result
-        if not inp.coarse:
-            continue
-        if inp.fine:
-            want = _measure_hash(inp, _plan_hash(inp, params))
-            if res is None or res.stage != "measured":
-                out[e.label] = "not measured yet"
-            elif res.inputs_hash != want:
-                out[e.label] = "inputs or parameters changed"
-        else:
-            want = _plan_hash(inp, params)
-            if res is None:
-                out[e.label] = "not planned yet"
-            elif res.inputs_hash != want and res.stage == "planned":
-                out[e.label] = "inputs or parameters changed"
+        stale = _stale_setups(c, e.label, params)
+        if stale:
+            out[e.label] = "; ".join(why if k == 1 else f"set-up {k}: {why}" for k, why in sorted(stale.items()))
     return out
 
 
@@ -340,30 +390,44 @@ def process(c: Campaign, labels: Optional[Sequence[str]] = None, *,
     else:
         todo = epochs
     summary = ProcessSummary()
-    stale = stale_epochs(c)
+    params = parameters(c)
     for k, e in enumerate(todo):
         lab = e.label
         sub = scaled(progress, k / max(len(todo), 1), (k + 1) / max(len(todo), 1))
-        if lab not in stale:
+        stale = _stale_setups(c, lab, params)
+        if not stale:
             summary.outcomes.append(EpochOutcome(lab, "up-to-date"))
             continue
-        try:
-            if c.files(lab, "fine"):
-                cents = measure_epoch(c, lab, progress=sub)
-                found = sum(t.found for t in cents.values())
-                summary.outcomes.append(EpochOutcome(lab, "measured", f"{found}/{len(cents)} targets found"))
-            else:
-                plan = plan_epoch(c, lab, progress=sub)
-                summary.outcomes.append(EpochOutcome(lab, "planned", f"{len(plan.rois)} windows, "
-                                                     f"{plan.total_seconds / 60:.1f} min; add its fine scans"))
-        except CancelledError:
-            raise  # the user stopped the whole run, not this epoch (the epochs done so far are kept)
-        except SurveyError as exc:
-            log.warning("epoch %s: %s", lab, exc)
-            summary.outcomes.append(EpochOutcome(lab, "failed", str(exc)))
+        summary.outcomes.append(_process_setups(c, lab, sorted(stale), sub))
     finish_displacements(c, summary, [e.label for e in todo])
     report(progress, 1.0, "done")
     return summary
+
+
+def _process_setups(c: Campaign, lab: str, setups: Sequence[int], progress) -> EpochOutcome:
+    """Plan or measure the given set-ups of an epoch; one outcome for the epoch (a set-up's failure in its message)."""
+    actions, notes = [], []
+    for n, k in enumerate(setups):
+        sub = scaled(progress, n / len(setups), (n + 1) / len(setups))
+        where = "" if k == 1 and len(setups) == 1 else f"set-up {k}: "
+        try:
+            if c.files(lab, "fine", setup=k):
+                cents = measure_epoch(c, lab, setup=k, progress=sub)
+                found = sum(t.found for t in cents.values())
+                actions.append("measured")
+                notes.append(f"{where}{found}/{len(cents)} targets found")
+            else:
+                plan = plan_epoch(c, lab, setup=k, progress=sub)
+                actions.append("planned")
+                notes.append(f"{where}{len(plan.rois)} windows, {plan.total_seconds / 60:.1f} min; add its fine scans")
+        except CancelledError:
+            raise  # the user stopped the whole run, not this epoch (the epochs done so far are kept)
+        except SurveyError as exc:
+            log.warning("epoch %s%s: %s", lab, f" set-up {k}" if k != 1 else "", exc)
+            actions.append("failed")
+            notes.append(f"{where}{exc}")
+    action = "failed" if "failed" in actions else "measured" if "measured" in actions else "planned"
+    return EpochOutcome(lab, action, "; ".join(notes))
 
 
 def finish_displacements(c: Campaign, summary: ProcessSummary, labels: Sequence[str]) -> None:
@@ -384,16 +448,77 @@ def finish_displacements(c: Campaign, summary: ProcessSummary, labels: Sequence[
 
 
 def _stage1_hash(c: Campaign, label: str) -> Optional[str]:
+    """The stage-1 hash of a measured epoch (None when set-up 1 is not measured); of every set-up with several."""
     res = c.result(label)
-    return res.inputs_hash if res is not None and res.stage == "measured" else None
+    if res is None or res.stage != "measured":
+        return None
+    setups = c.setups(label)
+    if setups == [1]:
+        return res.inputs_hash
+    others = [(k, r.inputs_hash if (r := c.result(label, k)) is not None and r.stage == "measured" else None)
+              for k in setups[1:]]
+    return _hash([res.inputs_hash, others])
+
+
+class _Setups:
+    """What stage 2 reads of each measured epoch's set-ups: their found centroids and, once corrected, their join."""
+
+    def __init__(self, c: Campaign, labels: Sequence[str]):
+        self.c = c
+        self.measured: dict[str, list[int]] = {}
+        self.unmeasured: dict[str, list[int]] = {}
+        for lab in labels:
+            every = c.setups(lab)
+            self.measured[lab] = [k for k in every if k == 1 or ((r := c.result(lab, k)) is not None
+                                                                 and r.stage == "measured")]
+            self.unmeasured[lab] = [k for k in every if k not in self.measured[lab]]
+        self.visits = {visit_label(lab, k): (lab, k) for lab in labels for k in self.measured[lab]}
+        self._found: dict[tuple[str, int], dict] = {}
+        self._sides: dict[str, CorrectedVisit] = {}
+        self.model: Optional[object] = None
+
+    def several(self, label: str) -> bool:
+        return len(self.measured[label]) > 1 or bool(self.unmeasured[label])
+
+    def found_setup(self, label: str, setup: int) -> dict:
+        if (label, setup) not in self._found:
+            self._found[(label, setup)] = {k: v for k, v in self.c.centroids(label, setup).items() if v.found}
+        return self._found[(label, setup)]
+
+    def found(self, label: str) -> dict:
+        """Every target found in any set-up of the epoch (set-up 1's centroid first)."""
+        out: dict = {}
+        for k in self.measured[label]:
+            for t, v in self.found_setup(label, k).items():
+                out.setdefault(t, v)
+        return out
+
+    def found_visit(self, visit: str) -> dict:
+        return self.found_setup(*self.visits[visit])
+
+    def closures_visit(self, visit: str) -> dict:
+        return self.c.closure_centroids(*self.visits[visit])
+
+    def side(self, label: str) -> CorrectedVisit:
+        if label not in self._sides:
+            self._sides[label] = corrected_side(label, {k: self.found_setup(label, k) for k in self.measured[label]},
+                                                self.model)  # type: ignore[arg-type]
+        return self._sides[label]
+
+    def key(self, labels: Sequence[str]) -> dict:
+        """What the displacements of epochs with several set-ups also depend on: each set-up's field-model terms."""
+        return {lab: {"measured": {str(k): visit_digest(self.model, visit_label(lab, k), visit_label(lab, k))  # type: ignore[arg-type]
+                                   for k in self.measured[lab]}, "unmeasured": self.unmeasured[lab]}
+                for lab in labels if self.several(lab)}
 
 
 def update_displacements(c: Campaign, baseline: str, *, reasons: Optional[dict] = None) -> list[str]:
     """(Re)compute the displacements of every measured epoch whose inputs changed; returns those epochs.
 
     The campaign's field model (:mod:`projects.processing.field`) is fitted first over every measured
-    epoch; each epoch's displacements depend on it through its digest of the two visits' terms. The
-    stored digest is ``inputs:field`` so that ``reasons`` (epoch -> ``"field"`` or ``"inputs"``) can
+    epoch (every set-up of one, as a visit of its own); each epoch's displacements depend on it through
+    its digest of the two visits' terms. The set-ups of an epoch are joined (:mod:`projects.processing.setups`).
+    The stored digest is ``inputs:field`` so that ``reasons`` (epoch -> ``"field"`` or ``"inputs"``) can
     say whether only the field model moved (a new epoch refines the campaign-wide range walk).
     """
     params = parameters(c)
@@ -402,19 +527,17 @@ def update_displacements(c: Campaign, baseline: str, *, reasons: Optional[dict] 
     measured = [e.label for e in c.epochs() if _stage1_hash(c, e.label)]
     if baseline not in measured:
         return []
-    found_cache: dict[str, dict] = {}
-
-    def found(label):
-        if label not in found_cache:
-            found_cache[label] = {k: v for k, v in c.centroids(label).items() if v.found}
-        return found_cache[label]
-
+    su = _Setups(c, measured)
+    found = su.found
     first_seen: dict[str, str] = {}
     start = measured.index(baseline)
     for lab in measured[start:]:
         for rid in found(lab):
             first_seen.setdefault(rid, lab)
-    model = update_field_model(c, baseline, measured, groups, found, enabled=bool(params["field_model"]))
+    visits = [v for v in su.visits]
+    model = update_field_model(c, baseline, visits, groups, su.found_visit, enabled=bool(params["field_model"]),
+                               closures=su.closures_visit)
+    su.model = model
     # the air's series decide the atmosphere's flags (projects.processing.field.atmosphere_flags)
     air = sorted(r.sha256 for r in c.series.records("env_series") if r.kind in ("temperature", "pressure", "humidity"))
     done = []
@@ -427,26 +550,67 @@ def update_displacements(c: Campaign, baseline: str, *, reasons: Optional[dict] 
         key = {"v": PIPELINE_VERSION, "epoch": _stage1_hash(c, lab), "params": stage2_params(params),
                "bases": {b: _stage1_hash(c, b) for b in bases}, "reflectors": sorted((k, repr(v)) for k, v in refl.items()),
                "air": air}
+        field_key: dict = {b: visit_digest(model, b, lab) for b in bases}
+        if any(su.several(x) for x in [*bases, lab]):
+            field_key["setups"] = su.key(sorted({*bases, lab}))
         core = _hash(key)
-        h = f"{core}:{_hash({b: visit_digest(model, b, lab) for b in bases})}"
+        h = f"{core}:{_hash(field_key)}"
         stored = c.displacement_set(lab)
         if stored is not None and stored.inputs_hash == h:
             continue
         if reasons is not None and stored is not None:
             reasons[lab] = "field" if stored.inputs_hash.split(":")[0] == core else "inputs"
-        result = _epoch_displacements(c, lab, bases, baseline, found, groups, first_seen, params, model, refl)
+        result = _epoch_displacements(c, lab, bases, baseline, found, groups, first_seen, params, model, refl,
+                                      _displacements_of(su, params))
         if result is None:
             continue
         time_source = c.time_source(lab)
-        result = replace(result, flags=tuple(result.flags) + tuple(epoch_flags(model, lab, time_source))
-                         + tuple(atmosphere_flags(c, model, lab)))
-        c.save_displacements(lab, baseline, result, h, systematics=systematics_json(model, lab, time_source))
+        flags, systematics = _setup_terms(su, lab, epoch_flags(model, lab, time_source),
+                                          systematics_json(model, lab, time_source))
+        result = replace(result, flags=tuple(result.flags) + tuple(flags) + tuple(atmosphere_flags(c, model, lab)))
+        c.save_displacements(lab, baseline, result, h, systematics=systematics)
         done.append(lab)
     return done
 
 
+def _displacements_of(su: _Setups, params: dict):
+    """``f(b, lab, groups)``: one epoch's displacements against ``b``, joining set-ups when either has several."""
+    options = {"normal_mode": params["normal_mode"], "moved_tolerance_m": params["moved_tolerance_m"],
+               "weighted": bool(params["weighted_references"])}
+
+    def displacements(b: str, lab: str, groups: dict) -> EpochDisplacements:
+        if not su.several(b) and not su.several(lab):
+            return corrected_displacements(su.found(b), su.found(lab), groups, model=su.model, baseline_label=b,
+                                           epoch_label=lab, **options)  # type: ignore[arg-type]
+        return joined_displacements(su.side(b), su.side(lab), groups, model=su.model, **options)  # type: ignore[arg-type]
+    return displacements
+
+
+def _setup_terms(su: _Setups, lab: str, flags: list, systematics: dict) -> tuple[list, dict]:
+    """An epoch's flags and systematics with its set-ups': their field-model flags, the join's flags and QA."""
+    if not su.several(lab):
+        return flags, systematics
+    flags = list(flags)
+    per_setup = {}
+    for k in su.measured[lab][1:]:
+        v = visit_label(lab, k)
+        ts = su.c.time_source(lab, k)
+        flags += [f for f in epoch_flags(su.model, v, ts) if f not in flags]  # type: ignore[arg-type]
+        per_setup[str(k)] = systematics_json(su.model, v, ts)  # type: ignore[arg-type]
+    for k in su.unmeasured[lab]:
+        flags.append(f"{FLAG_SETUP_NOT_MEASURED}: set-up {k} has no measured fine scans; the targets only it sees "
+                     "are missing (import them with 'bridgesurvey add-fine --setup', then process)")
+    try:
+        join = su.side(lab).join
+    except SurveyError as exc:  # no set-up with a target: the epoch's displacements already say why
+        log.warning("epoch %s: %s", lab, exc)
+        return flags, systematics
+    flags += join.flags()
+    return flags, {**systematics, "setups": {**join.to_json(), "systematics": per_setup}}
+
+
 def _epoch_displacements(c: Campaign, lab: str, bases: list, baseline: str, found, groups: dict, first_seen: dict,
-                         params: dict, model, refl: dict) -> Optional[EpochDisplacements]:
+                         params: dict, model, refl: dict, displacements_of=None) -> Optional[EpochDisplacements]:
     """One epoch's displacements against the baseline (and the later baselines of targets that replaced others)."""
     cents = found(lab)
     meas_here = [m for m in cents if groups.get(m) == "measurement"]
@@ -466,10 +630,13 @@ def _epoch_displacements(c: Campaign, lab: str, bases: list, baseline: str, foun
             continue
         sub_groups = {r: g for r, g in groups.items() if g == "reference" or r in targets}
         try:
-            res = corrected_displacements(found(b), cents, sub_groups, model=model, baseline_label=b, epoch_label=lab,
-                                          normal_mode=params["normal_mode"],
-                                          moved_tolerance_m=params["moved_tolerance_m"],
-                                          weighted=bool(params["weighted_references"]))
+            if displacements_of is not None:
+                res = displacements_of(b, lab, sub_groups)
+            else:
+                res = corrected_displacements(found(b), cents, sub_groups, model=model, baseline_label=b,
+                                              epoch_label=lab, normal_mode=params["normal_mode"],
+                                              moved_tolerance_m=params["moved_tolerance_m"],
+                                              weighted=bool(params["weighted_references"]))
         except SurveyError as exc:
             log.warning("epoch %s against %s: %s", lab, b, exc)
             if b == baseline:
@@ -503,10 +670,12 @@ def _why_missing(c: Campaign, lab: str, result: EpochDisplacements) -> EpochDisp
     """A target without a value carries, on its row, why its centroid was not found (beside ``missing``)."""
     if not any(has(d.flags, FLAG_MISSING) for d in result.displacements):
         return result
-    cents = c.centroids(lab)
+    setups = c.setups(lab)
+    every = [c.centroids(lab, k) for k in setups]
     rows = []
     for d in result.displacements:
-        tc = cents.get(d.reflector)
+        seen = [cents[d.reflector] for cents in every if d.reflector in cents]
+        tc = next((t for t in seen if t.found), seen[0] if seen else None)
         if has(d.flags, FLAG_MISSING) and tc is not None and not tc.found:
             d = replace(d, flags=tuple(d.flags) + tuple(f for f in tc.flags if code(f) != FLAG_NOT_FOUND))
         rows.append(d)

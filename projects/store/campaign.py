@@ -36,7 +36,7 @@ from projects.store.imports import (IMPORT_DIRS, SCANS_DIR, Copied, clean_temp_f
 from projects.store.imports import CAMERA_DIR, ENV_DIR, PREDICTION_DIR  # noqa: F401  (importers name them here)
 from projects.store.lock import LOCK_NAME, CampaignLock  # noqa: F401  (LOCK_NAME: likewise)
 from projects.store.errors import CampaignError, CampaignLockedError, DuplicateImportError, InputError
-from projects.store import field_tables
+from projects.store import field_tables, setup_tables
 from projects.store.repositories import (ComparisonRepository, CrossvalRepository, EventRepository,
                                          PredictionRepository, SeriesRepository)
 from projects.store.records import (DisplacementRecord, DisplacementSet, Epoch, EpochInputs, EpochResult, LimitRecord,
@@ -276,13 +276,12 @@ class Campaign:
     def profile(self) -> ScannerProfile:
         return ScannerProfile.from_dict(json.loads(self.meta("scanner_profile", "{}")))
 
-    def profile_for(self, label: Optional[str]) -> ScannerProfile:
-        """The scanner of an epoch: its own when it has one (``add-epoch --scanner``), else the campaign's."""
-        own = self.settings().get("epoch_scanners", {}).get(label) if label else None
-        return ScannerProfile.from_dict(own, source=f"epoch {label} scanner") if own else self.profile
+    def profile_for(self, label: Optional[str], setup: int = 1) -> ScannerProfile:
+        """The scanner of an epoch's set-up: its own (``add-setup --scanner``), else the epoch's, else the campaign's."""
+        return _profile_of(self.settings(), label, setup, self.profile)
 
-    def set_profile(self, profile: ScannerProfile, *, epoch: Optional[str] = None) -> None:
-        """Set the campaign's scanner, or one epoch's (the epoch must exist)."""
+    def set_profile(self, profile: ScannerProfile, *, epoch: Optional[str] = None, setup: Optional[int] = None) -> None:
+        """Set the campaign's scanner, or one epoch's, or one set-up's of an epoch (which must exist)."""
         if epoch is None:
             with self.transaction() as c:
                 c.execute("UPDATE meta SET value = ? WHERE key = 'scanner_profile'", (json.dumps(profile.to_dict()),))
@@ -290,13 +289,19 @@ class Campaign:
             return
         self.epoch(epoch)
         s = self.settings()
-        s.setdefault("epoch_scanners", {})[epoch] = profile.to_dict()
-        mark = self._journal_entry({"kind": "epoch-scanner", "epoch": epoch, "profile": profile.to_dict(),
-                                    "stored_path": "", "imported": now_iso()})  # for 'repair'
+        entry: dict = {"kind": "epoch-scanner", "epoch": epoch, "profile": profile.to_dict(), "stored_path": "",
+                       "imported": now_iso()}
+        if setup is None or setup == 1:
+            s.setdefault("epoch_scanners", {})[epoch] = profile.to_dict()
+        else:
+            self.check_setup(epoch, setup)
+            s.setdefault("setup_scanners", {}).setdefault(epoch, {})[str(setup)] = profile.to_dict()
+            entry["setup"] = setup
+        mark = self._journal_entry(entry)  # for 'repair'
         try:
             with self.transaction() as c:
                 c.execute("UPDATE meta SET value = ? WHERE key = 'settings'", (json.dumps(s),))
-                self.log_action(c, "scanner", epoch, {"name": profile.name})
+                self.log_action(c, "scanner", epoch, {"name": profile.name, **({"setup": setup} if "setup" in entry else {})})
         except BaseException:
             journal.truncate(self.folder, mark)
             raise
@@ -398,28 +403,51 @@ class Campaign:
             raise InputError(f"no epoch {label!r} in {self.folder}{hint}")
         return Epoch(**dict(row))
 
-    def files(self, epoch: str, role: Optional[str] = None) -> list[ScanFile]:
-        """An epoch's scan files (``role`` ``"coarse"`` or ``"fine"``, or both), in import order."""
-        q = "SELECT * FROM files WHERE epoch = ?" + (" AND role = ?" if role else "") + " ORDER BY imported, stored_path"
-        return [ScanFile(**dict(r)) for r in self.conn.execute(q, (epoch, role) if role else (epoch,))]
+    def files(self, epoch: str, role: Optional[str] = None, *, setup: Optional[int] = 1) -> list[ScanFile]:
+        """An epoch's scan files (``role`` ``"coarse"`` or ``"fine"``, or both), in import order.
 
-    def epoch_inputs(self, label: str, *, plan: bool = True) -> EpochInputs:
-        """In one read: the epoch, its files by role, its stored plan and result, its layout, scanner and settings.
+        ``setup`` chooses the set-up (default 1: one scanner frame, as every visit had before set-ups);
+        None gives every set-up's files.
+        """
+        q = "SELECT * FROM files WHERE epoch = ?" + (" AND role = ?" if role else "") + " ORDER BY imported, stored_path"
+        rows = [ScanFile(**dict(r)) for r in self.conn.execute(q, (epoch, role) if role else (epoch,))]
+        return rows if setup is None else [f for f in rows if setup in f.setups]
+
+    def setups(self, epoch: str) -> list[int]:
+        """The set-ups of an epoch, 1-based ([1] for an epoch of one set-up)."""
+        return sorted({k for f in self.files(epoch, setup=None) for k in f.setups}) or [1]
+
+    def last_setup(self, epoch: str) -> int:
+        """The set-up added last to an epoch (the default of ``--setup``)."""
+        self.epoch(epoch)
+        return self.setups(epoch)[-1]
+
+    def check_setup(self, epoch: str, setup: int) -> int:
+        """``setup`` when the epoch has it, else an :class:`InputError` naming the set-ups there are."""
+        have = self.setups(epoch)
+        if setup not in have:
+            raise InputError(f"epoch {epoch} has no set-up {setup}; its set-ups are {', '.join(map(str, have))} "
+                             "(add one with 'bridgesurvey add-setup')")
+        return setup
+
+    def epoch_inputs(self, label: str, *, plan: bool = True, setup: int = 1) -> EpochInputs:
+        """In one read: the epoch, a set-up's files by role, its stored plan and result, the layout, scanner, settings.
 
         An unknown label is an :class:`InputError`. ``plan=False`` does not read the plan (``plan`` is
-        then None), for callers that only compare hashes.
+        then None), for callers that only compare hashes. ``setup`` is the set-up (default 1).
         """
         with self.snapshot():
             ep = self.epoch(label)
-            files = self.files(label)
-            stored = self.stored_plan(label) if plan else None
-            result = self.result(label)
+            every = self.files(label, setup=None)
+            files = [f for f in every if setup in f.setups]
+            stored = self.stored_plan(label, setup) if plan else None
+            result = self.result(label, setup)
             reflectors = self.reflectors()
             settings = self.settings()
-            own = settings.get("epoch_scanners", {}).get(label)
-            profile = ScannerProfile.from_dict(own, source=f"epoch {label} scanner") if own else self.profile
+            profile = _profile_of(settings, label, setup, self.profile)
+        setups = tuple(sorted({k for f in every for k in f.setups})) or (1,)
         return EpochInputs(ep, tuple(f for f in files if f.role == "coarse"), tuple(f for f in files if f.role == "fine"),
-                           stored, result, _layout_of(reflectors, ep.datetime), profile, settings)
+                           stored, result, _layout_of(reflectors, ep.datetime), profile, settings, setup, setups)
 
     def path_of(self, file: ScanFile) -> Path:
         """Where a stored scan file is on disk."""
@@ -470,60 +498,88 @@ class Campaign:
             raise
 
     def import_files(self, epoch: str, paths: Iterable[str | os.PathLike], role: str, *,
-                     validate=None, create_epoch: Optional[dict] = None) -> list[str]:
+                     validate=None, create_epoch: Optional[dict] = None, setup: Optional[int] = None,
+                     frames_of=None) -> list[str]:
         """Validate, copy in and register scan files of an epoch, all or nothing.
 
         ``validate(path)`` must raise on an unreadable file (before anything is changed).
-        ``create_epoch`` (label, datetime, notes) creates the epoch in the same transaction.
+        ``create_epoch`` (label, datetime, notes) creates the epoch in the same transaction. ``setup`` is
+        the set-up the files belong to (default: the last one added; a fine file whose scans carry a
+        set-up's pose goes to that set-up). ``frames_of(path, fallback)`` (e.g. :func:`lidar.io.poses.file_frames`
+        with the pose the user gave) reads a file and returns a :class:`lidar.io.poses.FileFrame` per scan
+        position in it, raising on an unreadable file or one in a project frame without a pose;
+        ``fallback`` is the set-up's own pose, when one is known. It replaces ``validate``.
         """
-        files = [Path(p) for p in paths]
-        for p in files:
+        return self._import(epoch, [(Path(p), role) for p in paths], setup=setup, validate=validate,
+                            frames_of=frames_of, create_epoch=create_epoch)
+
+    def _checked_new(self, items: Sequence[tuple[Path, str]]) -> list[str]:
+        """The checksums of files about to be imported: each exists, none twice, none already imported."""
+        for p, _ in items:
             if not p.is_file():
                 raise InputError(f"{p}: no such file; check the path")
-        shas = [sha256_of(p) for p in files]
+        shas = [sha256_of(p) for p, _ in items]
         if len(set(shas)) != len(shas):
             raise DuplicateImportError("the same file is given twice")
-        for p, sha in zip(files, shas):
+        for (p, _), sha in zip(items, shas):
             row = self.conn.execute("SELECT epoch, original_path FROM files WHERE sha256 = ?", (sha,)).fetchone()
             if row is not None:
                 raise DuplicateImportError(f"{p}: this file is already in the campaign (epoch {row['epoch']}, "
                                            f"imported from {row['original_path']}); nothing was changed")
-        if validate is not None:
-            for p in files:
-                validate(p)
-        ensure_free(self.folder / SCANS_DIR, sum(p.stat().st_size for p in files) + MB)
+        return shas
+
+    def _import(self, epoch: str, items: Sequence[tuple[Path, str]], *, setup: Optional[int], validate, frames_of,
+                create_epoch: Optional[dict], placed: Optional[list] = None) -> list[str]:
+        """Import coarse and fine files of one epoch in one transaction (see :meth:`import_files`).
+
+        ``placed`` is each file's (set-up, frame JSON) when already worked out (:func:`setup_tables.place_files`).
+        """
+        shas = self._checked_new(items)
+        if placed is None:
+            existing = [] if create_epoch is not None else self.files(epoch, setup=None)
+            placed = setup_tables.place_files(epoch, items, existing, setup=setup, frames_of=frames_of,
+                                              validate=validate)
+        ensure_free(self.folder / SCANS_DIR, sum(p.stat().st_size for p, _ in items) + MB)
         ep = create_epoch if create_epoch is not None else dict(self.epoch(epoch).to_dict())
         copied: list[Copied] = []
         marks: list[int] = []
         try:
-            for p in files:
+            for p, _ in items:
                 copied.append(copy_in(self.folder, p, SCANS_DIR))
-            for p, got in zip(files, copied):
-                marks.append(self._journal(got, p, {"kind": "scan", "epoch": epoch, "role": role, "epoch_datetime": ep["datetime"],
-                                       "epoch_notes": ep.get("notes", ""), "header": _header_or_none(self.folder / got.rel)}))
+            for (p, role), got, (k, frame) in zip(items, copied, placed):
+                marks.append(self._journal(got, p, {"kind": "scan", "epoch": epoch, "role": role, "setup": k,
+                                                    "frame": frame, "epoch_datetime": ep["datetime"],
+                                                    "epoch_notes": ep.get("notes", ""),
+                                                    "header": _header_or_none(self.folder / got.rel)}))
             with self.transaction() as c:
                 if create_epoch is not None:
                     c.execute("INSERT INTO epochs(label, datetime, notes, created) VALUES (?, ?, ?, ?)",
                               (create_epoch["label"], create_epoch["datetime"], create_epoch.get("notes", ""),
                                now_iso()))
-                for p, got in zip(files, copied):
-                    c.execute("INSERT INTO files(sha256, epoch, role, stored_path, original_path, size, imported) "
-                              "VALUES (?, ?, ?, ?, ?, ?, ?)",
-                              (got.sha256, epoch, role, got.rel, str(p.resolve()), got.size, now_iso()))
-                self.log_action(c, "import", epoch, {"role": role, "files": [str(p) for p in files], "sha256": shas})
+                for (p, role), got, (k, frame) in zip(items, copied, placed):
+                    c.execute("INSERT INTO files(sha256, epoch, role, stored_path, original_path, size, imported, "
+                              "setup, frame) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                              (got.sha256, epoch, role, got.rel, str(p.resolve()), got.size, now_iso(), k, frame))
+                for role in dict.fromkeys(r for _, r in items):
+                    these = [(p, sha, k) for (p, r), sha, (k, _) in zip(items, shas, placed) if r == role]
+                    self.log_action(c, "import", epoch, {"role": role, "files": [str(p) for p, _, _ in these],
+                                                         "sha256": [sha for _, sha, _ in these],
+                                                         **({"setups": sorted({k for _, _, k in these})}
+                                                            if any(k != 1 for _, _, k in these) else {})})
         except BaseException:
             self._undo_import(copied, marks)
             raise
         return shas
 
     def add_epoch(self, label: str, when: str, coarse: str | os.PathLike, fines: Sequence = (), *, notes: str = "",
-                  validate=None, allow_date: bool = False) -> str:
+                  validate=None, allow_date: bool = False, frames_of=None) -> str:
         """Create an epoch with its coarse scan (and fine scans), all checked before anything changes.
 
         A date more than :data:`projects.store.inputs.DATE_SPAN_YEARS` years from the campaign's other
         epochs (for the first one: outside the plausible years) is refused unless ``allow_date``. An
         epoch dated before every measured one never becomes the baseline: the implicit baseline (the
-        first measured epoch) is fixed first (see :meth:`baseline_note`).
+        first measured epoch) is fixed first (see :meth:`baseline_note`). The coarse scan is set-up 1
+        (a coarse file of several scan positions: set-ups 1, 2...); ``frames_of`` as in :meth:`import_files`.
         """
         if not label or not label.strip() or any(ch in label for ch in "/\\\n"):
             raise InputError(f"epoch label {label!r} is not usable (no slashes or line breaks)")
@@ -532,12 +588,26 @@ class Campaign:
             raise InputError(f"epoch {label!r} already exists; use another --label or add-fine to add files to it")
         if not allow_date:
             inputs.check_epoch_date(when, [e.datetime for e in self.epochs()])
-        self._pin_baseline_before(when)
-        self.import_files(label, [coarse], "coarse", validate=validate,
-                          create_epoch={"label": label, "datetime": when, "notes": notes})
-        if fines:
-            self.import_files(label, fines, "fine", validate=validate)
+        items = [(Path(coarse), "coarse")] + [(Path(f), "fine") for f in fines]
+        self._checked_new(items)
+        placed = setup_tables.place_files(label, items, [], setup=1, frames_of=frames_of, validate=validate)
+        self._pin_baseline_before(when)  # after every file was read: a refused file changes nothing
+        self._import(label, items, setup=1, validate=validate, frames_of=frames_of,
+                     create_epoch={"label": label, "datetime": when, "notes": notes}, placed=placed)
         return label
+
+    def add_setup(self, label: str, coarse: str | os.PathLike, fines: Sequence = (), *, validate=None,
+                  frames_of=None) -> list[int]:
+        """Add a set-up (another station of the same visit) to an epoch: its coarse scan and fine scans.
+
+        Returns the new set-up's number (several, for a coarse file of several scan positions). All is
+        checked before anything changes; ``frames_of`` as in :meth:`import_files`.
+        """
+        self.epoch(label)
+        new = self.setups(label)[-1] + 1
+        items = [(Path(coarse), "coarse")] + [(Path(f), "fine") for f in fines]
+        self._import(label, items, setup=new, validate=validate, frames_of=frames_of, create_epoch=None)
+        return [k for k in self.setups(label) if k >= new]
 
     def _pin_baseline_before(self, when: str) -> None:
         """Fix the implicit baseline (the first measured epoch) before an epoch dated earlier arrives."""
@@ -559,9 +629,16 @@ class Campaign:
                 f"time; the baseline changes only with 'bridgesurvey settings DIR baseline {label}'")
 
     # ------------------------------------------------------------------ results
-    def save_plan(self, epoch: str, plan_json: dict, inputs_hash: str, preview: Optional[tuple[bytes, str]] = None
-                  ) -> None:
-        """Store an epoch's plan (and the encoded map preview it came from), dropping its old centroids."""
+    def save_plan(self, epoch: str, plan_json: dict, inputs_hash: str, preview: Optional[tuple[bytes, str]] = None,
+                  *, setup: int = 1) -> None:
+        """Store an epoch's (set-up's) plan (and the encoded map preview it came from), dropping its old centroids."""
+        if setup != 1:
+            with self.transaction() as c:
+                setup_tables.write_plan(c, epoch, setup, plan_json, inputs_hash, now_iso(), preview)
+                for table in ("setup_plans", "setup_results") + (("setup_previews",) if preview is not None else ()):
+                    digests.seal(c, table, (epoch, setup))
+                self.log_action(c, "plan", epoch, {"inputs_hash": inputs_hash, "setup": setup})
+            return
         with self.transaction() as c:
             c.execute("INSERT OR REPLACE INTO plans(epoch, json, inputs_hash, created) VALUES (?, ?, ?, ?)",
                       (epoch, json.dumps(plan_json), inputs_hash, now_iso()))
@@ -577,12 +654,18 @@ class Campaign:
             digests.seal(c, "epoch_results", (epoch,))
             self.log_action(c, "plan", epoch, {"inputs_hash": inputs_hash})
 
-    def stored_plan(self, epoch: str) -> Optional[StoredPlan]:
-        """An epoch's plan with the inputs hash it was made from, or None when it has none."""
+    def stored_plan(self, epoch: str, setup: int = 1) -> Optional[StoredPlan]:
+        """An epoch's (set-up's) plan with the inputs hash it was made from, or None when it has none."""
         from lidar.plan import ScanPlan
 
-        row = self.conn.execute("SELECT json, inputs_hash, created FROM plans WHERE epoch = ?", (epoch,)).fetchone()
-        if row is None or not self._plan_sound(epoch):
+        if setup != 1:
+            row = self.conn.execute("SELECT json, inputs_hash, created FROM setup_plans WHERE epoch = ? AND setup = ?",
+                                    (epoch, setup)).fetchone()
+            if row is None or not self._setup_plan_sound(epoch, setup):
+                return None
+        else:
+            row = self.conn.execute("SELECT json, inputs_hash, created FROM plans WHERE epoch = ?", (epoch,)).fetchone()
+        if row is None or (setup == 1 and not self._plan_sound(epoch)):
             return None  # a damaged plan (or the preview of an unedited one) is stale: planned again
         doc = json.loads(row["json"])
         return StoredPlan(epoch, ScanPlan.from_json(doc), doc, row["inputs_hash"], row["created"])
@@ -623,20 +706,45 @@ class Campaign:
     def _stage1_sound(self, epoch: str) -> bool:
         return self.is_sound("epoch_results", (epoch,)) and self._plan_sound(epoch)
 
+    def _setup_plan_sound(self, epoch: str, setup: int) -> bool:
+        """A further set-up's plan and preview match their digests (as :meth:`_plan_sound` for set-up 1)."""
+        key = (epoch, setup)
+        row = self.conn.execute("SELECT json FROM setup_plans WHERE epoch = ? AND setup = ?", key).fetchone()
+        if row is not None and not self.is_sound("setup_plans", key):
+            return False
+        has_preview = self.conn.execute("SELECT 1 FROM setup_previews WHERE epoch = ? AND setup = ?",
+                                        key).fetchone() is not None
+        if not has_preview or self.is_sound("setup_previews", key):
+            return True
+        return row is not None and bool(json.loads(row[0]).get("edited"))
+
+    def _setup_result_row(self, epoch: str, setup: int):
+        """A further set-up's sound result row, or None (absent, or failing its digest or its plan's)."""
+        row = setup_tables.read_result(self.conn, epoch, setup)
+        if row is None or not self.is_sound("setup_results", (epoch, setup)) or not self._setup_plan_sound(epoch, setup):
+            return None
+        return row
+
     def _displacements_sound(self, epoch: str) -> bool:
         return self.is_sound("displacement_sets", (epoch,))
 
-    def plan(self, epoch: str):
-        """An epoch's :class:`lidar.plan.ScanPlan`, or None when it has none."""
-        stored = self.stored_plan(epoch)
+    def plan(self, epoch: str, setup: int = 1):
+        """An epoch's (set-up's) :class:`lidar.plan.ScanPlan`, or None when it has none."""
+        stored = self.stored_plan(epoch, setup)
         return None if stored is None else stored.plan
 
-    def map_preview(self, epoch: str):
-        """The stored :class:`projects.map_previews.MapPreview` of an epoch, or None."""
+    def map_preview(self, epoch: str, setup: int = 1):
+        """The stored :class:`projects.map_previews.MapPreview` of an epoch (set-up), or None."""
         from projects.store.previews import decode_preview
 
-        row = self.conn.execute("SELECT arrays, annotations FROM map_previews WHERE epoch = ?", (epoch,)).fetchone()
-        if row is None or not self.is_sound("map_previews", (epoch,)):
+        if setup != 1:
+            row = self.conn.execute("SELECT arrays, annotations FROM setup_previews WHERE epoch = ? AND setup = ?",
+                                    (epoch, setup)).fetchone()
+            sound = row is not None and self.is_sound("setup_previews", (epoch, setup))
+        else:
+            row = self.conn.execute("SELECT arrays, annotations FROM map_previews WHERE epoch = ?", (epoch,)).fetchone()
+            sound = row is not None and self.is_sound("map_previews", (epoch,))
+        if not sound:
             return None
         try:
             return decode_preview(row[0], row[1])
@@ -645,8 +753,11 @@ class Campaign:
         except Exception:  # undecodable despite its digest: not shown, never a crash
             return None
 
-    def result(self, epoch: str) -> Optional[EpochResult]:
-        """How far processing has taken an epoch, or None when it has not started (or its stored results are damaged)."""
+    def result(self, epoch: str, setup: int = 1) -> Optional[EpochResult]:
+        """How far processing has taken an epoch (set-up), or None when it has not started (or its results are damaged)."""
+        if setup != 1:
+            got = self._setup_result_row(epoch, setup)
+            return None if got is None else EpochResult(epoch, got["stage"], got["inputs_hash"], got["processed"])
         row = self.conn.execute("SELECT epoch, stage, inputs_hash, processed FROM epoch_results WHERE epoch = ?",
                                 (epoch,)).fetchone()
         if row is None or not self._stage1_sound(epoch):
@@ -654,8 +765,15 @@ class Campaign:
         return EpochResult(**dict(row))
 
     def save_centroids(self, epoch: str, cents: dict, inputs_hash: str, params: dict, *,
-                       closures: Optional[dict] = None, time_source: str = "points") -> None:
-        """Store an epoch's centroids (and its closure centroids) as its measured stage-1 result."""
+                       closures: Optional[dict] = None, time_source: str = "points", setup: int = 1) -> None:
+        """Store an epoch's (set-up's) centroids (and its closure centroids) as its measured stage-1 result."""
+        if setup != 1:
+            with self.transaction() as c:
+                setup_tables.write_centroids(c, epoch, setup, cents, closures or {}, inputs_hash, now_iso(), time_source)
+                digests.seal(c, "setup_results", (epoch, setup))
+                self.log_action(c, "measure", epoch, {"inputs_hash": inputs_hash, "params": params, "setup": setup,
+                                                     "found": sum(int(t.found) for t in cents.values())})
+            return
         with self.transaction() as c:
             c.execute("DELETE FROM centroids WHERE epoch = ?", (epoch,))
             for rid, tc in cents.items():
@@ -672,11 +790,14 @@ class Campaign:
             self.log_action(c, "measure", epoch, {"inputs_hash": inputs_hash, "params": params,
                                              "found": sum(int(t.found) for t in cents.values())})
 
-    def centroids(self, epoch: str) -> dict[str, TargetCentroid]:
-        """An epoch's stored centroids by target, with their times, incidences and clipped fractions.
+    def centroids(self, epoch: str, setup: int = 1) -> dict[str, TargetCentroid]:
+        """An epoch's (set-up's) stored centroids by target, with their times, incidences and clipped fractions.
 
-        None when they fail their digest (stale: processing measures the epoch again).
+        Empty when they fail their digest (stale: processing measures the epoch again).
         """
+        if setup != 1:
+            row = self._setup_result_row(epoch, setup)
+            return setup_tables.centroids_of(row) if row is not None and row["stage"] == "measured" else {}
         if self._exists("epoch_results", epoch) and not self.is_sound("epoch_results", (epoch,)):
             return {}
         extras = field_tables.read_centroid_extras(self.conn, epoch)
@@ -691,12 +812,17 @@ class Campaign:
             out[r["reflector"]] = field_tables.with_extra(out[r["reflector"]], extras.get(r["reflector"]))
         return out
 
-    def closure_centroids(self, epoch: str) -> dict[str, TargetCentroid]:
-        """The epoch's closure centroids: targets its plan scanned again at the end of the visit."""
+    def closure_centroids(self, epoch: str, setup: int = 1) -> dict[str, TargetCentroid]:
+        """The epoch's (set-up's) closure centroids: targets its plan scanned again at the end of the visit."""
+        if setup != 1:
+            return setup_tables.centroids_of(self._setup_result_row(epoch, setup), "closures")
         return field_tables.read_closures(self.conn, epoch)
 
-    def time_source(self, epoch: str) -> Optional[str]:
-        """Where the epoch's centroid times come from: ``points``, ``plan`` or None (not measured)."""
+    def time_source(self, epoch: str, setup: int = 1) -> Optional[str]:
+        """Where the epoch's (set-up's) centroid times come from: ``points``, ``plan`` or None (not measured)."""
+        if setup != 1:
+            row = self._setup_result_row(epoch, setup)
+            return None if row is None or row["stage"] != "measured" else row["time_source"]
         extras = field_tables.read_centroid_extras(self.conn, epoch)
         return next((e.get("time_source") for e in extras.values()), None)
 
@@ -833,6 +959,15 @@ class Campaign:
         res = self.conn.execute("PRAGMA integrity_check").fetchone()[0]
         fk = self.conn.execute("PRAGMA foreign_key_check").fetchall()
         return res if not fk else f"foreign key violations: {len(fk)}"
+
+
+def _profile_of(settings: dict, label: Optional[str], setup: int, campaign: ScannerProfile) -> ScannerProfile:
+    """A set-up's scanner from the settings: its own, else its epoch's, else the campaign's."""
+    own = settings.get("setup_scanners", {}).get(label, {}).get(str(setup)) if label and setup != 1 else None
+    if own:
+        return ScannerProfile.from_dict(own, source=f"epoch {label} set-up {setup} scanner")
+    own = settings.get("epoch_scanners", {}).get(label) if label else None
+    return ScannerProfile.from_dict(own, source=f"epoch {label} scanner") if own else campaign
 
 
 def _layout_of(reflectors: Sequence[Reflector], at: Optional[str]) -> Layout:

@@ -19,6 +19,8 @@ import zlib
 from dataclasses import dataclass
 from typing import Iterable, Optional, Sequence
 
+from projects.store import setup_tables
+
 
 def value_digest(rows: Iterable[Sequence]) -> str:
     """The digest of rows of SQL values (None, int, float, str, bytes), hex.
@@ -106,7 +108,11 @@ GROUPS: dict[str, Group] = {g.table: g for g in (
     Group("comparison", "comparisons", ("from_epoch", "to_epoch", "method"), (
         "SELECT from_epoch, to_epoch, method, summary FROM comparisons "
         "WHERE from_epoch = ? AND to_epoch = ? AND method = ?",)),
+    *(Group(name, table, ("epoch", "setup"), queries) for name, table, queries in setup_tables.GROUPS),
 )}
+#: The tables whose digests schema 10 introduced (the set-up tables came with schema 11, digests included).
+V10_TABLES = ("plans", "map_previews", "epoch_results", "displacement_sets", "camera_series", "env_series",
+              "predictions", "crossvals", "comparisons")
 
 
 def group_digest(conn: sqlite3.Connection, table: str, key: Sequence) -> str:
@@ -153,8 +159,8 @@ def damaged(conn: sqlite3.Connection, table: str) -> list[tuple]:
     return [k for k in keys_of(conn, table) if not is_sound(conn, table, k)]
 
 
-def seal_all(conn: sqlite3.Connection) -> None:
-    """Store the digest of every group (the migration that introduced digests)."""
-    for table in GROUPS:
+def seal_all(conn: sqlite3.Connection, tables: Optional[Sequence[str]] = None) -> None:
+    """Store the digest of every group of ``tables`` (default all; the migration that introduced digests)."""
+    for table in (GROUPS if tables is None else tables):
         for key in keys_of(conn, table):
             seal(conn, table, key)

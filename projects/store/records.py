@@ -97,7 +97,9 @@ class ScanFile(_Plain):
     """A scan file imported into an epoch.
 
     ``role`` is ``"coarse"`` or ``"fine"``; ``stored_path`` is
-    relative to the campaign folder; ``size`` in bytes.
+    relative to the campaign folder; ``size`` in bytes. ``setup`` is the set-up it belongs to (the first,
+    for a file holding several scan positions), ``frame`` the JSON of :attr:`frames` (None: one set-up,
+    points in the scanner frame as stored).
     """
 
     sha256: str
@@ -107,6 +109,24 @@ class ScanFile(_Plain):
     original_path: str
     size: int
     imported: str
+    setup: int = 1
+    frame: Optional[str] = None
+
+    @property
+    def frames(self) -> dict:
+        """Set-up number -> :class:`lidar.io.poses.FileFrame`: how the file's points reach each set-up's frame."""
+        from projects.store.setup_tables import frames_from_json
+
+        return frames_from_json(self.frame)
+
+    @property
+    def setups(self) -> tuple[int, ...]:
+        """The set-ups the file holds scans of."""
+        return tuple(sorted(self.frames)) or (self.setup,)
+
+    def frame_for(self, setup: int):
+        """The :class:`lidar.io.poses.FileFrame` of one set-up (None: read the file as it is)."""
+        return self.frames.get(setup)
 
 
 @dataclass(frozen=True)
@@ -329,7 +349,7 @@ class EpochInputs:
     ----------
     epoch : Epoch
     coarse, fine : tuple of ScanFile
-        Its scan files by role, in import order.
+        The set-up's scan files by role, in import order.
     plan : StoredPlan or None
         Its stored plan (None when it has none, or when it was not asked for).
     result : EpochResult or None
@@ -340,6 +360,10 @@ class EpochInputs:
         Its scanner: its own when it has one, else the campaign's.
     settings : dict
         The campaign's settings (processing parameters among them).
+    setup : int
+        Which set-up of the visit these are (1-based).
+    setups : tuple of int
+        Every set-up the visit has.
     """
 
     epoch: Epoch
@@ -350,6 +374,8 @@ class EpochInputs:
     layout: Any
     profile: Any
     settings: dict
+    setup: int = 1
+    setups: tuple[int, ...] = (1,)
 
     @property
     def label(self) -> str:

@@ -81,9 +81,11 @@ def _register_scan(c: Campaign, rel: str, e: dict) -> str:
             conn.execute("INSERT INTO epochs(label, datetime, notes, created) VALUES (?, ?, ?, ?)",
                          (label, e["epoch_datetime"], e.get("epoch_notes", ""), e.get("imported", "")))
             created = True
-        conn.execute("INSERT INTO files(sha256, epoch, role, stored_path, original_path, size, imported) "
-                     "VALUES (?, ?, ?, ?, ?, ?, ?)", (e["sha256"], label, e["role"], rel, e.get("original_path", ""),
-                                                      int(e["size"]), e.get("imported", "")))
+        conn.execute("INSERT INTO files(sha256, epoch, role, stored_path, original_path, size, imported, setup, frame) "
+                     "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)", (e["sha256"], label, e["role"], rel,
+                                                            e.get("original_path", ""), int(e["size"]),
+                                                            e.get("imported", ""), int(e.get("setup") or 1),
+                                                            e.get("frame")))
         c.log_action(conn, "repair", label, {"registered": rel, "role": e["role"], "epoch_created": created})
     return f"{rel}: registered again as the {e['role']} scan of epoch {label}" + \
         (" (the epoch was created again with its recorded date)" if created else "")
@@ -145,17 +147,18 @@ def _replay_epoch_scanners(c: Campaign, labels: set[str], out: RepairReport) -> 
     """Give epochs created again their own scanner, when the journal recorded one."""
     if not labels:
         return
-    own: dict[str, dict] = {}
+    own: dict[tuple[str, int], dict] = {}
     for e in journal.entries(c.folder):
         if e.get("kind") == "epoch-scanner" and e.get("epoch") in labels:
-            own[e["epoch"]] = e["profile"]
+            own[(e["epoch"], int(e.get("setup") or 1))] = e["profile"]
     if not own:
         return
     from lidar.scanner_profile import ScannerProfile
 
-    for label, doc in sorted(own.items()):
-        c.set_profile(ScannerProfile.from_dict(doc), epoch=label)
-        out.done.append(f"epoch {label}: its own scanner ({doc.get('name', '?')}) set again from the journal")
+    for (label, setup), doc in sorted(own.items()):
+        c.set_profile(ScannerProfile.from_dict(doc), epoch=label, setup=setup if setup != 1 else None)
+        what = f"set-up {setup}'s own scanner" if setup != 1 else "its own scanner"
+        out.done.append(f"epoch {label}: {what} ({doc.get('name', '?')}) set again from the journal")
 
 
 def repair_campaign(c: Campaign, reimporters: Optional[Mapping[str, Reimporter]] = None) -> RepairReport:

@@ -14,8 +14,9 @@ from common.flags import RENAMED
 from projects.store import digests
 from projects.store.errors import CampaignError
 from projects.store.field_tables import SCHEMA as FIELD_SCHEMA
+from projects.store.setup_tables import SCHEMA as SETUP_SCHEMA
 
-SCHEMA_VERSION = 10
+SCHEMA_VERSION = 11
 
 SCHEMA_V1 = """
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -103,9 +104,9 @@ CREATE INDEX files_by_epoch ON files(epoch);
 
 def _add_digests(conn: sqlite3.Connection) -> None:
     """Migration 10: a digest column on every table of results, filled for what is stored already."""
-    for table in digests.GROUPS:
+    for table in digests.V10_TABLES:
         conn.execute(f"ALTER TABLE {table} ADD COLUMN digest TEXT")
-    digests.seal_all(conn)
+    digests.seal_all(conn, digests.V10_TABLES)
 
 
 Migration = Union[str, Callable[[sqlite3.Connection], None]]
@@ -205,6 +206,9 @@ MIGRATIONS: dict[int, Migration] = {
     # 10: every stored result carries the digest of its values (projects.store.digests), so damage that
     #     passes integrity_check is found by 'verify' and the result recomputed instead of served.
     10: _add_digests,
+    # 11: visits with several set-ups (each file's set-up, the plans, map previews and centroids of set-ups 2, 3...)
+    #     and scans read through a scanner pose (each file's frame) (projects.store.setup_tables).
+    11: SETUP_SCHEMA,
 }
 
 #: What each migration leaves that can be seen in the tables: version -> (table, column or None).
@@ -212,7 +216,7 @@ MIGRATIONS: dict[int, Migration] = {
 MARKS: dict[int, tuple[str, Optional[str]]] = {
     1: ("displacements", None), 2: ("map_previews", None), 3: ("comparisons", None), 4: ("camera_series", None),
     5: ("reflectors", "nx"), 6: ("env_series", None), 7: ("predictions", None), 9: ("field_models", None),
-    10: ("plans", "digest"),
+    10: ("plans", "digest"), 11: ("setup_plans", None),
 }
 
 

@@ -34,6 +34,9 @@ REMEDY = {
     "predictions": "run 'bridgesurvey repair' to read it again from its imported file",
     "crossvals": "run 'bridgesurvey camera crossval' again",
     "comparisons": "run 'bridgesurvey compare' again",
+    "setup_plans": "run 'bridgesurvey process' to plan the set-up again",
+    "setup_previews": "run 'bridgesurvey process' to plan the set-up again",
+    "setup_results": "run 'bridgesurvey process' to measure the set-up again",
 }
 
 
@@ -109,6 +112,8 @@ def describe_group(table: str, key: tuple) -> str:
     group = digests.GROUPS[table]
     if group.key == ("epoch",):
         return f"{group.name} of epoch {key[0]}"
+    if group.key == ("epoch", "setup"):
+        return f"{group.name} of epoch {key[0]}, set-up {key[1]}"
     return f"{group.name} {' '.join(str(k) for k in key)}"
 
 

@@ -52,9 +52,9 @@ def epoch_html(c, label: str) -> str:
     rows = [("Date", e.datetime), ("State", state), ("Notes", e.notes or "-")]
     if flags:
         rows.append(("Flags", describe(flags)))
-    for f in c.files(label):
-        rows.append((f"{f.role} scan", f"{f.original_path.rsplit('/', 1)[-1]} ({f.size / 1e6:.1f} MB, "
-                                       f"sha256 {f.sha256[:12]}…)"))
+    for f in c.files(label, setup=None):
+        rows.append((f"{f.role} scan" + (f" (set-up {f.setup})" if f.setup != 1 else ""),
+                     f"{f.original_path.rsplit('/', 1)[-1]} ({f.size / 1e6:.1f} MB, sha256 {f.sha256[:12]}…)"))
     stored = c.stored_plan(label)
     if stored is not None:
         rows.append(("Plan", f"{len(stored.plan.rois)} windows, {stored.plan.total_seconds / 60:.1f} min"
@@ -71,6 +71,15 @@ def epoch_html(c, label: str) -> str:
             out += (f"<tr><td>{rid}</td><td>{t.n_points}</td><td>{sig:.3f}</td>"
                     f"<td>{html.escape(', '.join(t.flags)) or '-'}</td></tr>")
         out += "</table>"
+    joined = c.systematics(label).get("setups")
+    if joined:  # a visit of several set-ups: how they were joined (the joint frame's QA trail)
+        from projects.processing.setups import join_summary, join_tables
+
+        out += f"<h4>Set-ups</h4><p>{html.escape(join_summary(joined))}</p>"
+        for table in join_tables(joined):
+            out += "<table cellspacing=3>" + "".join(
+                "<tr>" + "".join(f"<t{'h' if n == 0 else 'd'}>{html.escape(v)}</t{'h' if n == 0 else 'd'}>"
+                                 for v in row) + "</tr>" for n, row in enumerate(table)) + "</table>"
     return out
 
 

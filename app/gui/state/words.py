@@ -18,6 +18,7 @@ import re
 MENUS = {
     "add-epoch": "Epoch ▸ Add epoch…",
     "add-fine": "Epoch ▸ Add fine scans to the selected epoch…",
+    "add-setup": "Epoch ▸ Add a set-up to the selected epoch…",
     "plan": "Epoch ▸ Plan the selected epoch",
     "check": "Epoch ▸ Check the fine scans before leaving",
     "process": "Epoch ▸ Process",
@@ -44,6 +45,7 @@ FIELDS = {
     "unit": "Unit", "timezone": "Zone of times without offset", "kind": "Kind", "date": "Date",
     "rule": "Limit rule", "scanner": "Scanner (Campaign ▸ Scanner…)", "series": "Series",
     "align-at": "Align at", "workers": "Workers", "epoch": "the selected epoch",
+    "setup": "the set-up added last", "pose": "Pose file", "origin": "Scanner position",
 }
 _COMMANDS = "|".join(sorted((re.escape(k) for k in MENUS), key=len, reverse=True))
 _RUN = r"(?P<run>run\s+)?"

@@ -74,6 +74,7 @@ class EpochSection:
     state: str = "imported"  # as ``status`` gives it (projects.results.state.epoch_state)
     state_flags: tuple[str, ...] = ()
     systematics: dict = field(default_factory=dict)  # what its displacements were corrected for (scale, drift)
+    setups: dict = field(default_factory=dict)  # how its set-ups were joined (projects.processing.setups), if several
 
 
 @dataclass(frozen=True, eq=False)
@@ -190,8 +191,8 @@ def gather(c: Campaign, scope: ReportScope = ReportScope(), *, author: Optional[
         sections.append(EpochSection(
             lab, e.datetime, e.notes, res.stage if res else "imported",
             c.stored_plan(lab), c.map_preview(lab) if with_previews else None,
-            c.centroids(lab), tuple(c.reference_checks(lab)), c.displacement_set(lab), tuple(c.files(lab)),
-            state, tuple(state_flags), c.systematics(lab)))
+            c.centroids(lab), tuple(c.reference_checks(lab)), c.displacement_set(lab), tuple(c.files(lab, setup=None)),
+            state, tuple(state_flags), c.systematics(lab), c.systematics(lab).get("setups") or {}))
     last_time = chosen[-1].datetime
     first_time = chosen[0].datetime
     # A visit report shows the history up to the visit; a period report the period itself.

@@ -332,6 +332,15 @@ def epoch_section(e: EpochSection, content: ReportContent, ss: Any, *, new_page:
             table.append([r.reflector, _num(None if r.median_change_m is None else r.median_change_m * 1000),
                           _num(None if r.max_change_m is None else r.max_change_m * 1000), verdict])
         out += [Spacer(1, 4), Paragraph("Reference group check", ss["Small"]), _table(table, (20, 45, 30, 35), ss)]
+    if e.setups:  # the joint frame of a visit of several set-ups: its QA trail
+        from projects.processing.setups import join_summary, join_tables
+
+        motions, residuals = join_tables(e.setups)
+        out += [Spacer(1, 4), Paragraph(_esc("Set-ups: " + join_summary(e.setups)), ss["Small"]),
+                _table(motions, (12, 70, 16, 20, 22, 22, 38), ss)]
+        if len(residuals) > 1:
+            out += [Spacer(1, 2), Paragraph("Joint frame residuals of the shared targets (largest first)", ss["Small"]),
+                    _table(residuals, (20, 16, 24, 22, 20), ss)]
     rows = [r for r in content.displacements if r["epoch"] == e.label]
     if rows:
         table = [["Target", "Displacement [mm]", "σ [mm]", "State", "Flags"]]

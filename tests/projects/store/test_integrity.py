@@ -124,11 +124,20 @@ def test_a_failing_migration_leaves_the_campaign_at_its_version(camp, monkeypatc
     assert snapshot(camp) == before
 
 
+def _back_to_version_9(conn: sqlite3.Connection) -> None:
+    """Undo migrations 11 (the set-up tables and file columns) and 10 (the digests) of a current campaign."""
+    for table in ("setup_plans", "setup_previews", "setup_results"):
+        conn.execute(f"DROP TABLE {table}")
+    for column in ("setup", "frame"):
+        conn.execute(f"ALTER TABLE files DROP COLUMN {column}")
+    for table in digests.V10_TABLES:
+        conn.execute(f"ALTER TABLE {table} DROP COLUMN digest")
+    conn.execute("UPDATE meta SET value = '9' WHERE key = 'schema_version'")
+
+
 def test_the_digest_migration_seals_an_existing_campaign(processed_copy):
     conn = sqlite3.connect(processed_copy / DB_NAME)
-    for table in digests.GROUPS:
-        conn.execute(f"ALTER TABLE {table} DROP COLUMN digest")
-    conn.execute("UPDATE meta SET value = '9' WHERE key = 'schema_version'")  # the version before the digests
+    _back_to_version_9(conn)
     conn.commit()
     conn.close()
     with Campaign.open(processed_copy) as c:

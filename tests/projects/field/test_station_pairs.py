@@ -1,0 +1,65 @@
+"""Two set-ups for one visit: the best second station given the first, and the stations command proposing it."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+
+from app.cli.main import main
+from lidar.layout import layout_from_model
+from lidar.simulate import BridgeModel
+from lidar.stations import StationPrediction
+from projects.field.station_pairs import combine, propose_pair
+
+LAYOUT = layout_from_model(BridgeModel(spans_m=(39.9, 39.9, 39.9)), noise_m=0.0, rng=np.random.default_rng(0))
+DECK = [t for t, g in zip(LAYOUT.ids, LAYOUT.groups) if g == "measurement"]
+REFS = [t for t, g in zip(LAYOUT.ids, LAYOUT.groups) if g == "reference"]
+
+
+def _station(x: float, sees: list, sigma: float = 0.1) -> StationPrediction:
+    hidden = tuple(t for t in LAYOUT.ids if t not in sees)
+    return StationPrediction((x, -10.0, 1.5), 600.0, {t: sigma + 0.001 * abs(x - 60) for t in DECK if t in sees},
+                             hidden)
+
+
+END1 = REFS[:4] + DECK[:12]  # spans 1 and 2
+END2 = REFS[2:] + DECK[6:]  # spans 2 and 3
+MID = REFS[2:6] + DECK[6:12]
+
+
+def test_a_pair_combines_the_sigmas_of_the_targets_both_see():
+    a, b = _station(30, END1), _station(90, END2)
+    p = combine(a, b, LAYOUT)
+    assert p is not None and not p.hidden and set(p.predicted_sigma_mm) == set(DECK)
+    shared = DECK[6]
+    want = (a.predicted_sigma_mm[shared] ** -2 + b.predicted_sigma_mm[shared] ** -2) ** -0.5
+    assert math.isclose(p.predicted_sigma_mm[shared], want)
+    assert p.predicted_sigma_mm[DECK[0]] == a.predicted_sigma_mm[DECK[0]]
+    assert p.worst_sigma_mm < math.inf and p.to_json()["seconds"] == 1200.0
+    assert set(p.shared) == set(REFS[2:4] + DECK[6:12])
+
+
+def test_stations_that_share_too_little_are_no_pair():
+    assert combine(_station(10, REFS[:2] + DECK[:6]), _station(110, REFS[6:] + DECK[12:]), LAYOUT) is None
+
+
+def test_the_second_set_up_is_the_one_that_improves_the_worst_target_most():
+    first = _station(30, END1)
+    stations = [first, _station(60, MID), _station(90, END2), _station(115, REFS[6:] + DECK[12:])]
+    p = propose_pair(stations, LAYOUT)
+    assert p is not None and p.first is first and p.second is stations[2] and not p.hidden
+    assert propose_pair([first], LAYOUT) is None
+
+
+def test_the_stations_command_proposes_a_pair(processed_copy, tmp_path, capsys):
+    area = tmp_path / "area.csv"
+    area.write_text("x,y\n2,-20\n38,-20\n38,-8\n2,-8\n")
+    out = tmp_path / "stations.json"
+    assert main(["stations", str(processed_copy), "--out", str(out), "--area", str(area), "--grid-m", "6",
+                 "--pair"]) == 0
+    d = json.loads(out.read_text())
+    assert "two set-ups:" in capsys.readouterr().out
+    pair = d["pair"]
+    assert pair["first"]["x"] == d["stations"][0]["x"] and len(pair["shared"]) >= 3
+    assert pair["worst_sigma_mm"] <= d["stations"][0]["worst_sigma_mm"]
