@@ -23,24 +23,21 @@ from lidar.systematic.range_walk import design
 
 
 def _side(centroids: Mapping[str, object], model: FieldModel, label: str):
-    """Corrected observations (covariance widened by the range walk's spread and the visit's misfit), Jacobians, spreads.
+    """Corrected observations (covariance widened by the visit's misfit) and their Jacobians.
 
     A visit whose centroids the field model fits worse than their covariances say (``misfit`` > 1: something
-    the model does not hold) has every centroid covariance scaled by the misfit squared.
+    the model does not hold) has every centroid covariance scaled by the misfit squared. The spread of the
+    range walk's families is left out of the observations' covariances: it is one error common to every
+    target (a family moves all of them at once), which an observation's own covariance cannot hold without
+    re-weighting the reference fit against it; it enters the budget through each family's deviations
+    (:func:`_deviations`) instead.
     """
     vis = model.visit(label)
     inflate = max(1.0, vis.misfit) ** 2
     pos, jac = correct_visit(centroids, range_walk=model.range_walk, visit=vis)
-    obs, spread = {}, {}
-    for k, c in centroids.items():
-        y = np.asarray(getattr(c, "xyz_socs"), dtype=np.float64)
-        r = float(np.linalg.norm(y))
-        u = y / r
-        sp = float(model.range_walk.spread_m(r, cos_incidence_of(c))[0])
-        s = sp ** 2 * np.outer(u, u)
-        obs[k] = Observation(pos[k], inflate * np.asarray(getattr(c, "cov"), dtype=np.float64) + s)
-        spread[k] = s
-    return obs, jac, spread
+    obs = {k: Observation(pos[k], inflate * np.asarray(getattr(c, "cov"), dtype=np.float64))
+           for k, c in centroids.items()}
+    return obs, jac
 
 
 def corrected_displacements(baseline: Mapping[str, object], epoch: Mapping[str, object], groups: Mapping[str, str],
@@ -65,14 +62,13 @@ def corrected_displacements(baseline: Mapping[str, object], epoch: Mapping[str, 
     EpochDisplacements
         Each displacement's ``budget`` holds every term; ``sigma_m`` is their sum in quadrature.
     """
-    b_obs, b_jac, b_spread = _side(baseline, model, baseline_label)
-    e_obs, e_jac, e_spread = _side(epoch, model, epoch_label)
+    b_obs, b_jac = _side(baseline, model, baseline_label)
+    e_obs, e_jac = _side(epoch, model, epoch_label)
     res = compute_displacements(b_obs, e_obs, groups, **options)  # type: ignore[arg-type]
     sens = res.sensitivity
     if sens is None:
         return res
     jacs = {"baseline": b_jac, "epoch": e_jac}
-    spreads = {"baseline": b_spread, "epoch": e_spread}
     devs = {"baseline": _deviations(baseline, model, baseline_label, {k: o.xyz for k, o in b_obs.items()}),
             "epoch": _deviations(epoch, model, epoch_label, {k: o.xyz for k, o in e_obs.items()})}
     weights = np.array([a[2] for a in model.range_walk.alternatives])
@@ -84,28 +80,24 @@ def corrected_displacements(baseline: Mapping[str, object], epoch: Mapping[str, 
             out.append(d)
             continue
         i = sens.targets.index(d.reflector)
-        terms = _terms(sens.vertical[i], sens.inputs, jacs, spreads, cov_theta, v_base, v_ep, d.reflector, devs,
-                       weights)
-        noise2 = max(d.budget.get("noise", 0.0) ** 2 - terms["spread_own"], 0.0)
-        frame2 = max(d.budget.get("frame", 0.0) ** 2 - terms["spread_other"], 0.0)
+        terms = _terms(sens.vertical[i], sens.inputs, jacs, cov_theta, v_base, v_ep, devs, weights)
         bias2 = terms["theta"] + terms["alternatives"]
-        budget = {"noise": np.sqrt(noise2), "frame": np.sqrt(frame2), "scale": np.sqrt(terms["scale"]),
+        budget = {"noise": d.budget.get("noise", 0.0), "frame": d.budget.get("frame", 0.0),
+                  "scale": np.sqrt(terms["scale"]),
                   "bias": np.sqrt(bias2), "drift": np.sqrt(terms["drift"])}
         sigma = float(np.sqrt(sum(v ** 2 for v in budget.values())))
         along_sigma = d.along_sigma_m
         if np.isfinite(d.along_m):
-            ta = _terms(sens.along[i], sens.inputs, jacs, spreads, cov_theta, v_base, v_ep, d.reflector, devs,
-                        weights)
-            along_sigma = float(np.sqrt(max(d.along_sigma_m ** 2 - ta["spread_own"] - ta["spread_other"], 0.0)
-                                        + ta["theta"] + ta["alternatives"] + ta["scale"] + ta["drift"]))
+            ta = _terms(sens.along[i], sens.inputs, jacs, cov_theta, v_base, v_ep, devs, weights)
+            along_sigma = float(np.sqrt(d.along_sigma_m ** 2 + ta["theta"] + ta["alternatives"] + ta["scale"]
+                                        + ta["drift"]))
         out.append(replace(d, sigma_m=sigma, along_sigma_m=along_sigma,
                            budget={k: float(v) for k, v in budget.items()}))
     return replace(res, displacements=tuple(out))
 
 
-def _terms(row: np.ndarray, inputs, jacs: Mapping[str, Mapping[str, CorrectionJacobian]],
-           spreads: Mapping[str, Mapping[str, np.ndarray]], cov_theta: np.ndarray, v_base, v_ep,
-           target: str, devs: Mapping[str, Mapping[str, np.ndarray]], weights: np.ndarray) -> dict:
+def _terms(row: np.ndarray, inputs, jacs: Mapping[str, Mapping[str, CorrectionJacobian]], cov_theta: np.ndarray,
+           v_base, v_ep, devs: Mapping[str, Mapping[str, np.ndarray]], weights: np.ndarray) -> dict:
     """Variance terms (m^2) of one output (a row of the sensitivity) from the corrections' uncertainties.
 
     ``devs[side][id]`` is (n_alternatives, 3): how each supported range-walk family would move that
@@ -115,7 +107,6 @@ def _terms(row: np.ndarray, inputs, jacs: Mapping[str, Mapping[str, CorrectionJa
     j_theta = np.zeros(p)
     j_scale = 0.0
     j_drift = {"baseline": np.zeros(3), "epoch": np.zeros(3)}
-    spread_own = spread_other = 0.0
     alt = np.zeros(weights.size)
     for n, (side, k) in enumerate(inputs):
         jb = row[3 * n:3 * n + 3]
@@ -126,18 +117,12 @@ def _terms(row: np.ndarray, inputs, jacs: Mapping[str, Mapping[str, CorrectionJa
         if side == "epoch":
             j_scale += float(jb @ cj.d_scale)
         j_drift[side] += jb @ cj.d_drift
-        var_s = float(jb @ spreads[side][k] @ jb)
-        if k == target:
-            spread_own += var_s
-        else:
-            spread_other += var_s
         if weights.size:
             alt += devs[side][k] @ jb
     return {"theta": float(j_theta @ cov_theta @ j_theta) if p else 0.0,
             "scale": j_scale ** 2 * (v_ep.scale_sigma_ppm ** 2),
             "drift": float(j_drift["baseline"] @ v_base.drift_cov @ j_drift["baseline"]
                            + j_drift["epoch"] @ v_ep.drift_cov @ j_drift["epoch"]),
-            "spread_own": spread_own, "spread_other": spread_other,
             "alternatives": float(weights @ alt ** 2 / weights.sum()) if weights.size else 0.0}
 
 

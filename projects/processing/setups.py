@@ -366,7 +366,6 @@ class CorrectedVisit:
 
     join: SetupJoin
     jacobians: Mapping[tuple[int, str], object]  # (set-up, target) -> CorrectionJacobian
-    spreads: Mapping[tuple[int, str], np.ndarray]
     deviations: Mapping[tuple[int, str], np.ndarray]
     visits: Mapping[int, str]  # set-up -> field-model visit label
 
@@ -376,15 +375,15 @@ def corrected_side(label: str, setups: Mapping[int, Mapping[str, object]], model
 
     ``setups`` maps set-up number -> found centroids (``xyz_socs``, ``cov``, ``cos_incidence``, ``time_s``).
     """
-    obs, jac, spread, devs, visits = {}, {}, {}, {}, {}
+    obs, jac, devs, visits = {}, {}, {}, {}
     for k, cents in setups.items():
         v = visits[k] = visit_label(label, k)
-        o, jc, sp = _side(cents, model, v)
+        o, jc = _side(cents, model, v)
         obs[k] = o
         dv = _deviations(cents, model, v, {t: x.xyz for t, x in o.items()})
         for t in cents:
-            jac[(k, t)], spread[(k, t)], devs[(k, t)] = jc[t], sp[t], dv[t]
-    return CorrectedVisit(join_setups(label, obs), jac, spread, devs, visits)
+            jac[(k, t)], devs[(k, t)] = jc[t], dv[t]
+    return CorrectedVisit(join_setups(label, obs), jac, devs, visits)
 
 
 def joined_displacements(baseline: CorrectedVisit, epoch: CorrectedVisit, groups: Mapping[str, str], *, model: FieldModel,
@@ -411,15 +410,15 @@ def joined_displacements(baseline: CorrectedVisit, epoch: CorrectedVisit, groups
         t = _terms(sens.vertical[i], sens.inputs, sides, model, d.reflector, weights)
         own_cd, var_cd = _diagonal_variances(sens.vertical[i], sens.inputs, sides, d.reflector)
         normal2 = max(d.budget.get("frame", 0.0) ** 2 - (var_cd - own_cd), 0.0)
-        budget = {"noise": math.sqrt(max(t["own"] - t["spread_own"], 0.0)),
-                  "frame": math.sqrt(max(t["total"] - t["own"] - t["spread_other"], 0.0) + normal2),
+        budget = {"noise": math.sqrt(max(t["own"], 0.0)),
+                  "frame": math.sqrt(max(t["total"] - t["own"], 0.0) + normal2),
                   "scale": math.sqrt(t["scale"]), "bias": math.sqrt(t["theta"] + t["alternatives"]),
                   "drift": math.sqrt(t["drift"])}
         along_sigma = d.along_sigma_m
         if np.isfinite(d.along_m):
             ta = _terms(sens.along[i], sens.inputs, sides, model, d.reflector, weights)
-            along_sigma = math.sqrt(max(ta["total"] - ta["spread_own"] - ta["spread_other"], 0.0) + ta["theta"]
-                                    + ta["alternatives"] + ta["scale"] + ta["drift"])
+            along_sigma = math.sqrt(max(ta["total"], 0.0) + ta["theta"] + ta["alternatives"] + ta["scale"]
+                                    + ta["drift"])
         sigma = math.sqrt(sum(v ** 2 for v in budget.values()))
         out.append(replace(d, sigma_m=sigma, along_sigma_m=along_sigma, budget={k: float(v) for k, v in budget.items()}))
     return replace(res, displacements=tuple(out))
@@ -440,24 +439,21 @@ def _sighting_rows(row: np.ndarray, inputs, sides: Mapping[str, CorrectedVisit])
 
 def _terms(row: np.ndarray, inputs, sides: Mapping[str, CorrectedVisit], model: FieldModel, target: str,
            weights: np.ndarray) -> dict:
-    """Variance terms (m^2) of one output: centroid noise (own, total), spreads, range walk, scales, drifts."""
+    """Variance terms (m^2) of one output: centroid noise (own, total), range walk, scales, drifts."""
     h = _sighting_rows(row, inputs, sides)
     p = model.range_walk.covariance_m2.shape[0]
     j_theta = np.zeros(p)
     alt = np.zeros(weights.size)
     scale: dict[str, float] = {}
     drift: dict[str, np.ndarray] = {}
-    own = total = spread_own = spread_other = 0.0
+    own = total = 0.0
     for side, c in sides.items():
         for n, key in enumerate(c.join.sightings):
             hb = h[side][3 * n:3 * n + 3]
             v = float(hb @ c.join.sighting_cov[n] @ hb)
-            sp = float(hb @ c.spreads[key] @ hb)
             total += v
             if key[1] == target:
-                own, spread_own = own + v, spread_own + sp
-            else:
-                spread_other += sp
+                own += v
             cj = c.jacobians[key]
             j_theta += hb @ cj.d_theta
             label = c.visits[key[0]]
@@ -466,7 +462,7 @@ def _terms(row: np.ndarray, inputs, sides: Mapping[str, CorrectedVisit], model: 
             if weights.size:
                 alt += c.deviations[key] @ hb
     cov_theta = model.range_walk.covariance_m2
-    return {"own": own, "total": total, "spread_own": spread_own, "spread_other": spread_other,
+    return {"own": own, "total": total,
             "theta": float(j_theta @ cov_theta @ j_theta) if p else 0.0,
             "scale": sum(js ** 2 * model.visit(lab).scale_sigma_ppm ** 2 for lab, js in scale.items()),
             "drift": sum(float(jd @ model.visit(lab).drift_cov @ jd) for lab, jd in drift.items()),

@@ -41,6 +41,9 @@ from projects.store.campaign import Campaign
 log = logging.getLogger(__name__)
 
 PIPELINE_VERSION = "1"
+#: Version of the centroid estimate, in every stage-1 result's inputs: a change re-measures stored epochs from
+#: their kept plans (2: the disc's normal fitted on the ranges alone, see lidar.centroid._plane).
+CENTROID_VERSION = "2"
 #: Profile fields added later: they enter the input hash only when they differ from their default.
 _LATER_PROFILE_FIELDS = {"max_tilt_deg": MAX_TILT_DEG, "kind": "line", "step_presets": [], "windowed": True,
                          "horizontal_direction": "ccw", "horizontal_zero_deg": 0.0, "vertical_reference": "zenith",
@@ -168,7 +171,7 @@ def _plan_hash(inp: EpochInputs, params: dict) -> str:
 
 
 def _measure_hash(inp: EpochInputs, plan_hash: str) -> str:
-    return _hash({"plan": plan_hash, "fine": [_file_key(f, inp.setup) for f in inp.fine]})
+    return _hash({"plan": plan_hash, "fine": [_file_key(f, inp.setup) for f in inp.fine], "centroids": CENTROID_VERSION})
 
 
 def _tilt_limit(params: dict, profile) -> Optional[float]:

@@ -118,3 +118,28 @@ def test_one_fine_file_holding_every_window_counts_each_window_on_its_own():
     cents = centroids_from_scan(xyz, np.full(len(xyz), 0.1), rois)
     assert {rid: c.n_window for rid, c in cents.items()} == counts
     assert len({c.n_window for c in cents.values()}) == 3
+
+
+@pytest.mark.parametrize("cos_true", [0.9, 0.6, 0.3])
+def test_the_discs_normal_is_not_tilted_by_range_noise(cos_true):
+    """Range noise along the beams must not tilt the fitted normal away from them (the incidence feeds the
+    range-walk model): a total least-squares plane read |cos| 0.03-0.04 low here."""
+    from lidar.centroid import _plane
+
+    rng = np.random.default_rng(5)
+    inc = np.arccos(cos_true)
+    normal = np.array([-np.cos(inc), np.sin(inc), 0.0])
+    a1 = np.cross(normal, [0.0, 0.0, 1.0])
+    a1 /= np.linalg.norm(a1)
+    a2 = np.cross(normal, a1)
+    got = []
+    for _ in range(60):
+        k = rng.uniform(-0.025, 0.025, (3000, 2))
+        k = k[np.hypot(k[:, 0], k[:, 1]) < 0.025][:800]
+        pts = np.array([20.0, 0.0, 0.0]) + k[:, :1] * a1 + k[:, 1:] * a2
+        r = np.linalg.norm(pts, axis=1)
+        noisy = pts / r[:, None] * (r + rng.normal(0.0, 0.005, r.size))[:, None]
+        _, n, axes = _plane(noisy)
+        got.append(abs(float(n @ np.array([-1.0, 0.0, 0.0]))))
+        assert np.allclose(axes @ n, 0.0, atol=1e-12) and np.allclose(axes @ axes.T, np.eye(2), atol=1e-12)
+    assert abs(np.mean(got) - cos_true) < 0.005, np.mean(got)

@@ -134,3 +134,19 @@ def test_the_model_survives_its_json():
     r, c = np.array([12.0, 25.0]), np.array([0.3, 0.9])
     assert np.allclose(back.range_walk.bias_m(r, c), model.range_walk.bias_m(r, c))
     assert back.visit("3").scale_ppm == pytest.approx(model.visit("3").scale_ppm)
+
+
+def test_the_families_spread_widens_sigma_but_never_moves_a_value():
+    """The range walk's alternatives are one error common to all targets: in sigma, not in the fit's weights."""
+    from dataclasses import replace
+
+    g, ids, groups, visits, cents, truths = campaign(walk=InverseSquareWalk(0.003, 15.0), ppm=10.0, seed=6, n=6)
+    model = fit_field_model(visits, groups)
+    assert len(model.range_walk.alternatives) > 1
+    alone = replace(model, range_walk=replace(model.range_walk, alternatives=()))
+    for k in range(1, len(cents)):
+        a = corrected_displacements(cents[0], cents[k], groups, model=model, baseline_label="0", epoch_label=str(k))
+        b = corrected_displacements(cents[0], cents[k], groups, model=alone, baseline_label="0", epoch_label=str(k))
+        for da, db in zip(a.displacements, b.displacements):
+            assert da.displacement_m == pytest.approx(db.displacement_m, abs=1e-12)
+            assert da.sigma_m >= db.sigma_m - 1e-15 and da.budget["noise"] == pytest.approx(db.budget["noise"])

@@ -1,0 +1,92 @@
+"""The field error budget on campaigns that carry what real instruments do (issue 24's benchmark).
+
+Each scenario simulates a campaign of weekly visits (random stations beside the span, the product's own
+plan with its closure window, point times), processes it with the field model and again with
+``field_model false`` (rigid motion only, as before), and scores both against the truth: displacement RMS
+and max, the share within 2 sigma, the share beyond 3 sigma without a warning on its row (must be 0),
+the along-span movements off by more than max(3 sigma, 0.3 mm), the largest scale error and the
+reference flags raised.
+
+Usage: ``./run bench field_effects [VISITS] [--quick]`` (default 8 visits a scenario; ``--quick``: 5 visits
+and three scenarios).
+"""
+from __future__ import annotations
+
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from lidar.simulate.bridge import BridgeModel  # noqa: E402
+from lidar.simulate.campaign import random_conditions  # noqa: E402
+from lidar.simulate.effects import (  # noqa: E402
+    InverseSquareWalk,
+    LinearIncidenceWalk,
+    StrengthStepWalk,
+    VisitTiming,
+)
+from lidar.simulate.setup import ScannerSetup  # noqa: E402
+from projects.studies import print_table, run_study, save_scores  # noqa: E402
+
+WALKS = {"linear in cos incidence": LinearIncidenceWalk(0.0015),
+         "saturating in 1/range^2": InverseSquareWalk(0.003, 15.0),
+         "a step at a strength threshold": StrengthStepWalk(0.0015, 0.0002, 0.5)}
+
+
+def scenario(model: BridgeModel, n: int, seed: int, *, ppm: bool, walk, clip: bool, strain: bool,
+             drift: float) -> list:
+    """The visits' conditions: each effect on or off (one range-walk form for the whole campaign)."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(n):
+        c = random_conditions(model, rng, ppm=(-30, 30) if ppm else (0, 0), max_walk_m=None,
+                              clipped_fraction=(0.1, 0.3) if clip else (0, 0),
+                              temperature_c=(-15, 15) if strain else (0, 0), drift_arcsec_per_h=drift)
+        out.append(replace(c, range_walk=walk, timing=VisitTiming(start_s=0.0, gap_s=30.0, duration="lines")))
+    return out
+
+
+def stations(model: BridgeModel, n: int, seed: int) -> list:
+    rng = np.random.default_rng(seed + 101)
+    return [[ScannerSetup.random(rng, span_m=model.span_m)] for _ in range(n)]
+
+
+def main(argv: list[str]) -> int:
+    quick = "--quick" in argv
+    args = [a for a in argv if not a.startswith("--")]
+    n = int(args[0]) if args else (5 if quick else 8)
+    model = BridgeModel()
+    plans = [("none", dict(ppm=False, walk=None, clip=False, strain=False, drift=0.0)),
+             ("atmosphere -30..+30 ppm", dict(ppm=True, walk=None, clip=False, strain=True, drift=0.0))]
+    plans += [(f"range walk, {name}", dict(ppm=False, walk=w, clip=True, strain=False, drift=0.0))
+              for name, w in WALKS.items()]
+    plans += [("drift 0-40''/h", dict(ppm=False, walk=None, clip=False, strain=False, drift=20.0)),
+              ("all together", dict(ppm=True, walk=WALKS["saturating in 1/range^2"], clip=True, strain=True,
+                                    drift=20.0))]
+    if quick:
+        plans = [plans[0], plans[3], plans[-1]]
+    rows = {}
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        for k, (name, kw) in enumerate(plans):
+            visits = scenario(model, n, 7 + k, **kw)
+            rows[name] = run_study(Path(tmp) / f"s{k}", model, visits, seed=3 + k, stations=stations(model, n, k),
+                                   compare_without=True)
+            print(f"  {name}: {time.perf_counter() - t0:.0f} s", flush=True)
+    print(print_table(rows))
+    out = Path(__file__).resolve().parent / "out"
+    out.mkdir(exist_ok=True)
+    save_scores(out / "field_effects.json", rows)
+    bad = [name for name, s in rows.items() if s["corrected"].silent_beyond_3sigma > 0]
+    if bad:
+        print("beyond 3 sigma without a flag in: " + ", ".join(bad))
+    return 1 if bad else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
