@@ -173,6 +173,10 @@ def print_analysis(doc: dict) -> None:
         trend = ("no trend" if t["trend_mm_per_year"] is None else
                  f"trend {_pm(t['trend_mm_per_year'], t['trend_sigma'], '{:+.1f}', '{:.1f}')} mm/year")
         print(f"{t['reflector']}  {thermal}, {trend}, {t['epochs']} epochs")
+        if t.get("along_mm_per_degC") is not None:
+            print(f"    along the span {_pm(t['along_mm_per_degC'], t['along_sigma'], '{:+.3f}', '{:.3f}')} mm/°C")
+        if t.get("along_note") and t.get("along_mm_per_degC") is not None:
+            print(f"      note: {t['along_note']}")
         for e in t["events"]:
             k = numbers.get((e["date"][:10], e["label"]), "-")
             text = f"    event {k} {e['label']} ({e['date'][:10]}): step {_pm(e['step_mm'], e['step_sigma_mm'])} mm"

@@ -103,3 +103,26 @@ def _title(target: dict) -> str:
     if target["trend_mm_per_year"] is not None:
         parts.append(f"trend {target['trend_mm_per_year']:+.1f} ± {target['trend_sigma']:.1f} mm/year")
     return title + (": " + ", ".join(parts) if parts else "")
+
+
+def along_figure(target: dict, *, figsize: tuple[float, float] = (3.6, 2.4)) -> Any:
+    """A target's along-span movement against the temperature at each scan, ±2σ bars, with its fitted line."""
+    from matplotlib.figure import Figure
+
+    pts = np.array(target.get("along_points") or [], dtype=np.float64).reshape(-1, 3)
+    fig = Figure(figsize=figsize, dpi=110, layout="constrained")
+    ax = fig.subplots()
+    ax.errorbar(pts[:, 0], pts[:, 1], yerr=2 * pts[:, 2], fmt="o", ms=3, capsize=2, lw=0.8, color="#1f77b4")
+    k = target.get("along_mm_per_degC")
+    if k is not None and len(pts):
+        w = 1.0 / np.maximum(pts[:, 2], 1e-6) ** 2
+        t0, a0 = float(w @ pts[:, 0] / w.sum()), float(w @ pts[:, 1] / w.sum())
+        x = np.array([pts[:, 0].min(), pts[:, 0].max()])
+        ax.plot(x, a0 + k * (x - t0), color="#d62728", lw=1, label=f"{k:+.3f} mm/°C")
+        ax.legend(fontsize=6, frameon=False)
+    ax.set_xlabel("temperature at the scan [°C]", fontsize=7)
+    ax.set_ylabel("along the span [mm] (±2σ)", fontsize=7)
+    ax.tick_params(labelsize=6)
+    ax.grid(alpha=0.3)
+    ax.set_title(f"{target['reflector']}: movement along the span", fontsize=7)
+    return fig

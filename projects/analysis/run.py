@@ -72,6 +72,7 @@ def analyse_campaign(c: Campaign, *, horizon_days: float = 365.0, long_term_fact
     preds = predictions(c)
     casting = casting_ns(c)
     warnings = _aliasing_warnings(epoch_times, temperature, origin)
+    along = _along_fits(c, temperature, origin, base)
     targets = []
     for rid, h in hist.items():
         mine = h.measured()
@@ -87,12 +88,36 @@ def analyse_campaign(c: Campaign, *, horizon_days: float = 365.0, long_term_fact
             tj["prediction_alignment"] = preds[rid][2]["align_at"] or "least squares"
         if casting is not None:
             tj["concrete_age_days"] = [_num(v + (origin - casting) / DAY_NS, 2) for v in fit.epoch_days]
+        tj.update(along[rid].to_json() if rid in along else {})
         targets.append(tj)
     return {"format_version": ANALYSIS_FORMAT_VERSION, "campaign": c.name, "baseline": base,
             "time_origin": dt.datetime.fromtimestamp(origin / 1e9, dt.timezone.utc).isoformat(),
             "temperature_source": temp_source, "casting_date": c.settings().get("casting_date"),
             "events": [e.to_dict() for e in stored], "warnings": warnings,
             "horizon_days": horizon_days, "long_term_factor": long_term_factor, "targets": targets}
+
+
+def _along_fits(c: Campaign, temperature: Optional[tuple[np.ndarray, np.ndarray]], origin: int, base: str) -> dict:
+    """Each deck target's along-span expansion coefficient (:mod:`projects.analysis.expansion`).
+
+    Only where a temperature series covers its epochs; the baseline's along-span movement is zero by
+    definition and left out.
+    """
+    from projects.analysis.expansion import fit_along, temperatures_at
+
+    if temperature is None:
+        return {}
+    rows: dict[str, list] = {}
+    for r in c.displacements():
+        if r.epoch == base or r.along_m is None or r.along_sigma_m is None:
+            continue
+        rows.setdefault(r.reflector, []).append(((_ns(r.datetime) - origin) / DAY_NS, r.along_m * 1e3,
+                                                 r.along_sigma_m * 1e3))
+    out = {}
+    for rid, vals in rows.items():
+        t, a, s = (np.array(v, dtype=np.float64) for v in zip(*vals))
+        out[rid] = fit_along(rid, temperatures_at(t, temperature), a, s)
+    return out
 
 
 def _aliasing_warnings(epoch_times: list[dt.datetime], temperature: Optional[tuple[np.ndarray, np.ndarray]],

@@ -71,6 +71,11 @@ def _target_text(t: dict) -> str:
         parts.append(f"temperature averaged over {t['temperature_window_h']:g} h ending {t['temperature_lag_h']:g} h "
                      f"before each scan, corrected to {num(t['reference_temperature_degC'], '{:.1f}')} °C"
                      + ("" if t["thermal_significant"] else " (thermal coefficient not significant, p ≥ 0.05)"))
+    if t.get("along_mm_per_degC") is not None:
+        parts.append(f"along the span {_pm(t['along_mm_per_degC'], t['along_sigma'], '{:+.3f}', '{:.3f}')} mm/°C "
+                     f"over {t['along_epochs']} epochs")
+    if t.get("along_note"):
+        parts.append(t["along_note"])
     if t.get("creep_law"):
         law, p = t["creep_law"].split(":")
         parts.append(("ACI 209 creep shape" if law == "aci" else "exponential creep") + f", time parameter {p} d")
@@ -81,7 +86,7 @@ def analysis_section(content: ReportContent, ss: Any) -> list:
     """What explains the displacements: temperature effect, events with creep, trend and projection, per target."""
     from reportlab.platypus import KeepTogether, PageBreak, Paragraph, Spacer
 
-    from projects.analysis.figures import target_figure
+    from projects.analysis.figures import along_figure, target_figure
 
     doc = content.extras["analysis"]
     intro = (f"Each target's history fitted by weighted least squares: a thermal coefficient, each event's "
@@ -99,6 +104,8 @@ def analysis_section(content: ReportContent, ss: Any) -> list:
         fig = target_figure(doc, t, figsize=FIGURE_SIZE_IN)
         block = [Paragraph(esc(f"Target {t['reflector']}"), ss["Heading3"]),
                  figure_flowable(fig, 170), Paragraph(esc(_target_text(t)), ss["Small"])]
+        if t.get("along_points"):
+            block.append(figure_flowable(along_figure(t), 80))
         if t["events"]:
             block += [Spacer(1, 2), table(event_rows(doc, t), (6, 34, 18, 22, 26, 22, 50), ss)]
         block += [Paragraph(esc(n), ss["Small"]) for n in t["notes"]]
