@@ -19,17 +19,20 @@ from typing import Optional, Sequence
 import numpy as np
 
 from common.flags import (FLAG_CHAINED, FLAG_DECK_NOT_MEASURED, FLAG_MISSING, FLAG_NO_DISPLACEMENT, FLAG_NOT_FOUND,
-                          FLAG_PIERS_NOT_MEASURED, FLAG_SETUP_NOT_MEASURED, PROBLEM, code, has, severity)
+                          FLAG_PIERS_NOT_MEASURED, FLAG_SETUP_NOT_MEASURED, PROBLEM, WARNING, code, has, severity)
 from lidar.displacement import Displacement, EpochDisplacements
+from lidar.systematic.adjustment import FieldModel
 from lidar.systematic.budget import corrected_displacements
 from common.errors import CancelledError, InputError, ProcessingError, SurveyError
 from lidar.identification import MAX_TILT_DEG
 from lidar.io import read_scan
 from lidar.io.poses import read_in_scanner_frame
+from lidar.layout import Layout
 from lidar.pipeline import analyse_coarse, measure_fine, plan_from_coarse
 from lidar.plan import ScanPlan
 from common.progress import ProgressCallback, report, scaled
 from lidar.scan import Scan
+from lidar.scanner_profile import ScannerProfile
 from projects.processing.field import (atmosphere_flags, epoch_flags, systematics_json, update_field_model,
                                        visit_digest)
 from projects.processing.parameters import DEFAULTS, parameter, stage1_params, stage2_params
@@ -170,8 +173,9 @@ def _plan_hash(inp: EpochInputs, params: dict) -> str:
     return _hash(key)
 
 
-def _measure_hash(inp: EpochInputs, plan_hash: str) -> str:
-    return _hash({"plan": plan_hash, "fine": [_file_key(f, inp.setup) for f in inp.fine], "centroids": CENTROID_VERSION})
+def _measure_hash(inp: EpochInputs, plan_hash: str, *, version: str = CENTROID_VERSION) -> str:
+    key = {"plan": plan_hash, "fine": [_file_key(f, inp.setup) for f in inp.fine]}
+    return _hash(key if version == "1" else {**key, "centroids": version})
 
 
 def _tilt_limit(params: dict, profile) -> Optional[float]:
@@ -211,9 +215,9 @@ class Stage1Job:
     label: str
     coarse_paths: tuple[str, ...]
     fine_paths: tuple[str, ...]
-    layout: object
+    layout: Layout
     params: dict
-    profile: object
+    profile: ScannerProfile
     plan_hash: str
     stored_plan: Optional[dict]
     measure_hash: Optional[str]
@@ -295,7 +299,7 @@ def save_stage1(c: Campaign, result: Stage1Result) -> None:
     job = result.job
     if result.new_plan_json is not None:
         c.save_plan(job.label, result.new_plan_json, job.plan_hash, preview=result.preview, setup=job.setup)
-    if result.centroids is not None:
+    if result.centroids is not None and job.measure_hash is not None:
         c.save_centroids(job.label, result.centroids, job.measure_hash, stage1_params(job.params),
                          closures=result.closures, time_source=result.time_source, setup=job.setup)
 
@@ -324,7 +328,7 @@ def measure_epoch(c: Campaign, label: str, *, setup: int = 1, progress: Optional
         raise ProcessingError(f"{where} has no fine scans yet; import them with 'bridgesurvey add-fine' first")
     result = run_stage1(job, progress=progress)
     save_stage1(c, result)
-    return result.centroids
+    return result.centroids or {}
 
 
 def _stale_reason(inp: EpochInputs, params: dict) -> Optional[str]:
@@ -337,6 +341,8 @@ def _stale_reason(inp: EpochInputs, params: dict) -> Optional[str]:
         if res is None or res.stage != "measured":
             return "not measured yet"
         if res.inputs_hash != want:
+            if res.inputs_hash == _measure_hash(inp, _plan_hash(inp, params), version="1"):
+                return "centroid estimate updated"
             return "inputs or parameters changed"
         return None
     want = _plan_hash(inp, params)
@@ -478,7 +484,18 @@ class _Setups:
         self.visits = {visit_label(lab, k): (lab, k) for lab in labels for k in self.measured[lab]}
         self._found: dict[tuple[str, int], dict] = {}
         self._sides: dict[str, CorrectedVisit] = {}
-        self.model: Optional[object] = None
+        self._model: Optional[FieldModel] = None
+
+    @property
+    def model(self) -> FieldModel:
+        """The campaign's field model, set once it is fitted (before any displacement is computed)."""
+        if self._model is None:
+            raise ProcessingError("the field model is used before it was fitted")
+        return self._model
+
+    @model.setter
+    def model(self, value: FieldModel) -> None:
+        self._model = value
 
     def several(self, label: str) -> bool:
         return len(self.measured[label]) > 1 or bool(self.unmeasured[label])
@@ -505,12 +522,12 @@ class _Setups:
     def side(self, label: str) -> CorrectedVisit:
         if label not in self._sides:
             self._sides[label] = corrected_side(label, {k: self.found_setup(label, k) for k in self.measured[label]},
-                                                self.model)  # type: ignore[arg-type]
+                                                self.model)
         return self._sides[label]
 
     def key(self, labels: Sequence[str]) -> dict:
         """What the displacements of epochs with several set-ups also depend on: each set-up's field-model terms."""
-        return {lab: {"measured": {str(k): visit_digest(self.model, visit_label(lab, k), visit_label(lab, k))  # type: ignore[arg-type]
+        return {lab: {"measured": {str(k): visit_digest(self.model, visit_label(lab, k), visit_label(lab, k))
                                    for k in self.measured[lab]}, "unmeasured": self.unmeasured[lab]}
                 for lab in labels if self.several(lab)}
 
@@ -584,8 +601,8 @@ def _displacements_of(su: _Setups, params: dict):
     def displacements(b: str, lab: str, groups: dict) -> EpochDisplacements:
         if not su.several(b) and not su.several(lab):
             return corrected_displacements(su.found(b), su.found(lab), groups, model=su.model, baseline_label=b,
-                                           epoch_label=lab, **options)  # type: ignore[arg-type]
-        return joined_displacements(su.side(b), su.side(lab), groups, model=su.model, **options)  # type: ignore[arg-type]
+                                           epoch_label=lab, **options)
+        return joined_displacements(su.side(b), su.side(lab), groups, model=su.model, **options)
     return displacements
 
 
@@ -598,8 +615,8 @@ def _setup_terms(su: _Setups, lab: str, flags: list, systematics: dict) -> tuple
     for k in su.measured[lab][1:]:
         v = visit_label(lab, k)
         ts = su.c.time_source(lab, k)
-        flags += [f for f in epoch_flags(su.model, v, ts) if f not in flags]  # type: ignore[arg-type]
-        per_setup[str(k)] = systematics_json(su.model, v, ts)  # type: ignore[arg-type]
+        flags += [f for f in epoch_flags(su.model, v, ts) if f not in flags]
+        per_setup[str(k)] = systematics_json(su.model, v, ts)
     for k in su.unmeasured[lab]:
         flags.append(f"{FLAG_SETUP_NOT_MEASURED}: set-up {k} has no measured fine scans; the targets only it sees "
                      "are missing (import them with 'bridgesurvey add-fine --setup', then process)")
@@ -666,7 +683,40 @@ def _epoch_displacements(c: Campaign, lab: str, bases: list, baseline: str, foun
         chained = {d.reflector for d in extra}
         result = replace(result, displacements=tuple(d for d in result.displacements if d.reflector not in chained)
                          + tuple(extra))
-    return _why_missing(c, lab, result)
+    return _with_centroid_doubts(c, lab, baseline, _why_missing(c, lab, result))
+
+
+def _with_centroid_doubts(c: Campaign, lab: str, baseline: str, result: EpochDisplacements) -> EpochDisplacements:
+    """A displacement whose centroid (in the epoch or the baseline) carries a warning carries it on its row too.
+
+    A surveyor reads the displacement table, not the centroids: a target measured at grazing incidence, beside
+    a second bright object or off its expected position says so where its number is (the baseline's with
+    ``(in the baseline L)`` after it). Every set-up's found centroids count.
+    """
+    def said(flag: str, where: str) -> str:
+        if not where:
+            return flag
+        head, _, detail = flag.partition(":")
+        return f"{head}: {detail.strip() + ' ' if detail else ''}(in the baseline {baseline})"
+
+    def found_flags(label: str) -> dict:
+        out: dict = {}
+        for k in c.setups(label):
+            for t, v in c.centroids(label, k).items():
+                if v.found:
+                    out.setdefault(t, []).extend(f for f in v.flags if f not in out.get(t, []))
+        return out
+
+    sides = [(found_flags(lab), "")] + ([(found_flags(baseline), "b")] if baseline != lab else [])
+    rows = []
+    for d in result.displacements:
+        if np.isfinite(d.displacement_m):
+            extra = [said(f, where) for flags, where in sides for f in flags.get(d.reflector, ())
+                     if severity(f) in (WARNING, PROBLEM) and said(f, where) not in d.flags]
+            if extra:
+                d = replace(d, flags=tuple(d.flags) + tuple(extra))
+        rows.append(d)
+    return replace(result, displacements=tuple(rows))
 
 
 def _why_missing(c: Campaign, lab: str, result: EpochDisplacements) -> EpochDisplacements:
@@ -712,7 +762,7 @@ def _chain(c: Campaign, d, base_label: str, refl: dict):
     if not old:
         return d
     last = c.last_displacement(old, at_or_before=base_label)
-    if last is None or not np.isfinite(d.displacement_m):
+    if last is None or last.displacement_m is None or last.sigma_m is None or not np.isfinite(d.displacement_m):
         return d
     return replace(d, displacement_m=d.displacement_m + last.displacement_m,
                    sigma_m=float(np.hypot(d.sigma_m, last.sigma_m)),
