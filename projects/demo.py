@@ -226,11 +226,11 @@ def add_demo_story(c: Campaign, folder: Path, *, weeks: int, seed: int, start: d
         rows = ["date,M1,M2,M3,M4,M5"]
         fractions = (0.2, 0.35, 0.5, 0.65, 0.8)
         for day in range(0, weeks * 7 + 30, 7):
-            w = day / 7.0
-            u = DESIGN_OFFSET_MM
-            if w >= 6:
-                u -= 3.0 + 1.5 * (1 - math.exp(-(w - 6) / 15.0))
-            if w >= 18:
+            wk = day / 7.0
+            u = float(DESIGN_OFFSET_MM)
+            if wk >= 6:
+                u -= 3.0 + 1.5 * (1 - math.exp(-(wk - 6) / 15.0))
+            if wk >= 18:
                 u -= 2.0
             when = (start + dt.timedelta(days=day)).date().isoformat()
             rows.append(when + "," + ",".join(f"{u * math.sin(math.pi * f):.3f}" for f in fractions))

@@ -13,9 +13,12 @@ import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
+from typing import TYPE_CHECKING, Optional
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from registration.profile import RegistrationSigma
 
 from common.errors import InputError
 from common.files import atomic_output, output_folder
@@ -286,7 +289,7 @@ def _profile(c: Campaign, base: str, epochs: tuple[EpochInFrame, EpochInFrame], 
     slh_targets = frame.coords(epochs[0].transform.apply(from_xyz))
     lay_slh = frame.from_layout(np.array([layout.xyz[layout.index(i)] for i in meas]))
     lines = girder_lines(lay_slh[:, :2], slh_targets[:, 2])
-    sig = []
+    sig: list[Optional[RegistrationSigma]] = []
     for e in epochs:
         if e.registration is None:
             sig.append(None)
@@ -396,9 +399,9 @@ def write_outputs(summary: dict, out_dir: str | os.PathLike) -> list[Path]:
     buf = io.StringIO()
     bins = public["span_profile"]["bins"]
     if bins:
-        w = csv.DictWriter(buf, fieldnames=list(bins[0]), lineterminator="\n")
-        w.writeheader()
-        w.writerows(bins)
+        dw = csv.DictWriter(buf, fieldnames=list(bins[0]), lineterminator="\n")
+        dw.writeheader()
+        dw.writerows(bins)
     paths.append(write_atomic(out / "span_profile.csv", buf.getvalue()))
     from lidar.figures import save_figure
     from projects.compare.figures import span_profile_figure

@@ -136,7 +136,7 @@ def check_epoch(c: Campaign, label: str, *, goal_sigma_mm: Optional[float] = Non
         raise ProcessingError(f"the sigma goal must be a positive number of millimetres, got {goal_sigma_mm}")
     result = run_stage1(job, progress=progress)  # the plan it measured with, and the centroids
     save_stage1(c, result)
-    cents, plan = result.centroids, result.plan
+    cents, plan = result.centroids or {}, result.plan
     closures = result.closures or {}
     layout = job.layout
     diam = {i: float(d) for i, d in zip(layout.ids, layout.diameters_m)}

@@ -150,7 +150,7 @@ def advise_stations(c: Campaign, *, area_xy: Optional[np.ndarray] = None, height
     station = None if last is None else last.position_layout
     if ground_z is not None:
         gz, source = float(ground_z), "given"
-    elif station is not None:
+    elif station is not None and last is not None:
         gz, source = float(station[2]) - DEFAULT_INSTRUMENT_HEIGHT_M, \
             f"epoch {last.label}'s station minus {DEFAULT_INSTRUMENT_HEIGHT_M} m"
     else:
@@ -161,14 +161,15 @@ def advise_stations(c: Campaign, *, area_xy: Optional[np.ndarray] = None, height
     if base_label is not None:
         baseline = {k: v for k, v in c.centroids(base_label).items() if v.found} or None
     seen = seen_surfaces(c, last, progress=scaled(progress, 0.0, 0.2)) if use_last_scan and last else None
-    seen_label = None if seen is None else last.label
+    seen_label = None if seen is None or last is None else last.label
     stations = survey_stations(layout, positions, profile=c.profile, min_points=int(params["min_points"]),
                                budget_seconds=float(params["budget_min"]) * 60.0, up=up, baseline=baseline,
                                obstacles_xyz=seen, field_model=_field_model(c, params),
                                closure=bool(params["closure"]), progress=scaled(progress, 0.2, 1.0))
     return StationAdvice(stations, area, gz, source, float(height_m), float(grid_m), c.profile.name,
                          base_label if baseline else None,
-                         None if station is None else tuple(float(v) for v in station), seen_label)
+                         None if station is None else (float(station[0]), float(station[1]), float(station[2])),
+                         seen_label)
 
 
 def _field_model(c: Campaign, params: dict):

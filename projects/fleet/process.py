@@ -151,13 +151,13 @@ def fleet_process(roots: Sequence[str | os.PathLike], *, scheduler: Optional[str
             if jobs:
                 _run_tasks(client, jobs, open_campaigns, run, progress)
         for cr in run.campaigns:
-            c = open_campaigns.get(cr.folder)
-            if c is None:
+            oc = open_campaigns.get(cr.folder)
+            if oc is None:
                 continue
-            labels = [e.label for e in c.epochs()]
+            labels = [e.label for e in oc.epochs()]
             done = {o.epoch for o in cr.summary.outcomes}
             cr.summary.outcomes += [EpochOutcome(lab, "up-to-date") for lab in labels if lab not in done]
-            finish_displacements(c, cr.summary, labels)
+            finish_displacements(oc, cr.summary, labels)
     report(progress, 1.0, f"{run.tasks} epoch(s) on {len(folders)} campaign(s)")
     return run
 

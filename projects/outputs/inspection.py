@@ -57,6 +57,8 @@ def inspect_target(c: Campaign, label: str, reflector: str, *,
     if not files:
         raise ProcessingError(f"epoch {label} has no fine scans yet; add them first")
     scan = read_files(c, files, scaled(progress, 0.0, 0.8))
+    if scan.intensity is None:
+        raise ProcessingError(f"the fine scans of {label} carry no intensity: the target cannot be told apart")
     theta, phi, _ = spherical_from_xyz(scan.xyz_socs)
     inside = roi.window.contains(theta, phi)
     if not inside.any():
@@ -114,6 +116,8 @@ def epoch_cloud(c: Campaign, label: str, *, max_points: int = 1_500_000, margin_
     if not files:
         raise InputError(f"epoch {label} has no coarse scan")
     scan = read_files(c, files, scaled(progress, 0.0, 0.9))
+    if scan.intensity is None:
+        raise InputError(f"the coarse scan of {label} carries no intensity to colour it by")
     ids, xyz = _targets_of(c, label)
     near = np.nonzero(around_targets(scan.xyz_socs, xyz, margin_m))[0] if margin_m is not None \
         else np.arange(len(scan.xyz_socs))

@@ -36,6 +36,7 @@ from lidar.displacement import compute_displacements
 from lidar.displacement_result import EpochDisplacements, Observation
 from lidar.systematic.adjustment import ARCSEC, FieldModel
 from lidar.systematic.budget import _deviations, _side
+from lidar.systematic.corrections import CorrectionJacobian
 
 #: Shared targets must spread at least this far off their best-fitting line (metres, RMS) to fix a rotation.
 MIN_SPREAD_M = 0.5
@@ -365,7 +366,7 @@ class CorrectedVisit:
     """One side (baseline or epoch) of the displacement computation: its set-ups corrected and joined."""
 
     join: SetupJoin
-    jacobians: Mapping[tuple[int, str], object]  # (set-up, target) -> CorrectionJacobian
+    jacobians: Mapping[tuple[int, str], CorrectionJacobian]  # (set-up, target) -> its Jacobian
     deviations: Mapping[tuple[int, str], np.ndarray]
     visits: Mapping[int, str]  # set-up -> field-model visit label
 
