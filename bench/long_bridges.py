@@ -12,6 +12,7 @@ Stations (x along the bridge of length L):
 
 * one, end - one set-up 0.1 L from the first pier;
 * one, middle - one set-up beside midspan;
+* one, inner pier - one set-up beside the first inner pier of a three-span bridge (a third of the way along);
 * two, ends - two set-ups, 0.28 L from each end (in the end spans of a three-span bridge);
 * two, end + middle - one at 0.1 L, one beside midspan.
 
@@ -45,6 +46,7 @@ BRIDGES = {
 STATIONS = {
     "one, end": (0.1,),
     "one, middle": (0.5,),
+    "one, inner pier": (1.0 / 3.0,),
     "two, ends": (0.28, 0.72),
     "two, end + middle": (0.1, 0.5),
 }

@@ -212,6 +212,7 @@ def _campaign_entries(v: Visit, camp, tmp_path, monkeypatch) -> None:
     assert win.tabs.currentWidget() is win.fine_view and win.fine_view.inspection.centroid.found
     win.tree.select_key("epoch", "v1")
     v.do("Epoch", "Add fine scans to the selected epoch…")  # the dialog cancelled: nothing happens
+    v.do("Epoch", "Add a set-up to the selected epoch…")  # cancelled too (tests/app/gui/state adds one)
     v.do("Epoch", "Plan the selected epoch")
     v.do("Epoch", "Check the fine scans before leaving")
     win.commands.check_dialog.close()

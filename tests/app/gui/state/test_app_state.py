@@ -108,6 +108,11 @@ def test_the_next_step_leads_through_a_visit(field_copy, tmp_path):
     assert st.next.command == "report"
     assert steps == ["add_epoch", "plan", "add_fine", "check", "process", "report"]
     assert "Epoch ▸ Add epoch…" in st.next.tooltip
+    # a second station of the same visit, through the application: added and planned in one job
+    new, plans = actions.add_setup(st.access, "v0", str(field_copy / "v1" / "coarse.laz"), lambda *a: None)
+    assert new == [2] and len(plans) == 1 and len(plans[0].rois) >= 5
+    with Campaign.open(folder, writable=False) as c:
+        assert c.setups("v0") == [1, 2] and c.plan("v0", 2) is not None and c.last_setup("v0") == 2
 
 
 def test_next_step_prefers_the_selected_epoch_then_the_latest_with_work_left():
