@@ -544,9 +544,9 @@ class Campaign:
         copied: list[Copied] = []
         marks: list[int] = []
         try:
-            for p, _ in items:
-                copied.append(copy_in(self.folder, p, SCANS_DIR))
-            for (p, role), got, (k, frame) in zip(items, copied, placed):
+            for (p, role), (k, frame) in zip(items, placed):  # each copy journaled at once: a kill leaves none unknown
+                got = copy_in(self.folder, p, SCANS_DIR)
+                copied.append(got)
                 marks.append(self._journal(got, p, {"kind": "scan", "epoch": epoch, "role": role, "setup": k,
                                                     "frame": frame, "epoch_datetime": ep["datetime"],
                                                     "epoch_notes": ep.get("notes", ""),
