@@ -6,7 +6,8 @@ a span), every visit's coarse scan imported as a surveyor would (``add-epoch``, 
 station), each set-up planned by the product, its fine windows simulated and imported, then processed.
 Riegl VZ-1000 profile, 1000 points a target, the instrument 1.5 m above the ground 6-10 m beside the deck,
 somewhere new each visit (a few metres along the bridge, any heading); every visit has its own span
-displacements (0 to -8 mm).
+displacements (0 to -8 mm). The surveyor gives set-up 1's rough place (``settings station_xy``): the layout is
+symmetric, and a station that sees it symmetrically is otherwise refused as ambiguous.
 
 Stations (x along the bridge of length L):
 
@@ -71,7 +72,9 @@ def scenario(root: Path, spans: tuple, fractions: tuple, *, visits: int, seed: i
     conditions = [EpochConditions()] + [EpochConditions(span_displacements_m=tuple(
         float(v) for v in rng.uniform(-0.008, 0.0, model.n_spans))) for _ in range(visits - 1)]
     stations = [_stations(model, fractions, rng) for _ in conditions]
-    return run_study(root, model, conditions, stations=stations, seed=seed)["corrected"]
+    # the surveyor says roughly where set-up 1 stands (a symmetric bridge is otherwise refused as ambiguous)
+    hint = f"{fractions[0] * model.length_m:.1f},{-(model.deck_width_m / 2 + 8.0):.1f}"
+    return run_study(root, model, conditions, stations=stations, seed=seed, settings={"station_xy": hint})["corrected"]
 
 
 def table(rows: dict) -> str:

@@ -234,9 +234,31 @@ def _triangle_area(xyz: np.ndarray) -> float:
     return float(0.5 * np.linalg.norm(np.cross(xyz[1] - xyz[0], xyz[2] - xyz[0])))
 
 
+#: A station hint settles two identifications when their stations lie this much farther apart from it (metres).
+STATION_MARGIN_M = 10.0
+
+
+def _by_station(options: list, station_xy: Optional[ArrayLike]) -> Optional[tuple]:
+    """The option whose scanner position (in the layout's frame) is clearly the nearest to ``station_xy``."""
+    if station_xy is None:
+        return None
+    hint = np.asarray(station_xy, dtype=np.float64)[:2]
+    # layout -> scanner is x_s = R x_l + t: the scanner's origin sits at -R^T t in the layout's frame
+    dist = [float(np.linalg.norm((-np.asarray(r).T @ np.asarray(t))[:2] - hint)) for _, _, r, t in options]
+    order = np.argsort(dist, kind="stable")
+    if dist[order[1]] - dist[order[0]] >= STATION_MARGIN_M:
+        _, score, r, t = options[order[0]]
+        return (score, r, t)
+    return None
+
+
 def _settle_rivals(best, candidates: dict, layout: Layout, det: np.ndarray,
-                   evidence: Optional[Callable[[np.ndarray], object]], up_layout: ArrayLike):
-    """The best solution, or a rival the coarse scan's evidence prefers; refused when nothing tells them apart."""
+                   evidence: Optional[Callable[[np.ndarray], object]], up_layout: ArrayLike,
+                   station_xy: Optional[ArrayLike] = None):
+    """The best solution, or a rival the coarse scan's evidence (then the station hint) prefers.
+
+    Refused when nothing tells them apart.
+    """
     rivals = _rivals(best, candidates)
     if not rivals:
         return best
@@ -249,12 +271,15 @@ def _settle_rivals(best, candidates: dict, layout: Layout, det: np.ndarray,
         if unseen[order[1]] - unseen[order[0]] >= EVIDENCE_MARGIN:
             _, score, r, t = options[order[0]]
             return (score, r, t)
+    settled = _by_station([(best_key, *best)] + rivals, station_xy)
+    if settled is not None:
+        return settled
     swapped = sorted(set(rivals[0][0]) - set(best_key))
     raise ProcessingError(
         f"two identifications fit the {best[0][1]} detected reflectors equally well (the layout is symmetric "
         f"for what was detected: {len(swapped)} reflector(s) would be assigned differently); refusing to guess. "
-        "Scan so that more of the bridge is seen (a second set-up, or a station where an end pier's targets face "
-        "the scanner), add an asymmetric target, or remove the wrong window by hand")
+        "Say roughly where the scanner stood ('bridgesurvey settings DIR station_xy X,Y', layout metres, within "
+        f"{STATION_MARGIN_M / 2:g} m), scan so that more of the bridge is seen, or add an asymmetric target")
 
 
 def tilt_deg(rotation: np.ndarray, up_layout: ArrayLike = (0.0, 0.0, 1.0)) -> float:
@@ -273,7 +298,8 @@ def tilt_deg(rotation: np.ndarray, up_layout: ArrayLike = (0.0, 0.0, 1.0)) -> fl
 def identify_reflectors(detections_xyz: np.ndarray, layout: Layout, *, tolerance_m: float = 0.15,
                         max_seeds: int = 60, max_tilt_deg: Optional[float] = MAX_TILT_DEG,
                         up_layout: ArrayLike = (0.0, 0.0, 1.0),
-                        evidence: Optional[Callable[[np.ndarray], object]] = None) -> Identification:
+                        evidence: Optional[Callable[[np.ndarray], object]] = None,
+                        station_xy: Optional[ArrayLike] = None) -> Identification:
     """Match detections (scanner frame) to the layout (any frame).
 
     Parameters
@@ -299,6 +325,10 @@ def identify_reflectors(detections_xyz: np.ndarray, layout: Layout, *, tolerance
         position, shows none, looked straight through it (nothing there but farther surfaces), or cannot tell. When two solutions fit the detections equally well - a layout that repeats
         itself, like the identical spans of a multi-span bridge, seen in part - the one that leaves
         :data:`EVIDENCE_MARGIN` fewer targets unseen where it puts them facing the scanner wins.
+    station_xy : (2,) sequence, optional, keyword-only
+        Roughly where the scanner stands, in the layout's frame (metres). When the evidence cannot settle two
+        solutions (a symmetric bridge turned end for end fits the same detections), the one that puts the
+        scanner :data:`STATION_MARGIN_M` nearer to it wins.
 
     Returns
     -------
@@ -359,7 +389,7 @@ def identify_reflectors(detections_xyz: np.ndarray, layout: Layout, *, tolerance
     _congruent_solutions(_best_triangle(best, lay, det, tolerance_m), candidates, lay, det, d_lay, d_det, tolerance_m,
                          max_tilt_deg, up_layout)
     best = max(candidates.values(), key=lambda v: v[0])
-    best = _settle_rivals(best, candidates, layout, det, evidence, up_layout)
+    best = _settle_rivals(best, candidates, layout, det, evidence, up_layout, station_xy)
     _, r, t = best
     fit = Transform.from_rt(r, t)
     for _ in range(4):  # refine on all matches

@@ -54,29 +54,30 @@ def _map_evidence(rmap: ReflectanceMap, threshold: float, tolerance_m: float):
 
 def analyse_coarse(scan: Scan, layout: Layout, *, step_deg: Optional[float] = None, threshold: Optional[float] = None,
                    tolerance_m: float = 0.15, max_tilt_deg: Optional[float] = MAX_TILT_DEG,
-                   up_layout: ArrayLike = (0.0, 0.0, 1.0),
+                   up_layout: ArrayLike = (0.0, 0.0, 1.0), station_xy: Optional[ArrayLike] = None,
                    progress: Optional[ProgressCallback] = None) -> CoarseAnalysis:
     """Reflectance map, detection and identification of a coarse scan.
 
-    ``max_tilt_deg`` and ``up_layout`` go to :func:`lidar.identification.identify_reflectors`
+    ``max_tilt_deg``, ``up_layout`` and ``station_xy`` go to :func:`lidar.identification.identify_reflectors`
     (None for a scanner that was not levelled).
     """
     intensity = _need_intensity(scan, "reflector detection")
     rmap = reflectance_map(scan.xyz_socs, intensity, step_deg=step_deg, progress=scaled(progress, 0, 0.8))
     return analyse_map(rmap, layout, threshold=threshold, tolerance_m=tolerance_m, max_tilt_deg=max_tilt_deg,
-                       up_layout=up_layout, progress=scaled(progress, 0.8, 1.0))
+                       up_layout=up_layout, station_xy=station_xy, progress=scaled(progress, 0.8, 1.0))
 
 
 def analyse_map(rmap: ReflectanceMap, layout: Layout, *, threshold: Optional[float] = None,
                 tolerance_m: float = 0.15, max_tilt_deg: Optional[float] = MAX_TILT_DEG,
-                up_layout: ArrayLike = (0.0, 0.0, 1.0),
+                up_layout: ArrayLike = (0.0, 0.0, 1.0), station_xy: Optional[ArrayLike] = None,
                 progress: Optional[ProgressCallback] = None) -> CoarseAnalysis:
     """Detection and identification on a coarse scan's reflectance map (see :func:`analyse_coarse`)."""
     diameter = float(np.median(layout.diameters_m))
     det = detect_reflectors(rmap, target_diameter_m=diameter, threshold=threshold)
     report(progress, 0.5, "identifying reflectors")
     ident = identify_reflectors(det.xyz(), layout, tolerance_m=tolerance_m, max_tilt_deg=max_tilt_deg,
-                                up_layout=up_layout, evidence=_map_evidence(rmap, det.threshold, tolerance_m))
+                                up_layout=up_layout, evidence=_map_evidence(rmap, det.threshold, tolerance_m),
+                                station_xy=station_xy)
     det, ident = recover_predicted(rmap, det, ident, tolerance_m=tolerance_m)
     inc = {m.id: incidence_from_map(rmap, m.xyz_socs) for m in ident.matches}
     report(progress, 1.0, "coarse scan analysed")

@@ -57,6 +57,15 @@ def _vector(text: str) -> str:
     return ",".join(f"{v:g}" for v in vec)
 
 
+def _xy_or_none(text: str) -> Optional[str]:
+    if text.strip().lower() in ("none", "auto", ""):
+        return None
+    xy = [float(v) for v in text.split(",")]
+    if len(xy) != 2 or not all(math.isfinite(v) for v in xy):
+        raise ValueError
+    return ",".join(f"{v:g}" for v in xy)
+
+
 def _text_or_none(text: str) -> Optional[str]:
     return text.strip() or None
 
@@ -118,6 +127,10 @@ PARAMETERS: tuple[Parameter, ...] = (
               "auto | a number > 0", added_later=True),
     Parameter("layout_up", "0,0,1", _vector, "plan", "the layout frame's up direction", "x,y,z (not all zero)",
               added_later=True),
+    Parameter("station_xy", None, _xy_or_none, "plan",
+              "roughly where set-up 1's scanner stands, in the layout's frame (within 5 m): settles which way round "
+              "a symmetric bridge is seen (none: such a tie is refused)",
+              "none | x,y in metres", added_later=True),
     Parameter("closure", True, _boolean, "plan",
               "end every plan with the first reference target's window again, to measure the set-up's drift",
               "true | false", added_later=True),

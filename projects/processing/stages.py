@@ -184,17 +184,33 @@ def _tilt_limit(params: dict, profile) -> Optional[float]:
     return float(params["max_tilt_deg"]) if params["max_tilt_deg"] is not None else profile.max_tilt_deg
 
 
-def _analyse(coarse: Scan, layout, params: dict, profile, progress: Optional[ProgressCallback] = None):
+def _analyse(coarse: Scan, layout, params: dict, profile, progress: Optional[ProgressCallback] = None, *,
+             station_xy: Optional[tuple[float, float]] = None):
     return analyse_coarse(coarse, layout, step_deg=params["map_step_deg"], threshold=params["detection_threshold"],
                           tolerance_m=params["identification_tolerance_m"],
-                          max_tilt_deg=_tilt_limit(params, profile), up_layout=layout_up(params), progress=progress)
+                          max_tilt_deg=_tilt_limit(params, profile), up_layout=layout_up(params),
+                          station_xy=station_xy, progress=progress)
+
+
+def _station_hint(setup: int, params: dict) -> Optional[tuple[float, float]]:
+    """Where the surveyor says set-up 1 stood (``station_xy``, layout metres), or None.
+
+    Only a tie between two identifications reads it (a symmetric bridge turned end for end). It is never
+    guessed from an earlier visit: a scanner standing at the other end this week would be taken for its
+    mirror image, and every target named wrong without a word.
+    """
+    if setup != 1 or not params.get("station_xy"):
+        return None
+    x, y = (float(v) for v in str(params["station_xy"]).split(","))
+    return (x, y)
 
 
 def analyse_epoch_coarse(c: Campaign, label: str, layout, params: dict, *, setup: int = 1,
                          progress: Optional[ProgressCallback] = None):
     """Reflectance map, detections and identification of an epoch's (set-up's) coarse scan with the parameters."""
     coarse = read_files(c, c.files(label, "coarse", setup=setup), scaled(progress, 0.0, 0.5), setup=setup)
-    return _analyse(coarse, layout, params, c.profile_for(label, setup), scaled(progress, 0.5, 1.0))
+    return _analyse(coarse, layout, params, c.profile_for(label, setup), scaled(progress, 0.5, 1.0),
+                    station_xy=_station_hint(setup, params))
 
 
 @dataclass(frozen=True, eq=False)
@@ -224,6 +240,7 @@ class Stage1Job:
     setup: int = 1
     coarse_frames: tuple = ()
     fine_frames: tuple = ()
+    station_xy: Optional[tuple[float, float]] = None  # the hint for a symmetric layout (see _station_hint)
 
 
 @dataclass(frozen=True, eq=False)
@@ -254,7 +271,8 @@ def stage1_job(c: Campaign, label: str, setup: int = 1) -> Stage1Job:
     return Stage1Job(str(c.folder), label, tuple(str(c.path_of(r)) for r in inp.coarse),
                      tuple(str(c.path_of(r)) for r in inp.fine), inp.layout, params, inp.profile, h, stored,
                      _measure_hash(inp, h) if inp.fine else None, setup,
-                     tuple(r.frame_for(setup) for r in inp.coarse), tuple(r.frame_for(setup) for r in inp.fine))
+                     tuple(r.frame_for(setup) for r in inp.coarse), tuple(r.frame_for(setup) for r in inp.fine),
+                     _station_hint(setup, params))
 
 
 def stage1_jobs(c: Campaign, label: str) -> list[Stage1Job]:
@@ -269,7 +287,8 @@ def run_stage1(job: Stage1Job, *, progress: Optional[ProgressCallback] = None) -
         plan = ScanPlan.from_json(job.stored_plan)
     else:
         coarse = read_paths(job.coarse_paths, scaled(progress, 0.0, 0.25), job.coarse_frames)
-        analysis = _analyse(coarse, job.layout, job.params, job.profile, scaled(progress, 0.25, 0.4))
+        analysis = _analyse(coarse, job.layout, job.params, job.profile, scaled(progress, 0.25, 0.4),
+                            station_xy=job.station_xy)
         del coarse
         plan = plan_from_coarse(analysis, job.layout, epoch=job.label, profile=job.profile,
                                 min_points=int(job.params["min_points"]),

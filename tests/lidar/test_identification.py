@@ -116,6 +116,21 @@ def test_a_genuine_tie_is_refused_not_guessed():
     assert ident.match("R1").detection == 0 and ident.match("M1").detection == 4
 
 
+def test_the_surveyors_station_settles_a_tie_and_a_wrong_one_cannot_force_it():
+    layout = layout_from_model(MODEL, noise_m=0.0)
+    refs = [t for t in MODEL.targets if t.group == "reference"]
+    rot = Rotation.from_euler("z", 35, degrees=True).as_matrix()
+    shift = np.array([5.0, -12.0, -1.5])
+    det = np.array([t.centre_m for t in refs]) @ rot.T + shift
+    station = -rot.T @ shift  # where this scanner stands in the layout's frame
+    ident = identify_reflectors(det, layout, station_xy=station[:2] + (2.0, -1.5))  # roughly right
+    assert ident.match("R1").detection == 0 and ident.rms_m < 1e-6
+    ident = identify_reflectors(det, layout, station_xy=(2 * 20.0 - station[0], -station[1]))  # the other end
+    assert ident.match("R1").detection != 0  # the surveyor's word is taken: the mirror solution
+    with pytest.raises(ProcessingError, match="station_xy"):  # midway between the two: still a tie
+        identify_reflectors(det, layout, station_xy=(20.0, 0.0))
+
+
 def test_a_layout_with_another_up_axis_is_declared_and_levelled():
     layout = _twin_girder_layout()
     from lidar.layout import Layout
