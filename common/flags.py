@@ -171,6 +171,23 @@ def code(flag: str) -> str:
     return flag.split(":", 1)[0].strip()
 
 
+def in_baseline(flag: str, baseline: str) -> str:
+    """A flag of the baseline's centroid, as repeated on a later epoch's displacement row.
+
+    >>> in_baseline("grazing: the disc is 40 % of the beam's width", "e1")
+    "grazing: the disc is 40 % of the beam's width (in the baseline e1)"
+    >>> in_baseline("second_bright_object", "e1")
+    'second_bright_object: (in the baseline e1)'
+    """
+    head, _, detail = flag.partition(":")
+    return f"{head}: {detail.strip() + ' ' if detail else ''}(in the baseline {baseline})"
+
+
+def is_from_baseline(flag: str) -> bool:
+    """Whether a row's flag is the baseline centroid's, repeated (see :func:`in_baseline`)."""
+    return flag.endswith(")") and "(in the baseline " in flag
+
+
 def has(flags: Iterable[str], flag_code: str) -> bool:
     """Whether ``flags`` hold a flag of code ``flag_code`` (with or without its reason).
 

@@ -19,7 +19,7 @@ from typing import Optional, Sequence
 import numpy as np
 
 from common.flags import (FLAG_CHAINED, FLAG_DECK_NOT_MEASURED, FLAG_MISSING, FLAG_NO_DISPLACEMENT, FLAG_NOT_FOUND,
-                          FLAG_PIERS_NOT_MEASURED, FLAG_SETUP_NOT_MEASURED, PROBLEM, WARNING, code, has, severity)
+                          FLAG_PIERS_NOT_MEASURED, FLAG_SETUP_NOT_MEASURED, PROBLEM, WARNING, code, has, in_baseline, severity)
 from lidar.displacement import Displacement, EpochDisplacements
 from lidar.systematic.adjustment import FieldModel
 from lidar.systematic.budget import corrected_displacements
@@ -713,10 +713,7 @@ def _with_centroid_doubts(c: Campaign, lab: str, baseline: str, result: EpochDis
     ``(in the baseline L)`` after it). Every set-up's found centroids count.
     """
     def said(flag: str, where: str) -> str:
-        if not where:
-            return flag
-        head, _, detail = flag.partition(":")
-        return f"{head}: {detail.strip() + ' ' if detail else ''}(in the baseline {baseline})"
+        return in_baseline(flag, baseline) if where else flag
 
     def found_flags(label: str) -> dict:
         out: dict = {}

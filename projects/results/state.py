@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass
 from typing import Iterable, Mapping, Optional, Sequence
 
-from common.flags import FLAG_DEPARTS, FLAG_REFERENCE_AMBIGUOUS, PROBLEM, WARNING, code, count, worst
+from common.flags import FLAG_DEPARTS, FLAG_REFERENCE_AMBIGUOUS, PROBLEM, WARNING, code, count, is_from_baseline, worst
 from projects.store.campaign import Campaign
 from projects.store.records import DisplacementRecord
 
@@ -163,8 +163,9 @@ def epoch_states(c: Campaign, labels: Optional[Sequence[str]] = None, *,
     for r in records:
         if r.epoch in per_target:
             extra = [FLAG_DEPARTS] if (d := departed.get((r.epoch, r.reflector))) is not None and d.departs else []
-            if r.flags or extra:
-                per_target[r.epoch].setdefault(r.reflector, []).extend(list(r.flags) + extra)
+            own = [f for f in r.flags if not is_from_baseline(f)]  # the baseline's doubts are in its own state
+            if own or extra:
+                per_target[r.epoch].setdefault(r.reflector, []).extend(own + extra)
     out = {}
     for lab in wanted:
         ds = c.displacement_set(lab)
