@@ -19,7 +19,7 @@ import numpy as np
 from common.progress import ProgressCallback, report
 from lidar.io.angular_step import AngularSteps, PatchSampler, angles_deg, steps_along_lines, steps_from_neighbours
 from lidar.io.intensity import detect_convention
-from lidar.io.poses import FAR_FROM_SCANNER_M, in_project_frame
+from lidar.io.poses import FAR_FROM_SCANNER_M, in_project_frame, to_scanner_frame
 from lidar.io.stream import CHUNK_POINTS, Chunk, ScanStream, StreamScan, open_stream
 
 #: Coordinates coarser than this lose what a target centroid needs.
@@ -206,10 +206,7 @@ def _header_scan(stream: ScanStream, k: int, s: StreamScan) -> ScanInfo:
 
 def _far_problem(r_min: float, xyz: np.ndarray, pose: Optional[np.ndarray]) -> str:
     """Why a project-frame scan's angles mean nothing, and what its import needs (a pose, unless it has its own)."""
-    own = False
-    if pose is not None and len(xyz):
-        m = np.asarray(pose, dtype=np.float64)
-        own = not in_project_frame((np.asarray(xyz[:100_000], dtype=np.float64) - m[:3, 3]) @ m[:3, :3])
+    own = pose is not None and len(xyz) > 0 and not in_project_frame(to_scanner_frame(xyz[:100_000], pose))
     return (f"every point is more than {r_min / 1000:.0f} km from the origin: the coordinates are in a project "
             "frame, not the scanner's own (SOCS); angles and steps are not meaningful"
             + ("; its own pose carries it into the scanner's frame at import" if own else

@@ -177,14 +177,19 @@ def pose_from_origin(origin_m: ArrayLike, up: Optional[ArrayLike] = None) -> np.
     return m
 
 
+def to_scanner_frame(xyz_project: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """(N, 3) project-frame points carried into the scanner's frame by ``pose`` (4x4, scanner -> project)."""
+    p = np.asarray(pose, dtype=np.float64)
+    return (np.asarray(xyz_project, dtype=np.float64) - p[:3, 3]) @ p[:3, :3]  # R^T (x - t), row-wise
+
+
 def carry_to_scanner(scan: Scan, pose: np.ndarray) -> Scan:
     """The scan with its points carried from the project frame into the scanner's by ``pose`` (scanner -> project).
 
     The scan keeps ``pose`` as its pose, so :meth:`lidar.scan.Scan.xyz_world` gives the project coordinates back.
     """
     p = np.asarray(pose, dtype=np.float64)
-    xyz = (scan.xyz_socs - p[:3, 3]) @ p[:3, :3]  # R^T (x - t), row-wise
-    return replace(scan, xyz_socs=np.ascontiguousarray(xyz), pose=p)
+    return replace(scan, xyz_socs=np.ascontiguousarray(to_scanner_frame(scan.xyz_socs, p)), pose=p)
 
 
 def same_pose(a: Optional[np.ndarray], b: Optional[np.ndarray]) -> bool:

@@ -17,6 +17,8 @@ from typing import Optional
 import numpy as np
 import numpy.typing as npt
 
+from projects.analysis.models import _wls
+
 #: Fewest epochs with an along-span value and a temperature for a coefficient.
 MIN_EPOCHS = 3
 #: Fewest epochs in each half for the seized-bearing comparison.
@@ -48,13 +50,11 @@ def _slope(temp: np.ndarray, along: np.ndarray, sigma: np.ndarray) -> tuple[floa
     """Weighted least-squares slope of ``along`` on ``temp`` and its sigma (scaled by the fit when it is worse)."""
     w = 1.0 / np.maximum(sigma, 1e-6) ** 2
     x = np.column_stack([np.ones_like(temp), temp])
-    n = x.T @ (w[:, None] * x)
-    if np.linalg.cond(n) > 1e12:
+    if np.linalg.cond(x.T @ (w[:, None] * x)) > 1e12:
         return math.nan, math.nan
-    cov = np.linalg.inv(n)
-    beta = cov @ (x.T @ (w * along))
+    beta, cov, chi2, _, _ = _wls(x, along, w)
     dof = len(temp) - 2
-    s2 = float(w @ (along - x @ beta) ** 2) / dof if dof > 0 else 1.0
+    s2 = chi2 / dof if dof > 0 else 1.0
     return float(beta[1]), float(math.sqrt(cov[1, 1] * max(1.0, s2)))
 
 

@@ -8,6 +8,7 @@ import numpy as np
 
 from lidar.systematic.adjustment import FieldModel
 from lidar.systematic.range_walk import describe_basis
+from projects.results.corrections import norm_sigma
 
 #: The incidences the range-walk panel draws a curve for (cos of the angle between beam and target normal).
 CURVE_COS = (1.0, 0.8, 0.6)
@@ -68,8 +69,7 @@ def drift_panel(ax: Any, model: FieldModel, times: Mapping[str, str]) -> None:
         if not v.timed:
             continue
         d, s = np.asarray(v.drift_arcsec_h, dtype=np.float64), v.drift_sigma_arcsec_h
-        n = float(np.hypot(d[0], d[1]))
-        ns = float(np.hypot(d[0] * s[0], d[1] * s[1]) / n) if n > 1e-9 else float(max(s[0], s[1]))
+        n, ns = norm_sigma((float(d[0]), float(d[1])), (float(s[0]), float(s[1])))
         tilt.append((_when(when), n, ns))
         twist.append((_when(when), abs(float(d[2])), float(s[2])))
     for rows, colour, name in ((tilt, "#d62728", "tilt"), (twist, "#9467bd", "twist")):

@@ -356,11 +356,12 @@ def _stale_reason(inp: EpochInputs, params: dict) -> Optional[str]:
     if not inp.coarse:
         return None
     if inp.fine:
-        want = _measure_hash(inp, _plan_hash(inp, params))
+        plan_hash = _plan_hash(inp, params)
+        want = _measure_hash(inp, plan_hash)
         if res is None or res.stage != "measured":
             return "not measured yet"
         if res.inputs_hash != want:
-            if res.inputs_hash == _measure_hash(inp, _plan_hash(inp, params), version="1"):
+            if res.inputs_hash == _measure_hash(inp, plan_hash, version="1"):
                 return "centroid estimate updated"
             return "inputs or parameters changed"
         return None

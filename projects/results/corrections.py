@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Mapping, Optional
+from typing import Mapping, Optional, Sequence
 
 #: Where the centroid times of an epoch came from, as the line says it.
 TIME_SOURCES = {"points": "times from the points", "plan": "times from the plan", "none": "no times"}
@@ -32,8 +32,8 @@ class EpochCorrections:
     left_out: tuple[str, ...]
 
 
-def _norm_sigma(v: tuple[float, ...], s: tuple[float, ...]) -> tuple[float, float]:
-    """|v| and its first-order standard deviation from independent component sigmas."""
+def norm_sigma(v: Sequence[float], s: Sequence[float]) -> tuple[float, float]:
+    """|v| and its first-order standard deviation from independent component sigmas (the larger sigma at 0)."""
     n = math.sqrt(sum(x * x for x in v))
     if n < 1e-12:
         return 0.0, max(s) if s else 0.0
@@ -46,7 +46,7 @@ def epoch_corrections(systematics: Mapping) -> Optional[EpochCorrections]:
         return None
     d = [float(x) for x in systematics.get("drift_arcsec_h") or (0.0, 0.0, 0.0)]
     ds = [float(x) for x in systematics.get("drift_sigma_arcsec_h") or (0.0, 0.0, 0.0)]
-    tilt, tilt_s = _norm_sigma((d[0], d[1]), (ds[0], ds[1]))
+    tilt, tilt_s = norm_sigma((d[0], d[1]), (ds[0], ds[1]))
     return EpochCorrections(
         float(systematics["scale_ppm"]), float(systematics.get("scale_sigma_ppm", 0.0)),
         bool(systematics.get("scale_determined", True)), tilt, tilt_s, abs(d[2]), ds[2],
