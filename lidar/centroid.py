@@ -339,8 +339,13 @@ def _trim_disc(cluster: np.ndarray, axes: np.ndarray, r_trim: float) -> tuple[np
     return centre, keep
 
 
-#: A disc whose projected short axis is narrower than this fraction of the beam's footprint is not measured.
-UNRESOLVED_RATIO = 0.35
+#: A disc whose projected short axis is narrower than this fraction of the beam's footprint is not measured:
+#: its returns are all mixed pixels, its centroid off by more than :func:`grazing_variance` covers.
+UNRESOLVED_RATIO = 0.2
+#: Below this fraction (and above :data:`UNRESOLVED_RATIO`) a disc is *weak*: measured, flagged ``grazing``
+#: with :func:`grazing_variance` (several millimetres along the line of sight), but planned only in the time
+#: the budget leaves after every other window (:func:`lidar.plan.plan_fine_scans`).
+WEAK_RATIO = 0.35
 #: Below this fraction it is measured, flagged ``grazing``, with its range-direction sigma widened.
 GRAZING_RATIO = 0.7
 
@@ -354,6 +359,22 @@ def resolvability(diameter_m: float, cos_incidence: float, range_m: float, profi
     :func:`grazing_variance` added.
     """
     return float(diameter_m * max(cos_incidence, 0.0) / max(float(profile.footprint_m(range_m)), 1e-4))
+
+
+def resolved_share(flags: Sequence[str]) -> float:
+    """The disc's width over the beam's (:func:`resolvability`) a centroid's ``grazing`` flag states; 1 without one."""
+    for f in flags:
+        if f.startswith(f"{FLAG_GRAZING}: the disc is "):
+            try:
+                return float(f.split("the disc is ", 1)[1].split(" %", 1)[0]) / 100.0
+            except ValueError:
+                return 0.0
+    return 1.0
+
+
+def is_weak(flags: Sequence[str]) -> bool:
+    """Whether a centroid's flags say its disc was narrower than :data:`WEAK_RATIO` of the beam."""
+    return resolved_share(flags) < WEAK_RATIO
 
 
 def grazing_variance(diameter_m: float, cos_incidence: float, ratio: float) -> float:

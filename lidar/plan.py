@@ -315,14 +315,17 @@ def plan_fine_scans(targets: Sequence[PlanTarget], *, epoch: str = "", profile: 
         raise InputError("the time budget must be positive")
     if not targets:
         raise InputError("nothing to plan: no targets")
-    targets, skipped = _measurable(targets, profile)
-    if not targets:
+    targets, weak, skipped = _measurable(targets, profile)
+    if not targets and not weak:
         raise InputError("nothing to plan: no target can be measured from this station ("
                          + "; ".join(f"{k} {why}" for k, why in skipped) + ")")
-    if not profile.windowed:
-        dome = _plan_full_dome(targets, epoch=epoch, profile=profile, min_points=min_points,
+    if not profile.windowed:  # a dome scans the weak targets too, at no extra time
+        dome = _plan_full_dome(targets + [t for t, _ in weak], epoch=epoch, profile=profile, min_points=min_points,
                                budget_seconds=budget_seconds, margin_m=margin_m)
         return replace(dome, skipped=tuple(skipped)) if skipped else dome
+    only_weak = {t.id: why for t, why in weak} if not targets else {}
+    if only_weak:  # only weak ones: they are the plan
+        targets, weak = [t for t, _ in weak], []
     n = float(min_points)
     warnings: list[str] = []
     for _ in range(30):
@@ -343,6 +346,13 @@ def plan_fine_scans(targets: Sequence[PlanTarget], *, epoch: str = "", profile: 
     if n < min_points:
         warnings.append(f"over the time budget with {min_points} points per target: reduced to about "
                         f"{int(n)} points per target to fit {budget_seconds / 60:.0f} min")
+    refs = [r.expected_seconds for r in rois if r.group == "reference"]
+    reserve = refs[0] if closure and refs else 0.0  # the closure window's time is kept for it
+    rois = [replace(r, notes=r.notes + (_weak_note(only_weak[r.reflector]),)) if r.reflector in only_weak else r
+            for r in rois]
+    rois, total, late = _weak_windows(rois, weak, n_points=n, total=total, budget_seconds=budget_seconds - reserve,
+                                      profile=profile, margin_m=margin_m)
+    skipped.extend(late)
     if closure:
         rois = _interleave_references(rois)
         first = next((r for r in rois if r.group == "reference"), None)
@@ -353,32 +363,64 @@ def plan_fine_scans(targets: Sequence[PlanTarget], *, epoch: str = "", profile: 
     if total > budget_seconds * 1.0001:
         warnings.append(f"the plan takes {total / 60:.1f} min, over the budget of {budget_seconds / 60:.0f} min")
     if skipped:
-        warnings.append("not planned (narrower than the beam from here, measure from another station): "
-                        + ", ".join(k for k, _ in skipped))
+        narrow = [k for k, why in skipped if "no time is left" not in why]
+        if narrow:
+            warnings.append("not planned (narrower than the beam from here, measure from another station): "
+                            + ", ".join(narrow))
+        if len(narrow) < len(skipped):
+            warnings.append("not planned (weak from here and no time left in the budget): "
+                            + ", ".join(k for k, why in skipped if k not in narrow))
     return ScanPlan(epoch, profile, tuple(rois), int(min_points), int(n), float(budget_seconds), tuple(warnings),
                     skipped=tuple(skipped))
 
 
-def _measurable(targets: Sequence[PlanTarget], profile: ScannerProfile) -> tuple[list, list]:
-    """The targets a fine scan can measure from this station, and why each other one cannot.
+def _measurable(targets: Sequence[PlanTarget], profile: ScannerProfile) -> tuple[list, list, list]:
+    """The targets a fine scan measures well from this station, the weak ones, and why each other one cannot.
 
     A disc whose projected short axis is narrower than :data:`lidar.centroid.UNRESOLVED_RATIO` of the beam
     at its range returns only mixed pixels: its window would spend the visit's time on a centroid that
-    would be refused.
+    would be refused. Below :data:`lidar.centroid.WEAK_RATIO` it is measured with a widened sigma: weak,
+    planned only in the time left (:func:`_weak_windows`), most resolvable first.
     """
-    from lidar.centroid import UNRESOLVED_RATIO, resolvability
+    from lidar.centroid import UNRESOLVED_RATIO, WEAK_RATIO, resolvability
 
-    keep, skipped = [], []
+    keep, weak, skipped = [], [], []
     for t in targets:
         r = float(np.linalg.norm(t.xyz_socs))
         cos = t.incidence_cos if t.incidence_cos is not None else DEFAULT_INCIDENCE_COS
         q = resolvability(t.diameter_m, cos, r, profile)
+        why = (f"at {r:.0f} m and {math.degrees(math.acos(min(max(cos, 0.0), 1.0))):.0f} deg "
+               f"incidence the disc is {100 * q:.0f} % of the beam's width")
         if q < UNRESOLVED_RATIO:
-            skipped.append((t.id, f"at {r:.0f} m and {math.degrees(math.acos(min(max(cos, 0.0), 1.0))):.0f} deg "
-                                  f"incidence the disc is {100 * q:.0f} % of the beam's width"))
+            skipped.append((t.id, why))
+        elif q < WEAK_RATIO:
+            weak.append((q, t, why))
         else:
             keep.append(t)
-    return keep, skipped
+    weak.sort(key=lambda e: -e[0])
+    return keep, [(t, why) for _, t, why in weak], skipped
+
+
+def _weak_note(why: str) -> str:
+    return f"weak: {why}; measured with a widened sigma and flagged grazing, planned in the time the budget leaves"
+
+
+def _weak_windows(rois: list, weak: Sequence[tuple[PlanTarget, str]], *, n_points: float, total: float,
+                  budget_seconds: float, profile: ScannerProfile, margin_m: float) -> tuple[list, float, list]:
+    """The weak targets' windows that fit in the time the budget leaves, never shrinking another window.
+
+    Returns the windows with the weak ones appended, the new total (s), and the weak targets left out
+    with their reason.
+    """
+    out, late = list(rois), []
+    for t, why in weak:
+        roi = plan_roi(t, n_points=n_points, profile=profile, margin_m=margin_m)
+        if total + roi.expected_seconds <= budget_seconds * 1.0001:
+            out.append(replace(roi, notes=roi.notes + (_weak_note(why),)))
+            total += roi.expected_seconds
+        else:
+            late.append((t.id, f"{why}: weak, and no time is left in the budget for it"))
+    return out, total, late
 
 
 def _interleave_references(rois: list) -> list:

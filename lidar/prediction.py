@@ -8,12 +8,14 @@ centroid by ``R / n``). Used by the station advisor and the on-site check.
 from __future__ import annotations
 
 import math
+from typing import Optional
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from common.errors import InputError
-from lidar.centroid import rim_variance
+from lidar.centroid import grazing_variance, resolvability, rim_variance
+from lidar.scanner_profile import ScannerProfile
 
 
 def disc_points(diameter_m: float, range_m: float, cos_incidence: float, theta_deg: float,
@@ -37,7 +39,7 @@ def disc_points(diameter_m: float, range_m: float, cos_incidence: float, theta_d
 
 
 def centroid_covariance(xyz_socs: ArrayLike, normal_socs: ArrayLike, n_points: float, *, diameter_m: float = 0.05,
-                        range_noise_m: float = 0.005) -> np.ndarray:
+                        range_noise_m: float = 0.005, profile: Optional[ScannerProfile] = None) -> np.ndarray:
     """(3, 3) covariance of a target centroid from ``n_points`` disc points, m^2.
 
     Parameters
@@ -51,6 +53,9 @@ def centroid_covariance(xyz_socs: ArrayLike, normal_socs: ArrayLike, n_points: f
     diameter_m : float, keyword-only
     range_noise_m : float, keyword-only
         One-point range standard deviation, metres.
+    profile : ScannerProfile, optional, keyword-only
+        The instrument: with it, a disc narrower than the beam at this range and incidence gets the
+        grazing term processing adds (:func:`lidar.centroid.grazing_variance`). Default: none added.
     """
     x = np.asarray(xyz_socs, dtype=np.float64)
     nrm = np.asarray(normal_socs, dtype=np.float64)
@@ -63,4 +68,8 @@ def centroid_covariance(xyz_socs: ArrayLike, normal_socs: ArrayLike, n_points: f
     cov = range_noise_m ** 2 / n * np.outer(view, view)
     spacing = math.sqrt(math.pi * radius ** 2 / n)
     cov += rim_variance(radius, n, spacing) * (np.eye(3) - np.outer(nrm, nrm))
+    if profile is not None:
+        cos = abs(float(nrm @ view))
+        q = resolvability(diameter_m, cos, float(np.linalg.norm(x)), profile)
+        cov += grazing_variance(diameter_m, cos, q) * np.outer(view, view)
     return cov

@@ -53,6 +53,10 @@ class StationPrediction:
         Targets the station cannot measure, with ``reasons`` saying why.
     points : mapping id -> int
         Points the plan would put on each visible target.
+    weak : tuple of str
+        Targets measured only at grazing incidence from here (narrower than
+        :data:`lidar.centroid.WEAK_RATIO` of the beam): planned in the time left, with a widened sigma.
+        Those narrower than :data:`lidar.centroid.UNRESOLVED_RATIO` are in ``hidden`` ("not measured").
     """
 
     xyz_layout: tuple[float, ...]
@@ -62,6 +66,7 @@ class StationPrediction:
     points: Mapping[str, int] = field(default_factory=dict)
     reasons: Mapping[str, str] = field(default_factory=dict)
     usable: bool = True
+    weak: tuple[str, ...] = ()
 
     @property
     def worst_sigma_mm(self) -> float:
@@ -81,7 +86,7 @@ class StationPrediction:
                 "worst_sigma_mm": None if math.isinf(worst) else round(float(worst), 4),
                 "predicted_sigma_mm": {k: round(float(v), 4) for k, v in self.predicted_sigma_mm.items()},
                 "hidden": list(self.hidden), "hidden_reasons": dict(self.reasons),
-                "points": dict(self.points)}
+                "weak": list(self.weak), "points": dict(self.points)}
 
 
 def _level_rotation(up: np.ndarray) -> np.ndarray:
@@ -266,6 +271,10 @@ def predict_station(layout: Layout, station_layout: Sequence[float], *, profile:
     plan = plan_fine_scans(targets, profile=profile, min_points=min_points, budget_seconds=budget_seconds,
                            closure=closure)
     times = plan_times(plan)
+    for tid, why in plan.skipped:  # narrower than the beam, or weak with no time left: not measured from here
+        hidden.append(tid)
+        reasons[tid] = f"not measured: {why}"
+    weak = tuple(r.reflector for r in plan.rois if not r.closure and any(n.startswith("weak:") for n in r.notes))
     epoch, points = {}, {}
     by_id = {t.id: t for t in targets}
     for roi in plan.rois:
@@ -275,7 +284,8 @@ def predict_station(layout: Layout, station_layout: Sequence[float], *, profile:
         n = max(roi.expected_target_points, 1)
         points[t.id] = int(n)
         epoch[t.id] = _Sighted(np.asarray(t.xyz_socs), centroid_covariance(
-            t.xyz_socs, normal_socs[t.id], n, diameter_m=t.diameter_m, range_noise_m=profile.range_noise_m),
+            t.xyz_socs, normal_socs[t.id], n, diameter_m=t.diameter_m, range_noise_m=profile.range_noise_m,
+            profile=profile),
             float(t.incidence_cos or 1.0), times.get(t.id, float("nan")))
     base = {k: _as_sighted(v) for k, v in baseline.items()} if baseline is not None else dict(epoch)
     if baseline is not None:  # same geometry as the baseline: positions from it, so nothing looks moved
@@ -291,10 +301,10 @@ def predict_station(layout: Layout, station_layout: Sequence[float], *, profile:
                                       epoch_label=label, expected_sigmas=True)
     except SurveyError:
         return StationPrediction(tuple(float(v) for v in s), plan.total_seconds, {}, tuple(hidden), points, reasons,
-                                 usable=False)
+                                 usable=False, weak=weak)
     sig = {d.reflector: d.sigma_m * 1000.0 for d in res.displacements if np.isfinite(d.sigma_m)}
     return StationPrediction(tuple(float(v) for v in s), plan.total_seconds, sig, tuple(hidden), points, reasons,
-                             usable=bool(sig))
+                             usable=bool(sig), weak=weak)
 
 
 def _carry(base: Mapping[str, _Sighted], epoch: Mapping[str, _Sighted]) -> dict[str, np.ndarray]:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import math
 import sys
 
 from app.cli.args import add_dir, add_epoch, add_json, input_file, output_file
@@ -130,7 +131,7 @@ def _pair(advice, layout, asked: bool):
 
     best = next((s for s in advice.stations if s.predicted_sigma_mm), None)
     deck = {t for t, g in zip(layout.ids, layout.groups) if g == "measurement"}
-    if not asked and (best is None or not deck & set(best.hidden)):
+    if not asked and (best is None or not deck & (set(best.hidden) | set(best.weak))):
         return None
     pair = propose_pair(advice.stations, layout)
     if pair is None and asked:
@@ -195,12 +196,14 @@ def cmd_stations(args) -> int:
     if args.png is not None:
         save_figure(station_map_figure(advice, layout), args.png)
     rows = [{"x": s.xyz_layout[0], "y": s.xyz_layout[1], "z": s.xyz_layout[2], "minutes": s.seconds / 60,
-             "worst_sigma_mm": s.worst_sigma_mm, "hidden": list(s.hidden)} for s in advice.stations[:args.top]]
-    table(rows, ["x", "y", "z", "minutes", "worst_sigma_mm", "hidden"])
+             "worst_sigma_mm": s.worst_sigma_mm, "hidden": list(s.hidden), "weak": list(s.weak)}
+            for s in advice.stations[:args.top]]
+    table(rows, ["x", "y", "z", "minutes", "worst_sigma_mm", "hidden", "weak"])
     if pair is not None:
         a, b = pair.first.xyz_layout, pair.second.xyz_layout
+        worst = "-" if math.isinf(pair.worst_sigma_mm) else f"{pair.worst_sigma_mm:.3f}"
         print(f"two set-ups: ({a[0]:.1f}, {a[1]:.1f}) and ({b[0]:.1f}, {b[1]:.1f}), worst target's sigma "
-              f"{pair.worst_sigma_mm:.3f} mm (one set-up: {pair.first.worst_sigma_mm:.3f} mm), "
+              f"{worst} mm (one set-up: {pair.first.worst_sigma_mm:.3f} mm), "
               f"{len(pair.shared)} targets shared to join them"
               + (f"; still hidden: {', '.join(pair.hidden)}" if pair.hidden else ""))
     print(f"wrote {args.out}: {len(advice.stations)} stations evaluated (ground z {advice.ground_z:.2f} m: "

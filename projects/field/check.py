@@ -161,7 +161,8 @@ def check_epoch(c: Campaign, label: str, *, goal_sigma_mm: Optional[float] = Non
             noise = cent.sigma_range_m if math.isfinite(cent.sigma_range_m) and cent.sigma_range_m > 0 \
                 else plan.profile.range_noise_m
             normal = cent.normal_socs if np.all(np.isfinite(cent.normal_socs)) else -cent.xyz_socs
-            promised = centroid_covariance(cent.xyz_socs, normal, max(planned, 1), diameter_m=d, range_noise_m=noise)
+            promised = centroid_covariance(cent.xyz_socs, normal, max(planned, 1), diameter_m=d, range_noise_m=noise,
+                                           profile=plan.profile)
             goal = SIGMA_TOLERANCE * 1000.0 * math.sqrt(promised[2, 2])
         else:
             goal = float(goal_sigma_mm)
@@ -172,6 +173,9 @@ def check_epoch(c: Campaign, label: str, *, goal_sigma_mm: Optional[float] = Non
             status, note = "imprecise", f"sigma {sigma:.3f} mm over the goal {goal:.3f} mm"
         else:
             status, note = "ok", ""
+        if any(n.startswith("weak:") for n in roi.notes):
+            note = "; ".join(x for x in (note, "weak from here (grazing, sigma widened): measure it from another "
+                                               "set-up if one sees it better") if x)
         rows.append(TargetCheck(roi.reflector, roi.group, True, int(cent.n_points), planned, sigma, goal, status, note))
         if status != "ok":
             retry.append((roi, cent, ratio))

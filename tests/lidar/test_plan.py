@@ -89,3 +89,49 @@ def test_plan_expected_points_match_what_the_simulator_delivers():
         assert delivered_target == pytest.approx(roi.expected_target_points, rel=0.30), roi.reflector
         in_window = np.count_nonzero(roi.window.contains(theta, phi))
         assert in_window == pytest.approx(roi.expected_points, rel=0.30), roi.reflector
+
+
+def _cos_for(q, r, profile=VZ1000, d=0.05):
+    """The incidence cosine at which a disc of diameter d at range r is q of the beam's width."""
+    return q * float(profile.footprint_m(r)) / d
+
+
+def test_weak_targets_take_only_the_time_left_and_never_shrink_another_window():
+    from lidar.centroid import UNRESOLVED_RATIO, WEAK_RATIO, resolvability
+
+    strong = [target(phi=5 * k, id=f"S{k}") for k in range(4)]
+    weak = [target(phi=30 + 2 * k, r=50.0, id=f"W{k}", cos=_cos_for(q, 50.0)) for k, q in enumerate((0.3, 0.25))]
+    narrow = target(phi=40, r=50.0, id="N", cos=_cos_for(0.12, 50.0))
+    for t in weak:
+        assert UNRESOLVED_RATIO <= resolvability(0.05, t.incidence_cos, 50.0, VZ1000) < WEAK_RATIO
+    alone = plan_fine_scans(strong, budget_seconds=3600)
+    plan = plan_fine_scans(strong + weak + [narrow], budget_seconds=3600)
+    by_id = {r.reflector: r for r in plan.rois}
+    assert {"W0", "W1"} <= by_id.keys() and "N" not in by_id
+    assert dict(plan.skipped)["N"].endswith("of the beam's width")
+    for r in alone.rois:  # the strong windows are exactly those planned without the weak ones
+        assert by_id[r.reflector].expected_points == r.expected_points
+    assert all(any(n.startswith("weak:") for n in by_id[w].notes) for w in ("W0", "W1"))
+    # a budget with room for the strong windows and one weak one: the more resolvable one gets it
+    w0 = by_id["W0"].expected_seconds
+    tight = plan_fine_scans(strong + weak, budget_seconds=alone.total_seconds + w0 + 1.0)
+    ids = [r.reflector for r in tight.rois]
+    assert "W0" in ids and "W1" not in ids
+    assert "no time is left" in dict(tight.skipped)["W1"]
+    assert any("no time left in the budget): W1" in w for w in tight.warnings)
+    assert tight.points_per_target == alone.points_per_target and tight.total_seconds <= tight.budget_seconds
+
+
+def test_closure_keeps_its_time_when_weak_windows_fill_the_budget():
+    strong = [target(phi=5 * k, id=f"S{k}", group="reference" if k == 0 else "measurement") for k in range(3)]
+    weak = [target(phi=30 + 2 * k, r=50.0, id=f"W{k}", cos=_cos_for(0.3, 50.0)) for k in range(6)]
+    alone = plan_fine_scans(strong, budget_seconds=3600, closure=True)
+    plan = plan_fine_scans(strong + weak, budget_seconds=alone.total_seconds + 200.0, closure=True)
+    assert plan.rois[-1].closure
+    assert plan.total_seconds <= plan.budget_seconds * 1.0001
+
+
+def test_only_weak_targets_are_still_planned():
+    plan = plan_fine_scans([target(r=50.0, id="W", cos=_cos_for(0.3, 50.0))])
+    assert [r.reflector for r in plan.rois] == ["W"]
+    assert any(n.startswith("weak:") for n in plan.rois[0].notes)

@@ -91,3 +91,25 @@ def test_surfaces_a_scan_saw_block_the_lines_of_sight_through_them(layout):
     # the surface the target is glued on (the deck's underside around it) does not hide it
     deck = np.array([[m3[0] + a, m3[1] + b, m3[2] + 0.002] for a in g for b in g])
     assert "M3" not in predict_station(layout, station, profile=VZ, obstacles=Obstacles(deck)).hidden
+
+
+def test_a_weak_targets_predicted_sigma_carries_the_grazing_term_processing_adds():
+    from lidar.centroid import grazing_variance, resolvability
+    from lidar.prediction import centroid_covariance
+
+    r, cos = 50.0, 0.12
+    xyz = np.array([r, 0.0, 0.0])
+    normal = np.array([-cos, 0.0, math.sqrt(1 - cos ** 2)])
+    plain = centroid_covariance(xyz, normal, 1000, diameter_m=0.05)
+    with_beam = centroid_covariance(xyz, normal, 1000, diameter_m=0.05, profile=VZ)
+    q = resolvability(0.05, cos, r, VZ)
+    assert 0.2 < q < 0.35
+    assert with_beam[0, 0] - plain[0, 0] == pytest.approx(grazing_variance(0.05, cos, q), rel=1e-9)
+    assert with_beam[1, 1] == pytest.approx(plain[1, 1]) and with_beam[2, 2] == pytest.approx(plain[2, 2])
+
+
+def test_one_end_of_a_three_span_bridge_the_far_span_is_not_planned_and_says_why():
+    lay = layout_from_model(BridgeModel(spans_m=(39.9, 39.9, 39.9), deck_fractions=(0.4, 0.5, 0.6)))
+    p = predict_station(lay, (12.0, -11.0, 1.5), profile=VZ)
+    far = [t for t, x in zip(lay.ids, lay.xyz) if x[0] > 80.0 and t.startswith("M")]
+    assert far and all(t not in p.predicted_sigma_mm for t in far)

@@ -32,7 +32,7 @@ class StationsView(QWidget):
                            "displacement and the scan time.")
         self.info.setWordWrap(True)
         self.table = QTableWidget(0, 5)
-        self.table.setHorizontalHeaderLabels(["x (m)", "y (m)", "minutes", "worst σ (mm)", "hidden"])
+        self.table.setHorizontalHeaderLabels(["x (m)", "y (m)", "minutes", "worst σ (mm)", "hidden · weak"])
         self.table.setMaximumHeight(200)
         self.table.setMinimumHeight(90)
         self.table.horizontalHeader().setStretchLastSection(True)
@@ -73,9 +73,15 @@ class StationsView(QWidget):
         for r, s in enumerate(best):
             worst = "–" if s.worst_sigma_mm == float("inf") else f"{s.worst_sigma_mm:.3f}"
             for c, v in enumerate((f"{s.xyz_layout[0]:.1f}", f"{s.xyz_layout[1]:.1f}", f"{s.seconds / 60:.1f}", worst,
-                                   ", ".join(s.hidden) or "–")):
+                                   _hidden_weak(s))):
                 item = QTableWidgetItem(v)
                 item.setToolTip(v)
                 self.table.setItem(r, c, item)
         self.info.setText(f"{len(advice.stations)} positions evaluated for a {advice.scanner}; ground at "
                           f"z = {advice.ground_z:.2f} m ({advice.ground_source}). Best first.")
+
+
+def _hidden_weak(s) -> str:
+    """The targets a station cannot measure, then those it measures only at grazing incidence."""
+    text = ", ".join(s.hidden) or "–"
+    return text + (f" · weak: {', '.join(s.weak)}" if s.weak else "")
