@@ -39,10 +39,17 @@ BIAS_FILE = "bias.json"
 
 
 def sightings(cents: Mapping[str, TargetCentroid], closures: Optional[Mapping[str, TargetCentroid]] = None) -> tuple:
-    """The found centroids (and closure centroids) of one epoch as the field model's sightings."""
+    """The found centroids (and closure centroids) of one epoch as the field model's sightings.
+
+    A weak centroid (:func:`lidar.centroid.is_weak`: a disc narrower than the beam, its centroid millimetres off
+    along the line of sight) is left out: at the far end of the incidences it would steer the range walk's
+    curve, which the well-resolved discs of every visit are corrected by.
+    """
+    from lidar.centroid import is_weak
+
     out = []
     for c in list(cents.values()) + list((closures or {}).values()):
-        if not c.found:
+        if not c.found or is_weak(c.flags):
             continue
         out.append(Sighting(c.reflector, np.asarray(c.xyz_socs, dtype=np.float64), np.asarray(c.cov, dtype=np.float64),
                             cos_incidence_of(c), float(c.time_s)))

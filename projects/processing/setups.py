@@ -9,7 +9,10 @@ into set-up 1's frame by a multi-station adjustment, as RiSCAN's MSA does for sc
 * observations: every corrected centroid, weighted by its covariance (``y_sj = R_s^T (X_j - t_s)``);
 * Gauss-Newton; a target seen from two set-ups is measured once, its sightings combined by their inverse
   covariances, and the motions' uncertainty is carried into every position (the full covariance of the
-  joined positions and their gain on every centroid are kept).
+  joined positions and their gain on every centroid are kept);
+* when the shared sightings disagree more than their covariances say (the join's RMS normalised residual
+  ``sigma0`` above 1), the budget of every displacement is summed from covariances scaled by ``sigma0**2`` (the a
+  posteriori variance factor; the weights stay as measured); a weak sighting of a target another set-up sees better is left out (:func:`without_weak_duplicates`).
 
 A set-up that shares fewer than three well-spread targets with the set-ups joined before it cannot be placed:
 it is refused with the reason (:data:`common.flags.FLAG_SETUP_NOT_JOINED` on the epoch). A shared target
@@ -334,6 +337,11 @@ def _finish(label: str, j: _Join, refused: Mapping[int, str], shared_of: Mapping
     gain_all = n_inv @ f.T @ w  # d unknowns / d centroids
     gain = gain_all[nm:]
     cov_all = gain_all @ _block_diag(j.cov) @ gain_all.T
+    # the a posteriori variance factor: sightings that disagree more than their covariances say are less certain
+    # than they say, every one of them (never made more certain when they agree better). It widens the budget
+    # each displacement's sigma is summed from (through ``sighting_cov``), not the weights: the positions'
+    # covariance the displacement computation weighs the targets and chooses the deck normal by stays as measured
+    sighting_cov = j.cov * max(1.0, s0) ** 2
     motions = {}
     for k, c in j.local.items():
         motions[k] = {"rotation": j.rot[k], "translation": j.tr[k],
@@ -349,7 +357,7 @@ def _finish(label: str, j: _Join, refused: Mapping[int, str], shared_of: Mapping
                           "residual_xyz_mm": [round(float(v) * 1e3, 4) for v in e],
                           "normalised": round(norm, 3), "left_out": (k, t) in skip})
     return SetupJoin(label, tuple(j.order), dict(refused), tuple(j.targets), j.x.copy(), cov_all[nm:, nm:],
-                     tuple(j.obs), gain, j.cov, motions, tuple(residuals), tuple(sorted(skip)), s0)
+                     tuple(j.obs), gain, sighting_cov, motions, tuple(residuals), tuple(sorted(skip)), s0)
 
 
 def _block_diag(blocks: np.ndarray) -> np.ndarray:
@@ -371,13 +379,29 @@ class CorrectedVisit:
     visits: Mapping[int, str]  # set-up -> field-model visit label
 
 
+def without_weak_duplicates(setups: Mapping[int, Mapping[str, object]]) -> dict[int, dict[str, object]]:
+    """Each set-up's centroids less the weak sightings of targets another set-up sees better.
+
+    A weak sighting (a disc narrower than :data:`lidar.centroid.WEAK_RATIO` of the beam, :func:`lidar.centroid.is_weak`)
+    is millimetres off along its line of sight, which its covariance covers on its own; joined with another
+    set-up's sharp sighting of the same target it still pulls the set-ups' motion (on the long-bridges bench,
+    0.2-0.4 mm, 2-4 sigma, on the joined targets). It is kept only where no set-up sees the target better.
+    """
+    from lidar.centroid import is_weak
+
+    sharp = {t for cents in setups.values() for t, c in cents.items() if not is_weak(c.flags)}  # type: ignore[attr-defined]
+    return {k: {t: c for t, c in cents.items() if t not in sharp or not is_weak(c.flags)}  # type: ignore[attr-defined]
+            for k, cents in setups.items()}
+
+
 def corrected_side(label: str, setups: Mapping[int, Mapping[str, object]], model: FieldModel) -> CorrectedVisit:
     """Correct each set-up of a visit with its own field-model terms, then join them (see :func:`join_setups`).
 
-    ``setups`` maps set-up number -> found centroids (``xyz_socs``, ``cov``, ``cos_incidence``, ``time_s``).
+    ``setups`` maps set-up number -> found centroids (``xyz_socs``, ``cov``, ``cos_incidence``, ``time_s``,
+    ``flags``); a weak sighting of a target another set-up sees better is left out (:func:`without_weak_duplicates`).
     """
     obs, jac, devs, visits = {}, {}, {}, {}
-    for k, cents in setups.items():
+    for k, cents in without_weak_duplicates(setups).items():
         v = visits[k] = visit_label(label, k)
         o, jc = _side(cents, model, v)
         obs[k] = o

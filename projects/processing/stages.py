@@ -36,7 +36,8 @@ from lidar.scanner_profile import ScannerProfile
 from projects.processing.field import (atmosphere_flags, epoch_flags, systematics_json, update_field_model,
                                        visit_digest)
 from projects.processing.parameters import DEFAULTS, parameter, stage1_params, stage2_params
-from projects.processing.setups import CorrectedVisit, corrected_side, joined_displacements, visit_label
+from projects.processing.setups import (CorrectedVisit, corrected_side, joined_displacements, visit_label,
+                                       without_weak_duplicates)
 from projects.store.previews import encode_preview
 from projects.store.records import EpochInputs, ScanFile
 from projects.store.campaign import Campaign
@@ -45,8 +46,9 @@ log = logging.getLogger(__name__)
 
 PIPELINE_VERSION = "1"
 #: Version of the centroid estimate, in every stage-1 result's inputs: a change re-measures stored epochs from
-#: their kept plans (2: the disc's normal fitted on the ranges alone, see lidar.centroid._plane).
-CENTROID_VERSION = "2"
+#: their kept plans (2: the disc's normal fitted on the ranges alone, see lidar.centroid._plane; 3: weak discs,
+#: 20-35 % of the beam's width, measured with a widened sigma instead of refused, see lidar.centroid.WEAK_RATIO).
+CENTROID_VERSION = "3"
 #: Profile fields added later: they enter the input hash only when they differ from their default.
 _LATER_PROFILE_FIELDS = {"max_tilt_deg": MAX_TILT_DEG, "kind": "line", "step_presets": [], "windowed": True,
                          "horizontal_direction": "ccw", "horizontal_zero_deg": 0.0, "vertical_reference": "zenith",
@@ -361,7 +363,7 @@ def _stale_reason(inp: EpochInputs, params: dict) -> Optional[str]:
         if res is None or res.stage != "measured":
             return "not measured yet"
         if res.inputs_hash != want:
-            if res.inputs_hash == _measure_hash(inp, plan_hash, version="1"):
+            if res.inputs_hash in (_measure_hash(inp, plan_hash, version=v) for v in ("1", "2")):
                 return "centroid estimate updated"
             return "inputs or parameters changed"
         return None
@@ -716,12 +718,12 @@ def _with_centroid_doubts(c: Campaign, lab: str, baseline: str, result: EpochDis
     def said(flag: str, where: str) -> str:
         return in_baseline(flag, baseline) if where else flag
 
-    def found_flags(label: str) -> dict:
+    def found_flags(label: str) -> dict:  # the sightings the displacement used (not a weak one left out of a join)
         out: dict = {}
-        for k in c.setups(label):
-            for t, v in c.centroids(label, k).items():
-                if v.found:
-                    out.setdefault(t, []).extend(f for f in v.flags if f not in out.get(t, []))
+        found = {k: {t: v for t, v in c.centroids(label, k).items() if v.found} for k in c.setups(label)}
+        for cents in without_weak_duplicates(found).values():
+            for t, v in cents.items():
+                out.setdefault(t, []).extend(f for f in v.flags if f not in out.get(t, []))
         return out
 
     sides = [(found_flags(lab), "")] + ([(found_flags(baseline), "b")] if baseline != lab else [])

@@ -177,3 +177,34 @@ def test_two_set_ups_a_side_give_the_displacements_of_one_frame():
         assert b.displacement_m == pytest.approx(a.displacement_m, abs=3 * b.sigma_m)
         assert set(b.budget) == {"noise", "frame", "scale", "bias", "drift"}
         assert b.sigma_m == pytest.approx(np.sqrt(sum(v ** 2 for v in b.budget.values())), rel=1e-9)
+
+
+def test_sightings_that_disagree_beyond_their_covariances_widen_what_the_join_hands_on():
+    """sigma0 > 1: the budget's sighting covariances scaled by sigma0**2 (the a posteriori variance factor), never shrunk."""
+    agree = join_setups("v1", _sides(END1, END2, noise=False))
+    assert agree.sigma0 < 1e-3
+    np.testing.assert_allclose(agree.sighting_cov[0], _cov(0.1))  # agreeing better than said: left as said
+    rng = np.random.default_rng(3)
+    shared = ["M7", "M8", "M9", "M10", "M11", "M12"]
+    offset = {t: rng.normal(0.0, 0.25e-3, 3) for t in shared}  # about twice the sightings' sigma
+    loose = join_setups("v1", _sides(END1, END2, noise=False, offset=offset))
+    assert loose.sigma0 > 1.3
+    np.testing.assert_allclose(loose.sighting_cov[0], _cov(0.1) * loose.sigma0 ** 2)
+    # the weights stay as measured: the positions' covariance is the gain over the unscaled sightings
+    assert np.trace(loose.covariance) == pytest.approx(np.trace(agree.covariance), rel=0.05)  # not sigma0**2 more
+
+
+def test_a_weak_sighting_is_left_out_where_another_set_up_sees_the_target_better():
+    from types import SimpleNamespace
+
+    from lidar.centroid import is_weak, resolved_share
+    from projects.processing.setups import without_weak_duplicates
+
+    weak = SimpleNamespace(flags=("grazing: the disc is 24 % of the beam's width",))
+    grazing = SimpleNamespace(flags=("second_bright_object", "grazing: the disc is 52 % of the beam's width"))
+    sharp = SimpleNamespace(flags=())
+    assert resolved_share(weak.flags) == pytest.approx(0.24) and is_weak(weak.flags)
+    assert not is_weak(grazing.flags) and resolved_share(sharp.flags) == 1.0
+    kept = without_weak_duplicates({1: {"M7": weak, "M13": weak, "M1": sharp},
+                                    2: {"M7": grazing, "M1": weak, "M14": weak}})
+    assert kept == {1: {"M13": weak, "M1": sharp}, 2: {"M7": grazing, "M14": weak}}  # weak alone: still measured
