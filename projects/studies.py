@@ -183,14 +183,18 @@ def score_campaign(camp: Path, field_dir: Path, labels: dict) -> StudyScore:
         if base not in by_label:
             return sc
         tb = by_label[base]
+        lay = c.layout()
+        deck = {t for t, g in zip(lay.ids, lay.groups) if g == "measurement"}
+        later = [e.label for e in c.epochs() if e.label != base and e.label in by_label]
+        sc.expected = len(deck) * len(later)  # every deck target of the layout in every later visit
+        sc.missing = sc.expected
         for r in c.displacements():
             if r.epoch == base or r.epoch not in by_label:
                 continue
-            sc.expected += 1
             t = by_label[r.epoch]
             if r.displacement_m is None or r.sigma_m is None or not math.isfinite(r.displacement_m):
-                sc.missing += 1
                 continue
+            sc.missing -= r.reflector in deck
             true = t.target(r.reflector).vertical_displacement_m - tb.target(r.reflector).vertical_displacement_m
             sc.errors_mm.append((r.displacement_m - true) * 1e3)
             sc.sigmas_mm.append(r.sigma_m * 1e3)
