@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from common.errors import InputError
-from lidar.centroid import grazing_variance, resolvability, rim_variance
+from lidar.centroid import grazing_covariance, resolvability, rim_variance
 from lidar.scanner_profile import ScannerProfile
 
 
@@ -55,7 +55,7 @@ def centroid_covariance(xyz_socs: ArrayLike, normal_socs: ArrayLike, n_points: f
         One-point range standard deviation, metres.
     profile : ScannerProfile, optional, keyword-only
         The instrument: with it, a disc narrower than the beam at this range and incidence gets the
-        grazing term processing adds (:func:`lidar.centroid.grazing_variance`). Default: none added.
+        grazing term processing adds (:func:`lidar.centroid.grazing_covariance`). Default: none added.
     """
     x = np.asarray(xyz_socs, dtype=np.float64)
     nrm = np.asarray(normal_socs, dtype=np.float64)
@@ -71,5 +71,6 @@ def centroid_covariance(xyz_socs: ArrayLike, normal_socs: ArrayLike, n_points: f
     if profile is not None:
         cos = abs(float(nrm @ view))
         q = resolvability(diameter_m, cos, float(np.linalg.norm(x)), profile)
-        cov += grazing_variance(diameter_m, cos, q) * np.outer(view, view)
+        cov += grazing_covariance(view, nrm, diameter_m=diameter_m, cos_incidence=cos,
+                                  footprint_m=float(profile.footprint_m(float(np.linalg.norm(x)))), ratio=q)
     return cov

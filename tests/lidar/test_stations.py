@@ -94,7 +94,7 @@ def test_surfaces_a_scan_saw_block_the_lines_of_sight_through_them(layout):
 
 
 def test_a_weak_targets_predicted_sigma_carries_the_grazing_term_processing_adds():
-    from lidar.centroid import grazing_variance, resolvability
+    from lidar.centroid import grazing_covariance, resolvability
     from lidar.prediction import centroid_covariance
 
     r, cos = 50.0, 0.12
@@ -104,8 +104,11 @@ def test_a_weak_targets_predicted_sigma_carries_the_grazing_term_processing_adds
     with_beam = centroid_covariance(xyz, normal, 1000, diameter_m=0.05, profile=VZ)
     q = resolvability(0.05, cos, r, VZ)
     assert 0.2 < q < 0.35
-    assert with_beam[0, 0] - plain[0, 0] == pytest.approx(grazing_variance(0.05, cos, q), rel=1e-9)
-    assert with_beam[1, 1] == pytest.approx(plain[1, 1]) and with_beam[2, 2] == pytest.approx(plain[2, 2])
+    extra = grazing_covariance(xyz / r, normal, diameter_m=0.05, cos_incidence=cos, footprint_m=VZ.footprint_m(r),
+                               ratio=q)
+    np.testing.assert_allclose(with_beam - plain, extra, rtol=1e-9, atol=1e-15)
+    assert normal @ extra @ normal < 0.02 * np.trace(extra)  # mostly along and across the disc, little in height
+    assert np.sqrt(extra[0, 0]) > 1e-3  # millimetres along the line of sight
 
 
 def test_one_end_of_a_three_span_bridge_the_far_span_is_not_planned_and_says_why():
