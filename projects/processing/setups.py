@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -379,7 +379,7 @@ class CorrectedVisit:
     visits: Mapping[int, str]  # set-up -> field-model visit label
 
 
-def without_weak_duplicates(setups: Mapping[int, Mapping[str, object]]) -> dict[int, dict[str, object]]:
+def without_weak_duplicates(setups: Mapping[int, Mapping[str, Any]]) -> dict[int, dict[str, Any]]:
     """Each set-up's centroids less the weak sightings of targets another set-up sees better.
 
     A weak sighting (a disc narrower than :data:`lidar.centroid.WEAK_RATIO` of the beam, :func:`lidar.centroid.is_weak`)
@@ -389,9 +389,8 @@ def without_weak_duplicates(setups: Mapping[int, Mapping[str, object]]) -> dict[
     """
     from lidar.centroid import is_weak
 
-    sharp = {t for cents in setups.values() for t, c in cents.items() if not is_weak(c.flags)}  # type: ignore[attr-defined]
-    return {k: {t: c for t, c in cents.items() if t not in sharp or not is_weak(c.flags)}  # type: ignore[attr-defined]
-            for k, cents in setups.items()}
+    sharp = {t for cents in setups.values() for t, c in cents.items() if not is_weak(c.flags)}
+    return {k: {t: c for t, c in cents.items() if t not in sharp or not is_weak(c.flags)} for k, cents in setups.items()}
 
 
 def corrected_side(label: str, setups: Mapping[int, Mapping[str, object]], model: FieldModel) -> CorrectedVisit:
