@@ -15,9 +15,6 @@ from typing import TYPE_CHECKING, Literal, Mapping, Optional, Sequence, overload
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
 from lidar.angles import AngularWindow, spherical_from_xyz
 from common.errors import InputError
@@ -147,6 +144,10 @@ def _not_found(reflector: str, n_window: int, threshold=float("nan"), sep=0.0, e
 
 
 def _clusters(pts: np.ndarray, eps: float) -> np.ndarray:
+    from scipy.sparse import coo_matrix  # here, not at import: the CLI's start-up stays short
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
     tree = cKDTree(pts)
     pairs = tree.query_pairs(eps, output_type="ndarray")
     n = len(pts)

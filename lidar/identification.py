@@ -15,7 +15,6 @@ from typing import Callable, Optional
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.optimize import linear_sum_assignment
 
 from common.errors import InputError, ProcessingError
 from lidar.layout import Layout
@@ -110,6 +109,8 @@ def _assign(pred: np.ndarray, det: np.ndarray, tol: float) -> list[tuple[int, in
     """Unique layout->detection pairs closer than ``tol`` (optimal assignment)."""
     d = np.linalg.norm(pred[:, None, :] - det[None, :, :], axis=2)
     cost = np.where(d <= tol, d, 1e6)
+    from scipy.optimize import linear_sum_assignment
+
     rows, cols = linear_sum_assignment(cost)
     return [(int(r), int(c), float(d[r, c])) for r, c in zip(rows, cols) if d[r, c] <= tol]
 

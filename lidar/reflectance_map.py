@@ -8,6 +8,7 @@ last columns are neighbours.
 """
 from __future__ import annotations
 
+import mmap
 import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
@@ -241,14 +242,42 @@ def binned_map(points: PointSource, *, step_deg: Optional[float] = None,
         idx = col.astype(np.int64)
         idx *= height
         idx += row  # column-major: a few scan lines are a compact index range
+        part = _Partial.of(idx, r, inten)  # binned outside the lock: both threads bin at once
         with lock:  # one chunk's temporaries per thread: memory stays bounded however fast the reads
-            acc.add(idx, r, inten)
+            acc.merge(part)
         return min(start + CHUNK, n)
 
     with ThreadPoolExecutor(max_workers=2) as pool:
         for done in pool.map(bin_chunk, starts):
             report(progress, 0.1 + 0.9 * done / n, "binning")
     return acc.finish(points.limits, height, width, row_lo, phi0, float(step_deg), full, n)
+
+
+@dataclass
+class _Partial:
+    """One chunk's points binned over the cell range they cover (``lo`` to ``lo + count.size``)."""
+
+    lo: int
+    count: np.ndarray
+    sum_i: np.ndarray
+    sum_r: np.ndarray
+    max_i: np.ndarray
+    i_lo: float
+    i_hi: float
+
+    @classmethod
+    def of(cls, idx: np.ndarray, r: np.ndarray, inten: np.ndarray) -> Optional["_Partial"]:
+        if idx.size == 0:
+            return None
+        lo = int(idx.min())
+        idx -= lo
+        span = int(idx.max()) + 1
+        max_i = np.full(span, -np.inf, np.float32)
+        np.maximum.at(max_i, idx, inten)
+        return cls(lo, np.bincount(idx, minlength=span).astype(np.int32),
+                   np.bincount(idx, weights=inten, minlength=span).astype(np.float32),
+                   np.bincount(idx, weights=r, minlength=span).astype(np.float32), max_i,
+                   float(inten.min()), float(inten.max()))
 
 
 class _Accumulator:
@@ -262,17 +291,18 @@ class _Accumulator:
         self.i_lo, self.i_hi = np.inf, -np.inf
 
     def add(self, idx: np.ndarray, r: np.ndarray, inten: np.ndarray) -> None:
-        if idx.size == 0:
+        self.merge(_Partial.of(idx, r, inten))
+
+    def merge(self, part: Optional["_Partial"]) -> None:
+        """Add one chunk's binned sums (:meth:`_Partial.of`) into the map's cells."""
+        if part is None:
             return
-        lo = int(idx.min())
-        idx -= lo
-        span = int(idx.max()) + 1
-        sl = slice(lo, lo + span)
-        self.count[sl] += np.bincount(idx, minlength=span).astype(np.int32)
-        self.sum_i[sl] += np.bincount(idx, weights=inten, minlength=span).astype(np.float32)
-        self.sum_r[sl] += np.bincount(idx, weights=r, minlength=span).astype(np.float32)
-        np.maximum.at(self.max_i[sl], idx, inten)
-        self.i_lo, self.i_hi = min(self.i_lo, float(inten.min())), max(self.i_hi, float(inten.max()))
+        sl = slice(part.lo, part.lo + part.count.size)
+        self.count[sl] += part.count
+        self.sum_i[sl] += part.sum_i
+        self.sum_r[sl] += part.sum_r
+        np.maximum(self.max_i[sl], part.max_i, out=self.max_i[sl])
+        self.i_lo, self.i_hi = min(self.i_lo, part.i_lo), max(self.i_hi, part.i_hi)
 
     def finish(self, limits, height, width, row_lo, phi0, step, full, n) -> ReflectanceMap:
         lo, hi = limits if limits is not None else (self.i_lo, self.i_hi)
@@ -388,13 +418,12 @@ class _LasPoints:
     """
 
     def __init__(self, path: Path):
-        import laspy
-
         from lidar.io.las_header import check_las_header
 
         facts = check_las_header(path)
-        with laspy.open(path) as reader:
-            self.dtype = reader.header.point_format.dtype()
+        # every LAS point format (0-10) starts X, Y, Z (int32) and intensity (uint16): only those are read
+        self.dtype = np.dtype({"names": ["X", "Y", "Z", "intensity"], "formats": ["<i4", "<i4", "<i4", "<u2"],
+                               "offsets": [0, 4, 8, 12], "itemsize": int(facts.record_length)})
         self.path, self.n, self.first = path, facts.point_count, facts.offset_to_points
         self.scales = np.asarray(facts.scales, np.float64)
         self.offsets = np.asarray(facts.offsets, np.float64)
@@ -427,17 +456,26 @@ class _LasPoints:
         return out[0], out[1], out[2]
 
     def strided(self, stride: int) -> tuple[np.ndarray, np.ndarray]:
-        """Every ``stride``-th point's angles: records read in chunks into one reused buffer (memory stays small)."""
-        step = max(1, CHUNK // stride) * stride
+        """Every ``stride``-th point's angles: records taken from a memory map a window at a time.
+
+        Only the sampled records are copied (a full read of each window would copy the whole file once more);
+        each window is unmapped before the next, so the mapped pages never grow past one window (64 MiB).
+        """
         size = self.dtype.itemsize
-        buf = np.empty(step * size, np.uint8)
+        step = max(1, (64 * 2**20 // size) // stride) * stride
         parts = []
-        for start in range(0, self.n, step):
-            m = min(step, self.n - start)
-            view = buf[: m * size]
-            if os.preadv(self.fd, [view], self.first + start * size) != view.size:  # type: ignore[list-item]
-                raise ScanFormatError(self.path, "truncated: the point records end early")
-            parts.append(view.view(self.dtype)[::stride].copy())
+        with open(self.path, "rb") as fh:
+            for start in range(0, self.n, step):
+                m = min(step, self.n - start)
+                base = self.first + start * size
+                page = base - base % mmap.ALLOCATIONGRANULARITY
+                try:
+                    with mmap.mmap(fh.fileno(), base - page + m * size, access=mmap.ACCESS_READ, offset=page) as mm:
+                        rec = np.frombuffer(mm, dtype=self.dtype, count=m, offset=base - page)
+                        parts.append(rec[::stride].copy())
+                        del rec
+                except (ValueError, OSError) as exc:  # the file is shorter than its header says
+                    raise ScanFormatError(self.path, f"truncated: the point records end early ({exc})") from None
         t, p, _ = _angles_of(*self._xyz32(np.concatenate(parts)))
         return t, p
 

@@ -131,7 +131,6 @@ def cmd_detect(args) -> int:
 
 
 def cmd_plan_file(args) -> int:
-    from lidar.figures import reflectance_map_figure, save_figure
     from lidar.pipeline import plan_from_coarse
 
     from lidar.scanner_catalogue import get_scanner
@@ -142,6 +141,8 @@ def cmd_plan_file(args) -> int:
                             budget_seconds=args.budget_min * 60.0, profile=profile)
     plan.save(args.out)
     if args.png:
+        from lidar.figures import reflectance_map_figure, save_figure
+
         save_figure(reflectance_map_figure(coarse.reflectance_map, detections=coarse.detections,
                                            identification=coarse.identification, rois=plan.rois,
                                            title=f"{args.scan.name}: plan"), args.png)

@@ -13,7 +13,6 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Optional
 
-import laspy
 import numpy as np
 
 from common.errors import ScanFormatError
@@ -31,8 +30,15 @@ LAS_CHUNK_POINTS = 262_144
 LAZ_CHUNK_POINTS = 1_000_000
 
 
+def _laspy():
+    """laspy, imported when a LAS/LAZ file is read through it (its import pulls requests in: a CLI start-up cost)."""
+    import laspy
+
+    return laspy
+
+
 def _laz_backend():
-    available = laspy.LazBackend.detect_available()
+    available = _laspy().LazBackend.detect_available()
     return available[0] if available else None
 
 
@@ -75,6 +81,7 @@ def read_las(path: str | os.PathLike, *, progress: Optional[ProgressCallback] = 
     """
     p = check_readable(path)
     facts = check_las_header(p)  # refuse lying headers before laspy allocates or loops on them
+    laspy = _laspy()
     try:
         with laspy.open(p, laz_backend=_laz_backend()) as reader:
             header = reader.header
@@ -218,6 +225,7 @@ def write_las(scan: Scan, path: str | os.PathLike, *, scale_m: Optional[float] =
         scale_m = 1e-5
         while extent / scale_m > 2.0e9:
             scale_m *= 10
+    laspy = _laspy()
     header = laspy.LasHeader(point_format=6, version="1.4")
     header.offsets = lo
     header.scales = np.array([scale_m] * 3)
