@@ -98,6 +98,10 @@ FLAG_NORMAL_FROM_EPOCH = _flag("normal_refitted_in_epoch", INFO, "deck normal re
                                "lidar.displacement")
 FLAG_REFERENCE_AMBIGUOUS = _flag("reference_change_ambiguous", WARNING, "the reference group changed and the "
                                  "moved target could not be singled out", "lidar.displacement")
+FLAG_REFERENCE_GEOMETRY_WEAK = _flag("reference_geometry_weak", PROBLEM, "the reference targets found (and the "
+                                     "deck's sideways stability) cannot fix one of the frame's rotations: all on "
+                                     "one line, or in one plane seen edge-on; the displacements are undetermined "
+                                     "about that axis", "lidar.displacement")
 
 # ---- the field error budget: scale, range walk, drift (lidar.systematic, projects.processing)
 FLAG_SCALE_UNDETERMINED = _flag("scale_undetermined", INFO, "the reference targets cannot determine the "

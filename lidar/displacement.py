@@ -44,6 +44,7 @@ from common.flags import (
     FLAG_MISSING_AT_BASELINE,
     FLAG_NORMAL_FROM_EPOCH,
     FLAG_REFERENCE_AMBIGUOUS,
+    FLAG_REFERENCE_GEOMETRY_WEAK,
     FLAG_REFERENCE_INCONSISTENT,
     FLAG_REFERENCE_MISSING,
     FLAG_REFERENCE_MOVED,
@@ -51,7 +52,7 @@ from common.flags import (
 from common.rigid import fit_rigid
 from lidar.displacement_result import Displacement, EpochDisplacements, Observation, ReferenceCheck, Sensitivity
 from lidar.pier_moves import resolve_ambiguous_move, verify_single_move
-from lidar.reference_motion import across_axis, fit_reference_motion
+from lidar.reference_motion import across_axis, fit_reference_motion, rotation_covariance
 
 #: 95 % quantile of chi-square with 2 degrees of freedom: the two deck normals agree within their noise.
 CHI2_2DOF_95 = 5.991
@@ -450,6 +451,9 @@ def _solve(base: dict, ep: dict, meas_ids: list, stable: list, checks, flags: li
     up = deck_normal(np.array([base[m].xyz for m in meas_base]))
     w_ref = reference_weights(base, ep, stable, up) if weighted else np.full(len(stable), 1.0 / len(stable))
     mw = motion_weights(base, ep, stable, meas, up, weighted)
+    weak = _weak_geometry(base, stable, meas_base, meas, up, mw) if mode != "epoch" else None
+    if weak:
+        flags.append(weak)
     involved_b = sorted(set(stable) | set(meas_base))
     involved_e = sorted(set(stable) | set(meas))
     x0 = np.concatenate([base[k].xyz for k in involved_b] + [ep[k].xyz for k in involved_e])
@@ -495,13 +499,51 @@ def _solve(base: dict, ep: dict, meas_ids: list, stable: list, checks, flags: li
             frame = float(np.sqrt(max(var[i] - own[i] + normal_var[i], 0.0)))
             al = (float(along0[i]), float(np.sqrt(max(var_al[i], 0.0)))) if var_al is not None else (np.nan, np.nan)
             out.append(Displacement(m, float(u0[i]), float(np.hypot(noise, frame)), float(hk[i]), float(h1[i]),
-                                    along_m=al[0], along_sigma_m=al[1], budget={"noise": noise, "frame": frame}))
+                                    (weak,) if weak else (), along_m=al[0], along_sigma_m=al[1],
+                                    budget={"noise": noise, "frame": frame}))
         else:
             flag = FLAG_MISSING_AT_BASELINE if m not in base else FLAG_MISSING
             out.append(Displacement(m, float("nan"), float("nan"), float("nan"), float("nan"), (flag,)))
     inputs = tuple(("baseline", k) for k in involved_b) + tuple(("epoch", k) for k in involved_e)
     sens = Sensitivity(tuple(meas), inputs, jac, jac_al if jac_al is not None else np.full_like(jac, np.nan))
     return EpochDisplacements(tuple(out), tuple(stable), checks, gk, sk, mode, tuple(flags), sens)
+
+
+#: A rotation of the frame motion whose sigma moves some deck target's height by more than this (m) is
+#: undetermined: ``reference_geometry_weak`` (a problem) on the epoch and on every row.
+WEAK_GEOMETRY_M = 0.005
+
+
+def _weak_geometry(base: Mapping[str, Observation], stable: Sequence[str], meas_base: Sequence[str],
+                   meas: Sequence[str], up: np.ndarray, mw: MotionWeights) -> Optional[str]:
+    """The ``reference_geometry_weak`` flag when a rotation of the frame motion is not fixed, else None.
+
+    The motion's rotation covariance (:func:`lidar.reference_motion.rotation_covariance`) along each of its
+    axes, times the largest height lever a deck target has about that axis through the reference targets.
+    """
+    ref = np.array([base[r].xyz for r in stable])
+    deck_ids = [m for m in mw.deck_ids if m in base]
+    cov = rotation_covariance(ref, mw.ref_var, deck_base=np.array([base[m].xyz for m in deck_ids]) if deck_ids
+                              else None, deck_var_across=mw.deck_var, across_base=mw.across)
+    vals, vecs = np.linalg.eigh(cov)
+    centre = ref.mean(axis=0)
+    levers = np.array([base[m].xyz for m in meas_base]) - centre
+    worst, axis = 0.0, None
+    for k in range(3):
+        v = vecs[:, k]
+        effect = float(np.sqrt(max(vals[k], 0.0)) * np.max(np.abs(np.cross(v, levers) @ up)))
+        if effect > worst:
+            worst, axis = effect, v
+    if worst <= WEAK_GEOMETRY_M or axis is None:
+        return None
+    if abs(axis @ up) > 0.7:
+        name = "heading about the vertical"
+    elif mw.across is not None and abs(axis @ mw.across) > 0.7:
+        name = "pitch about the across-span axis"
+    else:
+        name = "roll about the bridge axis"
+    how = "undetermined" if worst > 1.0 else f"known only to {worst * 1e3:.0f} mm on the deck"
+    return f"{FLAG_REFERENCE_GEOMETRY_WEAK}: {name} {how} ({len(stable)} reference targets)"
 
 
 def _jacobians(f: Callable, x0: np.ndarray, n: int, with_along: bool, step: float = 1e-6

@@ -121,3 +121,39 @@ def fit_reference_motion(ref_base: np.ndarray, ref_epoch: np.ndarray, ref_var: n
         rot = _rotvec_matrix(step[:3]) @ rot
         t = t + step[3:]
     return rot, t + c - rot @ c
+
+
+def rotation_covariance(ref_base: np.ndarray, ref_var: np.ndarray, *, deck_base: Optional[np.ndarray] = None,
+                        deck_var_across: Optional[np.ndarray] = None,
+                        across_base: Optional[np.ndarray] = None) -> np.ndarray:
+    """(3, 3) covariance (rad^2) of the motion's rotation that :func:`fit_reference_motion` would fit.
+
+    From the fit's normal matrix at the identity (the translation marginalised); infinite along a rotation
+    the observations cannot fix (reference targets all on one line, with no deck term to hold the roll
+    about it). Same parameters as :func:`fit_reference_motion`.
+    """
+    ref_base = np.asarray(ref_base, dtype=np.float64)
+    w_ref = 1.0 / np.maximum(np.asarray(ref_var, dtype=np.float64), 1e-16)
+    c = (w_ref @ ref_base) / w_ref.sum()
+    rows = [np.hstack([-_skews(ref_base - c).reshape(-1, 3), np.tile(np.eye(3), (len(ref_base), 1))])]
+    weights = [np.repeat(w_ref, 3)]
+    if across_base is not None and deck_base is not None and len(deck_base) >= 1:
+        a = np.asarray(across_base, dtype=np.float64)
+        qd = np.asarray(deck_base, dtype=np.float64) - c
+        rows.append(np.hstack([np.cross(qd, a), np.tile(a, (len(qd), 1))]))
+        weights.append(1.0 / np.maximum(np.asarray(deck_var_across, dtype=np.float64), 1e-16))
+    jac, w = np.vstack(rows), np.concatenate(weights)
+    normal = jac.T @ (jac * w[:, None])
+    vals, vecs = np.linalg.eigh(normal)
+    inv = np.where(vals > vals.max() * 1e-13, 1.0 / np.maximum(vals, 1e-300), np.inf)
+    full = (vecs * inv) @ vecs.T if np.all(np.isfinite(inv)) else None
+    if full is not None:
+        return full[:3, :3]
+    out = np.zeros((3, 3))  # a null direction: infinite along its rotation part
+    for k in np.flatnonzero(~np.isfinite(inv)):
+        r = vecs[:3, k]
+        if np.linalg.norm(r) > 1e-6:
+            r = r / np.linalg.norm(r)
+            out += np.outer(r, r) * 1e30
+    return out
+

@@ -155,3 +155,34 @@ def test_cable_tie_beside_a_reference_target_does_not_bias_displacements():
         assert abs(db.displacement_m - da.displacement_m) < 0.00005
         assert abs(db.displacement_m - true_u(tie[1], base[1], db.reflector)) < 0.0003
     assert "second_bright_object" in tie[0]["R1"].flags
+
+
+def _plane_visit(refs, deck, *, rng, sag_m=0.0, sigma_m=1e-4):
+    cov = np.eye(3) * sigma_m ** 2
+    obs = {k: Observation(np.asarray(x, float) + rng.normal(0, sigma_m, 3), cov) for k, x in refs.items()}
+    obs.update({k: Observation(np.asarray(x, float) + np.array([0, 0, sag_m]) + rng.normal(0, sigma_m, 3), cov)
+                for k, x in deck.items()})
+    return obs
+
+
+def test_a_reference_geometry_that_cannot_fix_a_rotation_is_a_problem_on_every_row():
+    """Reference targets on one line and a deck in their plane: the roll about that line is free."""
+    from common.flags import FLAG_REFERENCE_GEOMETRY_WEAK, PROBLEM, code, severity
+
+    rng = np.random.default_rng(2)
+    refs = {"R1": (0.0, -1.5, 2.0), "R2": (0.9, -1.5, 2.0), "R3": (39.1, -1.5, 2.0), "R4": (40.0, -1.5, 2.0)}
+    deck = {f"M{k}": (x, y, 2.0) for k, (x, y) in enumerate([(16, -3), (20, -3), (24, -3), (16, 3), (20, 3),
+                                                             (24, 3)], start=1)}
+    groups = {**{k: "reference" for k in refs}, **{k: "measurement" for k in deck}}
+    res = compute_displacements(_plane_visit(refs, deck, rng=rng), _plane_visit(refs, deck, rng=rng, sag_m=-0.004),
+                                groups, normal_mode="reference")
+    weak = [f for f in res.flags if code(f) == FLAG_REFERENCE_GEOMETRY_WEAK]
+    assert weak and severity(weak[0]) == PROBLEM and "roll about the bridge axis" in weak[0]
+    assert all(any(code(f) == FLAG_REFERENCE_GEOMETRY_WEAK for f in d.flags) for d in res.displacements)
+    # the same targets with the pier targets at two heights and the deck above them: nothing to say
+    refs_ok = {"R1": (0.0, -1.5, 2.0), "R2": (0.0, 1.5, 5.0), "R3": (40.0, 1.5, 5.0), "R4": (40.0, -1.5, 2.0)}
+    deck_ok = {k: (x, y, 7.0) for k, (x, y, _) in deck.items()}
+    res = compute_displacements(_plane_visit(refs_ok, deck_ok, rng=rng),
+                                _plane_visit(refs_ok, deck_ok, rng=rng, sag_m=-0.004), groups, normal_mode="reference")
+    assert not any(code(f) == FLAG_REFERENCE_GEOMETRY_WEAK for f in res.flags)
+    assert all(abs(d.displacement_m + 0.004) < 4 * d.sigma_m for d in res.displacements)
