@@ -17,7 +17,7 @@ from common.errors import InputError
 from lidar.guided_detection import bright_near, recover_predicted, seen_through
 from lidar.identification import MAX_TILT_DEG, Identification, identify_reflectors
 from lidar.layout import Layout, target_normals
-from lidar.plan import PlanTarget, ScanPlan, incidence_from_map, plan_fine_scans
+from lidar.plan import PlanTarget, ScanPlan, coarse_step_needed_deg, incidence_from_map, plan_fine_scans
 from common.progress import ProgressCallback, report, scaled
 from lidar.reflectance_map import ReflectanceMap, reflectance_map
 from lidar.scan import Scan
@@ -116,8 +116,24 @@ def plan_from_coarse(coarse: CoarseAnalysis, layout: Layout, *, epoch: str = "",
     inc = layout_incidence(coarse.identification, layout, up_layout=up_layout)
     targets = [PlanTarget(m.id, m.group, m.xyz_socs, float(layout.diameters_m[layout.index(m.id)]), m.predicted,
                           max(inc[m.id], 0.05)) for m in coarse.identification.matches]
-    return plan_fine_scans(targets, epoch=epoch, profile=profile, min_points=min_points,
+    plan = plan_fine_scans(targets, epoch=epoch, profile=profile, min_points=min_points,
                            budget_seconds=budget_seconds, margin_m=margin_m, closure=closure)
+    note = _coarse_step_note(targets, plan, coarse.reflectance_map.step_deg)
+    return replace(plan, warnings=plan.warnings + (note,)) if note else plan
+
+
+def _coarse_step_note(targets, plan: ScanPlan, step_deg: float) -> Optional[str]:
+    """What the coarse scan's step could not resolve: the planned targets it did not find and the step they need."""
+    planned = {r.reflector for r in plan.rois}
+    short = {t.id: coarse_step_needed_deg(t.diameter_m, t.incidence_cos or 1.0, float(np.linalg.norm(t.xyz_socs)))
+             for t in targets if t.predicted and t.id in planned}
+    short = {k: v for k, v in short.items() if v < step_deg}
+    if not short:
+        return None
+    need = min(short.values())
+    return (f"the coarse scan's cell ({step_deg:.3f} deg) is wider than {', '.join(sorted(short))} need(s) to be "
+            f"found (their windows come from the layout alone): scan the coarse at {need:.3f} deg or finer from "
+            "this station to find them")
 
 
 @dataclass(frozen=True, eq=False)

@@ -401,6 +401,16 @@ def _measurable(targets: Sequence[PlanTarget], profile: ScannerProfile) -> tuple
     return keep, [(t, why) for _, t, why in weak], skipped
 
 
+def coarse_step_needed_deg(diameter_m: float, cos_incidence: float, range_m: float) -> float:
+    """The coarsest coarse-scan step (degrees) that puts two samples across a disc's short projected axis.
+
+    A coarse scan finds a target from the samples on its disc; at grazing incidence the disc is
+    ``D cos(incidence)`` wide: a 50 mm disc at 80 deg from 20 m spans 0.025 deg, so a 0.05 deg coarse scan
+    misses it about half the time (its window then comes from the layout alone).
+    """
+    return math.degrees(diameter_m * max(float(cos_incidence), 0.0) / max(float(range_m), 1e-3)) / 2.0
+
+
 def _weak_note(why: str) -> str:
     return f"weak: {why}; measured with a widened sigma and flagged grazing, planned in the time the budget leaves"
 

@@ -28,7 +28,7 @@ from lidar.systematic.budget import corrected_displacements
 from lidar.systematic.range_walk import RangeWalkModel
 from common.errors import InputError, SurveyError
 from lidar.layout import Layout, bridge_axis, target_normals
-from lidar.plan import PlanTarget, plan_fine_scans
+from lidar.plan import PlanTarget, coarse_step_needed_deg, plan_fine_scans
 from lidar.prediction import centroid_covariance
 from common.progress import ProgressCallback, report
 from lidar.scanner_profile import ScannerProfile
@@ -57,6 +57,10 @@ class StationPrediction:
         Targets measured only at grazing incidence from here (narrower than
         :data:`lidar.centroid.WEAK_RATIO` of the beam): planned in the time left, with a widened sigma.
         Those narrower than :data:`lidar.centroid.UNRESOLVED_RATIO` are in ``hidden`` ("not measured").
+    coarse_step_deg : float
+        The coarsest coarse-scan step that resolves every target the plan would measure well from here (the
+        weak ones' windows come from the layout; :func:`lidar.plan.coarse_step_needed_deg`; NaN when none),
+        degrees.
     """
 
     xyz_layout: tuple[float, ...]
@@ -67,6 +71,7 @@ class StationPrediction:
     reasons: Mapping[str, str] = field(default_factory=dict)
     usable: bool = True
     weak: tuple[str, ...] = ()
+    coarse_step_deg: float = float("nan")
 
     @property
     def worst_sigma_mm(self) -> float:
@@ -86,7 +91,8 @@ class StationPrediction:
                 "worst_sigma_mm": None if math.isinf(worst) else round(float(worst), 4),
                 "predicted_sigma_mm": {k: round(float(v), 4) for k, v in self.predicted_sigma_mm.items()},
                 "hidden": list(self.hidden), "hidden_reasons": dict(self.reasons),
-                "weak": list(self.weak), "points": dict(self.points)}
+                "weak": list(self.weak), "points": dict(self.points),
+                "coarse_step_deg": None if not math.isfinite(self.coarse_step_deg) else round(self.coarse_step_deg, 4)}
 
 
 def _level_rotation(up: np.ndarray) -> np.ndarray:
@@ -275,6 +281,9 @@ def predict_station(layout: Layout, station_layout: Sequence[float], *, profile:
         hidden.append(tid)
         reasons[tid] = f"not measured: {why}"
     weak = tuple(r.reflector for r in plan.rois if not r.closure and any(n.startswith("weak:") for n in r.notes))
+    planned = {r.reflector for r in plan.rois} - set(weak)  # a weak target's window comes from the layout anyway
+    step = min((coarse_step_needed_deg(t.diameter_m, t.incidence_cos or 1.0, float(np.linalg.norm(t.xyz_socs)))
+                for t in targets if t.id in planned), default=float("nan"))
     epoch, points = {}, {}
     by_id = {t.id: t for t in targets}
     for roi in plan.rois:
@@ -301,10 +310,10 @@ def predict_station(layout: Layout, station_layout: Sequence[float], *, profile:
                                       epoch_label=label, expected_sigmas=True)
     except SurveyError:
         return StationPrediction(tuple(float(v) for v in s), plan.total_seconds, {}, tuple(hidden), points, reasons,
-                                 usable=False, weak=weak)
+                                 usable=False, weak=weak, coarse_step_deg=step)
     sig = {d.reflector: d.sigma_m * 1000.0 for d in res.displacements if np.isfinite(d.sigma_m)}
     return StationPrediction(tuple(float(v) for v in s), plan.total_seconds, sig, tuple(hidden), points, reasons,
-                             usable=bool(sig), weak=weak)
+                             usable=bool(sig), weak=weak, coarse_step_deg=step)
 
 
 def _carry(base: Mapping[str, _Sighted], epoch: Mapping[str, _Sighted]) -> dict[str, np.ndarray]:

@@ -196,9 +196,9 @@ def cmd_stations(args) -> int:
     if args.png is not None:
         save_figure(station_map_figure(advice, layout), args.png)
     rows = [{"x": s.xyz_layout[0], "y": s.xyz_layout[1], "z": s.xyz_layout[2], "minutes": s.seconds / 60,
-             "worst_sigma_mm": s.worst_sigma_mm, "hidden": list(s.hidden), "weak": list(s.weak)}
-            for s in advice.stations[:args.top]]
-    table(rows, ["x", "y", "z", "minutes", "worst_sigma_mm", "hidden", "weak"])
+             "worst_sigma_mm": s.worst_sigma_mm, "coarse_step_deg": s.coarse_step_deg, "hidden": list(s.hidden),
+             "weak": list(s.weak)} for s in advice.stations[:args.top]]
+    table(rows, ["x", "y", "z", "minutes", "worst_sigma_mm", "coarse_step_deg", "hidden", "weak"])
     if pair is not None:
         a, b = pair.first.xyz_layout, pair.second.xyz_layout
         worst = "-" if math.isinf(pair.worst_sigma_mm) else f"{pair.worst_sigma_mm:.3f}"

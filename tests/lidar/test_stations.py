@@ -116,3 +116,27 @@ def test_one_end_of_a_three_span_bridge_the_far_span_is_not_planned_and_says_why
     p = predict_station(lay, (12.0, -11.0, 1.5), profile=VZ)
     far = [t for t, x in zip(lay.ids, lay.xyz) if x[0] > 80.0 and t.startswith("M")]
     assert far and all(t not in p.predicted_sigma_mm for t in far)
+
+
+def test_each_station_says_the_coarse_step_its_targets_need(layout):
+    from lidar.plan import coarse_step_needed_deg
+
+    near = predict_station(layout, (20.0, -9.0, 1.5), profile=VZ)
+    far = predict_station(layout, (-15.0, -20.0, 1.5), profile=VZ)
+    assert 0 < far.coarse_step_deg < near.coarse_step_deg < 0.2
+    assert far.to_json()["coarse_step_deg"] == pytest.approx(far.coarse_step_deg, abs=1e-4)
+    # a 50 mm disc at 80 deg incidence from 20 m spans 0.025 deg: two samples need 0.0124 deg
+    assert coarse_step_needed_deg(0.05, math.cos(math.radians(80)), 20.0) == pytest.approx(0.0124, abs=2e-4)
+
+
+def test_the_plan_says_which_undetected_targets_the_coarse_step_could_not_resolve():
+    from lidar.pipeline import _coarse_step_note
+    from lidar.plan import PlanTarget, plan_fine_scans
+
+    targets = [PlanTarget("R1", "reference", (10.0, 0.0, 1.0), 0.05, False, 0.9),
+               PlanTarget("M1", "measurement", (30.0, 1.0, 5.0), 0.05, True, 0.15),
+               PlanTarget("M2", "measurement", (12.0, 2.0, 5.0), 0.05, True, 0.9)]
+    plan = plan_fine_scans(targets)
+    note = _coarse_step_note(targets, plan, 0.05)
+    assert note is not None and "M1" in note and "M2" not in note and "R1" not in note
+    assert _coarse_step_note(targets, plan, 0.005) is None
