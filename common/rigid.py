@@ -187,11 +187,24 @@ def matrix_from_rt(rotation: ArrayLike, translation: ArrayLike) -> np.ndarray:
     return m
 
 
+def rotation_from_rotvec(rotvec: ArrayLike) -> np.ndarray:
+    """(3, 3) rotation matrix of a rotation vector (axis * angle, rad), by Rodrigues' formula.
+
+    Plain numpy: the adjustments call it in their inner loops, and importing scipy.spatial for it costs
+    every command 0.3 s of start-up.
+    """
+    w = np.asarray(rotvec, dtype=np.float64).reshape(3)
+    theta = float(np.linalg.norm(w))
+    k = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    if theta < 1e-15:
+        return np.eye(3) + k
+    k /= theta
+    return np.eye(3) + np.sin(theta) * k + (1.0 - np.cos(theta)) * (k @ k)
+
+
 def matrix_from_rotvec(rotvec: ArrayLike, translation: ArrayLike) -> np.ndarray:
     """4x4 transform from a rotation vector (axis * angle, rad) and a translation (m)."""
-    from scipy.spatial.transform import Rotation
-
-    return matrix_from_rt(Rotation.from_rotvec(np.asarray(rotvec, dtype=float)).as_matrix(), translation)
+    return matrix_from_rt(rotation_from_rotvec(rotvec), translation)
 
 
 def invert_matrix(m: np.ndarray) -> np.ndarray:

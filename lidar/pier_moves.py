@@ -24,7 +24,6 @@ from dataclasses import replace
 from typing import Callable, Mapping, Optional
 
 import numpy as np
-from scipy.stats import chi2 as chi2_dist
 
 from common.flags import FLAG_REFERENCE_AMBIGUOUS, FLAG_REFERENCE_MOVED
 from lidar.displacement_result import EpochDisplacements
@@ -36,6 +35,12 @@ CONSISTENCY_RATIO = 3.0
 #: Deck targets whose across-span positions differ by less than this are on one girder line (m).
 LINE_TOLERANCE_M = 0.5
 
+
+def _chi2_99(dof: float) -> float:
+    """The chi-square distribution's 99 % quantile (scipy.stats imported here: it costs every command 1 s)."""
+    from scipy.stats import chi2
+
+    return float(chi2.ppf(0.99, dof))
 
 def _span_coordinates(base: Mapping, groups: Mapping[str, str], meas: list[str]):
     """Xi in [0, 1] of each deck target between the piers, and its girder line, from the baseline geometry."""
@@ -145,7 +150,7 @@ def _decisive(fits: list):
         return None
     fits = sorted(fits, key=lambda f: f[0])
     c1, dof1, best = fits[0]
-    if c1 > chi2_dist.ppf(0.99, dof1):
+    if c1 > _chi2_99(dof1):
         return None
     if len(fits) > 1 and fits[1][0] < DECISIVE_RATIO * max(c1, dof1):
         return None
@@ -165,7 +170,7 @@ def verify_single_move(result: EpochDisplacements, base: Mapping, groups: Mappin
         return result
     named = moved[0]
     shape = deck_shape_chi2(result, base, groups)
-    if shape is None or shape[0] <= chi2_dist.ppf(0.99, shape[1]):
+    if shape is None or shape[0] <= _chi2_99(shape[1]):
         return result
     present = list(result.reference_ids) + [named]
     limit = 2.0 * consistency(list(result.reference_ids)) + 2e-4

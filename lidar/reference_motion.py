@@ -20,15 +20,11 @@ from typing import Optional
 
 import numpy as np
 
-from common.rigid import fit_rigid
+from common.rigid import fit_rigid, rotation_from_rotvec
 
 #: The deck targets must spread at least this far along the span (m) for its axis to be known;
 #: below this the deck term is left out.
 MIN_ALONG_SPREAD_M = 1.0
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
 def _skews(v: np.ndarray) -> np.ndarray:
@@ -37,14 +33,6 @@ def _skews(v: np.ndarray) -> np.ndarray:
     out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
     out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
     return out
-
-
-def _rotvec_matrix(w: np.ndarray) -> np.ndarray:
-    theta = float(np.linalg.norm(w))
-    if theta < 1e-15:
-        return np.eye(3) + _skew(w)
-    k = _skew(w / theta)
-    return np.eye(3) + np.sin(theta) * k + (1 - np.cos(theta)) * (k @ k)
 
 
 def across_axis(deck_xyz: np.ndarray, up: np.ndarray) -> Optional[np.ndarray]:
@@ -118,7 +106,7 @@ def fit_reference_motion(ref_base: np.ndarray, ref_epoch: np.ndarray, ref_var: n
         rhs = np.concatenate([res_r, res_d])
         sw = np.sqrt(np.concatenate([np.repeat(w_ref, 3), w_deck]))
         step, *_ = np.linalg.lstsq(jac * sw[:, None], rhs * sw, rcond=None)
-        rot = _rotvec_matrix(step[:3]) @ rot
+        rot = rotation_from_rotvec(step[:3]) @ rot
         t = t + step[3:]
     return rot, t + c - rot @ c
 

@@ -34,7 +34,7 @@ import numpy as np
 
 from common.errors import ProcessingError
 from common.flags import FLAG_SETUP_JOIN_MISFIT, FLAG_SETUP_NOT_JOINED
-from common.rigid import fit_rigid
+from common.rigid import fit_rigid, rotation_from_rotvec
 from lidar.displacement import compute_displacements
 from lidar.displacement_result import EpochDisplacements, Observation
 from lidar.systematic.adjustment import ARCSEC, FieldModel
@@ -64,15 +64,6 @@ def visit_label(label: str, setup: int) -> str:
 
 def _skew(v: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
-def _rotvec(w: np.ndarray) -> np.ndarray:
-    """Rotation matrix of a rotation vector (Rodrigues)."""
-    theta = float(np.linalg.norm(w))
-    if theta < 1e-15:
-        return np.eye(3) + _skew(w)
-    k = _skew(w / theta)
-    return np.eye(3) + math.sin(theta) * k + (1.0 - math.cos(theta)) * (k @ k)
 
 
 def spread_m(xyz: np.ndarray) -> float:
@@ -260,7 +251,7 @@ class _Join:
         dx = n_inv @ f.T @ w @ r
         nm = 6 * len(self.local)
         for k, c in self.local.items():
-            self.rot[k] = _rotvec(dx[6 * c:6 * c + 3]) @ self.rot[k]
+            self.rot[k] = rotation_from_rotvec(dx[6 * c:6 * c + 3]) @ self.rot[k]
             self.tr[k] = self.tr[k] + dx[6 * c + 3:6 * c + 6]
         self.x = self.x + dx[nm:].reshape(-1, 3)
         return n_inv, f, w, r
