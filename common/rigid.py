@@ -204,7 +204,9 @@ def rotation_from_rotvec(rotvec: ArrayLike) -> np.ndarray:
 
 def matrix_from_rotvec(rotvec: ArrayLike, translation: ArrayLike) -> np.ndarray:
     """4x4 transform from a rotation vector (axis * angle, rad) and a translation (m)."""
-    return matrix_from_rt(rotation_from_rotvec(rotvec), translation)
+    from scipy.spatial.transform import Rotation
+
+    return matrix_from_rt(Rotation.from_rotvec(np.asarray(rotvec, dtype=float)).as_matrix(), translation)
 
 
 def invert_matrix(m: np.ndarray) -> np.ndarray:

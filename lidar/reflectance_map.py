@@ -225,9 +225,7 @@ def binned_map(points: PointSource, *, step_deg: Optional[float] = None,
     acc = _Accumulator(height * width)
     starts = list(range(0, n, CHUNK))
 
-    lock = threading.Lock()
-
-    def bin_chunk(start: int) -> int:
+    def bin_chunk(start: int) -> Optional["_Partial"]:
         t, p, r, inten = points.chunk(start, min(start + CHUNK, n))
         p -= np.float32(phi0)
         p[p < 0] += np.float32(360.0)
@@ -242,14 +240,17 @@ def binned_map(points: PointSource, *, step_deg: Optional[float] = None,
         idx = col.astype(np.int64)
         idx *= height
         idx += row  # column-major: a few scan lines are a compact index range
-        part = _Partial.of(idx, r, inten)  # binned outside the lock: both threads bin at once
-        with lock:  # one chunk's temporaries per thread: memory stays bounded however fast the reads
-            acc.merge(part)
-        return min(start + CHUNK, n)
+        return _Partial.of(idx, r, inten)  # both threads bin at once
 
+    # the chunks' sums are added in file order, whichever thread finishes first: float32 sums in another
+    # order round differently, and the map (and every window planned from it) would depend on the timing;
+    # a few chunks at a time keep the memory bounded however fast the reads
     with ThreadPoolExecutor(max_workers=2) as pool:
-        for done in pool.map(bin_chunk, starts):
-            report(progress, 0.1 + 0.9 * done / n, "binning")
+        for k in range(0, len(starts), 4):
+            batch = starts[k:k + 4]
+            for part in pool.map(bin_chunk, batch):
+                acc.merge(part)
+            report(progress, 0.1 + 0.9 * min(batch[-1] + CHUNK, n) / n, "binning")
     return acc.finish(points.limits, height, width, row_lo, phi0, float(step_deg), full, n)
 
 

@@ -31,7 +31,6 @@ from typing import Mapping, Optional, Sequence
 import numpy as np
 
 from common.errors import InputError
-from common.rigid import rotation_from_rotvec
 from lidar.displacement import deck_normal
 from lidar.reference_motion import across_axis
 from lidar.systematic.range_walk import (STEP_PROXIES, RangeWalkModel, candidate_bases, design, refine_thresholds,
@@ -149,7 +148,9 @@ def _skew(v: np.ndarray) -> np.ndarray:
 
 
 def _drift_rotation(omega_arcsec_h: np.ndarray, dt_s: float) -> np.ndarray:
-    return rotation_from_rotvec(np.asarray(omega_arcsec_h) * ARCSEC * dt_s / 3600.0)
+    from scipy.spatial.transform import Rotation  # here: importing scipy.spatial costs a command 0.3 s
+
+    return Rotation.from_rotvec(np.asarray(omega_arcsec_h) * ARCSEC * dt_s / 3600.0).as_matrix()
 
 
 def _skews(v: np.ndarray) -> np.ndarray:
@@ -343,7 +344,9 @@ class _Problem:
 
     def apply_step(self, v: _Visit, dx_local: np.ndarray) -> None:
         if not v.is_base:
-            v.q = rotation_from_rotvec(dx_local[0:3] * 1e-3) @ v.q
+            from scipy.spatial.transform import Rotation
+
+            v.q = Rotation.from_rotvec(dx_local[0:3] * 1e-3).as_matrix() @ v.q
             v.d = v.d + dx_local[3:6]
             v.kappa_ppm += float(dx_local[6])
         if v.timed:

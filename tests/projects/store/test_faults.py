@@ -465,8 +465,13 @@ def test_a_damaged_schema_version_is_one_line_and_repair_sets_it_from_the_tables
 
 
 # ------------------------------------------------------------------------------------------ a stale lock
+#: A writer that takes the campaign's lock and holds it until it is killed (a command may be too quick to catch).
+HOLD_LOCK = ("import sys, time\nfrom projects.store.campaign import Campaign\n"
+             "c = Campaign.open(sys.argv[1])\ntime.sleep(120)\n")
+
+
 def test_a_stale_lock_left_by_a_killed_writer_blocks_nobody(processed_copy, capsys):
-    proc = subprocess.Popen(CLI + ["settings", str(processed_copy), "min_points", "850"], cwd=ROOT,
+    proc = subprocess.Popen([sys.executable, "-c", HOLD_LOCK, str(processed_copy)], cwd=ROOT,
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     lock = processed_copy / ".lock"
     deadline = time.time() + 30
