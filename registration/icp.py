@@ -1,9 +1,10 @@
-"""ICP refinement of a registration on stable parts of the scene (Open3D point-to-plane, robust kernel)."""
+"""ICP refinement of a registration on stable parts of the scene (point-to-plane, Tukey kernel).
+
+Our own few dozen lines on scipy's KD-tree rather than Open3D's: the same algorithm, and importing Open3D
+(its plotting stack with it) cost every comparison a second.
+"""
 from __future__ import annotations
 
-import contextlib
-import io
-import re
 from dataclasses import dataclass
 from typing import Optional, Sequence
 
@@ -11,12 +12,10 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from common.progress import ProgressCallback, report
+from common.rigid import rotation_from_rotvec
 from common.validation import require_points
 from registration.errors import InputError, RegistrationError
 from registration.transform import Transform
-
-_ITER = re.compile(r"ICP Iteration #(\d+): Fitness ([0-9.]+), RMSE ([0-9.eE+-]+)")
-
 
 @dataclass(frozen=True, eq=False)
 class IcpResult:
@@ -31,7 +30,7 @@ class IcpResult:
     fitness : float
         Share of the source points (finest level) with a correspondence.
     rms_m : float
-        Open3D's inlier RMSE at the finest level: the RMS *point-to-point* distance between corresponding
+        The inlier RMSE at the finest level: the RMS *point-to-point* distance between corresponding
         downsampled points, metres (of the order of the voxel size, not a registration error).
     plane_rms_m : float
         RMS point-to-plane distance of the same correspondences after the fit, metres (the stable parts'
@@ -58,18 +57,6 @@ class IcpResult:
     plane_rms_m: float = float("nan")
 
 
-@contextlib.contextmanager
-def _capture_stdout():
-    """Collect Open3D's debug log of each ICP iteration (its Python module prints through sys.stdout)."""
-    buf = io.StringIO()
-    box = {}
-    try:
-        with contextlib.redirect_stdout(buf):
-            yield box
-    finally:
-        box["text"] = buf.getvalue()
-
-
 def check_clouds(source_xyz: ArrayLike, target_xyz: ArrayLike, what: str) -> tuple[np.ndarray, np.ndarray]:
     """Source and target as float64 (N, 3) arrays of at least 100 finite points, or InputError."""
     out = []
@@ -78,17 +65,74 @@ def check_clouds(source_xyz: ArrayLike, target_xyz: ArrayLike, what: str) -> tup
     return out[0], out[1]
 
 
-def _cloud(xyz: np.ndarray):
-    import open3d as o3d
+def voxel_centroids(xyz: np.ndarray, voxel_m: float) -> np.ndarray:
+    """The mean of the points in each occupied cube of ``voxel_m`` (the downsampling ICP works on).
 
-    return o3d.geometry.PointCloud(o3d.utility.Vector3dVector(xyz))
+    Parameters
+    ----------
+    xyz : (N, 3) float64 array, metres
+    voxel_m : float
+        Edge of the cubes, metres.
+
+    Returns
+    -------
+    (M, 3) float64 array
+        One point a cube, in the order of the cubes' integer coordinates (the same whatever the points' order).
+    """
+    cell = np.floor(xyz / voxel_m).astype(np.int64)
+    cell -= cell.min(axis=0)
+    dims = cell.max(axis=0) + 1
+    key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]
+    _, inverse, count = np.unique(key, return_inverse=True, return_counts=True)
+    sums = np.column_stack([np.bincount(inverse, weights=xyz[:, k], minlength=count.size) for k in range(3)])
+    return sums / count[:, None]
+
+
+def surface_normals(xyz: np.ndarray, tree, *, radius_m: float, max_nn: int = 30,
+                    min_nn: int = 6) -> np.ndarray:
+    """Unit normals of the local planes: the least principal axis of each point's neighbours.
+
+    Parameters
+    ----------
+    xyz : (N, 3) float64 array, metres
+        At least ``min_nn`` points.
+    tree : scipy.spatial.cKDTree
+        Built on ``xyz``.
+    radius_m : float, keyword-only
+        Neighbours within this distance count, up to the ``max_nn`` nearest (default 30) ...
+    min_nn : int, keyword-only
+        ... and where fewer lie that close (a sparse surface), the ``min_nn`` nearest wherever they are
+        (default 6): a plane through a few neighbours rather than no normal or a guessed one.
+
+    Returns
+    -------
+    (N, 3) float64 array
+        Unit normals, each of either orientation.
+    """
+    dist, idx = tree.query(xyz, k=min(max_nn, len(xyz)), distance_upper_bound=radius_m, workers=-1)
+    inside = np.isfinite(dist)
+    sparse = np.flatnonzero(inside.sum(axis=1) < min_nn)
+    if sparse.size:
+        _, near = tree.query(xyz[sparse], k=min_nn, workers=-1)
+        idx[sparse, :min_nn], inside[sparse, :min_nn], inside[sparse, min_nn:] = near, True, False
+    # a missing neighbour is the point itself: zero offset, so it adds nothing to the sums below
+    idx = np.where(inside, idx, np.arange(len(xyz))[:, None])
+    count = inside.sum(axis=1).astype(np.float64)
+    columns = [np.ascontiguousarray(xyz[:, k]) for k in range(3)]  # gathers from a column run 10x faster
+    offsets = [c[idx] - c[:, None] for c in columns]  # (N, k) each, metres
+    mean = [o.sum(axis=1) / count for o in offsets]
+    cov = np.empty((len(xyz), 3, 3))
+    for a in range(3):
+        for b in range(a, 3):
+            cov[:, a, b] = cov[:, b, a] = np.einsum("ij,ij->i", offsets[a], offsets[b]) / count - mean[a] * mean[b]
+    return np.linalg.eigh(cov)[1][:, :, 0]
 
 
 def refine_icp(source_xyz: np.ndarray, target_xyz: np.ndarray, initial: Transform, *,
                voxels_m: Sequence[float] = (0.20, 0.08, 0.04), max_iterations: int = 30,
                kernel_sigma_m: Optional[float] = None, offset: Optional[np.ndarray] = None,
                progress: Optional[ProgressCallback] = None) -> IcpResult:
-    """Refine ``initial`` (source -> target) by point-to-plane ICP, coarse to fine.
+    """Refine ``initial`` (source -> target) by point-to-plane ICP with a Tukey kernel, coarse to fine.
 
     Parameters
     ----------
@@ -97,55 +141,42 @@ def refine_icp(source_xyz: np.ndarray, target_xyz: np.ndarray, initial: Transfor
     initial : Transform
         Starting transform, e.g. from :func:`registration.targets.register_targets`.
     voxels_m : sequence of float, keyword-only
-        Voxel sizes of the levels, coarse to fine (default 20, 8, 4 cm). The correspondence
-        distance at each level is 2.5 voxels; normals use a radius of 3 voxels.
+        Voxel sizes of the levels, coarse to fine (default 20, 8, 4 cm): both clouds are reduced to their
+        voxels' centroids. The correspondence distance at each level is 2.5 voxels; normals come from the
+        30 nearest target points within 3 voxels (the 6 nearest where fewer lie that close).
     max_iterations : int, keyword-only
-        Per level (default 30).
+        Per level (default 30). A level ends sooner when the share of matched points and their RMS distance
+        change by less than 1e-6 between iterations (Open3D's default criteria).
     kernel_sigma_m : float, optional
         Tukey kernel width; default one voxel at each level.
     offset : (3,) array, optional
         Subtracted from all coordinates before solving (default: the target's mean), so large
-        project coordinates lose no precision in Open3D's float arithmetic.
+        project coordinates lose no precision.
+    progress : callable, optional
 
     Returns
     -------
     IcpResult
     """
-    import open3d as o3d
-
-    reg = o3d.pipelines.registration
     src, tgt = check_clouds(source_xyz, target_xyz, "ICP")
     if not voxels_m or any(not (v > 0) for v in voxels_m):
         raise InputError("ICP voxel sizes must be positive")
     off = tgt.mean(axis=0) if offset is None else np.asarray(offset, dtype=np.float64)
     shift = Transform(np.eye(3), -off)
     # Work in reduced coordinates: source is moved by the initial transform and the offset.
-    src_cloud = _cloud(initial.then(shift).apply(src))
-    tgt_cloud = _cloud(tgt - off)
+    src_red, tgt_red = initial.then(shift).apply(src), tgt - off
     current = np.eye(4)
-    iterations, last = [], None
-    verbosity = o3d.utility.get_verbosity_level()
+    iterations, level = [], None
     for k, v in enumerate(voxels_m):
         report(progress, k / len(voxels_m), f"ICP level {k + 1}/{len(voxels_m)} ({v * 100:.0f} cm)")
-        s = src_cloud.voxel_down_sample(v)
-        t = tgt_cloud.voxel_down_sample(v)
-        t.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=3 * v, max_nn=30))
-        loss = reg.TukeyLoss(k=kernel_sigma_m or v)
-        o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Debug)
-        try:
-            with _capture_stdout() as out:
-                last = reg.registration_icp(s, t, 2.5 * v, current, reg.TransformationEstimationPointToPlane(loss),
-                                            reg.ICPConvergenceCriteria(max_iteration=max_iterations))
-        finally:
-            o3d.utility.set_verbosity_level(verbosity)
-        iterations.append(len(_ITER.findall(out["text"])))
-        current = np.asarray(last.transformation)
-        n_src, n_tgt = len(s.points), len(t.points)
-        finest = (s, t, 2.5 * v)
-    if last is None or last.fitness < 0.2:
-        raise RegistrationError(f"ICP found correspondences for only {0 if last is None else last.fitness:.0%} of the "
-                                "stable points; the initial registration is too far off or the stable areas differ")
-    plane_rms = _plane_rms(*finest, current)
+        level = _Level(voxel_centroids(src_red, v), voxel_centroids(tgt_red, v), v, kernel_sigma_m or v)
+        current, count = level.solve(current, max_iterations)
+        iterations.append(count)
+    assert level is not None
+    fitness, inlier_rms, plane_rms = level.quality(current)
+    if fitness < 0.2:
+        raise RegistrationError(f"ICP found correspondences for only {fitness:.0%} of the stable points; the "
+                                "initial registration is too far off or the stable areas differ")
     corr_reduced = Transform.from_matrix(current)
     # correction in the target frame: x -> off + C (x - off)
     correction = shift.then(corr_reduced).then(shift.inverse())
@@ -155,24 +186,73 @@ def refine_icp(source_xyz: np.ndarray, target_xyz: np.ndarray, initial: Transfor
     report(progress, 1.0, "ICP done")
     return IcpResult(result, Transform(correction.rotation, correction.translation, 1.0, initial.target_frame,
                                        initial.target_frame, method="icp"),
-                     float(last.fitness), float(last.inlier_rmse), tuple(iterations), tuple(float(v) for v in voxels_m),
-                     n_src, n_tgt, off, plane_rms)
+                     fitness, inlier_rms, tuple(iterations), tuple(float(v) for v in voxels_m),
+                     len(level.source), len(level.target), off, plane_rms)
 
 
-def _plane_rms(source, target, max_distance_m: float, transform: np.ndarray) -> float:
-    """RMS point-to-plane distance from the moved source points to their nearest target point's plane."""
-    from scipy.spatial import cKDTree
+class _Level:
+    """One resolution of the ICP: downsampled clouds, the target's tree and normals, the matching distance.
 
-    src = np.asarray(source.points) @ transform[:3, :3].T + transform[:3, 3]
-    tgt = np.asarray(target.points)
-    normals = np.asarray(target.normals)
-    d, k = cKDTree(tgt, balanced_tree=False, compact_nodes=False).query(src, distance_upper_bound=max_distance_m,
-                                                                           workers=-1)
-    ok = np.isfinite(d)
-    if not ok.any():
-        return float("nan")
-    res = np.einsum("ij,ij->i", src[ok] - tgt[k[ok]], normals[k[ok]])
-    return float(np.sqrt(np.mean(res ** 2)))
+    Points match within 2.5 voxels; normals come from the 30 nearest target points within 3 voxels (the
+    6 nearest where fewer lie that close).
+    """
+
+    def __init__(self, source: np.ndarray, target: np.ndarray, voxel_m: float, kernel_m: float):
+        from scipy.spatial import cKDTree
+
+        self.source, self.max_distance_m, self.kernel_m = source, 2.5 * voxel_m, kernel_m
+        self.target = target
+        self.tree = cKDTree(target, balanced_tree=False, compact_nodes=False)
+        self.normals = surface_normals(target, self.tree, radius_m=3.0 * voxel_m)
+
+    def match(self, matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Moved source points with a target point within the distance, that point's index, the distance."""
+        moved = self.source @ matrix[:3, :3].T + matrix[:3, 3]
+        dist, idx = self.tree.query(moved, distance_upper_bound=self.max_distance_m, workers=-1)
+        ok = np.isfinite(dist)
+        return moved[ok], idx[ok], dist[ok]
+
+    def quality(self, matrix: np.ndarray) -> tuple[float, float, float]:
+        """Share of source points matched, their RMS point distance and RMS point-to-plane distance (m)."""
+        moved, idx, dist = self.match(matrix)
+        if not len(idx):
+            return 0.0, float("nan"), float("nan")
+        plane = np.einsum("ij,ij->i", moved - self.target[idx], self.normals[idx])
+        return len(idx) / len(self.source), float(np.sqrt(np.mean(dist ** 2))), float(np.sqrt(np.mean(plane ** 2)))
+
+    def solve(self, matrix: np.ndarray, max_iterations: int) -> tuple[np.ndarray, int]:
+        """Iterate the weighted point-to-plane step from ``matrix``; the refined matrix and the iterations run."""
+        moved, idx, dist = self.match(matrix)
+        before = (len(idx), float(np.sqrt(np.mean(dist ** 2))) if len(idx) else 0.0)
+        for it in range(1, max_iterations + 1):
+            if len(idx) < 6:
+                return matrix, it - 1
+            matrix = _step(moved, self.target[idx], self.normals[idx], self.kernel_m) @ matrix
+            moved, idx, dist = self.match(matrix)
+            after = (len(idx), float(np.sqrt(np.mean(dist ** 2))) if len(idx) else 0.0)
+            if abs(after[0] - before[0]) < 1e-6 * len(self.source) and abs(after[1] - before[1]) < 1e-6:
+                return matrix, it
+            before = after
+        return matrix, max_iterations
+
+
+def _step(moved: np.ndarray, matched: np.ndarray, normals: np.ndarray, kernel_m: float) -> np.ndarray:
+    """The 4x4 update that minimises the Tukey-weighted point-to-plane residuals, linearised in the rotation."""
+    residual = np.einsum("ij,ij->i", moved - matched, normals)
+    u = residual / kernel_m
+    weight = np.where(np.abs(u) < 1.0, (1.0 - u * u) ** 2, 0.0)
+    jac = np.hstack([np.cross(moved, normals), normals])  # d residual / d (rotation vector, translation)
+    wj = jac * weight[:, None]
+    lhs = np.einsum("ni,nj->ij", wj, jac)
+    rhs = -np.einsum("ni,n->i", wj, residual)
+    try:
+        x = np.linalg.solve(lhs, rhs)
+    except np.linalg.LinAlgError:
+        return np.eye(4)
+    update = np.eye(4)
+    update[:3, :3] = rotation_from_rotvec(x[:3])
+    update[:3, 3] = x[3:]
+    return update
 
 
 def stable_mask(xyz: np.ndarray, anchors_xyz: np.ndarray, *, radius_m: float = 4.0,

@@ -19,7 +19,7 @@ def register(sub) -> None:
     p.add_argument("--method", choices=("c2c", "m3c2"), default="m3c2", help="change computation: c2c or m3c2 (m3c2)")
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--registration", choices=("icp", "ndt", "targets"), default=None,
-                   help="refine the target registration on the stable parts with Open3D ICP (default), PCL's NDT "
+                   help="refine the target registration on the stable parts with point-to-plane ICP (default), PCL's NDT "
                         "(pcl_ndt3d, Debian pcl-tools) or not at all (targets)")
     p.add_argument("--no-icp", action="store_true", help="register on the targets only (= --registration targets)")
     p.add_argument("--bin-m", type=float, default=2.5, help="span profile bin length (default 2.5 m)")
