@@ -9,6 +9,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
+from common.imports import import_in_background
 from common.progress import ProgressCallback, report
 from common.validation import require_points
 from registration.errors import InputError
@@ -87,22 +88,13 @@ def _quiet_py4dgeo():
         lg.setLevel(level)
 
 
-def prefetch_py4dgeo() -> threading.Thread:
-    """Start importing py4dgeo in a background thread (it takes about a second) while other work runs.
+def prefetch_py4dgeo(*also: str) -> threading.Thread:
+    """Start importing py4dgeo (about two seconds), then the modules ``also``, while other work runs.
 
-    :func:`m3c2` imports it as usual: Python's import lock makes it wait for this import to finish, so
-    py4dgeo is imported once per process, and only by a job that runs M3C2. Import what the calling thread
-    needs meanwhile before starting it: some packages (Open3D) walk ``sys.modules`` while they set up.
+    :func:`m3c2` imports it as usual and waits for this import to finish, so py4dgeo is imported once per
+    process, and only by a job that runs M3C2 (see :func:`common.imports.import_in_background`).
     """
-    def load() -> None:
-        try:
-            import py4dgeo  # noqa: F401
-        except Exception:  # pragma: no cover - m3c2() reports it
-            pass
-
-    thread = threading.Thread(target=load, name="import py4dgeo", daemon=True)
-    thread.start()
-    return thread
+    return import_in_background(("py4dgeo", *also))
 
 
 def _check(name: str, a) -> np.ndarray:

@@ -127,7 +127,7 @@ def bring_to_campaign_frame(c: Campaign, label: str, base: str, *, refinement: s
                             progress: Optional[ProgressCallback] = None) -> EpochInFrame:
     """Register epoch ``label`` onto the baseline epoch ``base`` (targets, then ICP or NDT on stable parts).
 
-    ``refinement`` is ``icp`` (Open3D, the default), ``ndt`` (PCL's
+    ``refinement`` is ``icp`` (point-to-plane, the default), ``ndt`` (PCL's
     pcl_ndt3d) or ``targets`` (no refinement). ``base_xyz``, the baseline's
     coarse scan, is read here when not given.
     """
@@ -174,17 +174,15 @@ def _deck_mask(xyz: np.ndarray, targets: np.ndarray, radius_m: float = 1.0, band
     return out
 
 
-def _prefetch(refinement: str) -> None:
-    """Import py4dgeo in the background while the epochs are read and registered.
+def _prefetch() -> None:
+    """Import py4dgeo and the figures' matplotlib in the background while the epochs are read and registered.
 
-    What this thread imports meanwhile is imported first: Open3D's package set-up walks ``sys.modules`` and
-    fails if another thread adds to it at that moment.
+    What this thread imports meanwhile (the KD-tree of the stable-part masks and the ICP) is imported first,
+    so the two threads never import the same package at once.
     """
-    import scipy.spatial  # noqa: F401  (the stable-part masks)
+    import scipy.spatial  # noqa: F401
 
-    if refinement == "icp":
-        import open3d  # noqa: F401
-    prefetch_py4dgeo()
+    prefetch_py4dgeo("matplotlib.figure", "matplotlib.backends.backend_agg")
 
 
 def compare_epochs(c: Campaign, from_label: str, to_label: str, *, method: str = "m3c2", refinement: str = "icp",
@@ -206,7 +204,7 @@ def compare_epochs(c: Campaign, from_label: str, to_label: str, *, method: str =
     if base is None:
         raise CampaignError("no measured epoch yet: process the campaign first ('bridgesurvey process')")
     if method == "m3c2":
-        _prefetch(refinement)
+        _prefetch()
     report(progress, 0.0, f"reading {base}")
     base_xyz = read_files(c, c.files(base, "coarse")).xyz_socs  # once, for both epochs
     ea = bring_to_campaign_frame(c, from_label, base, refinement=refinement, base_xyz=base_xyz,
