@@ -5,7 +5,6 @@ from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
-from scipy import ndimage
 
 from common.errors import InputError
 from lidar.reflectance_map import ReflectanceMap
@@ -110,7 +109,7 @@ def detect_reflectors(rmap: ReflectanceMap, *, target_diameter_m: float = 0.05, 
     img = rmap.max_intensity.T
     thr = auto_threshold(img) if threshold is None else float(threshold)
     mask = img >= thr  # NaN (empty cells) compares False
-    labels_t, n = ndimage.label(mask, structure=np.ones((3, 3), dtype=bool))
+    labels_t, n = label_components(mask)
     if n == 0:
         return DetectionResult((), (), thr, rmap.step_deg)
     w, h = labels_t.shape  # (columns, rows)
@@ -165,6 +164,73 @@ def detect_reflectors(rmap: ReflectanceMap, *, target_diameter_m: float = 0.05, 
         (kept if size[k] <= allowed else rejected).append(det)
     kept.sort(key=lambda d: -d.score)
     return DetectionResult(tuple(kept), tuple(rejected), thr, rmap.step_deg)
+
+
+def label_components(mask: np.ndarray) -> tuple[np.ndarray, int]:
+    """Label the 8-connected groups of True cells of a 2-D mask, numbered in row-major order of first cell.
+
+    The labelling ``scipy.ndimage.label`` gives with a 3x3 structure, in plain numpy: importing scipy.ndimage
+    cost every command that plans a visit 0.3 s. The mask's runs (consecutive True cells of a row) are
+    joined where they touch a run of the next row, so a large blob costs its rows, not its cells.
+
+    Parameters
+    ----------
+    mask : (H, W) bool array
+
+    Returns
+    -------
+    labels : (H, W) int32 array
+        0 outside the mask, 1..n inside; two cells share a label when a chain of True cells, each touching
+        the next at a side or a corner, joins them.
+    n : int
+        Number of groups.
+    """
+    mask = np.asarray(mask, dtype=bool)
+    h, w = mask.shape
+    labels = np.zeros((h, w), np.int32)
+    padded = np.zeros((h, w + 2), np.int8)
+    padded[:, 1:-1] = mask
+    change = np.diff(padded.reshape(-1))
+    start = np.flatnonzero(change == 1) + 1  # positions in the padded rows (row * (w + 2) + column + 1)
+    stop = np.flatnonzero(change == -1) + 1  # one past each run
+    if start.size == 0:
+        return labels, 0
+    row = start // (w + 2)
+    # a run touches the runs of the row above that end at or after its start - 1 and begin at or before its
+    # stop: in that row's (sorted) runs a contiguous range, found by two binary searches
+    above = (row - 1) * (w + 2)
+    first = np.searchsorted(stop, start - (w + 2))  # first run of the row above ending at >= start - 1
+    last = np.searchsorted(start, stop - (w + 2), side="right") - 1  # last one starting <= stop
+    first = np.maximum(first, np.searchsorted(start, above))
+    last = np.minimum(last, np.searchsorted(start, above + (w + 2)) - 1)
+    n_pairs = np.where(row > 0, np.maximum(last - first + 1, 0), 0)
+    runs_b = np.repeat(np.arange(start.size), n_pairs)
+    runs_a = np.repeat(first, n_pairs) + (np.arange(n_pairs.sum()) - np.repeat(np.cumsum(n_pairs) - n_pairs, n_pairs))
+    parent = _join(np.arange(start.size), runs_a, runs_b)
+    roots, group = np.unique(parent, return_inverse=True)  # each root is its group's first run
+    length = stop - start
+    cells = np.repeat(start - 1 - 2 * row, length) + (np.arange(length.sum())
+                                                      - np.repeat(np.cumsum(length) - length, length))
+    labels.reshape(-1)[cells] = np.repeat(group.reshape(-1) + 1, length)
+    return labels, int(roots.size)
+
+
+def _join(parent: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Union of the pairs (a, b) by hooking the larger root onto the smaller, with full path compression.
+
+    Every entry of the result is the smallest index of its group.
+    """
+    while True:
+        pa, pb = parent[a], parent[b]
+        apart = pa != pb
+        if not apart.any():
+            return parent
+        np.minimum.at(parent, np.maximum(pa[apart], pb[apart]), np.minimum(pa[apart], pb[apart]))
+        while True:
+            up = parent[parent]
+            if np.array_equal(up, parent):
+                break
+            parent = up
 
 
 def _merge_across_seam(labels: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:

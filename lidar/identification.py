@@ -106,12 +106,76 @@ def _seed_triangles(xyz: np.ndarray, limit: int, groups: Optional[tuple] = None)
 
 
 def _assign(pred: np.ndarray, det: np.ndarray, tol: float) -> list[tuple[int, int, float]]:
-    """Unique layout->detection pairs closer than ``tol`` (optimal assignment)."""
+    """Unique layout->detection pairs closer than ``tol`` (optimal assignment), in layout order.
+
+    As many pairs as possible, and of those the smallest sum of distances. Each group of layout targets and
+    detections that compete for each other (usually one target and one detection) is solved on its own;
+    scipy's assignment solver is imported only for a group too large to enumerate (its import costs 0.3 s).
+    """
     d = np.linalg.norm(pred[:, None, :] - det[None, :, :], axis=2)
-    cost = np.where(d <= tol, d, 1e6)
+    near = d <= tol
+    pairs: list[tuple[int, int]] = []
+    for rows, cols in _competing_groups(near):
+        if len(rows) == 1 or len(cols) == 1:
+            sub = d[np.ix_(rows, cols)]
+            k = int(np.argmin(sub))
+            pairs.append((rows[k // len(cols)], cols[k % len(cols)]))
+            continue
+        best = _enumerate_matchings(rows, near, d)
+        if best is None:
+            return _assign_scipy(d, tol)
+        pairs.extend(best)
+    return [(r, c, float(d[r, c])) for r, c in sorted(pairs)]
+
+
+def _competing_groups(near: np.ndarray) -> list[tuple[list[int], list[int]]]:
+    """Connected groups (layout rows, detection columns) of the bipartite graph ``near``."""
+    seen_r, seen_c = np.zeros(near.shape[0], bool), np.zeros(near.shape[1], bool)
+    groups = []
+    for r0 in np.flatnonzero(near.any(axis=1)):
+        if seen_r[r0]:
+            continue
+        rows, cols, todo = [int(r0)], [], [int(r0)]
+        seen_r[r0] = True
+        while todo:
+            for c in np.flatnonzero(near[todo.pop()] & ~seen_c):
+                seen_c[c] = True
+                cols.append(int(c))
+                for r in np.flatnonzero(near[:, c] & ~seen_r):
+                    seen_r[r] = True
+                    rows.append(int(r))
+                    todo.append(int(r))
+        groups.append((sorted(rows), sorted(cols)))
+    return groups
+
+
+def _enumerate_matchings(rows: list[int], near: np.ndarray, d: np.ndarray,
+                         limit: int = 4096) -> Optional[list[tuple[int, int]]]:
+    """The matching of one group with the most pairs, then the smallest distance sum; None if too large."""
+    options = [[int(c) for c in np.flatnonzero(near[r])] for r in rows]
+    if np.prod([len(o) + 1 for o in options], dtype=float) > limit:
+        return None
+    best: tuple[int, float, list[tuple[int, int]]] = (-1, 0.0, [])
+
+    def walk(k: int, used: frozenset, chosen: list[tuple[int, int]], total: float) -> None:
+        nonlocal best
+        if k == len(rows):
+            if len(chosen) > best[0] or (len(chosen) == best[0] and total < best[1]):
+                best = (len(chosen), total, list(chosen))
+            return
+        for c in options[k]:
+            if c not in used:
+                walk(k + 1, used | {c}, chosen + [(rows[k], c)], total + float(d[rows[k], c]))
+        walk(k + 1, used, chosen, total)
+
+    walk(0, frozenset(), [], 0.0)
+    return best[2]
+
+
+def _assign_scipy(d: np.ndarray, tol: float) -> list[tuple[int, int, float]]:
     from scipy.optimize import linear_sum_assignment
 
-    rows, cols = linear_sum_assignment(cost)
+    rows, cols = linear_sum_assignment(np.where(d <= tol, d, 1e6))
     return [(int(r), int(c), float(d[r, c])) for r, c in zip(rows, cols) if d[r, c] <= tol]
 
 

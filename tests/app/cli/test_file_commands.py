@@ -63,3 +63,17 @@ def test_usage_errors_exit_2(capsys):
     with pytest.raises(SystemExit) as e:
         main(["detect"])
     assert e.value.code == 2
+
+
+def test_planning_from_a_las_file_imports_no_scipy(visit, tmp_path, capsys):
+    """plan-file's start-up: labelling and assignment are plain numpy (issue 27: scipy's import was 0.5 s)."""
+    from tests.app.cli.test_conventions import _modules_after
+
+    las = tmp_path / "coarse.las"
+    assert main(["convert", str(visit / "coarse.laz"), str(las)]) == 0
+    capsys.readouterr()
+    out = tmp_path / "plan.json"
+    r = _modules_after(f"from app.cli.main import main\nrc = main(['plan-file', {str(las)!r}, '--layout', "
+                       f"{str(visit / 'layout.csv')!r}, '--out', {str(out)!r}])\nassert rc == 0, rc")
+    assert not [m for m in r["loaded"] if m.split(".")[0] == "scipy"], r["loaded"]
+    assert len(json.loads(out.read_text())["rois"]) >= 9  # every target of the layout planned
