@@ -6,7 +6,7 @@ Our own few dozen lines on scipy's KD-tree rather than Open3D's: the same algori
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Optional, Sequence
+from typing import TYPE_CHECKING, Optional, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -16,6 +16,10 @@ from common.rigid import rotation_from_rotvec
 from common.validation import require_points
 from registration.errors import InputError, RegistrationError
 from registration.transform import Transform
+
+if TYPE_CHECKING:
+    from scipy.spatial import cKDTree
+
 
 @dataclass(frozen=True, eq=False)
 class IcpResult:
@@ -88,7 +92,7 @@ def voxel_centroids(xyz: np.ndarray, voxel_m: float) -> np.ndarray:
     return sums / count[:, None]
 
 
-def surface_normals(xyz: np.ndarray, tree, *, radius_m: float, max_nn: int = 30,
+def surface_normals(xyz: np.ndarray, tree: "cKDTree", *, radius_m: float, max_nn: int = 30,
                     min_nn: int = 6) -> np.ndarray:
     """Unit normals of the local planes: the least principal axis of each point's neighbours.
 
