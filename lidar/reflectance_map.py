@@ -447,10 +447,10 @@ class _LasPoints:
             raise ScanFormatError(self.path, "truncated: the point records end early")
         return view.view(self.dtype)
 
-    def _xyz32(self, rec: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _xyz32(self, ints: tuple[np.ndarray, np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         out = []
-        for k, name in enumerate(("X", "Y", "Z")):  # scaled in float64 as the reader does, then rounded once
-            v = rec[name].astype(np.float64)
+        for k in range(3):  # scaled in float64 as the reader does, then rounded once
+            v = ints[k].astype(np.float64)
             v *= self.scales[k]
             v += self.offsets[k]
             out.append(v.astype(np.float32))
@@ -472,17 +472,19 @@ class _LasPoints:
                 page = base - base % mmap.ALLOCATIONGRANULARITY
                 try:
                     with mmap.mmap(fh.fileno(), base - page + m * size, access=mmap.ACCESS_READ, offset=page) as mm:
-                        rec = np.frombuffer(mm, dtype=self.dtype, count=m, offset=base - page)
-                        parts.append(rec[::stride].copy())
-                        del rec
+                        raw = np.frombuffer(mm, dtype=np.uint8, count=m * size, offset=base - page)
+                        # the sampled records' X, Y, Z bytes: a plain byte copy (a structured one is 3x slower)
+                        parts.append(np.ascontiguousarray(raw.reshape(m, size)[::stride, :12]))
+                        del raw
                 except (ValueError, OSError) as exc:  # the file is shorter than its header says
                     raise ScanFormatError(self.path, f"truncated: the point records end early ({exc})") from None
-        t, p, _ = _angles_of(*self._xyz32(np.concatenate(parts)))
+        xyz = np.concatenate(parts).view("<i4")  # (k, 3) int32
+        t, p, _ = _angles_of(*self._xyz32((xyz[:, 0], xyz[:, 1], xyz[:, 2])))
         return t, p
 
     def chunk(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         rec = self._records(start, stop)
-        t, p, r = _angles_of(*self._xyz32(rec))
+        t, p, r = _angles_of(*self._xyz32((rec["X"], rec["Y"], rec["Z"])))
         return t, p, r, rec["intensity"].astype(np.float32)
 
 
