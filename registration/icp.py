@@ -32,7 +32,8 @@ class IcpResult:
     correction : Transform
         What ICP changed relative to the initial transform (in the target frame).
     fitness : float
-        Share of the source points (finest level) with a correspondence.
+        Share of the source points (finest level; at most :data:`FIT_POINTS` of them, evenly spread) with a
+        correspondence.
     rms_m : float
         The inlier RMSE at the finest level: the RMS *point-to-point* distance between corresponding
         downsampled points, metres (of the order of the voxel size, not a registration error).
@@ -81,19 +82,35 @@ def voxel_centroids(xyz: np.ndarray, voxel_m: float) -> np.ndarray:
     Returns
     -------
     (M, 3) float64 array
-        One point a cube, in the order of the cubes' integer coordinates (the same whatever the points' order).
+        One point a cube, the cubes in Z-order (Morton order of their integer coordinates): neighbours in
+        space lie near each other in memory, which makes the neighbour searches and gathers on them 2-3x
+        faster. The same whatever the points' order.
     """
     cell = np.floor(xyz / voxel_m).astype(np.int64)
     cell -= cell.min(axis=0)
     dims = cell.max(axis=0) + 1
-    key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]
+    key = _morton(cell) if dims.max() <= 1 << 21 else (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]
     _, inverse, count = np.unique(key, return_inverse=True, return_counts=True)
     sums = np.column_stack([np.bincount(inverse, weights=xyz[:, k], minlength=count.size) for k in range(3)])
     return sums / count[:, None]
 
 
+def _morton(cell: np.ndarray) -> np.ndarray:
+    """Z-order code of (N, 3) non-negative int64 cell coordinates below 2**21: their bits interleaved."""
+    code = np.zeros(len(cell), np.int64)
+    for axis in range(3):
+        v = cell[:, axis].astype(np.int64)
+        v = (v | (v << 32)) & 0x1F00000000FFFF
+        v = (v | (v << 16)) & 0x1F0000FF0000FF
+        v = (v | (v << 8)) & 0x100F00F00F00F00F
+        v = (v | (v << 4)) & 0x10C30C30C30C30C3
+        v = (v | (v << 2)) & 0x1249249249249249
+        code |= v << axis
+    return code
+
+
 def surface_normals(xyz: np.ndarray, tree: "cKDTree", *, radius_m: float, max_nn: int = 30,
-                    min_nn: int = 6) -> np.ndarray:
+                    min_nn: int = 6, which: Optional[np.ndarray] = None) -> np.ndarray:
     """Unit normals of the local planes: the least principal axis of each point's neighbours.
 
     Parameters
@@ -107,28 +124,50 @@ def surface_normals(xyz: np.ndarray, tree: "cKDTree", *, radius_m: float, max_nn
     min_nn : int, keyword-only
         ... and where fewer lie that close (a sparse surface), the ``min_nn`` nearest wherever they are
         (default 6): a plane through a few neighbours rather than no normal or a guessed one.
+    which : (K,) int array, optional, keyword-only
+        Only these points' normals (default all).
 
     Returns
     -------
-    (N, 3) float64 array
+    (N, 3) or (K, 3) float64 array
         Unit normals, each of either orientation.
     """
-    dist, idx = tree.query(xyz, k=min(max_nn, len(xyz)), distance_upper_bound=radius_m, workers=-1)
+    which = np.arange(len(xyz)) if which is None else np.asarray(which, dtype=np.intp)
+    out = np.empty((len(which), 3))
+    for lo in range(0, len(which), NORMALS_BLOCK):  # in blocks: the (N, 30) neighbour tables of a large cloud
+        hi = min(lo + NORMALS_BLOCK, len(which))     # would take gigabytes of fresh memory
+        out[lo:hi] = _block_normals(xyz, which[lo:hi], tree, radius_m, max_nn, min_nn)
+    return out
+
+
+#: Points whose normals are computed at once (bounds the neighbour tables to about 16 MB each).
+NORMALS_BLOCK = 65_536
+
+
+def _block_normals(xyz: np.ndarray, which: np.ndarray, tree: "cKDTree", radius_m: float, max_nn: int,
+                   min_nn: int) -> np.ndarray:
+    """Normals of the points ``xyz[which]`` (see :func:`surface_normals`)."""
+    dist, idx = tree.query(xyz[which], k=min(max_nn, len(xyz)), distance_upper_bound=radius_m, workers=-1)
     inside = np.isfinite(dist)
     sparse = np.flatnonzero(inside.sum(axis=1) < min_nn)
     if sparse.size:
-        _, near = tree.query(xyz[sparse], k=min_nn, workers=-1)
-        idx[sparse, :min_nn], inside[sparse, :min_nn], inside[sparse, min_nn:] = near, True, False
-    # a missing neighbour is the point itself: zero offset, so it adds nothing to the sums below
-    idx = np.where(inside, idx, np.arange(len(xyz))[:, None])
+        _, near_sparse = tree.query(xyz[which[sparse]], k=min_nn, workers=-1)
+        idx[sparse, :min_nn], inside[sparse, :min_nn], inside[sparse, min_nn:] = near_sparse, True, False
+    # a missing neighbour is the point itself: zero offset, so it adds nothing to the sums below. Neighbours
+    # run along the first axis and points along the second, so numpy's inner loops run over the points.
+    near = np.ascontiguousarray(np.where(inside, idx, which[:, None]).T)  # (k, n)
     count = inside.sum(axis=1).astype(np.float64)
-    columns = [np.ascontiguousarray(xyz[:, k]) for k in range(3)]  # gathers from a column run 10x faster
-    offsets = [c[idx] - c[:, None] for c in columns]  # (N, k) each, metres
-    mean = [o.sum(axis=1) / count for o in offsets]
-    cov = np.empty((len(xyz), 3, 3))
+    offsets = []
+    for k in range(3):
+        column = np.ascontiguousarray(xyz[:, k])
+        o = column[near]
+        o -= column[which]  # (k, n), metres
+        offsets.append(o)
+    mean = [o.sum(axis=0) / count for o in offsets]
+    cov = np.empty((len(which), 3, 3))
     for a in range(3):
         for b in range(a, 3):
-            cov[:, a, b] = cov[:, b, a] = np.einsum("ij,ij->i", offsets[a], offsets[b]) / count - mean[a] * mean[b]
+            cov[:, a, b] = cov[:, b, a] = np.einsum("ij,ij->j", offsets[a], offsets[b]) / count - mean[a] * mean[b]
     return np.linalg.eigh(cov)[1][:, :, 0]
 
 
@@ -194,47 +233,63 @@ def refine_icp(source_xyz: np.ndarray, target_xyz: np.ndarray, initial: Transfor
                      len(level.source), len(level.target), off, plane_rms)
 
 
+#: Source points a level fits and scores at most (every k-th of its voxels, which lie in Z-order: spread
+#: evenly); a larger cloud adds queries, not accuracy.
+FIT_POINTS = 150_000
+
+
 class _Level:
     """One resolution of the ICP: downsampled clouds, the target's tree and normals, the matching distance.
 
     Points match within 2.5 voxels; normals come from the 30 nearest target points within 3 voxels (the
-    6 nearest where fewer lie that close).
+    6 nearest where fewer lie that close), computed for the target points that are matched.
     """
 
     def __init__(self, source: np.ndarray, target: np.ndarray, voxel_m: float, kernel_m: float):
         from scipy.spatial import cKDTree
 
         self.source, self.max_distance_m, self.kernel_m = source, 2.5 * voxel_m, kernel_m
-        self.target = target
+        self.fit_source = source[::-(-len(source) // FIT_POINTS)]
+        self.target, self.radius_m = target, 3.0 * voxel_m
         self.tree = cKDTree(target, balanced_tree=False, compact_nodes=False)
-        self.normals = surface_normals(target, self.tree, radius_m=3.0 * voxel_m)
+        self._normals = np.zeros((len(target), 3))
+        self._known = np.zeros(len(target), bool)
 
-    def match(self, matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Moved source points with a target point within the distance, that point's index, the distance."""
-        moved = self.source @ matrix[:3, :3].T + matrix[:3, 3]
+    def normals(self, idx: np.ndarray) -> np.ndarray:
+        """Normals at the target points ``idx`` (computed once each, when first needed)."""
+        new = np.unique(idx[~self._known[idx]])
+        if new.size:
+            self._normals[new] = surface_normals(self.target, self.tree, radius_m=self.radius_m, which=new)
+            self._known[new] = True
+        return self._normals[idx]
+
+    def match(self, matrix: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Moved ``points`` with a target point within the distance, that point's index, the distance."""
+        moved = points @ matrix[:3, :3].T + matrix[:3, 3]
         dist, idx = self.tree.query(moved, distance_upper_bound=self.max_distance_m, workers=-1)
         ok = np.isfinite(dist)
         return moved[ok], idx[ok], dist[ok]
 
     def quality(self, matrix: np.ndarray) -> tuple[float, float, float]:
         """Share of source points matched, their RMS point distance and RMS point-to-plane distance (m)."""
-        moved, idx, dist = self.match(matrix)
+        moved, idx, dist = self.match(matrix, self.fit_source)
         if not len(idx):
             return 0.0, float("nan"), float("nan")
-        plane = np.einsum("ij,ij->i", moved - self.target[idx], self.normals[idx])
-        return len(idx) / len(self.source), float(np.sqrt(np.mean(dist ** 2))), float(np.sqrt(np.mean(plane ** 2)))
+        plane = np.einsum("ij,ij->i", moved - self.target[idx], self.normals(idx))
+        return len(idx) / len(self.fit_source), float(np.sqrt(np.mean(dist ** 2))), float(np.sqrt(np.mean(plane ** 2)))
 
     def solve(self, matrix: np.ndarray, max_iterations: int) -> tuple[np.ndarray, int]:
         """Iterate the weighted point-to-plane step from ``matrix``; the refined matrix and the iterations run."""
-        moved, idx, dist = self.match(matrix)
+        points = self.fit_source
+        moved, idx, dist = self.match(matrix, points)
         before = (len(idx), float(np.sqrt(np.mean(dist ** 2))) if len(idx) else 0.0)
         for it in range(1, max_iterations + 1):
             if len(idx) < 6:
                 return matrix, it - 1
-            matrix = _step(moved, self.target[idx], self.normals[idx], self.kernel_m) @ matrix
-            moved, idx, dist = self.match(matrix)
+            matrix = _step(moved, self.target[idx], self.normals(idx), self.kernel_m) @ matrix
+            moved, idx, dist = self.match(matrix, points)
             after = (len(idx), float(np.sqrt(np.mean(dist ** 2))) if len(idx) else 0.0)
-            if abs(after[0] - before[0]) < 1e-6 * len(self.source) and abs(after[1] - before[1]) < 1e-6:
+            if abs(after[0] - before[0]) < 1e-6 * len(points) and abs(after[1] - before[1]) < 1e-6:
                 return matrix, it
             before = after
         return matrix, max_iterations
