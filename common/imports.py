@@ -29,7 +29,6 @@ def import_in_background(names: Sequence[str]) -> threading.Thread:
     threading.Thread
     """
     names = tuple(names)
-    interval = sys.getswitchinterval()
 
     def load() -> None:
         try:
@@ -39,9 +38,27 @@ def import_in_background(names: Sequence[str]) -> threading.Thread:
                 except Exception:  # the caller's own import reports it
                     pass
         finally:
-            sys.setswitchinterval(interval)
+            _quicker_switching(False)
 
-    sys.setswitchinterval(min(interval, SWITCH_INTERVAL_S))
+    _quicker_switching(True)
     thread = threading.Thread(target=load, name="import " + ", ".join(names), daemon=True)
     thread.start()
     return thread
+
+
+_switching = {"running": 0, "interval": 0.0}
+_switching_lock = threading.Lock()
+
+
+def _quicker_switching(start: bool) -> None:
+    """Lower the switch interval while any background import runs; restore it when the last one ends."""
+    with _switching_lock:
+        if start:
+            if _switching["running"] == 0:
+                _switching["interval"] = sys.getswitchinterval()
+                sys.setswitchinterval(min(_switching["interval"], SWITCH_INTERVAL_S))
+            _switching["running"] += 1
+        else:
+            _switching["running"] -= 1
+            if _switching["running"] == 0:
+                sys.setswitchinterval(_switching["interval"])
