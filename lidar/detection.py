@@ -204,23 +204,36 @@ def label_components(mask: np.ndarray) -> tuple[np.ndarray, int]:
     first = np.maximum(first, np.searchsorted(start, above))
     last = np.minimum(last, np.searchsorted(start, above + (w + 2)) - 1)
     n_pairs = np.where(row > 0, np.maximum(last - first + 1, 0), 0)
-    runs_b = np.repeat(np.arange(start.size), n_pairs)
-    runs_a = np.repeat(first, n_pairs) + (np.arange(n_pairs.sum()) - np.repeat(np.cumsum(n_pairs) - n_pairs, n_pairs))
-    parent = _join(np.arange(start.size), runs_a, runs_b)
-    roots, group = np.unique(parent, return_inverse=True)  # each root is its group's first run
+    runs_a, runs_b = _ranges(first, n_pairs), np.repeat(np.arange(start.size), n_pairs)
+    roots, group = np.unique(join_groups(start.size, runs_a, runs_b), return_inverse=True)
     length = stop - start
-    cells = np.repeat(start - 1 - 2 * row, length) + (np.arange(length.sum())
-                                                      - np.repeat(np.cumsum(length) - length, length))
-    labels.reshape(-1)[cells] = np.repeat(group.reshape(-1) + 1, length)
+    labels.reshape(-1)[_ranges(start - 1 - 2 * row, length)] = np.repeat(group.reshape(-1) + 1, length)
     return labels, int(roots.size)
 
 
-def _join(parent: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Union of the pairs (a, b) by hooking the larger root onto the smaller, with full path compression.
+def _ranges(first: np.ndarray, length: np.ndarray) -> np.ndarray:
+    """The integers first[i], first[i] + 1, ... (length[i] of them) for every i, one after the other."""
+    return np.repeat(first, length) + (np.arange(length.sum()) - np.repeat(np.cumsum(length) - length, length))
 
-    Every entry of the result is the smallest index of its group.
+
+def join_groups(n: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The groups of ``n`` items that the pairs ``(a[i], b[i])`` join (union-find in numpy).
+
+    Parameters
+    ----------
+    n : int
+        Items 0 .. n-1.
+    a, b : (P,) int arrays
+        Pairs of items in one group.
+
+    Returns
+    -------
+    (n,) int array
+        Each item's group, named by its smallest item (so groups come in the order of their first item).
     """
-    while True:
+    parent = np.arange(n)
+    a, b = np.asarray(a, dtype=np.intp), np.asarray(b, dtype=np.intp)
+    while True:  # hook the larger root onto the smaller, then compress every path fully
         pa, pb = parent[a], parent[b]
         apart = pa != pb
         if not apart.any():

@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from common.errors import InputError, ProcessingError
+from lidar.detection import join_groups
 from lidar.layout import Layout
 from common.rigid import Transform, fit_rigid, pairwise_distances
 
@@ -129,24 +130,15 @@ def _assign(pred: np.ndarray, det: np.ndarray, tol: float) -> list[tuple[int, in
 
 
 def _competing_groups(near: np.ndarray) -> list[tuple[list[int], list[int]]]:
-    """Connected groups (layout rows, detection columns) of the bipartite graph ``near``."""
-    seen_r, seen_c = np.zeros(near.shape[0], bool), np.zeros(near.shape[1], bool)
-    groups = []
-    for r0 in np.flatnonzero(near.any(axis=1)):
-        if seen_r[r0]:
-            continue
-        rows, cols, todo = [int(r0)], [], [int(r0)]
-        seen_r[r0] = True
-        while todo:
-            for c in np.flatnonzero(near[todo.pop()] & ~seen_c):
-                seen_c[c] = True
-                cols.append(int(c))
-                for r in np.flatnonzero(near[:, c] & ~seen_r):
-                    seen_r[r] = True
-                    rows.append(int(r))
-                    todo.append(int(r))
-        groups.append((sorted(rows), sorted(cols)))
-    return groups
+    """Connected groups (layout rows, detection columns) of the bipartite graph ``near``, by first row."""
+    n_rows = near.shape[0]
+    r, c = np.nonzero(near)
+    group = join_groups(n_rows + near.shape[1], r, n_rows + c)  # rows are items 0.., columns after them
+    out = []
+    for g in np.unique(group[r]):  # a group's name is its first row
+        rows = np.flatnonzero(group[:n_rows] == g)
+        out.append(([int(k) for k in rows], [int(k) for k in np.flatnonzero(group[n_rows:] == g)]))
+    return out
 
 
 def _enumerate_matchings(rows: list[int], near: np.ndarray, d: np.ndarray,
