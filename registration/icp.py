@@ -277,23 +277,28 @@ class _Level:
         if not len(idx):
             return 0.0, float("nan"), float("nan")
         plane = np.einsum("ij,ij->i", moved - self.target[idx], self.normals(idx))
-        return len(idx) / len(self.fit_source), float(np.sqrt(np.mean(dist ** 2))), float(np.sqrt(np.mean(plane ** 2)))
+        return len(idx) / len(self.fit_source), _rms(dist), _rms(plane)
 
     def solve(self, matrix: np.ndarray, max_iterations: int) -> tuple[np.ndarray, int]:
         """Iterate the weighted point-to-plane step from ``matrix``; the refined matrix and the iterations run."""
         points = self.fit_source
         moved, idx, dist = self.match(matrix, points)
-        before = (len(idx), float(np.sqrt(np.mean(dist ** 2))) if len(idx) else 0.0)
+        before = (len(idx), _rms(dist))
         for it in range(1, max_iterations + 1):
             if len(idx) < 6:
                 return matrix, it - 1
             matrix = _step(moved, self.target[idx], self.normals(idx), self.kernel_m) @ matrix
             moved, idx, dist = self.match(matrix, points)
-            after = (len(idx), float(np.sqrt(np.mean(dist ** 2))) if len(idx) else 0.0)
+            after = (len(idx), _rms(dist))
             if abs(after[0] - before[0]) < 1e-6 * len(points) and abs(after[1] - before[1]) < 1e-6:
                 return matrix, it
             before = after
         return matrix, max_iterations
+
+
+def _rms(values: np.ndarray) -> float:
+    """Root mean square (0 of none)."""
+    return float(np.sqrt(np.mean(values ** 2))) if len(values) else 0.0
 
 
 def _step(moved: np.ndarray, matched: np.ndarray, normals: np.ndarray, kernel_m: float) -> np.ndarray:
