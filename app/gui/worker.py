@@ -16,8 +16,8 @@ log = logging.getLogger(__name__)
 #: Native extensions jobs load. Loading one for the first time in a worker thread while the GUI thread
 #: draws with OpenGL can deadlock (the dynamic loader's lock against the GIL: seen with Open3D under
 #: VTK), so they are all imported in the GUI thread before the first job starts.
-NATIVE_MODULES = ("open3d", "py4dgeo", "laspy", "lazrs", "pye57", "cv2", "scipy.spatial", "scipy.optimize",
-                  "scipy.ndimage", "pandas", "openpyxl", "reportlab.pdfgen.canvas")
+NATIVE_MODULES = ("open3d", "py4dgeo", "laspy", "lazrs", "pye57", "cv2", "scipy.spatial", "scipy.optimize", "pandas",
+                  "openpyxl", "reportlab.pdfgen.canvas")
 _preloaded = False
 
 
