@@ -124,7 +124,10 @@ def output_folder(path: str | os.PathLike) -> Path:
     out = Path(path)
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: exists and is not a folder")
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"{out}: cannot create the folder ({exc.strerror})") from None
     return out
 
 
@@ -173,7 +176,7 @@ def check_output(path: str | os.PathLike, *, folder: bool = False, suffixes: Seq
             parent = parent.parent
         if not parent.is_dir():
             raise InputError(f"{out}: cannot create a folder inside {parent}, which is a file")
-        if not os.access(parent, os.W_OK | os.X_OK):
+        if not os.access(parent, os.W_OK | os.X_OK) or not _can_create_in(parent):
             raise InputError(f"{out}: no permission to write in {parent}")
         return out
     if out.is_dir() or str(path).endswith(("/", os.sep)):
@@ -187,6 +190,24 @@ def check_output(path: str | os.PathLike, *, folder: bool = False, suffixes: Seq
         raise InputError(f"{out}: the folder {parent} does not exist; create it first")
     if not parent.is_dir():
         raise InputError(f"{out}: {parent} is a file, not a folder")
-    if not os.access(parent, os.W_OK | os.X_OK) or (out.exists() and not os.access(out, os.W_OK)):
+    if not os.access(parent, os.W_OK | os.X_OK) or (out.exists() and not os.access(out, os.W_OK)) \
+            or not _can_create_in(parent):
         raise InputError(f"{out}: no permission to write {'it' if out.exists() else 'in ' + str(parent)}")
     return out
+
+
+def _can_create_in(folder: Path) -> bool:
+    """Whether a file can really be created in ``folder`` (tried, and removed at once).
+
+    ``os.access`` answers yes to root everywhere, also on a read-only file system or in /proc, where the
+    writer would fail only after the computing.
+    """
+    import tempfile
+
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".bridgesurvey-probe-", dir=folder)
+    except OSError:
+        return False
+    os.close(fd)
+    os.unlink(probe)
+    return True

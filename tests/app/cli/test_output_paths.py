@@ -117,6 +117,16 @@ def test_no_write_permission_is_refused_first(name, scratch, capsys):
         locked.chmod(0o700)
 
 
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="needs Linux's /proc")
+@pytest.mark.parametrize("name", ["plan --out", "report", "analyse", "compare", "plan-file --out"])
+def test_a_place_nobody_may_write_is_refused_first_even_for_root(name, scratch, capsys):
+    """/proc takes no new files: os.access tells root it may write there; the check tries instead."""
+    template = {**FILE_OUTPUTS, **FOLDER_OUTPUTS}[name]
+    out = Path("/proc") / ("bridgesurvey-out" if name in FOLDER_OUTPUTS else f"out{ENDING.get(name, '.json')}")
+    _one_line(*_run(template, scratch, out, capsys), str(out), "no permission to write in /proc")
+    assert not out.exists() and not (scratch / "no-campaign").exists()
+
+
 def test_input_paths_say_what_is_wrong_with_them(scratch, capsys):
     d = scratch / "no-campaign"
     _one_line(main(["add-epoch", str(d), "--date", L, "--coarse", str(scratch / "a-folder")]),
