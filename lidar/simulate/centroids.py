@@ -198,10 +198,25 @@ def observe(xyz_bridge: np.ndarray, ids: Sequence[str], *, scanner_xyz: ArrayLik
         p = socs[k]
         r = float(np.linalg.norm(p))
         los = p / r
-        cov = (range_sigma_m ** 2 / points) * np.outer(los, los) + \
-            ((angle_sigma_rad * r) ** 2 / points) * (np.eye(3) - np.outer(los, los))
-        out[rid] = Observation(p + rng.multivariate_normal(np.zeros(3), cov), cov)
+        across = _across(los)
+        sd_range, sd_across = range_sigma_m / np.sqrt(points), angle_sigma_rad * r / np.sqrt(points)
+        cov = sd_range ** 2 * np.outer(los, los) + sd_across ** 2 * (np.eye(3) - np.outer(los, los))
+        z = rng.standard_normal(3)
+        out[rid] = Observation(p + sd_range * z[0] * los + sd_across * (z[1] * across[0] + z[2] * across[1]), cov)
     return (out, rot) if return_rotation else out
+
+
+def _across(los: np.ndarray) -> np.ndarray:
+    """(2, 3) orthonormal directions across a unit line of sight, from a fixed rule.
+
+    The noise is drawn along these rather than by ``Generator.multivariate_normal``, whose SVD picks arbitrary
+    axes in the covariance's two equal across-beam eigenvalues: which axes depends on the LAPACK kernel, so
+    the same seed gave centroids 80 um apart on two CPUs.
+    """
+    ref = np.array([0.0, 0.0, 1.0]) if abs(los[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    a = np.cross(los, ref)
+    a /= np.linalg.norm(a)
+    return np.stack([a, np.cross(los, a)])
 
 
 def _systematic(socs: np.ndarray, rot: np.ndarray, *, range_scale_ppm: float, range_walk: Optional[RangeWalk],

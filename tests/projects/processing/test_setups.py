@@ -35,10 +35,10 @@ def _sides(seen1, seen2, *, sigma1=0.1, sigma2=0.1, noise=True, offset=None):
     s1, s2 = {}, {}
     for t in seen1:
         c = _cov(sigma1)
-        s1[t] = Observation(TARGETS[t] + (RNG.multivariate_normal(np.zeros(3), c) if noise else 0), c)
+        s1[t] = Observation(TARGETS[t] + (RNG.multivariate_normal(np.zeros(3), c, method="cholesky") if noise else 0), c)
     for t in seen2:
         c = _cov(sigma2)
-        y = rot.T @ (TARGETS[t] - tr) + (RNG.multivariate_normal(np.zeros(3), c) if noise else 0)
+        y = rot.T @ (TARGETS[t] - tr) + (RNG.multivariate_normal(np.zeros(3), c, method="cholesky") if noise else 0)
         if offset and t in offset:
             y = y + offset[t]
         s2[t] = Observation(y, c)
