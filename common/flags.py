@@ -98,6 +98,11 @@ FLAG_NORMAL_FROM_EPOCH = _flag("normal_refitted_in_epoch", INFO, "deck normal re
                                "lidar.displacement")
 FLAG_REFERENCE_AMBIGUOUS = _flag("reference_change_ambiguous", WARNING, "the reference group changed and the "
                                  "moved target could not be singled out", "lidar.displacement")
+FLAG_REFERENCE_UNRESOLVED = _flag("reference_move_unresolved", PROBLEM, "a reference target moved and neither the "
+                                  "pier targets nor the deck's shape single it out: the displacements rest on the "
+                                  "likeliest guess, or on the targets left once both suspects are left out, and may "
+                                  "carry that move's tilt (errors of 5-15 sigma seen in simulation)",
+                                  "lidar.displacement")
 FLAG_REFERENCE_GEOMETRY_WEAK = _flag("reference_geometry_weak", PROBLEM, "the reference targets found (and the "
                                      "deck's sideways stability) cannot fix one of the frame's rotations: all on "
                                      "one line, or in one plane seen edge-on; the displacements are undetermined "

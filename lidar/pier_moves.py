@@ -25,7 +25,7 @@ from typing import Callable, Mapping, Optional
 
 import numpy as np
 
-from common.flags import FLAG_REFERENCE_AMBIGUOUS, FLAG_REFERENCE_MOVED
+from common.flags import FLAG_REFERENCE_AMBIGUOUS, FLAG_REFERENCE_MOVED, FLAG_REFERENCE_UNRESOLVED
 from lidar.displacement_result import EpochDisplacements
 
 #: How much worse (chi-square ratio) the rejected explanation must fit than the kept one.
@@ -106,7 +106,9 @@ def resolve_ambiguous_move(result: EpochDisplacements, base: Mapping, groups: Ma
     (``consistency(stable_ids)``, a rigid-fit RMS) and its deck fits a supported
     span. One that fits while every other fits decisively worse is taken: its
     target is named as moved and the others are kept. ``solve(stable_ids,
-    checks, flags)`` recomputes the epoch. Otherwise ``result`` stands.
+    checks, flags)`` recomputes the epoch. Otherwise ``result`` stands (both suspects left out), with
+    ``reference_move_unresolved`` (a problem) on the epoch and on every row: two pier targets on one pier
+    leave the deck's tilt to the deck itself, and its errors reach 5-15 sigma.
     """
     suspects = [c.reflector for c in result.reference_checks if c.suspect]
     if len(suspects) != 2:
@@ -129,7 +131,7 @@ def resolve_ambiguous_move(result: EpochDisplacements, base: Mapping, groups: Ma
         fit = _explain(solve, stable, checks, flags, base, groups)
         if fit is not None:
             fits.append(fit)
-    return _decisive(fits) or result
+    return _decisive(fits) or _unresolved(result)
 
 
 def _explain(solve: Callable, stable: list, checks, flags: list, base: Mapping, groups: Mapping[str, str]):
@@ -164,6 +166,9 @@ def verify_single_move(result: EpochDisplacements, base: Mapping, groups: Mappin
     When the deck displacements under that explanation do not fit a supported
     span (chi-square above its 99 % quantile), each other pier target is tried
     as the moved one instead (same conditions as :func:`resolve_ambiguous_move`).
+    When none is decisively better, the best-fitting explanation is kept and the
+    epoch and every row carry ``reference_move_unresolved`` (a problem): the check's
+    own choice is the one the deck rejects, so it cannot stand unflagged.
     """
     moved = [c.reflector for c in result.reference_checks if c.moved]
     if len(moved) != 1 or len(result.reference_ids) < 3:
@@ -184,4 +189,10 @@ def verify_single_move(result: EpochDisplacements, base: Mapping, groups: Mappin
         fit = _explain(solve, stable, checks, list(result.flags), base, groups)
         if fit is not None:
             fits.append(fit)
-    return _decisive(fits) or result
+    return _decisive(fits) or _unresolved(min(fits, key=lambda f: f[0])[2])
+
+
+def _unresolved(result: EpochDisplacements) -> EpochDisplacements:
+    """``result`` with ``reference_move_unresolved`` on the epoch and on every row."""
+    rows = tuple(replace(d, flags=d.flags + (FLAG_REFERENCE_UNRESOLVED,)) for d in result.displacements)
+    return replace(result, displacements=rows, flags=result.flags + (FLAG_REFERENCE_UNRESOLVED,))

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from common.flags import FLAG_NORMAL_FROM_EPOCH, FLAG_REFERENCE_AMBIGUOUS
+from common.flags import FLAG_NORMAL_FROM_EPOCH, FLAG_REFERENCE_AMBIGUOUS, FLAG_REFERENCE_UNRESOLVED
 from lidar.displacement import compute_displacements
 from lidar.reference_motion import across_axis, fit_reference_motion
 from lidar.simulate.centroids import BridgeGeometry, deflection, observe, random_station
@@ -109,10 +109,13 @@ def test_a_vertical_pier_target_move_is_pinned_by_the_deck_shape(target, move, s
         suspects = [c.reflector for c in res.reference_checks if c.suspect]
         assert pinned in ([target], [])  # never a wrong target named as moved
         assert pinned or suspects
+        for d in res.displacements:  # no silent error: within 3.5 sigma, or the row says why not
+            assert abs(d.displacement_m - dz[ids.index(d.reflector)]) <= 3.5 * d.sigma_m or d.flags, (seed, d)
         if pinned == [target]:
             named += 1
             errs += [d.displacement_m - dz[ids.index(d.reflector)] for d in res.displacements]
-        else:
-            assert FLAG_REFERENCE_AMBIGUOUS in res.flags  # left out both, and says so
+        else:  # left out both, and says so on the epoch and on every row
+            assert FLAG_REFERENCE_AMBIGUOUS in res.flags and FLAG_REFERENCE_UNRESOLVED in res.flags
+            assert all(FLAG_REFERENCE_UNRESOLVED in d.flags for d in res.displacements)
     assert named >= 16
     assert np.sqrt(np.mean(np.square(errs))) <= 0.00015 and np.abs(errs).max() <= 0.0004
