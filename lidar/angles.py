@@ -46,6 +46,58 @@ def spherical_from_xyz(xyz_socs: np.ndarray, *, out_dtype: DTypeLike = np.float6
     return theta, phi, rng
 
 
+#: Odd minimax polynomial of atan(a) on [0, 1] in degrees: atan(a) = a * sum(c_k a^(2k)), within 2.5e-7 rad.
+_ATAN_DEG = np.degrees(np.array([0.99999611, -0.33317372, 0.19807837, -0.13233395, 0.07962432, -0.0336046,
+                                 0.00681188])).astype(np.float32)
+
+
+def atan2_deg32(y: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``degrees(arctan2(y, x))`` of float32 arrays, four times quicker than numpy's float32 ``arctan2``.
+
+    Parameters
+    ----------
+    y, x : (N,) float32 arrays
+        ``x`` and ``y`` are left as they are.
+
+    Returns
+    -------
+    (N,) float32 array
+        Angles in degrees in [-180, 180], with arctan2's signs for zeros (``atan2(-0, -1) = -180``).
+        Within 3e-5 degrees of the exact angle (numpy's float32 ``arctan2`` in degrees: 2e-5), a
+        thousandth of a 0.02-degree cell.
+
+    Notes
+    -----
+    The coarse map of a 19-million-point scan takes two angles a point; numpy's float32 ``arctan2`` (37 ns a
+    point here) was two thirds of the map's time. The angle of the smaller over the larger coordinate comes
+    from a polynomial; the octant is restored with sign arithmetic (``copysign``) rather than masks, which
+    numpy runs at a quarter of its arithmetic speed.
+    """
+    ax, ay = np.abs(x), np.abs(y)
+    big = np.maximum(ax, ay)
+    np.maximum(big, np.float32(1e-30), out=big)  # atan2(0, 0) = 0
+    a = np.minimum(ax, ay)
+    a /= big
+    s = np.multiply(a, a, out=big)
+    r = s * _ATAN_DEG[-1]
+    for c in _ATAN_DEG[-2:0:-1]:  # Horner's scheme
+        r += c
+        r *= s
+    r += _ATAN_DEG[0]
+    r *= a  # degrees in [0, 45]
+    ax -= ay
+    _mirror(r, np.float32(45.0), np.copysign(np.float32(1.0), ax, out=ax))  # 90 - r where |y| > |x|
+    _mirror(r, np.float32(90.0), np.copysign(np.float32(1.0), x, out=ay))  # 180 - r where x < 0
+    return np.copysign(r, y, out=r)
+
+
+def _mirror(r: np.ndarray, about: np.float32, sign: np.ndarray) -> None:
+    """``r`` where ``sign`` is +1, ``2 * about - r`` where it is -1, in place."""
+    np.subtract(about, r, out=r)
+    r *= sign
+    np.subtract(about, r, out=r)
+
+
 def direction_from_angles(theta_deg: ArrayLike, phi_deg: ArrayLike) -> np.ndarray:
     """(..., 3) unit vectors for zenith/azimuth angles in degrees."""
     t = np.radians(np.asarray(theta_deg, dtype=np.float64))

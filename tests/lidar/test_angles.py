@@ -42,3 +42,20 @@ def test_invalid_windows():
         AngularWindow(0, 5, 80, 190, 0.1, 0.1)
     with pytest.raises(InputError):
         AngularWindow(0, 5, 80, 90, float("nan"), 0.1)
+
+
+def test_the_quick_float32_arctan2_is_within_3e_5_degrees_everywhere():
+    from lidar.angles import atan2_deg32
+
+    rng = np.random.default_rng(0)
+    y = rng.normal(size=200_000) * 10.0 ** rng.uniform(-6, 3, 200_000)
+    x = rng.normal(size=200_000) * 10.0 ** rng.uniform(-6, 3, 200_000)
+    y[:8] = [0.0, -0.0, 0.0, -0.0, 1.0, -1.0, 0.0, 0.0]  # the axes and signed zeros
+    x[:8] = [1.0, 1.0, -1.0, -1.0, 0.0, 0.0, 0.0, -0.0]
+    y32, x32 = y.astype(np.float32), x.astype(np.float32)
+    got = atan2_deg32(y32, x32)
+    want = np.degrees(np.arctan2(y32.astype(np.float64), x32.astype(np.float64)))
+    assert got.dtype == np.float32 and np.abs(got - want).max() < 3e-5
+    np.testing.assert_array_equal(got[:8], np.float32([0, -0.0, 180, -180, 90, -90, 0, 180]))
+    np.testing.assert_array_equal(np.signbit(got[:8]), np.signbit(want[:8]))
+    assert np.array_equal(y32, y.astype(np.float32)) and np.array_equal(x32, x.astype(np.float32))  # untouched
