@@ -453,10 +453,9 @@ class _LasPoints:
         return view.view(self.dtype)
 
     def _xyz32(self, xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Coordinates in float32 of records' X, Y, Z bytes (``V12``): scaled in float64 as the reader does,
-        then rounded once.
+        """Coordinates in float32 of records' X, Y, Z bytes (``V12``), scaled in float64 and rounded once.
 
-        The X, Y, Z bytes are copied out first: in records of an odd length most of the integers are
+        Scaled as the reader scales them. The X, Y, Z bytes are copied out first: in records of an odd length most of the integers are
         unaligned, and numpy casts unaligned integers at half its speed.
         """
         ints = np.ascontiguousarray(xyz).view("<i4").reshape(-1, 3)

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Optional, Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
+from common.arrays import unique_sorted
 from common.progress import ProgressCallback, report
 from common.rigid import rotation_from_rotvec
 from common.validation import require_points
@@ -258,7 +259,7 @@ class _Level:
 
     def normals(self, idx: np.ndarray) -> np.ndarray:
         """Normals at the target points ``idx`` (computed once each, when first needed)."""
-        new = np.unique(idx[~self._known[idx]])
+        new = unique_sorted(idx[~self._known[idx]])
         if new.size:
             self._normals[new] = surface_normals(self.target, self.tree, radius_m=self.radius_m, which=new)
             self._known[new] = True

@@ -21,6 +21,8 @@ from typing import Optional
 
 import numpy as np
 
+from common.arrays import unique_sorted
+from lidar.angles import atan2_deg32
 #: A cloud is a regular scan when at least this share of neighbour differences lies within 10 % of the step.
 REGULAR_SHARE = 0.5
 #: A neighbour is "straight above" when its azimuth differs by less than this fraction of its zenith difference.
@@ -70,8 +72,13 @@ def angles_deg(xyz: np.ndarray, dtype: type = np.float64) -> tuple[np.ndarray, n
     x: np.ndarray = np.asarray(xyz[:, 0], dtype=dtype)
     y: np.ndarray = np.asarray(xyz[:, 1], dtype=dtype)
     z: np.ndarray = np.asarray(xyz[:, 2], dtype=dtype)
-    deg: np.ndarray = np.asarray(180.0 / np.pi, dtype=dtype)
     turn: np.ndarray = np.asarray(360.0, dtype=dtype)
+    if np.dtype(dtype) == np.float32:  # four times quicker, within 3e-5 degrees
+        phi = atan2_deg32(y, x)
+        phi += turn * (phi < 0)
+        phi[phi >= turn] -= turn
+        return atan2_deg32(np.sqrt(x * x + y * y), z), phi
+    deg: np.ndarray = np.asarray(180.0 / np.pi, dtype=dtype)
     theta = np.arctan2(np.hypot(x, y), z)
     theta *= deg
     phi = np.arctan2(y, x)
@@ -275,5 +282,5 @@ class PatchSampler:
         if not self._theta:
             return AngularSteps(None, None, 0.0, 0, "angular neighbours")
         theta, phi = np.concatenate(self._theta), np.concatenate(self._phi)
-        return steps_from_neighbours(theta, phi, method=f"angular neighbours in {len(np.unique(np.concatenate(self._rank)))} "
+        return steps_from_neighbours(theta, phi, method=f"angular neighbours in {len(unique_sorted(np.concatenate(self._rank)))} "
                                                         f"patches of {self.cell_deg:g} deg")
