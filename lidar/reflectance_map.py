@@ -231,8 +231,8 @@ def binned_map(points: PointSource, *, step_deg: Optional[float] = None,
     def bin_chunk(start: int) -> Optional["_Partial"]:
         t, p, r, inten = points.chunk(start, min(start + CHUNK, n))
         p -= np.float32(phi0)
-        p[p < 0] += np.float32(360.0)
-        p[p >= 360.0] -= np.float32(360.0)
+        p += np.float32(360.0) * (p < 0)  # masks as factors: masked assignment is 4x slower
+        p -= np.float32(360.0) * (p >= 360.0)
         t *= inv
         row = t.astype(np.int32)
         row -= row_lo
