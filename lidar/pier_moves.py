@@ -115,8 +115,8 @@ def resolve_ambiguous_move(result: EpochDisplacements, base: Mapping, groups: Ma
         return result
     present = list(result.reference_ids) + suspects
     rms = {m: consistency([r for r in present if r != m]) for m in present if len(present) - 1 >= 3}
-    if not rms:
-        return result
+    if not rms:  # too few pier targets to try the explanations
+        return _unresolved(result)
     limit = CONSISTENCY_RATIO * min(rms.values()) + 1e-4
     fits = []
     for moved in present:
