@@ -91,6 +91,32 @@ def atan2_deg32(y: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.copysign(r, y, out=r)
 
 
+def spherical32(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Zenith angle, azimuth and range of float32 coordinates, by :func:`atan2_deg32`; overwrites its inputs.
+
+    Parameters
+    ----------
+    x, y, z : (N,) float32 arrays, metres in the scanner frame
+        Used as work space: their values are lost.
+
+    Returns
+    -------
+    theta_deg : (N,) float32 zenith angles in [0, 180], within 3e-5 degrees.
+    phi_deg : (N,) float32 azimuths in [0, 360], within 5e-5 degrees (those above 180 take one more
+        rounding); one just below 360 may round to 360.0.
+    range_m : (N,) float32 distances from the scanner origin.
+    """
+    phi = atan2_deg32(y, x)
+    phi += np.float32(360.0) * (phi < 0)  # a mask as a factor: masked assignment is 4x slower
+    x *= x
+    y *= y
+    x += y  # horizontal distance squared
+    y = np.multiply(z, z, out=y)
+    y += x  # range squared
+    theta = atan2_deg32(np.sqrt(x, out=x), z)
+    return theta, phi, np.sqrt(y, out=y)
+
+
 def _mirror(r: np.ndarray, about: np.float32, sign: np.ndarray) -> None:
     """``r`` where ``sign`` is +1, ``2 * about - r`` where it is -1, in place."""
     np.subtract(about, r, out=r)

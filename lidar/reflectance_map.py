@@ -18,7 +18,7 @@ from typing import Optional, Protocol
 import numpy as np
 from numpy.typing import ArrayLike
 
-from lidar.angles import atan2_deg32, direction_from_angles, wrap_phi
+from lidar.angles import direction_from_angles, spherical32, wrap_phi
 from common.validation import require_points
 from common.errors import InputError, ScanFormatError
 from common.progress import ProgressCallback, report
@@ -88,23 +88,8 @@ class ReflectanceMap:
 
 
 def _angles32(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    return _angles_of(xyz[:, 0].astype(np.float32), xyz[:, 1].astype(np.float32), xyz[:, 2].astype(np.float32))
-
-
-def _angles_of(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(theta, phi in [0, 360], range) in float32 of float32 coordinates; ``x``, ``y`` and ``z`` are overwritten.
-
-    ``phi`` may round to 360.0 just below the seam; :func:`binned_map` wraps it.
-    """
-    phi = atan2_deg32(y, x)
-    phi += np.float32(360.0) * (phi < 0)  # a mask as a factor: masked assignment is 4x slower
-    x *= x
-    y *= y
-    x += y  # horizontal distance squared
-    y = np.multiply(z, z, out=y)
-    y += x  # range squared
-    theta = atan2_deg32(np.sqrt(x, out=x), z)
-    return theta, phi, np.sqrt(y, out=y)
+    """(theta, phi in [0, 360], range) in float32 of (N, 3) points; a phi of 360.0 is wrapped by the binning."""
+    return spherical32(*(xyz[:, k].astype(np.float32) for k in range(3)))
 
 
 def occupied_area_deg2(theta_deg: np.ndarray, phi_deg: np.ndarray) -> float:
@@ -455,8 +440,8 @@ class _LasPoints:
     def _xyz32(self, xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Coordinates in float32 of records' X, Y, Z bytes (``V12``), scaled in float64 and rounded once.
 
-        Scaled as the reader scales them. The X, Y, Z bytes are copied out first: in records of an odd length most of the integers are
-        unaligned, and numpy casts unaligned integers at half its speed.
+        Scaled as the reader scales them. The X, Y, Z bytes are copied out first: in records of an odd
+        length most of the integers are unaligned, and numpy casts unaligned integers at half its speed.
         """
         ints = np.ascontiguousarray(xyz).view("<i4").reshape(-1, 3)
         out = []
@@ -480,12 +465,12 @@ class _LasPoints:
 
         with ThreadPoolExecutor(max_workers=2) as pool:
             parts = list(pool.map(sample, range(0, self.n, window)))
-        t, p, _ = _angles_of(*self._xyz32(np.concatenate(parts)))
+        t, p, _ = spherical32(*self._xyz32(np.concatenate(parts)))
         return t, p
 
     def chunk(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         rec = self._records(start, stop)
-        t, p, r = _angles_of(*self._xyz32(rec["xyz"]))
+        t, p, r = spherical32(*self._xyz32(rec["xyz"]))
         return t, p, r, rec["intensity"].astype(np.float32)
 
 

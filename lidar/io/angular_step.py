@@ -22,7 +22,8 @@ from typing import Optional
 import numpy as np
 
 from common.arrays import unique_sorted
-from lidar.angles import atan2_deg32
+from lidar.angles import spherical32
+
 #: A cloud is a regular scan when at least this share of neighbour differences lies within 10 % of the step.
 REGULAR_SHARE = 0.5
 #: A neighbour is "straight above" when its azimuth differs by less than this fraction of its zenith difference.
@@ -69,15 +70,14 @@ class AngularSteps:
 
 def angles_deg(xyz: np.ndarray, dtype: type = np.float64) -> tuple[np.ndarray, np.ndarray]:
     """(theta, phi) in degrees of points in the scanner frame; phi in [0, 360). ``dtype`` float32 is cheaper."""
+    turn: np.ndarray = np.asarray(360.0, dtype=dtype)
+    if np.dtype(dtype) == np.float32:  # four times quicker, within 3e-5 degrees; on copies (it overwrites)
+        theta, phi, _ = spherical32(*(xyz[:, k].astype(np.float32) for k in range(3)))
+        phi[phi >= turn] -= turn
+        return theta, phi
     x: np.ndarray = np.asarray(xyz[:, 0], dtype=dtype)
     y: np.ndarray = np.asarray(xyz[:, 1], dtype=dtype)
     z: np.ndarray = np.asarray(xyz[:, 2], dtype=dtype)
-    turn: np.ndarray = np.asarray(360.0, dtype=dtype)
-    if np.dtype(dtype) == np.float32:  # four times quicker, within 3e-5 degrees
-        phi = atan2_deg32(y, x)
-        phi += turn * (phi < 0)
-        phi[phi >= turn] -= turn
-        return atan2_deg32(np.sqrt(x * x + y * y), z), phi
     deg: np.ndarray = np.asarray(180.0 / np.pi, dtype=dtype)
     theta = np.arctan2(np.hypot(x, y), z)
     theta *= deg

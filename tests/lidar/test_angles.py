@@ -59,3 +59,14 @@ def test_the_quick_float32_arctan2_is_within_3e_5_degrees_everywhere():
     np.testing.assert_array_equal(got[:8], np.float32([0, -0.0, 180, -180, 90, -90, 0, 180]))
     np.testing.assert_array_equal(np.signbit(got[:8]), np.signbit(want[:8]))
     assert np.array_equal(y32, y.astype(np.float32)) and np.array_equal(x32, x.astype(np.float32))  # untouched
+
+
+def test_the_float32_spherical_angles_match_the_float64_ones():
+    from lidar.angles import spherical32
+
+    xyz = np.random.default_rng(1).normal(size=(50_000, 3)) * 30.0
+    t64, p64, r64 = spherical_from_xyz(xyz)
+    t, p, r = spherical32(*(xyz[:, k].astype(np.float32) for k in range(3)))
+    assert np.abs(t - t64).max() < 3e-5 and np.abs(r - r64).max() < 1e-6 * r64.max()
+    # azimuths above 180 take one more rounding (+360, a float32 step of 3e-5 there)
+    assert np.all((p >= 0) & (p <= 360)) and np.abs(phi_difference(p, p64)).max() < 5e-5
