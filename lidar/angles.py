@@ -46,8 +46,9 @@ def spherical_from_xyz(xyz_socs: np.ndarray, *, out_dtype: DTypeLike = np.float6
     return theta, phi, rng
 
 
-#: Odd minimax polynomial of atan(a) on [0, 1] in degrees: atan(a) = a * sum(c_k a^(2k)), within 2.5e-7 rad.
-_ATAN_DEG = np.degrees(np.array([0.99999611, -0.33317372, 0.19807837, -0.13233395, 0.07962432, -0.0336046,
+#: Odd minimax polynomial of atan(a) on [0, 1] in degrees: atan(a) = a * sum(c_k a^(2k)), within 2.5e-7 rad
+#: (also the compiled coarse map's, lidar/native/coarse_map.c).
+ATAN_DEG32 = np.degrees(np.array([0.99999611, -0.33317372, 0.19807837, -0.13233395, 0.07962432, -0.0336046,
                                  0.00681188])).astype(np.float32)
 
 
@@ -79,11 +80,11 @@ def atan2_deg32(y: np.ndarray, x: np.ndarray) -> np.ndarray:
     a = np.minimum(ax, ay)
     a /= big
     s = np.multiply(a, a, out=big)
-    r = s * _ATAN_DEG[-1]
-    for c in _ATAN_DEG[-2:0:-1]:  # Horner's scheme
+    r = s * ATAN_DEG32[-1]
+    for c in ATAN_DEG32[-2:0:-1]:  # Horner's scheme
         r += c
         r *= s
-    r += _ATAN_DEG[0]
+    r += ATAN_DEG32[0]
     r *= a  # degrees in [0, 45]
     ax -= ay
     _mirror(r, np.float32(45.0), np.copysign(np.float32(1.0), ax, out=ax))  # 90 - r where |y| > |x|
