@@ -16,7 +16,7 @@ log = logging.getLogger(__name__)
 #: Native extensions jobs load. Loading one for the first time in a worker thread while the GUI thread
 #: draws with OpenGL can deadlock (the dynamic loader's lock against the GIL: seen with Open3D under
 #: VTK), so they are all imported in the GUI thread before the first job starts.
-NATIVE_MODULES = ("open3d", "py4dgeo", "laspy", "lazrs", "pye57", "cv2", "scipy.spatial", "scipy.optimize", "pandas",
+NATIVE_MODULES = ("open3d", "_py4dgeo", "laspy", "lazrs", "pye57", "cv2", "scipy.spatial", "scipy.optimize", "pandas",
                   "openpyxl", "reportlab.pdfgen.canvas")
 _preloaded = False
 
@@ -34,6 +34,9 @@ def preload_native_modules() -> None:
             importlib.import_module(name)
         except Exception as exc:  # the job that needs it reports the problem in its own words
             log.warning("could not load %s: %s", name, exc)
+    from lidar.native import coarse_map_library
+
+    coarse_map_library()  # our own compiled coarse map, loaded by ctypes (None where it is not built)
 
 
 class _JobThread(QThread):

@@ -175,7 +175,7 @@ def _deck_mask(xyz: np.ndarray, targets: np.ndarray, radius_m: float = 1.0, band
 
 
 def _prefetch() -> None:
-    """Import py4dgeo and the figures' matplotlib in the background while the epochs are read and registered.
+    """Import py4dgeo's compiled core and the figures' matplotlib in the background while the epochs are read.
 
     What this thread imports meanwhile (the KD-tree of the stable-part masks and the ICP) is imported first,
     so the two threads never import the same package at once.
