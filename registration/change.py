@@ -159,6 +159,7 @@ def cloud_to_cloud(reference_xyz: np.ndarray, compared_xyz: np.ndarray, *, max_d
     answers the queries on every core (``workers=-1``). It is built without ``compact_nodes`` and
     ``balanced_tree``: cheaper to build, and a bounded query of points far from the reference (the ground
     beyond the bridge) no longer walks most of the tree (25 s instead of 1.5 s on two 1.2 M-point scans).
+    Leaves of 32 points rather than 16: 0.47 -> 0.44 s on those scans, the build twice as quick.
     """
     from scipy.spatial import cKDTree
 
@@ -167,7 +168,7 @@ def cloud_to_cloud(reference_xyz: np.ndarray, compared_xyz: np.ndarray, *, max_d
     if not (np.isfinite(max_distance_m) and max_distance_m > 0):
         raise InputError(f"C2C max distance must be positive, got {max_distance_m}")
     off = ref.mean(axis=0)
-    tree = cKDTree(ref - off, balanced_tree=False, compact_nodes=False)
+    tree = cKDTree(ref - off, leafsize=32, balanced_tree=False, compact_nodes=False)
     d, _ = tree.query(cmp_ - off, distance_upper_bound=max_distance_m, workers=-1)
     d[~np.isfinite(d)] = np.nan
     return ChangeResult("c2c", cmp_, d, None, None, float(registration_error_m),
