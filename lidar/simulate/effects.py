@@ -295,6 +295,77 @@ def _rotate(v: np.ndarray, rotvec: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
+class AxisErrors:
+    """The instrument's own errors, which its calibration does not remove: the same at every set-up.
+
+    A beam the instrument reports at zenith angle ``theta`` and azimuth ``phi`` really leaves at zenith
+    ``theta + vertical_index`` and azimuth ``phi + collimation / sin(theta) + trunnion * cot(theta)`` (the
+    classic axis errors of a theodolite), and every range reads ``range_offset_m`` long (the zero error, on
+    every surface, retro-reflective or not).
+
+    Attributes
+    ----------
+    collimation_arcsec : float
+        The beam's deviation from perpendicular to the trunnion axis. Default 0.
+    trunnion_arcsec : float
+        The trunnion axis' deviation from perpendicular to the vertical axis. Default 0.
+    vertical_index_arcsec : float
+        A constant error of the zenith angle. Default 0.
+    range_offset_m : float
+        Added to every range, metres. Default 0.
+    """
+
+    collimation_arcsec: float = 0.0
+    trunnion_arcsec: float = 0.0
+    vertical_index_arcsec: float = 0.0
+    range_offset_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not all(np.isfinite(getattr(self, f.name)) for f in fields(self)):
+            raise InputError("axis errors must be finite")
+        if max(abs(self.collimation_arcsec), abs(self.trunnion_arcsec), abs(self.vertical_index_arcsec)) > 3600:
+            raise InputError("axis errors beyond a degree are not an instrument's")
+
+    def _shift(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(d_theta, d_phi) in radians at zenith angles ``theta`` (radians)."""
+        s = np.maximum(np.sin(theta), 1e-6)
+        d_phi = (self.collimation_arcsec / s + self.trunnion_arcsec * np.cos(theta) / s) * ARCSEC
+        return np.full_like(theta, self.vertical_index_arcsec * ARCSEC), d_phi
+
+    def beam_directions(self, reported: np.ndarray) -> np.ndarray:
+        """(N, 3) unit vectors the beams really take, for the (N, 3) directions the instrument reports."""
+        theta, phi = _angles(reported)
+        d_theta, d_phi = self._shift(theta)
+        return _unit(theta + d_theta, phi + d_phi)
+
+    def reported_directions(self, beams: np.ndarray) -> np.ndarray:
+        """(N, 3) directions the instrument reports for beams along ``beams`` (the inverse, to 1e-12 rad)."""
+        theta, phi = _angles(beams)
+        rep_t, rep_p = theta.copy(), phi.copy()
+        for _ in range(3):  # fixed point: the shifts are arcseconds
+            d_theta, d_phi = self._shift(rep_t)
+            rep_t, rep_p = theta - d_theta, phi - d_phi
+        return _unit(rep_t, rep_p)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: Optional[dict]) -> Optional["AxisErrors"]:
+        return None if d is None else cls(**{f.name: float(d.get(f.name, 0.0)) for f in fields(cls)})
+
+
+def _angles(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    v = np.asarray(v, dtype=np.float64)
+    return np.arctan2(np.hypot(v[:, 0], v[:, 1]), v[:, 2]), np.arctan2(v[:, 1], v[:, 0])
+
+
+def _unit(theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
+    st = np.sin(theta)
+    return np.stack([st * np.cos(phi), st * np.sin(phi), np.cos(theta)], axis=-1)
+
+
+@dataclass(frozen=True)
 class VisitTiming:
     """When the points of a visit are measured.
 

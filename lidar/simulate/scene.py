@@ -20,7 +20,7 @@ from lidar.simulate.bridge import (
     pier_meshes,
     plate_mesh,
 )
-from lidar.simulate.effects import DriftModel, RangeWalk, VisitTiming, return_strength, walk_to_dict
+from lidar.simulate.effects import AxisErrors, DriftModel, RangeWalk, VisitTiming, return_strength, walk_to_dict
 from lidar.simulate.setup import ScannerSetup
 from lidar.simulate.truth import ScanTruth, TargetTruth, WindowTruth
 
@@ -78,6 +78,9 @@ class EpochConditions:
     timing : VisitTiming, optional
         When points are measured; every point then carries a time. Default none (no times, unless drifting:
         then ``VisitTiming()``).
+    axis_errors : AxisErrors, optional
+        The instrument's uncalibrated axis errors and range zero error (the same instrument's are the same at
+        every visit). Default none.
     """
 
     midspan_displacement_m: float = 0.0
@@ -94,6 +97,7 @@ class EpochConditions:
     clipped_fraction: float = 0.0
     drift: Optional[DriftModel] = None
     timing: Optional[VisitTiming] = None
+    axis_errors: Optional[AxisErrors] = None
 
     def __post_init__(self) -> None:
         if not np.isfinite(self.midspan_displacement_m):
@@ -267,7 +271,9 @@ class BridgeScene:
 
     def _world_directions(self, d_socs: np.ndarray, times: Optional[np.ndarray]) -> np.ndarray:
         """(N, 3) bridge-frame directions of rays the instrument sends along ``d_socs`` (its frame of the moment)."""
-        drift = self.conditions.drift
+        axes, drift = self.conditions.axis_errors, self.conditions.drift
+        if axes is not None:
+            d_socs = axes.beam_directions(d_socs)
         if drift is not None and times is not None:
             d_socs = drift.to_start(d_socs, times - self.conditions.visit_timing.start_s)
         return d_socs @ self.setup.rotation.T
@@ -322,6 +328,8 @@ class BridgeScene:
         rng_noisy = t + rng.normal(0.0, sigma, len(t))
         if returns is not None:
             self._walk_and_clip(returns.final(), on_target, rng_noisy, intensity)
+        if c.axis_errors is not None:
+            rng_noisy += c.axis_errors.range_offset_m
         if c.range_scale_ppm:
             rng_noisy *= 1.0 + c.range_scale_ppm * 1e-6
         keep = hit & (rng_noisy > 0)
@@ -448,10 +456,15 @@ class BridgeScene:
         bias = 0.0 if c.range_walk is None else float(
             c.range_walk.bias_m(rng_m, cos_inc, return_strength(rng_m, cos_inc))[()])
         observed = None
-        if time_s is not None or c.range_walk is not None or c.range_scale_ppm:
+        if time_s is not None or c.range_walk is not None or c.range_scale_ppm or c.axis_errors is not None:
             seen = socs if c.drift is None or time_s is None else \
                 c.drift.to_current(socs[None], time_s - c.visit_timing.start_s)[0]
-            observed = tuple(float(v) for v in seen / rng_m * (rng_m - bias) * (1.0 + c.range_scale_ppm * 1e-6))
+            offset = 0.0
+            if c.axis_errors is not None:
+                seen = c.axis_errors.reported_directions(seen[None])[0] * rng_m
+                offset = c.axis_errors.range_offset_m
+            observed = tuple(float(v) for v in
+                             seen / rng_m * (rng_m - bias + offset) * (1.0 + c.range_scale_ppm * 1e-6))
         return TargetTruth(
             id=tid, group=disc.target.group,
             centre_bridge_m=tuple(disc.centre),
@@ -489,6 +502,7 @@ class BridgeScene:
             range_walk=walk_to_dict(c.range_walk), clipped_fraction=c.clipped_fraction,
             drift=None if c.drift is None else c.drift.to_dict(),
             timing=c.visit_timing.to_dict() if c.timed else None, windows=windows,
+            axis_errors=None if c.axis_errors is None else c.axis_errors.to_dict(),
         )
 
     def coarse_window(self, step_deg: float = 0.05, margin_deg: float = 3.0) -> AngularWindow:

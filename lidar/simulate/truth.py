@@ -4,7 +4,8 @@ Format history: version 1 held the pose, the midspan displacement and per target
 vertical displacement and visibility; version 2 adds per target the along-span movement, the incidence, the
 range, the range bias applied, the time scanned and the centre as the instrument reported it, and per visit
 the spans, the span displacements, the deck strain, the atmosphere's scale, the range walk, the clipping, the
-drift and every scan's time span. Version-1 files load with those at their "off" values.
+drift and every scan's time span. Version-1 files load with those at their "off" values. The instrument's axis
+errors (``axis_errors``) were added within version 2; files without them load with none.
 """
 from __future__ import annotations
 
@@ -109,6 +110,8 @@ class ScanTruth:
         :class:`~lidar.simulate.effects.VisitTiming` parameters.
     windows : tuple of WindowTruth
         Time span of every scan, in the order scanned.
+    axis_errors : dict or None
+        :class:`~lidar.simulate.effects.AxisErrors` parameters (the instrument's axis and range zero errors).
     """
 
     scanner_pose: np.ndarray  # (4, 4) SOCS -> bridge frame
@@ -126,6 +129,7 @@ class ScanTruth:
     drift: Optional[dict] = None
     timing: Optional[dict] = None
     windows: tuple[WindowTruth, ...] = ()
+    axis_errors: Optional[dict] = None
 
     def target(self, target_id: str) -> TargetTruth:
         return next(t for t in self.targets if t.id == target_id)
@@ -156,7 +160,8 @@ class ScanTruth:
                    range_scale_ppm=float(d.get("range_scale_ppm", 0.0)),
                    range_walk=d.get("range_walk"), clipped_fraction=float(d.get("clipped_fraction", 0.0)),
                    drift=d.get("drift"), timing=d.get("timing"),
-                   windows=tuple(WindowTruth(**w) for w in d.get("windows", ())))
+                   windows=tuple(WindowTruth(**w) for w in d.get("windows", ())),
+                   axis_errors=d.get("axis_errors"))
 
     def save(self, path: str | os.PathLike) -> Path:
         p = Path(path)

@@ -7,6 +7,8 @@ from lidar.angles import spherical_from_xyz, window_around
 from lidar.simulate import BridgeModel, BridgeScene, EpochConditions, ScannerSetup
 from lidar.simulate.bridge import deck_mesh
 from lidar.simulate.effects import (
+    ARCSEC,
+    AxisErrors,
     DriftModel,
     ExponentialStrengthWalk,
     InverseSquareWalk,
@@ -239,3 +241,35 @@ def test_truth_version_2_round_trips_and_version_1_loads(tmp_path):
     old = ScanTruth.from_dict(v1)
     assert old.target("R1").points_on_target == 12 and old.target("R1").range_bias_m == 0.0
     assert old.range_walk is None and old.windows == () and old.range_scale_ppm == 0.0
+
+
+def test_axis_errors_shift_the_angles_as_a_theodolite_s_and_invert():
+    """Collimation c / sin(theta) and trunnion i cot(theta) in azimuth, the vertical index in zenith."""
+    ax = AxisErrors(collimation_arcsec=12.0, trunnion_arcsec=-30.0, vertical_index_arcsec=7.0)
+    theta = np.radians([90.0, 60.0, 30.0, 120.0])
+    phi = np.radians([0.0, 45.0, 200.0, 300.0])
+    rep = np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)], axis=1)
+    beam = ax.beam_directions(rep)
+    t_b = np.arctan2(np.hypot(beam[:, 0], beam[:, 1]), beam[:, 2])
+    p_b = np.arctan2(beam[:, 1], beam[:, 0])
+    np.testing.assert_allclose((t_b - theta) / ARCSEC, 7.0, atol=1e-6)
+    want = 12.0 / np.sin(theta) - 30.0 * np.cos(theta) / np.sin(theta)
+    np.testing.assert_allclose(np.angle(np.exp(1j * (p_b - phi))) / ARCSEC, want, atol=1e-6)
+    np.testing.assert_allclose(ax.reported_directions(beam), rep, atol=1e-12)
+    assert AxisErrors.from_dict(ax.to_dict()) == ax and AxisErrors.from_dict(None) is None
+    with pytest.raises(InputError):
+        AxisErrors(collimation_arcsec=float("nan"))
+
+
+def test_a_scan_with_axis_errors_reports_the_target_where_the_truth_says():
+    """The disc's points are found where the beams really went, and reported along the directions read."""
+    ax = AxisErrors(collimation_arcsec=40.0, trunnion_arcsec=40.0, vertical_index_arcsec=-60.0, range_offset_m=0.004)
+    a, ta, b, tb = scan_pair(EpochConditions(axis_errors=ax), noise=0.0)
+    t = tb.target("R2")
+    observed, true = np.asarray(t.centre_observed_socs_m), np.asarray(t.centre_socs_m)
+    assert np.linalg.norm(observed) - np.linalg.norm(true) == pytest.approx(0.004, abs=1e-9)
+    assert np.linalg.norm(observed - true) > 0.004  # the angles moved it too
+    bright_a, bright_b = a.xyz_socs[a.intensity > 0.6], b.xyz_socs[b.intensity > 0.6]
+    shift = bright_b.mean(axis=0) - bright_a.mean(axis=0)  # the disc seen through the errors, less the clean one
+    np.testing.assert_allclose(shift, observed - true, atol=0.6e-3)
+    assert tb.axis_errors == ax.to_dict() and ScanTruth.from_dict(tb.to_dict()).axis_errors == ax.to_dict()
