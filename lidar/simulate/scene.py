@@ -81,6 +81,9 @@ class EpochConditions:
     axis_errors : AxisErrors, optional
         The instrument's uncalibrated axis errors and range zero error (the same instrument's are the same at
         every visit). Default none.
+    walk_factors : mapping of target id to float, optional
+        The range walk of a target's returns times this factor (a weathered or a newer sheet of the same kind
+        walks more or less). Default 1 for every target.
     """
 
     midspan_displacement_m: float = 0.0
@@ -98,10 +101,15 @@ class EpochConditions:
     drift: Optional[DriftModel] = None
     timing: Optional[VisitTiming] = None
     axis_errors: Optional[AxisErrors] = None
+    walk_factors: Mapping[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not np.isfinite(self.midspan_displacement_m):
             raise InputError("midspan displacement must be finite")
+        object.__setattr__(self, "walk_factors", MappingProxyType(
+            {str(k): float(v) for k, v in dict(self.walk_factors).items()}))
+        if not all(np.isfinite(v) and v >= 0 for v in self.walk_factors.values()):
+            raise InputError("walk factors must be finite and not negative")
         object.__setattr__(self, "moved_targets", MappingProxyType(
             {k: tuple(float(x) for x in v) for k, v in dict(self.moved_targets).items()}))
         for name in ("occluded", "cable_ties", "removed"):
@@ -374,7 +382,11 @@ class BridgeScene:
         idx, r, cos_inc, strength = returns
         c = self.conditions
         if c.range_walk is not None and idx.size:
-            range_m[idx] -= c.range_walk.bias_m(r, cos_inc, strength)
+            factor = np.ones(len(idx))
+            for k, disc in enumerate(self.discs):
+                if disc.target.id in c.walk_factors:
+                    factor[on_target[idx] == k] = c.walk_factors[disc.target.id]
+            range_m[idx] -= c.range_walk.bias_m(r, cos_inc, strength) * factor
         on = on_target[idx] >= 0
         if c.clipped_fraction > 0 and np.any(on):
             limit = np.quantile(strength[on], 1.0 - c.clipped_fraction)
@@ -454,7 +466,7 @@ class BridgeScene:
         rng_m = float(np.linalg.norm(socs))
         cos_inc = float(abs(normal_socs @ socs) / rng_m)
         bias = 0.0 if c.range_walk is None else float(
-            c.range_walk.bias_m(rng_m, cos_inc, return_strength(rng_m, cos_inc))[()])
+            c.range_walk.bias_m(rng_m, cos_inc, return_strength(rng_m, cos_inc))[()]) * c.walk_factors.get(tid, 1.0)
         observed = None
         if time_s is not None or c.range_walk is not None or c.range_scale_ppm or c.axis_errors is not None:
             seen = socs if c.drift is None or time_s is None else \

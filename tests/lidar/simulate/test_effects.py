@@ -273,3 +273,17 @@ def test_a_scan_with_axis_errors_reports_the_target_where_the_truth_says():
     shift = bright_b.mean(axis=0) - bright_a.mean(axis=0)  # the disc seen through the errors, less the clean one
     np.testing.assert_allclose(shift, observed - true, atol=0.6e-3)
     assert tb.axis_errors == ax.to_dict() and ScanTruth.from_dict(tb.to_dict()).axis_errors == ax.to_dict()
+
+
+def test_a_walk_factor_scales_one_targets_walk_only():
+    walk = LinearIncidenceWalk(0.0015)
+    a, _, b, tb = scan_pair(EpochConditions(range_walk=walk), noise=0.0)
+    _, _, c, tc = scan_pair(EpochConditions(range_walk=walk, walk_factors={"R2": 1.8, "M1": 0.0}), noise=0.0)
+    assert tc.target("R2").range_bias_m == pytest.approx(1.8 * tb.target("R2").range_bias_m)
+    assert tc.target("M1").range_bias_m == 0.0
+    on = a.intensity > 0.6  # R2's points: each reads 1.8 times as short as under the campaign's walk
+    ra, rb, rc = (np.linalg.norm(s.xyz_socs[on], axis=1) for s in (a, b, c))
+    assert (ra - rb).min() > 1e-4
+    np.testing.assert_allclose(ra - rc, 1.8 * (ra - rb), rtol=1e-9, atol=1e-12)
+    with pytest.raises(InputError):
+        EpochConditions(walk_factors={"R2": -1.0})
