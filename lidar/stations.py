@@ -197,14 +197,22 @@ def _as_sighted(o: object) -> _Sighted:
 
 
 def _typical_visit(field: FieldModel, label: str) -> VisitSystematics:
-    """A visit as the campaign's visits have been: their median scale sigma, drift covariance and misfit."""
+    """A visit as the campaign's visits have been: their median scale sigma, drift covariance and misfit.
+
+    Each of the range walk's families implies its own scale for a visit; the typical visit's departs from its
+    scale (0 here) by the median of what it did in the other visits.
+    """
     others = [v for k, v in field.visits.items() if k != field.baseline] or list(field.visits.values())
     if not others:
         return VisitSystematics(label)
     timed = [v for v in others if v.timed]
     drift = np.median([v.drift_cov for v in timed], axis=0) if timed else np.zeros((3, 3))
+    n_alt = len(field.range_walk.alternatives)
+    alt_scales = [np.asarray(v.alternative_scale_ppm) - v.scale_ppm for v in others
+                  if n_alt and len(v.alternative_scale_ppm) == n_alt]
+    alternative = tuple(float(x) for x in np.median(alt_scales, axis=0)) if alt_scales else ()
     return VisitSystematics(label, 0.0, float(np.median([v.scale_sigma_ppm for v in others])), np.zeros(3), drift,
-                            0.0, bool(timed), True, (), (), float(np.median([v.misfit for v in others])))
+                            0.0, bool(timed), True, (), alternative, float(np.median([v.misfit for v in others])))
 
 
 def predict_station(layout: Layout, station_layout: Sequence[float], *, profile: ScannerProfile,

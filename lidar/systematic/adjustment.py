@@ -20,7 +20,8 @@ block-arrowhead: visits share only the targets and the range walk), weighted by 
 covariance, with weak priors on the range walk, the scale and the drift (so that an undetermined term
 keeps the prior's sigma instead of a guess) and a Tukey down-weighting of blocks that do not fit (a
 reference target that moved between visits). The range walk's family is chosen by BIC among
-:func:`lidar.systematic.range_walk.candidate_bases`.
+:func:`lidar.systematic.range_walk.candidate_bases` and steps at every threshold
+(:mod:`lidar.systematic.walk_screen`).
 """
 from __future__ import annotations
 
@@ -33,8 +34,7 @@ import numpy as np
 from common.errors import InputError
 from lidar.displacement import deck_normal
 from lidar.reference_motion import across_axis
-from lidar.systematic.range_walk import (STEP_PROXIES, RangeWalkModel, candidate_bases, design, refine_thresholds,
-                                         step_name, step_thresholds)
+from lidar.systematic.range_walk import RangeWalkModel, design
 
 ARCSEC = math.pi / 180.0 / 3600.0
 #: Prior standard deviations: range-walk coefficients (mm), scale (ppm), drift (arcsec per hour).
@@ -45,8 +45,10 @@ PRIOR_DRIFT_ARCSEC_H = 30.0
 MODEL_FLOOR_M2 = (2e-5) ** 2
 #: Tukey's constant on a block's normalised residual.
 TUKEY_C = 4.685
-#: Range-walk families within this BIC of the best widen the sigma where they disagree.
+#: Range-walk families within this BIC of the best widen the sigma where they disagree ...
 ALTERNATIVE_BIC = 10.0
+#: ... the best this many of them (a step at every threshold can put hundreds within it).
+MAX_ALTERNATIVES = 96
 #: A scale whose sigma exceeds this is not determined by the reference geometry (ppm).
 SCALE_DETERMINED_PPM = 15.0
 
@@ -284,8 +286,7 @@ class _Problem:
         off_w = 0 if v.is_base else 7
         z, dth, dom = self._corrected(v)
         blocks = [("r", j, 3) for j in range(nr)] + [("d", j, 1) for j in range(nd)]
-        wr = np.sqrt(np.array([v.weights.get(("r", j), 1.0) for j in range(nr)]))
-        wd = np.array([v.weights.get(("d", j), 1.0) for j in range(nd)])
+        lw, qa, wt = self.row_weights(v)
         # reference targets: 3 rows each
         qx = self.x_ref[a["ref_idx"]] @ v.q.T
         e = z[:nr] - sc * (qx + v.d)
@@ -301,13 +302,11 @@ class _Problem:
             ash[j, :, 3 * i:3 * i + 3] = -sc * v.q
         if nb:
             ash[:, :, ns - nb:] = dth[:nr]
-        lw = a["lw"] * wr[:, None, None]
         jl = [np.einsum("nij,njk->nik", lw, al).reshape(3 * nr, nl)]
         js = [np.einsum("nij,njk->nik", lw, ash).reshape(3 * nr, ns)]
         res = [np.einsum("nij,nj->ni", lw, e).reshape(-1)]
         # deck targets: 1 row each, across the span
         if nd:
-            qa = v.q @ self.across
             zz = z[nr:]
             vv = zz / sc - v.d
             ed = vv @ qa - self.a_deck[a["deck_idx"]]
@@ -322,8 +321,6 @@ class _Problem:
             asd[np.arange(nd), 3 * len(self.ref_ids) + a["deck_idx"]] = -1.0
             if nb:
                 asd[:, ns - nb:] = np.einsum("i,nip->np", qa, dth[nr:]) / sc
-            var = np.einsum("i,nij,j->n", qa, a["cov_deck"], qa) + MODEL_FLOOR_M2
-            wt = np.sqrt(wd / var)
             jl.append(ald * wt[:, None])
             js.append(asd * wt[:, None])
             res.append(ed * wt)
@@ -341,6 +338,25 @@ class _Problem:
             js.append(np.zeros((3, ns)))
             res.append(v.omega / PRIOR_DRIFT_ARCSEC_H)
         return np.vstack(jl), np.vstack(js), np.concatenate(res), blocks
+
+    def row_weights(self, v: _Visit) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """How a visit's rows are whitened, the blocks' down-weighting included.
+
+        Returns the reference rows' whitening (nr, 3, 3), the across axis in the visit's frame (3,) and the deck
+        rows' weights (nd,).
+        """
+        if not v.arrays:
+            self._prepare(v)
+        a = v.arrays
+        nr, nd = len(v.refs), len(v.decks)
+        wr = np.sqrt(np.array([v.weights.get(("r", j), 1.0) for j in range(nr)]))
+        lw = a["lw"] * wr[:, None, None]
+        if not nd:
+            return lw, np.zeros(3), np.zeros(0)
+        qa = v.q @ self.across
+        wd = np.array([v.weights.get(("d", j), 1.0) for j in range(nd)])
+        var = np.einsum("i,nij,j->n", qa, a["cov_deck"], qa) + MODEL_FLOOR_M2
+        return lw, qa, np.sqrt(wd / var)
 
     def apply_step(self, v: _Visit, dx_local: np.ndarray) -> None:
         if not v.is_base:
@@ -453,9 +469,11 @@ def fit_field_model(visits: Sequence[VisitSightings], groups: Mapping[str, str],
                     select_range_walk: bool = True) -> FieldModel:
     """The campaign's range walk and every visit's scale and drift, from every visit's centroids.
 
-    The range walk's family is chosen by BIC: the smooth families of
-    :func:`lidar.systematic.range_walk.candidate_bases` and steps at a strength threshold are screened with
-    the down-weighting of a general family held fixed, and the best is fitted again on its own.
+    The range walk's family is chosen by BIC among the smooth families of
+    :func:`lidar.systematic.range_walk.candidate_bases` and a constant plus a step at every threshold of the
+    return strength, the incidence's cosine and the range's ``(r0/r)^2`` between the campaign's values: all of
+    them screened at once on the adjustment linearised at a general family's solution
+    (:mod:`lidar.systematic.walk_screen`), with its down-weighting; the chosen family is then fitted in full.
 
     Parameters
     ----------
@@ -469,48 +487,23 @@ def fit_field_model(visits: Sequence[VisitSightings], groups: Mapping[str, str],
     -------
     FieldModel
     """
+    from lidar.systematic.walk_screen import bias_information, screen_laws  # it builds on this module's problem
+
     if not visits:
         raise InputError("the field model needs at least one visit")
     if not select_range_walk or len(visits) < 3:
         p, sol, left = _with_or_without_drift(visits, groups, (), None)
         return _model(p, sol, left, visits[0].label)
     general = _Problem(visits, groups, ("1", "sat_strength"))
-    _adjust(general)
-    r = np.array([np.linalg.norm(s.xyz_socs) for v in visits for s in v.sightings])
-    c = np.array([s.cos_incidence for v in visits for s in v.sightings])
-    scores: dict[tuple[str, ...], float] = {}
-    thetas: dict[tuple[str, ...], np.ndarray] = {}
-    kappas: dict[tuple[str, ...], list[float]] = {}
-
-    def screen(basis: tuple[str, ...]) -> float:
-        if basis not in scores:
-            p = _Problem(visits, groups, basis, start=general)
-            for _ in range(3):
-                sol, _ = _solve_once(p)
-            scores[basis] = _bic(sol)
-            thetas[basis] = p.theta * 1e-3
-            kappas[basis] = [v.kappa_ppm for v in p.visits]
-        return scores[basis]
-
-    for basis in candidate_bases():
-        screen(basis)
-    for proxy, g in STEP_PROXIES.items():
-        values = g(r, c)
-        steps = {t: screen(("1", step_name(proxy, t))) for t in step_thresholds(values)}
-        for _ in range(6):  # walk the threshold downhill until the best has no better neighbour
-            if not steps:
-                break
-            best_t = min(steps, key=lambda t: steps[t])
-            new = {t: screen(("1", step_name(proxy, t))) for t in refine_thresholds(values, best_t) if t not in steps}
-            steps.update(new)
-            if min(steps, key=lambda t: steps[t]) == best_t:
-                break
-    chosen = min(scores, key=lambda b: scores[b])
-    p, sol, left = _with_or_without_drift(visits, groups, chosen, general)
-    best = scores[chosen]
-    near = [b for b in scores if scores[b] - best < ALTERNATIVE_BIC]
-    alts = tuple((b, thetas[b], float(math.exp(-0.5 * (scores[b] - best)))) for b in near)
-    return _model(p, sol, left, visits[0].label, alts, [[kappas[b][k] for b in near] for k in range(len(visits))])
+    general_sol, _ = _adjust(general)
+    info = bias_information(_Problem(visits, groups, (), start=general))
+    laws = sorted(screen_laws(info, general_sol.n_data), key=lambda law: law.bic)
+    chosen = laws[0]
+    p, sol, left = _with_or_without_drift(visits, groups, chosen.basis, general)
+    near = [law for law in laws if law.bic - chosen.bic < ALTERNATIVE_BIC][:MAX_ALTERNATIVES]
+    alts = tuple((law.basis, law.theta_mm * 1e-3, float(math.exp(-0.5 * (law.bic - chosen.bic)))) for law in near)
+    scales = [info.scales_ppm(design(law.basis, info.range_m, info.cos_incidence), law.theta_mm) for law in near]
+    return _model(p, sol, left, visits[0].label, alts, [[float(k[i]) for k in scales] for i in range(len(visits))])
 
 
 def _with_or_without_drift(visits: Sequence[VisitSightings], groups: Mapping[str, str], basis: tuple[str, ...],

@@ -5,7 +5,8 @@
 displacement computation on them, and splits each displacement's variance into its terms (see
 :data:`lidar.displacement_result.BUDGET_TERMS`): the target's own centroids (``noise``), the reference
 motion and the deck normal (``frame``), the visit's atmospheric scale (``scale``), the range walk with the
-spread of the families the data support (``bias``) and both visits' drift (``drift``). The reported sigma
+largest departure among the families the data cannot tell from it (``bias``, see
+:func:`~lidar.systematic.range_walk.family_spread2`) and both visits' drift (``drift``). The reported sigma
 is their sum in quadrature. The along-span movements carry the same terms.
 """
 from __future__ import annotations
@@ -19,7 +20,7 @@ from lidar.displacement import compute_displacements
 from lidar.displacement_result import Displacement, EpochDisplacements, Observation
 from lidar.systematic.adjustment import FieldModel
 from lidar.systematic.corrections import CorrectionJacobian, correct_visit, cos_incidence_of
-from lidar.systematic.range_walk import design
+from lidar.systematic.range_walk import design, family_spread2
 
 
 def _side(centroids: Mapping[str, object], model: FieldModel, label: str):
@@ -123,7 +124,7 @@ def _terms(row: np.ndarray, inputs, jacs: Mapping[str, Mapping[str, CorrectionJa
             "scale": j_scale ** 2 * (v_ep.scale_sigma_ppm ** 2),
             "drift": float(j_drift["baseline"] @ v_base.drift_cov @ j_drift["baseline"]
                            + j_drift["epoch"] @ v_ep.drift_cov @ j_drift["epoch"]),
-            "alternatives": float(weights @ alt ** 2 / weights.sum()) if weights.size else 0.0}
+            "alternatives": float(family_spread2(alt, weights))}
 
 
 def _deviations(centroids: Mapping[str, object], model: FieldModel, label: str, corrected: Mapping[str, np.ndarray]

@@ -40,6 +40,7 @@ from lidar.displacement_result import EpochDisplacements, Observation
 from lidar.systematic.adjustment import ARCSEC, FieldModel
 from lidar.systematic.budget import _deviations, _side
 from lidar.systematic.corrections import CorrectionJacobian
+from lidar.systematic.range_walk import family_spread2
 
 #: Shared targets must spread at least this far off their best-fitting line (metres, RMS) to fix a rotation.
 MIN_SPREAD_M = 0.5
@@ -481,7 +482,7 @@ def _terms(row: np.ndarray, inputs, sides: Mapping[str, CorrectedVisit], model: 
             "theta": float(j_theta @ cov_theta @ j_theta) if p else 0.0,
             "scale": sum(js ** 2 * model.visit(lab).scale_sigma_ppm ** 2 for lab, js in scale.items()),
             "drift": sum(float(jd @ model.visit(lab).drift_cov @ jd) for lab, jd in drift.items()),
-            "alternatives": float(weights @ alt ** 2 / weights.sum()) if weights.size else 0.0}
+            "alternatives": float(family_spread2(alt, weights))}
 
 
 def _diagonal_variances(row: np.ndarray, inputs, sides: Mapping[str, CorrectedVisit], target: str) -> tuple[float, float]:
