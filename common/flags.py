@@ -115,6 +115,10 @@ FLAG_SCALE_UNDETERMINED = _flag("scale_undetermined", INFO, "the reference targe
 FLAG_RANGE_WALK_UNDETERMINED = _flag("range_walk_undetermined", INFO, "too few or too alike stations to determine "
                                      "the retro-reflector range walk: sigma widened to what a plausible bias "
                                      "would cause", "projects.processing")
+FLAG_FIELD_MISFIT = _flag("field_model_misfit", WARNING, "the target's centroid did not fit the campaign's field "
+                          "model in a visit and was left out of its fit: something the model does not hold (a "
+                          "range walk of that target's own, a knock, a cable tie) may bias the value beyond its "
+                          "sigma; on every row of an epoch when it is a reference target", "projects.processing")
 FLAG_DRIFT_FROM_PLAN = _flag("drift_from_plan_times", INFO, "the fine scans carry no point times: the set-up's "
                              "drift was fitted on the plan's window order and time model", "projects.processing")
 FLAG_DRIFT_BEYOND_SPEC = _flag("drift_beyond_tolerance", WARNING, "the set-up turned more during the visit than "

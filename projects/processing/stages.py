@@ -18,7 +18,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from common.flags import (FLAG_CHAINED, FLAG_DECK_NOT_MEASURED, FLAG_MISSING, FLAG_NO_DISPLACEMENT, FLAG_NOT_FOUND,
+from common.flags import (FLAG_CHAINED, FLAG_DECK_NOT_MEASURED, FLAG_FIELD_MISFIT, FLAG_MISSING, FLAG_NO_DISPLACEMENT, FLAG_NOT_FOUND,
                           FLAG_PIERS_NOT_MEASURED, FLAG_SETUP_NOT_MEASURED, PROBLEM, WARNING, code, has, in_baseline, severity)
 from lidar.displacement import Displacement, EpochDisplacements
 from lidar.systematic.adjustment import FieldModel
@@ -705,7 +705,41 @@ def _epoch_displacements(c: Campaign, lab: str, bases: list, baseline: str, foun
         chained = {d.reflector for d in extra}
         result = replace(result, displacements=tuple(d for d in result.displacements if d.reflector not in chained)
                          + tuple(extra))
-    return _with_centroid_doubts(c, lab, baseline, _why_missing(c, lab, result))
+    return _with_field_misfits(model, c.setups(lab), c.setups(baseline), lab, baseline, groups,
+                               _with_centroid_doubts(c, lab, baseline, _why_missing(c, lab, result)))
+
+
+def _with_field_misfits(model, setups: Sequence[int], base_setups: Sequence[int], lab: str, baseline: str,
+                        groups: dict, result: EpochDisplacements) -> EpochDisplacements:
+    """Rows whose sightings the field model left out of its fit (in the epoch or the baseline) say so.
+
+    A sighting the adjustment down-weighted to nothing does not fit the model that corrects it: its corrected
+    centroid may be off by more than the budget holds (a target whose range walk is not the campaign's: seen
+    in simulation 4-6 sigma off with no flag). A deck target's own row carries the flag; a reference target's
+    goes on every row (it sets the frame).
+    """
+    def left(label: str, ks: Sequence[int]) -> set:
+        return {t for k in ks for t in model.visit(visit_label(label, k)).left_out}
+
+    sides = [(left(lab, setups), "")] + ([(left(baseline, base_setups), baseline)] if baseline != lab else [])
+    if not any(out for out, _ in sides):
+        return result
+
+    def flag(target: str, where: str) -> str:
+        what = "reference target" if groups.get(target) == "reference" else "target"
+        text = f"{FLAG_FIELD_MISFIT}: {what} {target} did not fit the field model and was left out of its fit"
+        return in_baseline(text, where) if where else text
+
+    rows = []
+    for d in result.displacements:
+        if np.isfinite(d.displacement_m):
+            extra = [flag(t, where) for out, where in sides for t in sorted(out)
+                     if t == d.reflector or groups.get(t) == "reference"]
+            extra = [f for f in extra if f not in d.flags]
+            if extra:
+                d = replace(d, flags=tuple(d.flags) + tuple(extra))
+        rows.append(d)
+    return replace(result, displacements=tuple(rows))
 
 
 def _with_centroid_doubts(c: Campaign, lab: str, baseline: str, result: EpochDisplacements) -> EpochDisplacements:

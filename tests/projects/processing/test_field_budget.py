@@ -103,3 +103,34 @@ def test_a_baseline_without_its_deck_is_a_problem_and_processing_completes_twice
         state = {e.label: c.displacement_set(e.label) for e in c.epochs()}
     assert len(rows) == len(set(rows))
     assert any(ds is not None and any("deck_not_measured" in f for f in ds.flags) for ds in state.values())
+
+
+def test_a_sighting_the_field_model_left_out_flags_its_rows():
+    """A deck target left out of the field model's fit flags its own row (the baseline's: every epoch's row of
+    it); a reference target left out flags every row of the epoch (it sets the frame)."""
+    from common.flags import FLAG_FIELD_MISFIT, code
+    from lidar.displacement_result import Displacement, EpochDisplacements
+    from lidar.systematic.adjustment import FieldModel, VisitSystematics
+    from lidar.systematic.range_walk import RangeWalkModel
+    from projects.processing.stages import _with_field_misfits
+
+    groups = {"R1": "reference", "R2": "reference", "M1": "measurement", "M2": "measurement", "M3": "measurement"}
+    rows = tuple(Displacement(m, -0.001, 1e-4, 0.0, 0.0) for m in ("M1", "M2")) + \
+        (Displacement("M3", float("nan"), float("nan"), float("nan"), float("nan"), ("missing",)),)
+    result = EpochDisplacements(rows, ("R1", "R2"), (), np.zeros(3), np.zeros(3), "auto")
+
+    def model(**left):
+        return FieldModel("b", RangeWalkModel(), {k.replace("_", "#"): VisitSystematics(k, left_out=v)
+                                                  for k, v in left.items()})
+
+    def flags(m, **kw):
+        out = _with_field_misfits(m, kw.get("setups", (1,)), (1,), "e", "b", groups, result)
+        return {d.reflector: [f for f in d.flags if code(f) == FLAG_FIELD_MISFIT] for d in out.displacements}
+
+    assert flags(model()) == {"M1": [], "M2": [], "M3": []}
+    got = flags(model(e=("M1",)))
+    assert len(got["M1"]) == 1 and "M1" in got["M1"][0] and got["M2"] == [] and got["M3"] == []
+    got = flags(model(b=("M2",)))  # the baseline's sighting: said so, on M2's row only
+    assert got["M1"] == [] and "(in the baseline b)" in got["M2"][0]
+    got = flags(model(e_2=("R1",)), setups=(1, 2))  # a reference target of set-up 2: every row with a value
+    assert all("reference target R1" in got[m][0] for m in ("M1", "M2")) and got["M3"] == []
