@@ -25,6 +25,7 @@ from lidar.simulate.bridge import BridgeModel  # noqa: E402
 from lidar.simulate.campaign import random_conditions  # noqa: E402
 from lidar.simulate.effects import (  # noqa: E402
     AxisErrors,
+    DriftModel,
     InverseSquareWalk,
     LinearIncidenceWalk,
     StrengthStepWalk,
@@ -43,8 +44,11 @@ AXES = AxisErrors(collimation_arcsec=20.0, trunnion_arcsec=20.0, vertical_index_
 
 
 def scenario(model: BridgeModel, n: int, seed: int, *, ppm: bool, walk, clip: bool, strain: bool,
-             drift: float, axes: bool = False) -> list:
-    """The visits' conditions: each effect on or off (one range-walk form, one instrument for the whole campaign)."""
+             drift: float, axes: bool = False, knocked: bool = False) -> list:
+    """The visits' conditions: each effect on or off (one range-walk form, one instrument for the whole campaign).
+
+    ``knocked``: in visits 3, 5 and 7 the set-up turns suddenly by 30 arcsec (a random axis) 15 minutes in.
+    """
     rng = np.random.default_rng(seed)
     out = []
     for _ in range(n):
@@ -53,6 +57,12 @@ def scenario(model: BridgeModel, n: int, seed: int, *, ppm: bool, walk, clip: bo
                               temperature_c=(-15, 15) if strain else (0, 0), drift_arcsec_per_h=drift)
         out.append(replace(c, range_walk=walk, timing=VisitTiming(start_s=0.0, gap_s=30.0, duration="lines"),
                            axis_errors=AXES if axes else None))
+    if knocked:
+        for i in (2, 4, 6):
+            turn = rng.normal(0.0, 1.0, 3)
+            turn *= 30.0 / np.linalg.norm(turn)
+            out[i] = replace(out[i], drift=DriftModel(jump_x_arcsec=float(turn[0]), jump_y_arcsec=float(turn[1]),
+                                                      jump_z_arcsec=float(turn[2]), jump_after_s=900.0))
     return out
 
 
@@ -76,8 +86,10 @@ def main(argv: list[str]) -> int:
     # last, so the scenarios before keep their seeds
     plans.append(("axis errors 20/20/15'' and a 3 mm range zero error",
                   dict(ppm=False, walk=None, clip=False, strain=False, drift=0.0, axes=True)))
+    plans.append(("a knocked set-up: a sudden 30'' turn 15 min into 3 of 8 visits",
+                  dict(ppm=False, walk=None, clip=False, strain=False, drift=0.0, knocked=True)))
     if quick:
-        plans = [plans[0], plans[3], plans[-2]]
+        plans = [plans[0], plans[3], plans[-3]]
     rows = {}
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:

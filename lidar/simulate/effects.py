@@ -246,6 +246,9 @@ class DriftModel:
         Linear rates about x, y (tilts) and z (twist). Default 0.
     tilt_x_arcsec_per_h2, tilt_y_arcsec_per_h2, twist_arcsec_per_h2 : float
         Quadratic terms. Default 0.
+    jump_x_arcsec, jump_y_arcsec, jump_z_arcsec, jump_after_s : float
+        A sudden turn (a knocked tripod, a leg settling) of these angles once ``jump_after_s`` seconds of the
+        visit have passed. Default none.
     """
 
     tilt_x_arcsec_per_h: float = 0.0
@@ -254,17 +257,25 @@ class DriftModel:
     tilt_x_arcsec_per_h2: float = 0.0
     tilt_y_arcsec_per_h2: float = 0.0
     twist_arcsec_per_h2: float = 0.0
+    jump_x_arcsec: float = 0.0
+    jump_y_arcsec: float = 0.0
+    jump_z_arcsec: float = 0.0
+    jump_after_s: float = float("inf")
 
     def __post_init__(self) -> None:
-        if not all(np.isfinite(getattr(self, f.name)) for f in fields(self)):
+        if not all(np.isfinite(getattr(self, f.name)) for f in fields(self) if f.name != "jump_after_s"):
             raise InputError("drift rates must be finite")
+        if np.isnan(self.jump_after_s):
+            raise InputError("the drift's jump time must be a number (inf: no jump)")
 
     def angles_rad(self, elapsed_s: ArrayLike) -> np.ndarray:
         """(N, 3) rotation vector (about x, y, z of the starting frame), radians, at ``elapsed_s`` seconds."""
-        h = np.atleast_1d(np.asarray(elapsed_s, dtype=np.float64)) / 3600.0
+        t = np.atleast_1d(np.asarray(elapsed_s, dtype=np.float64))
+        h = t / 3600.0
         lin = np.array([self.tilt_x_arcsec_per_h, self.tilt_y_arcsec_per_h, self.twist_arcsec_per_h])
         quad = np.array([self.tilt_x_arcsec_per_h2, self.tilt_y_arcsec_per_h2, self.twist_arcsec_per_h2])
-        return (h[:, None] * lin + (h ** 2)[:, None] * quad) * ARCSEC
+        jump = np.array([self.jump_x_arcsec, self.jump_y_arcsec, self.jump_z_arcsec])
+        return (h[:, None] * lin + (h ** 2)[:, None] * quad + (t > self.jump_after_s)[:, None] * jump) * ARCSEC
 
     def to_start(self, vectors_current: np.ndarray, elapsed_s: ArrayLike) -> np.ndarray:
         """(N, 3) vectors given in the instrument's frame at ``elapsed_s``, expressed in its starting frame."""
@@ -275,11 +286,17 @@ class DriftModel:
         return _rotate(vectors_start, -self.angles_rad(elapsed_s))
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        d = asdict(self)
+        if not np.isfinite(self.jump_after_s):
+            d["jump_after_s"] = None  # no jump (JSON has no infinity)
+        return d
 
     @classmethod
     def from_dict(cls, d: Optional[dict]) -> Optional["DriftModel"]:
-        return None if d is None else cls(**{f.name: float(d.get(f.name, 0.0)) for f in fields(cls)})
+        if d is None:
+            return None
+        values = {f.name: d.get(f.name) for f in fields(cls)}
+        return cls(**{k: float(f.default if v is None else v) for (k, v), f in zip(values.items(), fields(cls))})
 
 
 def _rotate(v: np.ndarray, rotvec: np.ndarray) -> np.ndarray:

@@ -287,3 +287,14 @@ def test_a_walk_factor_scales_one_targets_walk_only():
     np.testing.assert_allclose(ra - rc, 1.8 * (ra - rb), rtol=1e-9, atol=1e-12)
     with pytest.raises(InputError):
         EpochConditions(walk_factors={"R2": -1.0})
+
+
+def test_a_drift_can_jump_once_during_the_visit():
+    d = DriftModel(tilt_x_arcsec_per_h=3.6, jump_x_arcsec=20.0, jump_z_arcsec=-10.0, jump_after_s=900.0)
+    a = np.degrees(d.angles_rad([0.0, 899.0, 901.0, 3600.0])) * 3600
+    np.testing.assert_allclose(a, [[0, 0, 0], [0.899, 0, 0], [20.901, 0, -10.0], [23.6, 0, -10.0]], atol=1e-9)
+    assert DriftModel.from_dict(d.to_dict()) == d
+    steady = DriftModel(2.0)
+    assert steady.to_dict()["jump_after_s"] is None and DriftModel.from_dict(steady.to_dict()) == steady
+    with pytest.raises(InputError):
+        DriftModel(jump_after_s=float("nan"))
