@@ -295,8 +295,9 @@ class DriftModel:
     def from_dict(cls, d: Optional[dict]) -> Optional["DriftModel"]:
         if d is None:
             return None
-        values = {f.name: d.get(f.name) for f in fields(cls)}
-        return cls(**{k: float(f.default if v is None else v) for (k, v), f in zip(values.items(), fields(cls))})
+        out = {f.name: float(d.get(f.name) or 0.0) for f in fields(cls) if f.name != "jump_after_s"}
+        jump_after = d.get("jump_after_s")
+        return cls(**out, jump_after_s=float("inf") if jump_after is None else float(jump_after))
 
 
 def _rotate(v: np.ndarray, rotvec: np.ndarray) -> np.ndarray:
