@@ -8,12 +8,14 @@ Typical use::
     coarse, truth = scene.scan(scene.coarse_window(), rng=np.random.default_rng(1))
 
 Multi-span bridges (``BridgeModel(spans_m=...)``), deck strain, the atmosphere's range scale, range walk on
-retro-reflectors, clipped intensities, drift and point times are in :class:`EpochConditions` and
+retro-reflectors (one target's own too), clipped intensities, drift (a sudden jump too), point times and the
+instrument's axis and range zero errors are in :class:`EpochConditions` and
 :mod:`lidar.simulate.effects`, all off by default; whole visits as files in :mod:`lidar.simulate.files`, campaigns
 of them in :mod:`lidar.simulate.campaign`.
 """
 from lidar.simulate.bridge import BridgeModel, Target
 from lidar.simulate.effects import (
+    AxisErrors,
     DriftModel,
     ExponentialStrengthWalk,
     InverseSquareWalk,
@@ -28,4 +30,4 @@ from lidar.simulate.truth import ScanTruth, TargetTruth, WindowTruth
 
 __all__ = ["BridgeModel", "Target", "BridgeScene", "EpochConditions", "ScannerSetup", "ScanTruth", "TargetTruth",
            "WindowTruth", "DriftModel", "VisitTiming", "LinearIncidenceWalk", "InverseSquareWalk", "StrengthStepWalk",
-           "LogisticStrengthWalk", "ExponentialStrengthWalk"]
+           "LogisticStrengthWalk", "ExponentialStrengthWalk", "AxisErrors"]

@@ -21,7 +21,7 @@ from common.errors import InputError
 from lidar.io.las import write_las
 from lidar.scan import Scan
 from lidar.simulate.bridge import BridgeModel, model_from_dict, model_to_dict
-from lidar.simulate.effects import DriftModel, VisitTiming, walk_from_dict, walk_to_dict
+from lidar.simulate.effects import AxisErrors, DriftModel, VisitTiming, walk_from_dict, walk_to_dict
 from lidar.simulate.scene import BridgeScene, EpochConditions
 from lidar.simulate.setup import ScannerSetup
 from lidar.simulate.truth import ScanTruth, WindowTruth
@@ -46,8 +46,10 @@ def conditions_to_dict(c: EpochConditions) -> dict:
         "range_walk": walk_to_dict(c.range_walk), "clipped_fraction": c.clipped_fraction,
         "drift": None if c.drift is None else c.drift.to_dict(),
         "timing": None if c.timing is None else c.timing.to_dict(),
+        "axis_errors": None if c.axis_errors is None else c.axis_errors.to_dict(),
+        "walk_factors": dict(c.walk_factors),
     }
-    d.update({k: v for k, v in extra.items() if v not in (None, 0.0, [])})
+    d.update({k: v for k, v in extra.items() if v not in (None, 0.0, [], {})})
     return d
 
 
@@ -59,7 +61,8 @@ def conditions_from_dict(c: dict) -> EpochConditions:
         deck_strain=float(c.get("deck_strain", 0.0)), fixed_bearing_x_m=c.get("fixed_bearing_x_m"),
         range_scale_ppm=float(c.get("range_scale_ppm", 0.0)), range_walk=walk_from_dict(c.get("range_walk")),
         clipped_fraction=float(c.get("clipped_fraction", 0.0)), drift=DriftModel.from_dict(c.get("drift")),
-        timing=VisitTiming.from_dict(c.get("timing")))
+        timing=VisitTiming.from_dict(c.get("timing")), axis_errors=AxisErrors.from_dict(c.get("axis_errors")),
+        walk_factors=dict(c.get("walk_factors") or {}))
 
 
 def save_scene(folder: Path, setup: ScannerSetup, conditions: EpochConditions, seed: int,

@@ -10,6 +10,7 @@ from lidar.io.las import read_las
 from lidar.plan import RoiPlan
 from lidar.simulate import (
     BridgeModel,
+    AxisErrors,
     DriftModel,
     EpochConditions,
     LogisticStrengthWalk,
@@ -46,8 +47,11 @@ def test_scene_spec_round_trips_the_model_and_every_effect(tmp_path):
     model = BridgeModel(spans_m=(30.0, 40.0, 30.0), deflection_shape="continuous", deck_width_m=8.0)
     cond = EpochConditions(span_displacements_m=(-0.002, -0.004, -0.001), deck_strain=2.4e-4, fixed_bearing_x_m=30.0,
                            range_scale_ppm=-18.0, range_walk=LogisticStrengthWalk(0.001, 0.4, 0.1),
-                           clipped_fraction=0.15, drift=DriftModel(3.0, -2.0, 5.0, 0.5),
-                           timing=VisitTiming(start_s=345_600.0, gap_s=12.0, rate_hz=50_000.0, duration="lines"))
+                           clipped_fraction=0.15, drift=DriftModel(3.0, -2.0, 5.0, 0.5, jump_y_arcsec=12.0,
+                                                                   jump_after_s=600.0),
+                           timing=VisitTiming(start_s=345_600.0, gap_s=12.0, rate_hz=50_000.0, duration="lines"),
+                           axis_errors=AxisErrors(collimation_arcsec=9.0, range_offset_m=0.002),
+                           walk_factors={"M3": 1.6})
     save_scene(tmp_path, SETUP, cond, 9, 0.05, model=model)
     setup, back, seed, step = load_scene(tmp_path)
     assert (setup, back, seed, step) == (SETUP, cond, 9, 0.05)
