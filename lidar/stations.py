@@ -311,8 +311,7 @@ def predict_station(layout: Layout, station_layout: Sequence[float], *, profile:
     groups = dict(zip(layout.ids, layout.groups))
     model = field_model if field_model is not None and baseline is not None else FieldModel("__baseline__", RangeWalkModel(), {})
     label = "__station__"
-    model = FieldModel(model.baseline, model.range_walk, {**dict(model.visits), label: _typical_visit(model, label)},
-                       model.sigma0)
+    model = replace(model, visits={**dict(model.visits), label: _typical_visit(model, label)})
     try:
         res = corrected_displacements(base, epoch, groups, model=model, baseline_label=model.baseline,
                                       epoch_label=label, expected_sigmas=True)

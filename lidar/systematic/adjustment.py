@@ -25,6 +25,7 @@ reference target that moved between visits). The range walk's family is chosen b
 """
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 from typing import Mapping, Optional, Sequence
@@ -34,6 +35,7 @@ import numpy as np
 from common.errors import InputError
 from lidar.displacement import deck_normal
 from lidar.reference_motion import across_axis
+from lidar.systematic.axes import PRIOR_AXES_ARCSEC, AxisModel, axis_basis
 from lidar.systematic.range_walk import RangeWalkModel, design
 
 ARCSEC = math.pi / 180.0 / 3600.0
@@ -49,6 +51,8 @@ TUKEY_C = 4.685
 ALTERNATIVE_BIC = 10.0
 #: ... the best this many of them (a step at every threshold can put hundreds within it).
 MAX_ALTERNATIVES = 96
+#: Rounds of choosing the range walk's family and the axis errors again on the previous round's final fit
+MAX_LAW_ROUNDS = 3
 #: A scale whose sigma exceeds this is not determined by the reference geometry (ppm).
 SCALE_DETERMINED_PPM = 15.0
 
@@ -111,7 +115,7 @@ class VisitSystematics:
 
 @dataclass(frozen=True, eq=False)
 class FieldModel:
-    """The campaign's systematic errors: the range walk and every visit's scale and drift."""
+    """The campaign's systematic errors: the range walk, the instrument's axis errors, every visit's scale and drift."""
 
     baseline: str
     range_walk: RangeWalkModel
@@ -119,6 +123,7 @@ class FieldModel:
     sigma0: float = 1.0
     n_observations: int = 0
     notes: tuple[str, ...] = ()
+    axes: AxisModel = field(default_factory=AxisModel)
 
     def visit(self, label: str) -> VisitSystematics:
         return self.visits.get(label) or VisitSystematics(label)
@@ -180,9 +185,10 @@ class _Problem:
     """The unknowns, their ordering and the linearised equations of one adjustment."""
 
     def __init__(self, visits: Sequence[VisitSightings], groups: Mapping[str, str], basis: tuple[str, ...],
-                 start: Optional["_Problem"] = None, drift: bool = True):
+                 start: Optional["_Problem"] = None, drift: bool = True, axes: tuple[int, ...] = ()):
         self.basis = basis
         self.drift = drift
+        self.axes, self.n_axes = tuple(axes), len(axes)  # the instrument's axis errors fitted (AXIS_NAMES)
         base = visits[0]
         ref_ids = sorted({s.target for v in visits for s in v.sightings if groups.get(s.target) == "reference"})
         deck_ids = sorted({s.target for v in visits for s in v.sightings if groups.get(s.target) == "measurement"})
@@ -194,15 +200,18 @@ class _Problem:
             self.across = across_axis(np.array(list(b_deck.values())), up)
         if self.across is None:
             deck_ids = self.deck_ids = []
-        self.n_shared = 3 * len(ref_ids) + len(deck_ids) + len(basis)
+        # shared unknowns: reference targets (3 each), deck targets' across coordinates, axis errors, range walk
+        self.n_shared = 3 * len(ref_ids) + len(deck_ids) + self.n_axes + len(basis)
         self.x_ref = np.zeros((len(ref_ids), 3))
         self.a_deck = np.zeros(len(deck_ids))
+        self.alpha = np.zeros(self.n_axes)  # arcsec
         self.theta = np.zeros(len(basis))  # mm
         self.visits = [self._visit(v, k == 0, groups) for k, v in enumerate(visits)]
         if start is None:
             self._initialise()
         else:  # the poses, targets and down-weighting of a solved problem on the same visits
             self.x_ref, self.a_deck = start.x_ref.copy(), start.a_deck.copy()
+            self.alpha = np.array([start.alpha[start.axes.index(k)] if k in start.axes else 0.0 for k in self.axes])
             for mine, theirs in zip(self.visits, start.visits):
                 mine.q, mine.d, mine.kappa_ppm = theirs.q.copy(), theirs.d.copy(), theirs.kappa_ppm
                 mine.omega = theirs.omega.copy() if mine.timed else np.zeros(3)
@@ -262,18 +271,19 @@ class _Problem:
             "cov_deck": np.array([s.cov for s, _ in v.decks]).reshape(-1, 3, 3),
             "ref_idx": np.array([i for _, i in v.refs], dtype=int),
             "deck_idx": np.array([m for _, m in v.decks], dtype=int),
+            "axes": axis_basis(y)[:, :, list(self.axes)],
         }
 
-    def _corrected(self, v: _Visit) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(z (n, 3), dz/dtheta (n, 3, P), dz/domega (n, 3, 3)) of every sighting at the current unknowns."""
+    def _corrected(self, v: _Visit) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(z (n, 3), dz/dtheta (n, 3, P), dz/domega (n, 3, 3), dz/dalpha (n, 3, A)) of every sighting."""
         a = v.arrays
-        w = a["y"] + 1e-3 * (a["phi"] @ self.theta)[:, None] * a["u"]
+        w = a["y"] + 1e-3 * (a["phi"] @ self.theta)[:, None] * a["u"] + a["axes"] @ self.alpha
         k = ARCSEC * a["dt"] / 3600.0
         rot = _rotations(v.omega[None, :] * k[:, None])
         z = np.einsum("nij,nj->ni", rot, w)
         dz_dtheta = np.einsum("nij,nj,np->nip", rot, a["u"], a["phi"]) * 1e-3
         dz_domega = -_skews(z) * k[:, None, None]
-        return z, dz_dtheta, dz_domega
+        return z, dz_dtheta, dz_domega, np.einsum("nij,njk->nik", rot, a["axes"])
 
     def visit_rows(self, v: _Visit) -> tuple[np.ndarray, np.ndarray, np.ndarray, list]:
         """Whitened (rows x local), (rows x shared) Jacobians and residuals of one visit, and its blocks."""
@@ -284,7 +294,8 @@ class _Problem:
         nr, nd = len(v.refs), len(v.decks)
         sc = 1.0 + 1e-6 * v.kappa_ppm
         off_w = 0 if v.is_base else 7
-        z, dth, dom = self._corrected(v)
+        z, dth, dom, dal = self._corrected(v)
+        ax0 = 3 * len(self.ref_ids) + len(self.deck_ids)  # the axis errors' first shared column
         blocks = [("r", j, 3) for j in range(nr)] + [("d", j, 1) for j in range(nd)]
         lw, qa, wt = self.row_weights(v)
         # reference targets: 3 rows each
@@ -302,6 +313,8 @@ class _Problem:
             ash[j, :, 3 * i:3 * i + 3] = -sc * v.q
         if nb:
             ash[:, :, ns - nb:] = dth[:nr]
+        if self.n_axes:
+            ash[:, :, ax0:ax0 + self.n_axes] = dal[:nr]
         jl = [np.einsum("nij,njk->nik", lw, al).reshape(3 * nr, nl)]
         js = [np.einsum("nij,njk->nik", lw, ash).reshape(3 * nr, ns)]
         res = [np.einsum("nij,nj->ni", lw, e).reshape(-1)]
@@ -321,6 +334,8 @@ class _Problem:
             asd[np.arange(nd), 3 * len(self.ref_ids) + a["deck_idx"]] = -1.0
             if nb:
                 asd[:, ns - nb:] = np.einsum("i,nip->np", qa, dth[nr:]) / sc
+            if self.n_axes:
+                asd[:, ax0:ax0 + self.n_axes] = np.einsum("i,nip->np", qa, dal[nr:]) / sc
             jl.append(ald * wt[:, None])
             js.append(asd * wt[:, None])
             res.append(ed * wt)
@@ -372,8 +387,26 @@ class _Problem:
     def apply_shared(self, dx: np.ndarray) -> None:
         nr = 3 * len(self.ref_ids)
         self.x_ref = self.x_ref + dx[:nr].reshape(-1, 3)
-        self.a_deck = self.a_deck + dx[nr:nr + len(self.deck_ids)]
-        self.theta = self.theta + dx[nr + len(self.deck_ids):]
+        ax0 = nr + len(self.deck_ids)
+        self.a_deck = self.a_deck + dx[nr:ax0]
+        self.alpha = self.alpha + dx[ax0:ax0 + self.n_axes]
+        self.theta = self.theta + dx[ax0 + self.n_axes:]
+
+    def priors(self) -> tuple[np.ndarray, np.ndarray, float]:
+        """The shared unknowns' priors as normal equations: (diagonal (ns,), right-hand side (ns,), chi2).
+
+        Weak priors on the range walk's coefficients (mm) and the axis errors (arcsec), centred on zero, so
+        that an undetermined combination keeps the prior's sigma instead of a guess.
+        """
+        ns, nb = self.n_shared, len(self.basis)
+        ax0 = ns - nb - self.n_axes
+        diag, rhs = np.zeros(ns), np.zeros(ns)
+        diag[ax0:ax0 + self.n_axes] = 1.0 / PRIOR_AXES_ARCSEC ** 2
+        diag[ns - nb:] = 1.0 / PRIOR_BIAS_MM ** 2
+        rhs[ax0:ax0 + self.n_axes] = -self.alpha / PRIOR_AXES_ARCSEC ** 2
+        rhs[ns - nb:] = -self.theta / PRIOR_BIAS_MM ** 2
+        chi2 = float(np.sum((self.alpha / PRIOR_AXES_ARCSEC) ** 2) + np.sum((self.theta / PRIOR_BIAS_MM) ** 2))
+        return diag, rhs, chi2
 
 
 @dataclass
@@ -390,15 +423,10 @@ class _Solution:
 def _solve_once(p: _Problem) -> tuple[_Solution, float]:
     """One Gauss-Newton step with every visit's unknowns eliminated; returns the solution and the step size."""
     ns = p.n_shared
-    n_ss = np.zeros((ns, ns))
-    b_s = np.zeros(ns)
-    # the range walk's prior
-    nb = len(p.basis)
-    if nb:
-        n_ss[ns - nb:, ns - nb:] += np.eye(nb) / PRIOR_BIAS_MM ** 2
-        b_s[ns - nb:] -= p.theta / PRIOR_BIAS_MM ** 2
+    prior_diag, b_s, chi2 = p.priors()
+    n_ss = np.diag(prior_diag)
     parts = []
-    chi2, n_rows = float(nb and np.sum((p.theta / PRIOR_BIAS_MM) ** 2)), nb
+    n_rows = len(p.basis) + p.n_axes
     chi2_data, n_data = 0.0, 0
     for v in p.visits:
         jl, js, res, blocks = p.visit_rows(v)
@@ -492,36 +520,72 @@ def fit_field_model(visits: Sequence[VisitSightings], groups: Mapping[str, str],
     if not visits:
         raise InputError("the field model needs at least one visit")
     if not select_range_walk or len(visits) < 3:
-        p, sol, left = _with_or_without_drift(visits, groups, (), None)
+        p, sol, left = _final_fit(visits, groups, (), None)
         return _model(p, sol, left, visits[0].label)
-    general = _Problem(visits, groups, ("1", "sat_strength"))
+    general = _Problem(visits, groups, ("1", "sat_strength"), axes=(0, 1, 2))
     general_sol, _ = _adjust(general)
-    info = bias_information(_Problem(visits, groups, (), start=general))
-    laws = sorted(screen_laws(info, general_sol.n_data), key=lambda law: law.bic)
-    chosen = laws[0]
-    p, sol, left = _with_or_without_drift(visits, groups, chosen.basis, general)
-    near = [law for law in laws if law.bic - chosen.bic < ALTERNATIVE_BIC][:MAX_ALTERNATIVES]
-    alts = tuple((law.basis, law.theta_mm * 1e-3, float(math.exp(-0.5 * (law.bic - chosen.bic)))) for law in near)
+    info = bias_information(_Problem(visits, groups, (), start=general, axes=(0, 1, 2)))
+    chosen = min(screen_laws(info, general_sol.n_data), key=lambda law: law.bic).basis
+    tried = []
+    while True:  # the law and the axis errors the data support, until the screen agrees with the final fit
+        tried.append(chosen)
+        p, sol, left = _final_fit(visits, groups, chosen, general)
+        # the families screened again on the final fit (its axis errors and drift)
+        info = bias_information(_Problem(visits, groups, (), start=p, drift=p.drift, axes=p.axes))
+        laws = sorted(screen_laws(info, sol.n_data), key=lambda law: law.bic)
+        if laws[0].basis in tried or len(tried) >= MAX_LAW_ROUNDS:
+            break
+        chosen = laws[0].basis
+    laws.sort(key=lambda law: (law.basis != chosen, law.bic))
+    ref = laws[0].bic
+    near = [law for law in laws if law.bic - ref < ALTERNATIVE_BIC][:MAX_ALTERNATIVES]
+    alts = tuple((law.basis, law.theta_mm * 1e-3, float(math.exp(-0.5 * (law.bic - ref)))) for law in near)
     scales = [info.scales_ppm(design(law.basis, info.range_m, info.cos_incidence), law.theta_mm) for law in near]
     return _model(p, sol, left, visits[0].label, alts, [[float(k[i]) for k in scales] for i in range(len(visits))])
 
 
-def _with_or_without_drift(visits: Sequence[VisitSightings], groups: Mapping[str, str], basis: tuple[str, ...],
-                           start: Optional[_Problem]) -> tuple[_Problem, _Solution, list]:
-    """The range walk ``basis`` fitted with and without the set-ups' drift; the one BIC prefers.
+def _final_fit(visits: Sequence[VisitSightings], groups: Mapping[str, str], basis: tuple[str, ...],
+               start: Optional[_Problem]) -> tuple[_Problem, _Solution, list]:
+    """The range walk ``basis`` fitted with the instrument's axis errors and the set-ups' drift the data support.
 
-    A drift the data cannot show (no point times, a plan's time model only) is left out rather than
-    fitted to noise.
+    All three axis errors are fitted first; the subset BIC prefers follows from that fit's estimates and
+    covariance (dropping errors ``S`` raises chi2 by ``a_S^T C_SS^-1 a_S``, their Wald statistic) and is
+    fitted again. A drift the data cannot show (no point times, a plan's time model only) is left out by
+    BIC too. The fits without start from the full fit's down-weighting (re-weighting would discard the very
+    blocks - the closures, the far targets - that show them, and make the model without them look better).
     """
-    p = _Problem(visits, groups, basis, start=start)
+    p = _Problem(visits, groups, basis, start=start, axes=(0, 1, 2))
     sol, left = _adjust(p)
-    if not any(v.timed for v in p.visits):
-        return p, sol, left
-    # without drift, with the drift fit's down-weighting (re-weighting would discard the very blocks - the
-    # closures - that show the drift, and make the model without it look better than it is)
-    q = _Problem(visits, groups, basis, start=p, drift=False)
-    sol_q, _ = _adjust(q, robust=False)
-    return (p, sol, left) if _bic(sol) < _bic(sol_q) else (q, sol_q, left)
+    keep = _supported_axes(p, sol)
+    best = (p, sol, left)
+    if keep != p.axes:
+        q = _Problem(visits, groups, basis, start=p, axes=keep)
+        sol_q, _ = _adjust(q, robust=False)
+        best = (q, sol_q, left)
+    if any(v.timed for v in best[0].visits):
+        q = _Problem(visits, groups, basis, start=best[0], axes=keep, drift=False)
+        sol_q, _ = _adjust(q, robust=False)
+        if _bic(sol_q) < _bic(best[1]):
+            best = (q, sol_q, left)
+    return best
+
+
+def _supported_axes(p: _Problem, sol: _Solution) -> tuple[int, ...]:
+    """The subset of the fitted axis errors BIC prefers, from the full fit's estimates and covariance."""
+    nb = len(p.basis)
+    ax0 = p.n_shared - nb - p.n_axes
+    cov = sol.cov_shared[ax0:ax0 + p.n_axes, ax0:ax0 + p.n_axes]
+    per_term = math.log(max(sol.n_data, 2))
+    best, best_cost = p.axes, 0.0
+    for size in range(p.n_axes):
+        for kept in itertools.combinations(range(p.n_axes), size):
+            dropped = [i for i in range(p.n_axes) if i not in kept]
+            a = p.alpha[dropped]
+            wald = float(a @ np.linalg.pinv(cov[np.ix_(dropped, dropped)]) @ a)
+            cost = wald - per_term * len(dropped)  # BIC of the smaller model minus the full one's
+            if cost < best_cost:
+                best, best_cost = tuple(p.axes[i] for i in kept), cost
+    return best
 
 
 def _model(p: _Problem, sol: _Solution, left_out: list, baseline: str, alternatives: tuple = (),
@@ -537,6 +601,8 @@ def _model(p: _Problem, sol: _Solution, left_out: list, baseline: str, alternati
         notes.append("the campaign's stations are too few or too alike to determine the range walk: its sigma "
                      "is widened to what a plausible bias would cause")
     rw = RangeWalkModel(p.basis, p.theta * 1e-3, cov_theta, determined, tuple(notes), alternatives)
+    ax0 = p.n_shared - nb - p.n_axes
+    axes = AxisModel(p.axes, p.alpha.copy(), sol.cov_shared[ax0:ax0 + p.n_axes, ax0:ax0 + p.n_axes] * f)
     out = {}
     dof_ratio = max(1.0 - sol.n_unknowns / max(sol.n_rows, 1), 0.1)
     for k, (v, cl) in enumerate(zip(p.visits, sol.cov_local)):
@@ -561,4 +627,4 @@ def _model(p: _Problem, sol: _Solution, left_out: list, baseline: str, alternati
                                         v.omega.copy() if v.timed else np.zeros(3), dcov, v.t_ref, v.timed,
                                         v.is_base or s_ppm < SCALE_DETERMINED_PPM, left,
                                         tuple(alternative_kappas[k]) if alternative_kappas else (), misfit)
-    return FieldModel(baseline, rw, out, s0, sol.n_rows, tuple(notes))
+    return FieldModel(baseline, rw, out, s0, sol.n_rows, tuple(notes), axes)

@@ -4,9 +4,10 @@
 :class:`~lidar.systematic.adjustment.FieldModel` (:mod:`lidar.systematic.corrections`), runs the
 displacement computation on them, and splits each displacement's variance into its terms (see
 :data:`lidar.displacement_result.BUDGET_TERMS`): the target's own centroids (``noise``), the reference
-motion and the deck normal (``frame``), the visit's atmospheric scale (``scale``), the range walk with the
-largest departure among the families the data cannot tell from it (``bias``, see
-:func:`~lidar.systematic.range_walk.family_spread2`) and both visits' drift (``drift``). The reported sigma
+motion and the deck normal (``frame``), the visit's atmospheric scale (``scale``), the instrument's biases
+(``bias``: the range walk with the largest departure among the families the data cannot tell from it, see
+:func:`~lidar.systematic.range_walk.family_spread2`, and the axis errors, :mod:`lidar.systematic.axes`) and
+both visits' drift (``drift``). The reported sigma
 is their sum in quadrature. The along-span movements carry the same terms.
 """
 from __future__ import annotations
@@ -35,7 +36,7 @@ def _side(centroids: Mapping[str, object], model: FieldModel, label: str):
     """
     vis = model.visit(label)
     inflate = max(1.0, vis.misfit) ** 2
-    pos, jac = correct_visit(centroids, range_walk=model.range_walk, visit=vis)
+    pos, jac = correct_visit(centroids, range_walk=model.range_walk, visit=vis, axes=model.axes)
     obs = {k: Observation(pos[k], inflate * np.asarray(getattr(c, "cov"), dtype=np.float64))
            for k, c in centroids.items()}
     return obs, jac
@@ -74,6 +75,7 @@ def corrected_displacements(baseline: Mapping[str, object], epoch: Mapping[str, 
             "epoch": _deviations(epoch, model, epoch_label, {k: o.xyz for k, o in e_obs.items()})}
     weights = np.array([a[2] for a in model.range_walk.alternatives])
     cov_theta = model.range_walk.covariance_m2
+    cov_axes = model.axes.covariance_arcsec2
     v_base, v_ep = model.visit(baseline_label), model.visit(epoch_label)
     out = []
     for d in res.displacements:
@@ -81,31 +83,34 @@ def corrected_displacements(baseline: Mapping[str, object], epoch: Mapping[str, 
             out.append(d)
             continue
         i = sens.targets.index(d.reflector)
-        terms = _terms(sens.vertical[i], sens.inputs, jacs, cov_theta, v_base, v_ep, devs, weights)
-        bias2 = terms["theta"] + terms["alternatives"]
+        terms = _terms(sens.vertical[i], sens.inputs, jacs, cov_theta, v_base, v_ep, devs, weights, cov_axes)
+        bias2 = terms["theta"] + terms["alternatives"] + terms["axes"]
         budget = {"noise": d.budget.get("noise", 0.0), "frame": d.budget.get("frame", 0.0),
                   "scale": np.sqrt(terms["scale"]),
                   "bias": np.sqrt(bias2), "drift": np.sqrt(terms["drift"])}
         sigma = float(np.sqrt(sum(v ** 2 for v in budget.values())))
         along_sigma = d.along_sigma_m
         if np.isfinite(d.along_m):
-            ta = _terms(sens.along[i], sens.inputs, jacs, cov_theta, v_base, v_ep, devs, weights)
-            along_sigma = float(np.sqrt(d.along_sigma_m ** 2 + ta["theta"] + ta["alternatives"] + ta["scale"]
-                                        + ta["drift"]))
+            ta = _terms(sens.along[i], sens.inputs, jacs, cov_theta, v_base, v_ep, devs, weights, cov_axes)
+            along_sigma = float(np.sqrt(d.along_sigma_m ** 2 + ta["theta"] + ta["alternatives"] + ta["axes"]
+                                        + ta["scale"] + ta["drift"]))
         out.append(replace(d, sigma_m=sigma, along_sigma_m=along_sigma,
                            budget={k: float(v) for k, v in budget.items()}))
     return replace(res, displacements=tuple(out))
 
 
 def _terms(row: np.ndarray, inputs, jacs: Mapping[str, Mapping[str, CorrectionJacobian]], cov_theta: np.ndarray,
-           v_base, v_ep, devs: Mapping[str, Mapping[str, np.ndarray]], weights: np.ndarray) -> dict:
+           v_base, v_ep, devs: Mapping[str, Mapping[str, np.ndarray]], weights: np.ndarray,
+           cov_axes: np.ndarray = np.zeros((0, 0))) -> dict:
     """Variance terms (m^2) of one output (a row of the sensitivity) from the corrections' uncertainties.
 
     ``devs[side][id]`` is (n_alternatives, 3): how each supported range-walk family would move that
-    corrected centroid against the chosen one; ``weights`` their BIC weights.
+    corrected centroid against the chosen one; ``weights`` their BIC weights. ``cov_axes`` is the instrument's
+    axis errors' covariance (arcsec^2; they are the same in both visits).
     """
     p = cov_theta.shape[0]
     j_theta = np.zeros(p)
+    j_axes = np.zeros(cov_axes.shape[0])
     j_scale = 0.0
     j_drift = {"baseline": np.zeros(3), "epoch": np.zeros(3)}
     alt = np.zeros(weights.size)
@@ -115,12 +120,15 @@ def _terms(row: np.ndarray, inputs, jacs: Mapping[str, Mapping[str, CorrectionJa
         if cj is None:
             continue
         j_theta += jb @ cj.d_theta
+        if j_axes.size:
+            j_axes += jb @ cj.d_axes
         if side == "epoch":
             j_scale += float(jb @ cj.d_scale)
         j_drift[side] += jb @ cj.d_drift
         if weights.size:
             alt += devs[side][k] @ jb
     return {"theta": float(j_theta @ cov_theta @ j_theta) if p else 0.0,
+            "axes": float(j_axes @ cov_axes @ j_axes) if j_axes.size else 0.0,
             "scale": j_scale ** 2 * (v_ep.scale_sigma_ppm ** 2),
             "drift": float(j_drift["baseline"] @ v_base.drift_cov @ j_drift["baseline"]
                            + j_drift["epoch"] @ v_ep.drift_cov @ j_drift["epoch"]),

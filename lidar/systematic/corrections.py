@@ -6,17 +6,19 @@ sight ``u``, the visit's drift rates ``omega`` and scale ``kappa`` (:class:`~lid
     z = R(omega (t - t_ref)) (y + b u) / (1 + kappa)
 
 ``z`` is where the target would have been read by the visit's instrument at ``t_ref``, in the baseline's
-atmosphere, without a range walk. :func:`correction_jacobians` gives ``dz`` per unit of each correction's
+atmosphere, without a range walk (and without the instrument's axis errors, when the campaign fitted them:
+``y`` then gains their correction before the drift's rotation, :mod:`lidar.systematic.axes`). :func:`correction_jacobians` gives ``dz`` per unit of each correction's
 parameters, so that their uncertainties can be carried through the displacement computation.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Mapping
 
 import numpy as np
 
 from lidar.systematic.adjustment import ARCSEC, VisitSystematics, _drift_rotation, _skew
+from lidar.systematic.axes import AxisModel, axis_basis
 from lidar.systematic.range_walk import RangeWalkModel, design
 
 
@@ -25,30 +27,35 @@ class CorrectionJacobian:
     """How one corrected centroid moves with the corrections' parameters (metres per unit).
 
     ``d_theta`` (3, P) per metre of each range-walk coefficient, ``d_scale`` (3,) per ppm of the
-    visit's scale, ``d_drift`` (3, 3) per arcsec/h of each drift rate.
+    visit's scale, ``d_drift`` (3, 3) per arcsec/h of each drift rate, ``d_axes`` (3, A) per arcsec of each of
+    the instrument's axis errors (A = 0 when none were fitted).
     """
 
     d_theta: np.ndarray
     d_scale: np.ndarray
     d_drift: np.ndarray
+    d_axes: np.ndarray = field(default_factory=lambda: np.zeros((3, 0)))
 
 
 def correct_centroid(xyz_socs: np.ndarray, cos_incidence: float, time_s: float, *, range_walk: RangeWalkModel,
-                     visit: VisitSystematics) -> tuple[np.ndarray, CorrectionJacobian]:
+                     visit: VisitSystematics, axes: AxisModel = AxisModel()) -> tuple[np.ndarray, CorrectionJacobian]:
     """The corrected centroid (3,) and its :class:`CorrectionJacobian`.
 
-    A time of NaN (or a visit without times) leaves the drift out.
+    A time of NaN (or a visit without times) leaves the drift out; ``axes`` are the instrument's axis errors
+    (:mod:`lidar.systematic.axes`; none by default).
     """
     y = np.asarray(xyz_socs, dtype=np.float64)
     r = float(np.linalg.norm(y))
     u = y / r
     phi = design(range_walk.basis, r, cos_incidence)[0]
-    w = y + float(phi @ range_walk.coefficients_m) * u
+    along_axes = axis_basis(y[None])[0][:, list(axes.terms)]
+    w = y + float(phi @ range_walk.coefficients_m) * u + along_axes @ axes.values_arcsec
     dt = (time_s - visit.time_ref_s) if visit.timed and np.isfinite(time_s) else 0.0
     rot = _drift_rotation(visit.drift_arcsec_h, dt)
     sc = 1.0 + 1e-6 * visit.scale_ppm
     z = rot @ w / sc
-    jac = CorrectionJacobian(rot @ np.outer(u, phi) / sc, -z * 1e-6 / sc, -_skew(z) * (ARCSEC * dt / 3600.0))
+    jac = CorrectionJacobian(rot @ np.outer(u, phi) / sc, -z * 1e-6 / sc, -_skew(z) * (ARCSEC * dt / 3600.0),
+                             rot @ along_axes / sc)
     return z, jac
 
 
@@ -58,13 +65,14 @@ def cos_incidence_of(centroid: object) -> float:
     return c if np.isfinite(c) else 1.0
 
 
-def correct_visit(centroids: Mapping[str, object], *, range_walk: RangeWalkModel, visit: VisitSystematics
-                  ) -> tuple[dict[str, np.ndarray], dict[str, CorrectionJacobian]]:
+def correct_visit(centroids: Mapping[str, object], *, range_walk: RangeWalkModel, visit: VisitSystematics,
+                  axes: AxisModel = AxisModel()) -> tuple[dict[str, np.ndarray], dict[str, CorrectionJacobian]]:
     """Corrected positions and Jacobians of a visit's centroids (``xyz_socs``, ``cos_incidence``, ``time_s``)."""
     out, jacs = {}, {}
     for k, c in centroids.items():
         z, j = correct_centroid(np.asarray(getattr(c, "xyz_socs")), cos_incidence_of(c),
-                                float(getattr(c, "time_s", float("nan"))), range_walk=range_walk, visit=visit)
+                                float(getattr(c, "time_s", float("nan"))), range_walk=range_walk, visit=visit,
+                                axes=axes)
         out[k], jacs[k] = z, j
     return out, jacs
 

@@ -118,6 +118,10 @@ def bias_information(problem: _Problem) -> BiasInformation:
         sights = [s for s, _ in v.refs] + [s for s, _ in v.decks]
         r_all += [float(np.linalg.norm(s.xyz_socs)) for s in sights]
         c_all += [float(s.cos_incidence) for s in sights]
+    prior_diag, prior_rhs, prior_chi2 = problem.priors()  # the axis errors' (no walk here)
+    normal[:n_x, :n_x] += np.diag(prior_diag)
+    rhs[:n_x] += prior_rhs
+    chi2 += prior_chi2
     n_xx, n_xw = normal[:n_x, :n_x], normal[:n_x, n_x:]
     inv_xx = np.linalg.pinv(n_xx)
     info = normal[n_x:, n_x:] - n_xw.T @ inv_xx @ n_xw

@@ -5,7 +5,8 @@ the set-up's drift (:mod:`lidar.systematic`) before computing its displacements.
 every measured epoch at once; when epochs arrive, it is fitted again, and the stored model is replaced
 only when the new one differs materially (a range walk changing by more than
 :data:`MATERIAL_BIAS_M` anywhere the campaign measured, a visit's scale by more than
-:data:`MATERIAL_SCALE_PPM`, its drift by more than :data:`MATERIAL_DRIFT_ARCSEC_H`); otherwise the new
+:data:`MATERIAL_SCALE_PPM`, its drift by more than :data:`MATERIAL_DRIFT_ARCSEC_H`, the instrument's axis
+errors come or go or move by more than :data:`MATERIAL_AXES_ARCSEC`); otherwise the new
 visits' own terms are added to it. So adding an epoch recomputes that epoch's displacements, and all of
 them only when the campaign's knowledge of its instrument has changed.
 """
@@ -34,6 +35,7 @@ log = logging.getLogger(__name__)
 MATERIAL_BIAS_M = 1e-5
 MATERIAL_SCALE_PPM = 0.3
 MATERIAL_DRIFT_ARCSEC_H = 0.5
+MATERIAL_AXES_ARCSEC = 0.5
 #: The campaign's field model as a file (versioned JSON, :data:`projects.store.field_tables.FIELD_MODEL_FORMAT_VERSION`).
 BIAS_FILE = "bias.json"
 
@@ -68,6 +70,9 @@ def _usable(cents: Mapping[str, TargetCentroid], groups: Mapping[str, str]) -> b
 def _material(new: FieldModel, old: FieldModel, visits: Sequence[VisitSightings]) -> bool:
     if new.baseline != old.baseline or bool(new.range_walk.basis) != bool(old.range_walk.basis):
         return True
+    if new.axes.fitted != old.axes.fitted or (new.axes.fitted and np.max(np.abs(
+            new.axes.values_arcsec - old.axes.values_arcsec)) > MATERIAL_AXES_ARCSEC):
+        return True
     r = np.array([np.linalg.norm(s.xyz_socs) for v in visits for s in v.sightings])
     c = np.array([s.cos_incidence for v in visits for s in v.sightings])
     if r.size and np.max(np.abs(new.range_walk.bias_m(r, c) - old.range_walk.bias_m(r, c))) > MATERIAL_BIAS_M:
@@ -87,7 +92,7 @@ def _merged(old: FieldModel, new: FieldModel) -> FieldModel:
     visits = dict(old.visits)
     for label, v in new.visits.items():  # its scales under the new fit's alternatives do not apply to the old ones
         visits.setdefault(label, replace(v, alternative_scale_ppm=()))
-    return FieldModel(old.baseline, old.range_walk, visits, old.sigma0, new.n_observations, old.notes)
+    return FieldModel(old.baseline, old.range_walk, visits, old.sigma0, new.n_observations, old.notes, old.axes)
 
 
 def digest_of(model: FieldModel) -> str:
@@ -99,6 +104,8 @@ def visit_digest(model: FieldModel, baseline: str, label: str) -> str:
     """A digest of what one epoch's displacements depend on: the range walk and both visits' terms."""
     part = {"rw": model.range_walk.to_json(), "base": _visit_key(model.visit(baseline)),
             "epoch": _visit_key(model.visit(label))}
+    if model.axes.fitted:  # (a model without them keeps the digests it had)
+        part["axes"] = np.round(model.axes.values_arcsec, 4).tolist()
     return hashlib.sha256(json.dumps(part, sort_keys=True).encode()).hexdigest()[:24]
 
 

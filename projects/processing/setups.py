@@ -428,12 +428,12 @@ def joined_displacements(baseline: CorrectedVisit, epoch: CorrectedVisit, groups
         normal2 = max(d.budget.get("frame", 0.0) ** 2 - (var_cd - own_cd), 0.0)
         budget = {"noise": math.sqrt(max(t["own"], 0.0)),
                   "frame": math.sqrt(max(t["total"] - t["own"], 0.0) + normal2),
-                  "scale": math.sqrt(t["scale"]), "bias": math.sqrt(t["theta"] + t["alternatives"]),
+                  "scale": math.sqrt(t["scale"]), "bias": math.sqrt(t["theta"] + t["alternatives"] + t["axes"]),
                   "drift": math.sqrt(t["drift"])}
         along_sigma = d.along_sigma_m
         if np.isfinite(d.along_m):
             ta = _terms(sens.along[i], sens.inputs, sides, model, d.reflector, weights)
-            along_sigma = math.sqrt(max(ta["total"], 0.0) + ta["theta"] + ta["alternatives"] + ta["scale"]
+            along_sigma = math.sqrt(max(ta["total"], 0.0) + ta["theta"] + ta["alternatives"] + ta["axes"] + ta["scale"]
                                     + ta["drift"])
         sigma = math.sqrt(sum(v ** 2 for v in budget.values()))
         out.append(replace(d, sigma_m=sigma, along_sigma_m=along_sigma, budget={k: float(v) for k, v in budget.items()}))
@@ -459,6 +459,8 @@ def _terms(row: np.ndarray, inputs, sides: Mapping[str, CorrectedVisit], model: 
     h = _sighting_rows(row, inputs, sides)
     p = model.range_walk.covariance_m2.shape[0]
     j_theta = np.zeros(p)
+    cov_axes = model.axes.covariance_arcsec2
+    j_axes = np.zeros(cov_axes.shape[0])
     alt = np.zeros(weights.size)
     scale: dict[str, float] = {}
     drift: dict[str, np.ndarray] = {}
@@ -472,6 +474,8 @@ def _terms(row: np.ndarray, inputs, sides: Mapping[str, CorrectedVisit], model: 
                 own += v
             cj = c.jacobians[key]
             j_theta += hb @ cj.d_theta
+            if j_axes.size:
+                j_axes += hb @ cj.d_axes
             label = c.visits[key[0]]
             scale[label] = scale.get(label, 0.0) + float(hb @ cj.d_scale)
             drift[label] = drift.get(label, np.zeros(3)) + hb @ cj.d_drift
@@ -480,6 +484,7 @@ def _terms(row: np.ndarray, inputs, sides: Mapping[str, CorrectedVisit], model: 
     cov_theta = model.range_walk.covariance_m2
     return {"own": own, "total": total,
             "theta": float(j_theta @ cov_theta @ j_theta) if p else 0.0,
+            "axes": float(j_axes @ cov_axes @ j_axes) if j_axes.size else 0.0,
             "scale": sum(js ** 2 * model.visit(lab).scale_sigma_ppm ** 2 for lab, js in scale.items()),
             "drift": sum(float(jd @ model.visit(lab).drift_cov @ jd) for lab, jd in drift.items()),
             "alternatives": float(family_spread2(alt, weights))}

@@ -20,10 +20,12 @@ import numpy as np
 
 from lidar.centroid import TargetCentroid
 from lidar.systematic.adjustment import FieldModel, VisitSystematics
+from lidar.systematic.axes import AxisModel
 from lidar.systematic.range_walk import RangeWalkModel
 
-#: Format version of a stored field model (and of the campaign's ``bias.json``).
-FIELD_MODEL_FORMAT_VERSION = 1
+#: Format version of a stored field model (and of the campaign's ``bias.json``). 2 adds the instrument's axis
+#: errors (``axes``); a version-1 model has none.
+FIELD_MODEL_FORMAT_VERSION = 2
 
 SCHEMA = """
 CREATE TABLE centroid_extras (
@@ -167,7 +169,8 @@ def field_model_to_json(m: FieldModel) -> dict:
     """A field model as the versioned JSON of ``bias.json``."""
     return {"format_version": FIELD_MODEL_FORMAT_VERSION, "baseline": m.baseline,
             "range_walk": m.range_walk.to_json(), "sigma0": m.sigma0, "n_observations": m.n_observations,
-            "notes": list(m.notes), "visits": [visit_to_json(v) for v in m.visits.values()]}
+            "notes": list(m.notes), "visits": [visit_to_json(v) for v in m.visits.values()],
+            "axes": m.axes.to_json()}
 
 
 def field_model_from_json(d: dict) -> FieldModel:
@@ -178,7 +181,7 @@ def field_model_from_json(d: dict) -> FieldModel:
         raise InputError("the campaign's field model was written by a newer BridgeSurvey")
     visits = {v["label"]: visit_from_json(v) for v in d.get("visits", ())}
     return FieldModel(d["baseline"], RangeWalkModel.from_json(d["range_walk"]), visits, float(d.get("sigma0", 1.0)),
-                      int(d.get("n_observations", 0)), tuple(d.get("notes", ())))
+                      int(d.get("n_observations", 0)), tuple(d.get("notes", ())), AxisModel.from_json(d.get("axes")))
 
 
 def write_field_model(conn: sqlite3.Connection, model_json: dict, digest: str, created: str) -> None:

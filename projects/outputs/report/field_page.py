@@ -41,6 +41,7 @@ def _range_walk_text(content: ReportContent) -> str:
         text += (f"; {len(ranked)} laws came within {ALTERNATIVE_BIC:g} BIC units of it, {len(close)} within "
                  f"{PLAUSIBLE_BIC:g} (as credible): the largest departure among those is in σ "
                  f"({', '.join(describe_basis(b) for b, _, _ in close[:3])}{', …' if len(close) > 3 else ''})")
+    text += f". The instrument's axis errors the data support: {model.axes.describe()}"
     text += f". Adjustment: {model.n_observations} observations, σ0 {model.sigma0:.2f}."
     notes = list(rw.notes) + list(model.notes)
     return text + (" " + " ".join(notes) if notes else "")

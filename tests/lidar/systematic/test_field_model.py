@@ -134,6 +134,15 @@ def test_the_model_survives_its_json():
     r, c = np.array([12.0, 25.0]), np.array([0.3, 0.9])
     assert np.allclose(back.range_walk.bias_m(r, c), model.range_walk.bias_m(r, c))
     assert back.visit("3").scale_ppm == pytest.approx(model.visit("3").scale_ppm)
+    from dataclasses import replace
+
+    from lidar.systematic.axes import AxisModel
+
+    with_axes = replace(model, axes=AxisModel((0,), np.array([21.0]), np.array([[16.0]])))
+    back = field_model_from_json(field_model_to_json(with_axes))
+    assert back.axes.terms == (0,) and back.axes.values_arcsec[0] == 21.0
+    old = {k: v for k, v in field_model_to_json(model).items() if k != "axes"}  # version 1: no axes
+    assert not field_model_from_json({**old, "format_version": 1}).axes.fitted
 
 
 def test_the_families_spread_widens_sigma_but_never_moves_a_value():

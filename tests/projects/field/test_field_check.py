@@ -154,8 +154,9 @@ def test_predicted_sigma_matches_what_processing_reports(processed):
             # processing's frame term depends on how far the epoch's own deck normal falls from the carried one,
             # which no prediction knows (it takes its expectation), and its range-walk term on where the measured
             # returns' strengths fall against the plausible families' steps, which a prediction evaluates at the
-            # layout's incidences: within -40 % and +40 %
-            assert all(0.6 <= q <= 1.4 for q in ratios), (label, ratios)
+            # layout's incidences (a step family puts a target near its threshold on either side of it): within
+            # -50 % and +40 %
+            assert all(0.5 <= q <= 1.4 for q in ratios), (label, ratios)
 
 
 def test_stations_cli_with_an_area_writes_json_and_map(processed_copy, tmp_path):

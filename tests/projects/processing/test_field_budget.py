@@ -28,7 +28,7 @@ def _rows(camp, capsys):
 
 def test_the_model_is_stored_versioned_and_every_row_has_its_budget(processed, capsys):
     bias = json.loads((processed / "bias.json").read_text())
-    assert bias["format_version"] == 1 and "range_walk" in bias and len(bias["visits"]) == 3
+    assert bias["format_version"] == 2 and "range_walk" in bias and "axes" in bias and len(bias["visits"]) == 3
     for r in _rows(processed, capsys):
         if r["epoch"] == r["baseline"] or not r["displacement_mm"]:
             continue

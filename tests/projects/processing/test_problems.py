@@ -81,7 +81,9 @@ def test_an_epoch_dated_before_the_baseline_gets_negative_time_not_a_new_baselin
     assert mid and mid[0]["displacement_mm"] == pytest.approx(2.0, abs=0.5)  # 2 mm up, against the baseline
     with Campaign.open(processed_copy, writable=False) as c:
         after = {(r.epoch, r.reflector): r.displacement_m for r in c.displacements()}
-    assert all(after[k] == before[k] for k in before)  # nothing else was re-referenced
+    # nothing else was re-referenced (that would move them by the early epoch's 2 mm); the campaign's field
+    # model, re-fitted with one more visit, may move them within their sigma
+    assert all(abs(after[k] - before[k]) < 0.3e-3 for k in before)
     assert main(["settings", str(processed_copy), "baseline", "2026-03-09"]) == 0
     assert "re-referenced" in capsys.readouterr().err
     with Campaign.open(processed_copy, writable=False) as c:
