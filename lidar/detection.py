@@ -66,18 +66,16 @@ def auto_threshold(values: np.ndarray) -> float:
     Halfway between the background median and the brightest cell, but at least
     3 robust standard deviations above the background median.
     """
-    v = np.asarray(values).ravel()
-    v = v[np.isfinite(v)]
-    if v.size > 1_000_000:  # the background statistics need no more than a large sample
-        v_all_max = float(v.max())
-        v = v[:: v.size // 1_000_000]
-    else:
-        v_all_max = float(v.max()) if v.size else 0.0
-    if v.size == 0:
+    v = np.asarray(values).ravel(order="K")  # in memory order: a view of a large map, not a copy
+    finite = np.isfinite(v)
+    if not finite.any():
         raise InputError("the reflectance map is empty")
+    top = float(np.max(v, where=finite, initial=-np.inf))
+    step = max(v.size // 1_000_000, 1)  # the background statistics need no more than a large sample
+    sample = v[::step][finite[::step]]
+    v = sample if sample.size else v[finite]
     bg = float(np.median(v))
     mad = float(np.median(np.abs(v - bg))) * 1.4826
-    top = v_all_max
     return max(bg + 3.0 * mad, bg + 0.5 * (top - bg))
 
 
@@ -104,33 +102,30 @@ def detect_reflectors(rmap: ReflectanceMap, *, target_diameter_m: float = 0.05, 
     """
     if not (np.isfinite(target_diameter_m) and target_diameter_m > 0):
         raise InputError(f"target diameter must be positive, got {target_diameter_m}")
-    # Work on the transposed (azimuth-major) view: the map is stored column by column, so this
-    # view is contiguous and no copy of the (possibly large) map is made.
+    # Work on the transposed (azimuth-major) view: blobs are numbered in the order of their first cell by
+    # azimuth, then zenith.
     img = rmap.max_intensity.T
     thr = auto_threshold(img) if threshold is None else float(threshold)
     mask = img >= thr  # NaN (empty cells) compares False
     labels_t, n = label_components(mask)
     if n == 0:
         return DetectionResult((), (), thr, rmap.step_deg)
-    w, h = labels_t.shape  # (columns, rows)
-    col_shift = np.zeros(n + 1)
-    labels_all = labels_t
+    w = labels_t.shape[0]  # (columns, rows)
+    # the labelled cells only, in the transposed view's row-major order (the map is not copied)
+    cols, rows = np.nonzero(labels_t)
+    lab = labels_t[cols, rows]
     if rmap.full_circle:
-        labels_all, col_shift = _merge_across_seam(labels_t.T, w)
-        labels_all = labels_all.T
-    flat = labels_all.reshape(-1)
-    sel = np.flatnonzero(flat)
-    lab = flat[sel]
-    cols, rows = np.divmod(sel, h)
-    cols = cols + col_shift[labels_t.reshape(-1)[sel]]  # seam-merged blobs continue past the last column
-    vals = img.reshape(-1)[sel]
+        roots, col_shift = _merge_across_seam(labels_t.T, w)
+        cols = cols + col_shift[lab]  # seam-merged blobs continue past the last column
+        lab = roots[lab]
+    vals = img[cols % w, rows]
     weight = vals - thr * 0.9
-    nlab = int(labels_all.max()) + 1
+    nlab = int(lab.max()) + 1
     sw = np.bincount(lab, weight, nlab)
     n_cells = np.bincount(lab, minlength=nlab)
     r_c = np.bincount(lab, weight * rows, nlab) / np.where(sw > 0, sw, 1)
     c_c = np.bincount(lab, weight * cols, nlab) / np.where(sw > 0, sw, 1)
-    rng_vals = np.nan_to_num(rmap.range_m.T.reshape(-1)[sel], nan=0.0)
+    rng_vals = np.nan_to_num(rmap.range_m.T[cols % w, rows], nan=0.0)
     valid_r = rng_vals > 0
     rng = np.bincount(lab, rng_vals * valid_r, nlab) / np.maximum(np.bincount(lab, valid_r.astype(float), nlab), 1)
     peak = np.zeros(nlab)
@@ -249,7 +244,7 @@ def join_groups(n: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def _merge_across_seam(labels: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:
     """Join blobs touching both the first and last column of a full-circle map.
 
-    Returns relabelled labels and, per label, the column shift (0 or width) that
+    Returns, per label, its merged label (``roots[label]``) and the column shift (0 or width) that
     makes the merged blob's columns continuous.
     """
     n = int(labels.max())
@@ -269,9 +264,9 @@ def _merge_across_seam(labels: np.ndarray, width: int) -> tuple[np.ndarray, np.n
                 a, b = find(last[r]), find(first[rr])
                 if a != b:
                     parent[b] = a
-    shift = np.zeros(n + 1)
+    shift = np.zeros(n + 1, dtype=np.int64)
     roots = np.array([find(k) for k in range(n + 1)])
     for k in range(1, n + 1):
         if roots[k] != k:  # merged: its columns (near column 0) continue after the last column
             shift[k] = width
-    return roots[labels], shift
+    return roots, shift
