@@ -106,9 +106,12 @@ def estimate_step_deg(theta_deg: np.ndarray, phi_deg: np.ndarray, *, n_total: Op
 
     ``theta_deg``/``phi_deg`` may be a subsample of a scan of ``n_total`` points.
     """
-    n = n_total or theta_deg.size
-    step = float(np.sqrt(occupied_area_deg2(theta_deg, phi_deg) / max(n, 1)))
-    # round to 2 significant digits
+    return _rounded_step(occupied_area_deg2(theta_deg, phi_deg), n_total or theta_deg.size)
+
+
+def _rounded_step(area_deg2: float, n: int) -> float:
+    """The step of ``n`` points spread over ``area_deg2``, to 2 significant digits."""
+    step = float(np.sqrt(area_deg2 / max(n, 1)))
     mag = 10 ** np.floor(np.log10(step))
     return float(np.round(step / mag, 1) * mag)
 
@@ -195,8 +198,9 @@ def binned_map(points: PointSource, *, step_deg: Optional[float] = None,
     hist = np.bincount(np.clip((p_s * 10).astype(np.int32), 0, 3599), minlength=3600)
     report(progress, 0.1, "angles")
     if step_deg is None:
-        step_deg = 1.2 * estimate_step_deg(t_s, p_s, n_total=n)
-        floor = float(np.sqrt(occupied_area_deg2(t_s, p_s) / MAX_AUTO_CELLS))
+        area = occupied_area_deg2(t_s, p_s)
+        step_deg = 1.2 * _rounded_step(area, n)
+        floor = float(np.sqrt(area / MAX_AUTO_CELLS))
         if floor > step_deg:
             step_deg = float(np.ceil(floor * 1e4) / 1e4)
     phi0, full = _azimuth_origin_from_hist(hist)
