@@ -1,8 +1,8 @@
 """The report's field error budget: what the campaign's instrument did, and what each term of σ holds.
 
-One page: the range walk, each visit's scale and drift (figure and table), then per epoch the median of
-each budget term over its targets, so a reader sees what the displacements were corrected for and how
-much of their σ each correction costs.
+One page: the range walk and the axis errors, each visit's scale and drift (figure and table), then per
+epoch the median of each budget term over its targets, so a reader sees what the displacements were
+corrected for and how much of their σ each correction costs.
 """
 from __future__ import annotations
 
@@ -21,11 +21,13 @@ from projects.results.table import BUDGET_COLUMNS
 FIGURE_SIZE_IN = (7.6, 2.7)
 INTRO = ("Each visit's centroids are corrected before their displacements are computed: for the atmosphere's "
          "range scale (ppm against the baseline's visit), for the retro-reflectors' range walk (a bias along the "
-         "beam that depends on range and incidence, one law for the campaign), and for the set-up's drift during "
-         "the visit (tilt and twist rates, measured on the reference targets and on the closure window that scans "
-         "the first reference again at the end). They are fitted jointly over every visit; what the data cannot "
-         "tell apart widens σ instead of moving the value. The budget below splits σ into its terms: noise (the "
-         "centroids), frame (the reference targets' fit), scale, bias (range walk) and drift.")
+         "beam that depends on range and incidence, one law for the campaign), for the instrument's axis errors "
+         "(collimation, trunnion and vertical index, one set for the campaign, where the data support them) and "
+         "for the set-up's drift during the visit (tilt and twist rates, measured on the reference targets and on "
+         "the closure window that scans the first reference again at the end). They are fitted jointly over every "
+         "visit; what the data cannot tell apart widens σ instead of moving the value. The budget below splits σ "
+         "into its terms: noise (the centroids), frame (the reference targets' fit), scale, bias (range walk and "
+         "axis errors) and drift.")
 
 
 def _range_walk_text(content: ReportContent) -> str:

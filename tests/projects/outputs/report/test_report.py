@@ -40,6 +40,7 @@ def test_whole_campaign_report_has_every_section_and_no_blank_page(processed, tm
         assert f"Epoch {label}" in text
     # the field error budget page, and each epoch says what its displacements were corrected for
     assert "Field error budget" in text and "Each visit's corrections" in text and "Range walk:" in text
+    assert "axis errors the data support:" in " ".join(text.split())  # the fitted ones, or "none"
     assert text.count("Corrected for: scale") == 3 and "scale 0 ppm (the baseline defines it)" in text
     assert "1970" not in text  # an empty drift panel keeps no time axis
     assert "A. Surveyor" in text and "Riegl VZ-1000" in text and "kr-rail:0-200" in text
