@@ -7,9 +7,9 @@ Typical use::
                         ScannerSetup((20, -12, 1.5), heading_deg=30))
     coarse, truth = scene.scan(scene.coarse_window(), rng=np.random.default_rng(1))
 
-Multi-span bridges (``BridgeModel(spans_m=...)``), deck strain, the atmosphere's range scale, range walk on
-retro-reflectors (one target's own too), clipped intensities, drift (a sudden jump too), point times and the
-instrument's axis and range zero errors are in :class:`EpochConditions` and
+Multi-span bridges (``BridgeModel(spans_m=...)``), deck strain, the atmosphere's range scale (changing during
+the visit too), range walk on retro-reflectors (one target's own too), clipped intensities, drift (a sudden jump
+too), point times and the instrument's axis and range zero errors are in :class:`EpochConditions` and
 :mod:`lidar.simulate.effects`, all off by default; whole visits as files in :mod:`lidar.simulate.files`, campaigns
 of them in :mod:`lidar.simulate.campaign`.
 """

@@ -67,6 +67,9 @@ class EpochConditions:
         x of the fixed bearing. Default None: the first pier (x = 0).
     range_scale_ppm : float
         Atmosphere: every measured range is multiplied by ``1 + ppm * 1e-6``. Default 0.
+    range_scale_rate_ppm_h : float
+        The atmosphere changing during the visit (the air warming): the scale at a point's time is
+        ``range_scale_ppm + rate * hours since the visit started``. Implies times. Default 0.
     range_walk : RangeWalk, optional
         Bias of retro-reflector (target and cable-tie) ranges, see :mod:`lidar.simulate.effects`. Default none.
     clipped_fraction : float
@@ -96,6 +99,7 @@ class EpochConditions:
     deck_strain: float = 0.0
     fixed_bearing_x_m: Optional[float] = None
     range_scale_ppm: float = 0.0
+    range_scale_rate_ppm_h: float = 0.0
     range_walk: Optional[RangeWalk] = None
     clipped_fraction: float = 0.0
     drift: Optional[DriftModel] = None
@@ -115,19 +119,27 @@ class EpochConditions:
         for name in ("occluded", "cable_ties", "removed"):
             object.__setattr__(self, name, tuple(getattr(self, name)))
         object.__setattr__(self, "span_displacements_m", tuple(float(v) for v in self.span_displacements_m))
-        scalars = (self.deck_strain, self.range_scale_ppm, *self.span_displacements_m,
+        scalars = (self.deck_strain, self.range_scale_ppm, self.range_scale_rate_ppm_h, *self.span_displacements_m,
                    0.0 if self.fixed_bearing_x_m is None else self.fixed_bearing_x_m)
         if not all(np.isfinite(scalars)):
-            raise InputError("epoch conditions: strain, range scale, span displacements and bearing must be finite")
-        if abs(self.deck_strain) > 0.01 or abs(self.range_scale_ppm) > 10_000:
-            raise InputError("epoch conditions: deck strain beyond 1 % or a range scale beyond 10,000 ppm")
+            raise InputError("epoch conditions: strain, range scale (and its rate), span displacements and bearing "
+                             "must be finite")
+        if abs(self.deck_strain) > 0.01 or abs(self.range_scale_ppm) > 10_000 or abs(self.range_scale_rate_ppm_h) > 1000:
+            raise InputError("epoch conditions: deck strain beyond 1 %, a range scale beyond 10,000 ppm or changing "
+                             "faster than 1,000 ppm an hour")
         if not 0.0 <= self.clipped_fraction <= 1.0:
             raise InputError(f"clipped fraction must lie in [0, 1], got {self.clipped_fraction}")
 
     @property
     def timed(self) -> bool:
-        """Whether points get times (a timing or a drift is given)."""
-        return self.timing is not None or self.drift is not None
+        """Whether points get times (a timing, a drift or a scale that changes during the visit is given)."""
+        return self.timing is not None or self.drift is not None or self.range_scale_rate_ppm_h != 0.0
+
+    def scale_ppm_at(self, time_s):
+        """The atmosphere's range scale (ppm) at ``time_s`` (seconds on the visit's clock; None: its start)."""
+        if time_s is None or not self.range_scale_rate_ppm_h:
+            return self.range_scale_ppm
+        return self.range_scale_ppm + self.range_scale_rate_ppm_h * (np.asarray(time_s) - self.visit_timing.start_s) / 3600.0
 
     @property
     def visit_timing(self) -> VisitTiming:
@@ -338,8 +350,8 @@ class BridgeScene:
             self._walk_and_clip(returns.final(), on_target, rng_noisy, intensity)
         if c.axis_errors is not None:
             rng_noisy += c.axis_errors.range_offset_m
-        if c.range_scale_ppm:
-            rng_noisy *= 1.0 + c.range_scale_ppm * 1e-6
+        if c.range_scale_ppm or c.range_scale_rate_ppm_h:
+            rng_noisy *= 1.0 + c.scale_ppm_at(times) * 1e-6
         keep = hit & (rng_noisy > 0)
         xyz = d_socs[keep] * rng_noisy[keep, None]
         raw = np.round(intensity[keep] * 65535.0).astype(np.uint16)
@@ -468,7 +480,8 @@ class BridgeScene:
         bias = 0.0 if c.range_walk is None else float(
             c.range_walk.bias_m(rng_m, cos_inc, return_strength(rng_m, cos_inc))[()]) * c.walk_factors.get(tid, 1.0)
         observed = None
-        if time_s is not None or c.range_walk is not None or c.range_scale_ppm or c.axis_errors is not None:
+        if time_s is not None or c.range_walk is not None or c.range_scale_ppm or c.axis_errors is not None \
+                or c.range_scale_rate_ppm_h:
             seen = socs if c.drift is None or time_s is None else \
                 c.drift.to_current(socs[None], time_s - c.visit_timing.start_s)[0]
             offset = 0.0
@@ -476,7 +489,7 @@ class BridgeScene:
                 seen = c.axis_errors.reported_directions(seen[None])[0] * rng_m
                 offset = c.axis_errors.range_offset_m
             observed = tuple(float(v) for v in
-                             seen / rng_m * (rng_m - bias + offset) * (1.0 + c.range_scale_ppm * 1e-6))
+                             seen / rng_m * (rng_m - bias + offset) * (1.0 + float(c.scale_ppm_at(time_s)) * 1e-6))
         return TargetTruth(
             id=tid, group=disc.target.group,
             centre_bridge_m=tuple(disc.centre),

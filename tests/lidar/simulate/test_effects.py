@@ -261,6 +261,23 @@ def test_axis_errors_shift_the_angles_as_a_theodolite_s_and_invert():
         AxisErrors(collimation_arcsec=float("nan"))
 
 
+def test_a_scale_changing_during_the_visit_scales_each_point_by_its_own_time():
+    ppm, rate = 10.0, -36.0  # -36 ppm an hour: -0.01 ppm a second
+    timing = VisitTiming(start_s=500.0)
+    a, _, b, tb = scan_pair(EpochConditions(range_scale_ppm=ppm, range_scale_rate_ppm_h=rate, timing=timing),
+                            noise=0.0, start_s=2300.0)
+    assert b.time_s is not None and b.time_s.min() >= 2300.0
+    ra, rb = np.linalg.norm(a.xyz_socs, axis=1), np.linalg.norm(b.xyz_socs, axis=1)
+    expected = 1.0 + (ppm + rate * (b.time_s - 500.0) / 3600.0) * 1e-6  # -8 ppm and less, 1800 s in
+    np.testing.assert_allclose(rb / ra, expected, rtol=0, atol=1e-13)
+    t = tb.target("R2")
+    scale = ppm + rate * (t.time_s - 500.0) / 3600.0
+    np.testing.assert_allclose(np.linalg.norm(t.centre_observed_socs_m), t.range_m * (1 + scale * 1e-6), rtol=1e-14)
+    assert EpochConditions(range_scale_rate_ppm_h=1.0).timed
+    with pytest.raises(InputError):
+        EpochConditions(range_scale_rate_ppm_h=float("nan"))
+
+
 def test_a_scan_with_axis_errors_reports_the_target_where_the_truth_says():
     """The disc's points are found where the beams really went, and reported along the directions read."""
     ax = AxisErrors(collimation_arcsec=40.0, trunnion_arcsec=40.0, vertical_index_arcsec=-60.0, range_offset_m=0.004)

@@ -46,7 +46,8 @@ def test_default_scene_spec_is_written_as_before(tmp_path):
 def test_scene_spec_round_trips_the_model_and_every_effect(tmp_path):
     model = BridgeModel(spans_m=(30.0, 40.0, 30.0), deflection_shape="continuous", deck_width_m=8.0)
     cond = EpochConditions(span_displacements_m=(-0.002, -0.004, -0.001), deck_strain=2.4e-4, fixed_bearing_x_m=30.0,
-                           range_scale_ppm=-18.0, range_walk=LogisticStrengthWalk(0.001, 0.4, 0.1),
+                           range_scale_ppm=-18.0, range_scale_rate_ppm_h=7.5,
+                           range_walk=LogisticStrengthWalk(0.001, 0.4, 0.1),
                            clipped_fraction=0.15, drift=DriftModel(3.0, -2.0, 5.0, 0.5, jump_y_arcsec=12.0,
                                                                    jump_after_s=600.0),
                            timing=VisitTiming(start_s=345_600.0, gap_s=12.0, rate_hz=50_000.0, duration="lines"),
