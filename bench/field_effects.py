@@ -44,10 +44,12 @@ AXES = AxisErrors(collimation_arcsec=20.0, trunnion_arcsec=20.0, vertical_index_
 
 
 def scenario(model: BridgeModel, n: int, seed: int, *, ppm: bool, walk, clip: bool, strain: bool,
-             drift: float, axes: bool = False, knocked: bool = False) -> list:
+             drift: float, axes: bool = False, knocked: bool = False, scale_rate: float = 0.0) -> list:
     """The visits' conditions: each effect on or off (one range-walk form, one instrument for the whole campaign).
 
     ``knocked``: in visits 3, 5 and 7 the set-up turns suddenly by 30 arcsec (a random axis) 15 minutes in.
+    ``scale_rate``: the atmosphere's scale changes during each visit by 0.5 to 1 times this many ppm an hour,
+    up or down.
     """
     rng = np.random.default_rng(seed)
     out = []
@@ -57,6 +59,9 @@ def scenario(model: BridgeModel, n: int, seed: int, *, ppm: bool, walk, clip: bo
                               temperature_c=(-15, 15) if strain else (0, 0), drift_arcsec_per_h=drift)
         out.append(replace(c, range_walk=walk, timing=VisitTiming(start_s=0.0, gap_s=30.0, duration="lines"),
                            axis_errors=AXES if axes else None))
+    if scale_rate:
+        rates = rng.choice([-1.0, 1.0], n) * rng.uniform(0.5, 1.0, n) * scale_rate
+        out = [replace(c, range_scale_rate_ppm_h=float(r)) for c, r in zip(out, rates)]
     if knocked:
         for i in (2, 4, 6):
             turn = rng.normal(0.0, 1.0, 3)
@@ -88,8 +93,10 @@ def main(argv: list[str]) -> int:
                   dict(ppm=False, walk=None, clip=False, strain=False, drift=0.0, axes=True)))
     plans.append(("a knocked set-up: a sudden 30'' turn 15 min into 3 of 8 visits",
                   dict(ppm=False, walk=None, clip=False, strain=False, drift=0.0, knocked=True)))
+    plans.append(("the air warming or cooling during the visit: 7.5-15 ppm/h",
+                  dict(ppm=True, walk=None, clip=False, strain=False, drift=0.0, scale_rate=15.0)))
     if quick:
-        plans = [plans[0], plans[3], plans[-3]]
+        plans = [plans[0], plans[3], plans[-4]]
     rows = {}
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
