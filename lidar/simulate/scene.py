@@ -6,6 +6,7 @@ from types import MappingProxyType
 from typing import Mapping, Optional
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from lidar.angles import AngularWindow, bounding_window, direction_from_angles, spherical_from_xyz
 from common.errors import InputError
@@ -135,7 +136,7 @@ class EpochConditions:
         """Whether points get times (a timing, a drift or a scale that changes during the visit is given)."""
         return self.timing is not None or self.drift is not None or self.range_scale_rate_ppm_h != 0.0
 
-    def scale_ppm_at(self, time_s):
+    def scale_ppm_at(self, time_s: Optional[ArrayLike]) -> float | np.ndarray:
         """The atmosphere's range scale (ppm) at ``time_s`` (seconds on the visit's clock; None: its start)."""
         if time_s is None or not self.range_scale_rate_ppm_h:
             return self.range_scale_ppm
