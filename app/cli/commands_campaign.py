@@ -428,6 +428,7 @@ def cmd_displacements(args) -> int:
 
 
 def cmd_status(args) -> int:
+    from projects.results.corrections import instrument_line
     from projects.results.state import campaign_status
 
     with _open(args.dir, writable=False) as c:
@@ -452,6 +453,8 @@ def cmd_status(args) -> int:
         if level in ("problem", "warning"):
             print(f"{level.upper()} in {e['epoch']}: " +
                   "; ".join(f for f in e["flag_list"] if severity(f) in ("problem", "warning")))
+    if data.get("instrument"):
+        print("instrument (the campaign's field model): " + instrument_line(data["instrument"]))
     print("latest displacement of each measurement target:")
     table(data["targets"], ["reflector", "epoch", "displacement_mm", "sigma_mm", "state", "warning_mm", "alarm_mm",
                             "flags"])

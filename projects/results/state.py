@@ -190,7 +190,11 @@ def epoch_state(c: Campaign, label: str) -> tuple[str, list[str]]:
 
 
 def campaign_status(c: Campaign) -> dict:
-    """Name, span, baseline, epochs (state, staleness, flags), the latest row of every target, and warnings.
+    """Name, span, baseline, epochs, instrument, the latest row of every target, and warnings.
+
+    ``epochs`` carry their state, staleness and flags; ``instrument`` is the campaign's range walk and axis
+    errors as its field model found them (:func:`~projects.results.corrections.instrument_summary`; None
+    before one is fitted).
 
     ``warnings`` are the layout's (targets no station could reach) and the stored results that fail their
     checksum (not shown, recomputed by ``process``); ``unlisted_files`` the files of the
@@ -199,7 +203,7 @@ def campaign_status(c: Campaign) -> dict:
     from projects.processing.stages import baseline_epoch, stale_epochs
     from projects.results.table import displacement_table
 
-    from projects.results.corrections import epoch_corrections
+    from projects.results.corrections import epoch_corrections, instrument_summary
 
     stale = stale_epochs(c)
     states = epoch_states(c)
@@ -222,6 +226,8 @@ def campaign_status(c: Campaign) -> dict:
     for r in displacement_table(c, states=states):
         if r["displacement_mm"] is not None or r["reflector"] not in latest:  # keep the last good value
             latest[r["reflector"]] = r
+    fitted = c.field_model()
     return {"name": c.name, "span_m": c.span_m, "baseline": baseline_epoch(c), "epochs": epochs,
+            "instrument": None if fitted is None else instrument_summary(fitted[0]),
             "targets": list(latest.values()), "warnings": c.layout_warnings() + damaged,
             "unlisted_files": c.unlisted_files()}

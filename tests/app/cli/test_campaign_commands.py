@@ -214,6 +214,12 @@ def test_status_shows_each_epochs_range_scale(processed_copy, capsys):
     assert "scale" in out.splitlines()[1]  # the table's header
     assert "0 (baseline)" in out
     assert len(re.findall(r"[+-]\d+\.\d±\d+\.\d ppm", out)) == 2  # the two later epochs, each with its sigma
+    # the campaign's instrument as the field model found it: its range walk and axis errors
+    line = next(ln for ln in out.splitlines() if ln.startswith("instrument (the campaign's field model): "))
+    assert "range walk: " in line and "axis errors: " in line
     assert main(["status", str(processed_copy), "--json"]) == 0
-    epochs = json.loads(capsys.readouterr().out)["epochs"]
+    data = json.loads(capsys.readouterr().out)
+    epochs = data["epochs"]
     assert all(isinstance(e["scale_ppm"], float) and e["scale_sigma_ppm"] >= 0 for e in epochs)
+    assert set(data["instrument"]) == {"range_walk", "range_walk_determined", "axis_errors", "sigma0"}
+    assert all(set(a) == {"axis", "arcsec", "sigma_arcsec"} for a in data["instrument"]["axis_errors"])

@@ -46,3 +46,20 @@ def test_the_baseline_defines_the_scale():
 def test_a_zero_drift_has_the_larger_sigma():
     e = epoch_corrections(record(drift_arcsec_h=[0.0, 0.0, 0.0]))
     assert e.tilt_arcsec_h == 0.0 and e.tilt_sigma_arcsec_h == 4.0
+
+
+def test_status_words_for_the_instrument_of_a_field_model():
+    import numpy as np
+
+    from lidar.systematic.adjustment import FieldModel
+    from lidar.systematic.axes import AXIS_NAMES, AxisModel
+    from lidar.systematic.range_walk import RangeWalkModel
+    from projects.results.corrections import instrument_line, instrument_summary
+
+    axes = AxisModel((2,), np.array([28.04]), np.array([[56.25]]))
+    s = instrument_summary(FieldModel("b", RangeWalkModel(), {}, 0.876, axes=axes))
+    assert s == {"range_walk": "none", "range_walk_determined": True, "sigma0": 0.88,
+                 "axis_errors": [{"axis": AXIS_NAMES[2], "arcsec": 28.0, "sigma_arcsec": 7.5}]}
+    assert instrument_line(s) == f"range walk: none; axis errors: {AXIS_NAMES[2]} +28.0 ± 7.5″"
+    none = instrument_summary(FieldModel("b", RangeWalkModel(), {}))
+    assert instrument_line(none) == "range walk: none; axis errors: none the data support"
