@@ -86,4 +86,3 @@ def test_the_axis_model_survives_its_json():
     assert m.describe().startswith("vertical index +12.5 ± 2.0″; trunnion axis -3.0")
     with pytest.raises(ValueError):
         AxisModel.from_json({"terms": ["wobble"], "values_arcsec": [1.0], "covariance_arcsec2": [[1.0]]})
-
