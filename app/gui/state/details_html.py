@@ -8,7 +8,7 @@ import numpy as np
 from common.flags import describe
 from projects.store.history import histories
 from projects.processing.stages import baseline_epoch
-from projects.results.corrections import corrections_line
+from projects.results.corrections import corrections_line, instrument_line
 from projects.results.state import epoch_state
 
 
@@ -19,10 +19,12 @@ def _rows(pairs) -> str:
 
 def campaign_html(c, status: dict) -> str:
     n_proc = sum(e["state"] in ("processed", "warning", "problem") for e in status["epochs"])
-    return (f"<h3>{html.escape(c.name)}</h3>" + _rows([
-        ("Folder", str(c.folder)), ("Span", f"{c.span_m:g} m" if c.span_m else "-"), ("Scanner", c.profile.name),
-        ("Epochs", f"{len(status['epochs'])} ({n_proc} processed)"), ("Baseline", status["baseline"] or "-"),
-        ("Reflectors", len(c.reflectors()))]))
+    rows = [("Folder", str(c.folder)), ("Span", f"{c.span_m:g} m" if c.span_m else "-"), ("Scanner", c.profile.name),
+            ("Epochs", f"{len(status['epochs'])} ({n_proc} processed)"), ("Baseline", status["baseline"] or "-"),
+            ("Reflectors", len(c.reflectors()))]
+    if status.get("instrument"):  # what the field model found of the instrument, as `status` says it
+        rows.append(("Instrument", instrument_line(status["instrument"])))
+    return f"<h3>{html.escape(c.name)}</h3>" + _rows(rows)
 
 
 def reflector_html(c, rid: str) -> str:

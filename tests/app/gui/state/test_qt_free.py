@@ -53,6 +53,7 @@ def test_window_from_cells_and_the_details_html_on_a_campaign(processed_copy):
     assert abs(new.window.phi_min_deg - roi.window.phi_min_deg) < 1e-4
     assert new.expected_target_points > 0.5 * plan.min_points
     assert "Test bridge" in html_c and "2026-03-02" in html_e and "M3" in html_r
+    assert "<b>Instrument</b>" in html_c and "range walk: " in html_c and "axis errors: " in html_c
     assert "Corrected for" in html_e and "scale 0 ppm (the baseline defines it)" in html_e
 
 
