@@ -35,10 +35,9 @@ import numpy as np
 from common.errors import InputError
 from lidar.displacement import deck_normal
 from lidar.reference_motion import across_axis
-from lidar.systematic.axes import PRIOR_AXES_ARCSEC, AxisModel, axis_basis
+from lidar.systematic.axes import ARCSEC, PRIOR_AXES_ARCSEC, AxisModel, axis_basis
 from lidar.systematic.range_walk import RangeWalkModel, design
 
-ARCSEC = math.pi / 180.0 / 3600.0
 #: Prior standard deviations: range-walk coefficients (mm), scale (ppm), drift (arcsec per hour).
 PRIOR_BIAS_MM = 2.0
 PRIOR_SCALE_PPM = 300.0
@@ -295,7 +294,6 @@ class _Problem:
         sc = 1.0 + 1e-6 * v.kappa_ppm
         off_w = 0 if v.is_base else 7
         z, dth, dom, dal = self._corrected(v)
-        ax0 = 3 * len(self.ref_ids) + len(self.deck_ids)  # the axis errors' first shared column
         blocks = [("r", j, 3) for j in range(nr)] + [("d", j, 1) for j in range(nd)]
         lw, qa, wt = self.row_weights(v)
         # reference targets: 3 rows each
@@ -314,7 +312,7 @@ class _Problem:
         if nb:
             ash[:, :, ns - nb:] = dth[:nr]
         if self.n_axes:
-            ash[:, :, ax0:ax0 + self.n_axes] = dal[:nr]
+            ash[:, :, self.axis_columns] = dal[:nr]
         jl = [np.einsum("nij,njk->nik", lw, al).reshape(3 * nr, nl)]
         js = [np.einsum("nij,njk->nik", lw, ash).reshape(3 * nr, ns)]
         res = [np.einsum("nij,nj->ni", lw, e).reshape(-1)]
@@ -335,7 +333,7 @@ class _Problem:
             if nb:
                 asd[:, ns - nb:] = np.einsum("i,nip->np", qa, dth[nr:]) / sc
             if self.n_axes:
-                asd[:, ax0:ax0 + self.n_axes] = np.einsum("i,nip->np", qa, dal[nr:]) / sc
+                asd[:, self.axis_columns] = np.einsum("i,nip->np", qa, dal[nr:]) / sc
             jl.append(ald * wt[:, None])
             js.append(asd * wt[:, None])
             res.append(ed * wt)
@@ -353,6 +351,12 @@ class _Problem:
             js.append(np.zeros((3, ns)))
             res.append(v.omega / PRIOR_DRIFT_ARCSEC_H)
         return np.vstack(jl), np.vstack(js), np.concatenate(res), blocks
+
+    @property
+    def axis_columns(self) -> slice:
+        """Where the axis errors sit among the shared unknowns (after the targets', before the range walk's)."""
+        start = 3 * len(self.ref_ids) + len(self.deck_ids)
+        return slice(start, start + self.n_axes)
 
     def row_weights(self, v: _Visit) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """How a visit's rows are whitened, the blocks' down-weighting included.
@@ -387,10 +391,10 @@ class _Problem:
     def apply_shared(self, dx: np.ndarray) -> None:
         nr = 3 * len(self.ref_ids)
         self.x_ref = self.x_ref + dx[:nr].reshape(-1, 3)
-        ax0 = nr + len(self.deck_ids)
-        self.a_deck = self.a_deck + dx[nr:ax0]
-        self.alpha = self.alpha + dx[ax0:ax0 + self.n_axes]
-        self.theta = self.theta + dx[ax0 + self.n_axes:]
+        cols = self.axis_columns
+        self.a_deck = self.a_deck + dx[nr:cols.start]
+        self.alpha = self.alpha + dx[cols]
+        self.theta = self.theta + dx[cols.stop:]
 
     def priors(self) -> tuple[np.ndarray, np.ndarray, float]:
         """The shared unknowns' priors as normal equations: (diagonal (ns,), right-hand side (ns,), chi2).
@@ -398,12 +402,11 @@ class _Problem:
         Weak priors on the range walk's coefficients (mm) and the axis errors (arcsec), centred on zero, so
         that an undetermined combination keeps the prior's sigma instead of a guess.
         """
-        ns, nb = self.n_shared, len(self.basis)
-        ax0 = ns - nb - self.n_axes
+        ns, nb, cols = self.n_shared, len(self.basis), self.axis_columns
         diag, rhs = np.zeros(ns), np.zeros(ns)
-        diag[ax0:ax0 + self.n_axes] = 1.0 / PRIOR_AXES_ARCSEC ** 2
+        diag[cols] = 1.0 / PRIOR_AXES_ARCSEC ** 2
         diag[ns - nb:] = 1.0 / PRIOR_BIAS_MM ** 2
-        rhs[ax0:ax0 + self.n_axes] = -self.alpha / PRIOR_AXES_ARCSEC ** 2
+        rhs[cols] = -self.alpha / PRIOR_AXES_ARCSEC ** 2
         rhs[ns - nb:] = -self.theta / PRIOR_BIAS_MM ** 2
         chi2 = float(np.sum((self.alpha / PRIOR_AXES_ARCSEC) ** 2) + np.sum((self.theta / PRIOR_BIAS_MM) ** 2))
         return diag, rhs, chi2
@@ -572,9 +575,7 @@ def _final_fit(visits: Sequence[VisitSightings], groups: Mapping[str, str], basi
 
 def _supported_axes(p: _Problem, sol: _Solution) -> tuple[int, ...]:
     """The subset of the fitted axis errors BIC prefers, from the full fit's estimates and covariance."""
-    nb = len(p.basis)
-    ax0 = p.n_shared - nb - p.n_axes
-    cov = sol.cov_shared[ax0:ax0 + p.n_axes, ax0:ax0 + p.n_axes]
+    cov = sol.cov_shared[p.axis_columns, p.axis_columns]
     per_term = math.log(max(sol.n_data, 2))
     best, best_cost = p.axes, 0.0
     for size in range(p.n_axes):
@@ -601,8 +602,7 @@ def _model(p: _Problem, sol: _Solution, left_out: list, baseline: str, alternati
         notes.append("the campaign's stations are too few or too alike to determine the range walk: its sigma "
                      "is widened to what a plausible bias would cause")
     rw = RangeWalkModel(p.basis, p.theta * 1e-3, cov_theta, determined, tuple(notes), alternatives)
-    ax0 = p.n_shared - nb - p.n_axes
-    axes = AxisModel(p.axes, p.alpha.copy(), sol.cov_shared[ax0:ax0 + p.n_axes, ax0:ax0 + p.n_axes] * f)
+    axes = AxisModel(p.axes, p.alpha.copy(), sol.cov_shared[p.axis_columns, p.axis_columns] * f)
     out = {}
     dof_ratio = max(1.0 - sol.n_unknowns / max(sol.n_rows, 1), 0.1)
     for k, (v, cl) in enumerate(zip(p.visits, sol.cov_local)):
