@@ -33,6 +33,11 @@ RANGE_WALK_FORMAT_VERSION = 1
 PLAUSIBLE_BIC = 6.0
 
 
+def plausible(weights: ArrayLike) -> np.ndarray:
+    """Which families (BIC weights ``exp(-dBIC / 2)``, 1 for the chosen one) lie within :data:`PLAUSIBLE_BIC`."""
+    return np.asarray(weights, dtype=np.float64) >= np.exp(-0.5 * PLAUSIBLE_BIC) * (1.0 - 1e-9)
+
+
 def family_spread2(departures: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """Variance a quantity carries from the range walk's families: its largest squared departure among the plausible.
 
@@ -57,11 +62,8 @@ def family_spread2(departures: np.ndarray, weights: np.ndarray) -> np.ndarray:
     departure among the families within ``PLAUSIBLE_BIC`` puts none (RMS 0.94 sigma).
     """
     d = np.asarray(departures, dtype=np.float64)
-    w = np.asarray(weights, dtype=np.float64)
-    if w.size == 0:
-        return np.zeros(d.shape[1:])
-    plausible = w >= np.exp(-0.5 * PLAUSIBLE_BIC) * (1.0 - 1e-9)
-    return np.max(d[plausible] ** 2, axis=0) if plausible.any() else np.zeros(d.shape[1:])
+    keep = plausible(weights)
+    return np.max(d[keep] ** 2, axis=0) if keep.any() else np.zeros(d.shape[1:])
 
 
 def strength(range_m: ArrayLike, cos_incidence: ArrayLike) -> np.ndarray:

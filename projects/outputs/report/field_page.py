@@ -6,13 +6,12 @@ corrected for and how much of their σ each correction costs.
 """
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
 
 from lidar.systematic.adjustment import ALTERNATIVE_BIC
-from lidar.systematic.range_walk import PLAUSIBLE_BIC, describe_basis
+from lidar.systematic.range_walk import PLAUSIBLE_BIC, describe_basis, plausible
 from projects.outputs.report.content import ReportContent
 from projects.outputs.report.flowables import esc, figure_flowable, num, table
 from projects.results.corrections import epoch_corrections
@@ -39,7 +38,7 @@ def _range_walk_text(content: ReportContent) -> str:
         text += "; determined by the campaign's data" if rw.determined else "; not determined: its prior is in σ"
     if len(rw.alternatives) > 1:
         ranked = sorted(rw.alternatives, key=lambda a: -a[2])
-        close = [a for a in ranked if a[2] >= math.exp(-0.5 * PLAUSIBLE_BIC) * (1.0 - 1e-9)]
+        close = [a for a, ok in zip(ranked, plausible([a[2] for a in ranked])) if ok]
         text += (f"; {len(ranked)} laws came within {ALTERNATIVE_BIC:g} BIC units of it, {len(close)} within "
                  f"{PLAUSIBLE_BIC:g} (as credible): the largest departure among those is in σ "
                  f"({', '.join(describe_basis(b) for b, _, _ in close[:3])}{', …' if len(close) > 3 else ''})")
