@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Iterable
 
 import numpy as np
 
@@ -58,6 +59,11 @@ def axis_basis(xyz_socs: np.ndarray) -> np.ndarray:
     return np.stack([e_theta * scale, e_phi * scale, e_phi * (scale * cos_t[:, None])], axis=2)
 
 
+def errors_text(errors: Iterable[tuple[str, float, float]]) -> str:
+    """``vertical index +28.7 ± 7.8″; trunnion axis -3.0 ± 1.1″`` of (name, arcsec, sigma); empty without any."""
+    return "; ".join(f"{name} {value:+.1f} ± {sigma:.1f}″" for name, value, sigma in errors)
+
+
 @dataclass(frozen=True, eq=False)
 class AxisModel:
     """A campaign's fitted axis errors (arcsec) and their covariance (arcsec^2).
@@ -79,11 +85,14 @@ class AxisModel:
     def fitted(self) -> bool:
         return bool(self.terms)
 
-    def describe(self) -> str:
-        """``vertical index +28.7 +/- 7.8''``, one clause per fitted error; ``none`` without."""
+    def errors(self) -> list[tuple[str, float, float]]:
+        """(name, arcsec, sigma in arcsec) of every fitted error."""
         sig = np.sqrt(np.maximum(np.diag(self.covariance_arcsec2), 0.0))
-        return "; ".join(f"{AXIS_NAMES[k]} {v:+.1f} ± {s:.1f}″" for k, v, s in
-                         zip(self.terms, self.values_arcsec, sig)) or "none"
+        return [(AXIS_NAMES[k], float(v), float(s)) for k, v, s in zip(self.terms, self.values_arcsec, sig)]
+
+    def describe(self) -> str:
+        """``vertical index +28.7 ± 7.8″``, one clause per fitted error (:func:`errors_text`); ``none`` without."""
+        return errors_text(self.errors()) or "none"
 
     def to_json(self) -> dict:
         return {"format_version": AXES_FORMAT_VERSION, "terms": [AXIS_NAMES[k] for k in self.terms],

@@ -89,20 +89,20 @@ def instrument_summary(model) -> dict:
     words, ``none`` without one), ``range_walk_determined``, ``axis_errors`` (one ``{"axis", "arcsec",
     "sigma_arcsec"}`` a fitted error, none where the data support none) and ``sigma0``.
     """
-    from lidar.systematic.axes import AXIS_NAMES
     from lidar.systematic.range_walk import describe_basis
 
-    rw, axes = model.range_walk, model.axes
-    sig = [math.sqrt(max(float(axes.covariance_arcsec2[k, k]), 0.0)) for k in range(len(axes.terms))]
+    rw = model.range_walk
     return {"range_walk": describe_basis(rw.basis), "range_walk_determined": bool(rw.determined),
-            "axis_errors": [{"axis": AXIS_NAMES[t], "arcsec": round(float(v), 1) + 0.0, "sigma_arcsec": round(s, 1)}
-                            for t, v, s in zip(axes.terms, axes.values_arcsec, sig)],
+            "axis_errors": [{"axis": name, "arcsec": round(v, 1) + 0.0, "sigma_arcsec": round(s, 1)}
+                            for name, v, s in model.axes.errors()],
             "sigma0": round(float(model.sigma0), 2)}
 
 
 def instrument_line(summary: Mapping) -> str:
     """``range walk: none; axis errors: vertical index +28.0 ± 7.5″`` from :func:`instrument_summary`."""
-    axes = "; ".join(f"{a['axis']} {a['arcsec']:+.1f} ± {a['sigma_arcsec']:.1f}″" for a in summary["axis_errors"])
+    from lidar.systematic.axes import errors_text
+
+    axes = errors_text((a["axis"], a["arcsec"], a["sigma_arcsec"]) for a in summary["axis_errors"])
     walk = summary["range_walk"] + ("" if summary["range_walk"] == "none" or summary["range_walk_determined"]
                                     else " (not determined: its prior is in σ)")
     return f"range walk: {walk}; axis errors: {axes or 'none the data support'}"
