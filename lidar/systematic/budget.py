@@ -120,15 +120,14 @@ def _terms(row: np.ndarray, inputs, jacs: Mapping[str, Mapping[str, CorrectionJa
         if cj is None:
             continue
         j_theta += jb @ cj.d_theta
-        if j_axes.size:
-            j_axes += jb @ cj.d_axes
+        j_axes += jb @ cj.d_axes
         if side == "epoch":
             j_scale += float(jb @ cj.d_scale)
         j_drift[side] += jb @ cj.d_drift
         if weights.size:
             alt += devs[side][k] @ jb
     return {"theta": float(j_theta @ cov_theta @ j_theta) if p else 0.0,
-            "axes": float(j_axes @ cov_axes @ j_axes) if j_axes.size else 0.0,
+            "axes": float(j_axes @ cov_axes @ j_axes),
             "scale": j_scale ** 2 * (v_ep.scale_sigma_ppm ** 2),
             "drift": float(j_drift["baseline"] @ v_base.drift_cov @ j_drift["baseline"]
                            + j_drift["epoch"] @ v_ep.drift_cov @ j_drift["epoch"]),

@@ -474,8 +474,7 @@ def _terms(row: np.ndarray, inputs, sides: Mapping[str, CorrectedVisit], model: 
                 own += v
             cj = c.jacobians[key]
             j_theta += hb @ cj.d_theta
-            if j_axes.size:
-                j_axes += hb @ cj.d_axes
+            j_axes += hb @ cj.d_axes
             label = c.visits[key[0]]
             scale[label] = scale.get(label, 0.0) + float(hb @ cj.d_scale)
             drift[label] = drift.get(label, np.zeros(3)) + hb @ cj.d_drift
@@ -484,7 +483,7 @@ def _terms(row: np.ndarray, inputs, sides: Mapping[str, CorrectedVisit], model: 
     cov_theta = model.range_walk.covariance_m2
     return {"own": own, "total": total,
             "theta": float(j_theta @ cov_theta @ j_theta) if p else 0.0,
-            "axes": float(j_axes @ cov_axes @ j_axes) if j_axes.size else 0.0,
+            "axes": float(j_axes @ cov_axes @ j_axes),
             "scale": sum(js ** 2 * model.visit(lab).scale_sigma_ppm ** 2 for lab, js in scale.items()),
             "drift": sum(float(jd @ model.visit(lab).drift_cov @ jd) for lab, jd in drift.items()),
             "alternatives": float(family_spread2(alt, weights))}
