@@ -37,6 +37,18 @@ from projects.store.campaign import Campaign
 START = dt.datetime(2026, 1, 5, 9, 0, tzinfo=dt.timezone.utc)
 
 
+def _within(errors: list, sigmas: list, k: float) -> float:
+    """Share of errors within ``k`` sigma (NaN without any)."""
+    e, s = np.abs(errors), np.asarray(sigmas)
+    return float(np.mean(e <= k * s)) if e.size else float("nan")
+
+
+def _silent(errors: list, sigmas: list, warned: list) -> float:
+    """Share of errors beyond 3 sigma whose row carries no warning or problem flag (NaN without any)."""
+    e, s, w = np.abs(errors), np.asarray(sigmas), np.asarray(warned, dtype=bool)
+    return float(np.mean((e > 3 * s) & ~w)) if e.size else float("nan")
+
+
 @dataclass
 class StudyScore:
     """Errors of every reported value against the truth (millimetres, ppm)."""
@@ -63,26 +75,21 @@ class StudyScore:
 
     @property
     def within_2sigma(self) -> float:
-        e, s = np.abs(self.errors_mm), np.asarray(self.sigmas_mm)
-        return float(np.mean(e <= 2 * s)) if e.size else float("nan")
+        return _within(self.errors_mm, self.sigmas_mm, 2.0)
 
     @property
     def silent_beyond_3sigma(self) -> float:
         """Share of displacements off by more than 3 sigma with no warning or problem flag on their own row."""
-        e, s, w = np.abs(self.errors_mm), np.asarray(self.sigmas_mm), np.asarray(self.warned, dtype=bool)
-        return float(np.mean((e > 3 * s) & ~w)) if e.size else float("nan")
+        return _silent(self.errors_mm, self.sigmas_mm, self.warned)
 
     @property
     def along_silent_beyond_3sigma(self) -> float:
         """Share of along-span movements off by more than 3 sigma with no warning or problem flag on their row."""
-        e, s = np.abs(self.along_errors_mm), np.asarray(self.along_sigmas_mm)
-        w = np.asarray(self.along_warned, dtype=bool)
-        return float(np.mean((e > 3 * s) & ~w)) if e.size else float("nan")
+        return _silent(self.along_errors_mm, self.along_sigmas_mm, self.along_warned)
 
     @property
     def along_within_2sigma(self) -> float:
-        e, s = np.abs(self.along_errors_mm), np.asarray(self.along_sigmas_mm)
-        return float(np.mean(e <= 2 * s)) if e.size else float("nan")
+        return _within(self.along_errors_mm, self.along_sigmas_mm, 2.0)
 
     @property
     def along_bad(self) -> float:
