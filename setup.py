@@ -15,6 +15,7 @@ DIGEST = hashlib.sha256((Path(__file__).resolve().parent / SOURCE).read_bytes())
 setup(ext_modules=[Extension(
     "lidar.native._coarse_map", sources=[SOURCE], optional=True,
     define_macros=[("BS_SOURCE_DIGEST", f'"{DIGEST[:16]}"')],
-    # no fused multiply-adds: numpy rounds a product and a sum apart, and the library must give its results
-    extra_compile_args=["-O3", "-ffp-contract=off", "-fno-math-errno"],
+    # no fused multiply-adds: numpy rounds a product and a sum apart, and the library must give its results;
+    # no trapping math: the loops' comparisons become vector selects (the same values, no floating-point traps)
+    extra_compile_args=["-O3", "-ffp-contract=off", "-fno-math-errno", "-fno-trapping-math"],
 )])

@@ -27,6 +27,8 @@ from common.progress import ProgressCallback, report
 
 #: Points per chunk: small enough that a chunk's float32 temporaries stay in the caches.
 CHUNK = 262_144
+#: Chunks binned at once (on two threads) before their sums are added to the map, in file order.
+BATCH = 4
 #: The automatic cell size keeps maps below this many cells: a few cells across a target are enough
 #: to find it, and detection time and memory grow with the cell count.
 MAX_AUTO_CELLS = 4_000_000
@@ -96,9 +98,47 @@ def _angles32(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def occupied_area_deg2(theta_deg: np.ndarray, phi_deg: np.ndarray) -> float:
     """Area (square degrees of the angle grid) of the directions a scan covers, in 0.5-degree cells."""
-    rows = np.clip((theta_deg / 0.5).astype(np.int32), 0, 359)
-    cols = np.clip((phi_deg / 0.5).astype(np.int32), 0, 719)
-    return float(np.count_nonzero(np.bincount(rows * 720 + cols, minlength=360 * 720))) * 0.25
+    return _Survey.of_angles(theta_deg, phi_deg).area_deg2
+
+
+@dataclass
+class _Survey:
+    """What a sample of a scan's directions tells the map before binning.
+
+    A 0.1-degree histogram of the azimuth (where the coverage starts and how wide it is), which cells of a
+    0.5-degree grid of the sphere hold a point (the occupied area, hence the step) and the range of the
+    zenith angle (the map's rows). Surveys of parts of a scan add up to the survey of the whole.
+    """
+
+    azimuth_hist: np.ndarray  # (3600,) int64
+    occupied: np.ndarray  # (360 * 720,) uint8, 0.5-degree cells row by row (zenith rows, azimuth columns)
+    theta_span: np.ndarray  # (2,) float32: smallest and largest zenith angle (inf, -inf when empty)
+
+    @classmethod
+    def empty(cls) -> "_Survey":
+        return cls(np.zeros(3600, np.int64), np.zeros(360 * 720, np.uint8), np.array([np.inf, -np.inf], np.float32))
+
+    @classmethod
+    def of_angles(cls, theta_deg: np.ndarray, phi_deg: np.ndarray) -> "_Survey":
+        """The survey of float32 angles in degrees (phi in [0, 360])."""
+        theta_deg, phi_deg = np.asarray(theta_deg, np.float32), np.asarray(phi_deg, np.float32)
+        hist = np.bincount(np.clip((phi_deg * 10).astype(np.int32), 0, 3599), minlength=3600)
+        rows = np.clip((theta_deg / 0.5).astype(np.int32), 0, 359)
+        cols = np.clip((phi_deg / 0.5).astype(np.int32), 0, 719)
+        occupied = np.zeros(360 * 720, np.uint8)
+        occupied[rows * 720 + cols] = 1
+        seen = theta_deg[np.isfinite(theta_deg)]  # a NaN point (allowed in memory) has no zenith angle
+        span = np.array([seen.min(), seen.max()] if seen.size else [np.inf, -np.inf], np.float32)
+        return cls(hist.astype(np.int64), occupied, span)
+
+    def add(self, other: "_Survey") -> "_Survey":
+        lo, hi = min(self.theta_span[0], other.theta_span[0]), max(self.theta_span[1], other.theta_span[1])
+        return _Survey(self.azimuth_hist + other.azimuth_hist, self.occupied | other.occupied,
+                       np.array([lo, hi], np.float32))
+
+    @property
+    def area_deg2(self) -> float:
+        return float(np.count_nonzero(self.occupied)) * 0.25
 
 
 def estimate_step_deg(theta_deg: np.ndarray, phi_deg: np.ndarray, *, n_total: Optional[int] = None) -> float:
@@ -122,7 +162,7 @@ class PointSource(Protocol):
     n: int
     limits: Optional[tuple[float, float]]
 
-    def strided(self, stride: int) -> tuple[np.ndarray, np.ndarray]: ...
+    def survey(self, stride: int) -> _Survey: ...
 
     def chunk(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]: ...
 
@@ -134,9 +174,9 @@ class _ArrayPoints:
         self.xyz, self.intensity, self.n = xyz, intensity, int(xyz.shape[0])
         self.limits: Optional[tuple[float, float]] = (0.0, 1.0)
 
-    def strided(self, stride: int) -> tuple[np.ndarray, np.ndarray]:
+    def survey(self, stride: int) -> _Survey:
         t, p, _ = _angles32(self.xyz[::stride])
-        return t, p
+        return _Survey.of_angles(t, p)
 
     def chunk(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         t, p, r = _angles32(self.xyz[start:stop])
@@ -188,17 +228,17 @@ def binned_map(points: PointSource, *, step_deg: Optional[float] = None,
     """The reflectance map of a point source (see :func:`reflectance_map`, :func:`reflectance_map_from_file`).
 
     ``points`` has ``n``, ``limits`` (the raw intensity range mapped onto [0, 1]; None: found while binning),
-    ``strided(stride) -> (theta, phi)`` and ``chunk(start, stop) -> (theta, phi, range, intensity)`` in float32
-    degrees (phi in [0, 360)).
+    ``survey(stride)`` (the :class:`_Survey` of every ``stride``-th point) and
+    ``chunk(start, stop) -> (theta, phi, range, intensity)`` in float32 degrees (phi in [0, 360)).
     """
     _check_step(step_deg)
     n = points.n
     stride = max(1, n // 2_000_000)
-    t_s, p_s = points.strided(stride)
-    hist = np.bincount(np.clip((p_s * 10).astype(np.int32), 0, 3599), minlength=3600)
+    survey = points.survey(stride)
+    hist = survey.azimuth_hist
     report(progress, 0.1, "angles")
     if step_deg is None:
-        area = occupied_area_deg2(t_s, p_s)
+        area = survey.area_deg2
         step_deg = 1.2 * _rounded_step(area, n)
         floor = float(np.sqrt(area / MAX_AUTO_CELLS))
         if floor > step_deg:
@@ -207,24 +247,25 @@ def binned_map(points: PointSource, *, step_deg: Optional[float] = None,
     inv = np.float32(1.0 / step_deg)
     # rows are absolute (floor(theta / step)); the survey's range plus a margin holds every point
     margin = int(np.ceil(2.0 / step_deg)) + 2
-    row_lo = max(0, int(np.floor(float(t_s.min()) / step_deg)) - margin)
-    row_hi = int(np.floor(float(t_s.max()) / step_deg)) + margin
+    row_lo = max(0, int(np.floor(float(survey.theta_span[0]) / step_deg)) - margin)
+    row_hi = int(np.floor(float(survey.theta_span[1]) / step_deg)) + margin
     height = row_hi - row_lo + 1
     width = int(np.ceil(360.0 / step_deg)) if full else \
         min(int(np.ceil(_azimuth_span(hist, phi0) / step_deg)) + 1 + margin, int(np.ceil(360.0 / step_deg)))
     if height * width > 80_000_000:
         raise InputError(f"reflectance map of {height}x{width} cells is too large; use a coarser step than "
                          f"{step_deg:.4f} deg")
-    del t_s, p_s
     acc = _Accumulator(height * width)
     starts = list(range(0, n, CHUNK))
     grid = _Grid(phi0=float(phi0), inv=inv, row_lo=row_lo, height=height, width=width)
     compiled = getattr(points, "binned", None)
+    slots = [_Scratch() for _ in range(BATCH)]  # chunk k of a batch is binned in slots[k]
 
-    def bin_chunk(start: int) -> Optional["_Partial"]:
+    def bin_chunk(job: tuple[int, "_Scratch"]) -> Optional["_Partial"]:
+        start, scratch = job
         stop = min(start + CHUNK, n)
         if compiled is not None:
-            part = compiled(start, stop, grid)
+            part = compiled(start, stop, grid, scratch)
             if part is not NotImplemented:
                 return part
         t, p, r, inten = points.chunk(start, stop)
@@ -232,11 +273,12 @@ def binned_map(points: PointSource, *, step_deg: Optional[float] = None,
 
     # the chunks' sums are added in file order, whichever thread finishes first: float32 sums in another
     # order round differently, and the map (and every window planned from it) would depend on the timing;
-    # a few chunks at a time keep the memory bounded however fast the reads
+    # a few chunks at a time keep the memory bounded however fast the reads (and a batch's slots are free again
+    # once its chunks are merged)
     with ThreadPoolExecutor(max_workers=2) as pool:
-        for k in range(0, len(starts), 4):
-            batch = starts[k:k + 4]
-            for part in pool.map(bin_chunk, batch):
+        for k in range(0, len(starts), BATCH):
+            batch = starts[k:k + BATCH]
+            for part in pool.map(bin_chunk, zip(batch, slots)):
                 acc.merge(part)
             report(progress, 0.1 + 0.9 * min(batch[-1] + CHUNK, n) / n, "binning")
     return acc.finish(points.limits, height, width, row_lo, phi0, float(step_deg), full, n)
@@ -304,17 +346,44 @@ class _Partial:
 
     @classmethod
     def of_records(cls, lib, records: np.ndarray, n: int, record_length: int, scales: np.ndarray,
-                   offsets: np.ndarray, grid: _Grid) -> "_Partial":
-        """The partial of ``n`` LAS records (raw bytes) by the compiled loops: the numpy path's sums to the bit."""
-        cell, r, inten = np.empty(n, np.int64), np.empty(n, np.float32), np.empty(n, np.float32)
+                   offsets: np.ndarray, grid: _Grid, scratch: "_Scratch") -> "_Partial":
+        """The partial of ``n`` LAS records (raw bytes) by the compiled loops: the numpy path's sums to the bit.
+
+        Its arrays are ``scratch``'s, valid until the scratch bins another chunk.
+        """
+        cell, r, inten = scratch.take("cell", n, np.int64), scratch.take("r", n, np.float32), \
+            scratch.take("i", n, np.float32)
         cell_span, inten_span = np.empty(2, np.int64), np.empty(2, np.float32)
         lib.bs_record_cells(records, n, record_length, scales, offsets, ATAN_DEG32, grid.phi0, grid.inv,
                             grid.row_lo, grid.height, grid.width, cell, r, inten, cell_span, inten_span)
         lo, span = int(cell_span[0]), int(cell_span[1] - cell_span[0]) + 1
-        count, sum_i, sum_r = np.zeros(span, np.int64), np.zeros(span, np.float64), np.zeros(span, np.float64)
-        max_i = np.full(span, -np.inf, np.float32)
+        count, sum_i, sum_r = (scratch.take(name, span, dtype, fill=0) for name, dtype in
+                               (("count", np.int64), ("sum_i", np.float64), ("sum_r", np.float64)))
+        max_i = scratch.take("max_i", span, np.float32, fill=-np.inf)
         lib.bs_cell_sums(cell, r, inten, n, lo, count, sum_i, sum_r, max_i)
         return cls(lo, count, sum_i, sum_r, max_i, float(inten_span[0]), float(inten_span[1]))
+
+
+class _Scratch:
+    """Arrays a chunk is binned in, kept for the next chunk.
+
+    Fresh memory costs a page fault per 4 KiB page the first time it is written, and memory handed back costs
+    the other threads' address translations: allocated anew for each chunk, a 19 M-point scan's chunks faulted
+    in over 200 MB.
+    """
+
+    def __init__(self) -> None:
+        self._arrays: dict[str, np.ndarray] = {}
+
+    def take(self, name: str, n: int, dtype, *, fill: Optional[float] = None) -> np.ndarray:
+        """A 1-D array of ``n`` elements (filled with ``fill`` if given), the same memory as the last one of that name."""
+        a = self._arrays.get(name)
+        if a is None or a.size < n or a.dtype != np.dtype(dtype):
+            a = self._arrays[name] = np.empty(max(n, 1), dtype)
+        view = a[:n]
+        if fill is not None:
+            view.fill(fill)
+        return view
 
 
 class _Accumulator:
@@ -511,40 +580,45 @@ class _LasPoints:
             out.append(v.astype(np.float32))
         return out[0], out[1], out[2]
 
-    def strided(self, stride: int) -> tuple[np.ndarray, np.ndarray]:
-        """Every ``stride``-th point's angles, a window of about 8 MiB at a time on two threads."""
+    def survey(self, stride: int) -> _Survey:
+        """The survey of every ``stride``-th point, a window of about 8 MiB at a time on two threads."""
         window = max(1, (2**23 // self.dtype.itemsize) // stride) * stride
         lib, size = coarse_map_library(), self.dtype.itemsize
 
-        def sample(start: int):
+        def sample(start: int) -> _Survey:
             stop = min(start + window, self.n)
             raw = self._records(start, stop)
             if lib is None:
-                return np.ascontiguousarray(raw.view(self.dtype)["xyz"][::stride])
-            m = -(-(stop - start) // stride)
-            t, p = np.empty(m, np.float32), np.empty(m, np.float32)
-            lib.bs_record_angles(raw, m, size, stride, self.scales, self.offsets, ATAN_DEG32, t, p)
-            return t, p
+                xyz = np.ascontiguousarray(raw.view(self.dtype)["xyz"][::stride])
+                t, p, _ = spherical32(*self._xyz32(xyz))
+                return _Survey.of_angles(t, p)
+            part = _Survey.empty()
+            lib.bs_record_survey(raw, -(-(stop - start) // stride), size, stride, self.scales, self.offsets,
+                                 ATAN_DEG32, part.azimuth_hist, part.occupied, part.theta_span)
+            return part
 
+        total = _Survey.empty()
         with ThreadPoolExecutor(max_workers=2) as pool:
-            parts = list(pool.map(sample, range(0, self.n, window)))
-        if lib is not None:
-            return np.concatenate([t for t, _ in parts]), np.concatenate([p for _, p in parts])
-        t, p, _ = spherical32(*self._xyz32(np.concatenate(parts)))
-        return t, p
+            for part in pool.map(sample, range(0, self.n, window)):
+                total = total.add(part)
+        return total
 
     def chunk(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         rec = self._records(start, stop).view(self.dtype)
         t, p, r = spherical32(*self._xyz32(rec["xyz"]))
         return t, p, r, rec["intensity"].astype(np.float32)
 
-    def binned(self, start: int, stop: int, grid: _Grid):
-        """Records ``start`` to ``stop`` binned on ``grid`` by the compiled loops (NotImplemented without them)."""
+    def binned(self, start: int, stop: int, grid: _Grid, scratch: _Scratch):
+        """Records ``start`` to ``stop`` binned on ``grid`` in ``scratch`` by the compiled loops.
+
+        NotImplemented where the library is not built.
+        """
         lib = coarse_map_library()
         if lib is None:
             return NotImplemented
         raw = self._records(start, stop)
-        return _Partial.of_records(lib, raw, stop - start, self.dtype.itemsize, self.scales, self.offsets, grid)
+        return _Partial.of_records(lib, raw, stop - start, self.dtype.itemsize, self.scales, self.offsets, grid,
+                                   scratch)
 
 
 def reflectance_map_from_file(path: str | os.PathLike, *, step_deg: Optional[float] = None,

@@ -59,8 +59,8 @@ def load_coarse_map(folder: Path) -> Optional[ctypes.CDLL]:
         return None  # stale: its functions may not be the ones declared below
     i64, f32, i32 = ctypes.c_int64, ctypes.c_float, ctypes.c_int32
     u8, d, f, q = _ptr(np.uint8), _ptr(np.float64), _ptr(np.float32), _ptr(np.int64)
-    lib.bs_record_angles.argtypes = [u8, i64, i64, i64, d, d, f, f, f]
-    lib.bs_record_angles.restype = None
+    lib.bs_record_survey.argtypes = [u8, i64, i64, i64, d, d, f, q, u8, f]
+    lib.bs_record_survey.restype = None
     lib.bs_record_cells.argtypes = [u8, i64, i64, d, d, f, f32, f32, i32, i32, i32, q, f, f, q, f]
     lib.bs_record_cells.restype = None
     lib.bs_cell_sums.argtypes = [q, f, f, i64, i64, q, d, d, f]

@@ -1,10 +1,11 @@
 /*
- * The coarse reflectance map's inner loops, compiled: angles and cells of LAS point records in one pass,
- * and a chunk's per-cell sums.
+ * The coarse reflectance map's inner loops, compiled: the survey of LAS point records (what sets the map's step,
+ * azimuth origin and rows), their angles and cells in one pass, and a chunk's per-cell sums.
  *
  * Every operation repeats, in the same order and precision, what lidar.reflectance_map and
  * lidar.angles.spherical32 do with numpy, so the map is the same to the bit with or without this library
- * (tested). Build with -ffp-contract=off: a fused multiply-add rounds once where numpy rounds twice.
+ * (tested). Build with -ffp-contract=off: a fused multiply-add rounds once where numpy rounds twice; and with
+ * -fno-trapping-math, without which the compiler keeps the comparisons as branches and the cell loop scalar.
  * Little-endian hosts only (LAS is little-endian; the loader refuses others).
  */
 #include <math.h>
@@ -58,21 +59,20 @@ static inline void spherical(float x, float y, float z, const float *c, float *t
     *range = sqrtf(rr);
 }
 
-/* A record's coordinates in float32: scaled in double and rounded once, as the LAS reader scales them. */
-static inline void record_xyz(const uint8_t *rec, const double *scale, const double *offset, float *xyz)
+/* Coordinates in float32 of integers: scaled in double and rounded once, as the LAS reader scales them. */
+static inline void scale_coordinates(int64_t n, const int32_t *v, double scale, double offset, float *out)
 {
-    int32_t v[3];
-    memcpy(v, rec, sizeof v);
-    for (int k = 0; k < 3; ++k) {
-        double d = (double)v[k] * scale[k];
-        d += offset[k];
-        xyz[k] = (float)d;
+    for (int64_t i = 0; i < n; ++i) {
+        double d = (double)v[i] * scale;
+        d += offset;
+        out[i] = (float)d;
     }
 }
 
 /* Points are handled in blocks: the records' fields are copied out one by one, then the angles of the block are
  * computed in loops the compiler turns into vector instructions. */
 #define BLOCK 256
+#define PREFETCH_RECORDS 256
 
 /* An AVX2 copy of the vector loops beside the baseline one, picked when the program loads (same results: the
  * same operations, eight lanes instead of four, and no fused multiply-add either way). */
@@ -82,17 +82,25 @@ static inline void record_xyz(const uint8_t *rec, const double *scale, const dou
 #define TARGETS
 #endif
 
-/* Coordinates of records 0, step, 2 step, ... (n <= BLOCK of them). */
+/* Coordinates of records 0, step, 2 step, ... (n <= BLOCK of them): the integers copied out one record at a
+ * time, then scaled in vector loops. */
 static inline void block_xyz(const uint8_t *records, int64_t n, int64_t stride, const double *scale,
                              const double *offset, float *x, float *y, float *z)
 {
+    int32_t xi[BLOCK], yi[BLOCK], zi[BLOCK];
     for (int64_t i = 0; i < n; ++i) {
-        float xyz[3];
-        record_xyz(records + i * stride, scale, offset, xyz);
-        x[i] = xyz[0];
-        y[i] = xyz[1];
-        z[i] = xyz[2];
+        int32_t v[3];
+        /* the hardware's prefetcher stops at page boundaries; a hint a few pages ahead keeps the loads streaming
+         * (a hint past the end of the mapping is dropped, never a fault) */
+        __builtin_prefetch(records + (i + PREFETCH_RECORDS) * stride);
+        memcpy(v, records + i * stride, sizeof v);
+        xi[i] = v[0];
+        yi[i] = v[1];
+        zi[i] = v[2];
     }
+    scale_coordinates(n, xi, scale[0], offset[0], x);
+    scale_coordinates(n, yi, scale[1], offset[1], y);
+    scale_coordinates(n, zi, scale[2], offset[2], z);
 }
 
 static inline void block_spherical(int64_t n, const float *x, const float *y, const float *z, const float *coef,
@@ -102,15 +110,54 @@ static inline void block_spherical(int64_t n, const float *x, const float *y, co
         spherical(x[i], y[i], z[i], coef, theta + i, phi + i, range + i);
 }
 
-/* Zenith angle and azimuth of records 0, step, 2 step, ... (n of them) of record_length bytes each. */
-TARGETS void bs_record_angles(const uint8_t *records, int64_t n, int64_t record_length, int64_t step,
-                      const double *scale, const double *offset, const float *coef, float *theta, float *phi)
+/* The survey of records 0, step, 2 step, ... (n of them) of record_length bytes each, added to the arrays, as
+ * lidar.reflectance_map._Survey.of_angles makes it: the azimuth's 0.1-degree histogram (3600 bins), the
+ * 0.5-degree cells of the sphere that hold a point (360 rows of 720) and the zenith angle's range (theta_span[0..1],
+ * inf and -inf to start). */
+TARGETS void bs_record_survey(const uint8_t *records, int64_t n, int64_t record_length, int64_t step,
+                              const double *scale, const double *offset, const float *coef, int64_t *azimuth_hist,
+                              uint8_t *occupied, float *theta_span)
 {
-    float x[BLOCK], y[BLOCK], z[BLOCK], r[BLOCK];
+    float x[BLOCK], y[BLOCK], z[BLOCK], r[BLOCK], t[BLOCK], p[BLOCK];
+    float lo = theta_span[0], hi = theta_span[1];
     for (int64_t b = 0; b < n; b += BLOCK) {
         int64_t m = n - b < BLOCK ? n - b : BLOCK;
         block_xyz(records + b * step * record_length, m, step * record_length, scale, offset, x, y, z);
-        block_spherical(m, x, y, z, coef, theta + b, phi + b, r);
+        block_spherical(m, x, y, z, coef, t, p, r);
+        for (int64_t i = 0; i < m; ++i) {
+            int32_t bin = (int32_t)(p[i] * 10.0f);
+            int32_t row = (int32_t)(t[i] / 0.5f);
+            int32_t col = (int32_t)(p[i] / 0.5f);
+            bin = bin < 0 ? 0 : (bin > 3599 ? 3599 : bin);
+            row = row < 0 ? 0 : (row > 359 ? 359 : row);
+            col = col < 0 ? 0 : (col > 719 ? 719 : col);
+            azimuth_hist[bin] += 1;
+            occupied[row * 720 + col] = 1;
+            lo = t[i] < lo ? t[i] : lo;
+            hi = t[i] > hi ? t[i] : hi;
+        }
+    }
+    theta_span[0] = lo;
+    theta_span[1] = hi;
+}
+
+/* Cells (column-major: col * height + row) of n angles on a grid whose rows start at row_lo (absolute rows of
+ * step 1 / inv_step) and whose columns start at azimuth phi0, as lidar.reflectance_map._Grid.cells; the cell
+ * indices fit in int32 (a map has at most 80 M cells). */
+static inline void block_cells(int64_t n, const float *t, const float *p, float phi0, float inv_step, int32_t row_lo,
+                               int32_t height, int32_t width, int32_t *cell)
+{
+    for (int64_t i = 0; i < n; ++i) {
+        float q = p[i] - phi0;
+        q += q < 0.0f ? 360.0f : 0.0f; /* numpy adds 360 * (q < 0): the same sums */
+        q -= q >= 360.0f ? 360.0f : 0.0f;
+        int32_t row = (int32_t)(t[i] * inv_step) - row_lo;
+        int32_t col = (int32_t)(q * inv_step);
+        row = row > 0 ? row : 0;
+        row = row < height - 1 ? row : height - 1;
+        col = col > 0 ? col : 0;
+        col = col < width - 1 ? col : width - 1;
+        cell[i] = col * height + row;
     }
 }
 
@@ -122,42 +169,32 @@ TARGETS void bs_record_cells(const uint8_t *records, int64_t n, int64_t record_l
                      int32_t height, int32_t width, int64_t *cell, float *range, float *intensity,
                      int64_t *cell_span, float *intensity_span)
 {
-    int64_t lo = INT64_MAX, hi = INT64_MIN;
-    float ilo = INFINITY, ihi = -INFINITY;
+    int32_t lo = INT32_MAX, hi = INT32_MIN;
+    uint16_t ilo = UINT16_MAX, ihi = 0;
     float x[BLOCK], y[BLOCK], z[BLOCK], t[BLOCK], p[BLOCK];
+    int32_t c[BLOCK];
+    uint16_t raw[BLOCK];
     for (int64_t b = 0; b < n; b += BLOCK) {
         int64_t m = n - b < BLOCK ? n - b : BLOCK;
         const uint8_t *rec = records + b * record_length;
         block_xyz(rec, m, record_length, scale, offset, x, y, z);
-        for (int64_t i = 0; i < m; ++i) {
-            uint16_t raw;
-            memcpy(&raw, rec + i * record_length + 12, sizeof raw);
-            intensity[b + i] = (float)raw;
-        }
+        for (int64_t i = 0; i < m; ++i)
+            memcpy(raw + i, rec + i * record_length + 12, sizeof raw[0]);
         block_spherical(m, x, y, z, coef, t, p, range + b);
+        block_cells(m, t, p, phi0, inv_step, row_lo, height, width, c);
         for (int64_t i = 0; i < m; ++i) {
-            float q = p[i] - phi0;
-            q += (float)(q < 0.0f) * 360.0f;
-            q -= (float)(q >= 360.0f) * 360.0f;
-            int32_t row = (int32_t)(t[i] * inv_step) - row_lo;
-            int32_t col = (int32_t)(q * inv_step);
-            row = row < 0 ? 0 : (row > height - 1 ? height - 1 : row);
-            col = col < 0 ? 0 : (col > width - 1 ? width - 1 : col);
-            cell[b + i] = (int64_t)col * height + row;
+            cell[b + i] = c[i];
+            intensity[b + i] = (float)raw[i];
+            lo = c[i] < lo ? c[i] : lo;
+            hi = c[i] > hi ? c[i] : hi;
+            ilo = raw[i] < ilo ? raw[i] : ilo;
+            ihi = raw[i] > ihi ? raw[i] : ihi;
         }
     }
-    for (int64_t i = 0; i < n; ++i) {
-        int64_t k = cell[i];
-        float v = intensity[i];
-        lo = k < lo ? k : lo;
-        hi = k > hi ? k : hi;
-        ilo = v < ilo ? v : ilo;
-        ihi = v > ihi ? v : ihi;
-    }
-    cell_span[0] = lo;
-    cell_span[1] = hi;
-    intensity_span[0] = ilo;
-    intensity_span[1] = ihi;
+    cell_span[0] = n > 0 ? lo : INT64_MAX;
+    cell_span[1] = n > 0 ? hi : INT64_MIN;
+    intensity_span[0] = n > 0 ? (float)ilo : INFINITY;
+    intensity_span[1] = n > 0 ? (float)ihi : -INFINITY;
 }
 /* Per-cell count, sums (in double, point by point as numpy's bincount adds them) and maximum intensity of n
  * points whose cells are cell[i] - lo; the outputs hold the cell range and start at zero (max_i at -inf). */
