@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -157,3 +158,17 @@ def test_every_output_option_is_checked():
     unchecked = [f"{' '.join(path)} {a.dest}" for path, p in _parsers() for a in p._actions
                  if a.dest in ("out", "png", "sheet", "output") and path_kind(a) is None]
     assert not unchecked, unchecked
+
+
+@pytest.mark.parametrize("command, single", [("info", True), ("status", False)])
+def test_file_commands_load_numpy_with_a_single_threaded_blas(tmp_path, command, single):
+    """OpenBLAS's idle pool spins a core after numpy loads: the file commands, whose loops are their own, skip it."""
+    pytest.importorskip("threadpoolctl")
+    target = ROOT / "tests" / "data" / "las" / "simple.las" if command == "info" else tmp_path
+    probe = (f"from app.cli.main import main\nmain([{command!r}, {str(target)!r}])\nimport numpy, threadpoolctl\n"
+             "print('@@', [i['num_threads'] for i in threadpoolctl.threadpool_info() if i['internal_api'] == 'openblas'])")
+    env = {k: v for k, v in os.environ.items() if not k.endswith("_NUM_THREADS")}
+    res = subprocess.run([sys.executable, "-c", probe], cwd=ROOT, capture_output=True, text=True, env=env)
+    threads = json.loads(next(ln for ln in res.stdout.splitlines() if ln.startswith("@@"))[3:])
+    assert threads, res.stderr  # numpy's wheels carry OpenBLAS
+    assert (threads == [1]) == single or (not single and os.cpu_count() == 1), threads
