@@ -6,6 +6,7 @@ from typing import Optional
 
 import numpy as np
 
+from common.arrays import median
 from common.errors import InputError
 from lidar.reflectance_map import ReflectanceMap
 
@@ -67,19 +68,21 @@ def auto_threshold(values: np.ndarray) -> float:
     3 robust standard deviations above the background median.
     """
     a = np.asarray(values)
-    finite = np.isfinite(a)
-    if not finite.any():
-        raise InputError("the reflectance map is empty")
-    top = float(np.max(a, where=finite, initial=-np.inf))
+    top = float(np.fmax.reduce(a, axis=None)) if a.size else np.nan  # NaN cells left out, no mask made
+    if not np.isfinite(top):  # every cell NaN, or infinite values: the largest finite one
+        finite = np.isfinite(a)
+        if not finite.any():
+            raise InputError("the reflectance map is empty")
+        top = float(np.max(a, where=finite, initial=-np.inf))
     # the background statistics need no more than about a million cells: a strided view of the map (a
     # large map's views are not contiguous, and a flat copy of one cost more than the statistics)
     k = max(int(np.sqrt(a.size / 1_000_000)), 1) if a.ndim == 2 else 1
     sample = a[::k, ::k] if a.ndim == 2 else a
     v = sample[np.isfinite(sample)]
     if v.size == 0:
-        v = a[finite]
-    bg = float(np.median(v))
-    mad = float(np.median(np.abs(v - bg))) * 1.4826
+        v = a[np.isfinite(a)]
+    bg = median(v)
+    mad = median(np.abs(v - bg)) * 1.4826
     return max(bg + 3.0 * mad, bg + 0.5 * (top - bg))
 
 

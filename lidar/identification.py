@@ -16,6 +16,7 @@ from typing import Callable, Optional
 import numpy as np
 from numpy.typing import ArrayLike
 
+from common.arrays import unique_sorted
 from common.errors import InputError, ProcessingError
 from lidar.detection import join_groups
 from lidar.layout import Layout
@@ -135,7 +136,7 @@ def _competing_groups(near: np.ndarray) -> list[tuple[list[int], list[int]]]:
     r, c = np.nonzero(near)
     group = join_groups(n_rows + near.shape[1], r, n_rows + c)  # rows are items 0.., columns after them
     out = []
-    for g in np.unique(group[r]):  # a group's name is its first row
+    for g in unique_sorted(group[r]):  # a group's name is its first row
         rows = np.flatnonzero(group[:n_rows] == g)
         out.append(([int(k) for k in rows], [int(k) for k in np.flatnonzero(group[n_rows:] == g)]))
     return out

@@ -13,6 +13,7 @@ from numpy.typing import ArrayLike
 from common.flags import FLAG_NOT_FOUND, FLAG_UNRESOLVED
 from lidar.centroid import TargetCentroid, measure_windows
 from lidar.detection import DetectionResult, detect_reflectors
+from common.arrays import median
 from common.errors import InputError
 from lidar.guided_detection import bright_near, recover_predicted, seen_through
 from lidar.identification import MAX_TILT_DEG, Identification, identify_reflectors
@@ -72,7 +73,7 @@ def analyse_map(rmap: ReflectanceMap, layout: Layout, *, threshold: Optional[flo
                 up_layout: ArrayLike = (0.0, 0.0, 1.0), station_xy: Optional[ArrayLike] = None,
                 progress: Optional[ProgressCallback] = None) -> CoarseAnalysis:
     """Detection and identification on a coarse scan's reflectance map (see :func:`analyse_coarse`)."""
-    diameter = float(np.median(layout.diameters_m))
+    diameter = median(layout.diameters_m)
     det = detect_reflectors(rmap, target_diameter_m=diameter, threshold=threshold)
     report(progress, 0.5, "identifying reflectors")
     ident = identify_reflectors(det.xyz(), layout, tolerance_m=tolerance_m, max_tilt_deg=max_tilt_deg,
