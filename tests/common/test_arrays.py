@@ -1,6 +1,7 @@
 import numpy as np
+import pytest
 
-from common.arrays import unique_sorted
+from common.arrays import median, unique_sorted
 
 
 def test_unique_sorted_is_numpys_unique():
@@ -23,3 +24,11 @@ def test_prefaulted_zeros_are_separate_aligned_writable_arrays():
     a[:] = -1
     b[:] = np.inf
     assert not c.any() and (a == -1).all() and np.isinf(b).all()
+
+
+@pytest.mark.parametrize("n", [1, 2, 7, 1000, 1001])
+@pytest.mark.parametrize("dtype", [np.float32, np.float64, np.int64])
+def test_median_is_numpys_median(n, dtype):
+    v = (np.random.default_rng(n).normal(size=n) * 100).astype(dtype)
+    assert median(v) == float(np.median(v))
+    assert median(np.sort(v)[::-1]) == float(np.median(v))  # not contiguous, any order
