@@ -415,24 +415,19 @@ class _Accumulator:
     def finish(self, limits, height, width, row_lo, phi0, step, full, n) -> ReflectanceMap:
         lo, hi = limits if limits is not None else (self.i_lo, self.i_hi)
         scale = np.float32(1.0 / (hi - lo)) if hi > lo else np.float32(0.0)
+        normalise = limits != (0.0, 1.0)  # raw values binned: normalise the cells (an affine map commutes with means)
+        lib = coarse_map_library()
+        if lib is not None:
+            row_used, col_used = self._finish_compiled(lib, height, width, normalise, np.float32(lo), scale)
+        else:
+            row_used, col_used = self._finish_numpy(height, width, normalise, np.float32(lo), scale)
         count, sum_i, sum_r, max_i = self.count, self.sum_i, self.sum_r, self.max_i
-        empty = count == 0
-        with np.errstate(invalid="ignore", divide="ignore"):
-            sum_i /= count  # in place: the sums become means
-            sum_r /= count
-        if limits != (0.0, 1.0):  # raw values binned: normalise the cells (an affine map commutes with means)
-            for a in (sum_i, max_i):
-                a -= np.float32(lo)
-                a *= scale
-                np.clip(a, 0.0, 1.0, out=a)
-        max_i[empty] = np.nan
 
         def grid(a):  # column-major storage -> (rows=theta, cols=phi) view
             return a.reshape(width, height).T
 
         # trim the survey's margins: empty rows above and below, empty columns on the right
-        rows = np.flatnonzero(grid(count).any(axis=1))
-        cols = np.flatnonzero(grid(count).any(axis=0))
+        rows, cols = np.flatnonzero(row_used), np.flatnonzero(col_used)
         r0, r1 = (int(rows[0]), int(rows[-1]) + 1) if rows.size else (0, height)
         c1 = width if full or not cols.size else int(cols[-1]) + 1
         cut = (slice(r0, r1), slice(0, c1))
@@ -441,6 +436,38 @@ class _Accumulator:
             max_intensity=grid(max_i)[cut], mean_intensity=grid(sum_i)[cut], range_m=grid(sum_r)[cut],
             count=grid(count)[cut], full_circle=full, n_points=n,
         )
+
+
+    def _finish_numpy(self, height, width, normalise, lo, scale) -> tuple[np.ndarray, np.ndarray]:
+        """Means, normalised intensities and NaN maxima of empty cells in place; the rows and columns used."""
+        count, sum_i, sum_r, max_i = self.count, self.sum_i, self.sum_r, self.max_i
+        empty = count == 0
+        with np.errstate(invalid="ignore", divide="ignore"):
+            sum_i /= count  # in place: the sums become means
+            sum_r /= count
+        if normalise:
+            for a in (sum_i, max_i):
+                a -= lo
+                a *= scale
+                np.clip(a, 0.0, 1.0, out=a)
+        max_i[empty] = np.nan
+        used = ~empty.reshape(width, height)  # column-major storage
+        return used.any(axis=0), used.any(axis=1)
+
+    def _finish_compiled(self, lib, height, width, normalise, lo, scale) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_finish_numpy` by the compiled loop, half the columns on each of two threads."""
+        halves = [(0, width // 2), (width // 2, width)]
+        rows = [np.zeros(height, np.uint8) for _ in halves]
+        col_used = np.zeros(width, np.uint8)
+
+        def run(k: int) -> None:
+            c0, c1 = halves[k]
+            lib.bs_finish(height, c0, c1, int(normalise), lo, scale, self.count, self.sum_i, self.sum_r, self.max_i,
+                          rows[k], col_used[c0:c1])
+
+        with ThreadPoolExecutor(max_workers=2) as pool:
+            list(pool.map(run, range(2)))
+        return (rows[0] | rows[1]).astype(bool), col_used.astype(bool)
 
 
 def _azimuth_origin_from_hist(hist: np.ndarray) -> tuple[float, bool]:

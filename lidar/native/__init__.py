@@ -67,4 +67,6 @@ def load_coarse_map(folder: Path) -> Optional[ctypes.CDLL]:
     lib.bs_cell_sums.restype = None
     lib.bs_merge.argtypes = [i64, q, d, d, f, _ptr(np.int32), f, f, f]
     lib.bs_merge.restype = None
+    lib.bs_finish.argtypes = [i64, i64, i64, i32, f32, f32, _ptr(np.int32), f, f, f, u8, u8]
+    lib.bs_finish.restype = None
     return lib

@@ -223,3 +223,36 @@ void bs_merge(int64_t span, const int64_t *count, const double *sum_i, const dou
         acc_max_i[k] = max_i[k] > acc_max_i[k] ? max_i[k] : acc_max_i[k];
     }
 }
+
+static inline float clip01(float v) { return v < 0.0f ? 0.0f : (v > 1.0f ? 1.0f : v); } /* NaN stays NaN */
+
+/* Finishes columns col0..col1-1 of a column-major map of height rows, as lidar.reflectance_map._Accumulator.finish
+ * does with numpy: the sums become means (divided in double and rounded to float32, as numpy divides float32 by
+ * int32), the intensities are normalised to (v - lo) * scale clipped to [0, 1] when normalise is set, and an empty
+ * cell's maximum becomes NaN. Marks the rows that hold a point in row_used (height bytes, only ever set) and the
+ * columns in col_used (col1 - col0 bytes). */
+TARGETS void bs_finish(int64_t height, int64_t col0, int64_t col1, int32_t normalise, float lo, float scale,
+                       const int32_t *count, float *sum_i, float *sum_r, float *max_i, uint8_t *row_used,
+                       uint8_t *col_used)
+{
+    for (int64_t c = col0; c < col1; ++c) {
+        uint8_t any = 0;
+        const int64_t base = c * height;
+        for (int64_t r = 0; r < height; ++r) {
+            const int64_t k = base + r;
+            const int32_t n = count[k];
+            float mean_i = (float)((double)sum_i[k] / (double)n);
+            float top = max_i[k];
+            if (normalise) {
+                mean_i = clip01((mean_i - lo) * scale);
+                top = clip01((top - lo) * scale);
+            }
+            sum_i[k] = mean_i;
+            sum_r[k] = (float)((double)sum_r[k] / (double)n);
+            max_i[k] = n != 0 ? top : NAN;
+            row_used[r] |= (uint8_t)(n != 0);
+            any |= (uint8_t)(n != 0);
+        }
+        col_used[c - col0] = any;
+    }
+}
