@@ -30,12 +30,14 @@ def unique_sorted(values: np.ndarray) -> np.ndarray:
     return s[keep]
 
 
-def median(values: np.ndarray) -> float:
+def median(values: np.ndarray, *, overwrite_input: bool = False) -> float:
     """``np.median`` of a 1-D array of finite values, without its check for NaN.
 
     Parameters
     ----------
     values : (N,) array, N > 0, no NaN
+    overwrite_input : bool, keyword-only
+        Partially sort ``values`` in place instead of a copy (as ``np.median``'s option). Default False.
 
     Returns
     -------
@@ -49,9 +51,12 @@ def median(values: np.ndarray) -> float:
     """
     v = np.asarray(values).ravel()
     k = v.size // 2
-    if v.size % 2:
-        return float(np.partition(v, k)[k])
-    return float(np.mean(np.partition(v, [k - 1, k])[k - 1:k + 1]))
+    kth = [k] if v.size % 2 else [k - 1, k]
+    if overwrite_input and v.flags.writeable and np.shares_memory(v, values):
+        v.partition(kth)
+    else:
+        v = np.partition(v, kth)
+    return float(v[k]) if v.size % 2 else float(np.mean(v[k - 1:k + 1]))
 
 
 def zeros_prefaulted(sizes_and_dtypes: list[tuple[int, DTypeLike]]) -> list[np.ndarray]:

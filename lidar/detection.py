@@ -81,8 +81,12 @@ def auto_threshold(values: np.ndarray) -> float:
     v = sample[np.isfinite(sample)]
     if v.size == 0:
         v = a[np.isfinite(a)]
+    if not np.issubdtype(v.dtype, np.floating):
+        v = v.astype(np.float64)
     bg = median(v)
-    mad = median(np.abs(v - bg)) * 1.4826
+    np.subtract(v, bg, out=v)  # v is the sample's own copy (boolean indexing): |v - bg| is made in it
+    np.abs(v, out=v)
+    mad = median(v, overwrite_input=True) * 1.4826
     return max(bg + 3.0 * mad, bg + 0.5 * (top - bg))
 
 
@@ -113,16 +117,13 @@ def detect_reflectors(rmap: ReflectanceMap, *, target_diameter_m: float = 0.05, 
     # azimuth, then zenith.
     img = rmap.max_intensity.T
     thr = auto_threshold(img) if threshold is None else float(threshold)
-    mask = img >= thr  # NaN (empty cells) compares False
-    labels_t, n = label_components(mask)
-    if n == 0:
+    runs = component_runs(img >= thr)  # NaN (empty cells) compares False
+    if runs.n == 0:
         return DetectionResult((), (), thr, rmap.step_deg)
-    w = labels_t.shape[0]  # (columns, rows)
-    # the labelled cells only, in the transposed view's row-major order (the map is not copied)
-    cols, rows = np.nonzero(mask)  # a byte a cell: quicker than the labels' four
-    lab = labels_t[cols, rows]
+    w = runs.shape[0]  # (columns, rows)
+    cols, rows, lab = runs.cells()  # the bright cells only, in the transposed view's row-major order
     if rmap.full_circle:
-        roots, col_shift = _merge_across_seam(labels_t.T, w)
+        roots, col_shift = _merge_across_seam(runs.line(0), runs.line(w - 1), runs.n, w)
         cols = cols + col_shift[lab]  # seam-merged blobs continue past the last column
         lab = roots[lab]
     vals = img[cols % w, rows]
@@ -168,12 +169,82 @@ def detect_reflectors(rmap: ReflectanceMap, *, target_diameter_m: float = 0.05, 
     return DetectionResult(tuple(kept), tuple(rejected), thr, rmap.step_deg)
 
 
+@dataclass(frozen=True)
+class ComponentRuns:
+    """The 8-connected groups of a 2-D mask's True cells, as runs (consecutive True cells of a row).
+
+    Runs come in row-major order of their first cell, so their cells, one run after the other, are the mask's
+    True cells in the order ``np.nonzero`` gives them. ``group`` numbers the groups 1..n in row-major order of
+    their first cell (``scipy.ndimage.label``'s numbering with a 3x3 structure).
+    """
+
+    shape: tuple[int, int]
+    row: np.ndarray  # (R,) int64
+    col: np.ndarray  # (R,) int64: first column of each run
+    length: np.ndarray  # (R,) int64
+    group: np.ndarray  # (R,) int64, 1..n
+    n: int
+
+    def cells(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Row, column and group of every True cell, in row-major order."""
+        return np.repeat(self.row, self.length), _ranges(self.col, self.length), np.repeat(self.group, self.length)
+
+    def line(self, r: int) -> np.ndarray:
+        """The groups along row ``r`` (0 outside the mask), shape (W,)."""
+        out = np.zeros(self.shape[1], np.int64)
+        on = self.row == r
+        out[_ranges(self.col[on], self.length[on])] = np.repeat(self.group[on], self.length[on])
+        return out
+
+
+def component_runs(mask: np.ndarray) -> ComponentRuns:
+    """The 8-connected groups of True cells of a 2-D mask, found on its runs.
+
+    The runs are read off the True cells' positions (``np.flatnonzero``) and joined where they touch a run of
+    the next row, so a large blob costs its rows and the whole map one pass: no image of labels is made (a
+    coarse map's was 27 MB).
+
+    Parameters
+    ----------
+    mask : (H, W) bool array
+
+    Returns
+    -------
+    ComponentRuns
+    """
+    mask = np.asarray(mask, dtype=bool)
+    h, w = mask.shape
+    pos = np.flatnonzero(mask)
+    if pos.size == 0:
+        empty = np.zeros(0, np.int64)
+        return ComponentRuns((h, w), empty, empty, empty, empty, 0)
+    row, col = np.divmod(pos, w)
+    new = np.ones(pos.size, bool)
+    new[1:] = (pos[1:] != pos[:-1] + 1) | (col[1:] == 0)
+    first_cell = np.flatnonzero(new)
+    run_row, run_col = row[first_cell], col[first_cell]
+    length = np.diff(np.append(first_cell, pos.size))
+    # positions in rows padded by one cell each side (row * (w + 2) + column + 1), one past each run's end
+    start = run_row * (w + 2) + run_col + 1
+    stop = start + length
+    # a run touches the runs of the row above that end at or after its start - 1 and begin at or before its
+    # stop: in that row's (sorted) runs a contiguous range, found by two binary searches
+    above = (run_row - 1) * (w + 2)
+    first = np.searchsorted(stop, start - (w + 2))  # first run of the row above ending at >= start - 1
+    last = np.searchsorted(start, stop - (w + 2), side="right") - 1  # last one starting <= stop
+    first = np.maximum(first, np.searchsorted(start, above))
+    last = np.minimum(last, np.searchsorted(start, above + (w + 2)) - 1)
+    n_pairs = np.where(run_row > 0, np.maximum(last - first + 1, 0), 0)
+    runs_a, runs_b = _ranges(first, n_pairs), np.repeat(np.arange(start.size), n_pairs)
+    roots, group = np.unique(join_groups(start.size, runs_a, runs_b), return_inverse=True)
+    return ComponentRuns((h, w), run_row, run_col, length, group.reshape(-1).astype(np.int64) + 1, int(roots.size))
+
+
 def label_components(mask: np.ndarray) -> tuple[np.ndarray, int]:
     """Label the 8-connected groups of True cells of a 2-D mask, numbered in row-major order of first cell.
 
-    The labelling ``scipy.ndimage.label`` gives with a 3x3 structure, in plain numpy: importing scipy.ndimage
-    cost every command that plans a visit 0.3 s. The mask's runs (consecutive True cells of a row) are
-    joined where they touch a run of the next row, so a large blob costs its rows, not its cells.
+    The labelling ``scipy.ndimage.label`` gives with a 3x3 structure, in plain numpy (importing scipy.ndimage
+    cost every command that plans a visit 0.3 s), painted from :func:`component_runs`.
 
     Parameters
     ----------
@@ -187,30 +258,11 @@ def label_components(mask: np.ndarray) -> tuple[np.ndarray, int]:
     n : int
         Number of groups.
     """
-    mask = np.asarray(mask, dtype=bool)
-    h, w = mask.shape
-    labels = np.zeros((h, w), np.int32)
-    padded = np.zeros((h, w + 2), np.int8)
-    padded[:, 1:-1] = mask
-    change = np.diff(padded.reshape(-1))
-    start = np.flatnonzero(change == 1) + 1  # positions in the padded rows (row * (w + 2) + column + 1)
-    stop = np.flatnonzero(change == -1) + 1  # one past each run
-    if start.size == 0:
-        return labels, 0
-    row = start // (w + 2)
-    # a run touches the runs of the row above that end at or after its start - 1 and begin at or before its
-    # stop: in that row's (sorted) runs a contiguous range, found by two binary searches
-    above = (row - 1) * (w + 2)
-    first = np.searchsorted(stop, start - (w + 2))  # first run of the row above ending at >= start - 1
-    last = np.searchsorted(start, stop - (w + 2), side="right") - 1  # last one starting <= stop
-    first = np.maximum(first, np.searchsorted(start, above))
-    last = np.minimum(last, np.searchsorted(start, above + (w + 2)) - 1)
-    n_pairs = np.where(row > 0, np.maximum(last - first + 1, 0), 0)
-    runs_a, runs_b = _ranges(first, n_pairs), np.repeat(np.arange(start.size), n_pairs)
-    roots, group = np.unique(join_groups(start.size, runs_a, runs_b), return_inverse=True)
-    length = stop - start
-    labels.reshape(-1)[_ranges(start - 1 - 2 * row, length)] = np.repeat(group.reshape(-1) + 1, length)
-    return labels, int(roots.size)
+    runs = component_runs(mask)
+    labels = np.zeros(runs.shape, np.int32)
+    rows, cols, group = runs.cells()
+    labels[rows, cols] = group
+    return labels, runs.n
 
 
 def _ranges(first: np.ndarray, length: np.ndarray) -> np.ndarray:
@@ -248,13 +300,13 @@ def join_groups(n: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
             parent = up
 
 
-def _merge_across_seam(labels: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:
+def _merge_across_seam(first: np.ndarray, last: np.ndarray, n: int, width: int) -> tuple[np.ndarray, np.ndarray]:
     """Join blobs touching both the first and last column of a full-circle map.
 
-    Returns, per label, its merged label (``roots[label]``) and the column shift (0 or width) that
-    makes the merged blob's columns continuous.
+    ``first`` and ``last`` are the labels (1..n, 0 for none) down the map's first and last columns. Returns, per
+    label, its merged label (``roots[label]``) and the column shift (0 or width) that makes the merged blob's
+    columns continuous.
     """
-    n = int(labels.max())
     parent = np.arange(n + 1)
 
     def find(a):
@@ -263,11 +315,10 @@ def _merge_across_seam(labels: np.ndarray, width: int) -> tuple[np.ndarray, np.n
             a = parent[a]
         return a
 
-    first, last = labels[:, 0], labels[:, -1]
-    for r in range(labels.shape[0]):
+    for r in range(first.size):
         for dr in (-1, 0, 1):
             rr = r + dr
-            if 0 <= rr < labels.shape[0] and last[r] and first[rr]:
+            if 0 <= rr < first.size and last[r] and first[rr]:
                 a, b = find(last[r]), find(first[rr])
                 if a != b:
                     parent[b] = a

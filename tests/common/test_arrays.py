@@ -32,3 +32,10 @@ def test_median_is_numpys_median(n, dtype):
     v = (np.random.default_rng(n).normal(size=n) * 100).astype(dtype)
     assert median(v) == float(np.median(v))
     assert median(np.sort(v)[::-1]) == float(np.median(v))  # not contiguous, any order
+
+
+def test_median_overwriting_its_input_partitions_it_in_place():
+    v = np.random.default_rng(3).normal(size=1001)
+    want, kept = float(np.median(v)), v.copy()
+    assert median(v, overwrite_input=True) == want
+    assert not np.array_equal(v, kept) and np.array_equal(np.sort(v), np.sort(kept))
