@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import mmap
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -567,8 +568,11 @@ class _LasPoints:
         if facts.point_count == 0:
             raise ScanFormatError(path, "the LAS header declares 0 points; nothing to read")
         self.fd = os.open(path, os.O_RDONLY)
+        self._batch: Optional[tuple[int, np.ndarray]] = None  # the mapped records of the batch being binned
+        self._batch_lock = threading.Lock()
 
     def close(self) -> None:
+        self._batch = None
         os.close(self.fd)
 
     def _records(self, start: int, stop: int) -> np.ndarray:
@@ -608,8 +612,12 @@ class _LasPoints:
         return out[0], out[1], out[2]
 
     def survey(self, stride: int) -> _Survey:
-        """The survey of every ``stride``-th point, a window of about 8 MiB at a time on two threads."""
-        window = max(1, (2**23 // self.dtype.itemsize) // stride) * stride
+        """The survey of every ``stride``-th point, a window of about 32 MiB at a time on two threads.
+
+        Every page of the file is touched (a sampled record every few hundred bytes): each window costs a
+        mapping and an unmapping, and 8 MiB windows took 0.012 s longer over a 532 MB file.
+        """
+        window = max(1, (2**25 // self.dtype.itemsize) // stride) * stride
         lib, size = coarse_map_library(), self.dtype.itemsize
 
         def sample(start: int) -> _Survey:
@@ -643,9 +651,23 @@ class _LasPoints:
         lib = coarse_map_library()
         if lib is None:
             return NotImplemented
-        raw = self._records(start, stop)
-        return _Partial.of_records(lib, raw, stop - start, self.dtype.itemsize, self.scales, self.offsets, grid,
-                                   scratch)
+        return _Partial.of_records(lib, self._batch_records(start, stop), stop - start, self.dtype.itemsize,
+                                   self.scales, self.offsets, grid, scratch)
+
+    def _batch_records(self, start: int, stop: int) -> np.ndarray:
+        """Records ``start`` to ``stop`` of one chunk, from one mapping the chunks of its batch share.
+
+        A mapping costs a call and an unmapping however small: one a batch (``BATCH`` chunks) instead of one a
+        chunk. The batch's mapping is kept until the next batch's first chunk asks for its own.
+        """
+        span = BATCH * CHUNK
+        first = start - start % span
+        with self._batch_lock:
+            if self._batch is None or self._batch[0] != first:
+                self._batch = (first, self._records(first, min(first + span, self.n)))
+            raw = self._batch[1]
+        size = self.dtype.itemsize
+        return raw[(start - first) * size:(stop - first) * size]
 
 
 def reflectance_map_from_file(path: str | os.PathLike, *, step_deg: Optional[float] = None,
