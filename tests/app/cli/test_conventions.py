@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from app.cli.args import DIR_EXPLAINED, DIR_HELP
-from app.cli.main import COMMAND_GROUPS, _walk, build_parser, main
+from app.cli.main import COMMAND_GROUPS, COMMAND_MODULES, _walk, build_parser, main
 
 ROOT = Path(__file__).resolve().parents[3]
 #: What building the parser (and refusing a command before it starts) must not import.
@@ -172,3 +172,14 @@ def test_file_commands_load_numpy_with_a_single_threaded_blas(tmp_path, command,
     threads = json.loads(next(ln for ln in res.stdout.splitlines() if ln.startswith("@@"))[3:])
     assert threads, res.stderr  # numpy's wheels carry OpenBLAS
     assert (threads == [1]) == single or (not single and os.cpu_count() == 1), threads
+
+
+def test_each_command_is_parsed_by_its_own_modules_parser_alone():
+    """A command on the line builds only its module's parser (COMMAND_MODULES): the table must say true."""
+    full = {path[0]: p for path, p in _walk(build_parser()) if len(path) == 1}
+    assert set(full) == set(COMMAND_MODULES) == {n for _, names in COMMAND_GROUPS for n in names}
+    for command, module in COMMAND_MODULES.items():
+        alone = {path[0]: p for path, p in _walk(build_parser(command)) if len(path) == 1}
+        assert command in alone
+        assert {c for c, m in COMMAND_MODULES.items() if m == module} == set(alone)
+        assert alone[command].format_help() == full[command].format_help()
