@@ -11,6 +11,7 @@ from __future__ import annotations
 import mmap
 import os
 import threading
+from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,7 +29,8 @@ from common.progress import ProgressCallback, report
 
 #: Points per chunk: small enough that a chunk's float32 temporaries stay in the caches.
 CHUNK = 262_144
-#: Chunks binned at once (on two threads) before their sums are added to the map, in file order.
+#: Chunks read and binned (on two threads) ahead of the last one added to the map; the LAS records of a
+#: batch of this many chunks share one mapping.
 BATCH = 4
 #: The automatic cell size keeps maps below this many cells: a few cells across a target are enough
 #: to find it, and detection time and memory grow with the cell count.
@@ -260,7 +262,7 @@ def binned_map(points: PointSource, *, step_deg: Optional[float] = None,
     starts = list(range(0, n, CHUNK))
     grid = _Grid(phi0=float(phi0), inv=inv, row_lo=row_lo, height=height, width=width)
     compiled = getattr(points, "binned", None)
-    slots = [_Scratch() for _ in range(BATCH)]  # chunk k of a batch is binned in slots[k]
+    slots = [_Scratch() for _ in range(BATCH)]  # chunk k is binned in slots[k % BATCH]
 
     def bin_chunk(job: tuple[int, "_Scratch"]) -> Optional["_Partial"]:
         start, scratch = job
@@ -273,15 +275,20 @@ def binned_map(points: PointSource, *, step_deg: Optional[float] = None,
         return _Partial.of(grid.cells(t, p), r, inten)  # both threads bin at once
 
     # the chunks' sums are added in file order, whichever thread finishes first: float32 sums in another
-    # order round differently, and the map (and every window planned from it) would depend on the timing;
-    # a few chunks at a time keep the memory bounded however fast the reads (and a batch's slots are free again
-    # once its chunks are merged)
+    # order round differently, and the map (and every window planned from it) would depend on the timing.
+    # At most BATCH chunks are read ahead of the last one added (bounded memory, and chunk k's slot is free
+    # again once chunk k - BATCH is added); the threads never wait for a whole batch to be added.
+    ahead: deque = deque()
     with ThreadPoolExecutor(max_workers=2) as pool:
-        for k in range(0, len(starts), BATCH):
-            batch = starts[k:k + BATCH]
-            for part in pool.map(bin_chunk, zip(batch, slots)):
-                acc.merge(part)
-            report(progress, 0.1 + 0.9 * min(batch[-1] + CHUNK, n) / n, "binning")
+        for k, start in enumerate(starts):
+            if len(ahead) == BATCH:
+                acc.merge(ahead.popleft().result())
+            ahead.append(pool.submit(bin_chunk, (start, slots[k % BATCH])))
+            if k % BATCH == 0:
+                report(progress, 0.1 + 0.9 * start / n, "binning")
+        while ahead:
+            acc.merge(ahead.popleft().result())
+    report(progress, 1.0, "binning")
     return acc.finish(points.limits, height, width, row_lo, phi0, float(step_deg), full, n)
 
 
@@ -658,7 +665,7 @@ class _LasPoints:
         """Records ``start`` to ``stop`` of one chunk, from one mapping the chunks of its batch share.
 
         A mapping costs a call and an unmapping however small: one a batch (``BATCH`` chunks) instead of one a
-        chunk. The batch's mapping is kept until the next batch's first chunk asks for its own.
+        chunk. The batch's mapping is kept until a chunk of the next batch asks for its own.
         """
         span = BATCH * CHUNK
         first = start - start % span
