@@ -12,6 +12,7 @@ they need when they run): ``bridgesurvey --help`` and a refused command start in
 from __future__ import annotations
 
 import argparse
+import gc
 import logging
 import os
 import sys
@@ -196,5 +197,17 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return 141
 
 
+def run() -> None:
+    """The ``bridgesurvey`` program: :func:`main` on the command line, then exit with its status.
+
+    The objects left when the command is done are frozen out of the garbage collector first: the
+    interpreter's collections at exit traversed all of them again (numpy's and the product's modules),
+    0.03-0.045 s of every command, for memory the system takes back anyway.
+    """
+    status = main()
+    gc.freeze()
+    sys.exit(status)
+
+
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    run()

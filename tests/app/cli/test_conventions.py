@@ -183,3 +183,17 @@ def test_each_command_is_parsed_by_its_own_modules_parser_alone():
         assert command in alone
         assert {c for c, m in COMMAND_MODULES.items() if m == module} == set(alone)
         assert alone[command].format_help() == full[command].format_help()
+
+
+def test_the_program_exits_with_the_commands_status(tmp_path, monkeypatch, capsys):
+    import gc
+
+    from app.cli.main import run
+
+    monkeypatch.setattr(sys, "argv", ["bridgesurvey", "status", str(tmp_path / "nowhere")])
+    try:
+        with pytest.raises(SystemExit) as stop:
+            run()
+    finally:
+        gc.unfreeze()  # run() freezes the survivors for a quick exit; this process goes on
+    assert stop.value.code == 1 and "no campaign here" in capsys.readouterr().err
