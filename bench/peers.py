@@ -339,7 +339,9 @@ las = laspy.read({str(las)!r})
 x, y, z = np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)
 theta = np.degrees(np.arctan2(np.hypot(x, y), z)); phi = np.degrees(np.arctan2(y, x)) % 360
 """))
-    inproc = measure("from lidar.reflectance_map import reflectance_map_from_file\n"
+    # as the command loads numpy (app.cli.main.SINGLE_THREADED_BLAS): OpenBLAS's idle pool would spin on a core
+    inproc = measure("import os\nos.environ.setdefault('OPENBLAS_NUM_THREADS', '1')\n"
+                     "from lidar.reflectance_map import reflectance_map_from_file\n"
                      "from lidar.pipeline import analyse_map, plan_from_coarse\nfrom lidar.layout import read_layout_csv",
                      f"layout = read_layout_csv({str(layout)!r}); coarse = analyse_map(reflectance_map_from_file("
                      f"{str(las)!r}), layout); plan = plan_from_coarse(coarse, layout)")
