@@ -585,9 +585,10 @@ class _LasPoints:
     def _records(self, start: int, stop: int) -> np.ndarray:
         """Records ``start`` to ``stop`` as raw bytes, mapped read-only from the file (unmapped when dropped).
 
-        The window's pages are mapped at once (``MAP_POPULATE``): where the file is in the page cache that
-        costs next to nothing, where a copy (``preadv``) cost 0.04 s a pass of a 532 MB file and faulting a
-        plain mapping in page by page more. A window at a time keeps the resident memory to a few chunks.
+        A plain mapping: the threads that read the records fault the pages in, 16 at a fault and both threads at
+        once. A copy (``preadv``) cost 0.04 s a pass of a 532 MB file, and windows mapped at once
+        (``MAP_POPULATE``) were populated under the address space's lock, the other thread's mappings waiting:
+        0.04 s more for the map of that file. A window at a time keeps the resident memory to a few chunks.
         """
         size = self.dtype.itemsize
         begin, end = self.first + start * size, self.first + stop * size
@@ -595,7 +596,7 @@ class _LasPoints:
             raise ScanFormatError(self.path, "truncated: the point records end early")
         base = begin - begin % mmap.ALLOCATIONGRANULARITY
         try:
-            window = mmap.mmap(self.fd, end - base, flags=mmap.MAP_SHARED | getattr(mmap, "MAP_POPULATE", 0),
+            window = mmap.mmap(self.fd, end - base, flags=mmap.MAP_SHARED,
                                prot=mmap.PROT_READ, offset=base)
         except OSError:  # a file system that cannot map files: read a copy
             copy = np.empty(end - begin, np.uint8)
