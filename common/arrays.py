@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import DTypeLike
 
 
 def unique_sorted(values: np.ndarray) -> np.ndarray:
@@ -57,39 +56,3 @@ def median(values: np.ndarray, *, overwrite_input: bool = False) -> float:
     else:
         v = np.partition(v, kth)
     return float(v[k]) if v.size % 2 else float(np.mean(v[k - 1:k + 1]))
-
-
-def zeros_prefaulted(sizes_and_dtypes: list[tuple[int, DTypeLike]]) -> list[np.ndarray]:
-    """Zeroed 1-D arrays of the given sizes and dtypes, in one block of memory the kernel maps in at once.
-
-    Parameters
-    ----------
-    sizes_and_dtypes : list of (int, dtype)
-        Length and dtype of each array.
-
-    Returns
-    -------
-    list of (N_k,) arrays, zeroed, each aligned to 64 bytes
-
-    Notes
-    -----
-    A fresh array is paid for at its first write, one page fault per 4 KiB page: on a virtual machine 0.07 s
-    for the 110 MB of a 6.8 M-cell coarse map, a fifth of the map's time. Mapped with ``MAP_POPULATE`` the
-    kernel zeroes and maps the whole block in one call (0.04 s). Elsewhere than on Linux this is an ordinary
-    zeroed block.
-    """
-    import mmap
-
-    offsets, total = [], 0
-    for n, dtype in sizes_and_dtypes:
-        total = -(-total // 64) * 64
-        offsets.append(total)
-        total += int(n) * np.dtype(dtype).itemsize
-    flags = getattr(mmap, "MAP_PRIVATE", 0) | getattr(mmap, "MAP_ANONYMOUS", 0) | getattr(mmap, "MAP_POPULATE", 0)
-    block: mmap.mmap | np.ndarray
-    try:
-        block = mmap.mmap(-1, max(total, 1), flags=flags) if flags else mmap.mmap(-1, max(total, 1))
-    except OSError:  # no mapping allowed (a limit on mappings): ordinary memory
-        block = np.zeros(max(total, 1), np.uint8)
-    return [np.frombuffer(block, dtype=dtype, count=int(n), offset=off)
-            for (n, dtype), off in zip(sizes_and_dtypes, offsets)]

@@ -13,19 +13,6 @@ def test_unique_sorted_is_numpys_unique():
         np.testing.assert_array_equal(got, np.unique(values))
 
 
-def test_prefaulted_zeros_are_separate_aligned_writable_arrays():
-    from common.arrays import zeros_prefaulted
-
-    a, b, c = zeros_prefaulted([(1001, np.int32), (3, np.float64), (2**20, np.float32)])
-    assert (a.shape, b.shape, c.shape) == ((1001,), (3,), (2**20,))
-    assert (a.dtype, b.dtype, c.dtype) == (np.int32, np.float64, np.float32)
-    for x in (a, b, c):
-        assert x.flags.writeable and x.flags.c_contiguous and x.ctypes.data % 64 == 0 and not x.any()
-    a[:] = -1
-    b[:] = np.inf
-    assert not c.any() and (a == -1).all() and np.isinf(b).all()
-
-
 @pytest.mark.parametrize("n", [1, 2, 7, 1000, 1001])
 @pytest.mark.parametrize("dtype", [np.float32, np.float64, np.int64])
 def test_median_is_numpys_median(n, dtype):
