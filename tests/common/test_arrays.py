@@ -21,6 +21,12 @@ def test_median_is_numpys_median(n, dtype):
     assert median(np.sort(v)[::-1]) == float(np.median(v))  # not contiguous, any order
 
 
+def test_median_of_an_empty_array_or_one_with_a_nan_is_nan_as_numpys():
+    assert np.isnan(median(np.array([]))) and np.isnan(median(np.array([1.0, np.nan, 3.0])))
+    assert np.isnan(median(np.array([np.nan, 2.0]))) and np.isnan(median(np.array([np.nan])))
+    assert np.isnan(np.median(np.array([1.0, np.nan, 3.0])))  # the behaviour copied
+
+
 def test_median_overwriting_its_input_partitions_it_in_place():
     v = np.random.default_rng(3).normal(size=1001)
     want, kept = float(np.median(v)), v.copy()
