@@ -448,7 +448,6 @@ class _Accumulator:
             count=grid(count)[cut], full_circle=full, n_points=n,
         )
 
-
     def _finish_numpy(self, height, width, normalise, lo, scale) -> tuple[np.ndarray, np.ndarray]:
         """Means, normalised intensities and NaN maxima of empty cells in place; the rows and columns used."""
         count, sum_i, sum_r, max_i = self.count, self.sum_i, self.sum_r, self.max_i

@@ -13,8 +13,10 @@ from __future__ import annotations
 
 import argparse
 import gc
+import importlib
 import logging
 import os
+import shutil
 import sys
 import textwrap
 from typing import Optional, Sequence
@@ -131,9 +133,6 @@ def _finish(parser: argparse.ArgumentParser) -> None:
 
 def build_parser(command: Optional[str] = None) -> argparse.ArgumentParser:
     """The ``bridgesurvey`` parser with every command, or only ``command``'s module's (imports nothing heavy)."""
-    import importlib
-    import shutil
-
     width = min(100, shutil.get_terminal_size((100, 24)).columns) - 2
     parser = Parser(prog="bridgesurvey", usage="bridgesurvey [-h] [-v] COMMAND [DIR] [OPTIONS]",
                     formatter_class=RawDescriptionHelpFormatter,
