@@ -5,7 +5,8 @@ Peers: py4dgeo and Open3D (in the project's environment), laspy, and CloudCompar
 (simulated once into ``bench/out/peers``, see ``_peers_data.py``): the tests' three visits of the 40 m bridge
 (coarse scans at 0.06 degrees, 1.2-1.3 M points, 0 / -4 / -7 mm at midspan), processed as a campaign, and a
 whole-bridge coarse scan of about 19 M points as LAS. Every figure is the best of three fresh processes (plan-file
-and the bare read: of five, run in turns); every ratio is against a peer measured in the same run. Usage: ``./run bench peers [epochs | files]``.
+and the bare read: of five, run in turns); every ratio is against a peer measured in the same run.
+Usage: ``./run bench peers [epochs | files]``.
 """
 from __future__ import annotations
 
@@ -61,9 +62,11 @@ def run(cmd: list[str], *, repeat: int = 3, cwd: Path = OUT) -> dict:
 
 
 def run_alternating(a: list[str], b: list[str], *, rounds: int = 5) -> tuple[dict, dict]:
-    """Best wall times of two commands run one after the other, ``rounds`` times: both see the same moments of a
-    shared machine (a virtual machine's speed drifts over minutes; three runs of one, then three of the other,
-    can land in different spells)."""
+    """Best wall times of two commands run one after the other, ``rounds`` times.
+
+    Both see the same moments of a shared machine: a virtual machine's speed drifts over minutes, and three
+    runs of one, then three of the other, can land in different spells.
+    """
     runs = [(run(a, repeat=1), run(b, repeat=1)) for _ in range(rounds)]
     return (min((x for x, _ in runs), key=lambda r: r["seconds"]) | {"peak_mb": max(x["peak_mb"] for x, _ in runs)},
             min((y for _, y in runs), key=lambda r: r["seconds"]) | {"peak_mb": max(y["peak_mb"] for _, y in runs)})

@@ -383,7 +383,7 @@ class _Scratch:
         self._arrays: dict[str, np.ndarray] = {}
 
     def take(self, name: str, n: int, dtype, *, fill: Optional[float] = None) -> np.ndarray:
-        """A 1-D array of ``n`` elements (filled with ``fill`` if given), the same memory as the last one of that name."""
+        """A 1-D array of ``n`` elements (filled with ``fill`` if given): the memory of the last one of that name."""
         a = self._arrays.get(name)
         if a is None or a.size < n or a.dtype != np.dtype(dtype):
             a = self._arrays[name] = np.empty(max(n, 1), dtype)
