@@ -15,7 +15,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-
 from _harness import OUT, measure, row
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))

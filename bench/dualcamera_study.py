@@ -33,7 +33,8 @@ BLOCKS = ("rot x", "rot y", "rot z", "tra x", "tra y", "tra z", "random")
 
 def rendered(rig, poses, disp):
     g = rig.geometry
-    main = np.array([detect_main_target(rig.render_main(P, d), g.main_pattern_m) for P, d in zip(poses, disp)])
+    main = np.array([detect_main_target(rig.render_main(P, d), g.main_pattern_m)
+                     for P, d in zip(poses, disp, strict=False)])
     sub = []
     for P in poses:
         c = detect_checkerboard(rig.render_sub(P), g.board.inner_corners)

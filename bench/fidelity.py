@@ -30,6 +30,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from _dissertation import time_figures  # noqa: E402
+
 from lidar.displacement import compute_displacements  # noqa: E402
 from lidar.layout import layout_from_model  # noqa: E402
 from lidar.pipeline import analyse_coarse, measure_targets, plan_from_coarse  # noqa: E402
@@ -56,7 +57,7 @@ def lab_model() -> BridgeModel:
     """A 2.4 m desk (top at 0.75 m) on two 1.4 m wide pillars; 5 reflectors on the top, 2 on each pillar."""
     span, top = 2.4, 0.75
     deck = [Target(f"M{k + 1}", "measurement", (f * span, y, top + 0.001), (0, 0, 1))
-            for k, (f, y) in enumerate(zip((0.2, 0.35, 0.5, 0.65, 0.8), (-0.3, 0.3, -0.3, 0.3, -0.3)))]
+            for k, (f, y) in enumerate(zip((0.2, 0.35, 0.5, 0.65, 0.8), (-0.3, 0.3, -0.3, 0.3, -0.3), strict=False))]
     pill = [Target("R1", "reference", (-0.05, -0.701, 0.25), (0, -1, 0)),
             Target("R2", "reference", (0.05, -0.701, 0.55), (0, -1, 0)),
             Target("R3", "reference", (span - 0.05, -0.701, 0.25), (0, -1, 0)),
@@ -78,7 +79,7 @@ def lab_positions() -> list[ScannerSetup]:
 def lab_test(seed: int = 3):
     model = lab_model()
     layout = layout_from_model(model, noise_m=0.01, rng=np.random.default_rng(1))
-    groups = dict(zip(layout.ids, layout.groups))
+    groups = dict(zip(layout.ids, layout.groups, strict=False))
     rng = np.random.default_rng(seed)
     cases = []
     for setup in lab_positions():
@@ -152,6 +153,7 @@ def centroid_precision(repeats: int = 60, seed: int = 5):
 # ----------------------------------------------------------------------------------------- 3-4. dual camera
 def dual_camera(per_block: int = 100):
     from dualcamera_study import run
+
     from vision.simulate import RigGeometry, table10_schedule
     from vision.simulate.motions import pan_tilt_drift
 

@@ -61,7 +61,7 @@ def scenario(model: BridgeModel, n: int, seed: int, *, ppm: bool, walk, clip: bo
                            axis_errors=AXES if axes else None))
     if scale_rate:
         rates = rng.choice([-1.0, 1.0], n) * rng.uniform(0.5, 1.0, n) * scale_rate
-        out = [replace(c, range_scale_rate_ppm_h=float(r)) for c, r in zip(out, rates)]
+        out = [replace(c, range_scale_rate_ppm_h=float(r)) for c, r in zip(out, rates, strict=False)]
     if knocked:
         for i in (2, 4, 6):
             turn = rng.normal(0.0, 1.0, 3)

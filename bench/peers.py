@@ -138,7 +138,7 @@ dist, unc = algo.run()
 
 
 def c2c_step(npz: Path) -> None:
-    setup = "import numpy as np\nd = np.load(%r); xa, xb = d['xa'], d['xb']\n" % str(npz)
+    setup = f"import numpy as np\nd = np.load({str(npz)!r}); xa, xb = d['xa'], d['xb']\n"
     # scipy.spatial (0.2-0.3 s to import) is imported in the setup, as Open3D is for its row
     ours = measure(setup + "from registration.change import cloud_to_cloud\nimport scipy.spatial",
                    "r = cloud_to_cloud(xa, xb)")

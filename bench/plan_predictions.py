@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from _dissertation import time_figures  # noqa: E402  (bench/ is on the path when run as a script)
 
 from lidar.displacement import Observation, compute_displacements
 from lidar.layout import layout_from_model
@@ -33,8 +34,6 @@ from lidar.scanner_catalogue import get_scanner
 from lidar.simulate import BridgeModel, BridgeScene, EpochConditions, ScannerSetup
 from lidar.simulate.bridge import Target
 from lidar.stations import predict_station
-
-from _dissertation import time_figures  # noqa: E402  (bench/ is on the path when run as a script)
 
 VZ = get_scanner("Riegl VZ-1000")
 STEPS = (0.03, 0.05, 0.08)
@@ -93,7 +92,7 @@ def run(stations_per_bridge: int = 10, seed: int = 7):
     points_rows, sigma_rows, recall_rows = [], [], []
     for name, model in BRIDGES.items():
         layout = layout_from_model(model, noise_m=0.02, rng=np.random.default_rng(1))
-        groups = dict(zip(layout.ids, layout.groups))
+        groups = dict(zip(layout.ids, layout.groups, strict=False))
         base_setup = _station(rng, model)
         base, *_ = visit(model, layout, base_setup, 0.0, 0.05, rng)
         base_obs = {k: Observation(c.xyz_socs, c.cov) for k, c in base.items()}

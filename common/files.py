@@ -11,8 +11,9 @@ import errno
 import io
 import math
 import os
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
-from typing import Any, Iterator, Mapping, Optional, Sequence
+from typing import Any
 
 from common.errors import SurveyError
 
@@ -25,7 +26,7 @@ class DiskFullError(SurveyError):
     """The device a file is written to has no space left; nothing was changed."""
 
 
-def free_bytes(path: str | os.PathLike) -> Optional[int]:
+def free_bytes(path: str | os.PathLike) -> int | None:
     """Bytes free for this user on the device holding ``path`` (or its nearest existing parent); None if unknown."""
     p = Path(path).absolute()
     while not p.exists() and p != p.parent:
@@ -37,7 +38,7 @@ def free_bytes(path: str | os.PathLike) -> Optional[int]:
     return int(st.f_bavail * st.f_frsize)
 
 
-def disk_full_error(path: str | os.PathLike, need_bytes: Optional[int] = None) -> DiskFullError:
+def disk_full_error(path: str | os.PathLike, need_bytes: int | None = None) -> DiskFullError:
     """The one-line error for a write to ``path`` that found (or would find) the disk full.
 
     ``need_bytes`` is what the write needs (default :data:`DEFAULT_NEED_BYTES`); the message asks for
@@ -52,7 +53,7 @@ def disk_full_error(path: str | os.PathLike, need_bytes: Optional[int] = None) -
 def is_disk_full(exc: BaseException) -> bool:
     """Whether ``exc`` (or an exception it was raised from) is the system's 'no space left on device'."""
     seen = 0
-    cur: Optional[BaseException] = exc
+    cur: BaseException | None = exc
     while cur is not None and seen < 10:
         if isinstance(cur, OSError) and cur.errno in (errno.ENOSPC, errno.EDQUOT):
             return True

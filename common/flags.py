@@ -17,8 +17,8 @@ by a migration (:data:`RENAMED`).
 """
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Iterable, Optional
 
 from common.errors import SurveyError
 
@@ -253,7 +253,7 @@ def renamed(flag: str) -> str:
     return RENAMED[c] + flag[len(c):] if c in RENAMED else flag
 
 
-def worst(flags: Iterable[str]) -> Optional[str]:
+def worst(flags: Iterable[str]) -> str | None:
     """The most serious severity among ``flags`` (None when there are none).
 
     >>> worst(["normal_refitted_in_epoch", "missing"])

@@ -4,7 +4,7 @@ from __future__ import annotations
 import importlib
 import sys
 import threading
-from typing import Sequence
+from collections.abc import Sequence
 
 #: How often (seconds) the interpreter is handed between threads while a background import runs. An import
 #: runs Python for seconds; at the default 5 ms each of the caller's numpy calls would wait that long.

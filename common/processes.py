@@ -15,7 +15,7 @@ import contextlib
 import os
 import sys
 import warnings
-from typing import Iterator
+from collections.abc import Iterator
 
 
 @contextlib.contextmanager
@@ -48,7 +48,7 @@ def quiet_resource_tracker() -> None:
 
     def ensure_running() -> None:
         fd = getattr(tracker, "_fd", None)
-        if fd is not None and getattr(tracker, "_check_alive")():
+        if fd is not None and tracker._check_alive():  # type: ignore[attr-defined]
             return
         with warnings.catch_warnings():
             warnings.filterwarnings("ignore", message="resource_tracker: process died unexpectedly")

@@ -6,18 +6,18 @@ stop the work; functions taking one let that exception through untouched.
 """
 from __future__ import annotations
 
-from typing import Callable, Optional
+from collections.abc import Callable
 
 ProgressCallback = Callable[[float, str], None]
 
 
-def report(progress: Optional[ProgressCallback], fraction: float, message: str = "") -> None:
+def report(progress: ProgressCallback | None, fraction: float, message: str = "") -> None:
     """Call ``progress`` if one was given, clamping ``fraction`` to [0, 1]."""
     if progress is not None:
         progress(min(1.0, max(0.0, float(fraction))), message)
 
 
-def scaled(progress: Optional[ProgressCallback], start: float, stop: float) -> Optional[ProgressCallback]:
+def scaled(progress: ProgressCallback | None, start: float, stop: float) -> ProgressCallback | None:
     """A callback mapping [0, 1] of a sub-task onto [start, stop] of the whole."""
     if progress is None:
         return None

@@ -20,7 +20,7 @@ and :func:`apply_matrix`, which accept ``(..., 4, 4)`` stacks; :meth:`Transform.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -59,17 +59,17 @@ class Transform:
     notes: tuple[str, ...] = field(default=())
 
     @classmethod
-    def identity(cls, frame: str = "") -> "Transform":
+    def identity(cls, frame: str = "") -> Transform:
         return cls(np.eye(3), np.zeros(3), 1.0, frame, frame, 0.0, 0.0, "identity")
 
     @classmethod
-    def from_rt(cls, rotation: ArrayLike, translation: ArrayLike, **kw: Any) -> "Transform":
+    def from_rt(cls, rotation: ArrayLike, translation: ArrayLike, **kw: Any) -> Transform:
         """A rigid transform from a (3, 3) rotation and a (3,) translation."""
         return cls(np.asarray(rotation, dtype=np.float64), np.asarray(translation, dtype=np.float64).reshape(3), 1.0,
                    **kw)
 
     @classmethod
-    def from_matrix(cls, m: np.ndarray, **kw: Any) -> "Transform":
+    def from_matrix(cls, m: np.ndarray, **kw: Any) -> Transform:
         m = np.asarray(m, dtype=np.float64)
         s = float(np.cbrt(np.linalg.det(m[:3, :3])))
         return cls(m[:3, :3] / s, m[:3, 3].copy(), s, **kw)
@@ -86,7 +86,7 @@ class Transform:
         """Points (N, 3) of the source frame in the target frame (float64)."""
         return self.scale * (np.asarray(xyz, dtype=np.float64) @ self.rotation.T) + self.translation
 
-    def then(self, other: "Transform") -> "Transform":
+    def then(self, other: Transform) -> Transform:
         """The transform that applies this one, then ``other``."""
         m = other.matrix @ self.matrix
         sig_t = float(np.hypot(np.nan_to_num(self.sigma_translation_m), np.nan_to_num(other.sigma_translation_m)))
@@ -96,7 +96,7 @@ class Transform:
                                      method="+".join(m for m in (self.method, other.method) if m),
                                      notes=self.notes + other.notes)
 
-    def inverse(self) -> "Transform":
+    def inverse(self) -> Transform:
         r = self.rotation.T
         return Transform(r, -(r @ self.translation) / self.scale, 1.0 / self.scale, self.target_frame,
                          self.source_frame, self.sigma_translation_m, self.sigma_rotation_deg, self.method, self.notes)
@@ -112,7 +112,7 @@ class Transform:
                 "sigma_rotation_deg": self.sigma_rotation_deg, "method": self.method, "notes": list(self.notes)}
 
     @classmethod
-    def from_json(cls, d: dict) -> "Transform":
+    def from_json(cls, d: dict) -> Transform:
         return cls.from_matrix(np.array(d["matrix"]), source_frame=d.get("source_frame", ""),
                                target_frame=d.get("target_frame", ""),
                                sigma_translation_m=float(d.get("sigma_translation_m", float("nan"))),
@@ -130,7 +130,7 @@ def pose_difference(a: Transform, b: Transform) -> tuple[float, float]:
                                                                  .magnitude()))
 
 
-def fit_rigid(src: np.ndarray, dst: np.ndarray, weights: Optional[ArrayLike] = None, **provenance: Any) -> Transform:
+def fit_rigid(src: np.ndarray, dst: np.ndarray, weights: ArrayLike | None = None, **provenance: Any) -> Transform:
     """Least-squares rigid transform with ``dst ~= T.apply(src)`` (Kabsch, no reflection).
 
     Parameters

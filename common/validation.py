@@ -1,8 +1,6 @@
 """Checks made once at the public boundary of a computation."""
 from __future__ import annotations
 
-from typing import Optional
-
 import numpy as np
 from numpy.typing import ArrayLike, DTypeLike
 
@@ -10,7 +8,7 @@ from common.errors import InputError
 
 
 def require_points(xyz: ArrayLike, what: str, *, min_points: int = 1, finite: bool = True,
-                   dtype: Optional[DTypeLike] = np.float64) -> np.ndarray:
+                   dtype: DTypeLike | None = np.float64) -> np.ndarray:
     """``xyz`` as an (N, 3) array of at least ``min_points`` rows (finite unless ``finite=False``).
 
     Raises

@@ -10,7 +10,6 @@ A direction is ``(sin(theta) cos(phi), sin(theta) sin(phi), cos(theta))``.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Optional
 
 import numpy as np
 from numpy.typing import ArrayLike, DTypeLike
@@ -220,7 +219,7 @@ def window_around(theta_deg: float, phi_deg: float, half_theta_deg: float, half_
 
 
 def bounding_window(theta_deg: np.ndarray, phi_deg: np.ndarray, *, margin_deg: float = 0.0,
-                    theta_step_deg: float, phi_step_deg: float) -> Optional[AngularWindow]:
+                    theta_step_deg: float, phi_step_deg: float) -> AngularWindow | None:
     """Smallest window (seam aware) holding all given directions, plus a margin."""
     if len(theta_deg) == 0:
         return None

@@ -10,19 +10,18 @@ pull it; each doubt is flagged.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Literal, Mapping, Optional, Sequence, overload
+from typing import TYPE_CHECKING, Literal, overload
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from lidar.angles import AngularWindow, spherical_from_xyz
 from common.errors import InputError
 from common.flags import (
     FLAG_CLIPPED,
-    FLAG_GRAZING,
-    FLAG_UNRESOLVED,
     FLAG_FEW_POINTS,
+    FLAG_GRAZING,
     FLAG_LOW_CONTRAST,
     FLAG_LOW_SEPARABILITY,
     FLAG_NOT_COMPACT,
@@ -31,7 +30,9 @@ from common.flags import (
     FLAG_SATURATED,
     FLAG_SECOND_OBJECT,
     FLAG_SIZE,
+    FLAG_UNRESOLVED,
 )
+from lidar.angles import AngularWindow, spherical_from_xyz
 from lidar.scanner_profile import VZ1000, ScannerProfile
 
 if TYPE_CHECKING:
@@ -202,33 +203,33 @@ class CentroidTrace:
     disc: np.ndarray
 
     @classmethod
-    def empty(cls, n: int) -> "CentroidTrace":
+    def empty(cls, n: int) -> CentroidTrace:
         return cls(np.zeros(n, bool), np.zeros(n, bool), np.zeros(n, bool))
 
 
 @overload
 def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: str = "",
-                    expected_xyz: Optional[ArrayLike] = None, diameter_m: float = 0.05,
-                    window: Optional[AngularWindow] = None, profile: ScannerProfile = VZ1000,
-                    min_points: int = 30, time_s: Optional[np.ndarray] = None,
-                    incidence_cos: Optional[float] = None,
+                    expected_xyz: ArrayLike | None = None, diameter_m: float = 0.05,
+                    window: AngularWindow | None = None, profile: ScannerProfile = VZ1000,
+                    min_points: int = 30, time_s: np.ndarray | None = None,
+                    incidence_cos: float | None = None,
                     trace: Literal[False] = False) -> TargetCentroid: ...
 
 
 @overload
 def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: str = "",
-                    expected_xyz: Optional[ArrayLike] = None, diameter_m: float = 0.05,
-                    window: Optional[AngularWindow] = None, profile: ScannerProfile = VZ1000,
-                    min_points: int = 30, time_s: Optional[np.ndarray] = None,
-                    incidence_cos: Optional[float] = None,
+                    expected_xyz: ArrayLike | None = None, diameter_m: float = 0.05,
+                    window: AngularWindow | None = None, profile: ScannerProfile = VZ1000,
+                    min_points: int = 30, time_s: np.ndarray | None = None,
+                    incidence_cos: float | None = None,
                     trace: Literal[True]) -> tuple[TargetCentroid, CentroidTrace]: ...
 
 
 def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: str = "",
-                    expected_xyz: Optional[ArrayLike] = None, diameter_m: float = 0.05,
-                    window: Optional[AngularWindow] = None, profile: ScannerProfile = VZ1000,
-                    min_points: int = 30, time_s: Optional[np.ndarray] = None,
-                    incidence_cos: Optional[float] = None,
+                    expected_xyz: ArrayLike | None = None, diameter_m: float = 0.05,
+                    window: AngularWindow | None = None, profile: ScannerProfile = VZ1000,
+                    min_points: int = 30, time_s: np.ndarray | None = None,
+                    incidence_cos: float | None = None,
                     trace: bool = False) -> TargetCentroid | tuple[TargetCentroid, CentroidTrace]:
     """Robust centroid of the target in one fine-scan window.
 
@@ -293,7 +294,7 @@ def _bright(inten: np.ndarray) -> tuple[float, float, np.ndarray]:
 
 
 def _pick_cluster(pts: np.ndarray, rng: float, radius: float, window, expected, diameter_m: float,
-                  min_points: int, n_bright: int) -> tuple[Optional[np.ndarray], float]:
+                  min_points: int, n_bright: int) -> tuple[np.ndarray | None, float]:
     """The compact bright cluster nearest the expected position (largest first); also the point spacing.
 
     Clustering runs in the scanner's angular grid (scaled to metres at the target's range), where
@@ -541,8 +542,8 @@ def _centroid_stages(xyz: np.ndarray, inten: np.ndarray, ok_idx: np.ndarray, tr:
 
 
 def centroids_from_scan(xyz_socs: np.ndarray, intensity: np.ndarray, rois: Sequence[RoiPlan], *,
-                        diameters_m: Optional[Mapping[str, float]] = None, profile: ScannerProfile = VZ1000,
-                        time_s: Optional[np.ndarray] = None) -> dict[str, TargetCentroid]:
+                        diameters_m: Mapping[str, float] | None = None, profile: ScannerProfile = VZ1000,
+                        time_s: np.ndarray | None = None) -> dict[str, TargetCentroid]:
     """Centroids of every planned target from the fine-scan points of one set-up (closure windows left out).
 
     See :func:`measure_windows`, which also measures the plan's closure windows.
@@ -555,7 +556,7 @@ def centroids_from_scan(xyz_socs: np.ndarray, intensity: np.ndarray, rois: Seque
 PASS_GAP_S = 5.0
 
 
-def _passes(mask: np.ndarray, time_s: Optional[np.ndarray]) -> list[np.ndarray]:
+def _passes(mask: np.ndarray, time_s: np.ndarray | None) -> list[np.ndarray]:
     """The window's points split into passes by gaps in their times (one pass without times)."""
     idx = np.nonzero(mask)[0]
     if time_s is None or idx.size == 0:
@@ -569,8 +570,8 @@ def _passes(mask: np.ndarray, time_s: Optional[np.ndarray]) -> list[np.ndarray]:
 
 
 def measure_windows(xyz_socs: np.ndarray, intensity: np.ndarray, rois: Sequence[RoiPlan], *,
-                    diameters_m: Optional[Mapping[str, float]] = None, profile: ScannerProfile = VZ1000,
-                    time_s: Optional[np.ndarray] = None
+                    diameters_m: Mapping[str, float] | None = None, profile: ScannerProfile = VZ1000,
+                    time_s: np.ndarray | None = None
                     ) -> tuple[dict[str, TargetCentroid], dict[str, TargetCentroid]]:
     """Centroids of every planned target, and of the targets the plan scans again at its end (its closure).
 

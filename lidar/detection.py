@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Optional
 
 import numpy as np
 
@@ -90,7 +89,7 @@ def auto_threshold(values: np.ndarray) -> float:
     return max(bg + 3.0 * mad, bg + 0.5 * (top - bg))
 
 
-def detect_reflectors(rmap: ReflectanceMap, *, target_diameter_m: float = 0.05, threshold: Optional[float] = None,
+def detect_reflectors(rmap: ReflectanceMap, *, target_diameter_m: float = 0.05, threshold: float | None = None,
                       footprint_mrad: float = 0.3, max_size_factor: float = 1.6) -> DetectionResult:
     """Find reflector candidates in a reflectance map.
 

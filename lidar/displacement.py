@@ -32,8 +32,9 @@ numerical Jacobian.
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping, Optional, Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -124,7 +125,7 @@ def _loo_residual(base, ep, ids, k, tol_abs):
 
 
 def check_references(baseline: Mapping[str, Observation], epoch: Mapping[str, Observation],
-                     reference_ids: Sequence[str], *, tolerance_m: Optional[float] = None,
+                     reference_ids: Sequence[str], *, tolerance_m: float | None = None,
                      measurement_ids: Sequence[str] = ()
                      ) -> tuple[tuple[ReferenceCheck, ...], tuple[str, ...], tuple[str, ...]]:
     """Find reference targets that moved (or were replaced) since the baseline.
@@ -204,7 +205,7 @@ class MotionWeights:
     ref_var: np.ndarray  # (n_ref,) per-coordinate variance of each reference target's difference, m^2
     deck_ids: tuple[str, ...]  # deck targets found in both epochs
     deck_var: np.ndarray  # (n_deck,) across-span variance of their differences, m^2
-    across: Optional[np.ndarray]  # unit across-span axis in the baseline frame, or None
+    across: np.ndarray | None  # unit across-span axis in the baseline frame, or None
 
 
 def _motion(base: dict, ep: dict, refs, mw: MotionWeights) -> tuple[np.ndarray, np.ndarray]:
@@ -233,7 +234,7 @@ def _normals(base: dict, ep: dict, refs, meas_base, meas, mw: MotionWeights):
 
 
 def _vertical_positions(base: dict, ep: dict, refs, meas_base, meas, mode: str, w_ref: np.ndarray,
-                        mw: MotionWeights, gain: Optional[np.ndarray] = None, along_axis: Optional[np.ndarray] = None):
+                        mw: MotionWeights, gain: np.ndarray | None = None, along_axis: np.ndarray | None = None):
     """(h1, hk, gk, sk, along) for ``meas`` ids, given position dicts id -> (3,) array.
 
     The reference point is the same weighted mean of the same targets in both
@@ -280,7 +281,7 @@ def _tangent_basis(g: np.ndarray) -> np.ndarray:
 
 def normal_gain(normals: Callable[[np.ndarray], Any], x0: np.ndarray, cov: np.ndarray, step: float = 1e-6, *,
                 expected: bool = False
-                ) -> tuple[Optional[np.ndarray], np.ndarray, float]:
+                ) -> tuple[np.ndarray | None, np.ndarray, float]:
     """How far to move from the carried normal toward the epoch's own fit, by their uncertainties.
 
     ``normals(x) -> (g_ref, g_epoch)``. Both normals' covariances are
@@ -369,9 +370,9 @@ def motion_weights(base: Mapping[str, Observation], ep: Mapping[str, Observation
 
 
 def compute_displacements(baseline: Mapping[str, object], epoch: Mapping[str, object], groups: Mapping[str, str], *,
-                          normal_mode: str = "auto", moved_tolerance_m: Optional[float] = None,
+                          normal_mode: str = "auto", moved_tolerance_m: float | None = None,
                           weighted: bool = True, expected_sigmas: bool = False,
-                          first_reference: Optional[str] = None) -> EpochDisplacements:
+                          first_reference: str | None = None) -> EpochDisplacements:
     """Vertical displacements of an epoch against the baseline epoch.
 
     Parameters
@@ -432,7 +433,7 @@ def compute_displacements(baseline: Mapping[str, object], epoch: Mapping[str, ob
 
 
 def _solve(base: dict, ep: dict, meas_ids: list, stable: list, checks, flags: list, normal_mode: str,
-           weighted: bool, expected_sigmas: bool = False, first_reference: Optional[str] = None
+           weighted: bool, expected_sigmas: bool = False, first_reference: str | None = None
            ) -> EpochDisplacements:
     """Displacements of ``meas_ids`` with the reference point and frame motion from ``stable``."""
     if not stable:
@@ -515,7 +516,7 @@ WEAK_GEOMETRY_M = 0.005
 
 
 def _weak_geometry(base: Mapping[str, Observation], stable: Sequence[str], meas_base: Sequence[str],
-                   meas: Sequence[str], up: np.ndarray, mw: MotionWeights) -> Optional[str]:
+                   meas: Sequence[str], up: np.ndarray, mw: MotionWeights) -> str | None:
     """The ``reference_geometry_weak`` flag when a rotation of the frame motion is not fixed, else None.
 
     The motion's rotation covariance (:func:`lidar.reference_motion.rotation_covariance`) along each of its
@@ -547,7 +548,7 @@ def _weak_geometry(base: Mapping[str, Observation], stable: Sequence[str], meas_
 
 
 def _jacobians(f: Callable, x0: np.ndarray, n: int, with_along: bool, step: float = 1e-6
-               ) -> tuple[np.ndarray, Optional[np.ndarray]]:
+               ) -> tuple[np.ndarray, np.ndarray | None]:
     """Central-difference Jacobians of the displacements (and the along-span movements) over the inputs."""
     jac = np.empty((n, x0.size))
     jac_al = np.empty((n, x0.size)) if with_along else None
@@ -581,7 +582,7 @@ def _own_variance(jac: np.ndarray, cov: np.ndarray, meas: list, involved_b: list
 
 
 def _oriented_along_axis(base: dict, meas_base: list, stable: list, up: np.ndarray,
-                         first_reference: Optional[str]) -> Optional[np.ndarray]:
+                         first_reference: str | None) -> np.ndarray | None:
     """The bridge axis in the baseline frame, horizontal, pointing away from the first pier (None if unknown).
 
     The deck targets' long horizontal axis, oriented so that ``first_reference`` (default: the first

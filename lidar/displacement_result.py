@@ -5,8 +5,9 @@ its result without importing it.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Mapping, Optional
+from typing import Protocol
 
 import numpy as np
 
@@ -19,6 +20,20 @@ class Observation:
 
     xyz: np.ndarray
     cov: np.ndarray
+
+
+class Sighted(Protocol):
+    """What the field corrections read of a centroid (e.g. :class:`lidar.centroid.TargetCentroid`).
+
+    Its position in its visit's scanner frame (3,) in metres and its covariance (3, 3) in m^2; the corrections
+    also read ``cos_incidence`` and ``time_s`` when a centroid has them.
+    """
+
+    @property
+    def xyz_socs(self) -> np.ndarray: ...
+
+    @property
+    def cov(self) -> np.ndarray: ...
 
 
 @dataclass(frozen=True)
@@ -92,7 +107,7 @@ class EpochDisplacements:
     reference_point_socs: np.ndarray
     normal_mode: str
     flags: tuple[str, ...] = ()
-    sensitivity: Optional[Sensitivity] = None
+    sensitivity: Sensitivity | None = None
 
     def of(self, reflector: str) -> Displacement:
         for d in self.displacements:

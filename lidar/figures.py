@@ -2,8 +2,9 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Optional, Sequence, TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -13,8 +14,8 @@ if TYPE_CHECKING:
     from lidar.reflectance_map import ReflectanceMap
 
 
-def reflectance_map_figure(rmap: ReflectanceMap, *, detections: Optional[DetectionResult] = None,
-                           identification: Optional[Identification] = None, rois: Optional[Sequence] = None,
+def reflectance_map_figure(rmap: ReflectanceMap, *, detections: DetectionResult | None = None,
+                           identification: Identification | None = None, rois: Sequence | None = None,
                            title: str = "Reflectance map", figsize: tuple[float, float] = (11, 4.8),
                            fixed_layout: bool = False) -> Any:
     """A matplotlib Figure of the map (max intensity) with angle axes, a colour bar, detections and ROIs.
@@ -52,7 +53,7 @@ def reflectance_map_figure(rmap: ReflectanceMap, *, detections: Optional[Detecti
         return rmap.phi0_deg + np.mod(np.asarray(phi) - rmap.phi0_deg, 360.0)
 
     if detections is not None:
-        for k, d in enumerate(detections.detections):
+        for _k, d in enumerate(detections.detections):
             ax.plot(unwrap(d.phi_deg), d.theta_deg, "o", mfc="none", mec="tab:orange", ms=9, mew=1.2)
     if identification is not None:
         for m in identification.matches:

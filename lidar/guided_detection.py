@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from typing import Optional
 
 import numpy as np
 
@@ -38,7 +37,7 @@ def _patch(rmap: ReflectanceMap, row: float, col: float, half: int) -> tuple[np.
 
 
 def bright_near(rmap: ReflectanceMap, xyz_socs: np.ndarray, threshold: float, *, tolerance_m: float = 0.15,
-                range_tolerance_m: float = 0.3) -> Optional[bool]:
+                range_tolerance_m: float = 0.3) -> bool | None:
     """Whether the map shows a target where one is predicted: True (a local peak at the range), False, None.
 
     None when the map cannot tell (the direction is outside it, or it holds no return there).
@@ -65,7 +64,7 @@ def bright_near(rmap: ReflectanceMap, xyz_socs: np.ndarray, threshold: float, *,
     return bool(np.isfinite(cell_range) and abs(cell_range - r) <= range_tolerance_m + tolerance_m)
 
 
-def seen_through(rmap: ReflectanceMap, xyz_socs: np.ndarray, *, margin_m: float = 1.0) -> Optional[bool]:
+def seen_through(rmap: ReflectanceMap, xyz_socs: np.ndarray, *, margin_m: float = 1.0) -> bool | None:
     """Whether the scan looked straight through a position: nothing there, only farther surfaces (or none).
 
     True when every cell around the position's direction returned from beyond it (by ``margin_m``) or held

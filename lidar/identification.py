@@ -9,18 +9,18 @@ the latter get a position predicted from the fit, marked as predicted.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from itertools import combinations
-from typing import Callable, Optional
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from common.arrays import unique_sorted
 from common.errors import InputError, ProcessingError
+from common.rigid import Transform, fit_rigid, pairwise_distances
 from lidar.detection import join_groups
 from lidar.layout import Layout
-from common.rigid import Transform, fit_rigid, pairwise_distances
 
 
 @dataclass(frozen=True)
@@ -34,8 +34,8 @@ class TargetMatch:
     id: str
     group: str
     xyz_socs: tuple[float, ...]
-    detection: Optional[int]
-    residual_m: Optional[float]
+    detection: int | None
+    residual_m: float | None
 
     @property
     def predicted(self) -> bool:
@@ -77,7 +77,7 @@ class Identification:
         raise InputError(f"unknown reflector {reflector_id!r}")
 
 
-def _seed_triangles(xyz: np.ndarray, limit: int, groups: Optional[tuple] = None) -> list[tuple[int, int, int]]:
+def _seed_triangles(xyz: np.ndarray, limit: int, groups: tuple | None = None) -> list[tuple[int, int, int]]:
     """Well-conditioned layout triangles (large, not thin), best first.
 
     The pier (reference) targets' own triangles always come first, since deck targets are the ones a coarse scan misses.
@@ -143,7 +143,7 @@ def _competing_groups(near: np.ndarray) -> list[tuple[list[int], list[int]]]:
 
 
 def _enumerate_matchings(rows: list[int], near: np.ndarray, d: np.ndarray,
-                         limit: int = 4096) -> Optional[list[tuple[int, int]]]:
+                         limit: int = 4096) -> list[tuple[int, int]] | None:
     """The matching of one group with the most pairs, then the smallest distance sum; None if too large."""
     options = [[int(c) for c in np.flatnonzero(near[r])] for r in rows]
     if np.prod([len(o) + 1 for o in options], dtype=float) > limit:
@@ -169,7 +169,7 @@ def _assign_scipy(d: np.ndarray, tol: float) -> list[tuple[int, int, float]]:
     from scipy.optimize import linear_sum_assignment
 
     rows, cols = linear_sum_assignment(np.where(d <= tol, d, 1e6))
-    return [(int(r), int(c), float(d[r, c])) for r, c in zip(rows, cols) if d[r, c] <= tol]
+    return [(int(r), int(c), float(d[r, c])) for r, c in zip(rows, cols, strict=False) if d[r, c] <= tol]
 
 
 #: Default largest scanner tilt a solution may imply and still count as levelled (degrees). Compensators
@@ -241,7 +241,7 @@ def _unseen(r: np.ndarray, t: np.ndarray, layout: Layout, matched: set, det: np.
 DETECTION_SEEDS = 10
 
 
-def _best_triangle(best, lay: np.ndarray, det: np.ndarray, tol: float) -> Optional[tuple[int, int, int]]:
+def _best_triangle(best, lay: np.ndarray, det: np.ndarray, tol: float) -> tuple[int, int, int] | None:
     """The largest triangle of the detections a solution matched (None with fewer than three)."""
     _, r, t = best
     dets = [p[1] for p in _assign(lay @ np.asarray(r).T + t, det, tol)]
@@ -250,8 +250,8 @@ def _best_triangle(best, lay: np.ndarray, det: np.ndarray, tol: float) -> Option
     return max(combinations(dets, 3), key=lambda c: _triangle_area(det[list(c)]))
 
 
-def _congruent_solutions(tri: Optional[tuple[int, int, int]], candidates: dict, lay: np.ndarray, det: np.ndarray,
-                         d_lay: np.ndarray, d_det: np.ndarray, tol: float, max_tilt_deg: Optional[float],
+def _congruent_solutions(tri: tuple[int, int, int] | None, candidates: dict, lay: np.ndarray, det: np.ndarray,
+                         d_lay: np.ndarray, d_det: np.ndarray, tol: float, max_tilt_deg: float | None,
                          up_layout: ArrayLike) -> None:
     """Add to ``candidates`` every solution mapping the detection triangle ``tri`` onto a congruent layout triangle.
 
@@ -296,7 +296,7 @@ def _triangle_area(xyz: np.ndarray) -> float:
 STATION_MARGIN_M = 10.0
 
 
-def _by_station(options: list, station_xy: Optional[ArrayLike]) -> Optional[tuple]:
+def _by_station(options: list, station_xy: ArrayLike | None) -> tuple | None:
     """The option whose scanner position (in the layout's frame) is clearly the nearest to ``station_xy``."""
     if station_xy is None:
         return None
@@ -311,8 +311,8 @@ def _by_station(options: list, station_xy: Optional[ArrayLike]) -> Optional[tupl
 
 
 def _settle_rivals(best, candidates: dict, layout: Layout, det: np.ndarray,
-                   evidence: Optional[Callable[[np.ndarray], object]], up_layout: ArrayLike,
-                   station_xy: Optional[ArrayLike] = None):
+                   evidence: Callable[[np.ndarray], object] | None, up_layout: ArrayLike,
+                   station_xy: ArrayLike | None = None):
     """The best solution, or a rival the coarse scan's evidence (then the station hint) prefers.
 
     Refused when nothing tells them apart.
@@ -354,10 +354,10 @@ def tilt_deg(rotation: np.ndarray, up_layout: ArrayLike = (0.0, 0.0, 1.0)) -> fl
 
 
 def identify_reflectors(detections_xyz: np.ndarray, layout: Layout, *, tolerance_m: float = 0.15,
-                        max_seeds: int = 60, max_tilt_deg: Optional[float] = MAX_TILT_DEG,
+                        max_seeds: int = 60, max_tilt_deg: float | None = MAX_TILT_DEG,
                         up_layout: ArrayLike = (0.0, 0.0, 1.0),
-                        evidence: Optional[Callable[[np.ndarray], object]] = None,
-                        station_xy: Optional[ArrayLike] = None) -> Identification:
+                        evidence: Callable[[np.ndarray], object] | None = None,
+                        station_xy: ArrayLike | None = None) -> Identification:
     """Match detections (scanner frame) to the layout (any frame).
 
     Parameters
@@ -413,7 +413,7 @@ def identify_reflectors(detections_xyz: np.ndarray, layout: Layout, *, tolerance
     extra_seeds = 0
     for a, b, c in _seed_triangles(lay, max_seeds, tuple(layout.groups)):
         ok_ab = np.abs(d_det[iu] - d_lay[a, b]) <= tolerance_m
-        for i0, j0 in zip(iu[0][ok_ab], iu[1][ok_ab]):
+        for i0, j0 in zip(iu[0][ok_ab], iu[1][ok_ab], strict=False):
             for i, j in ((i0, j0), (j0, i0)):
                 ks = np.nonzero((np.abs(d_det[i] - d_lay[a, c]) <= tolerance_m)
                                 & (np.abs(d_det[j] - d_lay[b, c]) <= tolerance_m))[0]

@@ -3,9 +3,10 @@ from __future__ import annotations
 
 import csv
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional, Sequence, TYPE_CHECKING
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -81,16 +82,16 @@ class Layout:
         return self.groups[self.index(reflector_id)]
 
     def ids_in(self, group: str) -> tuple[str, ...]:
-        return tuple(i for i, g in zip(self.ids, self.groups) if g == group)
+        return tuple(i for i, g in zip(self.ids, self.groups, strict=False) if g == group)
 
-    def subset(self, ids: Sequence[str]) -> "Layout":
+    def subset(self, ids: Sequence[str]) -> Layout:
         idx = [self.index(i) for i in ids]
         return Layout(tuple(self.ids[k] for k in idx), tuple(self.groups[k] for k in idx), self.xyz[idx],
                       self.diameters_m[idx], self.normals[idx])
 
     def to_rows(self) -> list[dict]:
         rows = []
-        for i, g, p, d, nrm in zip(self.ids, self.groups, self.xyz, self.diameters_m, self.normals):
+        for i, g, p, d, nrm in zip(self.ids, self.groups, self.xyz, self.diameters_m, self.normals, strict=False):
             row = {"id": i, "group": g, "x": float(p[0]), "y": float(p[1]), "z": float(p[2]),
                    "diameter_mm": float(d * 1000)}
             if np.all(np.isfinite(nrm)):
@@ -190,7 +191,7 @@ def write_layout_csv(layout: Layout, path: str | os.PathLike) -> Path:
     return p
 
 
-def layout_from_model(model: BridgeModel, *, noise_m: float = 0.0, rng: Optional[np.random.Generator] = None,
+def layout_from_model(model: BridgeModel, *, noise_m: float = 0.0, rng: np.random.Generator | None = None,
                       with_normals: bool = False) -> Layout:
     """The layout of a simulated bridge, optionally with design-drawing-like errors and the targets' normals."""
     rng = rng or np.random.default_rng(0)
@@ -232,7 +233,7 @@ def _reference_facing(ref_along: np.ndarray, deck_along: np.ndarray) -> np.ndarr
         return out
     order = np.argsort(ref_along)
     groups, cur = [], [order[0]]
-    for a, b in zip(order[:-1], order[1:]):
+    for a, b in zip(order[:-1], order[1:], strict=False):
         if ref_along[b] - ref_along[a] > PIER_GAP_M:
             groups.append(cur)
             cur = []

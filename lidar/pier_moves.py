@@ -20,8 +20,8 @@ when the deck's shape under that choice is implausible.
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import replace
-from typing import Callable, Mapping, Optional
 
 import numpy as np
 
@@ -57,13 +57,12 @@ def _span_coordinates(base: Mapping, groups: Mapping[str, str], meas: list[str])
     side = deck @ across
     lines = np.zeros(len(meas), int)
     order = np.argsort(side)
-    for a, b in zip(order[:-1], order[1:]):
+    for a, b in zip(order[:-1], order[1:], strict=False):
         lines[b] = lines[a] + (side[b] - side[a] > LINE_TOLERANCE_M)
     return xi, lines
 
 
-def deck_shape_chi2(result: EpochDisplacements, base: Mapping, groups: Mapping[str, str]) -> Optional[tuple[float,
-                    int]]:
+def deck_shape_chi2(result: EpochDisplacements, base: Mapping, groups: Mapping[str, str]) -> tuple[float, int] | None:
     """(chi-square, degrees of freedom) of the deck displacements against the supported-span shapes.
 
     None when there are too few deck targets for any degree of freedom.

@@ -4,22 +4,22 @@ Each step is also available on its own in its module; these functions only chain
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import Mapping, Optional
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from common.flags import FLAG_NOT_FOUND, FLAG_UNRESOLVED
-from lidar.centroid import TargetCentroid, measure_windows
-from lidar.detection import DetectionResult, detect_reflectors
 from common.arrays import median
 from common.errors import InputError
+from common.flags import FLAG_NOT_FOUND, FLAG_UNRESOLVED
+from common.progress import ProgressCallback, report, scaled
+from lidar.centroid import TargetCentroid, measure_windows
+from lidar.detection import DetectionResult, detect_reflectors
 from lidar.guided_detection import bright_near, recover_predicted, seen_through
 from lidar.identification import MAX_TILT_DEG, Identification, identify_reflectors
 from lidar.layout import Layout, target_normals
 from lidar.plan import PlanTarget, ScanPlan, coarse_step_needed_deg, incidence_from_map, plan_fine_scans
-from common.progress import ProgressCallback, report, scaled
 from lidar.reflectance_map import ReflectanceMap, reflectance_map
 from lidar.scan import Scan
 from lidar.scanner_profile import VZ1000, ScannerProfile
@@ -32,7 +32,7 @@ class CoarseAnalysis:
     reflectance_map: ReflectanceMap
     detections: DetectionResult
     identification: Identification
-    incidence_cos: Mapping[str, Optional[float]]
+    incidence_cos: Mapping[str, float | None]
 
 
 def _need_intensity(scan: Scan, what: str) -> np.ndarray:
@@ -53,10 +53,10 @@ def _map_evidence(rmap: ReflectanceMap, threshold: float, tolerance_m: float):
     return evidence
 
 
-def analyse_coarse(scan: Scan, layout: Layout, *, step_deg: Optional[float] = None, threshold: Optional[float] = None,
-                   tolerance_m: float = 0.15, max_tilt_deg: Optional[float] = MAX_TILT_DEG,
-                   up_layout: ArrayLike = (0.0, 0.0, 1.0), station_xy: Optional[ArrayLike] = None,
-                   progress: Optional[ProgressCallback] = None) -> CoarseAnalysis:
+def analyse_coarse(scan: Scan, layout: Layout, *, step_deg: float | None = None, threshold: float | None = None,
+                   tolerance_m: float = 0.15, max_tilt_deg: float | None = MAX_TILT_DEG,
+                   up_layout: ArrayLike = (0.0, 0.0, 1.0), station_xy: ArrayLike | None = None,
+                   progress: ProgressCallback | None = None) -> CoarseAnalysis:
     """Reflectance map, detection and identification of a coarse scan.
 
     ``max_tilt_deg``, ``up_layout`` and ``station_xy`` go to :func:`lidar.identification.identify_reflectors`
@@ -68,10 +68,10 @@ def analyse_coarse(scan: Scan, layout: Layout, *, step_deg: Optional[float] = No
                        up_layout=up_layout, station_xy=station_xy, progress=scaled(progress, 0.8, 1.0))
 
 
-def analyse_map(rmap: ReflectanceMap, layout: Layout, *, threshold: Optional[float] = None,
-                tolerance_m: float = 0.15, max_tilt_deg: Optional[float] = MAX_TILT_DEG,
-                up_layout: ArrayLike = (0.0, 0.0, 1.0), station_xy: Optional[ArrayLike] = None,
-                progress: Optional[ProgressCallback] = None) -> CoarseAnalysis:
+def analyse_map(rmap: ReflectanceMap, layout: Layout, *, threshold: float | None = None,
+                tolerance_m: float = 0.15, max_tilt_deg: float | None = MAX_TILT_DEG,
+                up_layout: ArrayLike = (0.0, 0.0, 1.0), station_xy: ArrayLike | None = None,
+                progress: ProgressCallback | None = None) -> CoarseAnalysis:
     """Detection and identification on a coarse scan's reflectance map (see :func:`analyse_coarse`)."""
     diameter = median(layout.diameters_m)
     det = detect_reflectors(rmap, target_diameter_m=diameter, threshold=threshold)
@@ -123,7 +123,7 @@ def plan_from_coarse(coarse: CoarseAnalysis, layout: Layout, *, epoch: str = "",
     return replace(plan, warnings=plan.warnings + (note,)) if note else plan
 
 
-def _coarse_step_note(targets, plan: ScanPlan, step_deg: float) -> Optional[str]:
+def _coarse_step_note(targets, plan: ScanPlan, step_deg: float) -> str | None:
     """What the coarse scan's step could not resolve: the planned targets it did not find and the step they need."""
     planned = {r.reflector for r in plan.rois}
     short = {t.id: coarse_step_needed_deg(t.diameter_m, t.incidence_cos or 1.0, float(np.linalg.norm(t.xyz_socs)))
@@ -162,11 +162,11 @@ def plan_times(plan: ScanPlan) -> dict[str, float]:
     return out
 
 
-def measure_fine(fine: Scan, plan: ScanPlan, layout: Optional[Layout] = None, *,
-                 profile: Optional[ScannerProfile] = None) -> FineMeasurement:
+def measure_fine(fine: Scan, plan: ScanPlan, layout: Layout | None = None, *,
+                 profile: ScannerProfile | None = None) -> FineMeasurement:
     """Centroids (and closure centroids) of every planned target from the epoch's fine scans (concatenated)."""
     intensity = _need_intensity(fine, "the target centroids")
-    diam = None if layout is None else {i: float(d) for i, d in zip(layout.ids, layout.diameters_m)}
+    diam = None if layout is None else {i: float(d) for i, d in zip(layout.ids, layout.diameters_m, strict=False)}
     times = getattr(fine, "time_s", None)
     cents, closures = measure_windows(fine.xyz_socs, intensity, plan.rois, diameters_m=diam,
                                       profile=profile or plan.profile, time_s=times)
@@ -182,7 +182,7 @@ def measure_fine(fine: Scan, plan: ScanPlan, layout: Optional[Layout] = None, *,
     return FineMeasurement(timed, {}, "plan")
 
 
-def measure_targets(fine: Scan, plan: ScanPlan, layout: Optional[Layout] = None, *,
-                    profile: Optional[ScannerProfile] = None) -> dict[str, TargetCentroid]:
+def measure_targets(fine: Scan, plan: ScanPlan, layout: Layout | None = None, *,
+                    profile: ScannerProfile | None = None) -> dict[str, TargetCentroid]:
     """Centroids of every planned target from the epoch's fine scans (concatenated; see :func:`measure_fine`)."""
     return dict(measure_fine(fine, plan, layout, profile=profile).centroids)

@@ -13,15 +13,15 @@ from __future__ import annotations
 import json
 import math
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Optional, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from lidar.angles import AngularWindow, direction_from_angles, spherical_from_xyz, window_around
 from common.errors import InputError
+from lidar.angles import AngularWindow, direction_from_angles, spherical_from_xyz, window_around
 from lidar.reflectance_map import ReflectanceMap
 from lidar.scanner_profile import VZ1000, ScannerProfile
 
@@ -38,7 +38,7 @@ class PlanTarget:
     xyz_socs: tuple[float, ...]
     diameter_m: float = 0.05
     predicted: bool = False
-    incidence_cos: Optional[float] = None
+    incidence_cos: float | None = None
 
 
 @dataclass(frozen=True)
@@ -73,7 +73,7 @@ class RoiPlan:
         }
 
     @classmethod
-    def from_json(cls, d: dict) -> "RoiPlan":
+    def from_json(cls, d: dict) -> RoiPlan:
         try:
             w = AngularWindow(float(d["phi_min_deg"]), float(d["phi_max_deg"]), float(d["theta_min_deg"]),
                               float(d["theta_max_deg"]), float(d["phi_step_deg"]), float(d["theta_step_deg"]))
@@ -99,7 +99,7 @@ class ScanPlan:
     budget_seconds: float
     warnings: tuple[str, ...] = ()
     dome_seconds: float = 0.0
-    dome_step_deg: Optional[float] = None
+    dome_step_deg: float | None = None
     skipped: tuple[tuple[str, str], ...] = ()  # (reflector, why): targets this station cannot measure
 
     @property
@@ -107,7 +107,7 @@ class ScanPlan:
         """Windows plus, for a full-dome-only instrument, its one dome scan, seconds."""
         return float(sum(r.expected_seconds for r in self.rois)) + self.dome_seconds
 
-    def instrument_window(self, roi: "RoiPlan") -> dict:
+    def instrument_window(self, roi: RoiPlan) -> dict:
         """A window in the instrument's own angles and resolution setting (see :class:`ScannerProfile`)."""
         w = roi.window
         p = self.profile
@@ -141,7 +141,7 @@ class ScanPlan:
         }
 
     @classmethod
-    def from_json(cls, d: dict, *, source: str = "plan") -> "ScanPlan":
+    def from_json(cls, d: dict, *, source: str = "plan") -> ScanPlan:
         if not isinstance(d, dict) or "rois" not in d:
             raise InputError(f"{source}: not a BridgeSurvey plan (no 'rois' list)")
         version = int(d.get("format_version", 1))
@@ -167,7 +167,7 @@ class ScanPlan:
         return write_atomic(path, json.dumps(self.to_json(), indent=2))
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> "ScanPlan":
+    def load(cls, path: str | os.PathLike) -> ScanPlan:
         p = Path(path)
         try:
             d = json.loads(p.read_text())
@@ -178,7 +178,7 @@ class ScanPlan:
         return cls.from_json(d, source=str(p))
 
 
-def incidence_from_map(rmap: ReflectanceMap, xyz_socs: ArrayLike, *, radius_m: float = 0.35) -> Optional[float]:
+def incidence_from_map(rmap: ReflectanceMap, xyz_socs: ArrayLike, *, radius_m: float = 0.35) -> float | None:
     """|cos| of the incidence angle at a target, from a plane fitted to the map's cells around it."""
     xyz = np.asarray(xyz_socs, dtype=np.float64)
     theta, phi, rng = spherical_from_xyz(xyz[None])
@@ -237,7 +237,7 @@ def choose_steps(omega_sr: float, sin_theta: float, n_points: float, profile: Sc
 
 
 def plan_roi(target: PlanTarget, *, n_points: float, profile: ScannerProfile = VZ1000,
-             margin_m: float = 0.10, step_deg: Optional[float] = None) -> RoiPlan:
+             margin_m: float = 0.10, step_deg: float | None = None) -> RoiPlan:
     """Window and steps for one target.
 
     ``step_deg`` imposes one step in both angles (a full-dome scan's preset); the window is then
@@ -446,7 +446,7 @@ def _interleave_references(rois: list) -> list:
         return list(rois)
     out: list = []
     chunks = np.array_split(np.arange(len(others)), len(refs))
-    for ref, chunk in zip(refs, chunks):
+    for ref, chunk in zip(refs, chunks, strict=False):
         out.append(ref)
         out.extend(others[i] for i in chunk)
     return out

@@ -8,7 +8,6 @@ centroid by ``R / n``). Used by the station advisor and the on-site check.
 from __future__ import annotations
 
 import math
-from typing import Optional
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -39,7 +38,7 @@ def disc_points(diameter_m: float, range_m: float, cos_incidence: float, theta_d
 
 
 def centroid_covariance(xyz_socs: ArrayLike, normal_socs: ArrayLike, n_points: float, *, diameter_m: float = 0.05,
-                        range_noise_m: float = 0.005, profile: Optional[ScannerProfile] = None) -> np.ndarray:
+                        range_noise_m: float = 0.005, profile: ScannerProfile | None = None) -> np.ndarray:
     """(3, 3) covariance of a target centroid from ``n_points`` disc points, m^2.
 
     Parameters

@@ -16,8 +16,6 @@ residual weighted by its variance.
 """
 from __future__ import annotations
 
-from typing import Optional
-
 import numpy as np
 
 from common.rigid import fit_rigid, rotation_from_rotvec
@@ -35,7 +33,7 @@ def _skews(v: np.ndarray) -> np.ndarray:
     return out
 
 
-def across_axis(deck_xyz: np.ndarray, up: np.ndarray) -> Optional[np.ndarray]:
+def across_axis(deck_xyz: np.ndarray, up: np.ndarray) -> np.ndarray | None:
     """Horizontal unit vector across the span (perpendicular to ``up`` and to the deck targets' long axis).
 
     None when the deck targets do not spread along a direction (fewer than 2, or all within 1 m).
@@ -53,8 +51,8 @@ def across_axis(deck_xyz: np.ndarray, up: np.ndarray) -> Optional[np.ndarray]:
 
 
 def fit_reference_motion(ref_base: np.ndarray, ref_epoch: np.ndarray, ref_var: np.ndarray, *,
-                         deck_base: Optional[np.ndarray] = None, deck_epoch: Optional[np.ndarray] = None,
-                         deck_var_across: Optional[np.ndarray] = None, across_base: Optional[np.ndarray] = None,
+                         deck_base: np.ndarray | None = None, deck_epoch: np.ndarray | None = None,
+                         deck_var_across: np.ndarray | None = None, across_base: np.ndarray | None = None,
                          iterations: int = 3) -> tuple[np.ndarray, np.ndarray]:
     """Rigid motion (R, t) with ``epoch ~= R @ base + t`` from reference targets and deck sideways stability.
 
@@ -111,9 +109,9 @@ def fit_reference_motion(ref_base: np.ndarray, ref_epoch: np.ndarray, ref_var: n
     return rot, t + c - rot @ c
 
 
-def rotation_covariance(ref_base: np.ndarray, ref_var: np.ndarray, *, deck_base: Optional[np.ndarray] = None,
-                        deck_var_across: Optional[np.ndarray] = None,
-                        across_base: Optional[np.ndarray] = None) -> np.ndarray:
+def rotation_covariance(ref_base: np.ndarray, ref_var: np.ndarray, *, deck_base: np.ndarray | None = None,
+                        deck_var_across: np.ndarray | None = None,
+                        across_base: np.ndarray | None = None) -> np.ndarray:
     """(3, 3) covariance (rad^2) of the motion's rotation that :func:`fit_reference_motion` would fit.
 
     From the fit's normal matrix at the identity (the translation marginalised); infinite along a rotation

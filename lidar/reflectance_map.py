@@ -15,16 +15,16 @@ from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional, Protocol
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from lidar.angles import ATAN_DEG32, direction_from_angles, spherical32, wrap_phi
-from lidar.native import coarse_map_library
-from common.validation import require_points
 from common.errors import InputError, ScanFormatError
 from common.progress import ProgressCallback, report
+from common.validation import require_points
+from lidar.angles import ATAN_DEG32, direction_from_angles, spherical32, wrap_phi
+from lidar.native import coarse_map_library
 
 #: Points per chunk: small enough that a chunk's float32 temporaries stay in the caches.
 CHUNK = 262_144
@@ -117,11 +117,11 @@ class _Survey:
     theta_span: np.ndarray  # (2,) float32: smallest and largest zenith angle (inf, -inf when empty)
 
     @classmethod
-    def empty(cls) -> "_Survey":
+    def empty(cls) -> _Survey:
         return cls(np.zeros(3600, np.int64), np.zeros(360 * 720, np.uint8), np.array([np.inf, -np.inf], np.float32))
 
     @classmethod
-    def of_angles(cls, theta_deg: np.ndarray, phi_deg: np.ndarray) -> "_Survey":
+    def of_angles(cls, theta_deg: np.ndarray, phi_deg: np.ndarray) -> _Survey:
         """The survey of float32 angles in degrees (phi in [0, 360])."""
         theta_deg, phi_deg = np.asarray(theta_deg, np.float32), np.asarray(phi_deg, np.float32)
         hist = np.bincount(np.clip((phi_deg * 10).astype(np.int32), 0, 3599), minlength=3600)
@@ -133,7 +133,7 @@ class _Survey:
         span = np.array([seen.min(), seen.max()] if seen.size else [np.inf, -np.inf], np.float32)
         return cls(hist.astype(np.int64), occupied, span)
 
-    def add(self, other: "_Survey") -> "_Survey":
+    def add(self, other: _Survey) -> _Survey:
         lo, hi = min(self.theta_span[0], other.theta_span[0]), max(self.theta_span[1], other.theta_span[1])
         return _Survey(self.azimuth_hist + other.azimuth_hist, self.occupied | other.occupied,
                        np.array([lo, hi], np.float32))
@@ -143,7 +143,7 @@ class _Survey:
         return float(np.count_nonzero(self.occupied)) * 0.25
 
 
-def estimate_step_deg(theta_deg: np.ndarray, phi_deg: np.ndarray, *, n_total: Optional[int] = None) -> float:
+def estimate_step_deg(theta_deg: np.ndarray, phi_deg: np.ndarray, *, n_total: int | None = None) -> float:
     """Angular sampling step of a scan from its point density over the occupied directions.
 
     ``theta_deg``/``phi_deg`` may be a subsample of a scan of ``n_total`` points.
@@ -162,7 +162,7 @@ class PointSource(Protocol):
     """What :func:`binned_map` reads points from (held in memory, or a file's records)."""
 
     n: int
-    limits: Optional[tuple[float, float]]
+    limits: tuple[float, float] | None
 
     def survey(self, stride: int) -> _Survey: ...
 
@@ -174,7 +174,7 @@ class _ArrayPoints:
 
     def __init__(self, xyz: np.ndarray, intensity: np.ndarray):
         self.xyz, self.intensity, self.n = xyz, intensity, int(xyz.shape[0])
-        self.limits: Optional[tuple[float, float]] = (0.0, 1.0)
+        self.limits: tuple[float, float] | None = (0.0, 1.0)
 
     def survey(self, stride: int) -> _Survey:
         t, p, _ = _angles32(self.xyz[::stride])
@@ -185,8 +185,8 @@ class _ArrayPoints:
         return t, p, r, np.asarray(self.intensity[start:stop], dtype=np.float32)
 
 
-def reflectance_map(xyz_socs: np.ndarray, intensity: np.ndarray, *, step_deg: Optional[float] = None,
-                    progress: Optional[ProgressCallback] = None) -> ReflectanceMap:
+def reflectance_map(xyz_socs: np.ndarray, intensity: np.ndarray, *, step_deg: float | None = None,
+                    progress: ProgressCallback | None = None) -> ReflectanceMap:
     """Bin a scan into a reflectance map.
 
     Parameters
@@ -220,13 +220,13 @@ def reflectance_map(xyz_socs: np.ndarray, intensity: np.ndarray, *, step_deg: Op
     return binned_map(_ArrayPoints(xyz_socs, intensity), step_deg=step_deg, progress=progress)
 
 
-def _check_step(step_deg: Optional[float]) -> None:
+def _check_step(step_deg: float | None) -> None:
     if step_deg is not None and not (np.isfinite(step_deg) and 0 < step_deg <= 10):
         raise InputError(f"reflectance map step must be in (0, 10] degrees, got {step_deg}")
 
 
-def binned_map(points: PointSource, *, step_deg: Optional[float] = None,
-               progress: Optional[ProgressCallback] = None) -> ReflectanceMap:
+def binned_map(points: PointSource, *, step_deg: float | None = None,
+               progress: ProgressCallback | None = None) -> ReflectanceMap:
     """The reflectance map of a point source (see :func:`reflectance_map`, :func:`reflectance_map_from_file`).
 
     ``points`` has ``n``, ``limits`` (the raw intensity range mapped onto [0, 1]; None: found while binning),
@@ -263,7 +263,7 @@ def binned_map(points: PointSource, *, step_deg: Optional[float] = None,
     compiled = getattr(points, "binned", None)
     slots = [_Scratch() for _ in range(BATCH)]  # chunk k is binned in slots[k % BATCH]
 
-    def bin_chunk(job: tuple[int, "_Scratch"]) -> Optional["_Partial"]:
+    def bin_chunk(job: tuple[int, _Scratch]) -> _Partial | None:
         start, scratch = job
         stop = min(start + CHUNK, n)
         if compiled is not None:
@@ -340,7 +340,7 @@ class _Partial:
     i_hi: float
 
     @classmethod
-    def of(cls, idx: np.ndarray, r: np.ndarray, inten: np.ndarray) -> Optional["_Partial"]:
+    def of(cls, idx: np.ndarray, r: np.ndarray, inten: np.ndarray) -> _Partial | None:
         if idx.size == 0:
             return None
         lo = int(idx.min())
@@ -353,7 +353,7 @@ class _Partial:
 
     @classmethod
     def of_records(cls, lib, records: np.ndarray, n: int, record_length: int, scales: np.ndarray,
-                   offsets: np.ndarray, grid: _Grid, scratch: "_Scratch") -> "_Partial":
+                   offsets: np.ndarray, grid: _Grid, scratch: _Scratch) -> _Partial:
         """The partial of ``n`` LAS records (raw bytes) by the compiled loops: the numpy path's sums to the bit.
 
         Its arrays are ``scratch``'s, valid until the scratch bins another chunk.
@@ -382,7 +382,7 @@ class _Scratch:
     def __init__(self) -> None:
         self._arrays: dict[str, np.ndarray] = {}
 
-    def take(self, name: str, n: int, dtype, *, fill: Optional[float] = None) -> np.ndarray:
+    def take(self, name: str, n: int, dtype, *, fill: float | None = None) -> np.ndarray:
         """A 1-D array of ``n`` elements (filled with ``fill`` if given): the memory of the last one of that name."""
         a = self._arrays.get(name)
         if a is None or a.size < n or a.dtype != np.dtype(dtype):
@@ -407,7 +407,7 @@ class _Accumulator:
         self.max_i.fill(-np.inf)
         self.i_lo, self.i_hi = np.inf, -np.inf
 
-    def merge(self, part: Optional["_Partial"]) -> None:
+    def merge(self, part: _Partial | None) -> None:
         """Add one chunk's binned sums (:class:`_Partial`) into the map's cells, rounded to float32 first."""
         if part is None:
             return
@@ -573,11 +573,11 @@ class _LasPoints:
         self.path, self.n, self.first = path, facts.point_count, facts.offset_to_points
         self.scales = np.asarray(facts.scales, np.float64)
         self.offsets = np.asarray(facts.offsets, np.float64)
-        self.limits: Optional[tuple[float, float]] = None
+        self.limits: tuple[float, float] | None = None
         if facts.point_count == 0:
             raise ScanFormatError(path, "the LAS header declares 0 points; nothing to read")
         self.fd = os.open(path, os.O_RDONLY)
-        self._batch: Optional[tuple[int, np.ndarray]] = None  # the mapped records of the batch being binned
+        self._batch: tuple[int, np.ndarray] | None = None  # the mapped records of the batch being binned
         self._batch_lock = threading.Lock()
 
     def close(self) -> None:
@@ -680,8 +680,8 @@ class _LasPoints:
         return raw[(start - first) * size:(stop - first) * size]
 
 
-def reflectance_map_from_file(path: str | os.PathLike, *, step_deg: Optional[float] = None,
-                              progress: Optional[ProgressCallback] = None) -> ReflectanceMap:
+def reflectance_map_from_file(path: str | os.PathLike, *, step_deg: float | None = None,
+                              progress: ProgressCallback | None = None) -> ReflectanceMap:
     """The reflectance map of a scan file, without holding the scan in memory where the format allows it.
 
     Uncompressed LAS is read straight from its point records in parallel chunks, its angles computed and

@@ -6,16 +6,17 @@ and the raw values kept beside it.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Any, Mapping, Optional
+from typing import Any
 
 import numpy as np
 
 from common.errors import InputError
 
 
-def normalise_intensity(raw: np.ndarray, limits: Optional[tuple[float, float]] = None) -> np.ndarray:
+def normalise_intensity(raw: np.ndarray, limits: tuple[float, float] | None = None) -> np.ndarray:
     """Map raw intensities linearly onto [0, 1].
 
     Parameters
@@ -77,14 +78,14 @@ class Scan:
     """
 
     xyz_socs: np.ndarray
-    intensity: Optional[np.ndarray] = None
-    intensity_raw: Optional[np.ndarray] = None
-    pose: Optional[np.ndarray] = None
+    intensity: np.ndarray | None = None
+    intensity_raw: np.ndarray | None = None
+    pose: np.ndarray | None = None
     source: str = ""
     name: str = ""
-    grid_index: Optional[np.ndarray] = None
+    grid_index: np.ndarray | None = None
     metadata: Mapping[str, Any] = field(default_factory=dict)
-    time_s: Optional[np.ndarray] = None
+    time_s: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         xyz = self.xyz_socs
@@ -130,7 +131,7 @@ class Scan:
             return self.xyz_socs.copy()
         return self.xyz_socs @ self.pose[:3, :3].T + self.pose[:3, 3]
 
-    def subset(self, index: np.ndarray) -> "Scan":
+    def subset(self, index: np.ndarray) -> Scan:
         """A new scan holding the points selected by a boolean mask or index array."""
 
         def take(a):
@@ -149,7 +150,7 @@ class Scan:
         )
 
     @classmethod
-    def concatenate(cls, scans: "list[Scan]", *, name: str = "") -> "Scan":
+    def concatenate(cls, scans: list[Scan], *, name: str = "") -> Scan:
         """Join scans of one set-up (same SOCS) into one, e.g. several fine-scan files.
 
         Point times are kept when every scan has them (else the result has none).

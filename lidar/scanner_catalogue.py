@@ -19,7 +19,6 @@ exported scan, the field sheet's check line (aim at the first target and compare
 from __future__ import annotations
 
 import math
-from typing import Optional
 
 from common.errors import InputError
 from lidar.scanner_profile import ScannerProfile, load_profile
@@ -263,6 +262,6 @@ def get_scanner(name_or_file: str) -> ScannerProfile:
                      "or give a profile file (.json)")
 
 
-def profile_source(profile: ScannerProfile, field: str) -> Optional[str]:
+def profile_source(profile: ScannerProfile, field: str) -> str | None:
     """Where a profile's value of ``field`` comes from (a data sheet, the dissertation, "assumed: ..."), or None."""
     return dict(profile.sources).get(field)

@@ -10,7 +10,6 @@ import math
 import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Optional
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -101,7 +100,7 @@ class ScannerProfile:
     beam_divergence_mrad: float = 0.3
     beam_exit_diameter_m: float = 0.007
     max_range_m: float = 1400.0
-    max_tilt_deg: Optional[float] = MAX_TILT_DEG
+    max_tilt_deg: float | None = MAX_TILT_DEG
     kind: str = "line"
     step_presets: tuple[tuple[str, float], ...] = ()
     windowed: bool = True
@@ -209,7 +208,7 @@ class ScannerProfile:
         return d
 
     @classmethod
-    def from_dict(cls, d: dict, *, source: str = "scanner profile") -> "ScannerProfile":
+    def from_dict(cls, d: dict, *, source: str = "scanner profile") -> ScannerProfile:
         if not isinstance(d, dict):
             raise InputError(f"{source}: a scanner profile is a JSON object")
         known = {k: v for k, v in d.items() if k in cls.__dataclass_fields__}

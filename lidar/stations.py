@@ -16,22 +16,23 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Mapping, Optional, Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from common.errors import InputError, SurveyError
+from common.progress import ProgressCallback, report
+from lidar.layout import Layout, bridge_axis, target_normals
 from lidar.pipeline import plan_times
+from lidar.plan import PlanTarget, coarse_step_needed_deg, plan_fine_scans
+from lidar.prediction import centroid_covariance
+from lidar.scanner_profile import ScannerProfile
 from lidar.systematic.adjustment import FieldModel, VisitSystematics
 from lidar.systematic.budget import corrected_displacements
 from lidar.systematic.range_walk import RangeWalkModel
-from common.errors import InputError, SurveyError
-from lidar.layout import Layout, bridge_axis, target_normals
-from lidar.plan import PlanTarget, coarse_step_needed_deg, plan_fine_scans
-from lidar.prediction import centroid_covariance
-from common.progress import ProgressCallback, report
-from lidar.scanner_profile import ScannerProfile
 
 log = logging.getLogger(__name__)
 MIN_INCIDENCE_COS = 0.1  # beyond about 84 deg a retro-reflective disc returns too few points to use
@@ -116,7 +117,7 @@ class _Piers:
     top: float
 
     @classmethod
-    def from_layout(cls, layout: Layout, up: np.ndarray) -> "_Piers":
+    def from_layout(cls, layout: Layout, up: np.ndarray) -> _Piers:
         axis = bridge_axis(layout, up=up)
         across = np.cross(up, axis)
         ref = np.array([g == "reference" for g in layout.groups])
@@ -188,11 +189,11 @@ class _Sighted:
     time_s: float = float("nan")
 
 
-def _as_sighted(o: object) -> _Sighted:
+def _as_sighted(o: Any) -> _Sighted:
     xyz = getattr(o, "xyz_socs", None)
     if xyz is None:
-        xyz = getattr(o, "xyz")
-    return _Sighted(np.asarray(xyz, dtype=np.float64), np.asarray(getattr(o, "cov"), dtype=np.float64),
+        xyz = o.xyz
+    return _Sighted(np.asarray(xyz, dtype=np.float64), np.asarray(o.cov, dtype=np.float64),
                     float(getattr(o, "cos_incidence", float("nan"))), float(getattr(o, "time_s", float("nan"))))
 
 
@@ -217,9 +218,9 @@ def _typical_visit(field: FieldModel, label: str) -> VisitSystematics:
 
 def predict_station(layout: Layout, station_layout: Sequence[float], *, profile: ScannerProfile,
                     min_points: int = 1000, budget_seconds: float = 3600.0, up: ArrayLike = (0.0, 0.0, 1.0),
-                    baseline: Optional[Mapping[str, object]] = None,
-                    normals: Optional[np.ndarray] = None, piers: Optional[_Piers] = None,
-                    obstacles: Optional[Obstacles] = None, field_model: Optional[FieldModel] = None,
+                    baseline: Mapping[str, object] | None = None,
+                    normals: np.ndarray | None = None, piers: _Piers | None = None,
+                    obstacles: Obstacles | None = None, field_model: FieldModel | None = None,
                     closure: bool = False) -> StationPrediction:
     """Predicted plan time, points and displacement sigma of every target from one station.
 
@@ -308,7 +309,7 @@ def predict_station(layout: Layout, station_layout: Sequence[float], *, profile:
     if baseline is not None:  # same geometry as the baseline: positions from it, so nothing looks moved
         carried = _carry(base, epoch)
         epoch = {k: replace(o, xyz_socs=carried.get(k, o.xyz_socs)) for k, o in epoch.items()}
-    groups = dict(zip(layout.ids, layout.groups))
+    groups = dict(zip(layout.ids, layout.groups, strict=False))
     model = field_model if field_model is not None and baseline is not None else FieldModel("__baseline__", RangeWalkModel(), {})
     label = "__station__"
     model = replace(model, visits={**dict(model.visits), label: _typical_visit(model, label)})
@@ -403,10 +404,10 @@ def _terminate_workers(ex) -> None:
 
 def survey_stations(layout: Layout, positions_layout: np.ndarray, *, profile: ScannerProfile,
                     min_points: int = 1000, budget_seconds: float = 3600.0, up: ArrayLike = (0.0, 0.0, 1.0),
-                    baseline: Optional[Mapping[str, object]] = None, workers: Optional[int] = None,
-                    obstacles_xyz: Optional[np.ndarray] = None, field_model: Optional[FieldModel] = None,
+                    baseline: Mapping[str, object] | None = None, workers: int | None = None,
+                    obstacles_xyz: np.ndarray | None = None, field_model: FieldModel | None = None,
                     closure: bool = False,
-                    progress: Optional[ProgressCallback] = None) -> tuple[StationPrediction, ...]:
+                    progress: ProgressCallback | None = None) -> tuple[StationPrediction, ...]:
     """:func:`predict_station` at every position of an (M, 3) array, best first.
 
     ``workers`` processes share the positions (default: one per core, at most 4; 1 runs here).
@@ -463,7 +464,7 @@ def survey_stations(layout: Layout, positions_layout: np.ndarray, *, profile: Sc
         out = []
         for job in jobs:
             before = len(out)
-            out.extend(_predict_chunk(job, each=lambda n: report(
+            out.extend(_predict_chunk(job, each=lambda n, before=before: report(
                 progress, (before + n) / len(pos), f"{before + n} of {len(pos)} stations")))
     report(progress, 1.0, "stations evaluated")
     return tuple(sorted(out, key=StationPrediction.rank_key))

@@ -6,23 +6,22 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Optional
 
 import numpy as np
 
+from common.files import write_atomic
+from common.progress import ProgressCallback, report
 from lidar.figures import save_figure
 from lidar.layout import layout_from_model
-from common.progress import ProgressCallback, report
 from lidar.simulate import BridgeModel, EpochConditions, ScannerSetup
 from lidar.simulate.files import simulate_coarse, simulate_fine
-from projects.store.errors import CampaignError
-from common.files import write_atomic
 from projects.outputs.exports import export
-from projects.results.table import displacement_table, to_csv
 from projects.outputs.figures import displacement_history_figure
-from projects.store.history import histories
 from projects.processing.stages import plan_epoch, process
+from projects.results.table import displacement_table, to_csv
 from projects.store.campaign import DB_NAME, Campaign
+from projects.store.errors import CampaignError
+from projects.store.history import histories
 
 #: Visits are on Mondays at this time (UTC); the last one is the latest Monday before the day the demo is built,
 #: so a fresh demo never holds a visit, a temperature or a camera reading from the future.
@@ -31,7 +30,7 @@ CABLE_TIE_WEEK = 20
 OCCLUDED_WEEK = 30
 
 
-def demo_start(weeks: int, *, today: Optional[dt.date] = None) -> dt.datetime:
+def demo_start(weeks: int, *, today: dt.date | None = None) -> dt.datetime:
     """The first visit of a ``weeks``-week demo whose last visit is the latest Monday before ``today``.
 
     >>> demo_start(52, today=dt.date(2026, 12, 1)).isoformat()  # a Tuesday: the last visit is the day before
@@ -39,9 +38,9 @@ def demo_start(weeks: int, *, today: Optional[dt.date] = None) -> dt.datetime:
     >>> demo_start(2, today=dt.date(2026, 11, 30)).isoformat()  # a Monday: the last visit is a week before
     '2026-11-16T09:00:00+00:00'
     """
-    today = today or dt.datetime.now(dt.timezone.utc).date()
+    today = today or dt.datetime.now(dt.UTC).date()
     last = today - dt.timedelta(days=today.weekday() or 7)
-    return dt.datetime.combine(last, VISIT_TIME, tzinfo=dt.timezone.utc) - dt.timedelta(weeks=weeks - 1)
+    return dt.datetime.combine(last, VISIT_TIME, tzinfo=dt.UTC) - dt.timedelta(weeks=weeks - 1)
 
 
 def _start_of(c: Campaign, weeks: int) -> dt.datetime:
@@ -58,7 +57,7 @@ def _start_of(c: Campaign, weeks: int) -> dt.datetime:
 def _not_after_now(t_ns: int) -> int:
     """``t_ns``, or the current hour when that is earlier (series end at the time the demo is built)."""
     hour = 3600 * 10 ** 9
-    now = int(dt.datetime.now(dt.timezone.utc).timestamp()) * 10 ** 9 // hour * hour
+    now = int(dt.datetime.now(dt.UTC).timestamp()) * 10 ** 9 // hour * hour
     return min(int(t_ns), now)
 
 
@@ -87,7 +86,7 @@ class DemoResult:
     xlsx: Path
     plot: Path
     report: Path
-    crossval: Optional[Path] = None
+    crossval: Path | None = None
     notes: list[str] = field(default_factory=list)
 
     def summary(self) -> str:
@@ -100,7 +99,7 @@ class DemoResult:
 
 
 def build_demo(folder: str | os.PathLike, *, weeks: int = 52, seed: int = 2026,
-               progress: Optional[ProgressCallback] = None) -> DemoResult:
+               progress: ProgressCallback | None = None) -> DemoResult:
     """Build (or resume building) the demo campaign in ``folder``."""
     folder = Path(folder)
     if weeks < 2:
@@ -161,7 +160,6 @@ def build_demo(folder: str | os.PathLike, *, weeks: int = 52, seed: int = 2026,
         story = add_demo_story(c, folder, weeks=weeks, seed=seed, start=start)
         report(progress, 0.98, "report")
         from projects.outputs.report import write_report
-
         from projects.series.context import plot_context
 
         rows = displacement_table(c)
@@ -182,7 +180,7 @@ DESIGN_OFFSET_MM = 21.59  # the dissertation's alignment of its finite-element c
 
 
 def _ns(when: dt.datetime) -> int:
-    return int(np.datetime64(when.astimezone(dt.timezone.utc).replace(tzinfo=None), "ns").astype(np.int64))
+    return int(np.datetime64(when.astimezone(dt.UTC).replace(tzinfo=None), "ns").astype(np.int64))
 
 
 def demo_temperature(t_ns: np.ndarray, start: dt.datetime) -> np.ndarray:
@@ -214,7 +212,8 @@ def add_demo_story(c: Campaign, folder: Path, *, weeks: int, seed: int, start: d
         t = np.arange(t0 - 7 * 24 * hour, _not_after_now(t0 + (weeks + 1) * 7 * 24 * hour), hour)
         temp = demo_temperature(t, start) + np.random.default_rng(seed + 11).normal(0, 0.3, t.size)
         lines = ["time,temperature_degC"] + [
-            f"{np.datetime_as_string(np.datetime64(int(a), 'ns'), unit='m')}Z,{b:.2f}" for a, b in zip(t, temp)]
+            f"{np.datetime_as_string(np.datetime64(int(a), 'ns'), unit='m')}Z,{b:.2f}"
+            for a, b in zip(t, temp, strict=False)]
         (field / "temperature.csv").write_text("\n".join(lines) + "\n")
         import_env(c, field / "temperature.csv", kind="temperature", name="air-temperature")
     if not events(c):
@@ -256,8 +255,13 @@ def add_demo_camera(c: Campaign, folder: Path, *, weeks: int, seed: int, start: 
 
     Its own zero, 0.2 mm noise, a ten-day outage, a few empty readings), imported and cross-validated.
     """
-    from projects.series.camera import crossvalidate, save_crossval, series_records, write_crossval_outputs
-    from projects.series.camera import import_series
+    from projects.series.camera import (
+        crossvalidate,
+        import_series,
+        save_crossval,
+        series_records,
+        write_crossval_outputs,
+    )
     from vision.simulate.series import simulate_series, write_series_csv
 
     t0 = _ns(start)

@@ -17,9 +17,9 @@ import datetime as dt
 import json
 import math
 import shutil
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Optional, Sequence
 
 import numpy as np
 
@@ -34,7 +34,7 @@ from lidar.simulate.truth import ScanTruth
 from projects.processing.stages import plan_epoch, process, set_parameter
 from projects.store.campaign import Campaign
 
-START = dt.datetime(2026, 1, 5, 9, 0, tzinfo=dt.timezone.utc)
+START = dt.datetime(2026, 1, 5, 9, 0, tzinfo=dt.UTC)
 
 
 def _within(errors: list, sigmas: list, k: float) -> float:
@@ -113,8 +113,8 @@ class StudyScore:
 class ProductPlanner:
     """The ``plan_for`` callback of :func:`lidar.simulate.campaign.write_campaign`: plans with the product."""
 
-    def __init__(self, campaign_dir: Path, layout_csv: Path, *, span_m: Optional[float],
-                 settings: Optional[dict] = None):
+    def __init__(self, campaign_dir: Path, layout_csv: Path, *, span_m: float | None,
+                 settings: dict | None = None):
         self.dir, self.layout_csv, self.span_m = campaign_dir, layout_csv, span_m
         self.settings = settings or {}
         self.count = 0
@@ -154,8 +154,8 @@ def _setup_number(folder: Path) -> int:
 
 
 def run_study(root: Path, model: BridgeModel, visits: Sequence[EpochConditions], *, seed: int = 0,
-              stations: Optional[Sequence[Sequence[ScannerSetup]]] = None, coarse_step_deg: float = 0.05,
-              settings: Optional[dict] = None, compare_without: bool = False) -> dict[str, StudyScore]:
+              stations: Sequence[Sequence[ScannerSetup]] | None = None, coarse_step_deg: float = 0.05,
+              settings: dict | None = None, compare_without: bool = False) -> dict[str, StudyScore]:
     """Simulate, plan, import and process a campaign; score it (and, optionally, the same without corrections).
 
     Returns ``{"corrected": score}`` (and ``"uncorrected"``: the same scans with ``field_model false``).
@@ -206,7 +206,7 @@ def score_campaign(camp: Path, field_dir: Path, labels: dict) -> StudyScore:
             return sc
         tb = by_label[base]
         lay = c.layout()
-        deck = {t for t, g in zip(lay.ids, lay.groups) if g == "measurement"}
+        deck = {t for t, g in zip(lay.ids, lay.groups, strict=False) if g == "measurement"}
         later = [e.label for e in c.epochs() if e.label != base and e.label in by_label]
         sc.expected = len(deck) * len(later)  # every deck target of the layout in every later visit
         sc.missing = sc.expected

@@ -4,8 +4,8 @@ from __future__ import annotations
 import contextlib
 import logging
 import threading
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Optional, Sequence
 
 import numpy as np
 
@@ -39,8 +39,8 @@ class ChangeResult:
     method: str
     points: np.ndarray
     distance_m: np.ndarray
-    lod_m: Optional[np.ndarray]
-    normals: Optional[np.ndarray]
+    lod_m: np.ndarray | None
+    normals: np.ndarray | None
     registration_error_m: float
     parameters: dict
 
@@ -51,11 +51,11 @@ class ChangeResult:
         with np.errstate(invalid="ignore"):
             return np.abs(self.distance_m) > lod
 
-    def summary(self, mask: Optional[np.ndarray] = None) -> dict:
+    def summary(self, mask: np.ndarray | None = None) -> dict:
         """Statistics over all points or a subset (mm)."""
         d = self.distance_m if mask is None else self.distance_m[mask]
         ok = np.isfinite(d)
-        out: dict[str, Optional[float]] = {"n": int(ok.sum())}
+        out: dict[str, float | None] = {"n": int(ok.sum())}
         if ok.any():
             dd = d[ok] * 1e3
             out.update(mean_mm=float(dd.mean()), median_mm=float(np.median(dd)), std_mm=float(dd.std()),
@@ -179,7 +179,7 @@ def m3c2(reference_xyz: np.ndarray, compared_xyz: np.ndarray, core_points: np.nd
          normal_radii: Sequence[float] = (0.5,), cyl_radius: float = 0.25, max_distance: float = 0.5,
          registration_error: float = 0.0, robust_aggr: bool = False,
          orientation: Sequence[float] = (0.0, 0.0, 1.0),
-         progress: Optional[ProgressCallback] = None) -> ChangeResult:
+         progress: ProgressCallback | None = None) -> ChangeResult:
     """M3C2 distances (py4dgeo) at ``core_points`` with the level of detection.
 
     Parameters take py4dgeo's names and units (metres).

@@ -5,8 +5,9 @@ Our own few dozen lines on scipy's KD-tree rather than Open3D's: the same algori
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Optional, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -110,8 +111,8 @@ def _morton(cell: np.ndarray) -> np.ndarray:
     return code
 
 
-def surface_normals(xyz: np.ndarray, tree: "cKDTree", *, radius_m: float, max_nn: int = 30,
-                    min_nn: int = 6, which: Optional[np.ndarray] = None) -> np.ndarray:
+def surface_normals(xyz: np.ndarray, tree: cKDTree, *, radius_m: float, max_nn: int = 30,
+                    min_nn: int = 6, which: np.ndarray | None = None) -> np.ndarray:
     """Unit normals of the local planes: the least principal axis of each point's neighbours.
 
     Parameters
@@ -146,7 +147,7 @@ def surface_normals(xyz: np.ndarray, tree: "cKDTree", *, radius_m: float, max_nn
 NORMALS_BLOCK = 65_536
 
 
-def _block_normals(xyz: np.ndarray, columns: list[np.ndarray], which: np.ndarray, tree: "cKDTree", radius_m: float,
+def _block_normals(xyz: np.ndarray, columns: list[np.ndarray], which: np.ndarray, tree: cKDTree, radius_m: float,
                    max_nn: int, min_nn: int) -> np.ndarray:
     """Normals of the points ``xyz[which]`` (see :func:`surface_normals`); ``columns`` are xyz's, contiguous."""
     dist, idx = tree.query(xyz[which], k=min(max_nn, len(xyz)), distance_upper_bound=radius_m, workers=-1)
@@ -174,8 +175,8 @@ def _block_normals(xyz: np.ndarray, columns: list[np.ndarray], which: np.ndarray
 
 def refine_icp(source_xyz: np.ndarray, target_xyz: np.ndarray, initial: Transform, *,
                voxels_m: Sequence[float] = (0.20, 0.08, 0.04), max_iterations: int = 30,
-               kernel_sigma_m: Optional[float] = None, offset: Optional[np.ndarray] = None,
-               progress: Optional[ProgressCallback] = None) -> IcpResult:
+               kernel_sigma_m: float | None = None, offset: np.ndarray | None = None,
+               progress: ProgressCallback | None = None) -> IcpResult:
     """Refine ``initial`` (source -> target) by point-to-plane ICP with a Tukey kernel, coarse to fine.
 
     Parameters
@@ -322,7 +323,7 @@ def _step(moved: np.ndarray, matched: np.ndarray, normals: np.ndarray, kernel_m:
 
 
 def stable_mask(xyz: np.ndarray, anchors_xyz: np.ndarray, *, radius_m: float = 4.0,
-                exclude_above_m: Optional[float] = None, up: Sequence[float] = (0.0, 0.0, 1.0)) -> np.ndarray:
+                exclude_above_m: float | None = None, up: Sequence[float] = (0.0, 0.0, 1.0)) -> np.ndarray:
     """Points near the anchors (reference targets on the piers) and, optionally, below a height.
 
     Parameters

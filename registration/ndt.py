@@ -15,7 +15,6 @@ import subprocess
 import tempfile
 import time
 from pathlib import Path
-from typing import Optional
 
 import numpy as np
 
@@ -61,8 +60,8 @@ def parse_transform(text: str) -> np.ndarray:
 
 def refine_ndt(source_xyz: np.ndarray, target_xyz: np.ndarray, initial: Transform, *, resolution_m: float = 1.0,
                step_m: float = 0.05, max_iterations: int = 50, epsilon: float = 1e-6, voxel_m: float = 0.04,
-               offset: Optional[np.ndarray] = None, timeout_s: float = 600.0,
-               progress: Optional[ProgressCallback] = None) -> IcpResult:
+               offset: np.ndarray | None = None, timeout_s: float = 600.0,
+               progress: ProgressCallback | None = None) -> IcpResult:
     """Refine ``initial`` (source -> target) with PCL's NDT on the stable parts.
 
     Parameters

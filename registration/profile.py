@@ -14,8 +14,8 @@ errors at that place (:class:`RegistrationSigma`).
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Optional, Sequence
 
 import numpy as np
 
@@ -221,7 +221,7 @@ def underside_points(slh: np.ndarray, girders: Sequence[GirderLine], *, band_m: 
 
 
 def _joint_fit(ds: tuple[np.ndarray, np.ndarray], dl: tuple[np.ndarray, np.ndarray],
-               h: tuple[np.ndarray, np.ndarray]) -> Optional[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+               h: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """Both epochs' underside heights at (0, 0) from one fit with the bin's slopes shared.
 
     ``h = a_e + b ds + c dl (+ d ds in the second epoch)``: the underside's geometry (gradient, cross-fall) is
@@ -270,7 +270,7 @@ def _joint_fit(ds: tuple[np.ndarray, np.ndarray], dl: tuple[np.ndarray, np.ndarr
 def span_profile(slh_from: np.ndarray, slh_to: np.ndarray, girders: Sequence[GirderLine], *,
                  stations_m: tuple[float, float], bin_m: float = 2.5, half_width_m: float = 0.5,
                  band_m: float = 0.15, max_tilt_deg: float = 15.0, edge_margin_m: float = 0.1,
-                 registration: tuple[Optional[RegistrationSigma], Optional[RegistrationSigma]] = (None, None),
+                 registration: tuple[RegistrationSigma | None, RegistrationSigma | None] = (None, None),
                  min_points: int = 10) -> SpanProfile:
     """Height change of the deck underside per bin along each girder line, with its σ.
 

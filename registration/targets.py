@@ -1,8 +1,8 @@
 """Registration of two epochs on matched targets (tie points), with a residual table and moved-target checks."""
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Optional, Sequence
 
 import numpy as np
 
@@ -83,7 +83,7 @@ def _fit(src: np.ndarray, dst: np.ndarray, mode: str, w: np.ndarray) -> tuple[np
 
 
 def register_targets(xyz_from: np.ndarray, xyz_to: np.ndarray, ids: Sequence[str], *, mode: str = "rigid",
-                     sigma_m: Optional[np.ndarray] = None, tolerance_m: float = 0.002,
+                     sigma_m: np.ndarray | None = None, tolerance_m: float = 0.002,
                      source_frame: str = "", target_frame: str = "") -> TargetRegistration:
     """Transform taking ``xyz_from`` onto ``xyz_to`` from matched tie points.
 
@@ -117,7 +117,7 @@ def register_targets(xyz_from: np.ndarray, xyz_to: np.ndarray, ids: Sequence[str
     need = MIN_POINTS[mode]
     if ok.sum() < need:
         raise RegistrationError(f"{mode} registration needs at least {need} targets seen in both epochs, got "
-                                f"{int(ok.sum())} ({', '.join(i for i, k in zip(ids, ok) if k) or 'none'}); "
+                                f"{int(ok.sum())} ({', '.join(i for i, k in zip(ids, ok, strict=True) if k) or 'none'}); "
                                 + ("try --mode yaw for two targets on levelled set-ups" if mode != "yaw" else
                                    "check that the reference targets were found"))
     sig = np.full(len(src), 5e-4) if sigma_m is None else np.asarray(sigma_m, dtype=np.float64)

@@ -115,7 +115,7 @@ def main(argv: list[str]) -> int:
         if not (root / pkg).is_dir():
             continue
         a, p, fu, pu = annotations(root, pkg)
-        tot = [t + v for t, v in zip(tot, (a, p, fu, pu))]
+        tot = [t + v for t, v in zip(tot, (a, p, fu, pu), strict=False)]
         print(f"{pkg:13s} annotated parameters {a}/{p} ({100 * a / max(p, 1):.0f} %), "
               f"fully annotated public functions {fu}/{pu} ({100 * fu / max(pu, 1):.0f} %)")
     a, p, fu, pu = tot

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
-from typing import Optional
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -200,9 +199,9 @@ def _pose_params(B: np.ndarray) -> np.ndarray:
     return np.concatenate([Rotation.from_matrix(B[:3, :3]).as_rotvec(), B[:3, 3]])
 
 
-def measure_dual_camera(setup: DualCameraSetup, main_uv: np.ndarray, sub_uv: Optional[np.ndarray] = None, *,
-                        motion: Optional[CameraMotion] = None,
-                        progress: Optional[ProgressCallback] = None) -> DualCameraResult:
+def measure_dual_camera(setup: DualCameraSetup, main_uv: np.ndarray, sub_uv: np.ndarray | None = None, *,
+                        motion: CameraMotion | None = None,
+                        progress: ProgressCallback | None = None) -> DualCameraResult:
     """The measurement stage: compensated displacement of the main target in every frame.
 
     Parameters

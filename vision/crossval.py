@@ -13,8 +13,8 @@ The steps are plain functions: :func:`pair_with_camera`, :func:`align_camera`, :
 from __future__ import annotations
 
 import datetime as dt
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
-from typing import Optional, Sequence
 
 import numpy as np
 
@@ -93,7 +93,7 @@ class CrossValidation:
         return d
 
     @classmethod
-    def from_json(cls, d: dict) -> "CrossValidation":
+    def from_json(cls, d: dict) -> CrossValidation:
         """Rebuild from :meth:`to_json` output (JSON null read back as NaN).
 
         A summary stored by an older version from fewer than :data:`MIN_PAIRS` pairs loses its statistics.
@@ -115,7 +115,7 @@ STATISTICS = ("bias_mm", "rmse_mm", "std_mm", "max_abs_mm", "correlation", "slop
 
 
 def _iso(ns: int) -> str:
-    return dt.datetime.fromtimestamp(ns / 1e9, dt.timezone.utc).isoformat()
+    return dt.datetime.fromtimestamp(ns / 1e9, dt.UTC).isoformat()
 
 
 @dataclass(frozen=True, eq=False)
@@ -136,7 +136,7 @@ def pair_with_camera(time_ns: np.ndarray, camera: CameraSeries, *, window_s: flo
     cam = np.full(len(t), np.nan)
     cam_s = np.full(len(t), np.nan)
     cam_n = np.zeros(len(t), int)
-    for k, (a, b) in enumerate(zip(lo, hi)):
+    for k, (a, b) in enumerate(zip(lo, hi, strict=False)):
         v = cv[a:b]
         v = v[np.isfinite(v)]
         cam_n[k] = len(v)
@@ -149,7 +149,7 @@ def pair_with_camera(time_ns: np.ndarray, camera: CameraSeries, *, window_s: flo
 
 
 def align_camera(epochs: Sequence[str], time_ns: np.ndarray, lidar_mm: np.ndarray, camera_mm: np.ndarray,
-                 variance_mm2: np.ndarray, paired: np.ndarray, *, align_at_ns: Optional[int] = None
+                 variance_mm2: np.ndarray, paired: np.ndarray, *, align_at_ns: int | None = None
                  ) -> tuple[float, dict]:
     """The offset that sets the camera's zero, and how it was found.
 
@@ -229,7 +229,7 @@ def _pair_flags(camera_n: int, lidar_mm: float) -> tuple[str, ...]:
 
 
 def cross_validate(epochs: Sequence[str], time_ns: np.ndarray, lidar_mm: np.ndarray, lidar_sigma_mm: np.ndarray,
-                   camera: CameraSeries, *, window_s: float = 1800.0, align_at_ns: Optional[int] = None,
+                   camera: CameraSeries, *, window_s: float = 1800.0, align_at_ns: int | None = None,
                    reflector: str = "", series: str = "") -> CrossValidation:
     """Pair LiDAR epochs with the camera series, align the camera's zero and compare.
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from itertools import permutations
-from typing import Any, Optional
+from typing import Any
 
 import cv2
 import numpy as np
@@ -127,7 +127,7 @@ def detect_main_target(image: np.ndarray, pattern_m: np.ndarray, **kw: Any) -> n
 
 
 def detect_checkerboard(image: np.ndarray, inner_corners: tuple[int, int], *, refine: bool = True
-                        ) -> Optional[np.ndarray]:
+                        ) -> np.ndarray | None:
     """Inner corners of a checkerboard, (cols*rows, 2) row by row from the top-left, or None.
 
     Uses OpenCV's classic detector refined by ``cornerSubPix`` (about 0.03 px on a sharp

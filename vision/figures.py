@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import datetime as dt
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -53,7 +53,7 @@ def _pairs_with(cv: CrossValidation, attr: str):
     return p, _dates(ns.astype(np.int64))
 
 
-def overlay_figure(cv: CrossValidation, camera: Optional[CameraSeries] = None, *, ax: Any = None) -> Any:
+def overlay_figure(cv: CrossValidation, camera: CameraSeries | None = None, *, ax: Any = None) -> Any:
     """Camera series (aligned) with the LiDAR epochs and their +-2 sigma error bars."""
     fig = None
     if ax is None:

@@ -16,7 +16,6 @@ import numpy as np
 
 from common.rigid import apply_matrix, invert_matrix, matrix_from_rotvec, matrix_from_rt
 
-
 # The 4x4 form of common.rigid.Transform, under the names this module's callers use.
 rigid = matrix_from_rt
 rigid_from_rotvec = matrix_from_rotvec

@@ -2,8 +2,8 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Optional, Sequence
 
 import numpy as np
 
@@ -43,14 +43,14 @@ def paired(main: Sequence[Path], sub: Sequence[Path]) -> None:
 
 
 def detect_sequence(main: Sequence[Path], sub: Sequence[Path], *, pattern_m: np.ndarray,
-                    inner_corners: tuple[int, int], progress: Optional[ProgressCallback] = None
+                    inner_corners: tuple[int, int], progress: ProgressCallback | None = None
                     ) -> tuple[np.ndarray, np.ndarray]:
     """Main-target features (n, N, 2) and sub-target corners (n, M, 2) of every frame; NaN where not found."""
     paired(main, sub)
     n, N, M = len(main), len(pattern_m), inner_corners[0] * inner_corners[1]
     uv = np.full((n, N, 2), np.nan)
     corners = np.full((n, M, 2), np.nan)
-    for k, (pm, ps) in enumerate(zip(main, sub)):
+    for k, (pm, ps) in enumerate(zip(main, sub, strict=False)):
         try:
             uv[k] = detect_main_target(read_gray(pm), pattern_m)
         except ProcessingError:

@@ -24,7 +24,7 @@ import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 
@@ -110,7 +110,7 @@ class CameraSeries:
         import datetime as dt
 
         def iso(ns):
-            return dt.datetime.fromtimestamp(int(ns) / 1e9, dt.timezone.utc).isoformat()
+            return dt.datetime.fromtimestamp(int(ns) / 1e9, dt.UTC).isoformat()
 
         return {"rows": len(self), "start": iso(self.time_ns[0]) if len(self) else None,
                 "end": iso(self.time_ns[-1]) if len(self) else None, "sampling_s": self.sampling_s,
@@ -138,7 +138,7 @@ def _norm(name: str) -> str:
     return re.sub(r"[^a-z0-9µ]+", "_", name.strip().lower()).strip("_")
 
 
-def _unit_in_name(name: str, units=UNITS_MM) -> Optional[str]:
+def _unit_in_name(name: str, units=UNITS_MM) -> str | None:
     alt = "|".join(sorted((re.escape(u) for u in units), key=len, reverse=True))
     m = re.search(rf"(?:[_\[\(\s]|^)({alt})(?:[\]\)\s]|$)", name.strip().lower())
     if m is None:
@@ -146,7 +146,7 @@ def _unit_in_name(name: str, units=UNITS_MM) -> Optional[str]:
     return m.group(1) if m else None
 
 
-def _find(names: list[str], wanted) -> Optional[int]:
+def _find(names: list[str], wanted) -> int | None:
     normed = [_norm(n) for n in names]
     for w in wanted:
         for i, n in enumerate(normed):
@@ -155,7 +155,7 @@ def _find(names: list[str], wanted) -> Optional[int]:
     return None
 
 
-def _sniff_separator(lines: list[str]) -> Optional[str]:
+def _sniff_separator(lines: list[str]) -> str | None:
     sample = lines[:20]
     for sep in (",", ";", "\t"):
         counts = {ln.count(sep) for ln in sample}
@@ -164,8 +164,8 @@ def _sniff_separator(lines: list[str]) -> Optional[str]:
     return None  # whitespace
 
 
-def read_camera_series(path: str | os.PathLike, *, column: Optional[str] = None, timezone: str = "UTC",
-                       unit: Optional[str] = None, positive: str = "up", gap_factor: float = 3.0,
+def read_camera_series(path: str | os.PathLike, *, column: str | None = None, timezone: str = "UTC",
+                       unit: str | None = None, positive: str = "up", gap_factor: float = 3.0,
                        max_bad_fraction: float = 0.05, quantity: Quantity = DISPLACEMENT) -> CameraSeries:
     """Read a displacement series file (see the module documentation for what is understood).
 
@@ -214,7 +214,7 @@ class _Table:
     header: list[str]
     df: Any                # pandas DataFrame of str, columns 0..n-1 (pandas has no type stubs here)
     line_no: np.ndarray    # file line of each row (1-based)
-    sep: Optional[str]
+    sep: str | None
     n_rows: int            # data rows in the file, bad ones included
     bad: list              # BadRow, the first MAX_BAD_LISTED
     n_bad: int
@@ -222,12 +222,12 @@ class _Table:
 
 @dataclass(frozen=True)
 class _Columns:
-    unix: Optional[int]
-    time: Optional[int]
-    date: Optional[int]
-    clock: Optional[int]
-    unit: Optional[int]
-    zone: Optional[int]
+    unix: int | None
+    time: int | None
+    date: int | None
+    clock: int | None
+    unit: int | None
+    zone: int | None
     value: int
 
 
@@ -285,7 +285,7 @@ def _read_table(path: Path) -> _Table:
     return _Table(header, df, line_no, sep, len(body), bad, n_bad)
 
 
-def _find_columns(path: Path, header: list[str], column: Optional[str]) -> _Columns:
+def _find_columns(path: Path, header: list[str], column: str | None) -> _Columns:
     """Which column holds the time, the unit, the time zone and the value.
 
     The time is unix seconds, a date-time, or a date and a clock; the time zone and the value (``column`` when given, else by name, else the one column left).
@@ -338,7 +338,7 @@ def _read_times(tab: _Table, cols: _Columns, timezone: str) -> tuple[np.ndarray,
     return t_ns, t_ok
 
 
-def _read_values(tab: _Table, cols: _Columns, t_ok: np.ndarray, unit: Optional[str], quantity: Quantity):
+def _read_values(tab: _Table, cols: _Columns, t_ok: np.ndarray, unit: str | None, quantity: Quantity):
     """(values, missing mask, scale and offset to the stored unit per row, readable mask, unit text).
 
     Values and units that cannot be read are listed as bad rows.

@@ -1,8 +1,8 @@
 """The sub-camera: intrinsic calibration (Zhang), its pose in every frame and its motion since frame 1."""
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Optional, Sequence
 
 import cv2
 import numpy as np
@@ -83,7 +83,7 @@ class CameraMotion:
 
 
 def solve_poses(object_points: np.ndarray, image_points: np.ndarray, intrinsics: Intrinsics, *,
-                reference: Optional[np.ndarray] = None, min_sigma_px: float = 0.02) -> CameraMotion:
+                reference: np.ndarray | None = None, min_sigma_px: float = 0.02) -> CameraMotion:
     """Pose of the sub-target in every frame (PnP) and the motion ``B_CS(1)->CS(k)``.
 
     Parameters
@@ -136,7 +136,7 @@ def solve_poses(object_points: np.ndarray, image_points: np.ndarray, intrinsics:
                         pose_cov=cov)
 
 
-def motion_from_poses(rig_poses: np.ndarray, valid: Optional[np.ndarray] = None) -> CameraMotion:
+def motion_from_poses(rig_poses: np.ndarray, valid: np.ndarray | None = None) -> CameraMotion:
     """The exact motion of a simulated rig (poses body -> CS(1)), for studies without the sub-camera's errors."""
     P = np.asarray(rig_poses, float)
     motion = invert(P)

@@ -12,8 +12,8 @@ import importlib
 import os
 import textwrap
 import weakref
+from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Iterator, Optional, Sequence
 
 #: The positional DIR of every campaign command (explained once in the top-level help too).
 DIR_HELP = "the campaign folder: the one 'bridgesurvey init' created (it holds campaign.sqlite and the imported scans)"
@@ -27,7 +27,7 @@ OUTPUT_FILE, OUTPUT_FOLDER, INPUT_FILE, INPUT_FOLDER = "output file", "output fo
 PATH_KINDS = (OUTPUT_FILE, OUTPUT_FOLDER, INPUT_FILE, INPUT_FOLDER)
 
 #: The checked path options: action -> (kind, suffixes). Weak keys: tests build many parsers.
-_CHECKED: "weakref.WeakKeyDictionary[argparse.Action, tuple[str, tuple[str, ...]]]" = weakref.WeakKeyDictionary()
+_CHECKED: weakref.WeakKeyDictionary[argparse.Action, tuple[str, tuple[str, ...]]] = weakref.WeakKeyDictionary()
 
 
 class HelpFormatter(argparse.HelpFormatter):
@@ -55,7 +55,7 @@ def mark(action: argparse.Action, kind: str, suffixes: Sequence[str] = ()) -> ar
     return action
 
 
-def path_kind(action: argparse.Action) -> Optional[str]:
+def path_kind(action: argparse.Action) -> str | None:
     """The kind :func:`mark` gave ``action`` (None for an unchecked option)."""
     entry = _CHECKED.get(action)
     return entry[0] if entry else None
@@ -141,7 +141,7 @@ class LazyChoices(Sequence[str]):
 
     def __init__(self, module: str, attribute: str):
         self._where = (module, attribute)
-        self._items: Optional[tuple[str, ...]] = None
+        self._items: tuple[str, ...] | None = None
 
     def _load(self) -> tuple[str, ...]:
         if self._items is None:

@@ -1,7 +1,6 @@
 """Explaining the displacements: environment series, events, and the analysis."""
 from __future__ import annotations
 
-
 from app.cli.args import LazyChoices, add_dir, add_json, input_file, output_folder
 from app.cli.commands_campaign import _open
 from app.cli.output import dump_json, table

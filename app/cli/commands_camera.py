@@ -1,7 +1,6 @@
 """Camera commands: import a dual-camera displacement series, list them, cross-validate with LiDAR."""
 from __future__ import annotations
 
-
 from app.cli.args import add_dir, add_json, input_file, output_folder
 from app.cli.output import dump_json, table
 from common.flags import FLAG_NO_CAMERA_DATA

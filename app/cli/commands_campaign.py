@@ -5,7 +5,15 @@ import json
 import sys
 from pathlib import Path
 
-from app.cli.args import RawDescriptionHelpFormatter, add_dir, add_epoch, add_json, input_file, output_file, output_folder
+from app.cli.args import (
+    RawDescriptionHelpFormatter,
+    add_dir,
+    add_epoch,
+    add_json,
+    input_file,
+    output_file,
+    output_folder,
+)
 from app.cli.output import dump_json, table
 from app.cli.progress import progress_bar
 from common.errors import InputError
@@ -235,9 +243,8 @@ def _open(path: Path, writable: bool = True):
 
 def cmd_init(args) -> int:
     from lidar.layout import read_layout_csv
-    from projects.store.campaign import Campaign
-
     from lidar.scanner_catalogue import DEFAULT_SCANNER, get_scanner
+    from projects.store.campaign import Campaign
 
     profile = get_scanner(args.scanner or DEFAULT_SCANNER)
     layout = read_layout_csv(args.layout, default_diameter_m=args.target_diameter_mm / 1000.0)
@@ -250,9 +257,8 @@ def cmd_init(args) -> int:
 
 
 def cmd_add_epoch(args) -> int:
-    from projects.store.campaign import parse_datetime
-
     from lidar.scanner_catalogue import get_scanner
+    from projects.store.campaign import parse_datetime
 
     when = parse_datetime(args.date)
     label = args.label or when[:10]
@@ -541,7 +547,7 @@ def _prediction_tolerance(args) -> int:
 
 def cmd_settings(args) -> int:
     from projects.processing.parameters import DEFAULTS
-    from projects.processing.stages import parameters, stale_epochs, set_parameter
+    from projects.processing.stages import parameters, set_parameter, stale_epochs
 
     if args.key == "scanner":
         return _set_scanner(args)

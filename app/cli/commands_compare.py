@@ -64,8 +64,13 @@ def _options(args):
 
 
 def cmd_compare(args) -> int:
-    from projects.compare.whole_scan import (change_lines, compare_epochs, registration_lines, save_comparison,
-                                             write_outputs)
+    from projects.compare.whole_scan import (
+        change_lines,
+        compare_epochs,
+        registration_lines,
+        save_comparison,
+        write_outputs,
+    )
     from projects.store.campaign import Campaign
 
     options = _options(args)

@@ -54,7 +54,7 @@ def _board(text: str) -> tuple[int, int]:
         raise InputError(f"--board expects the inner corners as COLSxROWS (e.g. 20x12), got {text!r}") from None
 
 
-def _pattern(path: Path) -> "np.ndarray":
+def _pattern(path: Path) -> np.ndarray:
     import numpy as np
 
     from common.errors import InputError

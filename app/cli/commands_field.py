@@ -130,7 +130,7 @@ def _pair(advice, layout, asked: bool):
     from projects.field.station_pairs import propose_pair
 
     best = next((s for s in advice.stations if s.predicted_sigma_mm), None)
-    deck = {t for t, g in zip(layout.ids, layout.groups) if g == "measurement"}
+    deck = {t for t, g in zip(layout.ids, layout.groups, strict=False) if g == "measurement"}
     if not asked and (best is None or not deck & (set(best.hidden) | set(best.weak))):
         return None
     pair = propose_pair(advice.stations, layout)
@@ -175,8 +175,8 @@ def cmd_check(args) -> int:
 
 
 def cmd_stations(args) -> int:
-    from projects.field.stations import advise_stations, read_area_csv, station_map_figure
     from lidar.figures import save_figure
+    from projects.field.stations import advise_stations, read_area_csv, station_map_figure
 
     area = read_area_csv(args.area) if args.area is not None else None
     if args.top < 0:

@@ -132,7 +132,6 @@ def cmd_detect(args) -> int:
 
 def cmd_plan_file(args) -> int:
     from lidar.pipeline import plan_from_coarse
-
     from lidar.scanner_catalogue import get_scanner
 
     profile = get_scanner(args.scanner)

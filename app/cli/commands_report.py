@@ -1,7 +1,6 @@
 """The ``report`` command: a PDF survey report of one visit, a period or the whole campaign."""
 from __future__ import annotations
 
-
 from app.cli.args import add_dir, add_epoch, output_file
 from app.cli.progress import progress_bar
 

@@ -19,10 +19,18 @@ import os
 import shutil
 import sys
 import textwrap
-from typing import Optional, Sequence
+from collections.abc import Sequence
 
-from app.cli.args import (DIR_EXPLAINED, DIR_HELP, OUTPUT_FILE, OUTPUT_FOLDER, HelpFormatter,
-                          RawDescriptionHelpFormatter, check_paths, mark)
+from app.cli.args import (
+    DIR_EXPLAINED,
+    DIR_HELP,
+    OUTPUT_FILE,
+    OUTPUT_FOLDER,
+    HelpFormatter,
+    RawDescriptionHelpFormatter,
+    check_paths,
+    mark,
+)
 from common.errors import SurveyError
 
 EXIT_ERROR = 1
@@ -131,7 +139,7 @@ def _finish(parser: argparse.ArgumentParser) -> None:
                 mark(action, kind)
 
 
-def build_parser(command: Optional[str] = None) -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The ``bridgesurvey`` parser with every command, or only ``command``'s module's (imports nothing heavy)."""
     width = min(100, shutil.get_terminal_size((100, 24)).columns) - 2
     parser = Parser(prog="bridgesurvey", usage="bridgesurvey [-h] [-v] COMMAND [DIR] [OPTIONS]",
@@ -152,7 +160,7 @@ def build_parser(command: Optional[str] = None) -> argparse.ArgumentParser:
     return parser
 
 
-def _command_of(argv: Sequence[str]) -> Optional[str]:
+def _command_of(argv: Sequence[str]) -> str | None:
     """The command named on a command line (its first word that is not an option), if any."""
     return next((word for word in argv if not word.startswith("-")), None)
 
@@ -171,7 +179,7 @@ def _refuse_unknown(parser: argparse.ArgumentParser, extra: Sequence[str]) -> No
     parser.error(f"unrecognized arguments: {' '.join(extra)}{hint}")
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(_command_of(argv))
     args, extra = parser.parse_known_args(argv)

@@ -4,7 +4,7 @@ from __future__ import annotations
 import contextlib
 import sys
 import time
-from typing import Callable, Iterator
+from collections.abc import Callable, Iterator
 
 #: Seconds between two progress lines when stderr is not a terminal (a log file, CI, a pipe).
 LINE_INTERVAL_S = 2.0

@@ -7,8 +7,8 @@ raises ``SurveyError`` with a message for the user.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable, Optional
 
 from common.errors import InputError
 from common.progress import scaled
@@ -20,7 +20,7 @@ def build_demo(folder: Path, progress: Callable):
     return build(folder, progress=progress)
 
 
-def create_campaign(*, folder: str, name: str, layout: str, span_m: Optional[float], diameter_mm: float) -> Path:
+def create_campaign(*, folder: str, name: str, layout: str, span_m: float | None, diameter_mm: float) -> Path:
     from lidar.layout import read_layout_csv
     from projects.store.campaign import Campaign
 
@@ -220,7 +220,7 @@ def scanner_names() -> list[str]:
     return list(CATALOGUE)
 
 
-def set_scanner(session, name: str, epoch: Optional[str] = None) -> None:
+def set_scanner(session, name: str, epoch: str | None = None) -> None:
     from lidar.scanner_catalogue import get_scanner
 
     profile = get_scanner(name)

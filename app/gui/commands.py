@@ -7,15 +7,26 @@ view, a status line). No command touches a view.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable, Optional, Protocol
+from typing import Any, Protocol
 
 from PySide6.QtWidgets import QInputDialog, QMessageBox
 
 from app.gui import actions
-from app.gui.dialogs import (AddEpochDialog, AddEventDialog, CheckDialog, ImportCameraDialog, ImportEnvDialog,
-                             ImportPredictionDialog, NewCampaignDialog, SetLimitDialog, ask_files, ask_folder,
-                             ask_save_path)
+from app.gui.dialogs import (
+    AddEpochDialog,
+    AddEventDialog,
+    CheckDialog,
+    ImportCameraDialog,
+    ImportEnvDialog,
+    ImportPredictionDialog,
+    NewCampaignDialog,
+    SetLimitDialog,
+    ask_files,
+    ask_folder,
+    ask_save_path,
+)
 from app.gui.state.app_state import AppState
 from app.gui.state.folders import LastFolders
 from app.gui.state.words import in_app_words
@@ -28,7 +39,7 @@ class CommandHost(Protocol):
     state: AppState
     folders: LastFolders
 
-    def run_job(self, title: str, fn: Callable, on_done: Optional[Callable] = None) -> bool: ...
+    def run_job(self, title: str, fn: Callable, on_done: Callable | None = None) -> bool: ...
 
     def dialog_parent(self) -> Any: ...
 
@@ -38,7 +49,7 @@ class Commands:
 
     def __init__(self, host: CommandHost):
         self.host = host
-        self.check_dialog: Optional[CheckDialog] = None  # the last check's dialog, kept open
+        self.check_dialog: CheckDialog | None = None  # the last check's dialog, kept open
         self.fleet_view = None
 
     @property
@@ -49,19 +60,19 @@ class Commands:
     def parent(self):
         return self.host.dialog_parent()
 
-    def _job(self, title: str, fn: Callable, on_done: Optional[Callable] = None) -> bool:
+    def _job(self, title: str, fn: Callable, on_done: Callable | None = None) -> bool:
         return self.host.run_job(title, fn, on_done)
 
     def _refresh(self, _result=None) -> None:
         self.state.refresh()
 
-    def _need_epoch(self, title: str, what: str = "an epoch") -> Optional[str]:
+    def _need_epoch(self, title: str, what: str = "an epoch") -> str | None:
         label = self.state.epoch_or_latest
         if label is None:
             self.state.report_error(title, f"The campaign has no epoch yet: add {what} first (Epoch ▸ Add epoch…).")
         return label
 
-    def _quick(self, title: str, fn: Callable, done: Optional[Callable[[Any], str]] = None) -> bool:
+    def _quick(self, title: str, fn: Callable, done: Callable[[Any], str] | None = None) -> bool:
         """Small changes run in the GUI thread; errors are shown, the campaign is left as it was.
 
         ``done(result)`` gives the status line saying what was changed."""
@@ -100,7 +111,7 @@ class Commands:
         self._job("Building the demo campaign", lambda p: actions.build_demo(folder, p),
                   lambda _r: self.state.open(folder))
 
-    def open_fleet(self, folder: Optional[str] = None) -> None:
+    def open_fleet(self, folder: str | None = None) -> None:
         """List every campaign under a folder (worst state first) and open any of them."""
         from app.gui.views.fleet_view import FleetView
 
@@ -208,7 +219,7 @@ class Commands:
             new, plans = result
             self.state.refresh()
             what = ", ".join(f"set-up {k}: {len(p.rois)} windows, {p.total_seconds / 60:.1f} min"
-                             for k, p in zip(new, plans))
+                             for k, p in zip(new, plans, strict=False))
             self.state.status.result(f"{label}: {what}; next: scan them and add the fine scans (Epoch ▸ Add fine "
                                      "scans to the selected epoch…, they go to the set-up added last)")
 
@@ -314,7 +325,7 @@ class Commands:
                       done)
 
     # ------------------------------------------------------------------ campaign settings
-    def _ask(self, title: str, label: str, text: str = "") -> Optional[str]:
+    def _ask(self, title: str, label: str, text: str = "") -> str | None:
         value, ok = QInputDialog.getText(self.parent, title, label, text=text)
         return value.strip() if ok and value.strip() else None
 

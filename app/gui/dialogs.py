@@ -4,12 +4,28 @@ the one way errors are shown."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
 
 from PySide6.QtCore import QDate, QDateTime, Qt, QTimeZone
-from PySide6.QtWidgets import (QCheckBox, QComboBox, QDateEdit, QDateTimeEdit, QDialog, QDialogButtonBox,
-                               QDoubleSpinBox, QFileDialog, QFormLayout, QHBoxLayout, QLabel, QLineEdit, QListWidget,
-                               QMessageBox, QPushButton, QRadioButton, QVBoxLayout, QWidget)
+from PySide6.QtWidgets import (
+    QCheckBox,
+    QComboBox,
+    QDateEdit,
+    QDateTimeEdit,
+    QDialog,
+    QDialogButtonBox,
+    QDoubleSpinBox,
+    QFileDialog,
+    QFormLayout,
+    QHBoxLayout,
+    QLabel,
+    QLineEdit,
+    QListWidget,
+    QMessageBox,
+    QPushButton,
+    QRadioButton,
+    QVBoxLayout,
+    QWidget,
+)
 
 from app.gui.state.folders import LastFolders
 from common.errors import SurveyError
@@ -24,29 +40,29 @@ def show_error(parent, title: str, message: str) -> None:
 
 
 # ---------------------------------------------------------------------- file choosers
-def ask_open_file(parent, title: str, folders: Optional[LastFolders], kind: str, filter_: str) -> str:
+def ask_open_file(parent, title: str, folders: LastFolders | None, kind: str, filter_: str) -> str:
     p, _ = QFileDialog.getOpenFileName(parent, title, folders.start(kind) if folders else "", filter_)
     if p and folders:
         folders.remember(kind, p)
     return p
 
 
-def ask_files(parent, title: str, folders: Optional[LastFolders], kind: str, filter_: str = SCAN_FILTER) -> list[str]:
+def ask_files(parent, title: str, folders: LastFolders | None, kind: str, filter_: str = SCAN_FILTER) -> list[str]:
     paths, _ = QFileDialog.getOpenFileNames(parent, title, folders.start(kind) if folders else "", filter_)
     if paths and folders:
         folders.remember(kind, paths[0])
     return list(paths)
 
 
-def ask_folder(parent, title: str, folders: Optional[LastFolders], kind: str) -> str:
+def ask_folder(parent, title: str, folders: LastFolders | None, kind: str) -> str:
     p = QFileDialog.getExistingDirectory(parent, title, folders.start(kind) if folders else "")
     if p and folders:
         folders.remember(kind, p)
     return p
 
 
-def ask_save_path(parent, title: str, folders: Optional[LastFolders], default: str, filter_: str,
-                  kind: str = "outputs") -> Optional[Path]:
+def ask_save_path(parent, title: str, folders: LastFolders | None, default: str, filter_: str,
+                  kind: str = "outputs") -> Path | None:
     p, _ = QFileDialog.getSaveFileName(parent, title, folders.start(kind, default) if folders else default, filter_)
     if p and folders:
         folders.remember(kind, p)
@@ -57,7 +73,7 @@ class _PathField(QWidget):
     """A line edit with a Browse button (a file to open or a folder); ``kind`` names the folder memory."""
 
     def __init__(self, mode: str = "file", filter_: str = "All files (*)", *, kind: str = "scans",
-                 folders: Optional[LastFolders] = None, parent=None):
+                 folders: LastFolders | None = None, parent=None):
         super().__init__(parent)
         self.mode, self.filter, self.kind, self.folders = mode, filter_, kind, folders
         self.edit = QLineEdit()
@@ -101,7 +117,7 @@ def _hint(text: str) -> QLabel:
 class NewCampaignDialog(QDialog):
     """Folder, name, layout CSV, span and default target diameter of a new campaign."""
 
-    def __init__(self, parent=None, folders: Optional[LastFolders] = None):
+    def __init__(self, parent=None, folders: LastFolders | None = None):
         super().__init__(parent)
         self.setWindowTitle("New campaign")
         lay = QVBoxLayout(self)
@@ -133,7 +149,7 @@ class AddEpochDialog(QDialog):
     set the date by hand.
     """
 
-    def __init__(self, parent=None, folders: Optional[LastFolders] = None):
+    def __init__(self, parent=None, folders: LastFolders | None = None):
         super().__init__(parent)
         self.setWindowTitle("Add epoch")
         self.folders = folders
@@ -204,7 +220,7 @@ class SetLimitDialog(QDialog):
 
     RULES = ("kr-rail:0-200", "abs:10,15", "span:1000,500", "prediction:5")
 
-    def __init__(self, parent, targets: list[str], selected: Optional[str] = None):
+    def __init__(self, parent, targets: list[str], selected: str | None = None):
         super().__init__(parent)
         self.setWindowTitle("Set limit")
         lay = QVBoxLayout(self)
@@ -234,8 +250,8 @@ class SetLimitDialog(QDialog):
 class ImportCameraDialog(QDialog):
     """A camera series file and how to read it."""
 
-    def __init__(self, reflectors: list[str], default: Optional[str], parent=None,
-                 folders: Optional[LastFolders] = None):
+    def __init__(self, reflectors: list[str], default: str | None, parent=None,
+                 folders: LastFolders | None = None):
         super().__init__(parent)
         self.setWindowTitle("Import camera series")
         lay = QVBoxLayout(self)
@@ -267,7 +283,7 @@ class ImportCameraDialog(QDialog):
 class ImportEnvDialog(QDialog):
     """An environment series (temperature, sun, rain, snow, humidity) and how to read it."""
 
-    def __init__(self, parent=None, folders: Optional[LastFolders] = None):
+    def __init__(self, parent=None, folders: LastFolders | None = None):
         from projects.series.environment import KINDS
 
         super().__init__(parent)
@@ -306,7 +322,7 @@ class ImportEnvDialog(QDialog):
 class AddEventDialog(QDialog):
     """A construction step, load, repair… with its date and, for a load, the load added."""
 
-    def __init__(self, parent=None, default_date: Optional[str] = None):
+    def __init__(self, parent=None, default_date: str | None = None):
         from projects.series.environment import EVENT_KINDS
 
         super().__init__(parent)
@@ -338,7 +354,7 @@ class AddEventDialog(QDialog):
 class ImportPredictionDialog(QDialog):
     """A design prediction file, how to align it, and the casting date a file by concrete age needs."""
 
-    def __init__(self, parent=None, folders: Optional[LastFolders] = None, casting: Optional[str] = None):
+    def __init__(self, parent=None, folders: LastFolders | None = None, casting: str | None = None):
         super().__init__(parent)
         self.setWindowTitle("Import design prediction")
         lay = QVBoxLayout(self)
@@ -391,7 +407,7 @@ class ImportPredictionDialog(QDialog):
 class CheckDialog(QDialog):
     """The on-site check of an epoch: one row per target, and a button to save the re-scan plan."""
 
-    def __init__(self, parent, result, folders: Optional[LastFolders] = None):
+    def __init__(self, parent, result, folders: LastFolders | None = None):
         from PySide6.QtGui import QColor
         from PySide6.QtWidgets import QTableWidget, QTableWidgetItem
 

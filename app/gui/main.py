@@ -4,10 +4,10 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
-from typing import Optional, Sequence
+from collections.abc import Sequence
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="bridgesurvey-gui", description="The BridgeSurvey desktop application.")
     parser.add_argument("campaign", nargs="?", help="campaign folder to open")
     parser.add_argument("--demo-dir", default=None, help="where the demo campaign is (built on request)")

@@ -8,14 +8,26 @@ which run the work as background jobs). The window itself pushes no data into an
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable, Optional
 
 from PySide6.QtCore import QSettings, Qt
 from PySide6.QtGui import QAction, QKeySequence
-from PySide6.QtWidgets import (QDockWidget, QHBoxLayout, QLabel, QListWidget, QMainWindow, QMessageBox,
-                               QProgressBar, QPushButton, QStackedWidget, QTabWidget, QToolButton,
-                               QVBoxLayout, QWidget)
+from PySide6.QtWidgets import (
+    QDockWidget,
+    QHBoxLayout,
+    QLabel,
+    QListWidget,
+    QMainWindow,
+    QMessageBox,
+    QProgressBar,
+    QPushButton,
+    QStackedWidget,
+    QTabWidget,
+    QToolButton,
+    QVBoxLayout,
+    QWidget,
+)
 
 from app.gui.campaign_tree import CampaignTree
 from app.gui.commands import Commands
@@ -61,7 +73,7 @@ class SettingsStore:
 class WelcomePage(QWidget):
     """Shown without a campaign: open the demo, open or create a campaign, or a recent one."""
 
-    def __init__(self, window: "MainWindow"):
+    def __init__(self, window: MainWindow):
         super().__init__()
         lay = QVBoxLayout(self)
         title = QLabel("<h2>BridgeSurvey</h2><p>Long-term bridge displacement from weekly laser scans of "
@@ -91,7 +103,7 @@ class MainWindow(QMainWindow):
     TABS = (("displacements", "Displacements"), ("map", "Reflectance map"), ("fine", "Fine scan"), ("cloud", "3-D"),
             ("camera", "Camera"), ("stations", "Stations"), ("analysis", "Analysis"))
 
-    def __init__(self, *, demo_dir: Optional[str] = None):
+    def __init__(self, *, demo_dir: str | None = None):
         super().__init__()
         self.setWindowTitle("BridgeSurvey")
         self.demo_dir = Path(demo_dir) if demo_dir else Path.cwd() / "demo-campaign"
@@ -392,7 +404,7 @@ class MainWindow(QMainWindow):
         self.commands.build_demo(self.demo_dir)
 
     # ------------------------------------------------------------------ jobs
-    def run_job(self, title: str, fn: Callable, on_done: Optional[Callable] = None) -> bool:
+    def run_job(self, title: str, fn: Callable, on_done: Callable | None = None) -> bool:
         if not self.jobs.run(title, fn, on_done):
             show_error(self, title, "Another task is still running; wait for it or cancel it first.")
             return False

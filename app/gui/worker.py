@@ -5,7 +5,7 @@ import logging
 import threading
 import time
 import traceback
-from typing import Callable, Optional
+from collections.abc import Callable
 
 from PySide6.QtCore import QObject, QThread, Signal
 
@@ -85,14 +85,14 @@ class JobRunner(QObject):
 
     def __init__(self, parent=None):
         super().__init__(parent)
-        self._thread: Optional[_JobThread] = None
+        self._thread: _JobThread | None = None
         self._title = ""
 
     @property
     def busy(self) -> bool:
         return self._thread is not None
 
-    def run(self, title: str, fn: Callable, on_done: Optional[Callable] = None) -> bool:
+    def run(self, title: str, fn: Callable, on_done: Callable | None = None) -> bool:
         """Start a job; False (and nothing started) while another job runs."""
         if self._thread is not None:
             return False

@@ -13,9 +13,9 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Optional
 
 from common.errors import InputError, ScanFormatError
+from common.progress import ProgressCallback
 from lidar.io._common import check_readable
 from lidar.io.e57 import read_e57, write_e57
 from lidar.io.las import read_las, write_las
@@ -23,7 +23,6 @@ from lidar.io.pcd import read_pcd, write_pcd
 from lidar.io.ply import read_ply, write_ply
 from lidar.io.ptx import read_ptx, write_ptx
 from lidar.io.xyz import read_xyz, write_pts, write_xyz
-from common.progress import ProgressCallback
 from lidar.scan import Scan
 
 READ_SUFFIXES = {".las": "las", ".laz": "las", ".e57": "e57", ".ply": "ply", ".pcd": "pcd", ".ptx": "ptx",
@@ -52,7 +51,7 @@ def sniff_format(path: str | os.PathLike) -> str:
     return kind
 
 
-def read_scans(path: str | os.PathLike, *, progress: Optional[ProgressCallback] = None) -> list[Scan]:
+def read_scans(path: str | os.PathLike, *, progress: ProgressCallback | None = None) -> list[Scan]:
     """Read every scan of a file (one for most formats, possibly several for E57/PTX)."""
     kind = sniff_format(path)
     if kind == "las":
@@ -68,7 +67,7 @@ def read_scans(path: str | os.PathLike, *, progress: Optional[ProgressCallback] 
     return [read_xyz(path)]
 
 
-def read_scan(path: str | os.PathLike, *, progress: Optional[ProgressCallback] = None) -> Scan:
+def read_scan(path: str | os.PathLike, *, progress: ProgressCallback | None = None) -> Scan:
     """Read a file holding exactly one scan (one scanner set-up)."""
     scans = read_scans(path, progress=progress)
     if len(scans) != 1:

@@ -3,13 +3,14 @@ from __future__ import annotations
 
 import contextlib
 import os
+from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import BinaryIO, Iterator, Optional, Sequence
+from typing import BinaryIO
 
 import numpy as np
 
-from common.files import atomic_output  # noqa: F401  (used by every writer)
 from common.errors import ScanFormatError
+from common.files import atomic_output  # noqa: F401  (used by every writer)
 from lidar.io.intensity import detect_convention
 from lidar.scan import Scan, normalise_intensity
 
@@ -37,16 +38,16 @@ def check_readable(path: str | os.PathLike) -> Path:
 def make_scan(
     path: Path,
     xyz: np.ndarray,
-    raw: Optional[np.ndarray],
+    raw: np.ndarray | None,
     *,
     fmt: str,
-    limits: Optional[tuple[float, float]] = None,
-    pose: Optional[np.ndarray] = None,
+    limits: tuple[float, float] | None = None,
+    pose: np.ndarray | None = None,
     name: str = "",
-    grid_index: Optional[np.ndarray] = None,
-    metadata: Optional[dict] = None,
+    grid_index: np.ndarray | None = None,
+    metadata: dict | None = None,
     finite: bool = False,
-    time_s: Optional[np.ndarray] = None,
+    time_s: np.ndarray | None = None,
 ) -> Scan:
     """Build a Scan from decoded arrays: drop non-finite points, normalise intensity.
 
@@ -120,8 +121,8 @@ def pose_from_text(path: Path, words: list[str], what: str) -> np.ndarray:
     return vals.reshape(4, 4)
 
 
-def read_ascii_table(path: Path, fh: BinaryIO, *, sep: str, nrows: Optional[int], what: str,
-                     ncols: Optional[int] = None) -> np.ndarray:
+def read_ascii_table(path: Path, fh: BinaryIO, *, sep: str, nrows: int | None, what: str,
+                     ncols: int | None = None) -> np.ndarray:
     r"""Parse ASCII point lines from an open binary file at its current position (pandas' C reader).
 
     ``sep`` is a separator or ``r"\\s+"``; ``ncols`` fixes the number of columns (longer lines are

@@ -17,7 +17,6 @@ of a grid is not a grid at the step (its neighbours lie several steps apart): sa
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Optional
 
 import numpy as np
 
@@ -50,8 +49,8 @@ class AngularSteps:
         How the neighbours were found.
     """
 
-    theta_deg: Optional[float]
-    phi_deg: Optional[float]
+    theta_deg: float | None
+    phi_deg: float | None
     regular_share: float
     points: int
     method: str
@@ -61,7 +60,7 @@ class AngularSteps:
         return self.theta_deg is not None and self.phi_deg is not None and self.regular_share >= REGULAR_SHARE
 
     @property
-    def step_deg(self) -> Optional[float]:
+    def step_deg(self) -> float | None:
         """The coarser of the two steps (what decides whether a small target gets points), or None."""
         if not self.regular:
             return None
@@ -88,7 +87,7 @@ def angles_deg(xyz: np.ndarray, dtype: type = np.float64) -> tuple[np.ndarray, n
     return theta, phi
 
 
-def _median_share(values: np.ndarray) -> tuple[Optional[float], float]:
+def _median_share(values: np.ndarray) -> tuple[float | None, float]:
     values = values[values > TINY_DEG]
     if values.size < 10:
         return None, 0.0
@@ -131,7 +130,7 @@ def steps_from_neighbours(theta_deg: np.ndarray, phi_deg: np.ndarray, *, method:
     if n < 20:
         return AngularSteps(None, None, 0.0, int(n), method)
     scale = np.array([1.0, 1.0])
-    found: list[Optional[np.ndarray]] = [None, None]
+    found: list[np.ndarray | None] = [None, None]
     for _ in range(5):
         pts = np.column_stack([(theta - theta.min()) * scale[0], (phi - phi.min()) * scale[1]])
         _, idx = cKDTree(pts).query(pts, k=min(9, n), workers=-1)
@@ -193,7 +192,7 @@ def steps_along_lines(theta_deg: np.ndarray, phi_deg: np.ndarray) -> AngularStep
     starts = np.concatenate([[0], breaks])
     ends = np.concatenate([breaks, [theta.size]])
     long_enough = (ends - starts) >= 3
-    level = np.array([np.median(across[s:e]) for s, e in zip(starts[long_enough], ends[long_enough])])
+    level = np.array([np.median(across[s:e]) for s, e in zip(starts[long_enough], ends[long_enough], strict=False)])
     if level.size < 3:
         return AngularSteps(None, None, 0.0, int(theta.size), "scan lines")
     jumps = np.abs((np.diff(level) + 180.0) % 360.0 - 180.0) if column_major else np.abs(np.diff(level))
@@ -226,7 +225,7 @@ class PatchSampler:
         self._phi: list[np.ndarray] = []
         self._rank: list[np.ndarray] = []
         self._kept = 0
-        self._table: Optional[np.ndarray] = None
+        self._table: np.ndarray | None = None
 
     def _ranks(self, theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
         """Each direction's cell rank, looked up in a table of every cell's rank (a few thousand cells)."""

@@ -13,9 +13,10 @@ from __future__ import annotations
 
 import os
 import struct
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import BinaryIO, Iterator, Optional
+from typing import BinaryIO
 
 import numpy as np
 
@@ -36,7 +37,7 @@ class Converted:
     path: Path
     points: int
     scans: int
-    pose_kept: Optional[bool]  # None: the input had no pose
+    pose_kept: bool | None  # None: the input had no pose
     streamed: bool
     lossless_copy: bool
 
@@ -46,14 +47,14 @@ class _Pass1:
     n: int
     lo: np.ndarray
     hi: np.ndarray
-    raw_dtype: Optional[np.dtype]
+    raw_dtype: np.dtype | None
     raw_lo: float
     raw_hi: float
     raw_integral: bool
 
 
-def convert_file(src: str | os.PathLike, dst: str | os.PathLike, *, scan: Optional[int] = None,
-                 chunk_points: int = CHUNK_POINTS, progress: Optional[ProgressCallback] = None) -> Converted:
+def convert_file(src: str | os.PathLike, dst: str | os.PathLike, *, scan: int | None = None,
+                 chunk_points: int = CHUNK_POINTS, progress: ProgressCallback | None = None) -> Converted:
     """Convert ``src`` to the format of ``dst``'s suffix, streaming where both formats allow it.
 
     Parameters
@@ -102,7 +103,7 @@ def convert_file(src: str | os.PathLike, dst: str | os.PathLike, *, scan: Option
     return Converted(dst, first.n, 1, kept, True, False)
 
 
-def _progressed(chunks: Iterator[Chunk], n: int, progress: Optional[ProgressCallback]) -> Iterator[Chunk]:
+def _progressed(chunks: Iterator[Chunk], n: int, progress: ProgressCallback | None) -> Iterator[Chunk]:
     done = 0
     for c in chunks:
         done += len(c.xyz)
@@ -125,7 +126,7 @@ def _whole(src: Path, dst: Path, indices: list[int], stream: ScanStream) -> Conv
                      None if pose is None else dst.suffix.lower() != ".pts", False, False)
 
 
-def _copy_las(stream: ScanStream, dst: Path, chunk_points: int, progress: Optional[ProgressCallback]) -> int:
+def _copy_las(stream: ScanStream, dst: Path, chunk_points: int, progress: ProgressCallback | None) -> int:
     """Copy every point record with the input's header; laspy (de)compresses."""
     import laspy
 
@@ -150,7 +151,7 @@ def _copy_las(stream: ScanStream, dst: Path, chunk_points: int, progress: Option
     return done
 
 
-def _first_pass(stream: ScanStream, k: int, chunk_points: int, progress: Optional[ProgressCallback]) -> _Pass1:
+def _first_pass(stream: ScanStream, k: int, chunk_points: int, progress: ProgressCallback | None) -> _Pass1:
     """Valid point count, bounds and the raw intensity's range for the output's header."""
     p = _Pass1(0, np.full(3, np.inf), np.full(3, -np.inf), None, np.inf, -np.inf, True)
     declared = stream.scans[k].points

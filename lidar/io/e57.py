@@ -3,15 +3,15 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Optional
 
 import numpy as np
 
 from common.errors import ScanFormatError
+from common.progress import ProgressCallback, report
 from lidar.io._common import (
     atomic_output,
-    first_line,
     check_readable,
+    first_line,
     make_scan,
     pose_from_quaternion,
     quaternion_from_pose,
@@ -19,11 +19,10 @@ from lidar.io._common import (
     raw_for_writing,
 )
 from lidar.io.e57_header import check_e57
-from common.progress import ProgressCallback, report
 from lidar.scan import Scan
 
 
-def _intensity_limits(node) -> Optional[tuple[float, float]]:
+def _intensity_limits(node) -> tuple[float, float] | None:
     try:
         if not node.isDefined("intensityLimits"):
             return None
@@ -48,7 +47,7 @@ _WANTED = ("cartesianX", "cartesianY", "cartesianZ", "cartesianInvalidState", "s
            "rowIndex", "columnIndex")
 
 
-def read_e57(path: str | os.PathLike, *, progress: Optional[ProgressCallback] = None) -> list[Scan]:
+def read_e57(path: str | os.PathLike, *, progress: ProgressCallback | None = None) -> list[Scan]:
     """Read every scan of an E57 file.
 
     Each scan keeps its points in its own frame (SOCS) with its pose (SOCS ->
@@ -124,7 +123,7 @@ def _read_fields(e57, header, p: Path, i: int) -> dict:
     return data
 
 
-def _times(data: dict) -> Optional[np.ndarray]:
+def _times(data: dict) -> np.ndarray | None:
     """(N,) ``timeStamp`` seconds (NaN where flagged invalid), or None when the scan has no usable times."""
     if "timeStamp" not in data:
         return None
@@ -211,8 +210,8 @@ def write_e57(scans: Scan | list[Scan], path: str | os.PathLike) -> Path:
     return final
 
 
-def _write_timed_scan(e57, data: dict, time_s: np.ndarray, *, name: str, rotation: Optional[np.ndarray],
-                      translation: Optional[np.ndarray]) -> None:
+def _write_timed_scan(e57, data: dict, time_s: np.ndarray, *, name: str, rotation: np.ndarray | None,
+                      translation: np.ndarray | None) -> None:
     """One scan with a ``timeStamp`` field, through libE57 (pye57's writer knows no times).
 
     Coordinates and intensity are stored as pye57 stores them (single precision), the times in double.
@@ -223,7 +222,7 @@ def _write_timed_scan(e57, data: dict, time_s: np.ndarray, *, name: str, rotatio
 
     imf = e57.image_file
     node = libe57.StructureNode(imf)
-    node.set("guid", libe57.StringNode(imf, "{%s}" % uuid.uuid4()))
+    node.set("guid", libe57.StringNode(imf, f"{{{uuid.uuid4()}}}"))
     node.set("name", libe57.StringNode(imf, name))
     node.set("description", libe57.StringNode(imf, "BridgeSurvey"))
     xyz = np.column_stack([data["cartesianX"], data["cartesianY"], data["cartesianZ"]])
@@ -237,10 +236,10 @@ def _write_timed_scan(e57, data: dict, time_s: np.ndarray, *, name: str, rotatio
     if rotation is not None and translation is not None:
         pose = libe57.StructureNode(imf)
         rot = libe57.StructureNode(imf)
-        for k, v in zip("wxyz", rotation):
+        for k, v in zip("wxyz", rotation, strict=False):
             rot.set(k, libe57.FloatNode(imf, float(v)))
         tr = libe57.StructureNode(imf)
-        for k, v in zip("xyz", translation):
+        for k, v in zip("xyz", translation, strict=False):
             tr.set(k, libe57.FloatNode(imf, float(v)))
         pose.set("rotation", rot)
         pose.set("translation", tr)

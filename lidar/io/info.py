@@ -12,7 +12,6 @@ from __future__ import annotations
 import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Optional
 
 import numpy as np
 
@@ -38,18 +37,18 @@ class ScanInfo:
 
     name: str
     points: int
-    bounds_min: Optional[tuple[float, ...]]
-    bounds_max: Optional[tuple[float, ...]]
-    pose: Optional[list[list[float]]]
-    intensity_convention: Optional[str]
-    intensity_raw_range: Optional[tuple[float, float]]
-    angular_step_deg: Optional[float]
-    theta_step_deg: Optional[float]
-    phi_step_deg: Optional[float]
+    bounds_min: tuple[float, ...] | None
+    bounds_max: tuple[float, ...] | None
+    pose: list[list[float]] | None
+    intensity_convention: str | None
+    intensity_raw_range: tuple[float, float] | None
+    angular_step_deg: float | None
+    theta_step_deg: float | None
+    phi_step_deg: float | None
     step_from: str
-    spacing_at_10m_mm: Optional[float]
-    range_m: Optional[tuple[float, float]]
-    duplicate_points: Optional[int]
+    spacing_at_10m_mm: float | None
+    range_m: tuple[float, float] | None
+    duplicate_points: int | None
     problems: tuple[str, ...] = ()
     frame: str = "scanner"  # "scanner" (SOCS), or "project" (a project or national frame: see lidar.io.poses)
 
@@ -99,11 +98,11 @@ class _Stats:
         self.hi = np.full(3, -np.inf)
         self.r = [np.inf, -np.inf]
         self.i_lo, self.i_hi, self.i_integral = np.inf, -np.inf, True
-        self.i_dtype: Optional[np.dtype] = None
+        self.i_dtype: np.dtype | None = None
         self.patches = PatchSampler()
         self.dup_every = max(1, declared_points // DUPLICATE_SAMPLE)
         self.dup_hashes: list[np.ndarray] = []
-        self.first: Optional[np.ndarray] = None  # the first chunk's first points (a project-frame scan's pose check)
+        self.first: np.ndarray | None = None  # the first chunk's first points (a project-frame scan's pose check)
 
     def sample_xyz(self) -> np.ndarray:
         return self.first if self.first is not None else np.empty((0, 3))
@@ -135,7 +134,7 @@ class _Stats:
         h = np.concatenate(self.dup_hashes) if self.dup_hashes else np.zeros(0, np.uint64)
         return int(round((h.size - unique_sorted(h).size) * self.dup_every))
 
-    def convention(self) -> tuple[Optional[str], Optional[tuple[float, float]]]:
+    def convention(self) -> tuple[str | None, tuple[float, float] | None]:
         if self.i_dtype is None:
             return None, None
         sample = np.array([self.i_lo, self.i_hi] if self.i_integral else
@@ -154,7 +153,7 @@ def _point_hash(xyz: np.ndarray) -> np.ndarray:
     return h
 
 
-def _step_fields(steps: Optional[AngularSteps], source: str) -> dict:
+def _step_fields(steps: AngularSteps | None, source: str) -> dict:
     if steps is None or not steps.regular:
         return {"angular_step_deg": None, "theta_step_deg": None, "phi_step_deg": None, "spacing_at_10m_mm": None,
                 "step_from": source}
@@ -169,7 +168,7 @@ def _scale_problems(details: dict) -> list[str]:
             for k, s in enumerate(details.get("scales", ()) or ()) if abs(s) > COARSE_SCALE_M]
 
 
-def _not_regular(steps: Optional[AngularSteps]) -> list[str]:
+def _not_regular(steps: AngularSteps | None) -> list[str]:
     if steps is None or steps.points < 20 or steps.regular:
         return []
     return ["the points are not on a regular angular grid seen from the origin (a registered, merged or "
@@ -205,7 +204,7 @@ def _header_scan(stream: ScanStream, k: int, s: StreamScan) -> ScanInfo:
                     **_step_fields(steps, source))
 
 
-def _far_problem(r_min: float, xyz: np.ndarray, pose: Optional[np.ndarray]) -> str:
+def _far_problem(r_min: float, xyz: np.ndarray, pose: np.ndarray | None) -> str:
     """Why a project-frame scan's angles mean nothing, and what its import needs (a pose, unless it has its own)."""
     own = pose is not None and len(xyz) > 0 and not in_project_frame(to_scanner_frame(xyz[:100_000], pose))
     return (f"every point is more than {r_min / 1000:.0f} km from the origin: the coordinates are in a project "
@@ -214,7 +213,7 @@ def _far_problem(r_min: float, xyz: np.ndarray, pose: Optional[np.ndarray]) -> s
                "; importing it needs its scanner pose (--pose FILE or --origin X,Y,Z)"))
 
 
-def _full_scan(stream: ScanStream, k: int, s: StreamScan, progress: Optional[ProgressCallback]) -> ScanInfo:
+def _full_scan(stream: ScanStream, k: int, s: StreamScan, progress: ProgressCallback | None) -> ScanInfo:
     """Every point of scan ``k`` read in chunks."""
     acc = _Stats(s.points)
     for c in stream.chunks(k, CHUNK_POINTS):
@@ -258,7 +257,7 @@ def _full_scan(stream: ScanStream, k: int, s: StreamScan, progress: Optional[Pro
 
 
 def describe_file(path: str | os.PathLike, *, stats: bool = False,
-                  progress: Optional[ProgressCallback] = None) -> FileInfo:
+                  progress: ProgressCallback | None = None) -> FileInfo:
     """Describe a scan file (any supported format): at header speed, or reading every point (``stats``).
 
     Parameters

@@ -23,13 +23,11 @@ the range used are written into the scan's metadata (``intensity_convention``,
 """
 from __future__ import annotations
 
-from typing import Optional
-
 import numpy as np
 
 
-def detect_convention(raw: np.ndarray, *, declared: Optional[tuple[float, float]] = None
-                      ) -> tuple[str, Optional[tuple[float, float]]]:
+def detect_convention(raw: np.ndarray, *, declared: tuple[float, float] | None = None
+                      ) -> tuple[str, tuple[float, float] | None]:
     """Name the intensity convention of ``raw`` and the range to normalise over.
 
     Parameters

@@ -11,14 +11,13 @@ import struct
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import Optional
 
 import numpy as np
 
 from common.errors import ScanFormatError
-from lidar.io._common import atomic_output, first_line, check_readable, make_scan, raw_for_writing
-from lidar.io.las_header import check_las_header
 from common.progress import ProgressCallback, report
+from lidar.io._common import atomic_output, check_readable, first_line, make_scan, raw_for_writing
+from lidar.io.las_header import check_las_header
 from lidar.scan import Scan
 
 #: VLR in which BridgeSurvey keeps the scanner pose (SOCS -> project frame) of a scan.
@@ -42,7 +41,7 @@ def _laz_backend():
     return available[0] if available else None
 
 
-def _pose_from_header(header) -> Optional[np.ndarray]:
+def _pose_from_header(header) -> np.ndarray | None:
     for vlr in list(header.vlrs) + list(getattr(header, "evlrs", None) or []):
         if getattr(vlr, "user_id", "") == POSE_VLR_USER_ID and getattr(vlr, "record_id", None) == POSE_VLR_RECORD_ID:
             data = getattr(vlr, "record_data", b"")
@@ -51,8 +50,8 @@ def _pose_from_header(header) -> Optional[np.ndarray]:
     return None
 
 
-def read_las(path: str | os.PathLike, *, progress: Optional[ProgressCallback] = None,
-             chunk_points: Optional[int] = None) -> Scan:
+def read_las(path: str | os.PathLike, *, progress: ProgressCallback | None = None,
+             chunk_points: int | None = None) -> Scan:
     """Read a LAS or LAZ file into a :class:`Scan`.
 
     Parameters
@@ -198,7 +197,7 @@ def _decode_laz(reader, p: Path, out_arrays, scales, offsets, chunk_points, prog
         raise ScanFormatError(p, f"truncated: the header declares {n} points but only {start} could be decoded")
 
 
-def write_las(scan: Scan, path: str | os.PathLike, *, scale_m: Optional[float] = None) -> Path:
+def write_las(scan: Scan, path: str | os.PathLike, *, scale_m: float | None = None) -> Path:
     """Write a scan as LAS or LAZ (chosen by the suffix), LAS 1.4 point format 6.
 
     Point format 6 has ``gps_time``: the scan's ``time_s`` goes there (seconds); a scan without

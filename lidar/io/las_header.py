@@ -127,10 +127,10 @@ def check_las_header(path: str | Path) -> LasHeaderFacts:
         if record_length < POINT_RECORD_SIZES[point_format]:
             raise ScanFormatError(p, f"LAS point record length {record_length} is shorter than point format "
                                      f"{point_format} needs ({POINT_RECORD_SIZES[point_format]} bytes)")
-        for axis, s in zip("xyz", scales):
+        for axis, s in zip("xyz", scales, strict=False):
             if not math.isfinite(s) or s == 0.0:
                 raise ScanFormatError(p, f"LAS {axis} scale factor is {s!r}; it must be a finite non-zero number")
-        for axis, o in zip("xyz", offsets):
+        for axis, o in zip("xyz", offsets, strict=False):
             if not math.isfinite(o):
                 raise ScanFormatError(p, f"LAS {axis} offset is {o!r}; it must be finite")
         count = legacy_count

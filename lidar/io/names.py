@@ -7,7 +7,7 @@ all intensity.
 """
 from __future__ import annotations
 
-from typing import Optional, Sequence
+from collections.abc import Sequence
 
 #: Aliases of each role, in order of preference (compared in lower case, ``scalar_`` removed).
 ALIASES: dict[str, tuple[str, ...]] = {
@@ -30,7 +30,7 @@ def canonical(name: str) -> str:
     return n[len("scalar_"):] if n.startswith("scalar_") else n
 
 
-def find_column(names: Sequence[str], role: str) -> Optional[int]:
+def find_column(names: Sequence[str], role: str) -> int | None:
     """Index of the column playing ``role`` (``x``, ``y``, ``z`` or ``intensity``), or None.
 
     >>> find_column(["X", "Y", "Z", "Intensity", "ReturnNumber"], "intensity")

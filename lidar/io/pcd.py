@@ -18,8 +18,15 @@ from pathlib import Path
 import numpy as np
 
 from common.errors import ScanFormatError
-from lidar.io._common import (atomic_output, check_readable, make_scan, pose_from_quaternion, quaternion_from_pose,
-                               raw_for_writing, read_ascii_table)
+from lidar.io._common import (
+    atomic_output,
+    check_readable,
+    make_scan,
+    pose_from_quaternion,
+    quaternion_from_pose,
+    raw_for_writing,
+    read_ascii_table,
+)
 from lidar.io.names import find_column
 from lidar.scan import Scan
 
@@ -46,7 +53,7 @@ class PcdHeader:
 
     @property
     def row_bytes(self) -> int:
-        return sum(s * c for s, c in zip(self.sizes, self.counts))
+        return sum(s * c for s, c in zip(self.sizes, self.counts, strict=False))
 
 
 def _ints(p: Path, key: str, values: list[str], n: int | None = None) -> list[int]:
@@ -87,7 +94,7 @@ def parse_header(p: Path, head: bytes) -> PcdHeader:
     if len(types) != nf:
         raise ScanFormatError(p, f"PCD header field TYPE has {len(types)} entries for {nf} fields")
     counts = _ints(p, "COUNT", entries.get("COUNT", ["1"] * nf), nf)
-    for f, s, t, c in zip(fields, sizes, types, counts):
+    for f, s, t, c in zip(fields, sizes, types, counts, strict=False):
         if (t, s) not in _TYPES:
             raise ScanFormatError(p, f"PCD field {f} has an unsupported type {t}{s}")
         if not 1 <= c <= MAX_FIELD_COUNT:
@@ -163,7 +170,7 @@ def read_pcd(path: str | os.PathLike) -> Scan:
 
 def _record_dtype(h: PcdHeader) -> np.dtype:
     return np.dtype([(f"f{k}", _TYPES[(t, s)], (c,)) if c > 1 else (f"f{k}", _TYPES[(t, s)])
-                     for k, (s, t, c) in enumerate(zip(h.sizes, h.types, h.counts))])
+                     for k, (s, t, c) in enumerate(zip(h.sizes, h.types, h.counts, strict=False))])
 
 
 def _read_ascii(p: Path, h: PcdHeader, body_bytes: int) -> list[np.ndarray]:
@@ -208,7 +215,7 @@ def _read_compressed(p: Path, h: PcdHeader, body_bytes: int) -> list[np.ndarray]
         raise ScanFormatError(p, f"damaged PCD compressed block (decodes to {0 if raw is None else len(raw)} "
                                  f"bytes, expected {usize})")
     cols, off = [], 0
-    for s, t, c in zip(h.sizes, h.types, h.counts):  # column-major: every value of a field, then the next
+    for s, t, c in zip(h.sizes, h.types, h.counts, strict=False):  # column-major: every value of a field, then the next
         width = s * c * h.points
         cols.append(np.frombuffer(raw, dtype=_TYPES[(t, s)], count=c * h.points, offset=off).reshape(h.points, c)[:, 0])
         off += width

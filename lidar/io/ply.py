@@ -18,8 +18,15 @@ from pathlib import Path
 import numpy as np
 
 from common.errors import ScanFormatError
-from lidar.io._common import (atomic_output, check_readable, first_line, make_scan, pose_from_text, pose_to_text,
-                               raw_for_writing)
+from lidar.io._common import (
+    atomic_output,
+    check_readable,
+    first_line,
+    make_scan,
+    pose_from_text,
+    pose_to_text,
+    raw_for_writing,
+)
 from lidar.io.names import find_column
 from lidar.scan import Scan
 
@@ -156,7 +163,8 @@ def _pose_comment(p: Path, header: bytes):
 
 def write_ply(scan: Scan, path: str | os.PathLike, *, binary: bool = True) -> Path:
     """Write x, y, z (float64) and the raw intensity as a PLY vertex element."""
-    from plyfile import PlyData, PlyElement as PlyfileElement
+    from plyfile import PlyData
+    from plyfile import PlyElement as PlyfileElement
 
     final = Path(path)
     raw = raw_for_writing(scan)

@@ -17,9 +17,9 @@ from __future__ import annotations
 import math
 import os
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Optional, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -62,7 +62,7 @@ def in_project_frame(xyz: np.ndarray) -> bool:
     return bool(len(np.asarray(xyz).reshape(-1, 3))) and nearest_range_m(xyz) > FAR_FROM_SCANNER_M
 
 
-def _rigid_problem(m: np.ndarray) -> Optional[str]:
+def _rigid_problem(m: np.ndarray) -> str | None:
     """Why a 4x4 matrix is not a rigid transform (None when it is)."""
     if m.shape != (4, 4) or not np.all(np.isfinite(m)):
         return "not a finite 4x4 matrix"
@@ -142,7 +142,7 @@ def parse_vector(text: str, what: str) -> np.ndarray:
     return v
 
 
-def pose_from_origin(origin_m: ArrayLike, up: Optional[ArrayLike] = None) -> np.ndarray:
+def pose_from_origin(origin_m: ArrayLike, up: ArrayLike | None = None) -> np.ndarray:
     """A scanner pose from its position alone: the project's axes at ``origin_m``, tilted so that +z is ``up``.
 
     The heading stays unknown (the identification finds it), so planned windows' horizontal angles are
@@ -192,7 +192,7 @@ def carry_to_scanner(scan: Scan, pose: np.ndarray) -> Scan:
     return replace(scan, xyz_socs=np.ascontiguousarray(to_scanner_frame(scan.xyz_socs, p)), pose=p)
 
 
-def same_pose(a: Optional[np.ndarray], b: Optional[np.ndarray]) -> bool:
+def same_pose(a: np.ndarray | None, b: np.ndarray | None) -> bool:
     """Whether two scanner poses (4x4, or None for "no pose") are the same position and orientation."""
     if a is None or b is None:
         return a is None and b is None
@@ -224,8 +224,8 @@ class FileFrame:
         The pose file's path or the origin as typed, for the record.
     """
 
-    scans: Optional[tuple[int, ...]] = None
-    pose: Optional[np.ndarray] = None
+    scans: tuple[int, ...] | None = None
+    pose: np.ndarray | None = None
     carry: bool = False
     source: str = ""
     given: str = ""
@@ -236,7 +236,7 @@ class FileFrame:
                 "source": self.source, "given": self.given}
 
     @classmethod
-    def from_json(cls, d: dict) -> "FileFrame":
+    def from_json(cls, d: dict) -> FileFrame:
         return cls(None if d.get("scans") is None else tuple(int(k) for k in d["scans"]),
                    None if d.get("pose") is None else np.asarray(d["pose"], dtype=np.float64),
                    bool(d.get("carry", False)), str(d.get("source", "")), str(d.get("given", "")))
@@ -248,8 +248,8 @@ class FileFrame:
                 "carry": np.round(np.asarray(self.pose), 9).tolist() if self.carry and self.pose is not None else None}
 
 
-def read_in_scanner_frame(path: str | os.PathLike, frame: Optional[FileFrame] = None, *,
-                          progress: Optional[ProgressCallback] = None) -> Scan:
+def read_in_scanner_frame(path: str | os.PathLike, frame: FileFrame | None = None, *,
+                          progress: ProgressCallback | None = None) -> Scan:
     """Read a file's scans of one set-up in the scanner's frame (see :class:`FileFrame`).
 
     Without a frame, the file must hold one scan (as :func:`lidar.io.read_scan`).
@@ -283,8 +283,8 @@ def _groups(scans: Sequence[Scan]) -> list[list[int]]:
     return groups
 
 
-def _frame_of(path: Path, scans: Sequence[Scan], idx: list[int], given: Optional[FileFrame],
-              fallback: Optional[FileFrame], several: bool) -> FileFrame:
+def _frame_of(path: Path, scans: Sequence[Scan], idx: list[int], given: FileFrame | None,
+              fallback: FileFrame | None, several: bool) -> FileFrame:
     """The frame of one pose group of a file (see :func:`file_frames`)."""
     own = scans[idx[0]].pose
     chosen = tuple(idx) if several else None
@@ -310,8 +310,8 @@ def _frame_of(path: Path, scans: Sequence[Scan], idx: list[int], given: Optional
     return frame
 
 
-def file_frames(path: str | os.PathLike, *, given: Optional[FileFrame] = None, fallback: Optional[FileFrame] = None,
-                progress: Optional[ProgressCallback] = None) -> list[FileFrame]:
+def file_frames(path: str | os.PathLike, *, given: FileFrame | None = None, fallback: FileFrame | None = None,
+                progress: ProgressCallback | None = None) -> list[FileFrame]:
     """Read a scan file and say how each of its set-ups reaches its scanner frame; one line when it cannot.
 
     Scans with different poses (an E57 or PTX of several scan positions) are one set-up each, in file

@@ -11,7 +11,6 @@ from common.errors import ScanFormatError
 from lidar.io._common import atomic_output, check_readable, first_line, make_scan, raw_for_writing
 from lidar.scan import Scan
 
-
 #: Point lines parsed at a time (memory: the decoded arrays plus one chunk of text).
 CHUNK_LINES = 262_144
 

@@ -14,9 +14,9 @@ whole by :func:`lidar.io.read_scans` and handed out in chunks (``ScanStream.stre
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterator, Optional
 
 import numpy as np
 
@@ -33,7 +33,7 @@ class Chunk:
     """Consecutive points of one scan: (m, 3) float64 xyz (scanner frame, metres) and the raw intensity (m,)."""
 
     xyz: np.ndarray
-    raw: Optional[np.ndarray]
+    raw: np.ndarray | None
 
 
 @dataclass(frozen=True)
@@ -57,10 +57,10 @@ class StreamScan:
 
     name: str
     points: int
-    pose: Optional[np.ndarray]
-    intensity_limits: Optional[tuple[float, float]]
+    pose: np.ndarray | None
+    intensity_limits: tuple[float, float] | None
     has_intensity: bool
-    bounds: Optional[tuple[tuple[float, ...], tuple[float, ...]]] = None
+    bounds: tuple[tuple[float, ...], tuple[float, ...]] | None = None
 
 
 @dataclass
@@ -72,7 +72,7 @@ class ScanStream:
     scans: list[StreamScan]
     streamed: bool
     details: dict = field(default_factory=dict)
-    loaded: Optional[list] = None  # the scans read whole, for files that cannot be streamed
+    loaded: list | None = None  # the scans read whole, for files that cannot be streamed
 
     def chunks(self, index: int = 0, chunk_points: int = CHUNK_POINTS) -> Iterator[Chunk]:
         """Yield the points of scan ``index`` in chunks of at most ``chunk_points``."""
@@ -230,7 +230,7 @@ def _e57_xml(p: Path):
         return ET.fromstring(_logical(p, fh, int(xml_off), int(xml_len), size))
 
 
-def _e57_float(node, *names: str) -> Optional[float]:
+def _e57_float(node, *names: str) -> float | None:
     from lidar.io.e57_header import _NS
 
     for name in names:
@@ -256,7 +256,7 @@ def _open_e57(p: Path) -> ScanStream:
     data3d = root.find(_NS + "data3D")
     nodes = list(data3d) if data3d is not None else []
     scans = []
-    for k, (f, node) in enumerate(zip(facts.scans, nodes)):
+    for k, (f, node) in enumerate(zip(facts.scans, nodes, strict=False)):
         if f.record_count == 0:
             raise ScanFormatError(p, f"scan {k} ({f.name}) holds no points")
         q = [_e57_float(node, "pose", "rotation", a) for a in ("w", "x", "y", "z")]
@@ -378,7 +378,7 @@ def _open_ply(p: Path) -> ScanStream:
     return ScanStream(p, "ply", [StreamScan(p.stem, vertex.count, pose, None, has_i)], mappable, details)
 
 
-def _ply_vertex_types(clean: bytes) -> Optional[list[tuple[str, str]]]:
+def _ply_vertex_types(clean: bytes) -> list[tuple[str, str]] | None:
     """(name, numpy type) of the vertex element's scalar properties; None when it has a list property."""
     out: list[tuple[str, str]] = []
     inside = False
@@ -393,7 +393,7 @@ def _ply_vertex_types(clean: bytes) -> Optional[list[tuple[str, str]]]:
     return out
 
 
-def _ply_records(s: ScanStream) -> tuple[np.ndarray, list[str], Optional[str]]:
+def _ply_records(s: ScanStream) -> tuple[np.ndarray, list[str], str | None]:
     dtype = s.details["dtype"]
     rec = np.memmap(s.path, dtype=dtype, mode="r", offset=s.details["data_start"], shape=(s.scans[0].points,))
     names = dtype.names
@@ -429,7 +429,7 @@ def _open_pcd(p: Path) -> ScanStream:
                       {"format": "PCD", "pcd_data": h.mode, "fields": list(h.fields), "header": h})
 
 
-def _pcd_records(s: ScanStream) -> tuple[np.ndarray, list[str], Optional[str]]:
+def _pcd_records(s: ScanStream) -> tuple[np.ndarray, list[str], str | None]:
     from lidar.io.pcd import _record_dtype
 
     h = s.details["header"]
@@ -443,7 +443,7 @@ def _pcd_chunks(s: ScanStream, index: int, chunk_points: int) -> Iterator[Chunk]
     yield from _record_chunks(*_pcd_records(s), chunk_points)
 
 
-def _record_chunks(rec: np.ndarray, cols: list[str], icol: Optional[str], chunk_points: int) -> Iterator[Chunk]:
+def _record_chunks(rec: np.ndarray, cols: list[str], icol: str | None, chunk_points: int) -> Iterator[Chunk]:
     for start in range(0, len(rec), chunk_points):
         part = rec[start:start + chunk_points]
         xyz = np.empty((len(part), 3))
@@ -463,7 +463,7 @@ def _record_chunks(rec: np.ndarray, cols: list[str], icol: Optional[str], chunk_
 
 
 # ------------------------------------------------------------------ anything else: read whole, hand out in chunks
-def _whole_scan_chunks(scan, start: int, stop: Optional[int], chunk_points: int) -> Iterator[Chunk]:
+def _whole_scan_chunks(scan, start: int, stop: int | None, chunk_points: int) -> Iterator[Chunk]:
     raw = scan.intensity_raw
     stop = len(scan) if stop is None else min(stop, len(scan))
     for k in range(start, stop, chunk_points):

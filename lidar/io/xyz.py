@@ -17,8 +17,15 @@ from pathlib import Path
 import numpy as np
 
 from common.errors import ScanFormatError
-from lidar.io._common import (atomic_output, check_readable, make_scan, pose_from_text, pose_to_text, raw_for_writing,
-                               read_ascii_table)
+from lidar.io._common import (
+    atomic_output,
+    check_readable,
+    make_scan,
+    pose_from_text,
+    pose_to_text,
+    raw_for_writing,
+    read_ascii_table,
+)
 from lidar.io.names import find_column
 from lidar.scan import Scan
 

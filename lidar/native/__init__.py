@@ -17,7 +17,6 @@ import os
 import sys
 from functools import lru_cache
 from pathlib import Path
-from typing import Optional
 
 import numpy as np
 
@@ -29,14 +28,14 @@ def _ptr(kind):
 
 
 @lru_cache(maxsize=1)
-def coarse_map_library() -> Optional[ctypes.CDLL]:
+def coarse_map_library() -> ctypes.CDLL | None:
     """The compiled coarse-map loops, or None (not built, not loadable, stale, big-endian host or switched off)."""
     if os.environ.get("BRIDGESURVEY_NATIVE", "1") == "0" or sys.byteorder != "little":
         return None
     return load_coarse_map(_HERE)
 
 
-def load_coarse_map(folder: Path) -> Optional[ctypes.CDLL]:
+def load_coarse_map(folder: Path) -> ctypes.CDLL | None:
     """The library ``_coarse_map`` in ``folder`` with its functions declared, or None.
 
     None when it is missing, cannot be loaded, or was built from another ``coarse_map.c`` than the one in

@@ -6,8 +6,8 @@ usually stands) at y < 0.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, fields, replace
-from typing import Optional, Sequence, Union
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -63,7 +63,7 @@ def _default_targets(span: float, pier_length: float, deck_bottom: float, diamet
     fractions = (0.2, 0.35, 0.5, 0.65, 0.8)
     ys = (-2.0, 1.0, -2.0, 1.0, -2.0)
     meas = [Target(f"M{k + 1}", "measurement", (f * span, y, z), (0, 0, -1), diameter)
-            for k, (f, y) in enumerate(zip(fractions, ys))]
+            for k, (f, y) in enumerate(zip(fractions, ys, strict=False))]
     return tuple(ref + meas)
 
 
@@ -71,7 +71,7 @@ def _default_targets(span: float, pier_length: float, deck_bottom: float, diamet
 DEFAULT_DECK_FRACTIONS = (0.4, 0.5, 0.6)
 
 
-def _layout_targets(model: "BridgeModel") -> tuple[Target, ...]:
+def _layout_targets(model: BridgeModel) -> tuple[Target, ...]:
     """A multi-span layout (also used for one span when deck fractions or girder lines are given).
 
     Reference targets R1, R2 on the first pier's +x face (low on the access side, high on the far side), then
@@ -93,7 +93,7 @@ def _layout_targets(model: "BridgeModel") -> tuple[Target, ...]:
     lines = model.girder_lines_m or (-model.deck_width_m / 4, model.deck_width_m / 4)
     z = model.deck_bottom_m - 0.001
     k = 0
-    for x0, span in zip(xs[:-1], model.spans_m):
+    for x0, span in zip(xs[:-1], model.spans_m, strict=False):
         for y in lines:
             for f in fractions:
                 k += 1
@@ -253,7 +253,7 @@ class BridgeModel:
                 return t
         raise InputError(f"bridge model has no target {target_id!r}")
 
-    def deflection_m(self, x_m: ArrayLike, midspan_m: Union[float, Sequence[float]]) -> np.ndarray:
+    def deflection_m(self, x_m: ArrayLike, midspan_m: float | Sequence[float]) -> np.ndarray:
         """Vertical displacement (positive up) along the bridge for midspan amplitudes.
 
         Parameters
@@ -279,12 +279,12 @@ class BridgeModel:
             return continuous_deflection(self.spans_m, amps, x)
         xs = self.support_x_m
         out = np.zeros(x.shape)
-        for k, (x0, span) in enumerate(zip(xs[:-1], self.spans_m)):
+        for k, (x0, span) in enumerate(zip(xs[:-1], self.spans_m, strict=False)):
             sel = (x >= x0) & (x <= x0 + span)
             out[sel] = amps[k] * np.sin(np.pi * (x[sel] - x0) / span)
         return out
 
-    def with_targets(self, targets: Sequence[Target]) -> "BridgeModel":
+    def with_targets(self, targets: Sequence[Target]) -> BridgeModel:
         return replace(self, targets=tuple(targets))
 
 
@@ -299,7 +299,7 @@ def box_mesh(lo: Sequence[float], hi: Sequence[float]) -> tuple[np.ndarray, np.n
     return v, f
 
 
-def deck_mesh(model: BridgeModel, midspan_m: Union[float, Sequence[float]], stations: Optional[int] = None, *,
+def deck_mesh(model: BridgeModel, midspan_m: float | Sequence[float], stations: int | None = None, *,
               strain: float = 0.0, fixed_x_m: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """The deck as a prism with ``stations`` cross-sections along x, deflected vertically.
 
@@ -350,7 +350,7 @@ def pier_meshes(model: BridgeModel) -> list[tuple[np.ndarray, np.ndarray]]:
     return [box_mesh((xc - hl, -hw, 0.0), (xc + hl, hw, model.deck_bottom_m)) for xc in model.support_x_m]
 
 
-def ground_mesh(model: BridgeModel, extent_m: Optional[float] = None) -> tuple[np.ndarray, np.ndarray]:
+def ground_mesh(model: BridgeModel, extent_m: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(vertices, triangles) of a square of ground centred on the bridge, bridge frame.
 
     ``extent_m`` is its half-width; default the larger of 150 m and half the bridge's length plus 100 m.
@@ -370,7 +370,7 @@ def plate_mesh(centre: ArrayLike, normal: ArrayLike, half_size_m: float) -> tupl
     return v, np.array([[0, 1, 2], [0, 2, 3], [0, 2, 1], [0, 3, 2]], dtype=np.int32)
 
 
-def in_plane_axes(normal: ArrayLike, up_hint: Optional[np.ndarray] = None) -> tuple[np.ndarray, np.ndarray]:
+def in_plane_axes(normal: ArrayLike, up_hint: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Two unit vectors spanning the plane normal to ``normal``.
 
     The second axis is the projection of +z (or of +y for horizontal planes),

@@ -15,9 +15,9 @@ from __future__ import annotations
 import datetime as dt
 import json
 import os
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Optional, Sequence
 
 import numpy as np
 
@@ -91,7 +91,7 @@ def _random_walk(rng: np.random.Generator, max_bias_m: float) -> RangeWalk:
 
 def random_conditions(model: BridgeModel, rng: np.random.Generator, *, sag_m: tuple[float, float] = (-0.008, 0.0),
                       temperature_c: tuple[float, float] = (-15.0, 15.0), expansion_per_c: float = 12e-6,
-                      ppm: tuple[float, float] = (-30.0, 30.0), max_walk_m: Optional[float] = 0.0015,
+                      ppm: tuple[float, float] = (-30.0, 30.0), max_walk_m: float | None = 0.0015,
                       clipped_fraction: tuple[float, float] = (0.0, 0.3), drift_arcsec_per_h: float = 20.0,
                       start_s: float = 0.0, gap_s: float = 30.0) -> EpochConditions:
     """A visit's state with every effect drawn at random (uniform in the ranges given).
@@ -133,14 +133,14 @@ def random_conditions(model: BridgeModel, rng: np.random.Generator, *, sag_m: tu
     )
 
 
-def campaign_layout(model: BridgeModel, *, noise_m: float = 0.03, rng: Optional[np.random.Generator] = None,
+def campaign_layout(model: BridgeModel, *, noise_m: float = 0.03, rng: np.random.Generator | None = None,
                     with_normals: bool = False) -> Layout:
     """The model's targets as a layout with design-drawing errors (``noise_m`` per axis, default 3 cm)."""
     return layout_from_model(model, noise_m=noise_m, rng=rng or np.random.default_rng(0), with_normals=with_normals)
 
 
 def write_layout(model: BridgeModel, path: str | os.PathLike, *, noise_m: float = 0.03,
-                 rng: Optional[np.random.Generator] = None, with_normals: bool = False) -> Path:
+                 rng: np.random.Generator | None = None, with_normals: bool = False) -> Path:
     """Write the model's ``layout.csv`` with a few centimetres of error (see :func:`campaign_layout`)."""
     return write_layout_csv(campaign_layout(model, noise_m=noise_m, rng=rng, with_normals=with_normals), path)
 
@@ -156,9 +156,9 @@ class CampaignVisit:
 
 
 def write_campaign(root: str | os.PathLike, model: BridgeModel, visits: Sequence[EpochConditions], *,
-                   plan_for: PlanFor, stations: Optional[Sequence[Sequence[ScannerSetup]]] = None,
+                   plan_for: PlanFor, stations: Sequence[Sequence[ScannerSetup]] | None = None,
                    setups_per_visit: int = 1, seed: int = 0, coarse_step_deg: float = 0.04,
-                   start: Optional[dt.datetime] = None, interval_days: float = 7.0, layout_noise_m: float = 0.03,
+                   start: dt.datetime | None = None, interval_days: float = 7.0, layout_noise_m: float = 0.03,
                    with_normals: bool = False) -> list[CampaignVisit]:
     """Write a simulated campaign under ``root`` (see the module text for the files).
 
@@ -197,7 +197,7 @@ def write_campaign(root: str | os.PathLike, model: BridgeModel, visits: Sequence
     write_layout(model, root / "layout.csv", noise_m=layout_noise_m, rng=rng, with_normals=with_normals)
     if stations is not None and len(stations) != len(visits):
         raise InputError(f"{len(visits)} visits but stations for {len(stations)}")
-    start = start or dt.datetime(2026, 1, 5, 9, 0, tzinfo=dt.timezone.utc)
+    start = start or dt.datetime(2026, 1, 5, 9, 0, tzinfo=dt.UTC)
     out = []
     for k, cond in enumerate(visits):
         setups = tuple(stations[k]) if stations is not None else \

@@ -18,8 +18,8 @@ milliseconds.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Optional, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -96,7 +96,7 @@ class BridgeGeometry:
             groups[rid] = "reference"
             xyz.append(p)
         n = 1
-        for x0, span in zip(self.support_x_m[:-1], self.spans_m):
+        for x0, span in zip(self.support_x_m[:-1], self.spans_m, strict=False):
             for y in self.girder_offsets_m:
                 for s in self.stations:
                     rid = f"M{n}"
@@ -122,7 +122,7 @@ class BridgeGeometry:
 def deflection(xyz: np.ndarray, groups: dict[str, str], ids: Sequence[str], geometry: BridgeGeometry, *,
                midspan_m: float,
                girder_ratio: float = 1.0, asymmetry_m: float = 0.0,
-               span_amplitudes_m: Optional[Sequence[float]] = None) -> np.ndarray:
+               span_amplitudes_m: Sequence[float] | None = None) -> np.ndarray:
     """Vertical deck displacement (m, positive up) of each target; reference targets do not move.
 
     A half-sine sag of ``midspan_m`` at midspan (of every span; ``span_amplitudes_m`` gives one per span
@@ -167,8 +167,8 @@ def observe(xyz_bridge: np.ndarray, ids: Sequence[str], *, scanner_xyz: ArrayLik
             rng: np.random.Generator,
             range_sigma_m: float = 0.005, angle_sigma_rad: float = 4e-5, points: int = 1000,
             tilt_deg: float = 0.005, return_rotation: bool = False, range_scale_ppm: float = 0.0,
-            range_walk: Optional[RangeWalk] = None, normals_bridge: Optional[np.ndarray] = None,
-            drift: Optional[DriftModel] = None, times_s: Optional[ArrayLike] = None) -> dict | tuple[dict, np.ndarray]:
+            range_walk: RangeWalk | None = None, normals_bridge: np.ndarray | None = None,
+            drift: DriftModel | None = None, times_s: ArrayLike | None = None) -> dict | tuple[dict, np.ndarray]:
     """Centroids of the targets as a scanner at ``scanner_xyz`` (bridge frame) would measure them.
 
     Returns observations in the scanner's own frame (levelled to ``tilt_deg``,
@@ -219,9 +219,9 @@ def _across(los: np.ndarray) -> np.ndarray:
     return np.stack([a, np.cross(los, a)])
 
 
-def _systematic(socs: np.ndarray, rot: np.ndarray, *, range_scale_ppm: float, range_walk: Optional[RangeWalk],
-                normals_bridge: Optional[np.ndarray], drift: Optional[DriftModel],
-                times_s: Optional[ArrayLike]) -> np.ndarray:
+def _systematic(socs: np.ndarray, rot: np.ndarray, *, range_scale_ppm: float, range_walk: RangeWalk | None,
+                normals_bridge: np.ndarray | None, drift: DriftModel | None,
+                times_s: ArrayLike | None) -> np.ndarray:
     """(N, 3) true scanner-frame positions as the instrument reports them: drift, then range walk and scale."""
     if drift is not None:
         if times_s is None:

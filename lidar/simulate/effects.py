@@ -34,7 +34,7 @@ Timing
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields
-from typing import ClassVar, Optional, Union
+from typing import ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -209,18 +209,18 @@ class ExponentialStrengthWalk:
         return np.broadcast_to(self.max_m * (1.0 - np.exp(-np.maximum(s, 0.0) / self.scale)), shape).copy()
 
 
-RangeWalk = Union[LinearIncidenceWalk, InverseSquareWalk, StrengthStepWalk, LogisticStrengthWalk,
-                  ExponentialStrengthWalk]
+RangeWalk = (LinearIncidenceWalk | InverseSquareWalk | StrengthStepWalk | LogisticStrengthWalk
+             | ExponentialStrengthWalk)
 RANGE_WALK_FORMS: dict[str, type] = {c.form: c for c in (LinearIncidenceWalk, InverseSquareWalk, StrengthStepWalk,
                                                          LogisticStrengthWalk, ExponentialStrengthWalk)}
 
 
-def walk_to_dict(walk: Optional[RangeWalk]) -> Optional[dict]:
+def walk_to_dict(walk: RangeWalk | None) -> dict | None:
     """``{"form": name, **parameters}`` of a range walk (None for none), for JSON."""
     return None if walk is None else {"form": walk.form, **asdict(walk)}
 
 
-def walk_from_dict(d: Optional[dict]) -> Optional[RangeWalk]:
+def walk_from_dict(d: dict | None) -> RangeWalk | None:
     """The range walk written by :func:`walk_to_dict`."""
     if d is None:
         return None
@@ -292,7 +292,7 @@ class DriftModel:
         return d
 
     @classmethod
-    def from_dict(cls, d: Optional[dict]) -> Optional["DriftModel"]:
+    def from_dict(cls, d: dict | None) -> DriftModel | None:
         if d is None:
             return None
         out = {f.name: float(d.get(f.name) or 0.0) for f in fields(cls) if f.name != "jump_after_s"}
@@ -369,7 +369,7 @@ class AxisErrors:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, d: Optional[dict]) -> Optional["AxisErrors"]:
+    def from_dict(cls, d: dict | None) -> AxisErrors | None:
         return None if d is None else cls(**{f.name: float(d.get(f.name, 0.0)) for f in fields(cls)})
 
 
@@ -408,7 +408,7 @@ class VisitTiming:
 
     start_s: float = 0.0
     gap_s: float = 30.0
-    rate_hz: Optional[float] = None
+    rate_hz: float | None = None
     duration: str = "points"
 
     def __post_init__(self) -> None:
@@ -424,7 +424,7 @@ class VisitTiming:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, d: Optional[dict]) -> Optional["VisitTiming"]:
+    def from_dict(cls, d: dict | None) -> VisitTiming | None:
         if d is None:
             return None
         rate = d.get("rate_hz")

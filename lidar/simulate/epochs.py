@@ -5,8 +5,6 @@ lab design (3 scanner positions x 4 loads).
 """
 from __future__ import annotations
 
-from typing import Optional
-
 import numpy as np
 
 from lidar.centroid import centroids_from_scan
@@ -20,7 +18,7 @@ GROUPS = {t.id: t.group for t in MODEL.targets}
 
 
 def plan_from_truth(scene: BridgeScene, *, min_points: int = 1000, position_noise_m: float = 0.01,
-                    rng: Optional[np.random.Generator] = None) -> ScanPlan:
+                    rng: np.random.Generator | None = None) -> ScanPlan:
     """A fine-scan plan from the scene's true target positions, each disturbed by ``position_noise_m``."""
     rng = rng or np.random.default_rng(0)
     truth = scene.truth()
@@ -33,7 +31,7 @@ def plan_from_truth(scene: BridgeScene, *, min_points: int = 1000, position_nois
 
 
 def fine_epoch(conditions: EpochConditions, setup: ScannerSetup, *, seed: int, min_points: int = 1000,
-               range_noise_m: Optional[float] = None) -> tuple[dict, ScanTruth, ScanPlan, Scan]:
+               range_noise_m: float | None = None) -> tuple[dict, ScanTruth, ScanPlan, Scan]:
     """Centroids (found only) and truth of one epoch scanned at its planned windows."""
     scene = BridgeScene(MODEL, conditions, setup)
     rng = np.random.default_rng(seed)

@@ -11,9 +11,10 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Sequence
 from dataclasses import asdict, replace
 from pathlib import Path
-from typing import Optional, Sequence, TYPE_CHECKING
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -68,7 +69,7 @@ def conditions_from_dict(c: dict) -> EpochConditions:
 
 
 def save_scene(folder: Path, setup: ScannerSetup, conditions: EpochConditions, seed: int,
-               coarse_step_deg: float, *, model: Optional[BridgeModel] = None) -> Path:
+               coarse_step_deg: float, *, model: BridgeModel | None = None) -> Path:
     """Write ``scene.json``: what a visit folder's simulated scans were made from (to scan it again).
 
     The bridge model is written when it is not the default one; a scene of today's bridge without any of
@@ -123,7 +124,7 @@ def scan_order(rois: Sequence[RoiPlan]) -> list[RoiPlan]:
 
 
 def simulate_coarse(folder: str | os.PathLike, *, setup: ScannerSetup, conditions: EpochConditions,
-                    model: Optional[BridgeModel] = None, seed: int = 0, coarse_step_deg: float = 0.04,
+                    model: BridgeModel | None = None, seed: int = 0, coarse_step_deg: float = 0.04,
                     name: str = "coarse.laz") -> tuple[Path, ScanTruth]:
     """Write a coarse whole-bridge scan of one visit, its scene spec and its ground truth.
 
@@ -140,7 +141,7 @@ def simulate_coarse(folder: str | os.PathLike, *, setup: ScannerSetup, condition
     return write_las(scan, folder / name), truth
 
 
-def simulate_fine(folder: str | os.PathLike, rois: Sequence[RoiPlan], *, model: Optional[BridgeModel] = None,
+def simulate_fine(folder: str | os.PathLike, rois: Sequence[RoiPlan], *, model: BridgeModel | None = None,
                   name: str = "fine.laz", truth_name: str = "truth_fine.json") -> tuple[Path, ScanTruth]:
     """Scan the planned windows of the visit in ``folder`` (same set-up and state as its coarse scan).
 

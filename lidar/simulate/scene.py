@@ -1,15 +1,15 @@
 """Ray-cast scanning of the simulated bridge (Open3D), with an intensity and noise model."""
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Mapping, Optional
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from lidar.angles import AngularWindow, bounding_window, direction_from_angles, spherical_from_xyz
 from common.errors import InputError
+from lidar.angles import AngularWindow, bounding_window, direction_from_angles, spherical_from_xyz
 from lidar.scan import Scan, normalise_intensity
 from lidar.scanner_profile import VZ1000, ScannerProfile
 from lidar.simulate.bridge import (
@@ -98,14 +98,14 @@ class EpochConditions:
     saturated: bool = False
     span_displacements_m: tuple[float, ...] = ()
     deck_strain: float = 0.0
-    fixed_bearing_x_m: Optional[float] = None
+    fixed_bearing_x_m: float | None = None
     range_scale_ppm: float = 0.0
     range_scale_rate_ppm_h: float = 0.0
-    range_walk: Optional[RangeWalk] = None
+    range_walk: RangeWalk | None = None
     clipped_fraction: float = 0.0
-    drift: Optional[DriftModel] = None
-    timing: Optional[VisitTiming] = None
-    axis_errors: Optional[AxisErrors] = None
+    drift: DriftModel | None = None
+    timing: VisitTiming | None = None
+    axis_errors: AxisErrors | None = None
     walk_factors: Mapping[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -136,7 +136,7 @@ class EpochConditions:
         """Whether points get times (a timing, a drift or a scale that changes during the visit is given)."""
         return self.timing is not None or self.drift is not None or self.range_scale_rate_ppm_h != 0.0
 
-    def scale_ppm_at(self, time_s: Optional[ArrayLike]) -> float | np.ndarray:
+    def scale_ppm_at(self, time_s: ArrayLike | None) -> float | np.ndarray:
         """The atmosphere's range scale (ppm) at ``time_s`` (seconds on the visit's clock; None: its start)."""
         if time_s is None or not self.range_scale_rate_ppm_h:
             return self.range_scale_ppm
@@ -195,7 +195,7 @@ class _Returns:
         if not self.parts:
             e = np.zeros(0)
             return np.zeros(0, np.int64), e, e, e
-        idx, r, c, cov = (np.concatenate(a) for a in zip(*self.parts))
+        idx, r, c, cov = (np.concatenate(a) for a in zip(*self.parts, strict=False))
         _, first_rev = np.unique(idx[::-1], return_index=True)
         last = idx.size - 1 - first_rev
         return idx[last], r[last], c[last], return_strength(r[last], c[last], cov[last])
@@ -290,7 +290,7 @@ class BridgeScene:
             return float(start_s) + (k // rows) * self._line_seconds(window) + (k % rows) / self.rate_hz
         return float(start_s) + np.arange(n) / self.rate_hz
 
-    def _world_directions(self, d_socs: np.ndarray, times: Optional[np.ndarray]) -> np.ndarray:
+    def _world_directions(self, d_socs: np.ndarray, times: np.ndarray | None) -> np.ndarray:
         """(N, 3) bridge-frame directions of rays the instrument sends along ``d_socs`` (its frame of the moment)."""
         axes, drift = self.conditions.axis_errors, self.conditions.drift
         if axes is not None:
@@ -300,8 +300,8 @@ class BridgeScene:
         return d_socs @ self.setup.rotation.T
 
     # ------------------------------------------------------------------ scanning
-    def scan(self, window: AngularWindow, *, rng: np.random.Generator, range_noise_m: Optional[float] = None,
-             name: str = "", start_s: Optional[float] = None) -> tuple[Scan, ScanTruth]:
+    def scan(self, window: AngularWindow, *, rng: np.random.Generator, range_noise_m: float | None = None,
+             name: str = "", start_s: float | None = None) -> tuple[Scan, ScanTruth]:
         """Scan an angular window; returns the points (SOCS) and the ground truth.
 
         Parameters
@@ -428,7 +428,7 @@ class BridgeScene:
         return cand, q, t_d, visible, np.clip(-denom, 1e-3, 1.0)
 
     def _paint_disc(self, disc: _Disc, k: int, origin, d_world, t, hit, intensity, on_target,
-                    returns: Optional[_Returns] = None) -> int:
+                    returns: _Returns | None = None) -> int:
         reach = disc.radius + 3 * float(self.profile.footprint_m(np.linalg.norm(disc.centre - origin)))
         cand, q, t_d, visible, cos_inc = self._plane_hits(disc.centre, disc.normal, reach, origin, d_world, t, hit)
         if cand.size == 0:
@@ -450,7 +450,7 @@ class BridgeScene:
         return int(np.count_nonzero(cover >= 0.5))
 
     def _paint_cable_tie(self, disc: _Disc, origin, d_world, t, hit, intensity,
-                         returns: Optional[_Returns] = None) -> None:
+                         returns: _Returns | None = None) -> None:
         e1, e2 = in_plane_axes(disc.normal, up_hint=np.array([1.0, 0, 0]) if abs(disc.normal[2]) > 0.9 else None)
         centre = disc.centre - CABLE_TIE_OFFSET_M * e2  # below the target on a pier face
         half_w, half_l = CABLE_TIE_SIZE_M[0] / 2, CABLE_TIE_SIZE_M[1] / 2
@@ -471,7 +471,7 @@ class BridgeScene:
             returns.add(idx, t_d[sel], cos_inc[sel], cover[sel])
 
     # ------------------------------------------------------------------ truth
-    def _target_truth(self, disc: _Disc, points: Optional[int], time_s: Optional[float]) -> TargetTruth:
+    def _target_truth(self, disc: _Disc, points: int | None, time_s: float | None) -> TargetTruth:
         """One target's truth: where it is, how it faces the scanner, and what a noise-free instrument reports."""
         c, tid = self.conditions, disc.target.id
         socs = self.setup.to_socs(disc.centre[None])[0]
@@ -506,8 +506,8 @@ class BridgeScene:
             centre_observed_socs_m=observed,
         )
 
-    def truth(self, points_on_target: Optional[Mapping[str, Optional[int]]] = None, *,
-              times_s: Optional[Mapping[str, float]] = None, windows: tuple[WindowTruth, ...] = ()) -> ScanTruth:
+    def truth(self, points_on_target: Mapping[str, int | None] | None = None, *,
+              times_s: Mapping[str, float] | None = None, windows: tuple[WindowTruth, ...] = ()) -> ScanTruth:
         """Ground truth of this state and set-up: target centres in both frames and the visit's effects.
 
         ``times_s`` maps target ids to the time they were scanned; ``windows`` are the visit's scans in order.

@@ -49,7 +49,7 @@ class ScannerSetup:
     @classmethod
     def random(cls, rng: np.random.Generator, *, span_m: float = 40.0, x_range: tuple[float, float] = (0.15, 0.85),
                y_range_m: tuple[float, float] = (-20.0, -10.0), height_m: tuple[float, float] = (1.2, 1.8),
-               tilt_deg: float = 0.05) -> "ScannerSetup":
+               tilt_deg: float = 0.05) -> ScannerSetup:
         """A plausible weekly set-up on the access side of the bridge."""
         return cls(
             position_m=(rng.uniform(*x_range) * span_m, rng.uniform(*y_range_m), rng.uniform(*height_m)),

@@ -13,7 +13,6 @@ import json
 import os
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
-from typing import Optional
 
 import numpy as np
 
@@ -61,13 +60,13 @@ class TargetTruth:
     moved: bool = False
     occluded: bool = False
     cable_tie: bool = False
-    points_on_target: Optional[int] = None
+    points_on_target: int | None = None
     along_span_m: float = 0.0
-    cos_incidence: Optional[float] = None
-    range_m: Optional[float] = None
+    cos_incidence: float | None = None
+    range_m: float | None = None
     range_bias_m: float = 0.0
-    time_s: Optional[float] = None
-    centre_observed_socs_m: Optional[tuple[float, ...]] = None
+    time_s: float | None = None
+    centre_observed_socs_m: tuple[float, ...] | None = None
 
 
 @dataclass(frozen=True)
@@ -124,12 +123,12 @@ class ScanTruth:
     deck_strain: float = 0.0
     fixed_bearing_x_m: float = 0.0
     range_scale_ppm: float = 0.0
-    range_walk: Optional[dict] = None
+    range_walk: dict | None = None
     clipped_fraction: float = 0.0
-    drift: Optional[dict] = None
-    timing: Optional[dict] = None
+    drift: dict | None = None
+    timing: dict | None = None
     windows: tuple[WindowTruth, ...] = ()
-    axis_errors: Optional[dict] = None
+    axis_errors: dict | None = None
 
     def target(self, target_id: str) -> TargetTruth:
         return next(t for t in self.targets if t.id == target_id)
@@ -143,7 +142,7 @@ class ScanTruth:
         return d
 
     @classmethod
-    def from_dict(cls, d: dict) -> "ScanTruth":
+    def from_dict(cls, d: dict) -> ScanTruth:
         tuples = ("centre_bridge_m", "centre_socs_m", "normal_socs", "centre_observed_socs_m")
         known = {f.name for f in fields(TargetTruth)}
         def target(t: dict) -> TargetTruth:
@@ -169,5 +168,5 @@ class ScanTruth:
         return p
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> "ScanTruth":
+    def load(cls, path: str | os.PathLike) -> ScanTruth:
         return cls.from_dict(json.loads(Path(path).read_text()))

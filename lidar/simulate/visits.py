@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import os
 import shutil
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable, Optional, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -42,11 +42,11 @@ class VisitFiles:
 
     folder: Path
     coarse: Path
-    fine: Optional[Path]
+    fine: Path | None
     truth: ScanTruth
 
 
-def truth_plan_for(*, min_points: int = 1000, position_noise_m: float = 0.01, closure: Optional[str] = None,
+def truth_plan_for(*, min_points: int = 1000, position_noise_m: float = 0.01, closure: str | None = None,
                    seed: int = 0) -> PlanFor:
     """A plan callback planning from the simulator's truth (no coarse-scan processing), for tests and studies.
 
@@ -93,7 +93,7 @@ def truth_plan_for(*, min_points: int = 1000, position_noise_m: float = 0.01, cl
 
 
 def simulate_visit(folder: str | os.PathLike, *, setup: ScannerSetup, conditions: EpochConditions,
-                   plan_for: PlanFor, model: Optional[BridgeModel] = None, seed: int = 0,
+                   plan_for: PlanFor, model: BridgeModel | None = None, seed: int = 0,
                    coarse_step_deg: float = 0.04) -> VisitFiles:
     """One set-up's visit in ``folder``: ``coarse.laz``, the plan callback's windows in ``fine.laz``, the truth.
 
@@ -118,7 +118,7 @@ def visit_end_s(truth: ScanTruth) -> float:
 
 
 def simulate_setups(folder: str | os.PathLike, setups: Sequence[ScannerSetup], conditions: EpochConditions, *,
-                    plan_for: PlanFor, model: Optional[BridgeModel] = None, seed: int = 0,
+                    plan_for: PlanFor, model: BridgeModel | None = None, seed: int = 0,
                     coarse_step_deg: float = 0.04, move_s: float = 600.0) -> list[VisitFiles]:
     """Several set-ups in one visit: ``folder/setup1``, ``folder/setup2``... each with its own station's scans.
 

@@ -27,8 +27,8 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Mapping, Optional, Sequence
 
 import numpy as np
 
@@ -184,7 +184,7 @@ class _Problem:
     """The unknowns, their ordering and the linearised equations of one adjustment."""
 
     def __init__(self, visits: Sequence[VisitSightings], groups: Mapping[str, str], basis: tuple[str, ...],
-                 start: Optional["_Problem"] = None, drift: bool = True, axes: tuple[int, ...] = ()):
+                 start: _Problem | None = None, drift: bool = True, axes: tuple[int, ...] = ()):
         self.basis = basis
         self.drift = drift
         self.axes, self.n_axes = tuple(axes), len(axes)  # the instrument's axis errors fitted (AXIS_NAMES)
@@ -193,7 +193,7 @@ class _Problem:
         deck_ids = sorted({s.target for v in visits for s in v.sightings if groups.get(s.target) == "measurement"})
         self.ref_ids, self.deck_ids = ref_ids, deck_ids
         b_deck = {s.target: s.xyz_socs for s in base.sightings if s.target in deck_ids}
-        self.across: Optional[np.ndarray] = None
+        self.across: np.ndarray | None = None
         if len(b_deck) >= 3:
             up = deck_normal(np.array(list(b_deck.values())), up=(0.0, 0.0, 1.0))
             self.across = across_axis(np.array(list(b_deck.values())), up)
@@ -211,7 +211,7 @@ class _Problem:
         else:  # the poses, targets and down-weighting of a solved problem on the same visits
             self.x_ref, self.a_deck = start.x_ref.copy(), start.a_deck.copy()
             self.alpha = np.array([start.alpha[start.axes.index(k)] if k in start.axes else 0.0 for k in self.axes])
-            for mine, theirs in zip(self.visits, start.visits):
+            for mine, theirs in zip(self.visits, start.visits, strict=False):
                 mine.q, mine.d, mine.kappa_ppm = theirs.q.copy(), theirs.d.copy(), theirs.kappa_ppm
                 mine.omega = theirs.omega.copy() if mine.timed else np.zeros(3)
                 mine.weights = dict(theirs.weights)
@@ -449,7 +449,7 @@ def _solve_once(p: _Problem) -> tuple[_Solution, float]:
     dx_s = cov_s @ b_s
     step = float(np.max(np.abs(dx_s))) if dx_s.size else 0.0
     cov_l = []
-    for v, (inv_ll, n_ls, b_l) in zip(p.visits, parts):
+    for v, (inv_ll, n_ls, b_l) in zip(p.visits, parts, strict=False):
         dx_l = inv_ll @ (b_l - n_ls @ dx_s)
         p.apply_step(v, dx_l)
         k = inv_ll @ n_ls
@@ -548,7 +548,7 @@ def fit_field_model(visits: Sequence[VisitSightings], groups: Mapping[str, str],
 
 
 def _final_fit(visits: Sequence[VisitSightings], groups: Mapping[str, str], basis: tuple[str, ...],
-               start: Optional[_Problem]) -> tuple[_Problem, _Solution, list]:
+               start: _Problem | None) -> tuple[_Problem, _Solution, list]:
     """The range walk ``basis`` fitted with the instrument's axis errors and the set-ups' drift the data support.
 
     All three axis errors are fitted first; the subset BIC prefers follows from that fit's estimates and
@@ -590,7 +590,7 @@ def _supported_axes(p: _Problem, sol: _Solution) -> tuple[int, ...]:
 
 
 def _model(p: _Problem, sol: _Solution, left_out: list, baseline: str, alternatives: tuple = (),
-           alternative_kappas: Optional[list] = None) -> FieldModel:
+           alternative_kappas: list | None = None) -> FieldModel:
     dof = max(sol.n_rows - sol.n_unknowns, 1)
     s0 = math.sqrt(sol.chi2 / dof)
     f = max(1.0, s0) ** 2
@@ -605,7 +605,7 @@ def _model(p: _Problem, sol: _Solution, left_out: list, baseline: str, alternati
     axes = AxisModel(p.axes, p.alpha.copy(), sol.cov_shared[p.axis_columns, p.axis_columns] * f)
     out = {}
     dof_ratio = max(1.0 - sol.n_unknowns / max(sol.n_rows, 1), 0.1)
-    for k, (v, cl) in enumerate(zip(p.visits, sol.cov_local)):
+    for k, (v, cl) in enumerate(zip(p.visits, sol.cov_local, strict=False)):
         _, _, res, blocks = p.visit_rows(v)
         n_data = sum(n for _, _, n in blocks)
         kept = [(kind, j) for kind, j, _ in blocks if v.weights.get((kind, j), 1.0) > 0]

@@ -22,8 +22,8 @@ point the beam really met (the second order is below a micrometre at 60 arcsec a
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Iterable
 
 import numpy as np
 
@@ -90,7 +90,8 @@ class AxisModel:
     def errors(self) -> list[tuple[str, float, float]]:
         """(name, arcsec, sigma in arcsec) of every fitted error."""
         sig = np.sqrt(np.maximum(np.diag(self.covariance_arcsec2), 0.0))
-        return [(AXIS_NAMES[k], float(v), float(s)) for k, v, s in zip(self.terms, self.values_arcsec, sig)]
+        return [(AXIS_NAMES[k], float(v), float(s))
+                for k, v, s in zip(self.terms, self.values_arcsec, sig, strict=False)]
 
     def describe(self) -> str:
         """``vertical index +28.7 ± 7.8″``, one clause per fitted error (:func:`errors_text`); ``none`` without."""
@@ -101,7 +102,7 @@ class AxisModel:
                 "values_arcsec": self.values_arcsec.tolist(), "covariance_arcsec2": self.covariance_arcsec2.tolist()}
 
     @classmethod
-    def from_json(cls, d: dict | None) -> "AxisModel":
+    def from_json(cls, d: dict | None) -> AxisModel:
         if not d or not d.get("terms"):
             return cls()
         terms = tuple(AXIS_NAMES.index(t) for t in d["terms"])

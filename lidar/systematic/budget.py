@@ -12,19 +12,19 @@ is their sum in quadrature. The along-span movements carry the same terms.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import replace
-from typing import Mapping
 
 import numpy as np
 
 from lidar.displacement import compute_displacements
-from lidar.displacement_result import Displacement, EpochDisplacements, Observation
+from lidar.displacement_result import Displacement, EpochDisplacements, Observation, Sighted
 from lidar.systematic.adjustment import FieldModel
 from lidar.systematic.corrections import CorrectionJacobian, correct_visit, cos_incidence_of
 from lidar.systematic.range_walk import design, family_spread2
 
 
-def _side(centroids: Mapping[str, object], model: FieldModel, label: str):
+def _side(centroids: Mapping[str, Sighted], model: FieldModel, label: str):
     """Corrected observations (covariance widened by the visit's misfit) and their Jacobians.
 
     A visit whose centroids the field model fits worse than their covariances say (``misfit`` > 1: something
@@ -37,12 +37,12 @@ def _side(centroids: Mapping[str, object], model: FieldModel, label: str):
     vis = model.visit(label)
     inflate = max(1.0, vis.misfit) ** 2
     pos, jac = correct_visit(centroids, range_walk=model.range_walk, visit=vis, axes=model.axes)
-    obs = {k: Observation(pos[k], inflate * np.asarray(getattr(c, "cov"), dtype=np.float64))
+    obs = {k: Observation(pos[k], inflate * np.asarray(c.cov, dtype=np.float64))
            for k, c in centroids.items()}
     return obs, jac
 
 
-def corrected_displacements(baseline: Mapping[str, object], epoch: Mapping[str, object], groups: Mapping[str, str],
+def corrected_displacements(baseline: Mapping[str, Sighted], epoch: Mapping[str, Sighted], groups: Mapping[str, str],
                             *, model: FieldModel, baseline_label: str, epoch_label: str,
                             **options: object) -> EpochDisplacements:
     """Displacements of ``epoch`` against ``baseline`` after the field model's corrections, with their budget.
@@ -101,7 +101,7 @@ def corrected_displacements(baseline: Mapping[str, object], epoch: Mapping[str, 
 
 def _terms(row: np.ndarray, inputs, jacs: Mapping[str, Mapping[str, CorrectionJacobian]], cov_theta: np.ndarray,
            v_base, v_ep, devs: Mapping[str, Mapping[str, np.ndarray]], weights: np.ndarray,
-           cov_axes: np.ndarray = np.zeros((0, 0))) -> dict:
+           cov_axes: np.ndarray) -> dict:
     """Variance terms (m^2) of one output (a row of the sensitivity) from the corrections' uncertainties.
 
     ``devs[side][id]`` is (n_alternatives, 3): how each supported range-walk family would move that
@@ -134,7 +134,7 @@ def _terms(row: np.ndarray, inputs, jacs: Mapping[str, Mapping[str, CorrectionJa
             "alternatives": float(family_spread2(alt, weights))}
 
 
-def _deviations(centroids: Mapping[str, object], model: FieldModel, label: str, corrected: Mapping[str, np.ndarray]
+def _deviations(centroids: Mapping[str, Sighted], model: FieldModel, label: str, corrected: Mapping[str, np.ndarray]
                 ) -> dict[str, np.ndarray]:
     """(n_alternatives, 3) per centroid: the corrected position under each supported family minus the chosen one."""
     rw = model.range_walk
@@ -142,7 +142,7 @@ def _deviations(centroids: Mapping[str, object], model: FieldModel, label: str, 
     n = len(rw.alternatives)
     out = {}
     for k, c in centroids.items():
-        y = np.asarray(getattr(c, "xyz_socs"), dtype=np.float64)
+        y = np.asarray(c.xyz_socs, dtype=np.float64)
         r = float(np.linalg.norm(y))
         u = y / r
         ci = cos_incidence_of(c)

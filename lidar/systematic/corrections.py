@@ -12,11 +12,12 @@ parameters, so that their uncertainties can be carried through the displacement 
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Mapping
 
 import numpy as np
 
+from lidar.displacement_result import Sighted
 from lidar.systematic.adjustment import ARCSEC, VisitSystematics, _drift_rotation, _skew
 from lidar.systematic.axes import AxisModel, axis_basis
 from lidar.systematic.range_walk import RangeWalkModel, design
@@ -65,12 +66,12 @@ def cos_incidence_of(centroid: object) -> float:
     return c if np.isfinite(c) else 1.0
 
 
-def correct_visit(centroids: Mapping[str, object], *, range_walk: RangeWalkModel, visit: VisitSystematics,
+def correct_visit(centroids: Mapping[str, Sighted], *, range_walk: RangeWalkModel, visit: VisitSystematics,
                   axes: AxisModel = AxisModel()) -> tuple[dict[str, np.ndarray], dict[str, CorrectionJacobian]]:
     """Corrected positions and Jacobians of a visit's centroids (``xyz_socs``, ``cos_incidence``, ``time_s``)."""
     out, jacs = {}, {}
     for k, c in centroids.items():
-        z, j = correct_centroid(np.asarray(getattr(c, "xyz_socs")), cos_incidence_of(c),
+        z, j = correct_centroid(np.asarray(c.xyz_socs), cos_incidence_of(c),
                                 float(getattr(c, "time_s", float("nan"))), range_walk=range_walk, visit=visit,
                                 axes=axes)
         out[k], jacs[k] = z, j
@@ -96,15 +97,15 @@ class ClosureDrift:
         return self.angle_arcsec / self.dt_s * 3600.0 if self.dt_s > 0 else float("nan")
 
 
-def closure_drift(first: object, closure: object) -> ClosureDrift:
+def closure_drift(first: Sighted, closure: Sighted) -> ClosureDrift:
     """The set-up's turn between a target's first centroid and its closure centroid (same target, same visit)."""
-    a = np.asarray(getattr(first, "xyz_socs"), dtype=np.float64)
-    b = np.asarray(getattr(closure, "xyz_socs"), dtype=np.float64)
+    a = np.asarray(first.xyz_socs, dtype=np.float64)
+    b = np.asarray(closure.xyz_socs, dtype=np.float64)
     r = float(np.linalg.norm(a))
     u = a / r
     perp = np.eye(3) - np.outer(u, u)
     d = perp @ (b - a)
-    cov = perp @ (np.asarray(getattr(first, "cov")) + np.asarray(getattr(closure, "cov"))) @ perp
+    cov = perp @ (np.asarray(first.cov) + np.asarray(closure.cov)) @ perp
     dist = float(np.linalg.norm(d))
     var = float(d @ cov @ d) / dist ** 2 if dist > 0 else float(np.trace(cov)) / 2.0
     to_arcsec = 1.0 / r / ARCSEC

@@ -16,8 +16,8 @@ function is linear in ``r``.
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -216,7 +216,7 @@ class RangeWalkModel:
                                  for b, c, w in self.alternatives]}
 
     @classmethod
-    def from_json(cls, d: dict) -> "RangeWalkModel":
+    def from_json(cls, d: dict) -> RangeWalkModel:
         if int(d.get("format_version", 1)) > RANGE_WALK_FORMAT_VERSION:
             raise InputError("range-walk model written by a newer BridgeSurvey")
         p = len(d["basis"])

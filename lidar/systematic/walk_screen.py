@@ -100,7 +100,7 @@ def bias_information(problem: _Problem) -> BiasInformation:
     r_all, c_all = [], []
     scale0 = np.zeros(len(problem.visits))
     scale_rows = np.zeros((len(problem.visits), n_x + n_walk))
-    for i, (v, start) in enumerate(zip(problem.visits, offsets[:-1])):
+    for i, (v, start) in enumerate(zip(problem.visits, offsets[:-1], strict=False)):
         jl, js, res, _ = problem.visit_rows(v)
         jb = _bias_columns(problem, v)
         shared = np.zeros((js.shape[0], n_x + n_walk))
@@ -213,4 +213,4 @@ def _steps(info: BiasInformation, proxy: str, values: np.ndarray, per_param: flo
     chi2 = info.chi2_without - (b1 * t1 + b2 * t2)
     thresholds = 0.5 * (v[ks - 1] + v[ks])
     return [LawFit(("1", step_name(proxy, float(t))), float(c) + 2 * per_param, np.array([a, b]))
-            for t, c, a, b in zip(thresholds, chi2, t1, t2)]
+            for t, c, a, b in zip(thresholds, chi2, t1, t2, strict=False)]

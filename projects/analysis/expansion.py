@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Optional
 
 import numpy as np
 import numpy.typing as npt
@@ -31,14 +30,14 @@ class AlongFit:
 
     reflector: str
     epochs: int
-    mm_per_degC: Optional[float]
-    sigma: Optional[float]
-    early_late: Optional[tuple[float, float, float, float]]  # (k early, sigma, k late, sigma)
+    mm_per_degC: float | None
+    sigma: float | None
+    early_late: tuple[float, float, float, float] | None  # (k early, sigma, k late, sigma)
     note: str = ""
     points: tuple[tuple[float, float, float], ...] = ()  # (temperature °C, along mm, sigma mm) of the epochs used
 
     def to_json(self) -> dict:
-        def r(v: Optional[float], nd: int = 4) -> Optional[float]:
+        def r(v: float | None, nd: int = 4) -> float | None:
             return None if v is None or not math.isfinite(v) else round(float(v), nd)
         return {"along_epochs": self.epochs, "along_mm_per_degC": r(self.mm_per_degC),
                 "along_sigma": r(self.sigma),
@@ -84,11 +83,11 @@ def fit_along(reflector: str, temp_c: npt.ArrayLike, along_mm: npt.ArrayLike, si
             if abs(k2 - k1) > 3.0 * math.hypot(s1, s2):
                 note = (f"the along-span coefficient changed from {k1:+.3f} ± {s1:.3f} to {k2:+.3f} ± {s2:.3f} mm/°C "
                         "between the earlier and the later epochs: a bearing that stops sliding shows so")
-    points = tuple((float(x), float(y), float(z)) for x, y, z in zip(t, a, s))
+    points = tuple((float(x), float(y), float(z)) for x, y, z in zip(t, a, s, strict=False))
     return AlongFit(reflector, int(t.size), k, sk, early_late, note, points)
 
 
-def temperatures_at(times_days: np.ndarray, series: Optional[tuple[np.ndarray, np.ndarray]], *,
+def temperatures_at(times_days: np.ndarray, series: tuple[np.ndarray, np.ndarray] | None, *,
                     half_window_days: float = 1.0 / 24.0) -> np.ndarray:
     """The mean temperature within ``half_window_days`` of each time (NaN where the series has none)."""
     out = np.full(len(times_days), np.nan)

@@ -6,12 +6,12 @@ Everything on a date axis (with the concrete's age on top when a casting date is
 from __future__ import annotations
 
 import datetime as dt
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 
 
-def _array(values: Optional[list]) -> np.ndarray:
+def _array(values: list | None) -> np.ndarray:
     return np.array([np.nan if v is None else v for v in (values or [])], dtype=float)
 
 

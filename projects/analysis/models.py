@@ -26,8 +26,9 @@ at any time (the projection); :func:`fit_target` ties them together.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Optional, Sequence, Union
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -47,7 +48,7 @@ LAGS_H = (0.0, 3.0, 6.0)
 YEAR_D = 365.25
 
 
-def creep_shape(tau_days: npt.ArrayLike, law: Union[CreepLaw, float]) -> np.ndarray:
+def creep_shape(tau_days: npt.ArrayLike, law: CreepLaw | float) -> np.ndarray:
     """The creep developed ``tau_days`` after loading as a share of the final creep (0 to 1).
 
     ``law`` is ``("aci", d)``: ``tau^0.6 / (d + tau^0.6)`` (ACI 209), ``("exp", tc)``: ``1 - exp(-tau / tc)``,
@@ -101,7 +102,7 @@ class Term:
     """
 
     kind: str
-    event: Optional[Event] = None
+    event: Event | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -117,10 +118,10 @@ class TemperatureWindow:
 class ModelSpec:
     """One candidate model: its temperature window (or none), creep law, trend and annual terms."""
 
-    temperature: Optional[TemperatureWindow]
-    reference_temperature: Optional[float]
+    temperature: TemperatureWindow | None
+    reference_temperature: float | None
     events: tuple[tuple[Event, bool], ...]  # (event, whether its creep is determinable)
-    creep_law: Optional[CreepLaw] = None
+    creep_law: CreepLaw | None = None
     trend: bool = False
     annual: bool = False
 
@@ -139,15 +140,15 @@ class ModelSpec:
             out += [Term("annual_sin"), Term("annual_cos")]
         return tuple(out)
 
-    def temperature_deviation(self) -> Optional[np.ndarray]:
+    def temperature_deviation(self) -> np.ndarray | None:
         """(n,) effective temperature minus the reference at the epochs (0 where unknown), or None."""
         if self.temperature is None or self.reference_temperature is None:
             return None
         return np.nan_to_num(self.temperature.at_epochs - self.reference_temperature)
 
 
-def design_matrix(t_days: np.ndarray, terms: Sequence[Term], *, creep_law: Optional[CreepLaw] = None,
-                  temperature_deviation: Optional[np.ndarray] = None) -> np.ndarray:
+def design_matrix(t_days: np.ndarray, terms: Sequence[Term], *, creep_law: CreepLaw | None = None,
+                  temperature_deviation: np.ndarray | None = None) -> np.ndarray:
     """The (n, p) design matrix of ``terms`` at times ``t_days`` (n,).
 
     ``temperature_deviation`` (n,) fills the thermal column; None gives 0 there (the model at the reference
@@ -204,11 +205,11 @@ class Candidate:
         red = self.reduced_chi2
         return self.cov * (red if red > 1 else 1.0)
 
-    def index(self, term: Term) -> Optional[int]:
+    def index(self, term: Term) -> int | None:
         """The column of ``term``, or None when the model lacks it."""
         return self.terms.index(term) if term in self.terms else None
 
-    def estimate(self, term: Term) -> Optional[tuple[float, float]]:
+    def estimate(self, term: Term) -> tuple[float, float] | None:
         """(value, variance) of one coefficient, the variance scaled; None when the model lacks it."""
         i = self.index(term)
         return None if i is None else (float(self.coef[i]), float(self.scaled_cov[i, i]))
@@ -230,7 +231,7 @@ def _wls(X: np.ndarray, y: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.nd
     return coef, cov, chi2, aicc, resid
 
 
-def fit_candidate(t: np.ndarray, d: np.ndarray, w: np.ndarray, spec: ModelSpec) -> Optional[Candidate]:
+def fit_candidate(t: np.ndarray, d: np.ndarray, w: np.ndarray, spec: ModelSpec) -> Candidate | None:
     """Fit one candidate model; None when it has too few epochs or dependent columns."""
     use = np.ones(len(t), bool) if spec.temperature is None else np.isfinite(spec.temperature.at_epochs)
     terms = spec.terms()
@@ -241,11 +242,11 @@ def fit_candidate(t: np.ndarray, d: np.ndarray, w: np.ndarray, spec: ModelSpec) 
     return Candidate(spec, terms, use, coef, cov, chi2, aicc, resid)
 
 
-def model_specs(t: np.ndarray, windows: Sequence[Optional[TemperatureWindow]], events: Sequence[tuple[Event, bool]],
-                *, reference_temperature: Optional[float] = None) -> Iterable[ModelSpec]:
+def model_specs(t: np.ndarray, windows: Sequence[TemperatureWindow | None], events: Sequence[tuple[Event, bool]],
+                *, reference_temperature: float | None = None) -> Iterable[ModelSpec]:
     """Every candidate model, in search order: temperature window, creep law, trend, annual terms."""
     span = float(t.max() - t.min())
-    laws: Sequence[Optional[CreepLaw]] = CREEP_LAWS if any(c for _, c in events) else (None,)
+    laws: Sequence[CreepLaw | None] = CREEP_LAWS if any(c for _, c in events) else (None,)
     for tw in windows:
         t_ref = None
         if tw is not None:
@@ -258,13 +259,13 @@ def model_specs(t: np.ndarray, windows: Sequence[Optional[TemperatureWindow]], e
 
 
 def search_models(t: np.ndarray, d: np.ndarray, w: np.ndarray, specs: Iterable[ModelSpec]
-                  ) -> tuple[Optional[Candidate], tuple[Candidate, ...]]:
+                  ) -> tuple[Candidate | None, tuple[Candidate, ...]]:
     """The candidate with the lowest AICc, and the best candidate of each creep law (first seen first).
 
     Ties keep the earlier candidate.
     """
-    best: Optional[Candidate] = None
-    per_law: dict[Optional[CreepLaw], Candidate] = {}
+    best: Candidate | None = None
+    per_law: dict[CreepLaw | None, Candidate] = {}
     for spec in specs:
         cand = fit_candidate(t, d, w, spec)
         if cand is None:
@@ -284,7 +285,7 @@ def akaike_weights(models: Sequence[Candidate]) -> np.ndarray:
     return wts / wts.sum()
 
 
-def akaike_average(weights: np.ndarray, values: Sequence[Optional[tuple[float, float]]]) -> tuple[float, float]:
+def akaike_average(weights: np.ndarray, values: Sequence[tuple[float, float] | None]) -> tuple[float, float]:
     """Akaike-weighted mean and sigma of per-model (value, variance) pairs.
 
     The spread between the models is added to the variance; NaN when a model lacks the quantity.
@@ -292,8 +293,8 @@ def akaike_average(weights: np.ndarray, values: Sequence[Optional[tuple[float, f
     if any(v is None for v in values):
         return float("nan"), float("nan")
     vals = [v for v in values if v is not None]
-    mean = float(sum(w_ * v[0] for w_, v in zip(weights, vals)))
-    var = float(sum(w_ * (v[1] + (v[0] - mean) ** 2) for w_, v in zip(weights, vals)))
+    mean = float(sum(w_ * v[0] for w_, v in zip(weights, vals, strict=False)))
+    var = float(sum(w_ * (v[1] + (v[0] - mean) ** 2) for w_, v in zip(weights, vals, strict=False)))
     return mean, math.sqrt(var)
 
 
@@ -304,7 +305,7 @@ class Predictor:
     terms: tuple[Term, ...]
     coef: np.ndarray
     cov: np.ndarray  # scaled by the reduced chi-square
-    creep_law: Optional[CreepLaw]
+    creep_law: CreepLaw | None
 
     def __call__(self, t_days: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         J = design_matrix(t_days, self.terms, creep_law=self.creep_law)
@@ -319,15 +320,15 @@ class TargetFit:
     thermal_mm_per_degC: float = float("nan")
     thermal_sigma: float = float("nan")
     thermal_p_value: float = float("nan")
-    temperature_window_h: Optional[float] = None
-    temperature_lag_h: Optional[float] = None
-    reference_temperature_degC: Optional[float] = None
+    temperature_window_h: float | None = None
+    temperature_lag_h: float | None = None
+    reference_temperature_degC: float | None = None
     events: tuple[EventFit, ...] = ()
     trend_mm_per_year: float = float("nan")
     trend_sigma: float = float("nan")
     seasonal_amplitude_mm: float = float("nan")
-    creep_d_days: Optional[float] = None
-    creep_law: Optional[str] = None
+    creep_d_days: float | None = None
+    creep_law: str | None = None
     scale: float = 1.0  # sqrt of the reduced chi-square applied to the sigmas
     rms_residual_mm: float = float("nan")
     corrected_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -337,7 +338,7 @@ class TargetFit:
     measured_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
     measured_sigma_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
     notes: tuple[str, ...] = ()
-    predictor: Optional[Predictor] = None  # the model at the reference temperature, for projections
+    predictor: Predictor | None = None  # the model at the reference temperature, for projections
 
     def predict(self, t_days: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """(value, sigma) in mm of the model at the reference temperature at ``t_days`` (k,)."""
@@ -360,8 +361,8 @@ def effective_temperature(t_days: np.ndarray, temp_t_days: np.ndarray, temp: np.
     return np.where(n > 0, out, np.nan)
 
 
-def temperature_windows(t: np.ndarray, temperature: Optional[tuple[np.ndarray, np.ndarray]], notes: list[str]
-                        ) -> list[Optional[TemperatureWindow]]:
+def temperature_windows(t: np.ndarray, temperature: tuple[np.ndarray, np.ndarray] | None, notes: list[str]
+                        ) -> list[TemperatureWindow | None]:
     """The averaging windows and lags that cover the most epochs (at least 4), or ``[None]`` (no thermal term).
 
     Appends to ``notes`` what the fit cannot use.
@@ -377,7 +378,7 @@ def temperature_windows(t: np.ndarray, temperature: Optional[tuple[np.ndarray, n
     if best_cover < len(t):
         notes.append(f"the temperature series covers {best_cover} of {len(t)} epochs; the thermal fit uses those")
     if best_cover >= 4:
-        return [c for c, k in zip(cands, cover) if k == best_cover]
+        return [c for c, k in zip(cands, cover, strict=False) if k == best_cover]
     notes.append("the temperature series does not overlap the epochs: no thermal fit")
     return [None]
 
@@ -470,7 +471,7 @@ def _seasonal_temperature_amplitude(temperature: tuple[np.ndarray, np.ndarray]) 
 
 
 def _thermal_fit(best: Candidate, models: Sequence[Candidate], weights: np.ndarray, d: np.ndarray, s: np.ndarray,
-                 scale: float, temperature: Optional[tuple[np.ndarray, np.ndarray]], span: float) -> dict[str, Any]:
+                 scale: float, temperature: tuple[np.ndarray, np.ndarray] | None, span: float) -> dict[str, Any]:
     """The TargetFit fields of the thermal term (Akaike-averaged) and the temperature-corrected series."""
     tw, t_ref = best.spec.temperature, best.spec.reference_temperature
     if tw is None or t_ref is None:
@@ -490,8 +491,8 @@ def _thermal_fit(best: Candidate, models: Sequence[Candidate], weights: np.ndarr
 
 
 def fit_target(t_days: npt.ArrayLike, d_mm: npt.ArrayLike, sigma_mm: npt.ArrayLike, *,
-               temperature: Optional[tuple[np.ndarray, np.ndarray]] = None, events: Sequence[Event] = (),
-               reference_temperature: Optional[float] = None) -> TargetFit:
+               temperature: tuple[np.ndarray, np.ndarray] | None = None, events: Sequence[Event] = (),
+               reference_temperature: float | None = None) -> TargetFit:
     """Fit one target's history (see the module notes).
 
     Parameters
@@ -545,7 +546,7 @@ def fit_target(t_days: npt.ArrayLike, d_mm: npt.ArrayLike, sigma_mm: npt.ArrayLi
 
 
 def first_crossing(fit: TargetFit, t_from: float, t_to: float, level_mm: float, *, step_days: float = 1.0
-                   ) -> Optional[tuple[float, float, float]]:
+                   ) -> tuple[float, float, float] | None:
     """(central, earliest, latest) day on which the projection reaches ``|level_mm|``.
 
     The central estimate and the 2-sigma band's crossings; or None when even the band does not reach it before ``t_to``.

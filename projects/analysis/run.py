@@ -10,7 +10,7 @@ import json
 import math
 import os
 from pathlib import Path
-from typing import Optional, cast
+from typing import cast
 
 import numpy as np
 
@@ -19,9 +19,9 @@ from common.files import write_atomic
 from projects.analysis.models import Event, EventFit, TargetFit, first_crossing, fit_target
 from projects.series.environment import events as stored_events
 from projects.series.environment import load_env
+from projects.store.campaign import Campaign
 from projects.store.history import histories
 from projects.store.limits import Limit
-from projects.store.campaign import Campaign
 
 ANALYSIS_FORMAT_VERSION = 1
 DAY_NS = 86_400 * 10**9
@@ -31,18 +31,18 @@ def _ns(iso: str) -> int:
     return int(dt.datetime.fromisoformat(iso).timestamp() * 1e9)
 
 
-def _iso_day(origin_ns: int, t_days: float) -> Optional[str]:
+def _iso_day(origin_ns: int, t_days: float) -> str | None:
     if not math.isfinite(t_days):
         return None
-    return dt.datetime.fromtimestamp((origin_ns + t_days * DAY_NS) / 1e9, dt.timezone.utc).date().isoformat()
+    return dt.datetime.fromtimestamp((origin_ns + t_days * DAY_NS) / 1e9, dt.UTC).date().isoformat()
 
 
-def _num(v: Optional[float], nd: int = 4) -> Optional[float]:
+def _num(v: float | None, nd: int = 4) -> float | None:
     return None if v is None or not math.isfinite(v) else round(float(v), nd)
 
 
-def analyse_campaign(c: Campaign, *, horizon_days: float = 365.0, long_term_factor: Optional[float] = None,
-                     reference_temperature: Optional[float] = None) -> dict:
+def analyse_campaign(c: Campaign, *, horizon_days: float = 365.0, long_term_factor: float | None = None,
+                     reference_temperature: float | None = None) -> dict:
     """The analysis of every measurement target (the ``analysis.json`` document)."""
     from projects.processing.stages import baseline_epoch
 
@@ -80,7 +80,7 @@ def analyse_campaign(c: Campaign, *, horizon_days: float = 365.0, long_term_fact
         d = mine.displacement_mm
         sg = np.where(mine.sigma_mm > 0, mine.sigma_mm, np.nan)  # the baseline itself (sigma 0) carries no information
         fit = fit_target(t, d, sg, temperature=temperature, events=evs, reference_temperature=reference_temperature)
-        lim = cast(Optional[Limit], h.limit)
+        lim = cast(Limit | None, h.limit)
         tj = _target_json(rid, fit, t, origin, horizon_days, lim, long_term_factor)
         if rid in preds:
             tj["prediction_offset_mm"] = _num(preds[rid][2]["offset_mm"])
@@ -91,13 +91,13 @@ def analyse_campaign(c: Campaign, *, horizon_days: float = 365.0, long_term_fact
         tj.update(along[rid].to_json() if rid in along else {})
         targets.append(tj)
     return {"format_version": ANALYSIS_FORMAT_VERSION, "campaign": c.name, "baseline": base,
-            "time_origin": dt.datetime.fromtimestamp(origin / 1e9, dt.timezone.utc).isoformat(),
+            "time_origin": dt.datetime.fromtimestamp(origin / 1e9, dt.UTC).isoformat(),
             "temperature_source": temp_source, "casting_date": c.settings().get("casting_date"),
             "events": [e.to_dict() for e in stored], "warnings": warnings,
             "horizon_days": horizon_days, "long_term_factor": long_term_factor, "targets": targets}
 
 
-def _along_fits(c: Campaign, temperature: Optional[tuple[np.ndarray, np.ndarray]], origin: int, base: str) -> dict:
+def _along_fits(c: Campaign, temperature: tuple[np.ndarray, np.ndarray] | None, origin: int, base: str) -> dict:
     """Each deck target's along-span expansion coefficient (:mod:`projects.analysis.expansion`).
 
     Only where a temperature series covers its epochs; the baseline's along-span movement is zero by
@@ -115,15 +115,15 @@ def _along_fits(c: Campaign, temperature: Optional[tuple[np.ndarray, np.ndarray]
                                                  r.along_sigma_m * 1e3))
     out = {}
     for rid, vals in rows.items():
-        t, a, s = (np.array(v, dtype=np.float64) for v in zip(*vals))
+        t, a, s = (np.array(v, dtype=np.float64) for v in zip(*vals, strict=False))
         out[rid] = fit_along(rid, temperatures_at(t, temperature), a, s)
     return out
 
 
-def _aliasing_warnings(epoch_times: list[dt.datetime], temperature: Optional[tuple[np.ndarray, np.ndarray]],
+def _aliasing_warnings(epoch_times: list[dt.datetime], temperature: tuple[np.ndarray, np.ndarray] | None,
                        origin: int) -> list[str]:
     out = []
-    hours = np.array([e.astimezone(dt.timezone.utc).hour + e.minute / 60 for e in epoch_times])
+    hours = np.array([e.astimezone(dt.UTC).hour + e.minute / 60 for e in epoch_times])
     if len(hours) >= 3:
         ang = hours / 24 * 2 * np.pi
         spread = math.sqrt(-2 * math.log(max(math.hypot(np.cos(ang).mean(), np.sin(ang).mean()), 1e-9))) * 24 / (2 * np.pi)
@@ -136,7 +136,7 @@ def _aliasing_warnings(epoch_times: list[dt.datetime], temperature: Optional[tup
     return out
 
 
-def _event_json(e: EventFit, long_term_factor: Optional[float]) -> dict:
+def _event_json(e: EventFit, long_term_factor: float | None) -> dict:
     out = {"date": e.date, "label": e.label, "kind": e.kind, "step_mm": _num(e.step_mm),
            "step_sigma_mm": _num(e.step_sigma_mm), "creep_mm": _num(e.creep_mm),
            "creep_sigma_mm": _num(e.creep_sigma_mm), "creep_final_mm": _num(e.creep_final_mm),
@@ -148,8 +148,8 @@ def _event_json(e: EventFit, long_term_factor: Optional[float]) -> dict:
     return out
 
 
-def _projection_json(fit: TargetFit, t: np.ndarray, origin: int, horizon: float, lim: Optional[Limit]
-                     ) -> Optional[dict]:
+def _projection_json(fit: TargetFit, t: np.ndarray, origin: int, horizon: float, lim: Limit | None
+                     ) -> dict | None:
     """The model's value at the horizon and when the warning level is reached at this rate (limits to 0.1 mm)."""
     if fit.predictor is None or not len(t):
         return None
@@ -173,7 +173,7 @@ def _projection_json(fit: TargetFit, t: np.ndarray, origin: int, horizon: float,
     return proj
 
 
-def _model_curve(fit: TargetFit, events: list[EventFit]) -> Optional[dict]:
+def _model_curve(fit: TargetFit, events: list[EventFit]) -> dict | None:
     """The fitted model at the reference temperature over the epochs' span (days, mm, sigma), steps kept sharp."""
     if fit.predictor is None or not fit.epoch_days.size:
         return None
@@ -185,8 +185,8 @@ def _model_curve(fit: TargetFit, events: list[EventFit]) -> Optional[dict]:
     return {"days": [_num(x, 3) for x in days], "mm": [_num(x) for x in v], "sigma_mm": [_num(x) for x in s]}
 
 
-def _target_json(rid: str, fit: TargetFit, t: np.ndarray, origin: int, horizon: float, lim: Optional[Limit],
-                 long_term_factor: Optional[float]) -> dict:
+def _target_json(rid: str, fit: TargetFit, t: np.ndarray, origin: int, horizon: float, lim: Limit | None,
+                 long_term_factor: float | None) -> dict:
     return {"reflector": rid, "epochs": fit.n_epochs, "thermal_mm_per_degC": _num(fit.thermal_mm_per_degC, 5),
             "thermal_sigma": _num(fit.thermal_sigma, 5), "thermal_p_value": _num(fit.thermal_p_value, 6),
             "thermal_significant": bool(math.isfinite(fit.thermal_p_value) and fit.thermal_p_value < 0.05),

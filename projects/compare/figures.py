@@ -12,7 +12,7 @@ def span_profile_figure(summary: dict):
     girders = sorted({b["girder"] for b in prof["bins"]} | {t["girder"] for t in summary.get("targets", [])})
     fig = Figure(figsize=(9, 2.6 + 1.6 * max(len(girders), 1)), layout="constrained")
     axes = np.atleast_1d(fig.subplots(max(len(girders), 1), 1, sharex=True))
-    for ax, g in zip(axes, girders or [1]):
+    for ax, g in zip(axes, girders or [1], strict=False):
         bins = [b for b in prof["bins"] if b["girder"] == g]
         if bins:
             s = np.array([b["station_m"] for b in bins])
@@ -37,7 +37,7 @@ def span_profile_figure(summary: dict):
         ax.grid(alpha=0.3)
     handles, labels = axes[0].get_legend_handles_labels()
     for ax in axes[1:]:
-        for h, lab in zip(*ax.get_legend_handles_labels()):
+        for h, lab in zip(*ax.get_legend_handles_labels(), strict=False):
             if lab not in labels:
                 handles.append(h)
                 labels.append(lab)

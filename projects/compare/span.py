@@ -9,7 +9,6 @@ the station; heights are along the layout's up direction.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Optional
 
 import numpy as np
 
@@ -96,7 +95,7 @@ def span_frame(layout: Layout, ids: list[str], xyz_campaign: np.ndarray, up_layo
     return SpanFrame(to_layout, axis, side, up, float(st.min()), float(st.max()))
 
 
-def pivot(xyz_campaign: np.ndarray, used: Optional[np.ndarray] = None) -> np.ndarray:
+def pivot(xyz_campaign: np.ndarray, used: np.ndarray | None = None) -> np.ndarray:
     """Centroid of the tie points used by a registration (the point its translation σ refers to)."""
     xyz_campaign = np.asarray(xyz_campaign, dtype=np.float64)
     ok = np.all(np.isfinite(xyz_campaign), axis=1)

@@ -13,7 +13,7 @@ import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Optional
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -21,17 +21,16 @@ if TYPE_CHECKING:
     from registration.profile import RegistrationSigma
 
 from common.errors import InputError
-from common.files import atomic_output, output_folder
+from common.files import atomic_output, output_folder, write_atomic
 from common.progress import ProgressCallback, report, scaled
-from projects.store.errors import CampaignError
-from common.files import write_atomic
-from projects.results.table import displacement_table
+from projects.compare.span import SpanFrame, pivot, span_frame
 from projects.processing.stages import baseline_epoch, read_files
+from projects.results.table import displacement_table
 from projects.store.campaign import Campaign, now_iso
+from projects.store.errors import CampaignError
 from registration.change import METHODS, ChangeResult, cloud_to_cloud, core_points_grid, m3c2, prefetch_py4dgeo
 from registration.icp import IcpResult, refine_icp, stable_mask
 from registration.ndt import refine_ndt
-from projects.compare.span import SpanFrame, pivot, span_frame
 from registration.profile import SpanProfile, girder_lines, span_profile
 from registration.targets import TargetRegistration, register_targets
 from registration.transform import Transform
@@ -62,12 +61,12 @@ class ChangeOptions:
 
     normal_radii: tuple[float, ...] = (0.5,)
     cyl_radius: float = 0.25
-    max_distance: Optional[float] = None
+    max_distance: float | None = None
     corepoints: float | Path = 0.25
-    registration_error: Optional[float] = None
+    registration_error: float | None = None
     robust_aggr: bool = False
 
-    def check(self) -> "ChangeOptions":
+    def check(self) -> ChangeOptions:
         """The options, or InputError naming the first impossible one (before any computing)."""
         for name, v in (("--normal-radii", min(self.normal_radii, default=float("nan"))),
                         ("--cyl-radius", self.cyl_radius), ("--max-distance", self.max_distance)):
@@ -100,8 +99,8 @@ class EpochInFrame:
     """One epoch brought into the campaign frame."""
 
     label: str
-    registration: Optional[TargetRegistration]  # None for the baseline itself
-    icp: Optional[IcpResult]
+    registration: TargetRegistration | None  # None for the baseline itself
+    icp: IcpResult | None
     transform: Transform                        # epoch SOCS -> campaign frame
     xyz: np.ndarray                             # coarse scan in the campaign frame
 
@@ -113,7 +112,7 @@ def _centroid_arrays(c: Campaign, label: str, ids) -> tuple[np.ndarray, np.ndarr
     return xyz, sig
 
 
-def _below_deck_m(meas_xyz: np.ndarray) -> Optional[float]:
+def _below_deck_m(meas_xyz: np.ndarray) -> float | None:
     """Height limit of the stable parts: half a metre below the lowest deck target (None if none was seen)."""
     z = meas_xyz[:, 2]
     return float(np.nanmin(z) - 0.5) if np.isfinite(z).any() else None
@@ -124,7 +123,7 @@ REFINEMENTS = ("icp", "ndt", "targets")
 
 
 def bring_to_campaign_frame(c: Campaign, label: str, base: str, *, refinement: str = "icp", base_xyz=None,
-                            progress: Optional[ProgressCallback] = None) -> EpochInFrame:
+                            progress: ProgressCallback | None = None) -> EpochInFrame:
     """Register epoch ``label`` onto the baseline epoch ``base`` (targets, then ICP or NDT on stable parts).
 
     ``refinement`` is ``icp`` (point-to-plane, the default), ``ndt`` (PCL's
@@ -187,7 +186,7 @@ def _prefetch() -> None:
 
 def compare_epochs(c: Campaign, from_label: str, to_label: str, *, method: str = "m3c2", refinement: str = "icp",
                    bin_m: float = 2.5, options: ChangeOptions = ChangeOptions(),
-                   progress: Optional[ProgressCallback] = None) -> dict:
+                   progress: ProgressCallback | None = None) -> dict:
     """Register two epochs into the campaign frame and compute their change and span profile.
 
     ``options`` holds the M3C2/C2C parameters (py4dgeo's names). Returns a JSON-ready summary; the arrays are
@@ -247,7 +246,7 @@ def compare_epochs(c: Campaign, from_label: str, to_label: str, *, method: str =
     # target displacements of the same two epochs, at their stations along the span
     rows = {(r["epoch"], r["reflector"]): r for r in displacement_table(c)}
     targets = []
-    for rid, p in zip(meas, meas_from):
+    for rid, p in zip(meas, meas_from, strict=False):
         a, b = rows.get((from_label, rid)), rows.get((to_label, rid))
         if a and b and a["displacement_mm"] is not None and b["displacement_mm"] is not None and np.isfinite(p[0]):
             s_m, l_m, _ = frame.coords(p[None])[0]
@@ -287,7 +286,7 @@ def _profile(c: Campaign, base: str, epochs: tuple[EpochInFrame, EpochInFrame], 
     slh_targets = frame.coords(epochs[0].transform.apply(from_xyz))
     lay_slh = frame.from_layout(np.array([layout.xyz[layout.index(i)] for i in meas]))
     lines = girder_lines(lay_slh[:, :2], slh_targets[:, 2])
-    sig: list[Optional[RegistrationSigma]] = []
+    sig: list[RegistrationSigma | None] = []
     for e in epochs:
         if e.registration is None:
             sig.append(None)
@@ -434,7 +433,7 @@ def save_comparison(c: Campaign, summary: dict) -> None:
     c.comparisons.save({k: v for k, v in summary.items() if k != "_arrays"})
 
 
-def comparisons(c: Campaign, epochs: Optional[set] = None) -> list[dict]:
+def comparisons(c: Campaign, epochs: set | None = None) -> list[dict]:
     """Stored comparison summaries (newest versions this BridgeSurvey reads), optionally within some epochs."""
     out = []
     for s in (r.summary for r in c.comparisons.all()):

@@ -9,16 +9,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Optional
 
 import numpy as np
 
+from common.errors import ProcessingError
+from common.progress import ProgressCallback
 from lidar.angles import direction_from_angles
-from lidar.systematic.corrections import closure_drift
 from lidar.plan import PlanTarget, ScanPlan, plan_fine_scans
 from lidar.prediction import centroid_covariance
-from common.progress import ProgressCallback
-from common.errors import ProcessingError
+from lidar.systematic.corrections import closure_drift
 from projects.store.campaign import Campaign
 
 POINTS_TOLERANCE = 0.7  # fewer than 70 % of the planned points: re-scan
@@ -77,7 +76,7 @@ class ClosureCheck:
     note: str = ""
 
     def to_json(self) -> dict:
-        def num(v: float) -> Optional[float]:
+        def num(v: float) -> float | None:
             return None if not math.isfinite(v) else round(v, 2)
 
         return {"reflector": self.reflector, "status": self.status, "drift_arcsec": num(self.angle_arcsec),
@@ -85,7 +84,7 @@ class ClosureCheck:
                 "tolerance_arcsec": num(self.tolerance_arcsec), "note": self.note}
 
 
-def _closure_check(plan: ScanPlan, cents: dict, closures: dict) -> Optional[ClosureCheck]:
+def _closure_check(plan: ScanPlan, cents: dict, closures: dict) -> ClosureCheck | None:
     """The closure verdict of a measured epoch (None when its plan has no closure window)."""
     roi = next((r for r in plan.rois if r.closure), None)
     if roi is None:
@@ -110,8 +109,8 @@ class EpochCheck:
 
     epoch: str
     targets: tuple[TargetCheck, ...]
-    rescan: Optional[ScanPlan]
-    closure: Optional[ClosureCheck] = None
+    rescan: ScanPlan | None
+    closure: ClosureCheck | None = None
 
     @property
     def short(self) -> tuple[TargetCheck, ...]:
@@ -123,8 +122,8 @@ class EpochCheck:
                 "closure": None if self.closure is None else self.closure.to_json()}
 
 
-def check_epoch(c: Campaign, label: str, *, goal_sigma_mm: Optional[float] = None, setup: int = 1,
-                progress: Optional[ProgressCallback] = None) -> EpochCheck:
+def check_epoch(c: Campaign, label: str, *, goal_sigma_mm: float | None = None, setup: int = 1,
+                progress: ProgressCallback | None = None) -> EpochCheck:
     """Measure the epoch's (set-up's) fine scans and judge every planned target (see the module notes)."""
     from projects.processing.stages import run_stage1, save_stage1, stage1_job
 
@@ -139,7 +138,7 @@ def check_epoch(c: Campaign, label: str, *, goal_sigma_mm: Optional[float] = Non
     cents, plan = result.centroids or {}, result.plan
     closures = result.closures or {}
     layout = job.layout
-    diam = {i: float(d) for i, d in zip(layout.ids, layout.diameters_m)}
+    diam = {i: float(d) for i, d in zip(layout.ids, layout.diameters_m, strict=False)}
     rows, retry = [], []
     for roi in plan.rois:
         if roi.closure:

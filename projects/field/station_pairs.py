@@ -11,8 +11,8 @@ predictions; processing reports it in each displacement's frame term.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Optional, Sequence
 
 import numpy as np
 
@@ -45,7 +45,7 @@ class StationPair:
                 "seconds": round(float(self.first.seconds + self.second.seconds), 1)}
 
 
-def combine(first: StationPrediction, second: StationPrediction, layout: Layout) -> Optional[StationPair]:
+def combine(first: StationPrediction, second: StationPrediction, layout: Layout) -> StationPair | None:
     """What two stations give together; None when they cannot be joined (fewer than three well-spread shared targets)."""
     seen_a = [t for t in layout.ids if t not in first.hidden]
     seen_b = set(t for t in layout.ids if t not in second.hidden)
@@ -53,7 +53,7 @@ def combine(first: StationPrediction, second: StationPrediction, layout: Layout)
     if len(shared) < MIN_SHARED or spread_m(np.array([layout.xyz[layout.index(t)] for t in shared])) < MIN_SPREAD_M:
         return None
     sig = {}
-    deck = [t for t, g in zip(layout.ids, layout.groups) if g == "measurement"]
+    deck = [t for t, g in zip(layout.ids, layout.groups, strict=False) if g == "measurement"]
     for t in deck:
         parts = [s.predicted_sigma_mm[t] for s in (first, second) if t in s.predicted_sigma_mm]
         if parts:
@@ -63,7 +63,7 @@ def combine(first: StationPrediction, second: StationPrediction, layout: Layout)
 
 
 def propose_pair(stations: Sequence[StationPrediction], layout: Layout, *,
-                 first: Optional[StationPrediction] = None) -> Optional[StationPair]:
+                 first: StationPrediction | None = None) -> StationPair | None:
     """The best second set-up given the first (default: the best single station), or None when no pair joins.
 
     The second is the station whose pair with the first has the smallest worst-target sigma (fewest

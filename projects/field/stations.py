@@ -10,7 +10,6 @@ import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
 
 import numpy as np
 
@@ -36,9 +35,9 @@ class StationAdvice:
     height_m: float
     grid_m: float
     scanner: str
-    baseline: Optional[str]
-    last_station: Optional[tuple[float, float, float]]
-    obstacles_from: Optional[str] = None
+    baseline: str | None
+    last_station: tuple[float, float, float] | None
+    obstacles_from: str | None = None
 
     def to_json(self) -> dict:
         return {"format_version": STATIONS_FORMAT_VERSION, "frame": "layout", "scanner": self.scanner,
@@ -99,7 +98,7 @@ class LastStation:
         return self.rotation.T @ (-self.translation)
 
 
-def last_station(c: Campaign) -> Optional[LastStation]:
+def last_station(c: Campaign) -> LastStation | None:
     """The last epoch with at least three found targets, and its station (None before any)."""
     for e in reversed(c.epochs()):
         cents = {k: v for k, v in c.centroids(e.label).items() if v.found}
@@ -115,7 +114,7 @@ def last_station(c: Campaign) -> Optional[LastStation]:
 
 
 def seen_surfaces(c: Campaign, last: LastStation, *, voxel_m: float = 0.05,
-                  progress: Optional[ProgressCallback] = None) -> Optional[np.ndarray]:
+                  progress: ProgressCallback | None = None) -> np.ndarray | None:
     """The epoch's coarse scan in the layout's frame, one point per ``voxel_m`` cube (None without one)."""
     from projects.processing.stages import read_files
 
@@ -129,9 +128,9 @@ def seen_surfaces(c: Campaign, last: LastStation, *, voxel_m: float = 0.05,
     return xyz[np.sort(first)].astype(np.float32)
 
 
-def advise_stations(c: Campaign, *, area_xy: Optional[np.ndarray] = None, height_m: float = DEFAULT_INSTRUMENT_HEIGHT_M,
-                    grid_m: float = 2.0, ground_z: Optional[float] = None, use_last_scan: bool = True,
-                    progress: Optional[ProgressCallback] = None) -> StationAdvice:
+def advise_stations(c: Campaign, *, area_xy: np.ndarray | None = None, height_m: float = DEFAULT_INSTRUMENT_HEIGHT_M,
+                    grid_m: float = 2.0, ground_z: float | None = None, use_last_scan: bool = True,
+                    progress: ProgressCallback | None = None) -> StationAdvice:
     """Evaluate scanner positions on a grid inside the allowed area (default: both sides of the bridge).
 
     With ``use_last_scan`` the last measured epoch's coarse scan adds what it saw (vegetation, site

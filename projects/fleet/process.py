@@ -18,17 +18,24 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Optional, Sequence
 
 from common.errors import InputError, SurveyError
 from common.processes import quiet_resource_tracker
 from common.progress import ProgressCallback, report
-from projects.store.errors import CampaignLockedError
 from projects.fleet.status import find_campaigns
-from projects.processing.stages import (EpochOutcome, ProcessSummary, finish_displacements, run_stage1, save_stage1,
-                                 stage1_jobs, stale_epochs)
+from projects.processing.stages import (
+    EpochOutcome,
+    ProcessSummary,
+    finish_displacements,
+    run_stage1,
+    save_stage1,
+    stage1_jobs,
+    stale_epochs,
+)
 from projects.store.campaign import Campaign
+from projects.store.errors import CampaignLockedError
 
 log = logging.getLogger(__name__)
 TASK_RETRIES = 2
@@ -40,7 +47,7 @@ class CampaignRun:
 
     folder: str
     name: str = ""
-    skipped: Optional[str] = None
+    skipped: str | None = None
     summary: ProcessSummary = field(default_factory=ProcessSummary)
     tasks: int = 0
 
@@ -72,7 +79,7 @@ def _task(job):
 
 
 @contextlib.contextmanager
-def _client(scheduler: Optional[str], workers: Optional[int]):
+def _client(scheduler: str | None, workers: int | None):
     try:
         from distributed import Client, LocalCluster
     except ImportError:  # pragma: no cover - a dependency of the package
@@ -103,8 +110,8 @@ def _client(scheduler: Optional[str], workers: Optional[int]):
         cluster.close()
 
 
-def fleet_process(roots: Sequence[str | os.PathLike], *, scheduler: Optional[str] = None,
-                  workers: Optional[int] = None, progress: Optional[ProgressCallback] = None) -> FleetRun:
+def fleet_process(roots: Sequence[str | os.PathLike], *, scheduler: str | None = None,
+                  workers: int | None = None, progress: ProgressCallback | None = None) -> FleetRun:
     """Bring every campaign under ``roots`` up to date on a Dask cluster (see the module notes).
 
     Parameters

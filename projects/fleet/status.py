@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import datetime as dt
 import os
+from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Iterable, Optional, Sequence
 
 from common.errors import InputError, SurveyError
 from projects.store.campaign import DB_NAME, Campaign
@@ -90,19 +90,19 @@ class BridgeStatus:
     folder: str
     name: str
     epochs: int = 0
-    last_epoch: Optional[str] = None
-    last_date: Optional[str] = None
-    days_since: Optional[int] = None
+    last_epoch: str | None = None
+    last_date: str | None = None
+    days_since: int | None = None
     work_left: int = 0
     state: str = "unknown"
-    worst_target: Optional[str] = None
-    worst_displacement_mm: Optional[float] = None
-    worst_limit_mm: Optional[float] = None
-    worst_ratio: Optional[float] = None
+    worst_target: str | None = None
+    worst_displacement_mm: float | None = None
+    worst_limit_mm: float | None = None
+    worst_ratio: float | None = None
     problems: int = 0
     crossval: list = field(default_factory=list)
-    analysis: Optional[str] = None
-    error: Optional[str] = None
+    analysis: str | None = None
+    error: str | None = None
 
     def to_json(self) -> dict:
         return asdict(self)
@@ -112,10 +112,10 @@ def _days_since(iso: str, today: dt.date) -> int:
     return (today - dt.date.fromisoformat(iso[:10])).days
 
 
-def bridge_status(folder: str | os.PathLike, *, today: Optional[dt.date] = None) -> BridgeStatus:
+def bridge_status(folder: str | os.PathLike, *, today: dt.date | None = None) -> BridgeStatus:
     """Summary of one campaign, read-only; an unreadable campaign gets its one-line error instead."""
-    from projects.series.camera import crossval_summaries
     from projects.results.state import campaign_status
+    from projects.series.camera import crossval_summaries
 
     folder = Path(folder)
     today = today or dt.date.today()
@@ -150,7 +150,7 @@ def bridge_status(folder: str | os.PathLike, *, today: Optional[dt.date] = None)
         str(analysis) if analysis.is_file() else None)
 
 
-def fleet_status(roots: Sequence[str | os.PathLike], *, today: Optional[dt.date] = None,
+def fleet_status(roots: Sequence[str | os.PathLike], *, today: dt.date | None = None,
                  overdue_days: int = 10) -> dict:
     """Every bridge's status plus an overview (counts by state, overdue bridges, work left).
 

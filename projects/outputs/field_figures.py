@@ -2,7 +2,8 @@
 from __future__ import annotations
 
 import datetime as dt
-from typing import Any, Mapping, Optional, Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -28,7 +29,7 @@ def range_walk_panel(ax: Any, model: FieldModel, measured: Sequence[tuple[float,
     pts = np.asarray(measured, dtype=np.float64).reshape(-1, 2)
     lo, hi = (max(2.0, float(pts[:, 0].min()) * 0.8), float(pts[:, 0].max()) * 1.15) if len(pts) else (5.0, 80.0)
     r = np.linspace(lo, hi, 120)
-    for cosi, colour in zip(CURVE_COS, CURVE_COLOURS):
+    for cosi, colour in zip(CURVE_COS, CURVE_COLOURS, strict=False):
         c = np.full_like(r, cosi)
         b = rw.bias_m(r, c) * 1e3
         band = 2e3 * np.hypot(rw.sigma_m(r, c), rw.spread_m(r, c))
@@ -74,7 +75,7 @@ def drift_panel(ax: Any, model: FieldModel, times: Mapping[str, str]) -> None:
         twist.append((_when(when), abs(float(d[2])), float(s[2])))
     for rows, colour, name in ((tilt, "#d62728", "tilt"), (twist, "#9467bd", "twist")):
         if rows:
-            x, y, e = zip(*rows)
+            x, y, e = zip(*rows, strict=False)
             ax.errorbar(list(x), y, yerr=[2 * v for v in e], fmt="o", ms=3.5, capsize=2, lw=1, color=colour,
                         label=name)
     if tilt:
@@ -91,7 +92,7 @@ def drift_panel(ax: Any, model: FieldModel, times: Mapping[str, str]) -> None:
 
 def field_model_figure(model: FieldModel, times: Mapping[str, str], *,
                        measured: Sequence[tuple[float, float]] = (),
-                       figsize: Optional[tuple[float, float]] = None) -> Any:
+                       figsize: tuple[float, float] | None = None) -> Any:
     """Three panels: the range walk, each visit's scale and each visit's drift.
 
     ``times``: epoch label -> ISO date-time (the visits the figure places on its time axes);

@@ -10,7 +10,7 @@ from __future__ import annotations
 import io
 import os
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 
@@ -19,7 +19,7 @@ from lidar.plan import ScanPlan
 THUMB_HALF_DEG = 1.5
 
 
-def _thumbnail_png(preview, roi) -> Optional[bytes]:
+def _thumbnail_png(preview, roi) -> bytes | None:
     """A small image of the stored reflectance map around a window (None without a map)."""
     if preview is None:
         return None

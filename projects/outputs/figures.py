@@ -1,7 +1,8 @@
 """Campaign figures (matplotlib, no GUI toolkit), and the legend and limit helpers the report's figures share."""
 from __future__ import annotations
 
-from typing import Any, Mapping, Optional, Sequence, cast
+from collections.abc import Mapping, Sequence
+from typing import Any, cast
 
 from projects.series.context import COLOURS, PlotContext
 from projects.store.history import DisplacementHistory
@@ -14,9 +15,9 @@ TARGET_COLOURS = ("#1f77b4", "#2ca02c", "#8c564b", "#7f7f7f", "#bcbd22", "#00008
 LIMIT_STYLES = (("warning", ":", "warning"), ("alarm", "--", "alarm"))
 
 
-def limit_of(h: Optional[DisplacementHistory]) -> Optional[Limit]:
+def limit_of(h: DisplacementHistory | None) -> Limit | None:
     """The limit that applies to a history (None without one)."""
-    return None if h is None else cast(Optional[Limit], h.limit)
+    return None if h is None else cast(Limit | None, h.limit)
 
 
 def limit_handles(limits: Sequence[Limit]) -> list:
@@ -38,7 +39,7 @@ def figure_legend(fig: Any, handles: Sequence, *, ncol: int = 4, fontsize: float
 
 
 def displacement_history_figure(histories: Mapping[str, DisplacementHistory], *,
-                                title: str = "Vertical displacement history", context: Optional[PlotContext] = None,
+                                title: str = "Vertical displacement history", context: PlotContext | None = None,
                                 series: bool = True, figsize: tuple[float, float] = (11.0, 5.0)) -> Any:
     """Displacement of every measurement target over time with 2-sigma error bars and limit lines.
 

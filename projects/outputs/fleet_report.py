@@ -5,7 +5,6 @@ import datetime as dt
 import os
 from pathlib import Path
 
-
 STATE_COLOURS = {"ok": "#c8e6c9", "warning": "#ffe0b2", "alarm": "#ffcdd2", "unknown": "#eeeeee"}
 
 

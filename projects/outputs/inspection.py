@@ -2,15 +2,14 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Optional
 
 import numpy as np
 
+from common.errors import InputError, ProcessingError
+from common.progress import ProgressCallback, report, scaled
 from lidar.angles import direction_from_angles, spherical_from_xyz
 from lidar.centroid import TargetCentroid, target_centroid
-from common.errors import InputError, ProcessingError
 from lidar.plan import RoiPlan
-from common.progress import ProgressCallback, report, scaled
 from projects.processing.stages import read_files
 from projects.store.campaign import Campaign
 
@@ -35,7 +34,7 @@ class TargetInspection:
     cluster: np.ndarray
     disc: np.ndarray
     centroid: TargetCentroid
-    stored: Optional[TargetCentroid]
+    stored: TargetCentroid | None
     diameter_m: float = 0.05
 
     def centroid_angles(self) -> tuple[float, float]:
@@ -47,7 +46,7 @@ class TargetInspection:
 
 
 def inspect_target(c: Campaign, label: str, reflector: str, *,
-                   progress: Optional[ProgressCallback] = None) -> TargetInspection:
+                   progress: ProgressCallback | None = None) -> TargetInspection:
     """Read an epoch's fine scans and redo the centroid of ``reflector`` with its masks kept."""
     plan = c.plan(label)
     if plan is None:
@@ -105,8 +104,8 @@ def around_targets(xyz: np.ndarray, targets: np.ndarray, margin_m: float) -> np.
     return np.all((xyz >= lo) & (xyz <= hi), axis=1)
 
 
-def epoch_cloud(c: Campaign, label: str, *, max_points: int = 1_500_000, margin_m: Optional[float] = 15.0,
-                progress: Optional[ProgressCallback] = None) -> DisplayCloud:
+def epoch_cloud(c: Campaign, label: str, *, max_points: int = 1_500_000, margin_m: float | None = 15.0,
+                progress: ProgressCallback | None = None) -> DisplayCloud:
     """An epoch's coarse scan coloured by intensity, with its targets (centroids, else the plan's).
 
     ``margin_m``: show the bridge and this much around its targets (None: the whole scan).
@@ -140,7 +139,7 @@ def _targets_of(c: Campaign, label: str) -> tuple[tuple, np.ndarray]:
 
 
 def change_cloud(c: Campaign, base: str, label: str, *, max_points: int = 1_500_000,
-                 progress: Optional[ProgressCallback] = None) -> tuple[DisplayCloud, dict]:
+                 progress: ProgressCallback | None = None) -> tuple[DisplayCloud, dict]:
     """M3C2 change (mm, signed) of ``label`` against ``base`` in the campaign frame, and the summary."""
     from projects.compare.whole_scan import compare_epochs
 

@@ -15,14 +15,20 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
-from typing import Callable, Mapping, Optional, Sequence
 
 import numpy as np
 
 from common.files import write_atomic
-from common.flags import (FLAG_ATMOSPHERE_CORRECTED, FLAG_ATMOSPHERE_DISAGREES, FLAG_ATMOSPHERE_UNCORRECTED,
-                          FLAG_DRIFT_FROM_PLAN, FLAG_RANGE_WALK_UNDETERMINED, FLAG_SCALE_UNDETERMINED)
+from common.flags import (
+    FLAG_ATMOSPHERE_CORRECTED,
+    FLAG_ATMOSPHERE_DISAGREES,
+    FLAG_ATMOSPHERE_UNCORRECTED,
+    FLAG_DRIFT_FROM_PLAN,
+    FLAG_RANGE_WALK_UNDETERMINED,
+    FLAG_SCALE_UNDETERMINED,
+)
 from lidar.centroid import TargetCentroid
 from lidar.systematic.adjustment import FieldModel, Sighting, VisitSightings, VisitSystematics, fit_field_model
 from lidar.systematic.corrections import cos_incidence_of
@@ -40,7 +46,7 @@ MATERIAL_AXES_ARCSEC = 0.5
 BIAS_FILE = "bias.json"
 
 
-def sightings(cents: Mapping[str, TargetCentroid], closures: Optional[Mapping[str, TargetCentroid]] = None) -> tuple:
+def sightings(cents: Mapping[str, TargetCentroid], closures: Mapping[str, TargetCentroid] | None = None) -> tuple:
     """The found centroids (and closure centroids) of one epoch as the field model's sightings.
 
     A weak centroid (:func:`lidar.centroid.is_weak`: a disc narrower than the beam, its centroid millimetres off
@@ -117,7 +123,7 @@ def _visit_key(v: VisitSystematics) -> dict:
 
 def update_field_model(c: Campaign, baseline: str, labels: Sequence[str], groups: Mapping[str, str],
                        found: Callable[[str], Mapping[str, TargetCentroid]], *, enabled: bool = True,
-                       closures: Optional[Callable[[str], Mapping[str, TargetCentroid]]] = None) -> FieldModel:
+                       closures: Callable[[str], Mapping[str, TargetCentroid]] | None = None) -> FieldModel:
     """Fit the campaign's field model over ``labels`` (the baseline's first), keep or replace the stored one.
 
     Epochs with fewer than three reference targets found cannot be placed and are left out; a baseline
@@ -145,7 +151,7 @@ def update_field_model(c: Campaign, baseline: str, labels: Sequence[str], groups
     return model
 
 
-def systematics_json(model: FieldModel, label: str, time_source: Optional[str]) -> dict:
+def systematics_json(model: FieldModel, label: str, time_source: str | None) -> dict:
     """What an epoch's displacements were corrected for, as stored beside them (and in the CSV)."""
     v = model.visit(label)
     return {"scale_ppm": float(v.scale_ppm), "scale_sigma_ppm": float(v.scale_sigma_ppm),
@@ -159,13 +165,13 @@ def systematics_json(model: FieldModel, label: str, time_source: Optional[str]) 
 AIR_WINDOW_S = 3600.0
 
 
-def _air_at(c: Campaign, label: str) -> Optional[tuple[float, float, float]]:
+def _air_at(c: Campaign, label: str) -> tuple[float, float, float] | None:
     """(temperature degC, pressure hPa, relative humidity 0..1) around a visit, or None without a temperature."""
     from vision.series import CameraSeries
 
     t_ns = int(c.epoch(label).when.timestamp() * 1e9)
 
-    def mean(kind: str) -> Optional[float]:
+    def mean(kind: str) -> float | None:
         vals = []
         for r in c.series.records("env_series", kind=kind):
             times, values = CameraSeries.arrays_from_npz(c.series.arrays("env_series", r.name))
@@ -213,7 +219,7 @@ def atmosphere_flags(c: Campaign, model: FieldModel, label: str) -> list[str]:
     return []
 
 
-def epoch_flags(model: FieldModel, label: str, time_source: Optional[str]) -> list[str]:
+def epoch_flags(model: FieldModel, label: str, time_source: str | None) -> list[str]:
     """The epoch flags the field model adds: what it could not determine, and how times were had."""
     v = model.visit(label)
     out = []

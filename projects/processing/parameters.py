@@ -14,8 +14,9 @@ Stages:
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable, Optional
+from typing import Any
 
 from common.errors import InputError
 
@@ -29,7 +30,7 @@ def _positive_float(text: str) -> float:
     return v
 
 
-def _optional_positive(text: str) -> Optional[float]:
+def _optional_positive(text: str) -> float | None:
     return None if text.strip().lower() in ("none", "auto", "") else _positive_float(text)
 
 
@@ -57,7 +58,7 @@ def _vector(text: str) -> str:
     return ",".join(f"{v:g}" for v in vec)
 
 
-def _xy_or_none(text: str) -> Optional[str]:
+def _xy_or_none(text: str) -> str | None:
     if text.strip().lower() in ("none", "auto", ""):
         return None
     xy = [float(v) for v in text.split(",")]
@@ -66,7 +67,7 @@ def _xy_or_none(text: str) -> Optional[str]:
     return ",".join(f"{v:g}" for v in xy)
 
 
-def _text_or_none(text: str) -> Optional[str]:
+def _text_or_none(text: str) -> str | None:
     return text.strip() or None
 
 
@@ -100,7 +101,7 @@ class Parameter:
     values: str
     added_later: bool = False
 
-    def value_of(self, text: Optional[str]) -> Any:
+    def value_of(self, text: str | None) -> Any:
         """The validated value of ``text`` (an :class:`InputError` naming the parameter when it is not one)."""
         if text is None:
             raise InputError(f"give a value for {self.name} ({self.values})")

@@ -27,8 +27,9 @@ from every other centroid, the join's motions included, ``scale`` and ``drift`` 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 

@@ -13,34 +13,52 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import Optional, Sequence
 
 import numpy as np
 
-from common.flags import (FLAG_CHAINED, FLAG_DECK_NOT_MEASURED, FLAG_FIELD_MISFIT, FLAG_MISSING, FLAG_NO_DISPLACEMENT, FLAG_NOT_FOUND,
-                          FLAG_PIERS_NOT_MEASURED, FLAG_SETUP_NOT_MEASURED, PROBLEM, WARNING, code, has, in_baseline, severity)
-from lidar.displacement import Displacement, EpochDisplacements
-from lidar.systematic.adjustment import FieldModel
-from lidar.systematic.budget import corrected_displacements
 from common.errors import CancelledError, InputError, ProcessingError, SurveyError
+from common.flags import (
+    FLAG_CHAINED,
+    FLAG_DECK_NOT_MEASURED,
+    FLAG_FIELD_MISFIT,
+    FLAG_MISSING,
+    FLAG_NO_DISPLACEMENT,
+    FLAG_NOT_FOUND,
+    FLAG_PIERS_NOT_MEASURED,
+    FLAG_SETUP_NOT_MEASURED,
+    PROBLEM,
+    WARNING,
+    code,
+    has,
+    in_baseline,
+    severity,
+)
+from common.progress import ProgressCallback, report, scaled
+from lidar.displacement import Displacement, EpochDisplacements
 from lidar.identification import MAX_TILT_DEG
 from lidar.io import read_scan
 from lidar.io.poses import read_in_scanner_frame
 from lidar.layout import Layout
 from lidar.pipeline import analyse_coarse, measure_fine, plan_from_coarse
 from lidar.plan import ScanPlan
-from common.progress import ProgressCallback, report, scaled
 from lidar.scan import Scan
 from lidar.scanner_profile import ScannerProfile
-from projects.processing.field import (atmosphere_flags, epoch_flags, systematics_json, update_field_model,
-                                       visit_digest)
+from lidar.systematic.adjustment import FieldModel
+from lidar.systematic.budget import corrected_displacements
+from projects.processing.field import atmosphere_flags, epoch_flags, systematics_json, update_field_model, visit_digest
 from projects.processing.parameters import DEFAULTS, parameter, stage1_params, stage2_params
-from projects.processing.setups import (CorrectedVisit, corrected_side, joined_displacements, visit_label,
-                                       without_weak_duplicates)
+from projects.processing.setups import (
+    CorrectedVisit,
+    corrected_side,
+    joined_displacements,
+    visit_label,
+    without_weak_duplicates,
+)
+from projects.store.campaign import Campaign
 from projects.store.previews import encode_preview
 from projects.store.records import EpochInputs, ScanFile
-from projects.store.campaign import Campaign
 
 log = logging.getLogger(__name__)
 
@@ -71,7 +89,7 @@ def _profile_key(profile) -> dict:
     return d
 
 
-def max_tilt(c: Campaign, params: dict, label: Optional[str] = None) -> Optional[float]:
+def max_tilt(c: Campaign, params: dict, label: str | None = None) -> float | None:
     """Largest tilt an identification may imply: None when the scanner was not levelled."""
     return _tilt_limit(params, c.profile_for(label))
 
@@ -81,7 +99,7 @@ def layout_up(params: dict) -> np.ndarray:
     return np.array([float(v) for v in str(params["layout_up"]).split(",")])
 
 
-def set_parameter(c: Campaign, key: str, text: Optional[str]) -> None:
+def set_parameter(c: Campaign, key: str, text: str | None) -> None:
     """Change one processing parameter (or the baseline, or the casting date) from its text form, validated."""
     p = parameter(key)
     if p.stage == "baseline":
@@ -127,7 +145,7 @@ class ProcessSummary:
     outcomes: list[EpochOutcome] = field(default_factory=list)
     displacement_epochs: list[str] = field(default_factory=list)
     displacement_reasons: dict[str, str] = field(default_factory=dict)  # epoch -> why it was recomputed
-    baseline: Optional[str] = None
+    baseline: str | None = None
     problems: dict[str, str] = field(default_factory=dict)  # epoch -> its first problem flag
 
     @property
@@ -135,7 +153,7 @@ class ProcessSummary:
         return [o for o in self.outcomes if o.action == "failed"]
 
 
-def read_paths(paths, progress: Optional[ProgressCallback] = None, frames: Sequence = ()) -> Scan:
+def read_paths(paths, progress: ProgressCallback | None = None, frames: Sequence = ()) -> Scan:
     """Scan files as one scan (each file's share of the progress in turn).
 
     ``frames`` gives each file's :class:`lidar.io.poses.FileFrame` (which of its scans, the pose carrying
@@ -144,7 +162,7 @@ def read_paths(paths, progress: Optional[ProgressCallback] = None, frames: Seque
     frames = tuple(frames) or (None,) * len(paths)
     scans = [read_in_scanner_frame(p, fr, progress=scaled(progress, k / len(paths), (k + 1) / len(paths)))
              if fr is not None else read_scan(p, progress=scaled(progress, k / len(paths), (k + 1) / len(paths)))
-             for k, (p, fr) in enumerate(zip(paths, frames))]
+             for k, (p, fr) in enumerate(zip(paths, frames, strict=False))]
     return scans[0] if len(scans) == 1 else Scan.concatenate(scans)
 
 
@@ -180,21 +198,21 @@ def _measure_hash(inp: EpochInputs, plan_hash: str, *, version: str = CENTROID_V
     return _hash(key if version == "1" else {**key, "centroids": version})
 
 
-def _tilt_limit(params: dict, profile) -> Optional[float]:
+def _tilt_limit(params: dict, profile) -> float | None:
     if not params["levelled"]:
         return None
     return float(params["max_tilt_deg"]) if params["max_tilt_deg"] is not None else profile.max_tilt_deg
 
 
-def _analyse(coarse: Scan, layout, params: dict, profile, progress: Optional[ProgressCallback] = None, *,
-             station_xy: Optional[tuple[float, float]] = None):
+def _analyse(coarse: Scan, layout, params: dict, profile, progress: ProgressCallback | None = None, *,
+             station_xy: tuple[float, float] | None = None):
     return analyse_coarse(coarse, layout, step_deg=params["map_step_deg"], threshold=params["detection_threshold"],
                           tolerance_m=params["identification_tolerance_m"],
                           max_tilt_deg=_tilt_limit(params, profile), up_layout=layout_up(params),
                           station_xy=station_xy, progress=progress)
 
 
-def _station_hint(setup: int, params: dict) -> Optional[tuple[float, float]]:
+def _station_hint(setup: int, params: dict) -> tuple[float, float] | None:
     """Where the surveyor says set-up 1 stood (``station_xy``, layout metres), or None.
 
     Only a tie between two identifications reads it (a symmetric bridge turned end for end). It is never
@@ -208,7 +226,7 @@ def _station_hint(setup: int, params: dict) -> Optional[tuple[float, float]]:
 
 
 def analyse_epoch_coarse(c: Campaign, label: str, layout, params: dict, *, setup: int = 1,
-                         progress: Optional[ProgressCallback] = None):
+                         progress: ProgressCallback | None = None):
     """Reflectance map, detections and identification of an epoch's (set-up's) coarse scan with the parameters."""
     coarse = read_files(c, c.files(label, "coarse", setup=setup), scaled(progress, 0.0, 0.5), setup=setup)
     return _analyse(coarse, layout, params, c.profile_for(label, setup), scaled(progress, 0.5, 1.0),
@@ -237,12 +255,12 @@ class Stage1Job:
     params: dict
     profile: ScannerProfile
     plan_hash: str
-    stored_plan: Optional[dict]
-    measure_hash: Optional[str]
+    stored_plan: dict | None
+    measure_hash: str | None
     setup: int = 1
     coarse_frames: tuple = ()
     fine_frames: tuple = ()
-    station_xy: Optional[tuple[float, float]] = None  # the hint for a symmetric layout (see _station_hint)
+    station_xy: tuple[float, float] | None = None  # the hint for a symmetric layout (see _station_hint)
 
 
 @dataclass(frozen=True, eq=False)
@@ -254,10 +272,10 @@ class Stage1Result:
 
     job: Stage1Job
     plan: ScanPlan
-    new_plan_json: Optional[dict]
-    preview: Optional[tuple[bytes, str]]
-    centroids: Optional[dict]
-    closures: Optional[dict] = None
+    new_plan_json: dict | None
+    preview: tuple[bytes, str] | None
+    centroids: dict | None
+    closures: dict | None = None
     time_source: str = "none"
 
 
@@ -282,7 +300,7 @@ def stage1_jobs(c: Campaign, label: str) -> list[Stage1Job]:
     return [stage1_job(c, label, k) for k in _stale_setups(c, label, parameters(c))]
 
 
-def run_stage1(job: Stage1Job, *, progress: Optional[ProgressCallback] = None) -> Stage1Result:
+def run_stage1(job: Stage1Job, *, progress: ProgressCallback | None = None) -> Stage1Result:
     """Plan (unless reused) and centroids of one epoch: pure computation on its files."""
     new_plan, preview = None, None
     if job.stored_plan is not None:
@@ -325,7 +343,7 @@ def save_stage1(c: Campaign, result: Stage1Result) -> None:
                          closures=result.closures, time_source=result.time_source, setup=job.setup)
 
 
-def plan_epoch(c: Campaign, label: str, *, setup: int = 1, progress: Optional[ProgressCallback] = None) -> ScanPlan:
+def plan_epoch(c: Campaign, label: str, *, setup: int = 1, progress: ProgressCallback | None = None) -> ScanPlan:
     """The fine-scan plan of an epoch's set-up, from its coarse scan (reused when its inputs are unchanged)."""
     job = stage1_job(c, label, setup)
     if job.stored_plan is not None:
@@ -335,13 +353,13 @@ def plan_epoch(c: Campaign, label: str, *, setup: int = 1, progress: Optional[Pr
     return result.plan
 
 
-def measure_inputs(c: Campaign, label: str, params: dict, plan_hash: Optional[str] = None, setup: int = 1) -> str:
+def measure_inputs(c: Campaign, label: str, params: dict, plan_hash: str | None = None, setup: int = 1) -> str:
     """Stage 1's input hash of an epoch (set-up) with fine scans (``plan_hash`` when already computed)."""
     inp = c.epoch_inputs(label, plan=False, setup=setup)
     return _measure_hash(inp, plan_hash if plan_hash is not None else _plan_hash(inp, params))
 
 
-def measure_epoch(c: Campaign, label: str, *, setup: int = 1, progress: Optional[ProgressCallback] = None) -> dict:
+def measure_epoch(c: Campaign, label: str, *, setup: int = 1, progress: ProgressCallback | None = None) -> dict:
     """Plan (when needed) and centroids of an epoch's set-up with fine scans, saved; returns the centroids."""
     job = stage1_job(c, label, setup)
     if not job.fine_paths:
@@ -352,7 +370,7 @@ def measure_epoch(c: Campaign, label: str, *, setup: int = 1, progress: Optional
     return result.centroids or {}
 
 
-def _stale_reason(inp: EpochInputs, params: dict) -> Optional[str]:
+def _stale_reason(inp: EpochInputs, params: dict) -> str | None:
     """Why one set-up's stored stage-1 result no longer matches its inputs (None: up to date)."""
     res = inp.result
     if not inp.coarse:
@@ -398,7 +416,7 @@ def stale_epochs(c: Campaign) -> dict[str, str]:
     return out
 
 
-def baseline_epoch(c: Campaign) -> Optional[str]:
+def baseline_epoch(c: Campaign) -> str | None:
     """The baseline epoch: the one chosen, else the first measured one (None before any)."""
     chosen = c.settings().get("baseline")
     if chosen:
@@ -409,8 +427,8 @@ def baseline_epoch(c: Campaign) -> Optional[str]:
     return None
 
 
-def process(c: Campaign, labels: Optional[Sequence[str]] = None, *,
-            progress: Optional[ProgressCallback] = None) -> ProcessSummary:
+def process(c: Campaign, labels: Sequence[str] | None = None, *,
+            progress: ProgressCallback | None = None) -> ProcessSummary:
     """Bring the given epochs (default: all) up to date, then their displacements."""
     epochs = c.epochs()
     if labels:
@@ -478,7 +496,7 @@ def finish_displacements(c: Campaign, summary: ProcessSummary, labels: Sequence[
                 summary.problems[lab] = bad[0]
 
 
-def _stage1_hash(c: Campaign, label: str) -> Optional[str]:
+def _stage1_hash(c: Campaign, label: str) -> str | None:
     """The stage-1 hash of a measured epoch (None when set-up 1 is not measured); of every set-up with several."""
     res = c.result(label)
     if res is None or res.stage != "measured":
@@ -506,7 +524,7 @@ class _Setups:
         self.visits = {visit_label(lab, k): (lab, k) for lab in labels for k in self.measured[lab]}
         self._found: dict[tuple[str, int], dict] = {}
         self._sides: dict[str, CorrectedVisit] = {}
-        self._model: Optional[FieldModel] = None
+        self._model: FieldModel | None = None
 
     @property
     def model(self) -> FieldModel:
@@ -554,7 +572,7 @@ class _Setups:
                 for lab in labels if self.several(lab)}
 
 
-def update_displacements(c: Campaign, baseline: str, *, reasons: Optional[dict] = None) -> list[str]:
+def update_displacements(c: Campaign, baseline: str, *, reasons: dict | None = None) -> list[str]:
     """(Re)compute the displacements of every measured epoch whose inputs changed; returns those epochs.
 
     The campaign's field model (:mod:`projects.processing.field`) is fitted first over every measured
@@ -652,7 +670,7 @@ def _setup_terms(su: _Setups, lab: str, flags: list, systematics: dict) -> tuple
 
 
 def _epoch_displacements(c: Campaign, lab: str, bases: list, baseline: str, found, groups: dict, first_seen: dict,
-                         params: dict, model, refl: dict, displacements_of=None) -> Optional[EpochDisplacements]:
+                         params: dict, model, refl: dict, displacements_of=None) -> EpochDisplacements | None:
     """One epoch's displacements against the baseline (and the later baselines of targets that replaced others)."""
     cents = found(lab)
     meas_here = [m for m in cents if groups.get(m) == "measurement"]
@@ -789,7 +807,7 @@ def _why_missing(c: Campaign, lab: str, result: EpochDisplacements) -> EpochDisp
 
 
 def _failed_result(groups: dict, base: dict, cents: dict, baseline: str, reason: str, *,
-                   flag: Optional[str] = None) -> EpochDisplacements:
+                   flag: str | None = None) -> EpochDisplacements:
     """An epoch with no displacement: every deck target missing, and a problem flag saying why (or ``flag``)."""
     refs = [r for r, g in groups.items() if g == "reference"]
     meas = [m for m, g in groups.items() if g == "measurement"]

@@ -8,8 +8,8 @@ helpers turn that record into one short line and into numbers a table can show.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Mapping, Optional, Sequence
 
 #: Where the centroid times of an epoch came from, as the line says it.
 TIME_SOURCES = {"points": "times from the points", "plan": "times from the plan", "none": "no times"}
@@ -37,10 +37,10 @@ def norm_sigma(v: Sequence[float], s: Sequence[float]) -> tuple[float, float]:
     n = math.sqrt(sum(x * x for x in v))
     if n < 1e-12:
         return 0.0, max(s) if s else 0.0
-    return n, math.sqrt(sum((x * e) ** 2 for x, e in zip(v, s))) / n
+    return n, math.sqrt(sum((x * e) ** 2 for x, e in zip(v, s, strict=False))) / n
 
 
-def epoch_corrections(systematics: Mapping) -> Optional[EpochCorrections]:
+def epoch_corrections(systematics: Mapping) -> EpochCorrections | None:
     """The record ``Campaign.systematics(label)`` returns as numbers (None when the epoch has none)."""
     if not systematics or "scale_ppm" not in systematics:
         return None

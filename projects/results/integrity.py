@@ -9,8 +9,8 @@ options of their import. Neither deletes anything.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable, Optional
 
 from common.progress import ProgressCallback
 from projects.store.campaign import Campaign
@@ -32,7 +32,7 @@ def _stale(c: Campaign) -> list[Finding]:
     return out
 
 
-def verify_campaign(c: Campaign, *, progress: Optional[ProgressCallback] = None) -> list[Finding]:
+def verify_campaign(c: Campaign, *, progress: ProgressCallback | None = None) -> list[Finding]:
     """Every problem the campaign has, each with what to do (empty when it is whole)."""
     return verify_store(c, progress=progress) + _stale(c)
 

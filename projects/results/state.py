@@ -9,8 +9,8 @@ and the report show. :func:`epoch_states` gives it for every epoch of a campaign
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Iterable, Mapping, Optional, Sequence
 
 from common.flags import FLAG_DEPARTS, FLAG_REFERENCE_AMBIGUOUS, PROBLEM, WARNING, code, count, is_from_baseline, worst
 from projects.store.campaign import Campaign
@@ -44,7 +44,7 @@ class EpochState:
     flags: tuple[str, ...]
 
     @property
-    def severity(self) -> Optional[str]:
+    def severity(self) -> str | None:
         """The most serious severity among the flags (None without flags)."""
         return worst(self.flags)
 
@@ -97,11 +97,11 @@ class Departure:
     """
 
     predicted_mm: float
-    departure_mm: Optional[float]
+    departure_mm: float | None
     departs: bool
 
 
-def departures(c: Campaign, records: Optional[Sequence[DisplacementRecord]] = None
+def departures(c: Campaign, records: Sequence[DisplacementRecord] | None = None
                ) -> dict[tuple[str, str], Departure]:
     """``(epoch, reflector) -> Departure`` for every displacement (default: all stored) inside its prediction."""
     from projects.series.predictions import predictions
@@ -148,8 +148,8 @@ def _stage(c: Campaign, label: str, has_displacements: bool) -> str:
     return "measured"
 
 
-def epoch_states(c: Campaign, labels: Optional[Sequence[str]] = None, *,
-                 departed: Optional[Mapping[tuple[str, str], Departure]] = None) -> dict[str, EpochState]:
+def epoch_states(c: Campaign, labels: Sequence[str] | None = None, *,
+                 departed: Mapping[tuple[str, str], Departure] | None = None) -> dict[str, EpochState]:
     """The :class:`EpochState` of every epoch (or of ``labels``), in date order.
 
     Flags: the epoch's own (from its displacement computation), then every target's displacement flags
@@ -201,9 +201,8 @@ def campaign_status(c: Campaign) -> dict:
     import folders the database does not list (never deleted: ``bridgesurvey repair`` registers them).
     """
     from projects.processing.stages import baseline_epoch, stale_epochs
-    from projects.results.table import displacement_table
-
     from projects.results.corrections import epoch_corrections, instrument_summary
+    from projects.results.table import displacement_table
 
     stale = stale_epochs(c)
     states = epoch_states(c)

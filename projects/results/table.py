@@ -8,7 +8,7 @@ its centroid flags included).
 """
 from __future__ import annotations
 
-from typing import Mapping, Optional
+from collections.abc import Mapping
 
 from common.files import csv_text
 from projects.results.state import EpochState, departures, epoch_states
@@ -40,7 +40,7 @@ def field_columns(r) -> dict:
     return out
 
 
-def displacement_table(c: Campaign, *, states: Optional[Mapping[str, EpochState]] = None) -> list[dict]:
+def displacement_table(c: Campaign, *, states: Mapping[str, EpochState] | None = None) -> list[dict]:
     """One row per processed epoch x measurement target (baseline = first epoch, positive up).
 
     ``states`` are the epochs' states when the caller has them already (default: computed here).

@@ -5,16 +5,15 @@ import datetime as dt
 import json
 import os
 from pathlib import Path
-from typing import Optional
 
 import numpy as np
 
-from common.files import csv_text, json_safe, output_folder, write_atomic
 from common.errors import ProcessingError
+from common.files import csv_text, json_safe, output_folder, write_atomic
+from projects.store.campaign import CAMERA_DIR, Campaign, parse_datetime
 from projects.store.errors import InputError
 from projects.store.history import histories, ns_of
 from projects.store.records import SeriesRecord
-from projects.store.campaign import CAMERA_DIR, Campaign, parse_datetime
 from vision.crossval import CrossValidation, cross_validate
 from vision.series import CameraSeries, read_camera_series
 
@@ -32,9 +31,9 @@ def midspan_reflector(c: Campaign) -> str:
     return min(meas, key=lambda r: float(np.linalg.norm(np.array(r.xyz_layout) - mid))).id
 
 
-def import_series(c: Campaign, path: str | os.PathLike, *, name: Optional[str] = None,
-                  reflector: Optional[str] = None, column: Optional[str] = None, timezone: str = "UTC",
-                  unit: Optional[str] = None, positive: str = "up") -> tuple[str, CameraSeries]:
+def import_series(c: Campaign, path: str | os.PathLike, *, name: str | None = None,
+                  reflector: str | None = None, column: str | None = None, timezone: str = "UTC",
+                  unit: str | None = None, positive: str = "up") -> tuple[str, CameraSeries]:
     """Read a camera series file, copy it into the campaign (read-only) and store the series.
 
     Nothing changes in the campaign unless the whole file was read; a file already imported
@@ -67,7 +66,7 @@ def series_records(c: Campaign) -> list[SeriesRecord]:
     return c.series.records("camera_series")
 
 
-def load_series(c: Campaign, name: Optional[str] = None) -> tuple[SeriesRecord, CameraSeries]:
+def load_series(c: Campaign, name: str | None = None) -> tuple[SeriesRecord, CameraSeries]:
     """One stored series (the only one when ``name`` is None)."""
     rows = series_records(c)
     if not rows:
@@ -89,8 +88,8 @@ def load_series(c: Campaign, name: Optional[str] = None) -> tuple[SeriesRecord, 
                              sampling_s=s["sampling_s"] or float("nan"))
 
 
-def crossvalidate(c: Campaign, *, series: Optional[str] = None, reflector: Optional[str] = None,
-                  align_at: Optional[str] = None, window_min: float = 30.0) -> tuple[CrossValidation, CameraSeries]:
+def crossvalidate(c: Campaign, *, series: str | None = None, reflector: str | None = None,
+                  align_at: str | None = None, window_min: float = 30.0) -> tuple[CrossValidation, CameraSeries]:
     """Cross-validate a stored camera series with the LiDAR displacements of its reflector."""
     row, cam = load_series(c, series)
     rid = reflector or row.reflector or midspan_reflector(c)

@@ -8,8 +8,9 @@ Every time plot uses the colours of :data:`COLOURS`, so a legend means the same 
 from __future__ import annotations
 
 import datetime as dt
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Optional, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -28,7 +29,7 @@ class PlotContext:
     """What explains a displacement plot: the events (date, label) and one environment series."""
 
     events: tuple[tuple[dt.datetime, str], ...] = ()
-    series_name: Optional[str] = None
+    series_name: str | None = None
     series_unit: str = ""
     series_days: tuple = ()  # datetimes of the plotted values
     series_values: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -82,10 +83,10 @@ def series_for_plot(time_ns: np.ndarray, values: np.ndarray) -> tuple[tuple[dt.d
     t = np.asarray(time_ns, np.int64)[ok]
     step_h = float(np.median(np.diff(t))) / 3.6e12 if t.size > 1 else float("inf")
     if step_h > MAX_STEP_FOR_DAILY_MEANS_H:
-        return (tuple(dt.datetime.fromtimestamp(int(x) / 1e9, dt.timezone.utc) for x in t),
+        return (tuple(dt.datetime.fromtimestamp(int(x) / 1e9, dt.UTC) for x in t),
                 np.asarray(values, float)[ok], "samples")
     days, means = whole_day_means(time_ns, values)
-    return tuple(dt.datetime.fromtimestamp(int(d) * 86400 + 43200, dt.timezone.utc) for d in days), means, "daily means"
+    return tuple(dt.datetime.fromtimestamp(int(d) * 86400 + 43200, dt.UTC) for d in days), means, "daily means"
 
 
 def plot_context(c: Any, *, kind_preference: Sequence[str] = ("structure-temperature", "temperature")) -> PlotContext:
@@ -102,7 +103,7 @@ def plot_context(c: Any, *, kind_preference: Sequence[str] = ("structure-tempera
     return PlotContext(evs)
 
 
-def event_handles(ctx: Optional[PlotContext]) -> list:
+def event_handles(ctx: PlotContext | None) -> list:
     """Legend entries for the events: a dashed line labelled ``1  label (date)`` for each."""
     from matplotlib.lines import Line2D
 
@@ -113,7 +114,7 @@ def event_handles(ctx: Optional[PlotContext]) -> list:
             for k, (when, label) in enumerate(ctx.events, start=1)]
 
 
-def series_handle(ctx: Optional[PlotContext]) -> list:
+def series_handle(ctx: PlotContext | None) -> list:
     """The legend entry of the environment series (empty without one)."""
     from matplotlib.lines import Line2D
 
@@ -122,7 +123,7 @@ def series_handle(ctx: Optional[PlotContext]) -> list:
     return [Line2D([], [], color=COLOURS["series"], lw=1.0, label=ctx.series_label)]
 
 
-def draw_context(ax: Any, ctx: Optional[PlotContext], *, label_events: bool = True, series: bool = True) -> list:
+def draw_context(ax: Any, ctx: PlotContext | None, *, label_events: bool = True, series: bool = True) -> list:
     """Draw the events and the environment series behind a time plot; returns their legend entries.
 
     Events are dashed lines, numbered just above the axes when ``label_events`` (the legend entries name

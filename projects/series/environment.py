@@ -10,13 +10,12 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
-from typing import Optional
 
 import numpy as np
 
 from common.errors import InputError
-from projects.store.records import EventRecord, SeriesRecord
 from projects.store.campaign import ENV_DIR, Campaign, parse_datetime
+from projects.store.records import EventRecord, SeriesRecord
 from vision.series import CameraSeries, Quantity, read_camera_series
 
 _TEMP_UNITS = {"degc": (1.0, 0.0), "c": (1.0, 0.0), "°c": (1.0, 0.0), "celsius": (1.0, 0.0),
@@ -56,8 +55,8 @@ class EnvSeries:
     value: np.ndarray
 
 
-def import_env(c: Campaign, path: str | os.PathLike, *, kind: str, name: Optional[str] = None,
-               column: Optional[str] = None, unit: Optional[str] = None, timezone: str = "UTC"
+def import_env(c: Campaign, path: str | os.PathLike, *, kind: str, name: str | None = None,
+               column: str | None = None, unit: str | None = None, timezone: str = "UTC"
                ) -> tuple[str, CameraSeries]:
     """Read an environment series file, copy it into the campaign (read-only) and store it.
 
@@ -92,7 +91,7 @@ def env_records(c: Campaign) -> list[SeriesRecord]:
     return sorted(c.series.records("env_series"), key=lambda r: (r.kind, r.name))
 
 
-def load_env(c: Campaign, *, kind: Optional[str] = None, name: Optional[str] = None) -> list[EnvSeries]:
+def load_env(c: Campaign, *, kind: str | None = None, name: str | None = None) -> list[EnvSeries]:
     """Stored series of a kind (or the one named), oldest import first."""
     out = []
     for r in c.series.records("env_series", kind=kind, name=name):
@@ -104,7 +103,7 @@ def load_env(c: Campaign, *, kind: Optional[str] = None, name: Optional[str] = N
 
 
 # ------------------------------------------------------------------------------------------- events
-def add_event(c: Campaign, *, date: str, kind: str, label: str, load_kn_m: Optional[float] = None) -> int:
+def add_event(c: Campaign, *, date: str, kind: str, label: str, load_kn_m: float | None = None) -> int:
     """Record a construction step, load, repair...
 
     The date must fall within the campaign's epochs (or up to a

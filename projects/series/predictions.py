@@ -13,25 +13,24 @@ import datetime as dt
 import io
 import os
 from pathlib import Path
-from typing import Optional
 
 import numpy as np
 
 from common.errors import InputError
-from projects.store.history import histories
 from projects.store.campaign import PREDICTION_DIR, Campaign, parse_datetime, sha256_of
+from projects.store.history import histories
 
 DAY_NS = 86_400 * 10**9
 FORMAT_VERSION = 1
 
 
-def casting_ns(c: Campaign) -> Optional[int]:
+def casting_ns(c: Campaign) -> int | None:
     """The casting date setting as nanoseconds since 1970 (UTC), or None when it is not set."""
     s = c.settings().get("casting_date")
     return None if not s else int(dt.datetime.fromisoformat(s).timestamp() * 1e9)
 
 
-def read_prediction_file(path: Path, reflector_ids, casting: Optional[int]) -> tuple[dict, str]:
+def read_prediction_file(path: Path, reflector_ids, casting: int | None) -> tuple[dict, str]:
     """``{reflector: (time_ns, value_mm)}`` and the time axis used (``date`` or ``age``)."""
     import pandas as pd
 
@@ -94,7 +93,7 @@ def read_prediction_file(path: Path, reflector_ids, casting: Optional[int]) -> t
     return out, axis
 
 
-def align(t_pred, v_pred, t_meas, d_meas, s_meas, *, at_ns: Optional[int] = None) -> tuple[float, float, int]:
+def align(t_pred, v_pred, t_meas, d_meas, s_meas, *, at_ns: int | None = None) -> tuple[float, float, int]:
     """(offset_mm, residual RMS mm, pairs): measured = predicted + offset, at one date or by least squares."""
     inside = (t_meas >= t_pred[0]) & (t_meas <= t_pred[-1])
     if not np.any(inside):
@@ -113,7 +112,7 @@ def align(t_pred, v_pred, t_meas, d_meas, s_meas, *, at_ns: Optional[int] = None
     return offset, float(np.sqrt(np.mean(resid ** 2))), int(inside.sum())
 
 
-def import_prediction(c: Campaign, path: str | os.PathLike, *, align_at: Optional[str] = None,
+def import_prediction(c: Campaign, path: str | os.PathLike, *, align_at: str | None = None,
                       lsq: bool = False) -> dict:
     """Read a prediction file, align every target in it, copy the file in and store the curves.
 

@@ -20,34 +20,59 @@ import json
 import os
 import sqlite3
 import uuid
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
-from typing import Iterable, Iterator, Optional, Sequence
 
 import numpy as np
 
+from common.files import MB, disk_full_error, ensure_free, is_disk_full
 from lidar.centroid import TargetCentroid
 from lidar.layout import Layout, check_layout
 from lidar.scanner_profile import ScannerProfile
-from common.files import MB, disk_full_error, ensure_free, is_disk_full
-from projects.store import digests, inputs, journal, schema
+from projects.store import digests, field_tables, inputs, journal, schema, setup_tables
 from projects.store.connection import connect, open_database
-from projects.store.imports import (IMPORT_DIRS, SCANS_DIR, Copied, clean_temp_files, copy_in, folder_files,
-                                    header_facts, remove_uncommitted)
-from projects.store.imports import CAMERA_DIR, ENV_DIR, PREDICTION_DIR  # noqa: F401  (importers name them here)
-from projects.store.lock import LOCK_NAME, CampaignLock  # noqa: F401  (LOCK_NAME: likewise)
 from projects.store.errors import CampaignError, CampaignLockedError, DuplicateImportError, InputError
-from projects.store import field_tables, setup_tables
-from projects.store.repositories import (ComparisonRepository, CrossvalRepository, EventRepository,
-                                         PredictionRepository, SeriesRepository)
-from projects.store.records import (DisplacementRecord, DisplacementSet, Epoch, EpochInputs, EpochResult, LimitRecord,
-                                    LogEntry, Reflector, ReferenceCheck, ScanFile, StoredPlan)
+from projects.store.imports import (  # noqa: F401  (importers name them here)
+    CAMERA_DIR,
+    ENV_DIR,
+    IMPORT_DIRS,
+    PREDICTION_DIR,
+    SCANS_DIR,
+    Copied,
+    clean_temp_files,
+    copy_in,
+    folder_files,
+    header_facts,
+    remove_uncommitted,
+)
+from projects.store.lock import LOCK_NAME, CampaignLock  # noqa: F401  (LOCK_NAME: likewise)
+from projects.store.records import (
+    DisplacementRecord,
+    DisplacementSet,
+    Epoch,
+    EpochInputs,
+    EpochResult,
+    LimitRecord,
+    LogEntry,
+    ReferenceCheck,
+    Reflector,
+    ScanFile,
+    StoredPlan,
+)
+from projects.store.repositories import (
+    ComparisonRepository,
+    CrossvalRepository,
+    EventRepository,
+    PredictionRepository,
+    SeriesRepository,
+)
 
 DB_NAME = "campaign.sqlite"
 
 
 def now_iso() -> str:
     """The current UTC time, ISO 8601 to the second."""
-    return dt.datetime.now(dt.timezone.utc).replace(microsecond=0).isoformat()
+    return dt.datetime.now(dt.UTC).replace(microsecond=0).isoformat()
 
 
 def parse_datetime(text: str) -> str:
@@ -59,7 +84,7 @@ def parse_datetime(text: str) -> str:
             raise InputError(f"date {text!r} is an impossible date: {exc}") from None
         raise InputError(f"date {text!r} is not ISO 8601 (e.g. 2026-03-14 or 2026-03-14T09:30)") from None
     if value.tzinfo is None:
-        value = value.replace(tzinfo=dt.timezone.utc)
+        value = value.replace(tzinfo=dt.UTC)
     return value.isoformat()
 
 
@@ -94,7 +119,7 @@ class Campaign:
         events, design predictions, camera cross-validations, whole-scan comparisons.
     """
 
-    def __init__(self, folder: Path, conn: sqlite3.Connection, lock: Optional[CampaignLock], *, writable: bool):
+    def __init__(self, folder: Path, conn: sqlite3.Connection, lock: CampaignLock | None, *, writable: bool):
         self.folder = folder
         self.conn = conn
         self._lock = lock
@@ -109,8 +134,8 @@ class Campaign:
 
     # ------------------------------------------------------------------ opening
     @classmethod
-    def create(cls, folder: str | os.PathLike, *, name: str, layout: Layout, span_m: Optional[float] = None,
-               profile: Optional[ScannerProfile] = None) -> "Campaign":
+    def create(cls, folder: str | os.PathLike, *, name: str, layout: Layout, span_m: float | None = None,
+               profile: ScannerProfile | None = None) -> Campaign:
         """Create a new campaign folder (which must not hold a campaign yet).
 
         ``profile`` is the scanner (default: the catalogue's Riegl VZ-1000, the dissertation's).
@@ -143,7 +168,7 @@ class Campaign:
                 conn.executemany(
                     "INSERT INTO reflectors(id, grp, x, y, z, diameter_m, nx, ny, nz) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
                     [(i, g, *map(float, p), float(d), *_normal_values(n)) for i, g, p, d, n in
-                     zip(layout.ids, layout.groups, layout.xyz, layout.diameters_m, layout.normals)])
+                     zip(layout.ids, layout.groups, layout.xyz, layout.diameters_m, layout.normals, strict=False)])
                 conn.execute("INSERT INTO log(time, action, epoch, details) VALUES (?, 'init', NULL, ?)",
                              (now_iso(), json.dumps({"name": name, "reflectors": len(layout)})))
             conn.close()
@@ -156,7 +181,7 @@ class Campaign:
         return cls.open(folder)
 
     @classmethod
-    def open(cls, folder: str | os.PathLike, *, writable: bool = True) -> "Campaign":
+    def open(cls, folder: str | os.PathLike, *, writable: bool = True) -> Campaign:
         """Open a campaign; a writer holds an exclusive lock, readers a shared one (see :mod:`projects.store.lock`).
 
         A damaged or unknown schema version, a damaged database and a full disk are each one line
@@ -209,7 +234,7 @@ class Campaign:
             self._lock.release()
             self._lock = None
 
-    def __enter__(self) -> "Campaign":
+    def __enter__(self) -> Campaign:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -268,7 +293,7 @@ class Campaign:
         return self.meta("name", "")
 
     @property
-    def span_m(self) -> Optional[float]:
+    def span_m(self) -> float | None:
         v = self.meta("span_m", "")
         return float(v) if v else None
 
@@ -276,11 +301,11 @@ class Campaign:
     def profile(self) -> ScannerProfile:
         return ScannerProfile.from_dict(json.loads(self.meta("scanner_profile", "{}")))
 
-    def profile_for(self, label: Optional[str], setup: int = 1) -> ScannerProfile:
+    def profile_for(self, label: str | None, setup: int = 1) -> ScannerProfile:
         """The scanner of an epoch's set-up: its own (``add-setup --scanner``), else the epoch's, else the campaign's."""
         return _profile_of(self.settings(), label, setup, self.profile)
 
-    def set_profile(self, profile: ScannerProfile, *, epoch: Optional[str] = None, setup: Optional[int] = None) -> None:
+    def set_profile(self, profile: ScannerProfile, *, epoch: str | None = None, setup: int | None = None) -> None:
         """Set the campaign's scanner, or one epoch's, or one set-up's of an epoch (which must exist)."""
         if epoch is None:
             with self.transaction() as c:
@@ -316,7 +341,7 @@ class Campaign:
             c.execute("UPDATE meta SET value = ? WHERE key = 'settings'", (json.dumps(s),))
             self.log_action(c, "setting", None, {key: value})
 
-    def log_action(self, conn: sqlite3.Connection, action: str, epoch: Optional[str], details: dict) -> None:
+    def log_action(self, conn: sqlite3.Connection, action: str, epoch: str | None, details: dict) -> None:
         """Add a line to the campaign's log inside the transaction ``conn``."""
         conn.execute("INSERT INTO log(time, action, epoch, details) VALUES (?, ?, ?, ?)",
                      (now_iso(), action, epoch, json.dumps(details, default=str)))
@@ -338,11 +363,11 @@ class Campaign:
             raise InputError(f"unknown reflector {rid!r}; the campaign has {known}")
         return _reflector(row)
 
-    def layout(self, at: Optional[str] = None) -> Layout:
+    def layout(self, at: str | None = None) -> Layout:
         """Reflectors expected at a date-time (all active ones when None)."""
         return _layout_of(self.reflectors(), at)
 
-    def layout_warnings(self, epoch: Optional[str] = None) -> list[str]:
+    def layout_warnings(self, epoch: str | None = None) -> list[str]:
         """Warnings about the layout (at an epoch's date, with its scanner): targets no station could reach."""
         at = self.epoch(epoch).datetime if epoch else None
         layout, profile = self.layout(at), self.profile_for(epoch)
@@ -350,7 +375,7 @@ class Campaign:
                                           scanner=f"the {profile.name}")
 
     def add_reflector(self, rid: str, group: str, xyz: Sequence[float], *, diameter_m: float = 0.05,
-                      installed: Optional[str] = None, replaces: Optional[str] = None, note: str = "") -> None:
+                      installed: str | None = None, replaces: str | None = None, note: str = "") -> None:
         if group not in ("reference", "measurement"):
             raise InputError(f"group must be 'reference' or 'measurement', not {group!r}")
         if not rid.strip():
@@ -375,7 +400,7 @@ class Campaign:
             c.execute("UPDATE reflectors SET retired = ? WHERE id = ?", (when, rid))
             self.log_action(c, "reflector-retire", None, {"id": rid, "when": when})
 
-    def replace_reflector(self, old: str, new: str, when: str, *, xyz: Optional[Sequence[float]] = None) -> None:
+    def replace_reflector(self, old: str, new: str, when: str, *, xyz: Sequence[float] | None = None) -> None:
         """Retire ``old`` and install ``new`` at the same place (or at ``xyz``); the history continues."""
         r = self.reflector(old)
         when = parse_datetime(when)
@@ -403,7 +428,7 @@ class Campaign:
             raise InputError(f"no epoch {label!r} in {self.folder}{hint}")
         return Epoch(**dict(row))
 
-    def files(self, epoch: str, role: Optional[str] = None, *, setup: Optional[int] = 1) -> list[ScanFile]:
+    def files(self, epoch: str, role: str | None = None, *, setup: int | None = 1) -> list[ScanFile]:
         """An epoch's scan files (``role`` ``"coarse"`` or ``"fine"``, or both), in import order.
 
         ``setup`` chooses the set-up (default 1: one scanner frame, as every visit had before set-ups);
@@ -453,7 +478,7 @@ class Campaign:
         """Where a stored scan file is on disk."""
         return self.folder / file.stored_path
 
-    def import_file(self, src: Path, sha: str, sub: str, record, *, journal_entry: Optional[dict] = None) -> str:
+    def import_file(self, src: Path, sha: str, sub: str, record, *, journal_entry: dict | None = None) -> str:
         """Copy ``src`` into ``sub`` read-only and, in one transaction, ``record(conn, stored_path)``.
 
         ``sha`` is the file's checksum when it was read; ``journal_entry`` says what the file was
@@ -498,7 +523,7 @@ class Campaign:
             raise
 
     def import_files(self, epoch: str, paths: Iterable[str | os.PathLike], role: str, *,
-                     validate=None, create_epoch: Optional[dict] = None, setup: Optional[int] = None,
+                     validate=None, create_epoch: dict | None = None, setup: int | None = None,
                      frames_of=None) -> list[str]:
         """Validate, copy in and register scan files of an epoch, all or nothing.
 
@@ -521,15 +546,15 @@ class Campaign:
         shas = [sha256_of(p) for p, _ in items]
         if len(set(shas)) != len(shas):
             raise DuplicateImportError("the same file is given twice")
-        for (p, _), sha in zip(items, shas):
+        for (p, _), sha in zip(items, shas, strict=False):
             row = self.conn.execute("SELECT epoch, original_path FROM files WHERE sha256 = ?", (sha,)).fetchone()
             if row is not None:
                 raise DuplicateImportError(f"{p}: this file is already in the campaign (epoch {row['epoch']}, "
                                            f"imported from {row['original_path']}); nothing was changed")
         return shas
 
-    def _import(self, epoch: str, items: Sequence[tuple[Path, str]], *, setup: Optional[int], validate, frames_of,
-                create_epoch: Optional[dict], placed: Optional[list] = None) -> list[str]:
+    def _import(self, epoch: str, items: Sequence[tuple[Path, str]], *, setup: int | None, validate, frames_of,
+                create_epoch: dict | None, placed: list | None = None) -> list[str]:
         """Import coarse and fine files of one epoch in one transaction (see :meth:`import_files`).
 
         ``placed`` is each file's (set-up, frame JSON) when already worked out (:func:`setup_tables.place_files`).
@@ -544,7 +569,8 @@ class Campaign:
         copied: list[Copied] = []
         marks: list[int] = []
         try:
-            for (p, role), (k, frame) in zip(items, placed):  # each copy journaled at once: a kill leaves none unknown
+            # each copy journaled at once: a kill leaves none unknown
+            for (p, role), (k, frame) in zip(items, placed, strict=False):
                 got = copy_in(self.folder, p, SCANS_DIR)
                 copied.append(got)
                 marks.append(self._journal(got, p, {"kind": "scan", "epoch": epoch, "role": role, "setup": k,
@@ -556,12 +582,12 @@ class Campaign:
                     c.execute("INSERT INTO epochs(label, datetime, notes, created) VALUES (?, ?, ?, ?)",
                               (create_epoch["label"], create_epoch["datetime"], create_epoch.get("notes", ""),
                                now_iso()))
-                for (p, role), got, (k, frame) in zip(items, copied, placed):
+                for (p, role), got, (k, frame) in zip(items, copied, placed, strict=False):
                     c.execute("INSERT INTO files(sha256, epoch, role, stored_path, original_path, size, imported, "
                               "setup, frame) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
                               (got.sha256, epoch, role, got.rel, str(p.resolve()), got.size, now_iso(), k, frame))
                 for role in dict.fromkeys(r for _, r in items):
-                    these = [(p, sha, k) for (p, r), sha, (k, _) in zip(items, shas, placed) if r == role]
+                    these = [(p, sha, k) for (p, r), sha, (k, _) in zip(items, shas, placed, strict=False) if r == role]
                     self.log_action(c, "import", epoch, {"role": role, "files": [str(p) for p, _, _ in these],
                                                          "sha256": [sha for _, sha, _ in these],
                                                          **({"setups": sorted({k for _, _, k in these})}
@@ -617,7 +643,7 @@ class Campaign:
         if measured and when < measured[0].datetime:
             self.set_setting("baseline", measured[0].label)
 
-    def baseline_note(self, label: str) -> Optional[str]:
+    def baseline_note(self, label: str) -> str | None:
         """A line for the user when epoch ``label`` is dated before the campaign's baseline, else None."""
         base = self.settings().get("baseline")
         if not base or base == label:
@@ -629,7 +655,7 @@ class Campaign:
                 f"time; the baseline changes only with 'bridgesurvey settings DIR baseline {label}'")
 
     # ------------------------------------------------------------------ results
-    def save_plan(self, epoch: str, plan_json: dict, inputs_hash: str, preview: Optional[tuple[bytes, str]] = None,
+    def save_plan(self, epoch: str, plan_json: dict, inputs_hash: str, preview: tuple[bytes, str] | None = None,
                   *, setup: int = 1) -> None:
         """Store an epoch's (set-up's) plan (and the encoded map preview it came from), dropping its old centroids."""
         if setup != 1:
@@ -654,7 +680,7 @@ class Campaign:
             digests.seal(c, "epoch_results", (epoch,))
             self.log_action(c, "plan", epoch, {"inputs_hash": inputs_hash})
 
-    def stored_plan(self, epoch: str, setup: int = 1) -> Optional[StoredPlan]:
+    def stored_plan(self, epoch: str, setup: int = 1) -> StoredPlan | None:
         """An epoch's (set-up's) plan with the inputs hash it was made from, or None when it has none."""
         from lidar.plan import ScanPlan
 
@@ -753,7 +779,7 @@ class Campaign:
         except Exception:  # undecodable despite its digest: not shown, never a crash
             return None
 
-    def result(self, epoch: str, setup: int = 1) -> Optional[EpochResult]:
+    def result(self, epoch: str, setup: int = 1) -> EpochResult | None:
         """How far processing has taken an epoch (set-up), or None when it has not started (or its results are damaged)."""
         if setup != 1:
             got = self._setup_result_row(epoch, setup)
@@ -765,7 +791,7 @@ class Campaign:
         return EpochResult(**dict(row))
 
     def save_centroids(self, epoch: str, cents: dict, inputs_hash: str, params: dict, *,
-                       closures: Optional[dict] = None, time_source: str = "points", setup: int = 1) -> None:
+                       closures: dict | None = None, time_source: str = "points", setup: int = 1) -> None:
         """Store an epoch's (set-up's) centroids (and its closure centroids) as its measured stage-1 result."""
         if setup != 1:
             with self.transaction() as c:
@@ -818,7 +844,7 @@ class Campaign:
             return setup_tables.centroids_of(self._setup_result_row(epoch, setup), "closures")
         return field_tables.read_closures(self.conn, epoch)
 
-    def time_source(self, epoch: str, setup: int = 1) -> Optional[str]:
+    def time_source(self, epoch: str, setup: int = 1) -> str | None:
         """Where the epoch's (set-up's) centroid times come from: ``points``, ``plan`` or None (not measured)."""
         if setup != 1:
             row = self._setup_result_row(epoch, setup)
@@ -841,7 +867,7 @@ class Campaign:
         return field_tables.read_set_extras(self.conn, epoch)
 
     def save_displacements(self, epoch: str, baseline: str, res, inputs_hash: str, *,
-                           systematics: Optional[dict] = None) -> None:
+                           systematics: dict | None = None) -> None:
         """Store an epoch's displacements, their budgets and the systematics they were corrected for."""
         with self.transaction() as c:
             c.execute("DELETE FROM displacement_sets WHERE epoch = ?", (epoch,))
@@ -864,7 +890,7 @@ class Campaign:
             digests.seal(c, "displacement_sets", (epoch,))
             self.log_action(c, "displacements", epoch, {"baseline": baseline, "inputs_hash": inputs_hash})
 
-    def displacement_set(self, epoch: str) -> Optional[DisplacementSet]:
+    def displacement_set(self, epoch: str) -> DisplacementSet | None:
         """What an epoch's displacements were computed with, or None before they are."""
         r = self.conn.execute("SELECT * FROM displacement_sets WHERE epoch = ?", (epoch,)).fetchone()
         if r is None or not self._displacements_sound(epoch):
@@ -878,7 +904,7 @@ class Campaign:
         return self._displacement_records()
 
     def _displacement_records(self, where: str = "", args: tuple = (), *, newest_first: bool = False,
-                              limit: Optional[int] = None) -> list[DisplacementRecord]:
+                              limit: int | None = None) -> list[DisplacementRecord]:
         """Displacement records, optionally narrowed by ``where``.
 
         ``where`` is SQL over ``d`` displacements and ``e`` epochs, with ``args``: the store's own
@@ -907,7 +933,7 @@ class Campaign:
                     break
         return out
 
-    def last_displacement(self, reflector: str, *, at_or_before: str) -> Optional[DisplacementRecord]:
+    def last_displacement(self, reflector: str, *, at_or_before: str) -> DisplacementRecord | None:
         """A target's latest displacement with a value, in an epoch dated no later than epoch ``at_or_before``."""
         rows = self._displacement_records("d.reflector = ? AND d.displacement_m IS NOT NULL AND e.datetime <= "
                                           "(SELECT datetime FROM epochs WHERE label = ?)", (reflector, at_or_before),
@@ -961,7 +987,7 @@ class Campaign:
         return res if not fk else f"foreign key violations: {len(fk)}"
 
 
-def _profile_of(settings: dict, label: Optional[str], setup: int, campaign: ScannerProfile) -> ScannerProfile:
+def _profile_of(settings: dict, label: str | None, setup: int, campaign: ScannerProfile) -> ScannerProfile:
     """A set-up's scanner from the settings: its own, else its epoch's, else the campaign's."""
     own = settings.get("setup_scanners", {}).get(label, {}).get(str(setup)) if label and setup != 1 else None
     if own:
@@ -970,7 +996,7 @@ def _profile_of(settings: dict, label: Optional[str], setup: int, campaign: Scan
     return ScannerProfile.from_dict(own, source=f"epoch {label} scanner") if own else campaign
 
 
-def _layout_of(reflectors: Sequence[Reflector], at: Optional[str]) -> Layout:
+def _layout_of(reflectors: Sequence[Reflector], at: str | None) -> Layout:
     """The layout of the reflectors expected at the ISO date-time ``at`` (all active ones when None)."""
     rows = [r for r in reflectors if r.expected_at(at)]
     return Layout(tuple(r.id for r in rows), tuple(r.group for r in rows),
@@ -979,7 +1005,7 @@ def _layout_of(reflectors: Sequence[Reflector], at: Optional[str]) -> Layout:
                   np.array([r.normal_layout for r in rows], dtype=float).reshape(-1, 3))
 
 
-def _header_or_none(path: Path) -> Optional[dict]:
+def _header_or_none(path: Path) -> dict | None:
     from common.errors import SurveyError
 
     try:
@@ -994,6 +1020,6 @@ def _reflector(r: sqlite3.Row) -> Reflector:
                      r["note"])
 
 
-def _f(v) -> Optional[float]:
+def _f(v) -> float | None:
     return float(v) if v is not None and np.isfinite(v) else None
 

@@ -13,14 +13,13 @@ from __future__ import annotations
 import sqlite3
 import urllib.parse
 from pathlib import Path
-from typing import Optional
 
 from common.errors import SurveyError
 from common.files import MB, disk_full_error, free_bytes
 from projects.store.errors import CampaignError
 
 
-def store_error(exc: sqlite3.Error, db: Path) -> Optional[SurveyError]:
+def store_error(exc: sqlite3.Error, db: Path) -> SurveyError | None:
     """The one-line error for a database failure of ``db``, or None for an error that is not one."""
     name = getattr(exc, "sqlite_errorname", "") or ""
     text = str(exc)
@@ -79,7 +78,7 @@ class StoreCursor(sqlite3.Cursor):
             _raise(exc, self.connection)
             raise
 
-    def fetchmany(self, size: Optional[int] = 1):
+    def fetchmany(self, size: int | None = 1):
         try:
             return super().fetchmany(size)
         except sqlite3.Error as exc:
@@ -127,7 +126,7 @@ class StoreConnection(sqlite3.Connection):
             raise
 
 
-def connect(db: Path, *, uri: Optional[str] = None, timeout: float = 30.0) -> StoreConnection:
+def connect(db: Path, *, uri: str | None = None, timeout: float = 30.0) -> StoreConnection:
     """A :class:`StoreConnection` to ``db`` (or to the SQLite ``uri`` naming it), rows as ``sqlite3.Row``."""
     try:
         conn = sqlite3.connect(uri or db, timeout=timeout, factory=StoreConnection, uri=uri is not None)

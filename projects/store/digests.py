@@ -16,8 +16,8 @@ from __future__ import annotations
 import hashlib
 import sqlite3
 import zlib
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Iterable, Optional, Sequence
 
 from projects.store import setup_tables
 
@@ -135,7 +135,7 @@ def seal(conn: sqlite3.Connection, table: str, key: Sequence) -> None:
     conn.execute(f"UPDATE {table} SET digest = ? WHERE {_where(g)}", (group_digest(conn, table, key), *key))
 
 
-def stored_digest(conn: sqlite3.Connection, table: str, key: Sequence) -> Optional[str]:
+def stored_digest(conn: sqlite3.Connection, table: str, key: Sequence) -> str | None:
     """The digest stored with a group (None when the group does not exist or has none)."""
     g = GROUPS[table]
     row = conn.execute(f"SELECT digest FROM {table} WHERE {_where(g)}", tuple(key)).fetchone()
@@ -159,7 +159,7 @@ def damaged(conn: sqlite3.Connection, table: str) -> list[tuple]:
     return [k for k in keys_of(conn, table) if not is_sound(conn, table, k)]
 
 
-def seal_all(conn: sqlite3.Connection, tables: Optional[Sequence[str]] = None) -> None:
+def seal_all(conn: sqlite3.Connection, tables: Sequence[str] | None = None) -> None:
     """Store the digest of every group of ``tables`` (default all; the migration that introduced digests)."""
     for table in (GROUPS if tables is None else tables):
         for key in keys_of(conn, table):

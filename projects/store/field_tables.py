@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import json
 import sqlite3
-from typing import Any, Mapping, Optional
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
@@ -59,7 +60,7 @@ CREATE TABLE field_models (
 """
 
 
-def _num(v: Any) -> Optional[float]:
+def _num(v: Any) -> float | None:
     f = float(v)
     return f if np.isfinite(f) else None
 
@@ -75,7 +76,7 @@ def centroid_extra(tc: TargetCentroid, time_source: str) -> dict:
             "clipped_fraction": _num(tc.clipped_fraction)}
 
 
-def with_extra(tc: TargetCentroid, extra: Optional[dict]) -> TargetCentroid:
+def with_extra(tc: TargetCentroid, extra: dict | None) -> TargetCentroid:
     """A stored centroid with its extra details put back."""
     from dataclasses import replace
 
@@ -127,7 +128,7 @@ def read_closures(conn: sqlite3.Connection, epoch: str) -> dict[str, TargetCentr
                          (epoch,))}
 
 
-def write_displacement_extras(conn: sqlite3.Connection, epoch: str, res: Any, systematics: Optional[dict]) -> None:
+def write_displacement_extras(conn: sqlite3.Connection, epoch: str, res: Any, systematics: dict | None) -> None:
     """Each displacement's along-span movement and budget, and the epoch's systematics (caller's transaction)."""
     conn.execute("DELETE FROM displacement_extras WHERE epoch = ?", (epoch,))
     conn.execute("DELETE FROM displacement_set_extras WHERE epoch = ?", (epoch,))
@@ -189,7 +190,7 @@ def write_field_model(conn: sqlite3.Connection, model_json: dict, digest: str, c
     conn.execute("INSERT OR REPLACE INTO field_models VALUES (1, ?, ?, ?)", (json.dumps(model_json), digest, created))
 
 
-def read_field_model(conn: sqlite3.Connection) -> Optional[tuple[dict, str]]:
+def read_field_model(conn: sqlite3.Connection) -> tuple[dict, str] | None:
     """The stored field model's JSON and digest, or None."""
     r = conn.execute("SELECT model, digest FROM field_models WHERE id = 1").fetchone()
     return None if r is None else (json.loads(r[0]), r[1])

@@ -7,8 +7,8 @@ they group, date and scale the stored values the same way.
 from __future__ import annotations
 
 import datetime as dt
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Iterable, Mapping, Optional, Sequence
 
 import numpy as np
 
@@ -50,7 +50,7 @@ class DisplacementHistory:
     flags: tuple[tuple[str, ...], ...]
     epoch_flags: tuple[tuple[str, ...], ...]
     baselines: tuple[str, ...]
-    limit: Optional[object] = None
+    limit: object | None = None
 
     def __len__(self) -> int:
         return len(self.epochs)
@@ -70,7 +70,7 @@ class DisplacementHistory:
         """Epoch times as int64 nanoseconds since 1970 (UTC), shape (N,)."""
         return np.array([ns_of(t) for t in self.times], dtype=np.int64)
 
-    def select(self, mask) -> "DisplacementHistory":
+    def select(self, mask) -> DisplacementHistory:
         """The history at the epochs where ``mask`` (boolean or index array) holds."""
         idx = np.arange(len(self))[np.asarray(mask)]
         pick = [int(i) for i in idx]
@@ -79,19 +79,19 @@ class DisplacementHistory:
             self.displacement_mm[idx], self.sigma_mm[idx], tuple(self.flags[i] for i in pick),
             tuple(self.epoch_flags[i] for i in pick), tuple(self.baselines[i] for i in pick), self.limit)
 
-    def measured(self) -> "DisplacementHistory":
+    def measured(self) -> DisplacementHistory:
         """Only the epochs with a displacement."""
         return self.select(self.valid)
 
-    def thinned(self, max_points: int) -> "DisplacementHistory":
+    def thinned(self, max_points: int) -> DisplacementHistory:
         """Every k-th epoch so that at most ``max_points`` remain (for drawing long series)."""
         if len(self) <= max_points:
             return self
         return self.select(np.arange(0, len(self), int(np.ceil(len(self) / max_points))))
 
 
-def histories_from_records(records: Iterable[DisplacementRecord], limits: Optional[Mapping[str, object]] = None,
-                           *, targets: Optional[Sequence[str]] = None) -> dict[str, DisplacementHistory]:
+def histories_from_records(records: Iterable[DisplacementRecord], limits: Mapping[str, object] | None = None,
+                           *, targets: Sequence[str] | None = None) -> dict[str, DisplacementHistory]:
     """Group stored displacement records by target (records in epoch order).
 
     Examples
@@ -127,7 +127,7 @@ def histories_from_records(records: Iterable[DisplacementRecord], limits: Option
     return out
 
 
-def histories(c, *, targets: Optional[Sequence[str]] = None) -> dict[str, DisplacementHistory]:
+def histories(c, *, targets: Sequence[str] | None = None) -> dict[str, DisplacementHistory]:
     """Every target's history in campaign ``c`` (a :class:`projects.store.Campaign`), with its limits."""
     records = c.displacements()
     ids = {r.reflector for r in records} if targets is None else set(targets)

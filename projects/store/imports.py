@@ -14,9 +14,9 @@ import hashlib
 import os
 import re
 import uuid
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Optional
 
 from common.files import MB, disk_full_error, ensure_free, is_disk_full
 
@@ -170,7 +170,7 @@ def header_facts(path: Path) -> dict:
     return facts
 
 
-def header_matches(path: Path, recorded: Optional[dict]) -> bool:
+def header_matches(path: Path, recorded: dict | None) -> bool:
     """Whether the header of ``path`` reads and says what was recorded at its import."""
     from common.errors import SurveyError
 

@@ -15,7 +15,6 @@ import errno
 import json
 import os
 from pathlib import Path
-from typing import Optional
 
 JOURNAL_NAME = "imports.jsonl"
 
@@ -77,6 +76,6 @@ def latest_by_path(folder: Path) -> dict[str, dict]:
     return out
 
 
-def entry_for(folder: Path, stored_path: str) -> Optional[dict]:
+def entry_for(folder: Path, stored_path: str) -> dict | None:
     """The newest entry of one stored file, or None."""
     return latest_by_path(folder).get(stored_path)

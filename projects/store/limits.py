@@ -13,7 +13,6 @@ reaches the warning limit, else ``ok``; ``unknown`` without a value.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Optional
 
 import numpy as np
 
@@ -33,8 +32,8 @@ WARNING_SHARE = 0.8
 class Limit:
     """Warning and alarm thresholds (mm, on |displacement|) and the rule they came from."""
 
-    warning_mm: Optional[float]
-    alarm_mm: Optional[float]
+    warning_mm: float | None
+    alarm_mm: float | None
     rule: str
 
     def state(self, displacement_mm: float) -> str:
@@ -60,7 +59,7 @@ def kr_rail_limit_mm(span_m: float, speed_class: str) -> float:
     return span_m * 1000.0 / KR_RAIL_DENOMINATORS[speed_class][col]
 
 
-def parse_rule(rule: str, span_m: Optional[float]) -> Limit:
+def parse_rule(rule: str, span_m: float | None) -> Limit:
     """A Limit from its text form: 'abs:W,A' (mm), 'span:NW,NA' (L/NW, L/NA) or 'kr-rail:CLASS'."""
     try:
         kind, _, args = rule.partition(":")

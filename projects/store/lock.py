@@ -18,14 +18,14 @@ import os
 import socket
 import sys
 from pathlib import Path
-from typing import IO, Optional
+from typing import IO
 
 from projects.store.errors import CampaignError, CampaignLockedError
 
 LOCK_NAME = ".lock"
 
 
-def _start_ticks(pid: int) -> Optional[int]:
+def _start_ticks(pid: int) -> int | None:
     """When a process started (clock ticks since boot, ``/proc/PID/stat``), or None where unknown."""
     try:
         stat = Path(f"/proc/{pid}/stat").read_text()
@@ -48,11 +48,11 @@ def _command_of(pid: int) -> str:
 def _holder_line() -> str:
     argv = " ".join(Path(sys.argv[0]).name if k == 0 else a for k, a in enumerate(sys.argv)) if sys.argv else ""
     return json.dumps({"pid": os.getpid(), "start": _start_ticks(os.getpid()), "host": socket.gethostname(),
-                       "taken": dt.datetime.now(dt.timezone.utc).replace(microsecond=0).isoformat(),
+                       "taken": dt.datetime.now(dt.UTC).replace(microsecond=0).isoformat(),
                        "command": argv[:200]}) + "\n"
 
 
-def lock_holders(path: Path) -> Optional[list[int]]:
+def lock_holders(path: Path) -> list[int] | None:
     """Process ids holding an ``flock`` on ``path`` now (from ``/proc/locks``), or None where that cannot be told."""
     try:
         st = path.stat()
@@ -119,16 +119,16 @@ def describe_holders(path: Path) -> str:
 class CampaignLock:
     """The lock of one open campaign (see the module notes); :meth:`acquire` it, :meth:`release` it."""
 
-    def __init__(self, path: Path, fh: Optional[IO[str]], exclusive: bool):
+    def __init__(self, path: Path, fh: IO[str] | None, exclusive: bool):
         self.path = path
         self._fh = fh
         self.exclusive = exclusive
 
     @classmethod
-    def acquire(cls, folder: Path, *, exclusive: bool) -> "CampaignLock":
+    def acquire(cls, folder: Path, *, exclusive: bool) -> CampaignLock:
         """Take the lock of ``folder``: exclusive for a writer, shared for a reader; refused in one line."""
         path = folder / LOCK_NAME
-        fh: Optional[IO[str]] = None
+        fh: IO[str] | None = None
         try:
             fh = open(path, "a+")
         except OSError as exc:
@@ -136,7 +136,7 @@ class CampaignLock:
                 raise CampaignError(f"{path}: cannot be opened to lock the campaign ({exc.strerror}); the folder "
                                     "must be writable to change the campaign") from None
             with contextlib.suppress(OSError):  # a read-only medium: readers still read
-                fh = open(path, "r")
+                fh = open(path)
         if fh is None:
             return cls(path, None, exclusive)
         try:

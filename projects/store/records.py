@@ -10,8 +10,9 @@ Lengths are metres unless the name says otherwise.
 from __future__ import annotations
 
 import datetime as dt
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
-from typing import Any, Mapping, Optional
+from typing import Any
 
 import numpy as np
 
@@ -49,16 +50,16 @@ class Reflector:
     xyz_layout: tuple[float, float, float]
     diameter_m: float
     normal_layout: tuple[float, float, float] = (float("nan"),) * 3
-    installed: Optional[str] = None
-    retired: Optional[str] = None
-    replaces: Optional[str] = None
+    installed: str | None = None
+    retired: str | None = None
+    replaces: str | None = None
     note: str = ""
 
     @property
     def is_reference(self) -> bool:
         return self.group == "reference"
 
-    def expected_at(self, at: Optional[str]) -> bool:
+    def expected_at(self, at: str | None) -> bool:
         """Whether the target is in place at the ISO date-time ``at`` (None: now, i.e. not retired)."""
         if at is None:
             return not self.retired
@@ -110,7 +111,7 @@ class ScanFile(_Plain):
     size: int
     imported: str
     setup: int = 1
-    frame: Optional[str] = None
+    frame: str | None = None
 
     @property
     def frames(self) -> dict:
@@ -204,8 +205,8 @@ class DisplacementRecord:
     epoch: str
     datetime: str
     reflector: str
-    displacement_m: Optional[float]
-    sigma_m: Optional[float]
+    displacement_m: float | None
+    sigma_m: float | None
     flags: tuple[str, ...]
     epoch_flags: tuple[str, ...]
     baseline: str
@@ -217,16 +218,16 @@ class DisplacementRecord:
         return dt.datetime.fromisoformat(self.datetime)
 
     @property
-    def along_m(self) -> Optional[float]:
+    def along_m(self) -> float | None:
         """Movement along the bridge axis (positive away from the first pier), metres; None without one."""
         return self.extra.get("along_m")
 
     @property
-    def along_sigma_m(self) -> Optional[float]:
+    def along_sigma_m(self) -> float | None:
         return self.extra.get("along_sigma_m")
 
     @property
-    def budget(self) -> Mapping[str, Optional[float]]:
+    def budget(self) -> Mapping[str, float | None]:
         """The terms of ``sigma_m`` (metres): noise, frame, scale, bias, drift (absent when not stored)."""
         return self.extra.get("budget") or {}
 
@@ -237,8 +238,8 @@ class ReferenceCheck:
 
     epoch: str
     reflector: str
-    median_change_m: Optional[float]
-    max_change_m: Optional[float]
+    median_change_m: float | None
+    max_change_m: float | None
     moved: bool
     missing: bool
     suspect: bool
@@ -263,7 +264,7 @@ class LogEntry(_Plain):
     id: int
     time: str
     action: str
-    epoch: Optional[str]
+    epoch: str | None
     details: dict = field(default_factory=dict)
 
 
@@ -278,7 +279,7 @@ class SeriesRecord(_Plain):
 
     name: str
     kind: str
-    reflector: Optional[str]
+    reflector: str | None
     sha256: str
     stored_path: str
     original_path: str
@@ -295,7 +296,7 @@ class EventRecord(_Plain):
     date: str
     kind: str
     label: str
-    load_kn_m: Optional[float] = None
+    load_kn_m: float | None = None
 
     @property
     def when(self) -> dt.datetime:
@@ -369,8 +370,8 @@ class EpochInputs:
     epoch: Epoch
     coarse: tuple[ScanFile, ...]
     fine: tuple[ScanFile, ...]
-    plan: Optional[StoredPlan]
-    result: Optional[EpochResult]
+    plan: StoredPlan | None
+    result: EpochResult | None
     layout: Any
     profile: Any
     settings: dict

@@ -16,9 +16,9 @@ Each step is its own transaction and is logged; what could not be done is said w
 from __future__ import annotations
 
 import os
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Mapping, Optional
 
 from common.errors import SurveyError
 from projects.store import digests, journal, schema
@@ -40,7 +40,7 @@ class RepairReport:
     left: list[str] = field(default_factory=list)
 
 
-def repair_schema_version(folder: str | os.PathLike) -> Optional[str]:
+def repair_schema_version(folder: str | os.PathLike) -> str | None:
     """Set a missing or unreadable schema version from the tables; returns what it did, None when it was fine.
 
     Holds the writer lock while it looks; a version newer than this BridgeSurvey is left alone.
@@ -91,7 +91,7 @@ def _register_scan(c: Campaign, rel: str, e: dict) -> str:
         (" (the epoch was created again with its recorded date)" if created else "")
 
 
-def _check_entry(c: Campaign, rel: str, e: Optional[dict], sha_by_path: dict[str, str]) -> Optional[str]:
+def _check_entry(c: Campaign, rel: str, e: dict | None, sha_by_path: dict[str, str]) -> str | None:
     """Why an unlisted file cannot be registered again, or None when it can."""
     if e is None:
         return (f"{rel}: not in the journal of imports, so BridgeSurvey cannot tell what it was imported as; "
@@ -161,7 +161,7 @@ def _replay_epoch_scanners(c: Campaign, labels: set[str], out: RepairReport) -> 
         out.done.append(f"epoch {label}: {what} ({doc.get('name', '?')}) set again from the journal")
 
 
-def repair_campaign(c: Campaign, reimporters: Optional[Mapping[str, Reimporter]] = None) -> RepairReport:
+def repair_campaign(c: Campaign, reimporters: Mapping[str, Reimporter] | None = None) -> RepairReport:
     """Register again what the database lost, read damaged series again (see the module notes)."""
     reimporters = reimporters or {}
     out = RepairReport()

@@ -12,13 +12,14 @@ from __future__ import annotations
 import json
 import os
 import sqlite3
+from collections.abc import Sequence
+from contextlib import AbstractContextManager as ContextManager
 from pathlib import Path
-from typing import ContextManager, Optional, Protocol, Sequence
+from typing import Protocol
 
 from projects.store import digests
 from projects.store.errors import CampaignError, DuplicateImportError, InputError
-from projects.store.records import (ComparisonRecord, CrossvalRecord, EventRecord, PredictionRecord,
-                                    SeriesRecord)
+from projects.store.records import ComparisonRecord, CrossvalRecord, EventRecord, PredictionRecord, SeriesRecord
 
 SERIES_TABLES = {"camera_series": "camera", "env_series": "environment"}
 
@@ -32,7 +33,7 @@ class StoreCore(Protocol):
         """One atomic change (see :meth:`projects.store.campaign.Campaign.transaction`)."""
         ...
 
-    def log_action(self, conn: sqlite3.Connection, action: str, epoch: Optional[str], details: dict) -> None:
+    def log_action(self, conn: sqlite3.Connection, action: str, epoch: str | None, details: dict) -> None:
         """Add a line to the campaign's log inside the transaction ``conn``."""
         ...
 
@@ -67,7 +68,7 @@ class _Repository:
 class SeriesRepository(_Repository):
     """Imported camera and environment series (tables ``camera_series`` and ``env_series``)."""
 
-    def check_new(self, table: str, path: str | os.PathLike, name: Optional[str], what: str) -> tuple[Path, str]:
+    def check_new(self, table: str, path: str | os.PathLike, name: str | None, what: str) -> tuple[Path, str]:
         """The file and the name of a series about to be imported into ``table``.
 
         The file exists and the name (default: the file's stem) is usable and free; ``what`` names
@@ -98,7 +99,7 @@ class SeriesRepository(_Repository):
 
     def insert(self, conn: sqlite3.Connection, table: str, *, name: str, sha256: str, stored_path: str,
                original_path: str, options: dict, summary: dict, arrays: bytes,
-               reflector: Optional[str] = None, kind: Optional[str] = None) -> None:
+               reflector: str | None = None, kind: str | None = None) -> None:
         """Record an imported series inside the import's transaction (see ``Campaign.import_file``)."""
         table = _series_table(table)
         # the one column the two tables do not share: the watched target, or the environment quantity
@@ -109,7 +110,7 @@ class SeriesRepository(_Repository):
                       json.dumps(summary), arrays))
         digests.seal(conn, table, (name,))
 
-    def records(self, table: str, *, kind: Optional[str] = None, name: Optional[str] = None) -> list[SeriesRecord]:
+    def records(self, table: str, *, kind: str | None = None, name: str | None = None) -> list[SeriesRecord]:
         """The imported series of ``table`` (``camera_series`` or ``env_series``), oldest import first.
 
         Optionally of one environment ``kind`` or one ``name``.
@@ -142,7 +143,7 @@ class SeriesRepository(_Repository):
 class EventRepository(_Repository):
     """Construction steps, loads and repairs that explain the displacements (table ``events``)."""
 
-    def add(self, date: str, kind: str, label: str, load_kn_m: Optional[float]) -> int:
+    def add(self, date: str, kind: str, label: str, load_kn_m: float | None) -> int:
         """Record an event (already checked) and log it; returns its id."""
         with self._core.transaction() as conn:
             cur = conn.execute("INSERT INTO events(date, kind, label, load_kn_m, created) VALUES (?, ?, ?, ?, ?)",

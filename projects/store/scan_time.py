@@ -11,9 +11,8 @@ import datetime as dt
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
 
-GPS_EPOCH = dt.datetime(1980, 1, 6, tzinfo=dt.timezone.utc)
+GPS_EPOCH = dt.datetime(1980, 1, 6, tzinfo=dt.UTC)
 #: GPS - UTC in seconds from each date on (the leap seconds since the GPS epoch).
 GPS_UTC_OFFSET = ((dt.date(1981, 7, 1), 1), (dt.date(1982, 7, 1), 2), (dt.date(1983, 7, 1), 3),
                   (dt.date(1985, 7, 1), 4), (dt.date(1988, 1, 1), 5), (dt.date(1990, 1, 1), 6),
@@ -22,7 +21,7 @@ GPS_UTC_OFFSET = ((dt.date(1981, 7, 1), 1), (dt.date(1982, 7, 1), 2), (dt.date(1
                   (dt.date(1999, 1, 1), 13), (dt.date(2006, 1, 1), 14), (dt.date(2009, 1, 1), 15),
                   (dt.date(2012, 7, 1), 16), (dt.date(2015, 7, 1), 17), (dt.date(2017, 1, 1), 18))
 #: Earlier times are placeholders (a zero, a default), not a survey's.
-EARLIEST = dt.datetime(1990, 1, 1, tzinfo=dt.timezone.utc)
+EARLIEST = dt.datetime(1990, 1, 1, tzinfo=dt.UTC)
 
 
 @dataclass(frozen=True)
@@ -49,10 +48,10 @@ def gps_to_utc(gps_seconds: float) -> dt.datetime:
 
 
 def _plausible(when: dt.datetime) -> bool:
-    return EARLIEST <= when <= dt.datetime.now(dt.timezone.utc) + dt.timedelta(days=2)
+    return EARLIEST <= when <= dt.datetime.now(dt.UTC) + dt.timedelta(days=2)
 
 
-def _las_time(p: Path) -> Optional[ScanTime]:
+def _las_time(p: Path) -> ScanTime | None:
     import laspy
 
     with laspy.open(p) as reader:
@@ -65,13 +64,13 @@ def _las_time(p: Path) -> Optional[ScanTime]:
                 return ScanTime(when.replace(microsecond=0), "the GPS time of its first point")
         day = h.creation_date
     if day is not None:
-        when = dt.datetime(day.year, day.month, day.day, tzinfo=dt.timezone.utc)
+        when = dt.datetime(day.year, day.month, day.day, tzinfo=dt.UTC)
         if _plausible(when):
             return ScanTime(when, "the LAS header's creation day", day_only=True)
     return None
 
 
-def _e57_time(p: Path) -> Optional[ScanTime]:
+def _e57_time(p: Path) -> ScanTime | None:
     import pye57
 
     e = pye57.E57(str(p))
@@ -87,7 +86,7 @@ def _e57_time(p: Path) -> Optional[ScanTime]:
     return None
 
 
-def scan_file_time(path: str | os.PathLike) -> Optional[ScanTime]:
+def scan_file_time(path: str | os.PathLike) -> ScanTime | None:
     """When the scan file says it was scanned, or None (no time in the file, or the file unreadable).
 
     Never raises for a damaged file: the import itself reports that, in its own words.

@@ -8,7 +8,7 @@ with the new version number, so a failed or interrupted upgrade leaves the campa
 from __future__ import annotations
 
 import sqlite3
-from typing import Callable, Optional, Union
+from collections.abc import Callable
 
 from common.flags import RENAMED
 from projects.store import digests
@@ -109,7 +109,7 @@ def _add_digests(conn: sqlite3.Connection) -> None:
     digests.seal_all(conn, digests.V10_TABLES)
 
 
-Migration = Union[str, Callable[[sqlite3.Connection], None]]
+Migration = str | Callable[[sqlite3.Connection], None]
 
 # version -> SQL (or a function) that upgrades the previous version to it. A new campaign is created
 # as version 1 and then upgraded through every migration, so new and migrated campaigns have the same schema.
@@ -213,7 +213,7 @@ MIGRATIONS: dict[int, Migration] = {
 
 #: What each migration leaves that can be seen in the tables: version -> (table, column or None).
 #: Version 8 renames codes inside stored documents only and leaves no mark.
-MARKS: dict[int, tuple[str, Optional[str]]] = {
+MARKS: dict[int, tuple[str, str | None]] = {
     1: ("displacements", None), 2: ("map_previews", None), 3: ("comparisons", None), 4: ("camera_series", None),
     5: ("reflectors", "nx"), 6: ("env_series", None), 7: ("predictions", None), 9: ("field_models", None),
     10: ("plans", "digest"), 11: ("setup_plans", None),
@@ -257,7 +257,7 @@ def create(conn: sqlite3.Connection) -> None:
     conn.commit()
 
 
-def _has(conn: sqlite3.Connection, table: str, column: Optional[str]) -> bool:
+def _has(conn: sqlite3.Connection, table: str, column: str | None) -> bool:
     if not conn.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", (table,)).fetchone():
         return False
     return column is None or any(r[1] == column for r in conn.execute(f"PRAGMA table_info({table})"))
@@ -276,7 +276,7 @@ def structural_version(conn: sqlite3.Connection) -> int:
     return found
 
 
-def recorded_version(conn: sqlite3.Connection) -> Optional[str]:
+def recorded_version(conn: sqlite3.Connection) -> str | None:
     """The text of ``meta.schema_version`` (None when the row or the table is missing)."""
     try:
         row = conn.execute("SELECT value FROM meta WHERE key = 'schema_version'").fetchone()
@@ -324,7 +324,7 @@ def inferred_version(conn: sqlite3.Connection) -> int:
     return structural_version(conn)
 
 
-def migrate(conn: sqlite3.Connection, from_version: int, to_version: Optional[int] = None) -> None:
+def migrate(conn: sqlite3.Connection, from_version: int, to_version: int | None = None) -> None:
     """Upgrade an older campaign in place to ``to_version`` (default the current), each version in one transaction.
 
     A migration that fails leaves the campaign at the version before it (a :class:`CampaignError`).

@@ -20,8 +20,8 @@ from __future__ import annotations
 
 import json
 import sqlite3
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Callable, Mapping, Optional, Sequence
 
 from common.errors import InputError
 from lidar.centroid import TargetCentroid
@@ -75,14 +75,14 @@ GROUPS = (
 )
 
 
-def frames_to_json(frames: Optional[Mapping[int, FileFrame]]) -> Optional[str]:
+def frames_to_json(frames: Mapping[int, FileFrame] | None) -> str | None:
     """The ``files.frame`` text of a file's set-up frames (None when there is nothing to record)."""
     if not frames:
         return None
     return json.dumps({str(k): f.to_json() for k, f in sorted(frames.items())}, sort_keys=True)
 
 
-def frames_from_json(text: Optional[str]) -> dict[int, FileFrame]:
+def frames_from_json(text: str | None) -> dict[int, FileFrame]:
     """The inverse of :func:`frames_to_json` (empty for NULL)."""
     if not text:
         return {}
@@ -90,7 +90,7 @@ def frames_from_json(text: Optional[str]) -> dict[int, FileFrame]:
 
 
 def write_plan(conn: sqlite3.Connection, epoch: str, setup: int, plan_json: dict, inputs_hash: str, created: str,
-               preview: Optional[tuple[bytes, str]]) -> None:
+               preview: tuple[bytes, str] | None) -> None:
     """Replace a set-up's plan (and preview), making its result 'planned' without centroids (caller's transaction)."""
     conn.execute("INSERT OR REPLACE INTO setup_plans(epoch, setup, json, inputs_hash, created) VALUES (?, ?, ?, ?, ?)",
                  (epoch, setup, json.dumps(plan_json), inputs_hash, created))
@@ -112,12 +112,12 @@ def write_centroids(conn: sqlite3.Connection, epoch: str, setup: int, cents: Map
                   json.dumps([centroid_to_json(c) for _, c in sorted(closures.items())]), time_source))
 
 
-def read_result(conn: sqlite3.Connection, epoch: str, setup: int) -> Optional[sqlite3.Row]:
+def read_result(conn: sqlite3.Connection, epoch: str, setup: int) -> sqlite3.Row | None:
     """A set-up's result row (stage, inputs_hash, processed, centroids, closures, time_source), or None."""
     return conn.execute("SELECT * FROM setup_results WHERE epoch = ? AND setup = ?", (epoch, setup)).fetchone()
 
 
-def centroids_of(row: Optional[sqlite3.Row], column: str = "centroids") -> dict[str, TargetCentroid]:
+def centroids_of(row: sqlite3.Row | None, column: str = "centroids") -> dict[str, TargetCentroid]:
     """The centroids (or ``column="closures"``) of a set-up's result row, by target."""
     if row is None:
         return {}
@@ -135,7 +135,7 @@ def _known_frames(existing: Sequence) -> dict[int, FileFrame]:
     return out
 
 
-def _match_pose(frame: FileFrame, known: Mapping[int, FileFrame]) -> Optional[int]:
+def _match_pose(frame: FileFrame, known: Mapping[int, FileFrame]) -> int | None:
     """The set-up whose coarse scan carries the same own pose as ``frame`` (None without one)."""
     if frame.pose is None or frame.source != "file":
         return None
@@ -145,9 +145,9 @@ def _match_pose(frame: FileFrame, known: Mapping[int, FileFrame]) -> Optional[in
     return None
 
 
-def place_files(epoch: str, items: Sequence[tuple[Path, str]], existing: Sequence, *, setup: Optional[int],
-                frames_of: Optional[Callable] = None, validate: Optional[Callable] = None
-                ) -> list[tuple[int, Optional[str]]]:
+def place_files(epoch: str, items: Sequence[tuple[Path, str]], existing: Sequence, *, setup: int | None,
+                frames_of: Callable | None = None, validate: Callable | None = None
+                ) -> list[tuple[int, str | None]]:
     """Read the files about to be imported into an epoch and say where each goes: (set-up, ``files.frame`` text).
 
     A coarse file starts set-up ``setup`` (one set-up per scan position it holds, numbered on); a fine
@@ -161,7 +161,7 @@ def place_files(epoch: str, items: Sequence[tuple[Path, str]], existing: Sequenc
         raise InputError(f"epoch {epoch} has no set-up {setup}; its set-ups are {', '.join(map(str, have))} "
                          "(add one with 'bridgesurvey add-setup')")
     next_coarse = setup if setup is not None else have[-1]
-    out: list[tuple[int, Optional[str]]] = []
+    out: list[tuple[int, str | None]] = []
     for path, role in items:
         target = next_coarse if role == "coarse" else (setup if setup is not None else max(known, default=1))
         fallback = known.get(target)

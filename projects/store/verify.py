@@ -17,7 +17,6 @@ question; ``bridgesurvey verify`` adds it (see :mod:`app.cli.commands_store`).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Optional
 
 from common.progress import ProgressCallback, report
 from projects.store import digests, journal
@@ -76,7 +75,7 @@ def imported_files(c: Campaign) -> list[tuple[str, str, str]]:
     return list(seen.values())
 
 
-def _files(c: Campaign, progress: Optional[ProgressCallback]) -> list[Finding]:
+def _files(c: Campaign, progress: ProgressCallback | None) -> list[Finding]:
     out = []
     files = imported_files(c)
     for k, (rel, sha, original) in enumerate(files):
@@ -123,7 +122,7 @@ def _results(c: Campaign) -> list[Finding]:
             for table, key in c.damaged_results()]
 
 
-def verify_store(c: Campaign, *, progress: Optional[ProgressCallback] = None) -> list[Finding]:
+def verify_store(c: Campaign, *, progress: ProgressCallback | None = None) -> list[Finding]:
     """Every problem of the campaign's database, imported files and stored results (see the module notes)."""
     report(progress, 0.0, "checking the database")
     out = _database(c)

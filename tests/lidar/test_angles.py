@@ -3,8 +3,15 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from lidar.angles import AngularWindow, bounding_window, direction_from_angles, phi_difference, spherical_from_xyz, window_around
 from common.errors import InputError
+from lidar.angles import (
+    AngularWindow,
+    bounding_window,
+    direction_from_angles,
+    phi_difference,
+    spherical_from_xyz,
+    window_around,
+)
 
 
 @given(st.floats(0.5, 179.5), st.floats(0, 359.999), st.floats(0.1, 500))

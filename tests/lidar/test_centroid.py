@@ -12,7 +12,6 @@ from lidar.centroid import (
     target_centroid,
 )
 from lidar.simulate import BridgeScene, EpochConditions
-
 from tests.lidar.sim_helpers import LAB_POSITIONS, MODEL, plan_from_truth
 
 SETUP = LAB_POSITIONS[0]

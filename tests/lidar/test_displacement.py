@@ -1,6 +1,7 @@
 import numpy as np
 import pytest
 
+from common.errors import InputError, ProcessingError
 from lidar.displacement import (
     FLAG_MISSING,
     FLAG_NORMAL_FROM_EPOCH,
@@ -10,9 +11,7 @@ from lidar.displacement import (
     compute_displacements,
     deck_normal,
 )
-from common.errors import InputError, ProcessingError
 from lidar.simulate import EpochConditions, ScannerSetup
-
 from tests.lidar.sim_helpers import GROUPS, LAB_LOADS_MM, LAB_POSITIONS, MODEL, fine_epoch
 
 COV = np.eye(3) * 1e-8
@@ -151,7 +150,7 @@ def test_cable_tie_beside_a_reference_target_does_not_bias_displacements():
     tie = fine_epoch(EpochConditions(midspan_displacement_m=-0.005, cable_ties=("R1",)), LAB_POSITIONS[1], seed=901)
     a = compute_displacements(base[0], clean[0], GROUPS)
     b = compute_displacements(base[0], tie[0], GROUPS)
-    for da, db in zip(a.displacements, b.displacements):
+    for da, db in zip(a.displacements, b.displacements, strict=False):
         assert abs(db.displacement_m - da.displacement_m) < 0.00005
         assert abs(db.displacement_m - true_u(tie[1], base[1], db.reflector)) < 0.0003
     assert "second_bright_object" in tie[0]["R1"].flags

@@ -41,7 +41,7 @@ def test_labels_of_blobs_joined_only_at_a_corner_a_snake_and_an_empty_map():
 
 def _scipy_pairs(d, tol):
     r, c = linear_sum_assignment(np.where(d <= tol, d, 1e6))
-    return [(int(a), int(b)) for a, b in zip(r, c) if d[a, b] <= tol]
+    return [(int(a), int(b)) for a, b in zip(r, c, strict=False) if d[a, b] <= tol]
 
 
 def test_assignment_is_the_optimal_one():

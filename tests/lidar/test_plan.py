@@ -7,7 +7,6 @@ from common.errors import InputError
 from lidar.plan import PlanTarget, ScanPlan, choose_steps, plan_fine_scans
 from lidar.scanner_profile import VZ1000, ScannerProfile
 from lidar.simulate import EpochConditions
-
 from tests.lidar.sim_helpers import LAB_POSITIONS, fine_epoch
 
 CONTRACT_FIELDS = {"reflector", "group", "phi_min_deg", "phi_max_deg", "theta_min_deg", "theta_max_deg",

@@ -1,9 +1,9 @@
 import numpy as np
 import pytest
 
+from common.errors import InputError
 from lidar.angles import direction_from_angles
 from lidar.detection import detect_reflectors
-from common.errors import InputError
 from lidar.reflectance_map import estimate_step_deg, reflectance_map
 
 

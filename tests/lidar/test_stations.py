@@ -114,7 +114,7 @@ def test_a_weak_targets_predicted_sigma_carries_the_grazing_term_processing_adds
 def test_one_end_of_a_three_span_bridge_the_far_span_is_not_planned_and_says_why():
     lay = layout_from_model(BridgeModel(spans_m=(39.9, 39.9, 39.9), deck_fractions=(0.4, 0.5, 0.6)))
     p = predict_station(lay, (12.0, -11.0, 1.5), profile=VZ)
-    far = [t for t, x in zip(lay.ids, lay.xyz) if x[0] > 80.0 and t.startswith("M")]
+    far = [t for t, x in zip(lay.ids, lay.xyz, strict=False) if x[0] > 80.0 and t.startswith("M")]
     assert far and all(t not in p.predicted_sigma_mm for t in far)
 
 

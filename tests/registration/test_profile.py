@@ -24,7 +24,7 @@ def _model(width_m: float) -> BridgeModel:
     hw = width_m / 2
     ys = (-(hw - 0.3), hw - 1.0, -(hw - 0.3), hw - 1.0, -(hw - 0.3))
     meas = [Target(f"M{k + 1}", "measurement", (f * base.span_m, y, base.deck_bottom_m - 0.001), (0, 0, -1))
-            for k, (f, y) in enumerate(zip((0.2, 0.35, 0.5, 0.65, 0.8), ys))]
+            for k, (f, y) in enumerate(zip((0.2, 0.35, 0.5, 0.65, 0.8), ys, strict=False))]
     return base.with_targets([t for t in base.targets if t.group == "reference"] + meas)
 
 

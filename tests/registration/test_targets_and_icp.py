@@ -70,7 +70,7 @@ def test_transform_algebra():
     assert np.allclose(Transform.from_json(a.to_json()).matrix, a.matrix)
 
 
-def _scene(rng, n=60_000, offset=np.zeros(3)):
+def _scene(rng, n=60_000, offset=(0.0, 0.0, 0.0)):
     """Ground, two pier faces and a pier side: enough planes to pin all six degrees of freedom."""
     g = np.column_stack([rng.uniform(-5, 45, n // 2), rng.uniform(-8, 8, n // 2), np.zeros(n // 2)])
     f1 = np.column_stack([np.full(n // 6, 1.0), rng.uniform(-2.5, 2.5, n // 6), rng.uniform(0, 7, n // 6)])

@@ -80,7 +80,7 @@ def test_lab_size_false_displacement_is_reduced_below_the_dissertations_1_1_mm()
     rig = SyntheticRig(g)
 
     def detect(poses, disp):
-        m = [detect_main_target(rig.render_main(P, d), g.main_pattern_m) for P, d in zip(poses, disp)]
+        m = [detect_main_target(rig.render_main(P, d), g.main_pattern_m) for P, d in zip(poses, disp, strict=False)]
         s = [detect_checkerboard(rig.render_sub(P), g.board.inner_corners) for P in poses]
         return np.array(m), np.array(s)
 

@@ -12,7 +12,6 @@ from __future__ import annotations
 import datetime as dt
 import os
 from pathlib import Path
-from typing import Optional
 
 import numpy as np
 
@@ -31,11 +30,11 @@ def _write_png(path: Path, img: np.ndarray) -> None:
     write_atomic(path, buf.tobytes())
 
 
-def write_dualcam_dataset(folder: str | os.PathLike, *, geometry: Optional[RigGeometry] = None, n_zhang: int = 10,
+def write_dualcam_dataset(folder: str | os.PathLike, *, geometry: RigGeometry | None = None, n_zhang: int = 10,
                           n_calibration: int = 21, n_frames: int = 24, sag_mm: float = 4.0,
-                          start: dt.datetime = dt.datetime(2026, 3, 2, 9, 0, tzinfo=dt.timezone.utc),
+                          start: dt.datetime = dt.datetime(2026, 3, 2, 9, 0, tzinfo=dt.UTC),
                           interval_s: float = 3600.0, seed: int = 3,
-                          progress: Optional[ProgressCallback] = None) -> dict:
+                          progress: ProgressCallback | None = None) -> dict:
     """Render the data set; returns what the CLI needs (paths, board and pattern)."""
     g = geometry or RigGeometry.laboratory()
     rig = SyntheticRig(g)
@@ -64,7 +63,7 @@ def write_dualcam_dataset(folder: str | os.PathLike, *, geometry: Optional[RigGe
     poses = pan_tilt_drift(n_frames)
     sag = -sag_mm / 1000.0 * np.sin(np.linspace(0, np.pi / 2, n_frames))
     truth_rows, time_rows = ["frame,timestamp,true_vertical_mm,false_vertical_mm"], ["frame,timestamp"]
-    for k, (P, dy) in enumerate(zip(poses, sag)):
+    for k, (P, dy) in enumerate(zip(poses, sag, strict=False)):
         disp = np.array([0.0, dy])
         _write_png(dirs["measurement/main"] / f"frame_{k:04d}.png", rig.render_main(P, disp, noise=0.004, rng=rng))
         _write_png(dirs["measurement/sub"] / f"frame_{k:04d}.png", rig.render_sub(P, noise=0.004, rng=rng))

@@ -4,8 +4,6 @@ Frame 1 is always the identity: motions are relative to the initial position.
 """
 from __future__ import annotations
 
-from typing import Optional
-
 import numpy as np
 
 from vision.geometry import rigid_from_rotvec
@@ -18,7 +16,7 @@ def _triangle(n: int) -> np.ndarray:
 
 
 def table10_schedule(*, frames_per_block: int = 100, rotation_rad: float = 1e-3, translation_m: float = 0.01,
-                     rng: Optional[np.random.Generator] = None) -> np.ndarray:
+                     rng: np.random.Generator | None = None) -> np.ndarray:
     """The dissertation's motion table: sweeps about and along each axis of CS(1), then random 6-DOF.
 
     Blocks of ``frames_per_block`` frames: rotation about x, y, z (within +-``rotation_rad``),
@@ -40,22 +38,22 @@ def table10_schedule(*, frames_per_block: int = 100, rotation_rad: float = 1e-3,
         tra[(3 + axis) * n:(4 + axis) * n, axis] = translation_m * ramp
     rot[6 * n:] = rng.uniform(-rotation_rad, rotation_rad, (n, 3))
     tra[6 * n:] = rng.uniform(-translation_m, translation_m, (n, 3))
-    return np.stack([rigid_from_rotvec(r, t) for r, t in zip(rot, tra)])
+    return np.stack([rigid_from_rotvec(r, t) for r, t in zip(rot, tra, strict=False)])
 
 
 def random_motions(n: int, *, rotation_rad: float, translation_m: float,
-                   rng: Optional[np.random.Generator] = None) -> np.ndarray:
+                   rng: np.random.Generator | None = None) -> np.ndarray:
     """``n`` poses: the identity first, then uniformly random 6-DOF motions within the bounds."""
     rng = rng or np.random.default_rng(0)
     rot = rng.uniform(-rotation_rad, rotation_rad, (n, 3))
     tra = rng.uniform(-translation_m, translation_m, (n, 3))
     rot[0] = 0.0
     tra[0] = 0.0
-    return np.stack([rigid_from_rotvec(r, t) for r, t in zip(rot, tra)])
+    return np.stack([rigid_from_rotvec(r, t) for r, t in zip(rot, tra, strict=False)])
 
 
 def calibration_motions(h: int = 21, *, rotation_rad: float = 2e-3, translation_m: float = 0.005,
-                        rng: Optional[np.random.Generator] = None) -> np.ndarray:
+                        rng: np.random.Generator | None = None) -> np.ndarray:
     """The rig moved ``h`` times with both targets still (as with the lab's pan-tilt head); frame 1 = rest."""
     return random_motions(h + 1, rotation_rad=rotation_rad, translation_m=translation_m, rng=rng)
 

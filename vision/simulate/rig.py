@@ -16,7 +16,7 @@ estimates is ``B_CS(1)->CS(k) = inv(G_k)``.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -93,20 +93,20 @@ class RigGeometry:
     main_fov_m: float = 0.20
     sub_fov_m: float = 0.15
     resolution: tuple[int, int] = (1920, 1200)
-    main_fov_h_m: Optional[float] = None
-    sub_fov_h_m: Optional[float] = None
+    main_fov_h_m: float | None = None
+    sub_fov_h_m: float | None = None
     main_pattern_m: np.ndarray = field(default_factory=die_pattern)
     circle_radius_m: float = 0.004
     board: Checkerboard = Checkerboard()
     main_mount_rotvec: tuple[float, float, float] = (0.004, -0.006, 0.012)
 
     @classmethod
-    def laboratory(cls) -> "RigGeometry":
+    def laboratory(cls) -> RigGeometry:
         """The dissertation's lab: main target 11 m away at 0.08 mm/pixel, sub-target 50 mm at 0.05 mm/pixel."""
         return cls(main_distance_m=11.0, sub_distance_m=0.05, main_fov_m=0.08e-3 * 1920,
                    sub_fov_m=0.05e-3 * 1920, board=Checkerboard((21, 13), 0.004))
 
-    def with_resolution(self, width: int, height: int) -> "RigGeometry":
+    def with_resolution(self, width: int, height: int) -> RigGeometry:
         from dataclasses import replace
 
         return replace(self, resolution=(int(width), int(height)))
@@ -119,7 +119,7 @@ class RigGeometry:
     def K_sub(self) -> np.ndarray:
         return self._K(self.sub_distance_m, self.sub_fov_m, self.sub_fov_h_m)
 
-    def _K(self, distance_m: float, fov_w_m: float, fov_h_m: Optional[float]) -> np.ndarray:
+    def _K(self, distance_m: float, fov_w_m: float, fov_h_m: float | None) -> np.ndarray:
         w, h = self.resolution
         K = intrinsic_matrix(w * distance_m / fov_w_m, w, h)
         if fov_h_m is not None:
@@ -177,17 +177,17 @@ class SyntheticRig:
         uv = project_pinhole(g.K_sub, apply(invert(pose), world))
         return np.round(uv) if quantise else uv
 
-    def sequence(self, poses: np.ndarray, displacements_m: Optional[np.ndarray] = None, *,
+    def sequence(self, poses: np.ndarray, displacements_m: np.ndarray | None = None, *,
                  quantise: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """Image points of a whole sequence: main (n, N, 2) and sub (n, M, 2)."""
         n = len(poses)
         d = np.zeros((n, 2)) if displacements_m is None else np.asarray(displacements_m, float)
-        main = np.stack([self.main_image_points(P, di, quantise=quantise) for P, di in zip(poses, d)])
+        main = np.stack([self.main_image_points(P, di, quantise=quantise) for P, di in zip(poses, d, strict=False)])
         sub = np.stack([self.sub_image_points(P, quantise=quantise) for P in poses])
         return main, sub
 
     def zhang_poses(self, n: int = 15, *, max_tilt_rad: float = 0.5,
-                    rng: Optional[np.random.Generator] = None) -> list[np.ndarray]:
+                    rng: np.random.Generator | None = None) -> list[np.ndarray]:
         """``n`` poses ``B_WS->CS`` of the board held tilted in front of the sub-camera, wholly in view."""
         rng = rng or np.random.default_rng(11)
         g = self.geometry
@@ -206,7 +206,7 @@ class SyntheticRig:
         return poses
 
     def zhang_views(self, n: int = 15, *, max_tilt_rad: float = 0.5, quantise: bool = False,
-                    rng: Optional[np.random.Generator] = None) -> list[np.ndarray]:
+                    rng: np.random.Generator | None = None) -> list[np.ndarray]:
         """Image points of the board held at ``n`` tilted poses before installation (for Zhang's method)."""
         obj = self.geometry.board.object_points()
         views = [project_pinhole(self.geometry.K_sub, apply(B, obj))
@@ -229,7 +229,7 @@ class SyntheticRig:
         return t[0] + s * d[..., 0], t[1] + s * d[..., 1]
 
     def render_main(self, pose: np.ndarray, displacement_m: ArrayLike = (0.0, 0.0), *, supersample: int = 8,
-                    noise: float = 0.0, rng: Optional[np.random.Generator] = None) -> np.ndarray:
+                    noise: float = 0.0, rng: np.random.Generator | None = None) -> np.ndarray:
         """8-bit main-camera image (rows, cols): white circles on black, anti-aliased."""
         g = self.geometry
         w, h = g.resolution
@@ -240,7 +240,7 @@ class SyntheticRig:
         centres = self.main_image_points(pose, displacement_m)
         r_px = g.circle_radius_m * g.K_main[0, 0] / g.main_distance_m * 1.05 + 3
         du, dv = _sample_offsets(supersample)
-        for (uc, vc), (xc, yc) in zip(centres, g.main_pattern_m):
+        for (uc, vc), (xc, yc) in zip(centres, g.main_pattern_m, strict=False):
             c0, c1 = int(max(0, np.floor(uc - r_px))), int(min(w, np.ceil(uc + r_px) + 1))
             r0, r1 = int(max(0, np.floor(vc - r_px))), int(min(h, np.ceil(vc + r_px) + 1))
             if c1 <= c0 or r1 <= r0:
@@ -254,7 +254,7 @@ class SyntheticRig:
         return _to_uint8(img, noise, rng)
 
     def render_sub(self, pose: np.ndarray, *, supersample: int = 8, noise: float = 0.0,
-                   rng: Optional[np.random.Generator] = None) -> np.ndarray:
+                   rng: np.random.Generator | None = None) -> np.ndarray:
         """8-bit sub-camera image of the checkerboard (rows, cols), anti-aliased along every edge."""
         g = self.geometry
         w, h = g.resolution
@@ -283,7 +283,7 @@ def _sample_offsets(n: int) -> tuple[np.ndarray, np.ndarray]:
     return du.ravel(), dv.ravel()
 
 
-def _to_uint8(img: np.ndarray, noise: float, rng: Optional[np.random.Generator], blur_px: float = 0.8) -> np.ndarray:
+def _to_uint8(img: np.ndarray, noise: float, rng: np.random.Generator | None, blur_px: float = 0.8) -> np.ndarray:
     """Lens blur (Gaussian point spread of ``blur_px``), sensor noise, 8-bit quantisation."""
     if blur_px > 0:
         import cv2

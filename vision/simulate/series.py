@@ -2,8 +2,8 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Callable, Optional, Sequence
 
 import numpy as np
 
@@ -13,7 +13,7 @@ from common.files import atomic_output
 def simulate_series(start_ns: int, end_ns: int, truth_mm: Callable[[np.ndarray], np.ndarray], *,
                     sampling_s: float = 60.0, noise_mm: float = 0.25, zero_offset_mm: float = 0.0,
                     outages: Sequence[tuple[int, int]] = (), nan_fraction: float = 0.001,
-                    rng: Optional[np.random.Generator] = None) -> tuple[np.ndarray, np.ndarray]:
+                    rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Times (int64 UTC ns) and values (mm) of a camera series following ``truth_mm(time_ns)``.
 
     The camera has its own zero (``zero_offset_mm`` is added), white noise ``noise_mm``, no rows

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 from psygnal import Signal
 
@@ -57,7 +57,7 @@ class Snapshot:
     def epochs(self) -> list[str]:
         return [e["epoch"] for e in self.status["epochs"]]
 
-    def epoch_row(self, label: Optional[str]) -> Optional[dict]:
+    def epoch_row(self, label: str | None) -> dict | None:
         return next((e for e in self.status["epochs"] if e["epoch"] == label), None)
 
 
@@ -66,8 +66,8 @@ class Selection:
     """The selected target and epoch, and what the details show (``focus``: kind and key; kind is
     ``campaign``, ``reflector``, ``epoch`` or ``series``)."""
 
-    reflector: Optional[str] = None
-    epoch: Optional[str] = None
+    reflector: str | None = None
+    epoch: str | None = None
     focus: tuple[str, str] = ("campaign", "")
 
 
@@ -112,7 +112,7 @@ class AppState:
     error = Signal(str, str)
 
     def __init__(self) -> None:
-        self.access: Optional[CampaignAccess] = None
+        self.access: CampaignAccess | None = None
         self.name = ""
         self.snapshot = Snapshot()
         self.selection = Selection()
@@ -120,7 +120,7 @@ class AppState:
         self.map = MapState()
         self.outputs = Outputs()
         self.visible_view = ""
-        self.next: Optional[NextStep] = None
+        self.next: NextStep | None = None
 
     # ------------------------------------------------------------------ the campaign
     @property
@@ -128,7 +128,7 @@ class AppState:
         return self.access is not None
 
     @property
-    def folder(self) -> Optional[Path]:
+    def folder(self) -> Path | None:
         return None if self.access is None else self.access.folder
 
     def open(self, folder: str | Path) -> bool:
@@ -178,12 +178,12 @@ class AppState:
 
     # ------------------------------------------------------------------ selection and views
     @property
-    def epoch_or_latest(self) -> Optional[str]:
+    def epoch_or_latest(self) -> str | None:
         """The selected epoch, else the campaign's latest (None without epochs)."""
         eps = self.snapshot.epochs
         return self.selection.epoch or (eps[-1] if eps else None)
 
-    def select(self, *, reflector: Any = ..., epoch: Any = ..., focus: Optional[tuple[str, str]] = None) -> None:
+    def select(self, *, reflector: Any = ..., epoch: Any = ..., focus: tuple[str, str] | None = None) -> None:
         """Change the selection (arguments left out keep their value).
 
         The details follow what was selected last: ``focus`` when given, else the target when only a

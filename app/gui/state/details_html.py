@@ -6,10 +6,10 @@ import html
 import numpy as np
 
 from common.flags import describe
-from projects.store.history import histories
 from projects.processing.stages import baseline_epoch
 from projects.results.corrections import corrections_line, instrument_line
 from projects.results.state import epoch_state
+from projects.store.history import histories
 
 
 def _rows(pairs) -> str:

@@ -12,8 +12,8 @@
 from __future__ import annotations
 
 import os
+from collections.abc import MutableMapping
 from pathlib import Path
-from typing import MutableMapping, Optional
 
 #: The kinds of files the dialogs ask for, each remembered on its own.
 KINDS = ("campaigns", "layouts", "scans", "series", "outputs")
@@ -22,7 +22,7 @@ KINDS = ("campaigns", "layouts", "scans", "series", "outputs")
 class LastFolders:
     """Where each kind of file dialog starts: the folder of the last file chosen for that kind."""
 
-    def __init__(self, store: MutableMapping[str, str], *, fallback: Optional[str] = None):
+    def __init__(self, store: MutableMapping[str, str], *, fallback: str | None = None):
         self.store = store
         self.fallback = fallback if fallback is not None else os.getcwd()
 

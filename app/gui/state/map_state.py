@@ -7,8 +7,6 @@ event).
 """
 from __future__ import annotations
 
-from typing import Optional
-
 from psygnal import Signal
 
 from app.gui.state.map_geometry import CellRect, window_from_cells
@@ -24,11 +22,11 @@ class MapState:
     message = Signal(str)
 
     def __init__(self) -> None:
-        self.label: Optional[str] = None
+        self.label: str | None = None
         self.preview = None  # projects.store.previews.MapPreview
         self.editor = PlanEditor()
 
-    def show(self, access, label: Optional[str], *, reload: bool = False) -> None:
+    def show(self, access, label: str | None, *, reload: bool = False) -> None:
         """Show ``label``'s map and plan; the epoch already shown stays as it is (its windows may be under
         edit) unless ``reload`` asks for what the campaign now holds and nothing is left unsaved."""
         if label is None:

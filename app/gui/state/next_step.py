@@ -15,7 +15,6 @@ the selected epoch (else the latest) as a button, so a surveyor never has to gue
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Optional
 
 #: The commands a next step can be, with the menu entry that does the same (for tooltips).
 MENU = {"add_epoch": "Epoch ▸ Add epoch…", "plan": "Epoch ▸ Plan the selected epoch",
@@ -30,7 +29,7 @@ class NextStep:
 
     command: str
     text: str
-    epoch: Optional[str] = None
+    epoch: str | None = None
     why: str = ""
 
     @property
@@ -38,7 +37,7 @@ class NextStep:
         return f"{self.why} (also {MENU[self.command]})" if self.why else f"Also {MENU[self.command]}"
 
 
-def _for_epoch(e: dict) -> Optional[NextStep]:
+def _for_epoch(e: dict) -> NextStep | None:
     label, state = e["epoch"], e["state"]
     if state == "imported":
         return NextStep("plan", f"Next: plan {label}", label,
@@ -54,7 +53,7 @@ def _for_epoch(e: dict) -> Optional[NextStep]:
     return None
 
 
-def next_step(status: dict, selected_epoch: Optional[str]) -> NextStep:
+def next_step(status: dict, selected_epoch: str | None) -> NextStep:
     """The next step for ``selected_epoch`` (or, when it has none left, the first epoch with work left).
 
     ``status`` is :func:`projects.results.state.campaign_status` (its ``epochs``: ``epoch``, ``state``,

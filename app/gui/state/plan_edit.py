@@ -24,7 +24,7 @@ True
 """
 from __future__ import annotations
 
-from typing import Callable, Iterable, Optional
+from collections.abc import Callable, Iterable
 
 from psygnal import Signal
 
@@ -35,7 +35,7 @@ from lidar.plan import RoiPlan, ScanPlan, edit_roi, with_rois
 UNDO_DEPTH = 200
 
 
-def _editable(plan: Optional[ScanPlan]) -> tuple[RoiPlan, ...]:
+def _editable(plan: ScanPlan | None) -> tuple[RoiPlan, ...]:
     """The windows a user edits: all but the closure, which repeats its target's window at the visit's end."""
     return () if plan is None else tuple(r for r in plan.rois if not r.closure)
 
@@ -56,13 +56,13 @@ class PlanEditor:
 
     changed = Signal()
 
-    def __init__(self, stored: Optional[ScanPlan] = None, *, on_change: Optional[Callable[[], None]] = None):
+    def __init__(self, stored: ScanPlan | None = None, *, on_change: Callable[[], None] | None = None):
         if on_change is not None:
             self.changed.connect(on_change)
         self.load(stored)
 
     # ------------------------------------------------------------------ state
-    def load(self, stored: Optional[ScanPlan]) -> None:
+    def load(self, stored: ScanPlan | None) -> None:
         """Start editing ``stored`` afresh (no history)."""
         self.stored = stored
         # the closure window follows its target's window (lidar.plan.with_rois): it is not edited on its own
@@ -70,7 +70,7 @@ class PlanEditor:
         self._saved = self._rois
         self._undo: list[tuple[RoiPlan, ...]] = []
         self._redo: list[tuple[RoiPlan, ...]] = []
-        self._drag_origin: Optional[tuple[RoiPlan, ...]] = None
+        self._drag_origin: tuple[RoiPlan, ...] | None = None
         self._notify()
 
     @property
@@ -79,7 +79,7 @@ class PlanEditor:
         return self._rois
 
     @property
-    def plan(self) -> Optional[ScanPlan]:
+    def plan(self) -> ScanPlan | None:
         """The edited plan (the stored plan with the current windows), or None when there is none."""
         if self.stored is None:
             return None
@@ -98,7 +98,7 @@ class PlanEditor:
     def can_redo(self) -> bool:
         return bool(self._redo)
 
-    def roi(self, reflector: str) -> Optional[RoiPlan]:
+    def roi(self, reflector: str) -> RoiPlan | None:
         return next((r for r in self._rois if r.reflector == reflector), None)
 
     # ------------------------------------------------------------------ changes
@@ -115,7 +115,7 @@ class PlanEditor:
         self._commit(kept)
         return True
 
-    def reshape(self, reflector: str, window: dict, *, final: bool = True) -> Optional[RoiPlan]:
+    def reshape(self, reflector: str, window: dict, *, final: bool = True) -> RoiPlan | None:
         """Move or resize a target's window to ``window`` (``phi_min_deg``, ``phi_max_deg``,
         ``theta_min_deg``, ``theta_max_deg``), with steps for the plan's points.
 
@@ -157,7 +157,7 @@ class PlanEditor:
         if self._rois != self._saved:
             self._commit(self._saved)
 
-    def mark_saved(self, rois: Optional[Iterable[RoiPlan]] = None) -> None:
+    def mark_saved(self, rois: Iterable[RoiPlan] | None = None) -> None:
         """The current windows (or ``rois``, the ones a save wrote) are now what the campaign holds."""
         self._saved = self._rois if rois is None else tuple(r for r in rois if not r.closure)
         self._notify()

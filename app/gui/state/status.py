@@ -21,8 +21,8 @@ ask to cancel it in between (``cancelling``). The rules the status bar keeps:
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable, Optional
 
 from psygnal import Signal
 
@@ -55,7 +55,7 @@ class StatusLine:
     def __init__(self, *, clock: Callable[[], float] = time.monotonic):
         self._clock = clock
         self.message = StatusMessage("")
-        self.title: Optional[str] = None  # the running job
+        self.title: str | None = None  # the running job
         self.fraction = 0.0
         self.is_cancelling = False
         self._held_until = -1.0

@@ -14,16 +14,28 @@ the view hands the editor the user's gestures.
 from __future__ import annotations
 
 import math
-from typing import Callable, Optional
+from collections.abc import Callable
 
 import numpy as np
 from matplotlib import colormaps
 from PySide6.QtCore import QPointF, QRectF, Qt, QTimer, Signal
-from PySide6.QtGui import (QBrush, QColor, QFont, QFontMetricsF, QImage, QKeySequence, QPainter, QPen, QPixmap,
-                           QShortcut)
-from PySide6.QtWidgets import (QAbstractItemView, QGraphicsEllipseItem, QGraphicsItem, QGraphicsRectItem,
-                               QGraphicsScene, QGraphicsView, QHeaderView, QPushButton, QSplitter, QTableWidget,
-                               QTableWidgetItem, QToolBar, QVBoxLayout, QWidget)
+from PySide6.QtGui import QBrush, QColor, QFont, QFontMetricsF, QImage, QKeySequence, QPainter, QPen, QPixmap, QShortcut
+from PySide6.QtWidgets import (
+    QAbstractItemView,
+    QGraphicsEllipseItem,
+    QGraphicsItem,
+    QGraphicsRectItem,
+    QGraphicsScene,
+    QGraphicsView,
+    QHeaderView,
+    QPushButton,
+    QSplitter,
+    QTableWidget,
+    QTableWidgetItem,
+    QToolBar,
+    QVBoxLayout,
+    QWidget,
+)
 
 from app.gui.state.map_geometry import CellRect, window_of_cells
 from app.gui.widgets import ElidedLabel
@@ -86,7 +98,7 @@ class TagItem(QGraphicsItem):
     ``dy`` < 0 puts it above), drawn above the map's other items."""
 
     def __init__(self, text: str, colour: QColor, *, dx: float = 4.0, dy: float = -4.0, bold: bool = True,
-                 parent: Optional[QGraphicsItem] = None):
+                 parent: QGraphicsItem | None = None):
         super().__init__(parent)
         self.text, self.colour = text, colour
         self.font = QFont("Sans", 9, QFont.Bold if bold else QFont.Normal)
@@ -231,9 +243,9 @@ class MapGraphicsView(QGraphicsView):
         self.setViewportUpdateMode(QGraphicsView.FullViewportUpdate)  # the rulers follow every scroll
         self.setMinimumSize(200, 150)
         self.draw_mode = False
-        self.geometry_: Optional[MapGeometry] = None
-        self._start: Optional[QPointF] = None
-        self._rubber: Optional[QGraphicsRectItem] = None
+        self.geometry_: MapGeometry | None = None
+        self._start: QPointF | None = None
+        self._rubber: QGraphicsRectItem | None = None
 
     def wheelEvent(self, event):  # noqa: N802
         f = 1.25 if event.angleDelta().y() > 0 else 0.8
@@ -410,7 +422,7 @@ class MapView(QWidget):
         lay.addWidget(self.title)
         lay.addWidget(bar)
         lay.addWidget(split, 1)
-        self.geometry_: Optional[MapGeometry] = None
+        self.geometry_: MapGeometry | None = None
         self.items: list[RoiItem] = []
         self._syncing = False
         self._selecting = False
@@ -420,7 +432,7 @@ class MapView(QWidget):
         self._set_enabled(False)
 
     @property
-    def label(self) -> Optional[str]:
+    def label(self) -> str | None:
         """The epoch shown."""
         return self.state.label
 
@@ -429,7 +441,7 @@ class MapView(QWidget):
         return self.state.preview
 
     @property
-    def plan(self) -> Optional[ScanPlan]:
+    def plan(self) -> ScanPlan | None:
         """The plan as edited (None: no plan shown)."""
         return self.editor.plan
 
@@ -583,7 +595,7 @@ class MapView(QWidget):
         # a window dragged off the sky (theta outside 0..180) keeps its last valid shape
         self.editor.reshape(item.roi.reflector, self.geometry_.window_of(item.scene_rect()), final=final)
 
-    def current_plan(self) -> Optional[ScanPlan]:
+    def current_plan(self) -> ScanPlan | None:
         return self.plan
 
     def _refresh_table(self) -> None:
@@ -623,7 +635,7 @@ class MapView(QWidget):
         for k, it in enumerate(self.items):
             it.setSelected(k in rows)
 
-    def select_reflector(self, rid: Optional[str]) -> None:
+    def select_reflector(self, rid: str | None) -> None:
         """Select a target's window and bring it into view (the zoom stays as it is); not a user's pick,
         so it is not reported back (``reflectorPicked``)."""
         it = next((it for it in self.items if it.roi.reflector == rid), None)

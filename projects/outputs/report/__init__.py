@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Optional
 
 from common.errors import InputError
 from common.progress import ProgressCallback, scaled
@@ -33,8 +32,8 @@ def _check_output(path: Path) -> None:
 def _preview_from_scan(c: Campaign):
     """For epochs planned before previews were stored: analyse the coarse scan again (slow, not saved)."""
     def preview_of(label: str):
-        from projects.store.previews import decode_preview, encode_preview
         from projects.processing.stages import analyse_epoch_coarse, parameters
+        from projects.store.previews import decode_preview, encode_preview
 
         if not c.files(label, "coarse"):
             return None
@@ -44,7 +43,7 @@ def _preview_from_scan(c: Campaign):
 
 
 def write_report(c: Campaign, path: str | os.PathLike, scope: ReportScope = ReportScope(), *,
-                 author: Optional[str] = None, progress: Optional[ProgressCallback] = None) -> Path:
+                 author: str | None = None, progress: ProgressCallback | None = None) -> Path:
     """Write the PDF report of ``scope`` (default: whole campaign) to ``path``.
 
     Parameters

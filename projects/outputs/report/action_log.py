@@ -8,8 +8,9 @@ table and the workbook export).
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 from projects.outputs.report.flowables import num
 from projects.store.records import LogEntry

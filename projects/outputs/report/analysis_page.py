@@ -6,7 +6,7 @@ every digit).
 """
 from __future__ import annotations
 
-from typing import Any, Optional
+from typing import Any
 
 from projects.outputs.report.content import ReportContent
 from projects.outputs.report.flowables import esc, figure_flowable, num, table
@@ -14,7 +14,7 @@ from projects.outputs.report.flowables import esc, figure_flowable, num, table
 FIGURE_SIZE_IN = (7.0, 3.5)
 
 
-def _pm(v: Optional[float], s: Optional[float], fmt: str = "{:+.2f}", sfmt: str = "{:.2f}") -> str:
+def _pm(v: float | None, s: float | None, fmt: str = "{:+.2f}", sfmt: str = "{:.2f}") -> str:
     if v is None:
         return "–"
     return num(v, fmt) + ("" if s is None else " ± " + num(s, sfmt))

@@ -10,23 +10,32 @@ import datetime as dt
 import getpass
 import logging
 import platform
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from importlib import metadata
-from typing import Any, Optional, Sequence
+from typing import Any
 
 import numpy as np
 
 from common.errors import InputError, SurveyError
 from common.flags import FLAG_SECOND_OBJECT
-from projects.store import schema
+from projects.processing.stages import PIPELINE_VERSION, baseline_epoch, parameters
 from projects.results.state import epoch_state
 from projects.results.table import displacement_table
-from projects.store.history import DisplacementHistory, histories
-from projects.processing.stages import PIPELINE_VERSION, baseline_epoch, parameters
-from projects.store.records import (DisplacementSet, Epoch, LimitRecord, LogEntry, Reflector, ReferenceCheck, ScanFile,
-                              StoredPlan)
+from projects.store import schema
 from projects.store.campaign import Campaign
+from projects.store.history import DisplacementHistory, histories
 from projects.store.previews import MapPreview
+from projects.store.records import (
+    DisplacementSet,
+    Epoch,
+    LimitRecord,
+    LogEntry,
+    ReferenceCheck,
+    Reflector,
+    ScanFile,
+    StoredPlan,
+)
 
 log = logging.getLogger(__name__)
 
@@ -38,9 +47,9 @@ PACKAGES = ("bridgesurvey", "numpy", "scipy", "laspy", "lazrs", "pye57", "open3d
 class ReportScope:
     """Which epochs a report covers: one epoch, a period, or (both None) everything."""
 
-    epoch: Optional[str] = None
-    start: Optional[str] = None
-    end: Optional[str] = None
+    epoch: str | None = None
+    start: str | None = None
+    end: str | None = None
 
 
 @dataclass(frozen=True)
@@ -49,10 +58,10 @@ class TargetState:
 
     reflector: str
     group: str
-    installed: Optional[str]
-    retired: Optional[str]
-    replaces: Optional[str]
-    found: Optional[bool]
+    installed: str | None
+    retired: str | None
+    replaces: str | None
+    found: bool | None
     flags: tuple[str, ...]
     remarks: tuple[str, ...]
 
@@ -65,11 +74,11 @@ class EpochSection:
     datetime: str
     notes: str
     stage: str  # the stored result's stage (imported, planned, measured)
-    plan: Optional[StoredPlan]
-    preview: Optional[MapPreview]
+    plan: StoredPlan | None
+    preview: MapPreview | None
     centroids: dict
     reference_checks: tuple[ReferenceCheck, ...]
-    displacement_set: Optional[DisplacementSet]
+    displacement_set: DisplacementSet | None
     files: tuple[ScanFile, ...]
     state: str = "imported"  # as ``status`` gives it (projects.results.state.epoch_state)
     state_flags: tuple[str, ...] = ()
@@ -83,13 +92,13 @@ class ReportContent:
 
     name: str
     folder: str
-    span_m: Optional[float]
+    span_m: float | None
     scanner: str
     author: str
     generated: str
     scope: ReportScope
     scope_text: str
-    baseline: Optional[str]
+    baseline: str | None
     epochs: tuple[EpochSection, ...]
     displacements: tuple[dict, ...]      # rows of projects.exports.displacement_table within the scope
     histories: dict[str, DisplacementHistory]  # per target, within the scope
@@ -140,7 +149,7 @@ def versions() -> dict:
     return out
 
 
-def _target_states(c: Campaign, last: Optional[EpochSection]) -> list[TargetState]:
+def _target_states(c: Campaign, last: EpochSection | None) -> list[TargetState]:
     moved = {r.reflector for r in (last.reference_checks if last else ()) if r.moved or r.suspect}
     reflectors = c.reflectors()
     replaced_by = {r.replaces: r.id for r in reflectors if r.replaces}
@@ -166,7 +175,7 @@ def _target_states(c: Campaign, last: Optional[EpochSection]) -> list[TargetStat
     return out
 
 
-def _field_extra(c: Campaign, sections: Sequence[EpochSection]) -> Optional[dict]:
+def _field_extra(c: Campaign, sections: Sequence[EpochSection]) -> dict | None:
     """What the field error budget page shows: the model, each epoch's record, times, the centroids' geometry."""
     from lidar.systematic.corrections import cos_incidence_of
 
@@ -179,7 +188,7 @@ def _field_extra(c: Campaign, sections: Sequence[EpochSection]) -> Optional[dict
             "times": {s.label: s.datetime for s in sections}, "measured": measured}
 
 
-def gather(c: Campaign, scope: ReportScope = ReportScope(), *, author: Optional[str] = None,
+def gather(c: Campaign, scope: ReportScope = ReportScope(), *, author: str | None = None,
            with_previews: bool = True) -> ReportContent:
     """Collect the report's facts for ``scope`` from an open campaign."""
     chosen = select_epochs(c, scope)
@@ -234,7 +243,7 @@ def gather(c: Campaign, scope: ReportScope = ReportScope(), *, author: Optional[
     return ReportContent(
         name=c.name, folder=str(c.folder), span_m=c.span_m, scanner=c.profile.name,
         author=author or getpass.getuser(),
-        generated=dt.datetime.now(dt.timezone.utc).astimezone().isoformat(timespec="seconds"),
+        generated=dt.datetime.now(dt.UTC).astimezone().isoformat(timespec="seconds"),
         scope=scope, scope_text=text, baseline=baseline_epoch(c), epochs=tuple(sections), displacements=tuple(rows),
         histories=hist, reflectors=tuple(c.reflectors()), target_states=tuple(_target_states(c, sections[-1])),
         limits=tuple(c.limits()), parameters=parameters(c), versions=versions(), log=tuple(log_rows), extras=extras)

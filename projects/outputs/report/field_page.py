@@ -38,7 +38,7 @@ def _range_walk_text(content: ReportContent) -> str:
         text += "; determined by the campaign's data" if rw.determined else "; not determined: its prior is in σ"
     if len(rw.alternatives) > 1:
         ranked = sorted(rw.alternatives, key=lambda a: -a[2])
-        close = [a for a, ok in zip(ranked, plausible([a[2] for a in ranked])) if ok]
+        close = [a for a, ok in zip(ranked, plausible([a[2] for a in ranked]), strict=False) if ok]
         text += (f"; {len(ranked)} laws came within {ALTERNATIVE_BIC:g} BIC units of it, {len(close)} within "
                  f"{PLAUSIBLE_BIC:g} (as credible): the largest departure among those is in σ "
                  f"({', '.join(describe_basis(b) for b, _, _ in close[:3])}{', …' if len(close) > 3 else ''})")

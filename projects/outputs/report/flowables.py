@@ -6,8 +6,9 @@ figures go in as vector drawings. The report, the field sheet and the fleet summ
 from __future__ import annotations
 
 import io
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 

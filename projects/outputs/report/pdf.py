@@ -3,8 +3,9 @@ from __future__ import annotations
 
 import io
 import os
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Callable, Optional, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -230,12 +231,12 @@ def render_map_jpeg(preview: Any, plan: Any, label: str) -> bytes:
     return buf.getvalue()
 
 
-def _render_map_job(job) -> Optional[bytes]:
+def _render_map_job(job) -> bytes | None:
     return render_map_jpeg(*job)
 
 
-def render_maps(sections: Sequence[EpochSection], preview_of: Optional[Callable] = None, *,
-                progress: Optional[ProgressCallback] = None, workers: Optional[int] = None) -> list[Optional[bytes]]:
+def render_maps(sections: Sequence[EpochSection], preview_of: Callable | None = None, *,
+                progress: ProgressCallback | None = None, workers: int | None = None) -> list[bytes | None]:
     """Map images of many epochs, drawn in parallel worker processes when there are enough of them."""
     from lidar.reflectance_map import reduce_map
     from projects.store.previews import MapPreview
@@ -288,7 +289,7 @@ def state_line(e: EpochSection) -> str:
 
 
 def epoch_section(e: EpochSection, content: ReportContent, ss: Any, *, new_page: bool = True,
-                  map_jpeg: Optional[bytes] = None) -> list:
+                  map_jpeg: bytes | None = None) -> list:
     """Flowables of one epoch; ``map_jpeg`` from :func:`render_maps` (None: the epoch has no map)."""
     from reportlab.platypus import PageBreak, Paragraph, Spacer
 
@@ -494,8 +495,8 @@ EXTRA_SECTIONS: dict[str, Callable] = {"comparisons": comparison_section, "cross
                                        "analysis": analysis_section, "field": field_section}
 
 
-def build_pdf(content: ReportContent, path: str | os.PathLike, *, preview_of: Optional[Callable] = None,
-              progress: Optional[ProgressCallback] = None) -> Path:
+def build_pdf(content: ReportContent, path: str | os.PathLike, *, preview_of: Callable | None = None,
+              progress: ProgressCallback | None = None) -> Path:
     """Write the report to ``path`` (through a temporary file, so a failure leaves no half PDF)."""
     path = Path(path)
     ss = _styles()
@@ -518,7 +519,7 @@ def build_pdf(content: ReportContent, path: str | os.PathLike, *, preview_of: Op
                             "windows, the plan against what the fine scans held, the centroids with their "
                             "uncertainty and flags, the reference check and the displacements.", ss["Small"])]
         maps = render_maps(content.epochs, preview_of, progress=scaled(progress, 0.1, 0.6))
-        for k, (e, jpeg) in enumerate(zip(content.epochs, maps)):
+        for k, (e, jpeg) in enumerate(zip(content.epochs, maps, strict=False)):
             report(progress, 0.6 + 0.2 * k / len(content.epochs), f"epoch {e.label}")
             story += epoch_section(e, content, ss, new_page=k > 0, map_jpeg=jpeg)
     story += log_section(content, ss)

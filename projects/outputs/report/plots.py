@@ -1,7 +1,8 @@
 """Report figures (matplotlib Figures, no GUI toolkit): layout, per-target histories, epoch maps."""
 from __future__ import annotations
 
-from typing import Any, Mapping, Optional, Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -14,7 +15,7 @@ from projects.store.records import Reflector
 GROUP_STYLE = {"reference": ("s", "tab:blue"), "measurement": ("o", "tab:green")}
 
 
-def layout_figure(reflectors: Sequence[Reflector], states: Sequence = (), *, span_m: Optional[float] = None) -> Any:
+def layout_figure(reflectors: Sequence[Reflector], states: Sequence = (), *, span_m: float | None = None) -> Any:
     """Plan (x, y) and elevation (x, z) of the reflector layout, flagged targets in red; the legend above."""
     from matplotlib.figure import Figure
 
@@ -23,7 +24,7 @@ def layout_figure(reflectors: Sequence[Reflector], states: Sequence = (), *, spa
     fig = Figure(figsize=(7.0, 4.6), layout="constrained")
     axes = fig.subplots(2, 1, sharex=True)
     handles = []
-    for ax, (j, name) in zip(axes, ((1, "y [m]"), (2, "z [m]"))):
+    for ax, (j, name) in zip(axes, ((1, "y [m]"), (2, "z [m]")), strict=False):
         for grp, (marker, colour) in GROUP_STYLE.items():
             pts = [r for r in reflectors if r.group == grp]
             if not pts:
@@ -50,7 +51,7 @@ def layout_figure(reflectors: Sequence[Reflector], states: Sequence = (), *, spa
     return fig
 
 
-def _limit_lines(ax: Any, lim: Optional[Limit], lo: float, hi: float, drawn: set[tuple[str, float]]
+def _limit_lines(ax: Any, lim: Limit | None, lo: float, hi: float, drawn: set[tuple[str, float]]
                  ) -> tuple[float, list[str]]:
     """Draw the limits near the data (keeping them in view, added to ``drawn``); name the ones far below it.
 
@@ -71,8 +72,8 @@ def _limit_lines(ax: Any, lim: Optional[Limit], lo: float, hi: float, drawn: set
     return lo, off_scale
 
 
-def history_grid_figure(histories: Mapping[str, DisplacementHistory], *, targets: Optional[Sequence[str]] = None,
-                        max_points: int = 2000, context: Optional[PlotContext] = None) -> Any:
+def history_grid_figure(histories: Mapping[str, DisplacementHistory], *, targets: Sequence[str] | None = None,
+                        max_points: int = 2000, context: PlotContext | None = None) -> Any:
     """One panel per measurement target: displacement with ±2σ bars, warning and alarm lines.
 
     Also (``context``, a :class:`projects.series.context.PlotContext`) the events and an environment series.
@@ -91,7 +92,7 @@ def history_grid_figure(histories: Mapping[str, DisplacementHistory], *, targets
     any_flagged = False
     drawn: set[tuple[str, float]] = set()
     extra: list = []
-    for ax, rid in zip(axes, names):
+    for ax, rid in zip(axes, names, strict=False):
         h = histories.get(rid)
         pts = h.measured().thinned(max_points) if h is not None else None
         if pts:

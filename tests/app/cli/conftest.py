@@ -3,7 +3,6 @@ import re
 
 from tests.projects.conftest import field, field_copy, processed, processed_copy  # noqa: F401  (fixtures)
 
-
 #: A progress line of app.cli.progress when stderr is not a terminal ('calibration frames:  20% frame 3 of 15').
 PROGRESS_LINE = re.compile(r"^[^:]+: +\d{1,3}%( |$)")
 

@@ -35,7 +35,8 @@ def test_calibrate_and_measure_reproduce_the_truth(images, tmp_path, capsys):
                  "--out", str(tmp_path / "series.csv")]) == 0
     got = list(csv.DictReader(open(tmp_path / "series.csv")))
     truth = list(csv.DictReader(open(d / "truth.csv")))
-    err = np.array([float(g["displacement_mm"]) - float(t["true_vertical_mm"]) for g, t in zip(got, truth)])
+    err = np.array([float(g["displacement_mm"]) - float(t["true_vertical_mm"])
+                    for g, t in zip(got, truth, strict=True)])
     sig = np.array([float(g["sigma_mm"]) for g in got])
     false = np.array([float(t["false_vertical_mm"]) for t in truth])
     assert np.abs(false).max() > 3.0            # the rig's drift fakes millimetres...

@@ -29,7 +29,7 @@ def test_info_describes_every_sample_file(path, capsys):
     assert info["path"] == str(path)
     assert info["format"] in ("LAS", "LAZ", "E57")
     assert [s["points"] for s in info["scans"]] == [len(s) for s in scans]
-    for s, scan in zip(info["scans"], scans):
+    for s, scan in zip(info["scans"], scans, strict=False):
         np.testing.assert_allclose(s["bounds_min"], scan.xyz_socs.min(axis=0))
         assert (s["intensity_raw_range"] is None) == (scan.intensity_raw is None)
     for flags in ([], ["--full"]):
@@ -68,7 +68,7 @@ def test_convert_every_sample_to_every_format(path, suffix, tmp_path, capsys):
     before, after = read_scans(path), read_scans(out)
     assert len(after) == len(before)
     tol = 2e-5 if suffix in (".xyz", ".pts", ".ptx", ".las", ".laz") else 1e-9
-    for a, b in zip(before, after):
+    for a, b in zip(before, after, strict=False):
         np.testing.assert_allclose(b.xyz_socs, a.xyz_socs, atol=max(tol, 1e-5 * np.abs(a.xyz_socs).max() * 1e-6))
         if a.intensity is not None:
             np.testing.assert_allclose(b.intensity, a.intensity, atol=2e-4)

@@ -35,7 +35,7 @@ def two_setups(tmp_path_factory) -> Path:
     """Coarse scans of two visits of two set-ups each (fine scans are simulated from each set-up's plan)."""
     root = tmp_path_factory.mktemp("setups")
     write_layout_csv(layout_from_model(MODEL, noise_m=0.02, rng=np.random.default_rng(2)), root / "layout.csv")
-    for k, (stations, cond) in enumerate(zip(STATIONS, CONDITIONS)):
+    for k, (stations, cond) in enumerate(zip(STATIONS, CONDITIONS, strict=False)):
         for s, setup in enumerate(stations, start=1):
             simulate_coarse(root / f"v{k}" / f"setup{s}", setup=setup, conditions=cond, model=MODEL,
                             seed=40 + 10 * k + s, coarse_step_deg=0.06)

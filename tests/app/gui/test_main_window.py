@@ -1,7 +1,6 @@
 """The main window driven like a user would: open, select, edit the plan, process, inspect, export."""
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 from PySide6.QtCore import QPointF

@@ -15,8 +15,16 @@ import pytest
 from PySide6.QtCore import QDate, QDateTime, QPointF, QSettings, QTime, QTimer, QTimeZone
 from PySide6.QtWidgets import QInputDialog, QMessageBox, QToolBar
 
-from app.gui.dialogs import (AddEpochDialog, AddEventDialog, CheckDialog, ImportCameraDialog, ImportEnvDialog,
-                             ImportPredictionDialog, NewCampaignDialog, SetLimitDialog)
+from app.gui.dialogs import (
+    AddEpochDialog,
+    AddEventDialog,
+    CheckDialog,
+    ImportCameraDialog,
+    ImportEnvDialog,
+    ImportPredictionDialog,
+    NewCampaignDialog,
+    SetLimitDialog,
+)
 from app.gui.main_window import SMALL_SCREEN, MainWindow
 from projects.store.campaign import Campaign
 from tests.app.gui.conftest import wait_job

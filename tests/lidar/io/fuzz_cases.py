@@ -83,7 +83,8 @@ def _pcd_ascii(scan: Scan) -> bytes:
     n = len(scan)
     head = (f"VERSION .7\nFIELDS x y z intensity\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\nWIDTH {n}\n"
             f"HEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA ascii\n")
-    rows = "".join(f"{x:.4f} {y:.4f} {z:.4f} {i}\n" for (x, y, z), i in zip(scan.xyz_socs, scan.intensity_raw))
+    rows = "".join(f"{x:.4f} {y:.4f} {z:.4f} {i}\n"
+                   for (x, y, z), i in zip(scan.xyz_socs, scan.intensity_raw, strict=True))
     return (head + rows).encode()
 
 
@@ -102,7 +103,7 @@ def _pcd_compressed(scan: Scan) -> bytes:
 
 def _pts(scan: Scan) -> bytes:
     vals = (scan.intensity * 4095 - 2048).astype(int)
-    rows = "".join(f"{x:.4f} {y:.4f} {z:.4f} {i} 10 20 30\n" for (x, y, z), i in zip(scan.xyz_socs, vals))
+    rows = "".join(f"{x:.4f} {y:.4f} {z:.4f} {i} 10 20 30\n" for (x, y, z), i in zip(scan.xyz_socs, vals, strict=False))
     return f"{len(scan)}\n{rows}".encode()
 
 

@@ -85,8 +85,8 @@ def handle(req: dict) -> dict:
 def main() -> None:
     limit = int(os.environ.get("FUZZ_AS_LIMIT", str(3 << 30)))
     resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
-    import lidar.io  # noqa: F401  (import before answering "ready")
     import app.cli.main  # noqa: F401
+    import lidar.io  # noqa: F401  (import before answering "ready")
 
     sys.stdout.write(json.dumps({"ready": True}) + "\n")
     sys.stdout.flush()

@@ -113,7 +113,7 @@ def test_foreign_files_get_no_invented_step(path):
 def test_header_facts_match_the_points(path):
     quick, full, scans = describe_file(path), describe_file(path, stats=True), read_scans(path)
     assert [s.points for s in full.scans] == [len(s) for s in scans]
-    for q, f, scan in zip(quick.scans, full.scans, scans):
+    for q, f, scan in zip(quick.scans, full.scans, scans, strict=False):
         np.testing.assert_allclose(f.bounds_min, scan.xyz_socs.min(axis=0))
         np.testing.assert_allclose(f.bounds_max, scan.xyz_socs.max(axis=0))
         if q.bounds_min is not None:  # the header's bounds, where it has them

@@ -24,7 +24,7 @@ def _check(scan, intensity_raw=None):
 
 @pytest.mark.parametrize("sep", [" ", "\t", ","])
 def test_pdal_pcd_ascii_capital_fields_any_separator(tmp_path, sep):
-    rows = "\n".join(sep.join(f"{v:g}" for v in (*xyz, i, 1)) for xyz, i in zip(XYZ, (10, 200, 30)))
+    rows = "\n".join(sep.join(f"{v:g}" for v in (*xyz, i, 1)) for xyz, i in zip(XYZ, (10, 200, 30), strict=False))
     head = ("# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS X Y Z Intensity ReturnNumber\n"
             "SIZE 8 8 8 2 1\nTYPE F F F U U\nCOUNT 1 1 1 1 1\nWIDTH 3\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\n"
             "POINTS 3\nDATA ascii\n")
@@ -39,8 +39,8 @@ def test_pcd_binary_with_padding_fields_and_counts(tmp_path):
     rec = np.zeros(3, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("_", "u1", (4,)), ("intensity", "<f4")])
     rec["x"], rec["y"], rec["z"] = XYZ.T
     rec["intensity"] = (0.1, 0.5, 0.9)
-    head = ("VERSION 0.7\nFIELDS x y z _ intensity\nSIZE 4 4 4 1 4\nTYPE F F F U F\nCOUNT 1 1 1 4 1\nWIDTH 3\n"
-            "HEIGHT 1\nPOINTS 3\nDATA binary\n").encode()
+    head = (b"VERSION 0.7\nFIELDS x y z _ intensity\nSIZE 4 4 4 1 4\nTYPE F F F U F\nCOUNT 1 1 1 4 1\nWIDTH 3\n"
+            b"HEIGHT 1\nPOINTS 3\nDATA binary\n")
     p = tmp_path / "pad.pcd"
     p.write_bytes(head + rec.tobytes())
     scan = read_scan(p)
@@ -58,7 +58,7 @@ def test_ply_variants_trailing_blank_crlf_comments_lists_and_scalar_fields(tmp_p
                       "element vertex 3", "property double x", "property double y", "property double z",
                       "property float scalar_Intensity", "element face 1",
                       "property list uchar int vertex_indices", "end_header "])
-    body = "".join(f"{x} {y} {z} {i}\r\n" for (x, y, z), i in zip(XYZ, (-12.5, 0.0, 3.0))) + "3 0 1 2\r\n"
+    body = "".join(f"{x} {y} {z} {i}\r\n" for (x, y, z), i in zip(XYZ, (-12.5, 0.0, 3.0), strict=False)) + "3 0 1 2\r\n"
     p = tmp_path / "cc.ply"
     p.write_bytes(head + body.encode())
     scan = read_scan(p)
@@ -81,7 +81,8 @@ def test_binary_ply_with_capital_names_and_crlf_header(tmp_path):
 
 def test_cyclone_pts_with_count_line_and_rgb(tmp_path):
     p = tmp_path / "cyclone.pts"
-    p.write_text("3\n" + "".join(f"{x} {y} {z} {i} 10 20 30\n" for (x, y, z), i in zip(XYZ, (-2048, 0, 2047))))
+    p.write_text("3\n" + "".join(f"{x} {y} {z} {i} 10 20 30\n"
+                                  for (x, y, z), i in zip(XYZ, (-2048, 0, 2047), strict=True)))
     scan = read_scan(p)
     _check(scan, [-2048, 0, 2047])
     assert scan.metadata["format"] == "PTS"
@@ -95,7 +96,7 @@ def test_cyclone_pts_with_count_line_and_rgb(tmp_path):
 def test_ptx_with_and_without_rgb(tmp_path, rgb):
     head = "1\n3\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n1 0 0 0\n0 1 0 0\n0 0 1 0\n5 6 7 1\n"
     rows = "".join(f"{x} {y} {z} {i}" + (" 255 128 0" if rgb else "") + "\n" for (x, y, z), i in
-                   zip(XYZ, (0.2, 0.4, 0.8)))
+                   zip(XYZ, (0.2, 0.4, 0.8), strict=False))
     p = tmp_path / "leica.ptx"
     p.write_text(head + rows)
     scan = read_scan(p)
@@ -107,7 +108,7 @@ def test_ptx_with_and_without_rgb(tmp_path, rgb):
 def test_riscan_style_ascii_with_reflectance_db(tmp_path):
     p = tmp_path / "riscan.txt"
     p.write_text("X;Y;Z;Reflectance;Deviation\n" + "".join(f"{x};{y};{z};{r};2\n" for (x, y, z), r in
-                                                          zip(XYZ, (-20.0, -3.5, 4.0))))
+                                                          zip(XYZ, (-20.0, -3.5, 4.0), strict=False)))
     scan = read_scan(p)
     _check(scan, [-20.0, -3.5, 4.0])
     assert scan.metadata["intensity_convention"] == "Riegl reflectance dB"

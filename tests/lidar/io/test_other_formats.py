@@ -105,8 +105,8 @@ def test_pcd_binary_compressed(tmp_path):
     inten = np.array([0, 1, 2, 3], "<f4")
     body = xyz[:, 0].tobytes() + xyz[:, 1].tobytes() + xyz[:, 2].tobytes() + inten.tobytes()
     comp = _lzf_literal(body)
-    head = ("VERSION 0.7\nFIELDS x y z intensity\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\nWIDTH 4\n"
-            "HEIGHT 1\nVIEWPOINT 1 2 3 1 0 0 0\nPOINTS 4\nDATA binary_compressed\n").encode()
+    head = (b"VERSION 0.7\nFIELDS x y z intensity\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\nWIDTH 4\n"
+            b"HEIGHT 1\nVIEWPOINT 1 2 3 1 0 0 0\nPOINTS 4\nDATA binary_compressed\n")
     p = tmp_path / "c.pcd"
     p.write_bytes(head + np.array([len(comp), len(body)], "<u4").tobytes() + comp)
     scan = read_scan(p)

@@ -114,7 +114,7 @@ def test_e57_time_stamps_flagged_invalid_read_as_nan(tmp_path):
     e = pye57.E57(path, mode="w")
     imf = e.image_file
     node = libe57.StructureNode(imf)
-    node.set("guid", libe57.StringNode(imf, "{%s}" % uuid.uuid4()))
+    node.set("guid", libe57.StringNode(imf, f"{{{uuid.uuid4()}}}"))
     proto = libe57.StructureNode(imf)
     for f in ("cartesianX", "cartesianY", "cartesianZ"):
         proto.set(f, libe57.FloatNode(imf, 0.0, libe57.E57_DOUBLE, -100.0, 100.0))

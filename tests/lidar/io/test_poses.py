@@ -7,8 +7,15 @@ import pytest
 from common.errors import InputError
 from lidar.io import write_scan
 from lidar.io.info import describe_file
-from lidar.io.poses import (FileFrame, carry_to_scanner, file_frames, in_project_frame, pose_from_origin,
-                            read_in_scanner_frame, read_pose_file)
+from lidar.io.poses import (
+    FileFrame,
+    carry_to_scanner,
+    file_frames,
+    in_project_frame,
+    pose_from_origin,
+    read_in_scanner_frame,
+    read_pose_file,
+)
 from lidar.scan import Scan
 from lidar.simulate.visits import project_transform, write_sop
 

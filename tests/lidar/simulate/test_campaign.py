@@ -27,7 +27,7 @@ def test_random_stations_stand_on_both_sides_near_the_ends_and_beside_every_span
     assert np.all(np.abs(pos[:, 1]) >= THREE.deck_width_m / 2 + 8.0)
     assert np.any(pos[:, 1] < 0) and np.any(pos[:, 1] > 0)
     assert np.any(pos[:, 0] < 0.0) and np.any(pos[:, 0] > THREE.length_m)  # beyond either end
-    for x0, x1 in zip(THREE.support_x_m[:-1], THREE.support_x_m[1:]):
+    for x0, x1 in zip(THREE.support_x_m[:-1], THREE.support_x_m[1:], strict=False):
         assert np.count_nonzero((pos[:, 0] > x0) & (pos[:, 0] < x1)) > 40
     assert np.all((pos[:, 2] >= 1.2) & (pos[:, 2] <= 1.8))
     with pytest.raises(InputError, match="end_fraction"):

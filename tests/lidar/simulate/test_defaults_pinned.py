@@ -101,7 +101,7 @@ def assert_matches(got, want, path: str = "") -> None:
         assert got == want, f"{path}: {got} != {want}"
     elif isinstance(want, list):
         assert len(got) == len(want), f"{path}: {len(got)} values, pinned {len(want)}"
-        for i, (g, w) in enumerate(zip(got, want)):
+        for i, (g, w) in enumerate(zip(got, want, strict=False)):
             assert_matches(g, w, f"{path}[{i}]")
     elif isinstance(want, float):
         tol = max(1e-15 if ".cov_m2" in path else TOL_M, 1e-9 * abs(want))  # covariances are 1e-9-1e-6 m^2

@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from lidar.angles import spherical_from_xyz, window_around
 from common.errors import InputError
+from lidar.angles import spherical_from_xyz, window_around
 from lidar.simulate import BridgeModel, BridgeScene, EpochConditions, ScannerSetup
 
 SETUP = ScannerSetup((20.0, -12.0, 1.5), heading_deg=30.0, pitch_deg=0.03, roll_deg=-0.02)

@@ -9,8 +9,8 @@ from common.errors import InputError
 from lidar.io.las import read_las
 from lidar.plan import RoiPlan
 from lidar.simulate import (
-    BridgeModel,
     AxisErrors,
+    BridgeModel,
     DriftModel,
     EpochConditions,
     LogisticStrengthWalk,
@@ -86,7 +86,7 @@ def test_timed_visit_scans_coarse_then_windows_in_plan_order_then_closure(tmp_pa
     assert [w.closure for w in v.truth.windows] == [False] * 10 + [True]
     w = v.truth.windows
     assert w[0].start_s == 1000.0
-    for a, b in zip(w[:-1], w[1:]):
+    for a, b in zip(w[:-1], w[1:], strict=False):
         assert b.start_s == pytest.approx(a.end_s + 20.0)
     coarse, fine = read_las(v.coarse), read_las(v.fine)
     assert np.all(np.diff(coarse.time_s) > 0) and np.all(np.diff(fine.time_s) > 0)
@@ -125,7 +125,7 @@ def test_several_setups_in_one_visit(tmp_path):
     visits = simulate_setups(tmp_path, setups, cond, plan_for=truth_plan_for(min_points=200), coarse_step_deg=STEP,
                              move_s=900.0)
     assert [v.folder.name for v in visits] == ["setup1", "setup2"]
-    for v, s in zip(visits, setups):
+    for v, s in zip(visits, setups, strict=False):
         assert (v.folder / "coarse.laz").is_file() and (v.folder / "fine.laz").is_file()
         np.testing.assert_allclose(v.truth.scanner_pose, s.pose)
     end1 = max(w.end_s for w in visits[0].truth.windows)

@@ -29,7 +29,7 @@ def test_the_correction_undoes_the_simulators_axis_errors():
 def _with_axis_errors(cents, visits, err):
     """The same centroids as an instrument with ``err`` reports them."""
     out_c, out_v = [], []
-    for c, v in zip(cents, visits):
+    for c, v in zip(cents, visits, strict=False):
         new = {}
         for k, x in c.items():
             y = np.asarray(x.xyz_socs)

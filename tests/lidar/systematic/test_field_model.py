@@ -156,6 +156,6 @@ def test_the_families_spread_widens_sigma_but_never_moves_a_value():
     for k in range(1, len(cents)):
         a = corrected_displacements(cents[0], cents[k], groups, model=model, baseline_label="0", epoch_label=str(k))
         b = corrected_displacements(cents[0], cents[k], groups, model=alone, baseline_label="0", epoch_label=str(k))
-        for da, db in zip(a.displacements, b.displacements):
+        for da, db in zip(a.displacements, b.displacements, strict=False):
             assert da.displacement_m == pytest.approx(db.displacement_m, abs=1e-12)
             assert da.sigma_m >= db.sigma_m - 1e-15 and da.budget["noise"] == pytest.approx(db.budget["noise"])

@@ -9,7 +9,7 @@ from projects.analysis.models import Event, fit_target
 from projects.analysis.run import DAY_NS, _target_json
 from projects.store.limits import Limit
 
-ORIGIN = dt.datetime(2026, 1, 5, 9, tzinfo=dt.timezone.utc)
+ORIGIN = dt.datetime(2026, 1, 5, 9, tzinfo=dt.UTC)
 
 
 def _doc(rng=None):
@@ -35,7 +35,7 @@ def test_the_document_says_what_a_negative_creep_coefficient_means_and_rounds_li
     curve = target["model_curve"]
     assert len(curve["days"]) == len(curve["mm"]) == len(curve["sigma_mm"]) > 100
     assert min(curve["days"]) >= t[0] and max(curve["days"]) <= t[-1]
-    before, after = [v for d, v in zip(curve["days"], curve["mm"]) if 99.99 <= d <= 100.0]
+    before, after = [v for d, v in zip(curve["days"], curve["mm"], strict=False) if 99.99 <= d <= 100.0]
     assert after - before < -2.5  # the step is kept sharp
     warning = target["projection"]["warning"]
     assert "16.8 mm" in warning and "16.84" not in warning

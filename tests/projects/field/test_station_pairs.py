@@ -13,8 +13,8 @@ from lidar.stations import StationPrediction
 from projects.field.station_pairs import combine, propose_pair
 
 LAYOUT = layout_from_model(BridgeModel(spans_m=(39.9, 39.9, 39.9)), noise_m=0.0, rng=np.random.default_rng(0))
-DECK = [t for t, g in zip(LAYOUT.ids, LAYOUT.groups) if g == "measurement"]
-REFS = [t for t, g in zip(LAYOUT.ids, LAYOUT.groups) if g == "reference"]
+DECK = [t for t, g in zip(LAYOUT.ids, LAYOUT.groups, strict=False) if g == "measurement"]
+REFS = [t for t, g in zip(LAYOUT.ids, LAYOUT.groups, strict=False) if g == "reference"]
 
 
 def _station(x: float, sees: list, sigma: float = 0.1) -> StationPrediction:

@@ -10,7 +10,7 @@ from projects.series.context import COLOURS, PlotContext, series_for_plot, whole
 from projects.store.history import DisplacementHistory
 from projects.store.limits import Limit
 
-START = dt.datetime(2026, 1, 5, 9, tzinfo=dt.timezone.utc)
+START = dt.datetime(2026, 1, 5, 9, tzinfo=dt.UTC)
 HOUR_NS = 3_600 * 10**9
 
 
@@ -32,9 +32,8 @@ def _context() -> PlotContext:
 
 def _overlaps_data(fig) -> list[str]:
     """Legends and notes (texts that label no data point) whose box reaches into the plotting area of an axes."""
-    from matplotlib.text import Annotation
-
     from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.text import Annotation
 
     canvas = FigureCanvasAgg(fig)
     canvas.draw()
@@ -49,7 +48,7 @@ def _overlaps_data(fig) -> list[str]:
                    if t.get_visible() and t.get_text() and not isinstance(t, Annotation)]
     for name, artist in things:
         b = artist.get_window_extent(r)
-        for ax, a in boxes:
+        for _ax, a in boxes:
             if b.x0 < a.x1 - 1 and b.x1 > a.x0 + 1 and b.y0 < a.y1 - 1 and b.y1 > a.y0 + 1:
                 found.append(name)
     return found

@@ -43,7 +43,7 @@ def test_the_air_says_whether_the_instrument_corrected_the_atmosphere(processed_
     # a warm summer epoch after a freezing baseline: the air predicts about -28 ppm, the scans show none
     temp = tmp_path / "air.csv"
     lines = ["time,temperature"]
-    for k, (label, when) in enumerate(epochs):
+    for k, (_label, when) in enumerate(epochs):
         value = -2.0 if k == 0 else 28.0
         for m in (-30, 0, 30):
             t = when.timestamp() + 60 * m

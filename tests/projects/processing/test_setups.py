@@ -12,8 +12,14 @@ from lidar.simulate.scene import EpochConditions
 from lidar.systematic.adjustment import FieldModel, VisitSystematics
 from lidar.systematic.budget import corrected_displacements
 from lidar.systematic.range_walk import RangeWalkModel
-from projects.processing.setups import (CorrectedVisit, corrected_side, join_setups, joined_displacements, spread_m,
-                                        visit_label)
+from projects.processing.setups import (
+    CorrectedVisit,
+    corrected_side,
+    join_setups,
+    joined_displacements,
+    spread_m,
+    visit_label,
+)
 
 RNG = np.random.default_rng(7)
 #: A three-span bridge's targets in set-up 1's frame (m): piers at 0, 40, 80, 120, deck targets in every span.
@@ -143,7 +149,7 @@ def test_the_joined_budget_of_single_set_ups_is_the_field_budget():
     got = joined_displacements(corrected_side("b", {1: base}, model), corrected_side("e", {1: ep}, model), GROUPS,
                                model=model)
     assert isinstance(corrected_side("b", {1: base}, model), CorrectedVisit)
-    for a, b in zip(want.displacements, got.displacements):
+    for a, b in zip(want.displacements, got.displacements, strict=False):
         assert a.reflector == b.reflector and a.displacement_m == pytest.approx(b.displacement_m, abs=1e-12)
         assert b.sigma_m == pytest.approx(a.sigma_m, rel=1e-6)
         assert b.along_sigma_m == pytest.approx(a.along_sigma_m, rel=1e-6)
@@ -173,7 +179,7 @@ def test_two_set_ups_a_side_give_the_displacements_of_one_frame():
     side = corrected_side("e", {1: first, 2: second}, model)
     assert side.join.joined == (1, 2)
     two = joined_displacements(corrected_side("b", {1: base}, model), side, GROUPS, model=model)
-    for a, b in zip(one.displacements, two.displacements):
+    for a, b in zip(one.displacements, two.displacements, strict=False):
         assert b.displacement_m == pytest.approx(a.displacement_m, abs=3 * b.sigma_m)
         assert set(b.budget) == {"noise", "frame", "scale", "bias", "drift"}
         assert b.sigma_m == pytest.approx(np.sqrt(sum(v ** 2 for v in b.budget.values())), rel=1e-9)

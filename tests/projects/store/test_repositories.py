@@ -12,8 +12,14 @@ from lidar.layout import read_layout_csv
 from projects.store import repositories
 from projects.store.campaign import Campaign
 from projects.store.errors import DuplicateImportError, InputError
-from projects.store.records import (ComparisonRecord, CrossvalRecord, EpochInputs, EventRecord, PredictionRecord,
-                                    SeriesRecord)
+from projects.store.records import (
+    ComparisonRecord,
+    CrossvalRecord,
+    EpochInputs,
+    EventRecord,
+    PredictionRecord,
+    SeriesRecord,
+)
 
 
 @pytest.fixture

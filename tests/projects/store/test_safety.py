@@ -12,9 +12,9 @@ from pathlib import Path
 import pytest
 
 from app.cli.main import main
-from projects.store.errors import CampaignError, CampaignLockedError
 from projects.store import journal
 from projects.store.campaign import DB_NAME, Campaign
+from projects.store.errors import CampaignError, CampaignLockedError
 
 CLI = [sys.executable, "-c", "import sys; from app.cli.main import main; sys.exit(main())"]
 

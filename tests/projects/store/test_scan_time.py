@@ -17,7 +17,7 @@ def test_the_points_gps_time_comes_before_the_header_day():
 
 def test_a_header_creation_day_is_the_day_only():
     t = scan_file_time(DATA / "las" / "simple1_4.las")  # GPS week time: no date in the points
-    assert t is not None and t.day_only and t.when == dt.datetime(2012, 1, 13, tzinfo=dt.timezone.utc)
+    assert t is not None and t.day_only and t.when == dt.datetime(2012, 1, 13, tzinfo=dt.UTC)
 
 
 def test_no_time_a_placeholder_or_a_damaged_file_give_none(tmp_path):
@@ -33,5 +33,5 @@ def test_no_time_a_placeholder_or_a_damaged_file_give_none(tmp_path):
 
 
 def test_gps_time_has_its_leap_seconds():
-    assert gps_to_utc(0) == dt.datetime(1980, 1, 6, tzinfo=dt.timezone.utc)
+    assert gps_to_utc(0) == dt.datetime(1980, 1, 6, tzinfo=dt.UTC)
     assert gps_to_utc(1_000_000_000).isoformat() == "2011-09-14T01:46:25+00:00"

@@ -7,10 +7,10 @@ import datetime as dt
 import numpy as np
 import pytest
 
+from projects.store.campaign import Campaign
 from projects.store.history import histories, histories_from_records
 from projects.store.limits import Limit
 from projects.store.records import DisplacementRecord, Epoch, Reflector, ScanFile, StoredPlan
-from projects.store.campaign import Campaign
 
 
 def _rec(epoch, day, rid, d_m, s_m, flags=(), epoch_flags=()):

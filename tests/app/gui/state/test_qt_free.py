@@ -4,6 +4,7 @@ import sys
 
 from app.gui.state.map_geometry import CellRect, window_from_cells, window_of_cells
 
+
 def qt_free_modules() -> list[str]:
     """app.gui.actions and every module of app.gui.state."""
     import pkgutil

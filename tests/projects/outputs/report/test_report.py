@@ -134,7 +134,7 @@ def _cell_words_broken(flowables) -> list[str]:
         if not isinstance(t, Table):
             continue
         for row in t._cellvalues:
-            for w, cell in zip(t._colWidths, row):
+            for w, cell in zip(t._colWidths, row, strict=False):
                 if not isinstance(cell, Paragraph):
                     continue
                 cell.wrap(w - 2 * CELL_PADDING_PT, 10_000)
