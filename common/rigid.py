@@ -187,6 +187,30 @@ def matrix_from_rt(rotation: ArrayLike, translation: ArrayLike) -> np.ndarray:
     return m
 
 
+def skew(v: ArrayLike) -> np.ndarray:
+    """Cross-product matrices: ``skew(v) @ w == np.cross(v, w)``, shape (..., 3) -> (..., 3, 3).
+
+    Examples
+    --------
+    >>> skew([1.0, 2.0, 3.0]) @ np.array([4.0, 5.0, 6.0])
+    array([-3.,  6., -3.])
+    """
+    a = np.asarray(v, dtype=np.float64)
+    out = np.zeros(a.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -a[..., 2], a[..., 1], -a[..., 0]
+    out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = a[..., 2], -a[..., 1], a[..., 0]
+    return out
+
+
+def rotations_from_rotvecs(rotvecs: ArrayLike) -> np.ndarray:
+    """(n, 3, 3) rotation matrices of (n, 3) rotation vectors (axis * angle, rad), by Rodrigues' formula."""
+    w = np.asarray(rotvecs, dtype=np.float64).reshape(-1, 3)
+    theta = np.linalg.norm(w, axis=1)
+    k = skew(w / np.maximum(theta, 1e-300)[:, None])
+    s, c = np.sin(theta)[:, None, None], (1.0 - np.cos(theta))[:, None, None]
+    return np.eye(3)[None] + s * k + c * (k @ k)
+
+
 def rotation_from_rotvec(rotvec: ArrayLike) -> np.ndarray:
     """(3, 3) rotation matrix of a rotation vector (axis * angle, rad), by Rodrigues' formula.
 
@@ -195,7 +219,7 @@ def rotation_from_rotvec(rotvec: ArrayLike) -> np.ndarray:
     """
     w = np.asarray(rotvec, dtype=np.float64).reshape(3)
     theta = float(np.linalg.norm(w))
-    k = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    k = skew(w)
     if theta < 1e-15:
         return np.eye(3) + k
     k /= theta

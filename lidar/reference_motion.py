@@ -18,19 +18,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from common.rigid import fit_rigid, rotation_from_rotvec
+from common.rigid import fit_rigid, rotation_from_rotvec, skew
 
 #: The deck targets must spread at least this far along the span (m) for its axis to be known;
 #: below this the deck term is left out.
 MIN_ALONG_SPREAD_M = 1.0
-
-
-def _skews(v: np.ndarray) -> np.ndarray:
-    """(n, 3, 3) cross-product matrices of (n, 3) vectors."""
-    out = np.zeros(v.shape[:-1] + (3, 3))
-    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
-    out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
-    return out
 
 
 def across_axis(deck_xyz: np.ndarray, up: np.ndarray) -> np.ndarray | None:
@@ -96,7 +88,7 @@ def fit_reference_motion(ref_base: np.ndarray, ref_epoch: np.ndarray, ref_var: n
         a = rot @ across_base
         q = (ref_base - c) @ rot.T
         res_r = (ref_epoch - (q + c + t)).reshape(-1)
-        jw_r = -_skews(q).reshape(-1, 3)  # d(q)/d(omega) for rot <- (I + [omega]x) rot
+        jw_r = -skew(q).reshape(-1, 3)  # d(q)/d(omega) for rot <- (I + [omega]x) rot
         qd = (deck_base - c) @ rot.T
         res_d = (deck_epoch - (qd + c + t)) @ a
         jw_d = np.cross(qd, a)  # a . (-[q]x omega) = (q x a) . omega
@@ -121,7 +113,7 @@ def rotation_covariance(ref_base: np.ndarray, ref_var: np.ndarray, *, deck_base:
     ref_base = np.asarray(ref_base, dtype=np.float64)
     w_ref = 1.0 / np.maximum(np.asarray(ref_var, dtype=np.float64), 1e-16)
     c = (w_ref @ ref_base) / w_ref.sum()
-    rows = [np.hstack([-_skews(ref_base - c).reshape(-1, 3), np.tile(np.eye(3), (len(ref_base), 1))])]
+    rows = [np.hstack([-skew(ref_base - c).reshape(-1, 3), np.tile(np.eye(3), (len(ref_base), 1))])]
     weights = [np.repeat(w_ref, 3)]
     if across_base is not None and deck_base is not None and len(deck_base) >= 1:
         a = np.asarray(across_base, dtype=np.float64)

@@ -22,6 +22,7 @@ from scipy.spatial.transform import Rotation
 from common.errors import InputError, ProcessingError
 from common.flags import FLAG_MAIN_TARGET_MISSING, FLAG_SUB_TARGET_MISSING
 from common.progress import ProgressCallback, report
+from common.rigid import skew
 from vision.geometry import rigid_from_rotvec
 from vision.main_camera import AffineTargetModel, fit_affine_target
 from vision.sub_camera import CameraMotion, Intrinsics, solve_poses
@@ -67,11 +68,6 @@ class DualCalibration:
         return np.einsum("nab,knb->kna", self.Bbar, moved)
 
 
-def _cross_matrix(v: np.ndarray) -> np.ndarray:
-    x, y, z = v
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-
-
 def _fit_one_feature(duv: np.ndarray, R: np.ndarray, T: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     """Nine unknowns of one feature from (H, 2) false displacements and motions (H, 3, 3), (H, 3)."""
     omega = Rotation.from_matrix(R).as_rotvec()
@@ -80,7 +76,7 @@ def _fit_one_feature(duv: np.ndarray, R: np.ndarray, T: np.ndarray) -> tuple[np.
     coef, *_ = np.linalg.lstsq(A, duv, rcond=None)  # (6, 2)
     C, Bbar = coef[:3].T, coef[3:].T
     # C_a = X x Bbar_a = -[Bbar_a]x X for both image rows.
-    M = np.vstack([-_cross_matrix(Bbar[0]), -_cross_matrix(Bbar[1])])
+    M = np.vstack([-skew(Bbar[0]), -skew(Bbar[1])])
     X, *_ = np.linalg.lstsq(M, C.ravel(), rcond=None)
     RmI = R - np.eye(3)
 

@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from common.errors import InputError
+from common.rigid import rotation_from_rotvec, rotations_from_rotvecs, skew
 from lidar.displacement import deck_normal
 from lidar.reference_motion import across_axis
 from lidar.systematic.axes import ARCSEC, PRIOR_AXES_ARCSEC, AxisModel, axis_basis
@@ -149,30 +150,9 @@ class _Visit:
     is_base: bool = False
 
 
-def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
-def _drift_rotation(omega_arcsec_h: np.ndarray, dt_s: float) -> np.ndarray:
-    from scipy.spatial.transform import Rotation  # here: importing scipy.spatial costs a command 0.3 s
-
-    return Rotation.from_rotvec(np.asarray(omega_arcsec_h) * ARCSEC * dt_s / 3600.0).as_matrix()
-
-
-def _skews(v: np.ndarray) -> np.ndarray:
-    """(n, 3, 3) cross-product matrices of (n, 3) vectors."""
-    out = np.zeros(v.shape[:-1] + (3, 3))
-    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
-    out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
-    return out
-
-
-def _rotations(rotvecs: np.ndarray) -> np.ndarray:
-    """(n, 3, 3) rotation matrices of (n, 3) rotation vectors (Rodrigues)."""
-    theta = np.linalg.norm(rotvecs, axis=1)
-    k = _skews(rotvecs / np.maximum(theta, 1e-300)[:, None])
-    s, c = np.sin(theta)[:, None, None], (1.0 - np.cos(theta))[:, None, None]
-    return np.eye(3)[None] + s * k + c * (k @ k)
+def drift_rotation(omega_arcsec_h: np.ndarray, dt_s: float) -> np.ndarray:
+    """(3, 3) rotation of a set-up drifting at ``omega_arcsec_h`` (arcsec per hour about x, y, z) for ``dt_s`` s."""
+    return rotation_from_rotvec(np.asarray(omega_arcsec_h) * ARCSEC * dt_s / 3600.0)
 
 
 def _whiten(cov: np.ndarray) -> np.ndarray:
@@ -278,10 +258,10 @@ class _Problem:
         a = v.arrays
         w = a["y"] + 1e-3 * (a["phi"] @ self.theta)[:, None] * a["u"] + a["axes"] @ self.alpha
         k = ARCSEC * a["dt"] / 3600.0
-        rot = _rotations(v.omega[None, :] * k[:, None])
+        rot = rotations_from_rotvecs(v.omega[None, :] * k[:, None])
         z = np.einsum("nij,nj->ni", rot, w)
         dz_dtheta = np.einsum("nij,nj,np->nip", rot, a["u"], a["phi"]) * 1e-3
-        dz_domega = -_skews(z) * k[:, None, None]
+        dz_domega = -skew(z) * k[:, None, None]
         return z, dz_dtheta, dz_domega, np.einsum("nij,njk->nik", rot, a["axes"])
 
     def visit_rows(self, v: _Visit) -> tuple[np.ndarray, np.ndarray, np.ndarray, list]:
@@ -301,7 +281,7 @@ class _Problem:
         e = z[:nr] - sc * (qx + v.d)
         al = np.zeros((nr, 3, nl))
         if not v.is_base:
-            al[:, :, 0:3] = sc * _skews(qx) * 1e-3
+            al[:, :, 0:3] = sc * skew(qx) * 1e-3
             al[:, :, 3:6] = -sc * np.eye(3)
             al[:, :, 6] = -(qx + v.d) * 1e-6
         if v.timed:

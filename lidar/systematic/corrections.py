@@ -17,8 +17,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from common.rigid import skew
 from lidar.displacement_result import Sighted
-from lidar.systematic.adjustment import ARCSEC, VisitSystematics, _drift_rotation, _skew
+from lidar.systematic.adjustment import ARCSEC, VisitSystematics, drift_rotation
 from lidar.systematic.axes import AxisModel, axis_basis
 from lidar.systematic.range_walk import RangeWalkModel, design
 
@@ -52,10 +53,10 @@ def correct_centroid(xyz_socs: np.ndarray, cos_incidence: float, time_s: float, 
     along_axes = axis_basis(y[None])[0][:, list(axes.terms)]
     w = y + float(phi @ range_walk.coefficients_m) * u + along_axes @ axes.values_arcsec
     dt = (time_s - visit.time_ref_s) if visit.timed and np.isfinite(time_s) else 0.0
-    rot = _drift_rotation(visit.drift_arcsec_h, dt)
+    rot = drift_rotation(visit.drift_arcsec_h, dt)
     sc = 1.0 + 1e-6 * visit.scale_ppm
     z = rot @ w / sc
-    jac = CorrectionJacobian(rot @ np.outer(u, phi) / sc, -z * 1e-6 / sc, -_skew(z) * (ARCSEC * dt / 3600.0),
+    jac = CorrectionJacobian(rot @ np.outer(u, phi) / sc, -z * 1e-6 / sc, -skew(z) * (ARCSEC * dt / 3600.0),
                              rot @ along_axes / sc)
     return z, jac
 

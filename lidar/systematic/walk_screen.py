@@ -23,7 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lidar.systematic.adjustment import ARCSEC, PRIOR_BIAS_MM, _Problem, _rotations
+from common.rigid import rotations_from_rotvecs
+from lidar.systematic.adjustment import ARCSEC, PRIOR_BIAS_MM, _Problem
 from lidar.systematic.range_walk import STEP_PROXIES, candidate_bases, design, step_name
 
 
@@ -140,7 +141,7 @@ def _bias_columns(problem: _Problem, v) -> np.ndarray:
     a = v.arrays
     nr, nd = len(v.refs), len(v.decks)
     k = ARCSEC * a["dt"] / 3600.0
-    dz = np.einsum("nij,nj->ni", _rotations(v.omega[None, :] * k[:, None]), a["u"]) * 1e-3
+    dz = np.einsum("nij,nj->ni", rotations_from_rotvecs(v.omega[None, :] * k[:, None]), a["u"]) * 1e-3
     lw, qa, wt = problem.row_weights(v)
     out = np.zeros((3 * nr + nd, nr + nd))
     for j in range(nr):

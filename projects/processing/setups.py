@@ -35,7 +35,7 @@ import numpy as np
 
 from common.errors import ProcessingError
 from common.flags import FLAG_SETUP_JOIN_MISFIT, FLAG_SETUP_NOT_JOINED
-from common.rigid import fit_rigid, rotation_from_rotvec
+from common.rigid import fit_rigid, rotation_from_rotvec, skew
 from lidar.displacement import compute_displacements
 from lidar.displacement_result import EpochDisplacements, Observation
 from lidar.systematic.adjustment import ARCSEC, FieldModel
@@ -62,10 +62,6 @@ def visit_label(label: str, setup: int) -> str:
     ('2026-03-02', '2026-03-02#2')
     """
     return label if setup == 1 else f"{label}#{setup}"
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
 def spread_m(xyz: np.ndarray) -> float:
@@ -239,7 +235,7 @@ class _Join:
             f[rows, j:j + 3] = rk.T
             if k in self.local:
                 c = 6 * self.local[k]
-                f[rows, c:c + 3] = rk.T @ _skew(xj - tk)
+                f[rows, c:c + 3] = rk.T @ skew(xj - tk)
                 f[rows, c + 3:c + 6] = -rk.T
             shared = sum(1 for kk, tt in self.obs if tt == t) > 1
             if not ((k, t) in self.skip and shared):
