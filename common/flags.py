@@ -4,11 +4,16 @@ Flags come from the centroids (a doubt about one target), the displacement compu
 check, the deck normal, the frame), processing (an epoch that gave no result) and the camera
 cross-check. They are not equally serious, and treating them alike turns every epoch red (alarm fatigue):
 
-* **info** - how a result was obtained; nothing to do (``normal_refitted_in_epoch``).
-* **warning** - a result exists but deserves a look (a target missing, a moved pier target left out, a
-  second bright object in a window).
+* **info** - a doubt the sigma already carries (a grazing view with its widened sigma, clipped intensities
+  handled), or how a result was obtained (``normal_refitted_in_epoch``): nothing to do.
+* **warning** - a value may be wrong beyond its sigma, or the surveyor must act: re-scan before leaving,
+  inspect a target, check a reference (a target missing, a moved pier target left out, a second bright
+  object in a window). Every warning says its action.
 * **problem** - the epoch has no trustworthy result (no deck or pier targets measured, inconsistent
   references): act before the next visit.
+
+Advice for the next visit (stand elsewhere to see a target better) is not a flag: it goes to the station
+advisor, the plan and the field sheet.
 
 A flag may carry its reason after a colon (``deck_not_measured: 0 of 6 deck targets found``); its code is
 the part before it. Producers import the constants below; a code that is not registered here is an error
@@ -39,130 +44,201 @@ class Flag:
     code : str
         snake_case code, as stored and printed.
     severity : {"info", "warning", "problem"}
+        By consequence: *problem*, no trustworthy value; *warning*, a value may be wrong beyond its sigma or the
+        surveyor must do something (re-scan before leaving, inspect a target, check a reference); *info*, a doubt
+        the sigma already carries, or how a value was obtained.
     meaning : str
         One line for the report's flag table and the application's details.
     raised_by : str
         The module that raises it.
+    action : str
+        What the surveyor does about it, in plain words (every warning and problem has one; empty for info).
+    words : str
+        The flag as the report's body and the one-line visit summary say it (plural-ready noun phrase).
     """
 
     code: str
     severity: str
     meaning: str
     raised_by: str
+    action: str = ""
+    words: str = ""
 
 
 REGISTRY: dict[str, Flag] = {}
 
 
-def _flag(code: str, severity_: str, meaning: str, raised_by: str) -> str:
+def _flag(code: str, severity_: str, meaning: str, raised_by: str, *, action: str = "", words: str = "") -> str:
     if code in REGISTRY or severity_ not in SEVERITIES or code != code.lower() or "-" in code:
         raise ValueError(f"flag {code!r} declared twice, in another case or with a bad severity")
-    REGISTRY[code] = Flag(code, severity_, meaning, raised_by)
+    REGISTRY[code] = Flag(code, severity_, meaning, raised_by, action, words or code.replace("_", " "))
     return code
 
 
 # ---- a target in one fine scan (lidar.centroid)
 FLAG_NOT_FOUND = _flag("not_found", WARNING, "target not found in its fine scan (occluded, removed or outside "
-                       "the window)", "lidar.centroid")
-FLAG_FEW_POINTS = _flag("few_points", WARNING, "fewer points on the target than planned", "lidar.centroid")
+                       "the window)", "lidar.centroid", action="look at the target (occluded, fallen off?) and "
+                       "re-scan its window before leaving", words="target not found")
+FLAG_FEW_POINTS = _flag("few_points", INFO, "fewer points on the target than planned; its sigma is computed from "
+                        "the points it has", "lidar.centroid", words="fewer points than planned")
 FLAG_SECOND_OBJECT = _flag("second_bright_object", WARNING, "a second bright object beside the target was left "
-                           "out (cable-tie-like contamination)", "lidar.centroid")
-FLAG_CLIPPED = _flag("clipped_by_window", WARNING, "the target touches the edge of its scan window",
-                     "lidar.centroid")
-FLAG_SATURATED = _flag("saturated", INFO, "intensity saturated on the target", "lidar.centroid")
-FLAG_LOW_SEPARABILITY = _flag("low_separability", WARNING, "target and background intensities overlap",
-                              "lidar.centroid")
-FLAG_SIZE = _flag("size_mismatch", WARNING, "bright area does not match the target diameter", "lidar.centroid")
-FLAG_OFF_EXPECTED = _flag("off_expected_position", WARNING, "centroid away from the planned position",
-                          "lidar.centroid")
-FLAG_LOW_CONTRAST = _flag("no_bright_target", WARNING, "no bright target in the window", "lidar.centroid")
+                           "out (cable-tie-like contamination)", "lidar.centroid",
+                           action="inspect the target and remove what shines beside it (a cable tie, a second "
+                           "reflector); until then its value may carry the object's pull",
+                           words="second bright object beside the target")
+FLAG_CLIPPED = _flag("clipped_by_window", WARNING, "the target touches the edge of its scan window: its centroid "
+                     "may be pulled toward the window's inside", "lidar.centroid",
+                     action="re-scan the target with a larger window (check before leaving gives the re-scan plan)",
+                     words="target clipped by its window")
+FLAG_SATURATED = _flag("saturated", INFO, "intensity saturated on the target", "lidar.centroid",
+                       words="saturated intensities")
+FLAG_LOW_SEPARABILITY = _flag("low_separability", INFO, "target and background intensities overlap; the target's "
+                              "points were taken by the disc's shape and its sigma from their scatter",
+                              "lidar.centroid", words="target and background intensities overlap")
+FLAG_SIZE = _flag("size_mismatch", WARNING, "bright area does not match the target diameter (a partly covered "
+                  "disc, or another object)", "lidar.centroid",
+                  action="inspect the target (dirt, a cover, damage) and check its diameter in the layout",
+                  words="bright area not the target's size")
+FLAG_OFF_EXPECTED = _flag("off_expected_position", INFO, "centroid away from the planned position (the plan's "
+                          "positions come from the coarse scan, a few centimetres)", "lidar.centroid",
+                          words="away from the planned position")
+FLAG_LOW_CONTRAST = _flag("no_bright_target", WARNING, "no bright target in the window", "lidar.centroid",
+                          action="look at the target (occluded, fallen off?) and re-scan its window before leaving",
+                          words="no bright target in the window")
 FLAG_NOT_COMPACT = _flag("no_compact_target", WARNING, "bright points but no disc-shaped cluster",
-                         "lidar.centroid")
-FLAG_GRAZING = _flag("grazing", WARNING, "seen at grazing incidence: the disc is barely wider than the beam, its "
-                     "sigma is widened for the bias of a partly resolved disc", "lidar.centroid")
-FLAG_UNRESOLVED = _flag("unresolved", WARNING, "not measured: at this range and incidence the disc is narrower "
-                        "than the beam (measure it from another station)", "lidar.centroid")
+                         "lidar.centroid", action="look at the target (partly occluded, dirty, damaged?) and re-scan "
+                         "its window before leaving", words="no disc-shaped target")
+FLAG_GRAZING = _flag("grazing", INFO, "seen at grazing incidence: the disc is barely wider than the beam, its "
+                     "sigma is widened for the bias of a partly resolved disc", "lidar.centroid",
+                     words="seen at grazing incidence (sigma widened)")
+FLAG_INCIDENCE_FROM_SCAN = _flag("incidence_from_scan", INFO, "the disc's outline in the fine scan shows a "
+                                 "resolved disc where the layout's normal predicted a grazing view: the scan's "
+                                 "incidence is used (the layout's normal for the target may be wrong)",
+                                 "lidar.centroid", words="incidence from the scan, not the layout")
+FLAG_UNRESOLVED = _flag("unresolved", INFO, "not measured: at this range and incidence the disc is narrower "
+                        "than the beam (measure it from another station: see 'bridgesurvey stations')",
+                        "lidar.centroid", words="not resolvable from this station")
 
 # ---- a target's displacement and the epoch's reference check (lidar.displacement, lidar.pier_moves)
-FLAG_MISSING = _flag("missing", WARNING, "no value this epoch (target not found)", "lidar.displacement")
+FLAG_MISSING = _flag("missing", WARNING, "no value this epoch (target not found)", "lidar.displacement",
+                     action="look at the target (occluded, fallen off?); re-scan it if still on site",
+                     words="no value (target not found)")
 FLAG_MISSING_AT_BASELINE = _flag("missing_at_baseline", INFO, "target not measured in the baseline epoch",
-                                 "lidar.displacement")
+                                 "lidar.displacement", words="not measured in the baseline")
 FLAG_REFERENCE_MOVED = _flag("reference_moved", WARNING, "a reference target moved and was left out of the "
-                             "reference group", "lidar.displacement")
+                             "reference group", "lidar.displacement",
+                             action="inspect the pier target (knocked, loose?) and replace it if it moved "
+                             "('bridgesurvey reflector replace')", words="a pier target moved (left out)")
 FLAG_REFERENCE_MISSING = _flag("reference_missing", WARNING, "a reference target was not found",
-                               "lidar.displacement")
+                               "lidar.displacement", action="look at the pier target (occluded, fallen off?); the "
+                               "others carry the frame this visit", words="a pier target not found")
 FLAG_REFERENCE_INCONSISTENT = _flag("reference_inconsistent", PROBLEM, "reference distances changed beyond "
-                                    "tolerance", "lidar.displacement")
+                                    "tolerance", "lidar.displacement",
+                                    action="inspect the pier targets: several moved; the displacements cannot be "
+                                    "trusted until the reference group is sound", words="pier targets inconsistent")
 FLAG_NORMAL_FROM_EPOCH = _flag("normal_refitted_in_epoch", INFO, "deck normal re-fitted in this epoch (fewer "
                                "references than needed, or the fit agreed with the carried normal)",
-                               "lidar.displacement")
+                               "lidar.displacement", words="deck normal re-fitted")
 FLAG_REFERENCE_AMBIGUOUS = _flag("reference_change_ambiguous", WARNING, "the reference group changed and the "
-                                 "moved target could not be singled out", "lidar.displacement")
+                                 "moved target could not be singled out", "lidar.displacement",
+                                 action="inspect the pier targets named and replace the one that moved",
+                                 words="a pier target moved, which one is unclear")
 FLAG_REFERENCE_UNRESOLVED = _flag("reference_move_unresolved", PROBLEM, "a reference target moved and neither the "
                                   "pier targets nor the deck's shape single it out: the displacements rest on the "
                                   "likeliest guess, or on the targets left once both suspects are left out, and may "
                                   "carry that move's tilt (errors of 5-15 sigma seen in simulation)",
-                                  "lidar.displacement")
+                                  "lidar.displacement", action="inspect the pier targets named, replace the one that "
+                                  "moved, and process again", words="a pier target moved and could not be found")
 FLAG_REFERENCE_GEOMETRY_WEAK = _flag("reference_geometry_weak", PROBLEM, "the reference targets found (and the "
                                      "deck's sideways stability) cannot fix one of the frame's rotations: all on "
                                      "one line, or in one plane seen edge-on; the displacements are undetermined "
-                                     "about that axis", "lidar.displacement")
+                                     "about that axis", "lidar.displacement",
+                                     action="re-scan from a station that sees pier targets off that line, or add "
+                                     "pier targets", words="pier targets on one line")
 
-# ---- the field error budget: scale, range walk, drift (lidar.systematic, projects.processing)
+# ---- the field error budget: scale, range walk, drift (lidar.systematic, lidar.stage2)
 FLAG_SCALE_UNDETERMINED = _flag("scale_undetermined", INFO, "the reference targets cannot determine the "
                                 "atmosphere's range scale (too close together): its sigma is a plausible "
-                                "atmosphere's", "projects.processing")
+                                "atmosphere's",
+                                "lidar.systematic.campaign_fit", words="range scale undetermined (sigma widened)")
 FLAG_RANGE_WALK_UNDETERMINED = _flag("range_walk_undetermined", INFO, "too few or too alike stations to determine "
                                      "the retro-reflector range walk: sigma widened to what a plausible bias "
-                                     "would cause", "projects.processing")
+                                     "would cause",
+                                     "lidar.systematic.campaign_fit", words="range walk undetermined (sigma widened)")
 FLAG_FIELD_MISFIT = _flag("field_model_misfit", WARNING, "the target's centroid did not fit the campaign's field "
                           "model in a visit and was left out of its fit: something the model does not hold (a "
                           "range walk of that target's own, a knock, a cable tie) may bias the value beyond its "
-                          "sigma; on every row of an epoch when it is a reference target", "projects.processing")
+                          "sigma; on every row of an epoch when it is a reference target", "lidar.stage2",
+                          action="inspect the target named (cable tie, damage, a knock) and distrust its value "
+                          "beyond its sigma", words="did not fit the field model")
 FLAG_DRIFT_FROM_PLAN = _flag("drift_from_plan_times", INFO, "the fine scans carry no point times: the set-up's "
-                             "drift was fitted on the plan's window order and time model", "projects.processing")
+                             "drift was fitted on the plan's window order and time model",
+                             "lidar.systematic.campaign_fit",
+                             words="drift from the plan's times")
 FLAG_DRIFT_BEYOND_SPEC = _flag("drift_beyond_tolerance", WARNING, "the set-up turned more during the visit than "
-                               "the instrument allows for: re-scan advised", "projects.processing")
+                               "the instrument allows for", "lidar.stage2",
+                               action="check the tripod and the instrument's levelling, and re-scan",
+                               words="the set-up drifted beyond tolerance")
 FLAG_ATMOSPHERE_UNCORRECTED = _flag("atmosphere_not_corrected_by_instrument", INFO, "the range scale measured on "
                                     "the piers follows the air's temperature and pressure: the instrument did not "
-                                    "correct for the atmosphere (the scale is corrected here)", "projects.processing")
+                                    "correct for the atmosphere (the scale is corrected here)",
+                                    "lidar.systematic.campaign_fit",
+                                    words="atmosphere corrected here")
 FLAG_ATMOSPHERE_CORRECTED = _flag("atmosphere_corrected_by_instrument", INFO, "no range scale left where the air "
-                                  "predicts one: the instrument corrected for the atmosphere", "projects.processing")
+                                  "predicts one: the instrument corrected for the atmosphere",
+                                  "lidar.systematic.campaign_fit",
+                                  words="atmosphere corrected by the instrument")
 FLAG_ATMOSPHERE_DISAGREES = _flag("scale_disagrees_with_atmosphere", WARNING, "the range scale measured on the "
                                   "piers disagrees with what the air's temperature and pressure predict",
-                                  "projects.processing")
+                                  "lidar.systematic.campaign_fit",
+                                  action="check the air readings' times and the instrument's atmosphere setting; a "
+                                  "pier that moved along the span also shows as a scale",
+                                  words="range scale disagrees with the air")
 
-# ---- an epoch with no result, or a history (projects.processing)
+# ---- an epoch with no result, or a history (lidar.stage2, lidar.setups)
 FLAG_DECK_NOT_MEASURED = _flag("deck_not_measured", PROBLEM, "too few deck targets measured for a "
-                               "displacement", "projects.processing")
+                               "displacement", "lidar.stage2", action="re-scan the deck targets (at least 3)",
+                               words="too few deck targets measured")
 FLAG_PIERS_NOT_MEASURED = _flag("piers_not_measured", PROBLEM, "no reference target measured in both this "
-                                "epoch and the baseline", "projects.processing")
+                                "epoch and the baseline", "lidar.stage2", action="re-scan the pier targets",
+                                words="no pier target measured")
 FLAG_NO_DISPLACEMENT = _flag("no_displacement", PROBLEM, "the displacements could not be computed (the reason "
-                             "follows)", "projects.processing")
+                             "follows)", "lidar.stage2", action="act on the reason given, then process again",
+                             words="no displacement computed")
 FLAG_SETUP_NOT_JOINED = _flag("setup_not_joined", PROBLEM, "a set-up of the visit could not be joined to the "
                               "others (too few well-spread shared targets): its targets are left out",
-                              "projects.processing.setups")
+                              "lidar.setups", action="re-scan from a station that shares at least three "
+                              "well-spread targets with the others", words="a set-up could not be joined")
 FLAG_SETUP_JOIN_MISFIT = _flag("setup_join_misfit", WARNING, "a target seen from two set-ups disagreed beyond its "
-                               "sigmas and was measured from one of them only", "projects.processing.setups")
+                               "sigmas and was measured from one of them only", "lidar.setups",
+                               action="inspect the target named (moved between the set-ups? a cable tie?)",
+                               words="set-ups disagreed on a target")
 FLAG_SETUP_NOT_MEASURED = _flag("setup_not_measured", WARNING, "a set-up of the visit has no fine scans (or they "
-                                "failed): the targets only it sees are missing", "projects.processing")
+                                "failed): the targets only it sees are missing", "lidar.stage2",
+                                action="import its fine scans ('bridgesurvey add-fine --setup K') and process",
+                                words="a set-up without fine scans")
 FLAG_CHAINED = _flag("chained_to_replaced_target", INFO, "history continues from a replaced target",
-                     "projects.processing")
+                     "lidar.stage2", words="history continued from a replaced target")
 FLAG_DEPARTS = _flag("departs_from_prediction", WARNING, "the displacement departs from the design prediction "
-                     "by more than its tolerance", "projects.results")
+                     "by more than its tolerance", "projects.results",
+                     action="compare with the structure's state (inspection) and the design assumptions",
+                     words="departs from the design prediction")
 
 # ---- the camera cross-check (vision.crossval)
-FLAG_NO_CAMERA_DATA = _flag("no_camera_data", WARNING, "no camera samples around this LiDAR epoch",
-                            "vision.crossval")
+FLAG_NO_CAMERA_DATA = _flag("no_camera_data", INFO, "no camera samples around this LiDAR epoch",
+                            "vision.crossval", words="no camera samples")
 FLAG_FEW_CAMERA_SAMPLES = _flag("few_camera_samples", INFO, "few camera samples around this LiDAR epoch",
-                                "vision.crossval")
-FLAG_NO_LIDAR_VALUE = _flag("no_lidar_value", WARNING, "no LiDAR displacement at this epoch", "vision.crossval")
+                                "vision.crossval", words="few camera samples")
+FLAG_NO_LIDAR_VALUE = _flag("no_lidar_value", INFO, "no LiDAR displacement at this epoch", "vision.crossval",
+                            words="no LiDAR value")
 
 # ---- one frame of the dual-camera method (vision.compensation)
 FLAG_MAIN_TARGET_MISSING = _flag("main_target_missing", WARNING, "the main camera's target was not found in "
-                                 "this frame", "vision.compensation")
+                                 "this frame", "vision.compensation", action="check the main camera's view of its "
+                                 "target (obstructed, out of focus?)", words="main camera's target not found")
 FLAG_SUB_TARGET_MISSING = _flag("sub_target_missing", WARNING, "the sub-camera's checkerboard was not found in "
-                                "this frame", "vision.compensation")
+                                "this frame", "vision.compensation", action="check the sub-camera's view of the "
+                                "checkerboard (obstructed, moved?)", words="sub-camera's checkerboard not found")
 
 #: Codes of older versions and what they are now (applied by the campaign migrations and when reading
 #: files written by older versions).
@@ -232,6 +308,24 @@ def severity(flag: str) -> str:
     ('info', 'warning', 'problem')
     """
     return lookup(flag).severity
+
+
+def action(flag: str) -> str:
+    """What the surveyor does about a flag (empty for information).
+
+    >>> action("grazing")
+    ''
+    """
+    return lookup(flag).action
+
+
+def words(flag: str) -> str:
+    """The flag in plain words, for the report's body and one-line summaries.
+
+    >>> words("grazing")
+    'seen at grazing incidence (sigma widened)'
+    """
+    return lookup(flag).words
 
 
 def meaning(flag: str) -> str:

@@ -25,7 +25,9 @@ reference target that moved between visits). The range walk's family is chosen b
 """
 from __future__ import annotations
 
+import hashlib
 import itertools
+import json
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -53,6 +55,9 @@ ALTERNATIVE_BIC = 10.0
 MAX_ALTERNATIVES = 96
 #: Rounds of choosing the range walk's family and the axis errors again on the previous round's final fit
 MAX_LAW_ROUNDS = 3
+#: Format version of a saved field model (the store's and the campaign's ``bias.json``). 2 adds the instrument's
+#: axis errors (``axes``); a version-1 model has none.
+FIELD_MODEL_FORMAT_VERSION = 2
 #: A scale whose sigma exceeds this is not determined by the reference geometry (ppm).
 SCALE_DETERMINED_PPM = 15.0
 
@@ -112,6 +117,22 @@ class VisitSystematics:
     def drift_sigma_arcsec_h(self) -> np.ndarray:
         return np.sqrt(np.maximum(np.diag(self.drift_cov), 0.0))
 
+    def to_json(self) -> dict:
+        """The visit's scale and drift as JSON (part of :meth:`FieldModel.to_json`)."""
+        return {"label": self.label, "scale_ppm": self.scale_ppm, "scale_sigma_ppm": self.scale_sigma_ppm,
+                "drift_arcsec_h": np.asarray(self.drift_arcsec_h).tolist(),
+                "drift_cov": np.asarray(self.drift_cov).tolist(), "time_ref_s": self.time_ref_s, "timed": self.timed,
+                "scale_determined": self.scale_determined, "left_out": list(self.left_out),
+                "alternative_scale_ppm": list(self.alternative_scale_ppm), "misfit": self.misfit}
+
+    @classmethod
+    def from_json(cls, d: Mapping) -> VisitSystematics:
+        """The inverse of :meth:`to_json`."""
+        return cls(d["label"], float(d["scale_ppm"]), float(d["scale_sigma_ppm"]),
+                   np.asarray(d["drift_arcsec_h"], dtype=float), np.asarray(d["drift_cov"], dtype=float),
+                   float(d["time_ref_s"]), bool(d["timed"]), bool(d["scale_determined"]), tuple(d.get("left_out", ())),
+                   tuple(float(x) for x in d.get("alternative_scale_ppm", ())), float(d.get("misfit", 1.0)))
+
 
 @dataclass(frozen=True, eq=False)
 class FieldModel:
@@ -127,6 +148,26 @@ class FieldModel:
 
     def visit(self, label: str) -> VisitSystematics:
         return self.visits.get(label) or VisitSystematics(label)
+
+    def to_json(self) -> dict:
+        """The model as the versioned JSON of the campaign's ``bias.json`` (:data:`FIELD_MODEL_FORMAT_VERSION`)."""
+        return {"format_version": FIELD_MODEL_FORMAT_VERSION, "baseline": self.baseline,
+                "range_walk": self.range_walk.to_json(), "sigma0": self.sigma0, "n_observations": self.n_observations,
+                "notes": list(self.notes), "visits": [v.to_json() for v in self.visits.values()],
+                "axes": self.axes.to_json()}
+
+    @classmethod
+    def from_json(cls, d: Mapping) -> FieldModel:
+        """The inverse of :meth:`to_json`; a version-1 model has no axis errors, a newer version is an error."""
+        if int(d.get("format_version", 1)) > FIELD_MODEL_FORMAT_VERSION:
+            raise InputError("the campaign's field model was written by a newer BridgeSurvey")
+        visits = {v["label"]: VisitSystematics.from_json(v) for v in d.get("visits", ())}
+        return cls(d["baseline"], RangeWalkModel.from_json(d["range_walk"]), visits, float(d.get("sigma0", 1.0)),
+                   int(d.get("n_observations", 0)), tuple(d.get("notes", ())), AxisModel.from_json(d.get("axes")))
+
+    def digest(self) -> str:
+        """A digest of the whole model (what the store keeps beside it), 24 hex digits."""
+        return hashlib.sha256(json.dumps(self.to_json(), sort_keys=True).encode()).hexdigest()[:24]
 
 
 @dataclass

@@ -24,7 +24,8 @@ from lidar.systematic.corrections import CorrectionJacobian, correct_visit, cos_
 from lidar.systematic.range_walk import design, family_spread2
 
 
-def _side(centroids: Mapping[str, Sighted], model: FieldModel, label: str):
+def corrected_observations(centroids: Mapping[str, Sighted], model: FieldModel, label: str
+                           ) -> tuple[dict[str, Observation], dict[str, CorrectionJacobian]]:
     """Corrected observations (covariance widened by the visit's misfit) and their Jacobians.
 
     A visit whose centroids the field model fits worse than their covariances say (``misfit`` > 1: something
@@ -32,7 +33,7 @@ def _side(centroids: Mapping[str, Sighted], model: FieldModel, label: str):
     range walk's families is left out of the observations' covariances: it is one error common to every
     target (a family moves all of them at once), which an observation's own covariance cannot hold without
     re-weighting the reference fit against it; it enters the budget through each family's deviations
-    (:func:`_deviations`) instead.
+    (:func:`family_deviations`) instead.
     """
     vis = model.visit(label)
     inflate = max(1.0, vis.misfit) ** 2
@@ -64,15 +65,15 @@ def corrected_displacements(baseline: Mapping[str, Sighted], epoch: Mapping[str,
     EpochDisplacements
         Each displacement's ``budget`` holds every term; ``sigma_m`` is their sum in quadrature.
     """
-    b_obs, b_jac = _side(baseline, model, baseline_label)
-    e_obs, e_jac = _side(epoch, model, epoch_label)
+    b_obs, b_jac = corrected_observations(baseline, model, baseline_label)
+    e_obs, e_jac = corrected_observations(epoch, model, epoch_label)
     res = compute_displacements(b_obs, e_obs, groups, **options)  # type: ignore[arg-type]
     sens = res.sensitivity
     if sens is None:
         return res
     jacs = {"baseline": b_jac, "epoch": e_jac}
-    devs = {"baseline": _deviations(baseline, model, baseline_label, {k: o.xyz for k, o in b_obs.items()}),
-            "epoch": _deviations(epoch, model, epoch_label, {k: o.xyz for k, o in e_obs.items()})}
+    devs = {"baseline": family_deviations(baseline, model, baseline_label, {k: o.xyz for k, o in b_obs.items()}),
+            "epoch": family_deviations(epoch, model, epoch_label, {k: o.xyz for k, o in e_obs.items()})}
     weights = np.array([a[2] for a in model.range_walk.alternatives])
     cov_theta = model.range_walk.covariance_m2
     cov_axes = model.axes.covariance_arcsec2
@@ -134,7 +135,7 @@ def _terms(row: np.ndarray, inputs, jacs: Mapping[str, Mapping[str, CorrectionJa
             "alternatives": float(family_spread2(alt, weights))}
 
 
-def _deviations(centroids: Mapping[str, Sighted], model: FieldModel, label: str, corrected: Mapping[str, np.ndarray]
+def family_deviations(centroids: Mapping[str, Sighted], model: FieldModel, label: str, corrected: Mapping[str, np.ndarray]
                 ) -> dict[str, np.ndarray]:
     """(n_alternatives, 3) per centroid: the corrected position under each supported family minus the chosen one."""
     rw = model.range_walk

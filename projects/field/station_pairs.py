@@ -1,7 +1,7 @@
 """A pair of set-ups for one visit: the best second station given the first.
 
 When one station cannot see the whole bridge well (a long bridge, a pier hiding targets), a visit takes two
-set-ups, joined through the targets both see (:mod:`projects.processing.setups`). Given the evaluated
+set-ups, joined through the targets both see (:mod:`lidar.setups`). Given the evaluated
 stations (:func:`projects.field.stations.advise_stations`) and the first one (by default the best), the second
 is the one whose predicted sigmas most improve the worst deck target: each target's sigma from the pair is
 its two stations' combined by inverse variance (one station's when only one sees it), and the pair must share
@@ -17,8 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from lidar.layout import Layout
+from lidar.setups import MIN_SHARED, MIN_SPREAD_M, spread_m
 from lidar.stations import StationPrediction
-from projects.processing.setups import MIN_SHARED, MIN_SPREAD_M, spread_m
 
 
 @dataclass(frozen=True)

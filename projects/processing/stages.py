@@ -3,15 +3,16 @@
 Stage 1 (per epoch): coarse scan -> plan; fine scans -> centroids. Its inputs
 hash covers the scan checksums, the reflectors expected at that date, the
 parameters and the pipeline version; an epoch whose hash is unchanged is not
-recomputed. Stage 2 (per epoch): displacements against the baseline, hashed on
-the stage-1 hashes of the epoch and of its baseline(s) and the displacement
-parameters. Adding epoch 100 therefore computes epoch 100 only; changing a
-parameter marks exactly the epochs it affects as stale.
+recomputed. Stage 2 (:mod:`lidar.stage2`, a pure job on one snapshot of the
+campaign, :func:`stage2_inputs`): the field model and the displacements against
+the baseline, hashed on the stage-1 hashes of the epoch and of its baseline(s),
+the displacement parameters and the field model's terms. Adding epoch 100
+therefore computes epoch 100 only; changing a parameter marks exactly the
+epochs it affects as stale. This module decides what is stale, reads the
+store and writes what the jobs computed; it computes no number itself.
 """
 from __future__ import annotations
 
-import hashlib
-import json
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
@@ -19,24 +20,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from common.errors import CancelledError, InputError, ProcessingError, SurveyError
-from common.flags import (
-    FLAG_CHAINED,
-    FLAG_DECK_NOT_MEASURED,
-    FLAG_FIELD_MISFIT,
-    FLAG_MISSING,
-    FLAG_NO_DISPLACEMENT,
-    FLAG_NOT_FOUND,
-    FLAG_PIERS_NOT_MEASURED,
-    FLAG_SETUP_NOT_MEASURED,
-    PROBLEM,
-    WARNING,
-    code,
-    has,
-    in_baseline,
-    severity,
-)
+from common.flags import PROBLEM, severity
 from common.progress import ProgressCallback, report, scaled
-from lidar.displacement import Displacement, EpochDisplacements
 from lidar.identification import MAX_TILT_DEG
 from lidar.io import read_scan
 from lidar.io.poses import read_in_scanner_frame
@@ -45,20 +30,13 @@ from lidar.pipeline import analyse_coarse, measure_fine, plan_from_coarse
 from lidar.plan import ScanPlan
 from lidar.scan import Scan
 from lidar.scanner_profile import ScannerProfile
-from lidar.systematic.adjustment import FieldModel
-from lidar.systematic.budget import corrected_displacements
-from projects.processing.field import atmosphere_flags, epoch_flags, systematics_json, update_field_model, visit_digest
+from lidar.stage2 import Stage2Inputs, StoredDisplacement, VisitInputs, inputs_digest, run_stage2
+from lidar.systematic.campaign_fit import air_near
 from projects.processing.parameters import DEFAULTS, parameter, stage1_params, stage2_params
-from projects.processing.setups import (
-    CorrectedVisit,
-    corrected_side,
-    joined_displacements,
-    visit_label,
-    without_weak_duplicates,
-)
 from projects.store.campaign import Campaign
 from projects.store.previews import encode_preview
 from projects.store.records import EpochInputs, ScanFile
+from vision.series import CameraSeries
 
 log = logging.getLogger(__name__)
 
@@ -125,8 +103,7 @@ def _parameters_of(settings: dict) -> dict:
     return {**DEFAULTS, **{k: v for k, v in settings.items() if k in DEFAULTS}}
 
 
-def _hash(obj) -> str:
-    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:32]
+_hash = inputs_digest
 
 
 @dataclass
@@ -509,335 +486,74 @@ def _stage1_hash(c: Campaign, label: str) -> str | None:
     return _hash([res.inputs_hash, others])
 
 
-class _Setups:
-    """What stage 2 reads of each measured epoch's set-ups: their found centroids and, once corrected, their join."""
+def _measured_setups(c: Campaign, label: str) -> tuple[tuple[int, ...], tuple[int, ...]]:
+    """(every set-up, the measured ones) of an epoch: set-up 1 always counts as measured."""
+    every = c.setups(label)
+    return tuple(every), tuple(k for k in every if k == 1 or ((r := c.result(label, k)) is not None
+                                                            and r.stage == "measured"))
 
-    def __init__(self, c: Campaign, labels: Sequence[str]):
-        self.c = c
-        self.measured: dict[str, list[int]] = {}
-        self.unmeasured: dict[str, list[int]] = {}
-        for lab in labels:
-            every = c.setups(lab)
-            self.measured[lab] = [k for k in every if k == 1 or ((r := c.result(lab, k)) is not None
-                                                                 and r.stage == "measured")]
-            self.unmeasured[lab] = [k for k in every if k not in self.measured[lab]]
-        self.visits = {visit_label(lab, k): (lab, k) for lab in labels for k in self.measured[lab]}
-        self._found: dict[tuple[str, int], dict] = {}
-        self._sides: dict[str, CorrectedVisit] = {}
-        self._model: FieldModel | None = None
 
-    @property
-    def model(self) -> FieldModel:
-        """The campaign's field model, set once it is fitted (before any displacement is computed)."""
-        if self._model is None:
-            raise ProcessingError("the field model is used before it was fitted")
-        return self._model
+def _air_series(c: Campaign) -> list[tuple[str, np.ndarray, np.ndarray]]:
+    """The campaign's air series (temperature, pressure, humidity) as (kind, times ns, values)."""
+    out = []
+    for r in c.series.records("env_series"):
+        if r.kind in ("temperature", "pressure", "humidity"):
+            times, values = CameraSeries.arrays_from_npz(c.series.arrays("env_series", r.name))
+            out.append((r.kind, times, values))
+    return out
 
-    @model.setter
-    def model(self, value: FieldModel) -> None:
-        self._model = value
 
-    def several(self, label: str) -> bool:
-        return len(self.measured[label]) > 1 or bool(self.unmeasured[label])
-
-    def found_setup(self, label: str, setup: int) -> dict:
-        if (label, setup) not in self._found:
-            self._found[(label, setup)] = {k: v for k, v in self.c.centroids(label, setup).items() if v.found}
-        return self._found[(label, setup)]
-
-    def found(self, label: str) -> dict:
-        """Every target found in any set-up of the epoch (set-up 1's centroid first)."""
-        out: dict = {}
-        for k in self.measured[label]:
-            for t, v in self.found_setup(label, k).items():
-                out.setdefault(t, v)
-        return out
-
-    def found_visit(self, visit: str) -> dict:
-        return self.found_setup(*self.visits[visit])
-
-    def closures_visit(self, visit: str) -> dict:
-        return self.c.closure_centroids(*self.visits[visit])
-
-    def side(self, label: str) -> CorrectedVisit:
-        if label not in self._sides:
-            self._sides[label] = corrected_side(label, {k: self.found_setup(label, k) for k in self.measured[label]},
-                                                self.model)
-        return self._sides[label]
-
-    def key(self, labels: Sequence[str]) -> dict:
-        """What the displacements of epochs with several set-ups also depend on: each set-up's field-model terms."""
-        return {lab: {"measured": {str(k): visit_digest(self.model, visit_label(lab, k), visit_label(lab, k))
-                                   for k in self.measured[lab]}, "unmeasured": self.unmeasured[lab]}
-                for lab in labels if self.several(lab)}
+def stage2_inputs(c: Campaign, baseline: str) -> Stage2Inputs:
+    """Everything stage 2 needs of the campaign, read in one snapshot (see :class:`lidar.stage2.Stage2Inputs`)."""
+    with c.snapshot():
+        params = parameters(c)
+        refl = {r.id: r for r in c.reflectors()}
+        epochs = c.epochs()
+        order = {e.label: n for n, e in enumerate(epochs)}
+        air_records = [r for r in c.series.records("env_series") if r.kind in ("temperature", "pressure", "humidity")]
+        series = _air_series(c) if air_records else []
+        visits = []
+        for e in epochs:
+            digest = _stage1_hash(c, e.label)
+            if not digest:
+                continue
+            every, measured = _measured_setups(c, e.label)
+            air = air_near(series, int(e.when.timestamp() * 1e9)) if series else None
+            visits.append(VisitInputs(
+                e.label, digest, every, measured, {k: c.centroids(e.label, k) for k in every},
+                {k: c.closure_centroids(e.label, k) for k in measured},
+                {k: c.time_source(e.label, k) or "none" for k in measured}, air,
+                c.profile_for(e.label).wavelength_nm))
+        stored = c.field_model()
+        stored_digests = {v.label: ds.inputs_hash for v in visits if (ds := c.displacement_set(v.label)) is not None}
+        replaced = {r.replaces for r in refl.values() if r.replaces}
+        history = {old: tuple(StoredDisplacement(d.epoch, order[d.epoch], float(d.displacement_m), float(d.sigma_m))
+                              for d in c.displacements() if d.reflector == old and d.displacement_m is not None
+                              and d.sigma_m is not None and d.epoch in order)
+                   for old in replaced}
+    return Stage2Inputs(baseline, tuple(visits), {rid: r.group for rid, r in refl.items()},
+                        {rid: r.replaces for rid, r in refl.items() if r.replaces},
+                        tuple(sorted((k, repr(v)) for k, v in refl.items())), params, stage2_params(params),
+                        tuple(sorted(r.sha256 for r in air_records)), None if stored is None else stored[0],
+                        stored_digests, history, order)
 
 
 def update_displacements(c: Campaign, baseline: str, *, reasons: dict | None = None) -> list[str]:
     """(Re)compute the displacements of every measured epoch whose inputs changed; returns those epochs.
 
-    The campaign's field model (:mod:`projects.processing.field`) is fitted first over every measured
-    epoch (every set-up of one, as a visit of its own); each epoch's displacements depend on it through
-    its digest of the two visits' terms. The set-ups of an epoch are joined (:mod:`projects.processing.setups`).
-    The stored digest is ``inputs:field`` so that ``reasons`` (epoch -> ``"field"`` or ``"inputs"``) can
-    say whether only the field model moved (a new epoch refines the campaign-wide range walk).
+    Stage 2 is a pure job (:func:`lidar.stage2.run_stage2`) on one snapshot of the campaign
+    (:func:`stage2_inputs`): the campaign's field model is fitted first over every measured epoch (every set-up
+    of one, as a visit of its own), then each changed epoch's displacements. What it computed is stored in one
+    transaction. ``reasons`` (epoch -> ``"field"``, ``"inputs"`` or ``"new"``) says why each was recomputed.
     """
-    params = parameters(c)
-    refl = {r.id: r for r in c.reflectors()}
-    groups = {rid: r.group for rid, r in refl.items()}
-    measured = [e.label for e in c.epochs() if _stage1_hash(c, e.label)]
-    if baseline not in measured:
+    inputs = stage2_inputs(c, baseline)
+    if baseline not in [v.label for v in inputs.visits]:
         return []
-    su = _Setups(c, measured)
-    found = su.found
-    first_seen: dict[str, str] = {}
-    start = measured.index(baseline)
-    for lab in measured[start:]:
-        for rid in found(lab):
-            first_seen.setdefault(rid, lab)
-    visits = [v for v in su.visits]
-    model = update_field_model(c, baseline, visits, groups, su.found_visit, enabled=bool(params["field_model"]),
-                               closures=su.closures_visit)
-    su.model = model
-    # the air's series decide the atmosphere's flags (projects.processing.field.atmosphere_flags)
-    air = sorted(r.sha256 for r in c.series.records("env_series") if r.kind in ("temperature", "pressure", "humidity"))
-    done = []
-    for pos, lab in enumerate(measured):
-        meas_here = [m for m in found(lab) if groups.get(m) == "measurement"]
-        if pos < start:  # dated before the baseline: negative time against it, never a new baseline
-            bases = [baseline]
-        else:
-            bases = sorted({first_seen[m] for m in meas_here} | {baseline}, key=measured.index)
-        key = {"v": PIPELINE_VERSION, "epoch": _stage1_hash(c, lab), "params": stage2_params(params),
-               "bases": {b: _stage1_hash(c, b) for b in bases}, "reflectors": sorted((k, repr(v)) for k, v in refl.items()),
-               "air": air}
-        field_key: dict = {b: visit_digest(model, b, lab) for b in bases}
-        if any(su.several(x) for x in [*bases, lab]):
-            field_key["setups"] = su.key(sorted({*bases, lab}))
-        core = _hash(key)
-        h = f"{core}:{_hash(field_key)}"
-        stored = c.displacement_set(lab)
-        if stored is not None and stored.inputs_hash == h:
-            continue
-        if reasons is not None and stored is not None:
-            reasons[lab] = "field" if stored.inputs_hash.split(":")[0] == core else "inputs"
-        result = _epoch_displacements(c, lab, bases, baseline, found, groups, first_seen, params, model, refl,
-                                      _displacements_of(su, params))
-        if result is None:
-            continue
-        time_source = c.time_source(lab)
-        flags, systematics = _setup_terms(su, lab, epoch_flags(model, lab, time_source),
-                                          systematics_json(model, lab, time_source))
-        result = replace(result, flags=tuple(result.flags) + tuple(flags) + tuple(atmosphere_flags(c, model, lab)))
-        c.save_displacements(lab, baseline, result, h, systematics=systematics)
-        done.append(lab)
-    return done
-
-
-def _displacements_of(su: _Setups, params: dict):
-    """``f(b, lab, groups)``: one epoch's displacements against ``b``, joining set-ups when either has several."""
-    options = {"normal_mode": params["normal_mode"], "moved_tolerance_m": params["moved_tolerance_m"],
-               "weighted": bool(params["weighted_references"])}
-
-    def displacements(b: str, lab: str, groups: dict) -> EpochDisplacements:
-        if not su.several(b) and not su.several(lab):
-            return corrected_displacements(su.found(b), su.found(lab), groups, model=su.model, baseline_label=b,
-                                           epoch_label=lab, **options)
-        return joined_displacements(su.side(b), su.side(lab), groups, model=su.model, **options)
-    return displacements
-
-
-def _setup_terms(su: _Setups, lab: str, flags: list, systematics: dict) -> tuple[list, dict]:
-    """An epoch's flags and systematics with its set-ups': their field-model flags, the join's flags and QA."""
-    if not su.several(lab):
-        return flags, systematics
-    flags = list(flags)
-    per_setup = {}
-    for k in su.measured[lab][1:]:
-        v = visit_label(lab, k)
-        ts = su.c.time_source(lab, k)
-        flags += [f for f in epoch_flags(su.model, v, ts) if f not in flags]
-        per_setup[str(k)] = systematics_json(su.model, v, ts)
-    for k in su.unmeasured[lab]:
-        flags.append(f"{FLAG_SETUP_NOT_MEASURED}: set-up {k} has no measured fine scans; the targets only it sees "
-                     "are missing (import them with 'bridgesurvey add-fine --setup', then process)")
-    try:
-        join = su.side(lab).join
-    except SurveyError as exc:  # no set-up with a target: the epoch's displacements already say why
-        log.warning("epoch %s: %s", lab, exc)
-        return flags, systematics
-    flags += join.flags()
-    return flags, {**systematics, "setups": {**join.to_json(), "systematics": per_setup}}
-
-
-def _epoch_displacements(c: Campaign, lab: str, bases: list, baseline: str, found, groups: dict, first_seen: dict,
-                         params: dict, model, refl: dict, displacements_of=None) -> EpochDisplacements | None:
-    """One epoch's displacements against the baseline (and the later baselines of targets that replaced others)."""
-    cents = found(lab)
-    meas_here = [m for m in cents if groups.get(m) == "measurement"]
-    base_deck = [m for m in found(baseline) if groups.get(m) == "measurement"]
-    if len(base_deck) < 3:  # nothing can be referred to this baseline: say so on every epoch, with what to do
-        n_meas = sum(1 for g in groups.values() if g == "measurement")
-        return _failed_result(groups, found(baseline), cents, baseline, "", flag=(
-            f"{FLAG_DECK_NOT_MEASURED}: the baseline {baseline} measured {len(base_deck)} of {n_meas} deck targets, "
-            "at least 3 needed: choose another baseline ('bridgesurvey settings DIR baseline LABEL') or re-scan it"))
-    result = None
-    extra: list = []
-    failure = None
-    for b in bases:
-        targets = [m for m in meas_here if first_seen.get(m) == b] if b != baseline else \
-            [m for m in groups if groups[m] == "measurement" and first_seen.get(m, baseline) == baseline]
-        if not targets:
-            continue
-        sub_groups = {r: g for r, g in groups.items() if g == "reference" or r in targets}
-        try:
-            if displacements_of is not None:
-                res = displacements_of(b, lab, sub_groups)
-            else:
-                res = corrected_displacements(found(b), cents, sub_groups, model=model, baseline_label=b,
-                                              epoch_label=lab, normal_mode=params["normal_mode"],
-                                              moved_tolerance_m=params["moved_tolerance_m"],
-                                              weighted=bool(params["weighted_references"]))
-        except SurveyError as exc:
-            log.warning("epoch %s against %s: %s", lab, b, exc)
-            if b == baseline:
-                failure = str(exc).splitlines()[0].replace(";", ",")
-            continue
-        if b == baseline:
-            result = res
-        else:
-            extra += [_chain(c, d, b, refl) for d in res.displacements]
-    if result is None:
-        if failure is None:
-            return None
-        result = _failed_result(groups, found(baseline), cents, baseline, failure)
-    elif not any(np.isfinite(d.displacement_m) for d in result.displacements):
-        n_meas = sum(1 for g in groups.values() if g == "measurement")
-        result = replace(result, flags=tuple(result.flags) + (
-            f"{FLAG_DECK_NOT_MEASURED}: none of the {n_meas} deck targets was found in this epoch",))
-    if lab == baseline:  # the baseline against itself: zero by definition, exactly known
-        result = replace(result, displacements=tuple(
-            replace(d, displacement_m=0.0, sigma_m=0.0, along_m=0.0, along_sigma_m=0.0,
-                    budget={k: 0.0 for k in d.budget}) if np.isfinite(d.displacement_m) else d
-            for d in result.displacements))
-    if extra:  # a target measured against a later baseline replaces its row against this one
-        chained = {d.reflector for d in extra}
-        result = replace(result, displacements=tuple(d for d in result.displacements if d.reflector not in chained)
-                         + tuple(extra))
-    return _with_field_misfits(model, c.setups(lab), c.setups(baseline), lab, baseline, groups,
-                               _with_centroid_doubts(c, lab, baseline, _why_missing(c, lab, result)))
-
-
-def _with_field_misfits(model, setups: Sequence[int], base_setups: Sequence[int], lab: str, baseline: str,
-                        groups: dict, result: EpochDisplacements) -> EpochDisplacements:
-    """Rows whose sightings the field model left out of its fit (in the epoch or the baseline) say so.
-
-    A sighting the adjustment down-weighted to nothing does not fit the model that corrects it: its corrected
-    centroid may be off by more than the budget holds (a target whose range walk is not the campaign's: seen
-    in simulation 4-6 sigma off with no flag). A deck target's own row carries the flag; a reference target's
-    goes on every row (it sets the frame).
-    """
-    def left(label: str, ks: Sequence[int]) -> set:
-        return {t for k in ks for t in model.visit(visit_label(label, k)).left_out}
-
-    sides = [(left(lab, setups), "")] + ([(left(baseline, base_setups), baseline)] if baseline != lab else [])
-    if not any(out for out, _ in sides):
-        return result
-
-    def flag(target: str, where: str) -> str:
-        what = "reference target" if groups.get(target) == "reference" else "target"
-        text = f"{FLAG_FIELD_MISFIT}: {what} {target} did not fit the field model and was left out of its fit"
-        return in_baseline(text, where) if where else text
-
-    rows = []
-    for d in result.displacements:
-        if np.isfinite(d.displacement_m):
-            extra = [flag(t, where) for out, where in sides for t in sorted(out)
-                     if t == d.reflector or groups.get(t) == "reference"]
-            extra = [f for f in extra if f not in d.flags]
-            if extra:
-                d = replace(d, flags=tuple(d.flags) + tuple(extra))
-        rows.append(d)
-    return replace(result, displacements=tuple(rows))
-
-
-def _with_centroid_doubts(c: Campaign, lab: str, baseline: str, result: EpochDisplacements) -> EpochDisplacements:
-    """A displacement whose centroid (in the epoch or the baseline) carries a warning carries it on its row too.
-
-    A surveyor reads the displacement table, not the centroids: a target measured at grazing incidence, beside
-    a second bright object or off its expected position says so where its number is (the baseline's with
-    ``(in the baseline L)`` after it). Every set-up's found centroids count.
-    """
-    def said(flag: str, where: str) -> str:
-        return in_baseline(flag, baseline) if where else flag
-
-    def found_flags(label: str) -> dict:  # the sightings the displacement used (not a weak one left out of a join)
-        out: dict = {}
-        found = {k: {t: v for t, v in c.centroids(label, k).items() if v.found} for k in c.setups(label)}
-        for cents in without_weak_duplicates(found).values():
-            for t, v in cents.items():
-                out.setdefault(t, []).extend(f for f in v.flags if f not in out.get(t, []))
-        return out
-
-    sides = [(found_flags(lab), "")] + ([(found_flags(baseline), "b")] if baseline != lab else [])
-    rows = []
-    for d in result.displacements:
-        if np.isfinite(d.displacement_m):
-            extra = [said(f, where) for flags, where in sides for f in flags.get(d.reflector, ())
-                     if severity(f) in (WARNING, PROBLEM) and said(f, where) not in d.flags]
-            if extra:
-                d = replace(d, flags=tuple(d.flags) + tuple(extra))
-        rows.append(d)
-    return replace(result, displacements=tuple(rows))
-
-
-def _why_missing(c: Campaign, lab: str, result: EpochDisplacements) -> EpochDisplacements:
-    """A target without a value carries, on its row, why its centroid was not found (beside ``missing``)."""
-    if not any(has(d.flags, FLAG_MISSING) for d in result.displacements):
-        return result
-    setups = c.setups(lab)
-    every = [c.centroids(lab, k) for k in setups]
-    rows = []
-    for d in result.displacements:
-        seen = [cents[d.reflector] for cents in every if d.reflector in cents]
-        tc = next((t for t in seen if t.found), seen[0] if seen else None)
-        if has(d.flags, FLAG_MISSING) and tc is not None and not tc.found:
-            d = replace(d, flags=tuple(d.flags) + tuple(f for f in tc.flags if code(f) != FLAG_NOT_FOUND))
-        rows.append(d)
-    return replace(result, displacements=tuple(rows))
-
-
-def _failed_result(groups: dict, base: dict, cents: dict, baseline: str, reason: str, *,
-                   flag: str | None = None) -> EpochDisplacements:
-    """An epoch with no displacement: every deck target missing, and a problem flag saying why (or ``flag``)."""
-    refs = [r for r, g in groups.items() if g == "reference"]
-    meas = [m for m, g in groups.items() if g == "measurement"]
-    both = [r for r in refs if r in base and r in cents]
-    found_meas = [m for m in meas if m in cents]
-    if flag is not None:
-        pass
-    elif not both:
-        flag = (f"{FLAG_PIERS_NOT_MEASURED}: no reference target was found in both this epoch and the baseline "
-                f"{baseline} ({len([r for r in refs if r in cents])} of {len(refs)} found here)")
-    elif len(found_meas) < 3:
-        flag = f"{FLAG_DECK_NOT_MEASURED}: {len(found_meas)} of {len(meas)} deck targets found, at least 3 needed"
-    else:
-        flag = f"{FLAG_NO_DISPLACEMENT}: {reason}"
-    nan = float("nan")
-    disp = tuple(Displacement(m, nan, nan, nan, nan, (FLAG_MISSING,)) for m in meas)
-    return EpochDisplacements(disp, (), (), np.full(3, nan), np.full(3, nan), "none", (flag,))
-
-
-def _chain(c: Campaign, d, base_label: str, refl: dict):
-    """A target first measured after the baseline: continue the history of the target it replaced."""
-    old = refl[d.reflector].replaces
-    if not old:
-        return d
-    last = c.last_displacement(old, at_or_before=base_label)
-    if last is None or last.displacement_m is None or last.sigma_m is None or not np.isfinite(d.displacement_m):
-        return d
-    return replace(d, displacement_m=d.displacement_m + last.displacement_m,
-                   sigma_m=float(np.hypot(d.sigma_m, last.sigma_m)),
-                   flags=tuple(d.flags) + (FLAG_CHAINED,))
+    result = run_stage2(inputs)
+    c.save_stage2(baseline, result.model if result.model_changed else None, result.epochs)
+    if reasons is not None:
+        reasons.update({e.label: e.reason for e in result.epochs if e.reason != "new"})
+    return result.labels
 
 
 def save_edited_plan(c: Campaign, label: str, plan: ScanPlan) -> None:

@@ -12,7 +12,20 @@ import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
-from common.flags import FLAG_DEPARTS, FLAG_REFERENCE_AMBIGUOUS, PROBLEM, WARNING, code, count, is_from_baseline, worst
+from common.flags import (
+    FLAG_DEPARTS,
+    FLAG_NOT_FOUND,
+    FLAG_REFERENCE_AMBIGUOUS,
+    FLAG_UNRESOLVED,
+    PROBLEM,
+    WARNING,
+    code,
+    count,
+    has,
+    is_from_baseline,
+    words,
+    worst,
+)
 from projects.store.campaign import Campaign
 from projects.store.records import DisplacementRecord
 
@@ -137,6 +150,18 @@ def _own_flags(c: Campaign, label: str, flags: Sequence[str]) -> list[str]:
     return out
 
 
+def _one_name(flags: Sequence[str]) -> list[str]:
+    """A centroid's flags with a target not found said once: ``not_found`` with its reason in plain words."""
+    if not has(flags, FLAG_NOT_FOUND):
+        return list(flags)
+    reasons = [f for f in flags if code(f) != FLAG_NOT_FOUND]
+    if any(code(f) == FLAG_UNRESOLVED for f in reasons):
+        return [f for f in reasons if code(f) == FLAG_UNRESOLVED][:1]
+    if not reasons:
+        return [FLAG_NOT_FOUND]
+    return [f"{FLAG_NOT_FOUND}: " + "; ".join(dict.fromkeys(words(f) for f in reasons))]
+
+
 def _stage(c: Campaign, label: str, has_displacements: bool) -> str:
     if has_displacements:
         return "processed"
@@ -160,6 +185,7 @@ def epoch_states(c: Campaign, labels: Sequence[str] | None = None, *,
     per_target: dict[str, dict[str, list[str]]] = {lab: {} for lab in wanted}
     records = c.displacements()
     departed = departures(c, records) if departed is None else departed
+    with_rows = {(r.epoch, r.reflector) for r in records}
     for r in records:
         if r.epoch in per_target:
             extra = [FLAG_DEPARTS] if (d := departed.get((r.epoch, r.reflector))) is not None and d.departs else []
@@ -171,7 +197,11 @@ def epoch_states(c: Campaign, labels: Sequence[str] | None = None, *,
         ds = c.displacement_set(lab)
         targets = per_target[lab]
         for rid, cent in c.centroids(lab).items():
-            targets.setdefault(rid, []).extend(cent.flags)
+            if (lab, rid) in with_rows:  # its row says it (a missing target's reason in its 'missing' flag)
+                if cent.found:
+                    targets.setdefault(rid, []).extend(f for f in cent.flags if f not in targets.get(rid, ()))
+                continue
+            targets.setdefault(rid, []).extend(_one_name(cent.flags))
         flags = (_own_flags(c, lab, ds.flags) if ds is not None else []) + target_flags(targets)
         out[lab] = EpochState(lab, decide_state(_stage(c, lab, ds is not None), flags), tuple(flags))
     return out

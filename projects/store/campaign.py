@@ -25,10 +25,11 @@ from pathlib import Path
 
 import numpy as np
 
-from common.files import MB, disk_full_error, ensure_free, is_disk_full
+from common.files import MB, disk_full_error, ensure_free, is_disk_full, write_atomic
 from lidar.centroid import TargetCentroid
 from lidar.layout import Layout, check_layout
 from lidar.scanner_profile import ScannerProfile
+from lidar.systematic.adjustment import FieldModel
 from projects.store import digests, field_tables, inputs, journal, schema, setup_tables
 from projects.store.connection import connect, open_database
 from projects.store.errors import CampaignError, CampaignLockedError, DuplicateImportError, InputError
@@ -68,6 +69,8 @@ from projects.store.repositories import (
 )
 
 DB_NAME = "campaign.sqlite"
+#: The campaign's field model as a file for other tools (versioned JSON, :meth:`FieldModel.to_json`).
+BIAS_FILE = "bias.json"
 
 
 def now_iso() -> str:
@@ -852,15 +855,25 @@ class Campaign:
         extras = field_tables.read_centroid_extras(self.conn, epoch)
         return next((e.get("time_source") for e in extras.values()), None)
 
-    def field_model(self):
+    def field_model(self) -> tuple[FieldModel, str] | None:
         """The campaign's stored field model and its digest, or None before processing fitted one."""
         got = field_tables.read_field_model(self.conn)
-        return None if got is None else (field_tables.field_model_from_json(got[0]), got[1])
+        return None if got is None else (FieldModel.from_json(got[0]), got[1])
 
-    def save_field_model(self, model, digest: str) -> None:
-        """Store the campaign's field model (:class:`lidar.systematic.adjustment.FieldModel`)."""
+    def save_stage2(self, baseline: str, model: FieldModel | None, epochs: Sequence) -> None:
+        """Store what stage 2 computed, in one transaction: the field model when it changed, each epoch's displacements.
+
+        ``epochs`` are :class:`lidar.stage2.EpochDisplacementResult` (label, displacements, inputs hash,
+        systematics). The campaign's ``bias.json`` (the model as a file, for other tools) is written after the
+        commit, atomically.
+        """
         with self.transaction() as c:
-            field_tables.write_field_model(c, field_tables.field_model_to_json(model), digest, now_iso())
+            if model is not None:
+                field_tables.write_field_model(c, model.to_json(), model.digest(), now_iso())
+            for e in epochs:
+                self._write_displacements(c, e.label, baseline, e.displacements, e.inputs_hash, e.systematics)
+        if model is not None:
+            write_atomic(self.folder / BIAS_FILE, json.dumps(model.to_json(), indent=1) + "\n")
 
     def systematics(self, epoch: str) -> dict:
         """The scale and drift an epoch's displacements were computed with (empty before)."""
@@ -870,25 +883,29 @@ class Campaign:
                            systematics: dict | None = None) -> None:
         """Store an epoch's displacements, their budgets and the systematics they were corrected for."""
         with self.transaction() as c:
-            c.execute("DELETE FROM displacement_sets WHERE epoch = ?", (epoch,))
-            c.execute("INSERT INTO displacement_sets(epoch, baseline, inputs_hash, normal, reference_point, "
-                      "reference_ids, normal_mode, flags, processed) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                      (epoch, baseline, inputs_hash, json.dumps(np.asarray(res.normal_socs).tolist()),
-                       json.dumps(np.asarray(res.reference_point_socs).tolist()), json.dumps(list(res.reference_ids)),
-                       res.normal_mode, json.dumps(list(res.flags)), now_iso()))
-            for d in res.displacements:
-                c.execute("INSERT INTO displacements(epoch, reflector, displacement_m, sigma_m, vertical_m, "
-                          "baseline_vertical_m, flags) VALUES (?, ?, ?, ?, ?, ?, ?)",
-                          (epoch, d.reflector, _f(d.displacement_m), _f(d.sigma_m), _f(d.vertical_m),
-                           _f(d.baseline_vertical_m), json.dumps(list(d.flags))))
-            for rc in res.reference_checks:
-                c.execute("INSERT INTO reference_checks(epoch, reflector, median_change_m, max_change_m, moved, "
-                          "missing, suspect) VALUES (?, ?, ?, ?, ?, ?, ?)",
-                          (epoch, rc.reflector, _f(rc.median_change_m), _f(rc.max_change_m), int(rc.moved),
-                           int(rc.missing), int(rc.suspect)))
-            field_tables.write_displacement_extras(c, epoch, res, systematics)
-            digests.seal(c, "displacement_sets", (epoch,))
-            self.log_action(c, "displacements", epoch, {"baseline": baseline, "inputs_hash": inputs_hash})
+            self._write_displacements(c, epoch, baseline, res, inputs_hash, systematics)
+
+    def _write_displacements(self, c: sqlite3.Connection, epoch: str, baseline: str, res, inputs_hash: str,
+                             systematics: dict | None) -> None:
+        c.execute("DELETE FROM displacement_sets WHERE epoch = ?", (epoch,))
+        c.execute("INSERT INTO displacement_sets(epoch, baseline, inputs_hash, normal, reference_point, "
+                  "reference_ids, normal_mode, flags, processed) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                  (epoch, baseline, inputs_hash, json.dumps(np.asarray(res.normal_socs).tolist()),
+                   json.dumps(np.asarray(res.reference_point_socs).tolist()), json.dumps(list(res.reference_ids)),
+                   res.normal_mode, json.dumps(list(res.flags)), now_iso()))
+        for d in res.displacements:
+            c.execute("INSERT INTO displacements(epoch, reflector, displacement_m, sigma_m, vertical_m, "
+                      "baseline_vertical_m, flags) VALUES (?, ?, ?, ?, ?, ?, ?)",
+                      (epoch, d.reflector, _f(d.displacement_m), _f(d.sigma_m), _f(d.vertical_m),
+                       _f(d.baseline_vertical_m), json.dumps(list(d.flags))))
+        for rc in res.reference_checks:
+            c.execute("INSERT INTO reference_checks(epoch, reflector, median_change_m, max_change_m, moved, "
+                      "missing, suspect) VALUES (?, ?, ?, ?, ?, ?, ?)",
+                      (epoch, rc.reflector, _f(rc.median_change_m), _f(rc.max_change_m), int(rc.moved),
+                       int(rc.missing), int(rc.suspect)))
+        field_tables.write_displacement_extras(c, epoch, res, systematics)
+        digests.seal(c, "displacement_sets", (epoch,))
+        self.log_action(c, "displacements", epoch, {"baseline": baseline, "inputs_hash": inputs_hash})
 
     def displacement_set(self, epoch: str) -> DisplacementSet | None:
         """What an epoch's displacements were computed with, or None before they are."""

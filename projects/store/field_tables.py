@@ -8,7 +8,7 @@ error budget adds lives beside them, keyed the same way and written in the same 
 * ``displacement_extras`` - each displacement's along-span movement and error budget (JSON);
 * ``displacement_set_extras`` - each epoch's scale and drift as its displacements used them (JSON);
 * ``field_models`` - the campaign's field model (:class:`lidar.systematic.adjustment.FieldModel`), JSON of
-  :data:`FIELD_MODEL_FORMAT_VERSION`, with the digest processing hashes.
+  :data:`lidar.systematic.adjustment.FIELD_MODEL_FORMAT_VERSION`, with its digest.
 """
 from __future__ import annotations
 
@@ -20,13 +20,6 @@ from typing import Any
 import numpy as np
 
 from lidar.centroid import TargetCentroid
-from lidar.systematic.adjustment import FieldModel, VisitSystematics
-from lidar.systematic.axes import AxisModel
-from lidar.systematic.range_walk import RangeWalkModel
-
-#: Format version of a stored field model (and of the campaign's ``bias.json``). 2 adds the instrument's axis
-#: errors (``axes``); a version-1 model has none.
-FIELD_MODEL_FORMAT_VERSION = 2
 
 SCHEMA = """
 CREATE TABLE centroid_extras (
@@ -149,42 +142,6 @@ def read_set_extras(conn: sqlite3.Connection, epoch: str) -> dict:
 
 
 # ---------------------------------------------------------------------------------------------- field model
-def visit_to_json(v: VisitSystematics) -> dict:
-    """One visit's scale and drift as JSON."""
-    return {"label": v.label, "scale_ppm": v.scale_ppm, "scale_sigma_ppm": v.scale_sigma_ppm,
-            "drift_arcsec_h": np.asarray(v.drift_arcsec_h).tolist(), "drift_cov": np.asarray(v.drift_cov).tolist(),
-            "time_ref_s": v.time_ref_s, "timed": v.timed, "scale_determined": v.scale_determined,
-            "left_out": list(v.left_out), "alternative_scale_ppm": list(v.alternative_scale_ppm), "misfit": v.misfit}
-
-
-def visit_from_json(d: dict) -> VisitSystematics:
-    """The inverse of :func:`visit_to_json`."""
-    return VisitSystematics(d["label"], float(d["scale_ppm"]), float(d["scale_sigma_ppm"]),
-                            np.asarray(d["drift_arcsec_h"], dtype=float), np.asarray(d["drift_cov"], dtype=float),
-                            float(d["time_ref_s"]), bool(d["timed"]), bool(d["scale_determined"]),
-                            tuple(d.get("left_out", ())), tuple(float(x) for x in d.get("alternative_scale_ppm", ())),
-                            float(d.get("misfit", 1.0)))
-
-
-def field_model_to_json(m: FieldModel) -> dict:
-    """A field model as the versioned JSON of ``bias.json``."""
-    return {"format_version": FIELD_MODEL_FORMAT_VERSION, "baseline": m.baseline,
-            "range_walk": m.range_walk.to_json(), "sigma0": m.sigma0, "n_observations": m.n_observations,
-            "notes": list(m.notes), "visits": [visit_to_json(v) for v in m.visits.values()],
-            "axes": m.axes.to_json()}
-
-
-def field_model_from_json(d: dict) -> FieldModel:
-    """The inverse of :func:`field_model_to_json` (a newer format is an error)."""
-    from common.errors import InputError
-
-    if int(d.get("format_version", 1)) > FIELD_MODEL_FORMAT_VERSION:
-        raise InputError("the campaign's field model was written by a newer BridgeSurvey")
-    visits = {v["label"]: visit_from_json(v) for v in d.get("visits", ())}
-    return FieldModel(d["baseline"], RangeWalkModel.from_json(d["range_walk"]), visits, float(d.get("sigma0", 1.0)),
-                      int(d.get("n_observations", 0)), tuple(d.get("notes", ())), AxisModel.from_json(d.get("axes")))
-
-
 def write_field_model(conn: sqlite3.Connection, model_json: dict, digest: str, created: str) -> None:
     """Replace the stored field model (caller's transaction)."""
     conn.execute("INSERT OR REPLACE INTO field_models VALUES (1, ?, ?, ?)", (json.dumps(model_json), digest, created))

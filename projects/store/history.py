@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from common.flags import PROBLEM, WARNING, worst
 from projects.store.records import DisplacementRecord
 
 
@@ -62,8 +63,11 @@ class DisplacementHistory:
 
     @property
     def flagged(self) -> np.ndarray:
-        """Boolean mask, shape (N,): epochs where the target carries a flag of its own."""
-        return np.array([bool(f) for f in self.flags], dtype=bool)
+        """Boolean mask, shape (N,): epochs where the target carries a warning or a problem of its own.
+
+        Information (a doubt its sigma carries, how it was obtained) does not mark a value.
+        """
+        return np.array([worst(f) in (WARNING, PROBLEM) for f in self.flags], dtype=bool)
 
     @property
     def time_ns(self) -> np.ndarray:

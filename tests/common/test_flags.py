@@ -115,3 +115,14 @@ def test_every_flag_the_trap_simulations_raise_is_registered():
     assert {"second_bright_object", "reference_moved", "missing", "no_camera_data"} <= seen, seen
     for f in seen:
         flags.lookup(f)  # raises UnknownFlagError for an unregistered code
+
+
+def test_every_warning_and_problem_says_what_to_do_and_no_information_asks_for_anything():
+    """Severity by consequence: a warning or a problem is something the surveyor acts on, so it names the act;
+    information (a doubt the sigma carries) asks for nothing."""
+    for f in REGISTRY.values():
+        if f.severity == flags.INFO:
+            assert not f.action, f.code
+        else:
+            assert len(f.action) > 10 and "\n" not in f.action, f.code
+        assert f.words and "_" not in f.words, f.code

@@ -75,7 +75,7 @@ def epoch_html(c, label: str) -> str:
         out += "</table>"
     joined = c.systematics(label).get("setups")
     if joined:  # a visit of several set-ups: how they were joined (the joint frame's QA trail)
-        from projects.processing.setups import join_summary, join_tables
+        from lidar.setups import join_summary, join_tables
 
         out += f"<h4>Set-ups</h4><p>{html.escape(join_summary(joined))}</p>"
         for table in join_tables(joined):

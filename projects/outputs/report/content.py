@@ -83,7 +83,7 @@ class EpochSection:
     state: str = "imported"  # as ``status`` gives it (projects.results.state.epoch_state)
     state_flags: tuple[str, ...] = ()
     systematics: dict = field(default_factory=dict)  # what its displacements were corrected for (scale, drift)
-    setups: dict = field(default_factory=dict)  # how its set-ups were joined (projects.processing.setups), if several
+    setups: dict = field(default_factory=dict)  # how its set-ups were joined (lidar.setups), if several
 
 
 @dataclass(frozen=True, eq=False)

@@ -334,7 +334,7 @@ def epoch_section(e: EpochSection, content: ReportContent, ss: Any, *, new_page:
                           _num(None if r.max_change_m is None else r.max_change_m * 1000), verdict])
         out += [Spacer(1, 4), Paragraph("Reference group check", ss["Small"]), _table(table, (20, 45, 30, 35), ss)]
     if e.setups:  # the joint frame of a visit of several set-ups: its QA trail
-        from projects.processing.setups import join_summary, join_tables
+        from lidar.setups import join_summary, join_tables
 
         motions, residuals = join_tables(e.setups)
         out += [Spacer(1, 4), Paragraph(_esc("Set-ups: " + join_summary(e.setups)), ss["Small"]),

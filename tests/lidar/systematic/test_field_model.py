@@ -8,7 +8,7 @@ import pytest
 
 from lidar.simulate.centroids import BridgeGeometry, along_span, deflection, observe
 from lidar.simulate.effects import DriftModel, InverseSquareWalk, LinearIncidenceWalk, StrengthStepWalk
-from lidar.systematic.adjustment import Sighting, VisitSightings, fit_field_model
+from lidar.systematic.adjustment import FieldModel, Sighting, VisitSightings, fit_field_model
 from lidar.systematic.budget import corrected_displacements
 
 
@@ -126,11 +126,9 @@ def test_drift_with_times_is_fitted_and_corrected():
 
 
 def test_the_model_survives_its_json():
-    from projects.store.field_tables import field_model_from_json, field_model_to_json
-
     _, ids, groups, visits, cents, truths = campaign(walk=LinearIncidenceWalk(0.0015), n=5)
     model = fit_field_model(visits, groups)
-    back = field_model_from_json(field_model_to_json(model))
+    back = FieldModel.from_json(model.to_json())
     r, c = np.array([12.0, 25.0]), np.array([0.3, 0.9])
     assert np.allclose(back.range_walk.bias_m(r, c), model.range_walk.bias_m(r, c))
     assert back.visit("3").scale_ppm == pytest.approx(model.visit("3").scale_ppm)
@@ -139,10 +137,10 @@ def test_the_model_survives_its_json():
     from lidar.systematic.axes import AxisModel
 
     with_axes = replace(model, axes=AxisModel((0,), np.array([21.0]), np.array([[16.0]])))
-    back = field_model_from_json(field_model_to_json(with_axes))
+    back = FieldModel.from_json(with_axes.to_json())
     assert back.axes.terms == (0,) and back.axes.values_arcsec[0] == 21.0
-    old = {k: v for k, v in field_model_to_json(model).items() if k != "axes"}  # version 1: no axes
-    assert not field_model_from_json({**old, "format_version": 1}).axes.fitted
+    old = {k: v for k, v in model.to_json().items() if k != "axes"}  # version 1: no axes
+    assert not FieldModel.from_json({**old, "format_version": 1}).axes.fitted
 
 
 def test_the_families_spread_widens_sigma_but_never_moves_a_value():

@@ -110,9 +110,9 @@ def test_a_sighting_the_field_model_left_out_flags_its_rows():
     it); a reference target left out flags every row of the epoch (it sets the frame)."""
     from common.flags import FLAG_FIELD_MISFIT, code
     from lidar.displacement_result import Displacement, EpochDisplacements
+    from lidar.stage2 import with_field_misfits
     from lidar.systematic.adjustment import FieldModel, VisitSystematics
     from lidar.systematic.range_walk import RangeWalkModel
-    from projects.processing.stages import _with_field_misfits
 
     groups = {"R1": "reference", "R2": "reference", "M1": "measurement", "M2": "measurement", "M3": "measurement"}
     rows = tuple(Displacement(m, -0.001, 1e-4, 0.0, 0.0) for m in ("M1", "M2")) + \
@@ -124,7 +124,7 @@ def test_a_sighting_the_field_model_left_out_flags_its_rows():
                                                   for k, v in left.items()})
 
     def flags(m, **kw):
-        out = _with_field_misfits(m, kw.get("setups", (1,)), (1,), "e", "b", groups, result)
+        out = with_field_misfits(m, kw.get("setups", (1,)), (1,), "e", "b", groups, result)
         return {d.reflector: [f for f in d.flags if code(f) == FLAG_FIELD_MISFIT] for d in out.displacements}
 
     assert flags(model()) == {"M1": [], "M2": [], "M3": []}

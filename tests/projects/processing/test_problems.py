@@ -138,16 +138,16 @@ def test_centroid_flags_decide_the_state_everywhere_reference_targets_included(p
     import csv
     import io
 
-    from common.flags import FLAG_OFF_EXPECTED, FLAG_SECOND_OBJECT
+    from common.flags import FLAG_CLIPPED, FLAG_SECOND_OBJECT
 
     with Campaign.open(processed_copy) as c:
         assert {s for s, _ in (epoch_state(c, e.label) for e in c.epochs())} <= {"processed"}
         _flag_centroid(c, "2026-03-09", "R1", FLAG_SECOND_OBJECT)  # the demo's cable-tie week: a pier target
-        _flag_centroid(c, "2026-03-16", "M2", FLAG_OFF_EXPECTED)   # a deck target away from its planned place
+        _flag_centroid(c, "2026-03-16", "M2", FLAG_CLIPPED)   # a deck target touching its window's edge
         state, flags = epoch_state(c, "2026-03-09")
         assert state == "warning" and "second_bright_object: R1" in flags
         state, flags = epoch_state(c, "2026-03-16")
-        assert state == "warning" and "off_expected_position: M2" in flags
+        assert state == "warning" and "clipped_by_window: M2" in flags
         assert epoch_state(c, "2026-03-02")[0] == "processed"
         status = {e["epoch"]: e for e in campaign_status(c)["epochs"]}
         assert status["2026-03-09"]["state"] == status["2026-03-16"]["state"] == "warning"
@@ -157,7 +157,7 @@ def test_centroid_flags_decide_the_state_everywhere_reference_targets_included(p
     out = capsys.readouterr().out
     assert "epochs with problems: 0, with warnings: 2" in out
     assert "WARNING in 2026-03-09: second_bright_object: R1" in out
-    assert "WARNING in 2026-03-16: off_expected_position: M2" in out
+    assert "WARNING in 2026-03-16: clipped_by_window: M2" in out
     assert main(["displacements", str(processed_copy)]) == 0
     rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
     assert {r["epoch"]: r["epoch_state"] for r in rows} == {"2026-03-02": "processed", "2026-03-09": "warning",
@@ -175,7 +175,8 @@ def test_decide_state_uses_every_flag():
 
     assert decide_state("processed", []) == "processed"
     assert decide_state("processed", ["saturated: R2", "normal_refitted_in_epoch"]) == "processed"
-    assert decide_state("processed", ["saturated: R2", "few_points: M1"]) == "warning"
+    assert decide_state("processed", ["saturated: R2", "few_points: M1"]) == "processed"  # sigma carries both
+    assert decide_state("processed", ["saturated: R2", "clipped_by_window: M1"]) == "warning"
     assert decide_state("processed", ["few_points: M1", "reference_inconsistent"]) == "problem"
     for stage in ("imported", "planned", "scanned", "measured"):
         assert decide_state(stage, ["reference_inconsistent"]) == stage

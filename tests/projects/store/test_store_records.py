@@ -20,7 +20,7 @@ def _rec(epoch, day, rid, d_m, s_m, flags=(), epoch_flags=()):
 
 def test_history_groups_scales_and_keeps_gaps():
     recs = [_rec("e1", 2, "M1", 0.0, 0.0), _rec("e1", 2, "M2", 0.0, 0.0),
-            _rec("e2", 9, "M1", -0.0012, 0.0001, ("few_points",)), _rec("e2", 9, "M2", None, None, ("missing",)),
+            _rec("e2", 9, "M1", -0.0012, 0.0001, ("clipped_by_window",)), _rec("e2", 9, "M2", None, None, ("missing",)),
             _rec("e3", 16, "M1", -0.0020, 0.0002), _rec("e3", 16, "M2", -0.0031, 0.0003)]
     lim = Limit(5.0, 10.0, "fixed:5,10")
     h = histories_from_records(recs, {"M1": lim})

@@ -7,12 +7,7 @@ from scipy.spatial.transform import Rotation
 
 from common.flags import FLAG_SETUP_JOIN_MISFIT, FLAG_SETUP_NOT_JOINED, code
 from lidar.displacement_result import Observation
-from lidar.simulate.epochs import GROUPS, LAB_POSITIONS, fine_epoch
-from lidar.simulate.scene import EpochConditions
-from lidar.systematic.adjustment import FieldModel, VisitSystematics
-from lidar.systematic.budget import corrected_displacements
-from lidar.systematic.range_walk import RangeWalkModel
-from projects.processing.setups import (
+from lidar.setups import (
     CorrectedVisit,
     corrected_side,
     join_setups,
@@ -20,6 +15,11 @@ from projects.processing.setups import (
     spread_m,
     visit_label,
 )
+from lidar.simulate.epochs import GROUPS, LAB_POSITIONS, fine_epoch
+from lidar.simulate.scene import EpochConditions
+from lidar.systematic.adjustment import FieldModel, VisitSystematics
+from lidar.systematic.budget import corrected_displacements
+from lidar.systematic.range_walk import RangeWalkModel
 
 RNG = np.random.default_rng(7)
 #: A three-span bridge's targets in set-up 1's frame (m): piers at 0, 40, 80, 120, deck targets in every span.
@@ -204,7 +204,7 @@ def test_a_weak_sighting_is_left_out_where_another_set_up_sees_the_target_better
     from types import SimpleNamespace
 
     from lidar.centroid import is_weak, resolved_share
-    from projects.processing.setups import without_weak_duplicates
+    from lidar.setups import without_weak_duplicates
 
     weak = SimpleNamespace(flags=("grazing: the disc is 24 % of the beam's width",))
     grazing = SimpleNamespace(flags=("second_bright_object", "grazing: the disc is 52 % of the beam's width"))

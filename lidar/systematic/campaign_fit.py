@@ -1,26 +1,24 @@
-"""The campaign's field model in processing: fitted over every measured epoch, kept while it holds.
+"""The campaign's field model over its visits: fitted over every measured visit, kept while it holds.
 
-Stage 2 corrects every epoch's centroids for the atmosphere's scale, the retro-reflector range walk and
-the set-up's drift (:mod:`lidar.systematic`) before computing its displacements. The model is fitted over
-every measured epoch at once; when epochs arrive, it is fitted again, and the stored model is replaced
-only when the new one differs materially (a range walk changing by more than
-:data:`MATERIAL_BIAS_M` anywhere the campaign measured, a visit's scale by more than
-:data:`MATERIAL_SCALE_PPM`, its drift by more than :data:`MATERIAL_DRIFT_ARCSEC_H`, the instrument's axis
-errors come or go or move by more than :data:`MATERIAL_AXES_ARCSEC`); otherwise the new
-visits' own terms are added to it. So adding an epoch recomputes that epoch's displacements, and all of
-them only when the campaign's knowledge of its instrument has changed.
+Stage 2 (:mod:`lidar.stage2`) corrects every visit's centroids for the atmosphere's scale, the retro-reflector
+range walk and the set-up's drift (:mod:`lidar.systematic`) before computing its displacements. The model is
+fitted over every measured visit at once; when visits arrive, it is fitted again, and the stored model is
+replaced only when the new one differs materially (a range walk changing by more than :data:`MATERIAL_BIAS_M`
+anywhere the campaign measured, a visit's scale by more than :data:`MATERIAL_SCALE_PPM`, its drift by more
+than :data:`MATERIAL_DRIFT_ARCSEC_H`, the instrument's axis errors come or go or move by more than
+:data:`MATERIAL_AXES_ARCSEC`); otherwise the new visits' own terms are added to it. So adding a visit
+recomputes that visit's displacements, and all of them only when the campaign's knowledge of its instrument
+has changed.
 """
 from __future__ import annotations
 
 import hashlib
 import json
-import logging
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 
 import numpy as np
 
-from common.files import write_atomic
 from common.flags import (
     FLAG_ATMOSPHERE_CORRECTED,
     FLAG_ATMOSPHERE_DISAGREES,
@@ -29,21 +27,16 @@ from common.flags import (
     FLAG_RANGE_WALK_UNDETERMINED,
     FLAG_SCALE_UNDETERMINED,
 )
-from lidar.centroid import TargetCentroid
+from lidar.centroid import TargetCentroid, is_weak
 from lidar.systematic.adjustment import FieldModel, Sighting, VisitSightings, VisitSystematics, fit_field_model
+from lidar.systematic.atmosphere import range_scale_ppm
 from lidar.systematic.corrections import cos_incidence_of
 from lidar.systematic.range_walk import RangeWalkModel
-from projects.store.campaign import Campaign
-from projects.store.field_tables import field_model_to_json
-
-log = logging.getLogger(__name__)
 
 MATERIAL_BIAS_M = 1e-5
 MATERIAL_SCALE_PPM = 0.3
 MATERIAL_DRIFT_ARCSEC_H = 0.5
 MATERIAL_AXES_ARCSEC = 0.5
-#: The campaign's field model as a file (versioned JSON, :data:`projects.store.field_tables.FIELD_MODEL_FORMAT_VERSION`).
-BIAS_FILE = "bias.json"
 
 
 def sightings(cents: Mapping[str, TargetCentroid], closures: Mapping[str, TargetCentroid] | None = None) -> tuple:
@@ -53,8 +46,6 @@ def sightings(cents: Mapping[str, TargetCentroid], closures: Mapping[str, Target
     along the line of sight) is left out: at the far end of the incidences it would steer the range walk's
     curve, which the well-resolved discs of every visit are corrected by.
     """
-    from lidar.centroid import is_weak
-
     out = []
     for c in list(cents.values()) + list((closures or {}).values()):
         if not c.found or is_weak(c.flags):
@@ -64,12 +55,16 @@ def sightings(cents: Mapping[str, TargetCentroid], closures: Mapping[str, Target
     return tuple(out)
 
 
+Air = tuple[float, float, float]  # temperature degC, pressure hPa, relative humidity 0..1
+
+
 def identity_model(baseline: str) -> FieldModel:
     """A field model that corrects nothing (the campaign cannot be modelled yet)."""
     return FieldModel(baseline, RangeWalkModel(), {})
 
 
-def _usable(cents: Mapping[str, TargetCentroid], groups: Mapping[str, str]) -> bool:
+def usable(cents: Mapping[str, TargetCentroid], groups: Mapping[str, str]) -> bool:
+    """Whether a visit found the three reference targets that place it in the adjustment."""
     return sum(1 for k, c in cents.items() if c.found and groups.get(k) == "reference") >= 3
 
 
@@ -101,11 +96,6 @@ def _merged(old: FieldModel, new: FieldModel) -> FieldModel:
     return FieldModel(old.baseline, old.range_walk, visits, old.sigma0, new.n_observations, old.notes, old.axes)
 
 
-def digest_of(model: FieldModel) -> str:
-    """A digest of the whole model (what is stored beside it)."""
-    return hashlib.sha256(json.dumps(field_model_to_json(model), sort_keys=True).encode()).hexdigest()[:24]
-
-
 def visit_digest(model: FieldModel, baseline: str, label: str) -> str:
     """A digest of what one epoch's displacements depend on: the range walk and both visits' terms."""
     part = {"rw": model.range_walk.to_json(), "base": _visit_key(model.visit(baseline)),
@@ -121,34 +111,26 @@ def _visit_key(v: VisitSystematics) -> dict:
             "t": round(v.time_ref_s, 3), "timed": v.timed}
 
 
-def update_field_model(c: Campaign, baseline: str, labels: Sequence[str], groups: Mapping[str, str],
-                       found: Callable[[str], Mapping[str, TargetCentroid]], *, enabled: bool = True,
-                       closures: Callable[[str], Mapping[str, TargetCentroid]] | None = None) -> FieldModel:
-    """Fit the campaign's field model over ``labels`` (the baseline's first), keep or replace the stored one.
+def refit(stored: FieldModel | None, baseline: str, labels: Sequence[str], groups: Mapping[str, str],
+          found: Callable[[str], Mapping[str, TargetCentroid]],
+          closures: Callable[[str], Mapping[str, TargetCentroid]], *, enabled: bool = True) -> FieldModel:
+    """Fit the campaign's field model over ``labels`` (the baseline's first) and keep ``stored`` while it holds.
 
-    Epochs with fewer than three reference targets found cannot be placed and are left out; a baseline
+    Visits with fewer than three reference targets found cannot be placed and are left out; a baseline
     without three, or ``enabled=False``, gives a model that corrects nothing. ``labels`` are the model's
-    visits: epochs, or the set-ups of epochs (``closures(label)`` then gives a visit's closure centroids;
-    default the epoch's).
+    visits (epochs, or the set-ups of epochs: ``L#2``); ``found(label)`` gives a visit's found centroids and
+    ``closures(label)`` its closure centroids. The returned model is ``stored`` with the new visits' terms
+    added when the new fit does not differ from it materially, else the new fit.
     """
-    if not enabled or not _usable(found(baseline), groups):
+    if not enabled or not usable(found(baseline), groups):
         return identity_model(baseline)
-    closures = closures or c.closure_centroids
-    order = [baseline] + [lab for lab in labels if lab != baseline and _usable(found(lab), groups)]
+    order = [baseline] + [lab for lab in labels if lab != baseline and usable(found(lab), groups)]
     visits = [VisitSightings(lab, sightings(found(lab), {k: v for k, v in closures(lab).items()
                                                           if k in found(lab)})) for lab in order]
     new = fit_field_model(visits, groups)
-    got = c.field_model()
-    model = new
-    if got is not None:
-        old, _ = got
-        if not _material(new, old, visits):
-            model = _merged(old, new)
-    if got is None or digest_of(model) != got[1]:
-        digest = digest_of(model)
-        c.save_field_model(model, digest)
-        write_atomic(c.folder / BIAS_FILE, json.dumps(field_model_to_json(model), indent=1) + "\n")
-    return model
+    if stored is not None and not _material(new, stored, visits):
+        return _merged(stored, new)
+    return new
 
 
 def systematics_json(model: FieldModel, label: str, time_source: str | None) -> dict:
@@ -165,19 +147,17 @@ def systematics_json(model: FieldModel, label: str, time_source: str | None) -> 
 AIR_WINDOW_S = 3600.0
 
 
-def _air_at(c: Campaign, label: str) -> tuple[float, float, float] | None:
-    """(temperature degC, pressure hPa, relative humidity 0..1) around a visit, or None without a temperature."""
-    from vision.series import CameraSeries
+def air_near(series: Sequence[tuple[str, np.ndarray, np.ndarray]], t_ns: int) -> Air | None:
+    """(temperature degC, pressure hPa, relative humidity 0..1) around a time, or None without a temperature.
 
-    t_ns = int(c.epoch(label).when.timestamp() * 1e9)
-
+    ``series`` holds (kind, times ns (N,), values (N,)) of the campaign's environment series; the readings
+    within :data:`AIR_WINDOW_S` of ``t_ns`` are averaged per kind; pressure defaults to 1013.25 hPa and
+    humidity to 60 % when none was recorded.
+    """
     def mean(kind: str) -> float | None:
-        vals = []
-        for r in c.series.records("env_series", kind=kind):
-            times, values = CameraSeries.arrays_from_npz(c.series.arrays("env_series", r.name))
-            near = (np.abs(times - t_ns) <= AIR_WINDOW_S * 1e9) & np.isfinite(values)
-            vals += list(values[near])
-        return float(np.mean(vals)) if vals else None
+        vals = [v[(np.abs(t - t_ns) <= AIR_WINDOW_S * 1e9) & np.isfinite(v)] for k, t, v in series if k == kind]
+        allv = np.concatenate(vals) if vals else np.zeros(0)
+        return float(np.mean(allv)) if allv.size else None
 
     temp = mean("temperature")
     if temp is None:
@@ -186,25 +166,22 @@ def _air_at(c: Campaign, label: str) -> tuple[float, float, float] | None:
     return temp, 1013.25 if pres is None else pres, 0.6 if hum is None else hum / 100.0
 
 
-def atmosphere_flags(c: Campaign, model: FieldModel, label: str) -> list[str]:
-    """What the air's temperature (and pressure) around the visit say of its estimated scale.
+def atmosphere_flags(model: FieldModel, label: str, here: Air | None, base: Air | None, *,
+                     wavelength_nm: float) -> list[str]:
+    """What the air's temperature (and pressure) around a visit and the baseline say of its estimated scale.
 
     The scale the atmosphere predicts against the baseline (group refractivity for the scanner's
     wavelength, :mod:`lidar.systematic.atmosphere`) is compared with the estimate: agreeing, the instrument
     did not correct for the air (the correction is made here); an estimate near zero where the air
     predicts a scale, it did; neither, a warning naming both numbers.
     """
-    from lidar.systematic.atmosphere import range_scale_ppm
-
     v = model.visit(label)
     if label == model.baseline or label not in model.visits or not v.scale_determined:
         return []
-    here, base = _air_at(c, label), _air_at(c, model.baseline)
     if here is None or base is None:
         return []
-    wl = c.profile_for(label).wavelength_nm
-    predicted = range_scale_ppm(*here[:2], relative_humidity=here[2], wavelength_nm=wl) - \
-        range_scale_ppm(*base[:2], relative_humidity=base[2], wavelength_nm=wl)
+    predicted = range_scale_ppm(*here[:2], relative_humidity=here[2], wavelength_nm=wavelength_nm) - \
+        range_scale_ppm(*base[:2], relative_humidity=base[2], wavelength_nm=wavelength_nm)
     s = max(v.scale_sigma_ppm, 1e-6)
     agrees, corrected = abs(v.scale_ppm - predicted) <= 3 * s, abs(v.scale_ppm) <= 3 * s
     if agrees and not corrected:

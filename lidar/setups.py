@@ -39,7 +39,7 @@ from common.rigid import fit_rigid, rotation_from_rotvec, skew
 from lidar.displacement import compute_displacements
 from lidar.displacement_result import EpochDisplacements, Observation
 from lidar.systematic.adjustment import ARCSEC, FieldModel
-from lidar.systematic.budget import _deviations, _side
+from lidar.systematic.budget import corrected_observations, family_deviations
 from lidar.systematic.corrections import CorrectionJacobian
 from lidar.systematic.range_walk import family_spread2
 
@@ -391,9 +391,9 @@ def corrected_side(label: str, setups: Mapping[int, Mapping[str, object]], model
     obs, jac, devs, visits = {}, {}, {}, {}
     for k, cents in without_weak_duplicates(setups).items():
         v = visits[k] = visit_label(label, k)
-        o, jc = _side(cents, model, v)
+        o, jc = corrected_observations(cents, model, v)
         obs[k] = o
-        dv = _deviations(cents, model, v, {t: x.xyz for t, x in o.items()})
+        dv = family_deviations(cents, model, v, {t: x.xyz for t, x in o.items()})
         for t in cents:
             jac[(k, t)], devs[(k, t)] = jc[t], dv[t]
     return CorrectedVisit(join_setups(label, obs), jac, devs, visits)
