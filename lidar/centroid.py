@@ -22,6 +22,7 @@ from common.flags import (
     FLAG_CLIPPED,
     FLAG_FEW_POINTS,
     FLAG_GRAZING,
+    FLAG_INCIDENCE_FROM_SCAN,
     FLAG_LOW_CONTRAST,
     FLAG_LOW_SEPARABILITY,
     FLAG_NOT_COMPACT,
@@ -379,6 +380,43 @@ def is_weak(flags: Sequence[str]) -> bool:
     return resolved_share(flags) < WEAK_RATIO
 
 
+def _deg(cos_incidence: float) -> float:
+    return math.degrees(math.acos(min(max(cos_incidence, 0.0), 1.0)))
+
+
+def apparent_cos(points: np.ndarray, view: np.ndarray, radius_m: float) -> float:
+    """|cos| of a disc's incidence from its outline across the line of sight (0 when the beam hides it).
+
+    The bright points of a disc of radius R seen at incidence i, projected on the plane across the line of
+    sight ``view``, spread R^2/4 along its long axis and R^2 cos^2(i)/4 along its short one, each widened by
+    the beam's blur. The disc's size is known, so the long axis measures the blur (its spread beyond R^2/4),
+    which is taken off the short axis as well: a disc the beam does not resolve gives 0 rather than the rounder
+    outline the blur draws. Unlike the disc's fitted plane, the outline uses only the points' directions, which
+    range noise does not move.
+
+    Parameters
+    ----------
+    points : (N, 3) float64
+        The disc's bright points, scanner frame, metres.
+    view : (3,) float64
+        Unit vector along the line of sight.
+    radius_m : float
+        The disc's radius, metres.
+    """
+    v = np.asarray(view, dtype=np.float64)
+    e1 = np.cross(v, [0.0, 0.0, 1.0] if abs(v[2]) < 0.9 else [1.0, 0.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(v, e1)
+    p = np.asarray(points, dtype=np.float64)
+    uv = (p - p.mean(axis=0)) @ np.stack([e1, e2]).T
+    if len(uv) < 3:
+        return 0.0
+    short, long = np.linalg.eigvalsh(np.cov(uv.T))
+    disc = radius_m ** 2 / 4.0
+    blur = max(long - disc, 0.0)
+    return float(np.sqrt(np.clip((short - blur) / disc, 0.0, 1.0)))
+
+
 def grazing_variance(diameter_m: float, cos_incidence: float, ratio: float) -> float:
     """Range-direction variance (m^2) of a partly resolved disc's centroid: its rim's depth, by how unresolved.
 
@@ -505,6 +543,11 @@ def _centroid_stages(xyz: np.ndarray, inten: np.ndarray, ok_idx: np.ndarray, tr:
         normal = -normal
     cos_inc = float(abs(normal @ view))
     cos_known = cos_inc if incidence_cos is None else float(incidence_cos)
+    seen = apparent_cos(cluster, view, radius)
+    disagrees = incidence_cos is not None and resolvability(diameter_m, seen, rng, profile) >= GRAZING_RATIO \
+        and seen > 2.0 * cos_known
+    if disagrees:  # the disc's outline says it is resolved where the layout's normal says it grazes: the scan wins
+        cos_known = seen
     ratio = resolvability(diameter_m, cos_known, rng, profile)
     if ratio < UNRESOLVED_RATIO:
         return _not_found(reflector, n_window, thr, sep, (
@@ -537,6 +580,10 @@ def _centroid_stages(xyz: np.ndarray, inten: np.ndarray, ok_idx: np.ndarray, tr:
                     disc=disc)
     if graze > 0:
         flags.append(f"{FLAG_GRAZING}: the disc is {100 * ratio:.0f} % of the beam's width")
+    if disagrees:
+        flags.append(f"{FLAG_INCIDENCE_FROM_SCAN}: the disc's outline shows {_deg(seen):.0f} deg of incidence where "
+                     f"the layout's normal predicts {_deg(float(incidence_cos)):.0f} deg; the scan's is used (check "
+                     "the target's normal in the layout)")
     return TargetCentroid(reflector, centre, cov, n, thr, sep, tuple(flags), n_window, max(0, rejected),
                           sigma_r, normal2, clipped_fraction=float(clipped))
 
