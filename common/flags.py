@@ -115,6 +115,15 @@ FLAG_INCIDENCE_FROM_SCAN = _flag("incidence_from_scan", INFO, "the disc's outlin
                                  "resolved disc where the layout's normal predicted a grazing view: the scan's "
                                  "incidence is used (the layout's normal for the target may be wrong)",
                                  "lidar.centroid", words="incidence from the scan, not the layout")
+FLAG_TRANSIENT_REMOVED = _flag("transient_corrected", INFO, "the surface around the target moved while part of its "
+                               "window was scanned (a train, a lorry, wind): those points were moved back by the "
+                               "surface's own departure, and the sigma widened for what that may leave",
+                               "lidar.centroid", words="moved while scanned (corrected, sigma widened)")
+FLAG_MOVED_DURING_SCAN = _flag("moved_during_scan", WARNING, "the surface around the target moved while most of "
+                               "the target was scanned (a train, a lorry, wind): its value may be off by that "
+                               "movement", "lidar.centroid", action="scan the window again when nothing crosses "
+                               "the bridge (check before leaving gives the re-scan plan)",
+                               words="moved while it was scanned")
 FLAG_UNRESOLVED = _flag("unresolved", INFO, "not measured: at this range and incidence the disc is narrower "
                         "than the beam (measure it from another station: see 'bridgesurvey stations')",
                         "lidar.centroid", words="not resolvable from this station")
@@ -175,6 +184,9 @@ FLAG_DRIFT_FROM_PLAN = _flag("drift_from_plan_times", INFO, "the fine scans carr
                              "drift was fitted on the plan's window order and time model",
                              "lidar.systematic.campaign_fit",
                              words="drift from the plan's times")
+FLAG_TRANSIENTS_UNCHECKED = _flag("transients_unchecked", INFO, "the fine scans carry no point times: a train or a "
+                                  "lorry crossing while a window was scanned could not be looked for", "lidar.stage2",
+                                  words="movement during the windows not checked (no point times)")
 FLAG_DRIFT_BEYOND_SPEC = _flag("drift_beyond_tolerance", WARNING, "the set-up turned more during the visit than "
                                "the instrument allows for", "lidar.stage2",
                                action="check the tripod and the instrument's levelling, and re-scan",

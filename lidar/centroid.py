@@ -25,16 +25,19 @@ from common.flags import (
     FLAG_INCIDENCE_FROM_SCAN,
     FLAG_LOW_CONTRAST,
     FLAG_LOW_SEPARABILITY,
+    FLAG_MOVED_DURING_SCAN,
     FLAG_NOT_COMPACT,
     FLAG_NOT_FOUND,
     FLAG_OFF_EXPECTED,
     FLAG_SATURATED,
     FLAG_SECOND_OBJECT,
     FLAG_SIZE,
+    FLAG_TRANSIENT_REMOVED,
     FLAG_UNRESOLVED,
 )
 from lidar.angles import AngularWindow, spherical_from_xyz
 from lidar.scanner_profile import VZ1000, ScannerProfile
+from lidar.transients import window_motion
 
 if TYPE_CHECKING:
     from lidar.plan import RoiPlan
@@ -274,18 +277,66 @@ def target_centroid(xyz_socs: np.ndarray, intensity: np.ndarray, *, reflector: s
         raise InputError("target_centroid needs (N, 3) points and (N,) intensities")
     ok = np.isfinite(xyz).all(axis=1) & np.isfinite(inten)
     tr = CentroidTrace.empty(len(ok))
-    result = _centroid_stages(xyz[ok], inten[ok], np.nonzero(ok)[0], tr, reflector=reflector,
-                              expected_xyz=expected_xyz, diameter_m=diameter_m, window=window, profile=profile,
-                              min_points=min_points, incidence_cos=incidence_cos)
-    if time_s is not None and result.found:
+    options = dict(reflector=reflector, expected_xyz=expected_xyz, diameter_m=diameter_m, window=window,
+                   profile=profile, min_points=min_points, incidence_cos=incidence_cos)
+    result = _centroid_stages(xyz[ok], inten[ok], np.nonzero(ok)[0], tr, **options)
+    if time_s is not None:
         t = np.asarray(time_s, dtype=np.float64)
         if t.shape != (xyz.shape[0],):
             raise InputError("target_centroid needs one time per point")
+        if result.found:
+            result, tr = _without_movement(xyz, inten, ok, t, result, tr, options)
+    if time_s is not None and result.found:
         td = t[tr.disc]
         td = td[np.isfinite(td)]
         if td.size:
             result = replace(result, time_s=float(np.median(td)), time_span_s=float(np.ptp(td)))
     return (result, tr) if trace else result
+
+
+#: A surface that moved more than this (metres) while more than half of a target was scanned: scan it again.
+MAX_CORRECTED_M = 0.005
+
+
+def _without_movement(xyz: np.ndarray, inten: np.ndarray, ok: np.ndarray, t: np.ndarray, result: TargetCentroid,
+                      tr: CentroidTrace, options: dict) -> tuple[TargetCentroid, CentroidTrace]:
+    """The centroid with the points scanned while the surface around the target moved (a train) put back.
+
+    The background (everything but the bright points) shows the movement against time along the lines of sight
+    (:func:`lidar.transients.window_motion`); a disc glued to that surface moved with it, so every point of the
+    disturbed time is moved back along its line of sight by the background's departure at its time and the
+    window measured again. What the correction may leave (the disc's outline seen through the moved surface, a
+    target standing off the surface on a bracket) is added to the centroid's covariance along the line of
+    sight: a quarter of the departure, for the share of the disc it touched. A movement larger than
+    :data:`MAX_CORRECTED_M` over more than half of the disc is corrected all the same but warned: the window
+    should be scanned again. A movement that touched none of the disc's points changes nothing.
+    """
+    motion = window_motion(xyz[ok], t[ok], exclude=tr.bright[ok])
+    if not motion.checked or not motion.disturbed:
+        return result, tr
+    touched = ok & motion.contains(t)
+    when = ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in motion.disturbed)
+    share = float(np.count_nonzero(touched & tr.disc)) / max(int(np.count_nonzero(tr.disc)), 1)
+    if share == 0.0:
+        return result, tr
+    peak_m = abs(motion.peak_mm) * 1e-3
+    moved = xyz.copy()
+    r = np.linalg.norm(moved[ok], axis=1)
+    back = motion.range_offset_m(t[ok])
+    moved[ok] *= ((r - back) / r)[:, None]
+    tr2 = CentroidTrace.empty(len(ok))
+    again = _centroid_stages(moved[ok], inten[ok], np.nonzero(ok)[0], tr2, **options)
+    if not again.found:
+        flag = (f"{FLAG_MOVED_DURING_SCAN}: the surface around it moved by {1e3 * peak_m:.1f} mm at {when} "
+                f"while {100 * share:.0f} % of its points were scanned")
+        return replace(result, flags=tuple(result.flags) + (flag,)), tr
+    view = again.xyz_socs / np.linalg.norm(again.xyz_socs)
+    left = (0.25 * peak_m * share) ** 2
+    severe = share > 0.5 and peak_m > MAX_CORRECTED_M
+    flag = (f"{FLAG_MOVED_DURING_SCAN if severe else FLAG_TRANSIENT_REMOVED}: the surface around it moved by "
+            f"{1e3 * peak_m:.1f} mm at {when} while {100 * share:.0f} % of its points were scanned; they were moved "
+            "back")
+    return replace(again, cov=again.cov + left * np.outer(view, view), flags=tuple(again.flags) + (flag,)), tr2
 
 
 def _bright(inten: np.ndarray) -> tuple[float, float, np.ndarray]:

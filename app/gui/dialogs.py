@@ -418,7 +418,7 @@ class CheckDialog(QDialog):
         cols = ["target", "status", "points", "planned", "σ (mm)", "goal σ (mm)", "note"]
         table = QTableWidget(len(result.targets), len(cols))
         table.setHorizontalHeaderLabels(cols)
-        colours = {"ok": "#c8e6c9", "short": "#ffe0b2", "imprecise": "#ffe0b2", "not found": "#ffcdd2"}
+        colours = {"ok": "#c8e6c9", "short": "#ffe0b2", "imprecise": "#ffe0b2", "moved": "#ffe0b2", "not found": "#ffcdd2"}
         for r, t in enumerate(result.targets):
             vals = (t.reflector, t.status, str(t.points), str(t.planned_points),
                     "–" if t.sigma_mm != t.sigma_mm else f"{t.sigma_mm:.3f}",

@@ -384,6 +384,61 @@ def _unit(theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
+class DeckTransient:
+    """Loads crossing the deck during the visit (a train, a lorry, a gust): the deck deflects for seconds.
+
+    Every crossing deflects each span by its own shape (:meth:`BridgeModel.deflection_m`) times a trapezoid in
+    time: rising over ``ramp_s`` from ``start_s``, ``amplitude_m`` at midspan (negative: down) for
+    ``duration_s - 2 ramp_s``, falling over ``ramp_s``; a train of bogies adds ``wobble`` (a share of the
+    amplitude) at ``wobble_hz``. Several crossings (``start_s`` and the others as tuples) add up. The deck
+    targets and the deck's surfaces move with it; the truth keeps the static deck (the transient is an error
+    of the visit, not a displacement of the bridge).
+    """
+
+    start_s: tuple[float, ...]
+    duration_s: tuple[float, ...]
+    amplitude_m: tuple[float, ...]
+    ramp_s: tuple[float, ...] = ()
+    wobble: float = 0.0
+    wobble_hz: float = 1.5
+
+    def __post_init__(self) -> None:
+        for name in ("start_s", "duration_s", "amplitude_m", "ramp_s"):
+            v = getattr(self, name)
+            object.__setattr__(self, name, tuple(float(x) for x in (v if np.ndim(v) else [v])))
+        n = len(self.start_s)
+        if not self.ramp_s:
+            object.__setattr__(self, "ramp_s", tuple(min(2.0, d / 3) for d in self.duration_s))
+        if not (len(self.duration_s) == len(self.amplitude_m) == len(self.ramp_s) == n) or n == 0:
+            raise InputError("a deck transient needs as many starts, durations, amplitudes and ramps")
+        if not all(np.isfinite(x) for x in (*self.start_s, *self.amplitude_m, self.wobble, self.wobble_hz)) or \
+                not all(d > 0 and 0 < r <= d / 2 for d, r in zip(self.duration_s, self.ramp_s, strict=True)):
+            raise InputError("a deck transient's times and amplitudes must be finite, its ramps within half its "
+                             "duration")
+
+    def factor(self, t_s: ArrayLike) -> np.ndarray:
+        """(N,) the midspan deflection (m) at times ``t_s`` (seconds on the visit's clock)."""
+        t = np.asarray(t_s, dtype=np.float64)
+        out = np.zeros(t.shape)
+        for t0, dur, amp, ramp in zip(self.start_s, self.duration_s, self.amplitude_m, self.ramp_s, strict=True):
+            u = t - t0
+            shape = np.clip(np.minimum(u, dur - u) / ramp, 0.0, 1.0)
+            wob = 1.0 + self.wobble * np.sin(2 * np.pi * self.wobble_hz * u)
+            out += amp * shape * np.where(shape > 0, wob, 0.0)
+        return out
+
+    def to_dict(self) -> dict:
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+
+    @classmethod
+    def from_dict(cls, d: dict | None) -> DeckTransient | None:
+        if d is None:
+            return None
+        return cls(tuple(d["start_s"]), tuple(d["duration_s"]), tuple(d["amplitude_m"]), tuple(d.get("ramp_s", ())),
+                   float(d.get("wobble", 0.0)), float(d.get("wobble_hz", 1.5)))
+
+
+@dataclass(frozen=True)
 class VisitTiming:
     """When the points of a visit are measured.
 

@@ -21,7 +21,15 @@ from lidar.simulate.bridge import (
     pier_meshes,
     plate_mesh,
 )
-from lidar.simulate.effects import AxisErrors, DriftModel, RangeWalk, VisitTiming, return_strength, walk_to_dict
+from lidar.simulate.effects import (
+    AxisErrors,
+    DeckTransient,
+    DriftModel,
+    RangeWalk,
+    VisitTiming,
+    return_strength,
+    walk_to_dict,
+)
 from lidar.simulate.setup import ScannerSetup
 from lidar.simulate.truth import ScanTruth, TargetTruth, WindowTruth
 
@@ -85,6 +93,9 @@ class EpochConditions:
     axis_errors : AxisErrors, optional
         The instrument's uncalibrated axis errors and range zero error (the same instrument's are the same at
         every visit). Default none.
+    transient : DeckTransient, optional
+        Loads crossing the deck during the visit (a train): the deck and its targets move for seconds while
+        points are measured. Implies times. Default none.
     walk_factors : mapping of target id to float, optional
         The range walk of a target's returns times this factor (a weathered or a newer sheet of the same kind
         walks more or less). Default 1 for every target.
@@ -107,6 +118,7 @@ class EpochConditions:
     timing: VisitTiming | None = None
     axis_errors: AxisErrors | None = None
     walk_factors: Mapping[str, float] = field(default_factory=dict)
+    transient: DeckTransient | None = None
 
     def __post_init__(self) -> None:
         if not np.isfinite(self.midspan_displacement_m):
@@ -134,7 +146,8 @@ class EpochConditions:
     @property
     def timed(self) -> bool:
         """Whether points get times (a timing, a drift or a scale that changes during the visit is given)."""
-        return self.timing is not None or self.drift is not None or self.range_scale_rate_ppm_h != 0.0
+        return self.timing is not None or self.drift is not None or self.range_scale_rate_ppm_h != 0.0 or \
+            self.transient is not None
 
     def scale_ppm_at(self, time_s: ArrayLike | None) -> float | np.ndarray:
         """The atmosphere's range scale (ppm) at ``time_s`` (seconds on the visit's clock; None: its start)."""
@@ -329,18 +342,21 @@ class BridgeScene:
         times = None if start_s is None else self.ray_times(window, start_s)
         d_world = self._world_directions(d_socs, times)
         origin = np.asarray(self.setup.position_m)
-        t, hit, intensity = self._cast(origin, d_world)
+        t, hit, intensity, normals, moves = self._cast(origin, d_world)
 
         c = self.conditions
         returns = _Returns() if (c.range_walk is not None or c.clipped_fraction > 0) else None
         on_target = np.zeros(len(t), dtype=np.int32) - 1
         counts = {}
         for k, disc in enumerate(self.discs):
-            n_on = self._paint_disc(disc, k, origin, d_world, t, hit, intensity, on_target, returns)
+            n_on = self._paint_disc(disc, k, origin, d_world, t, hit, intensity, on_target, returns,
+                                    surface=(normals, moves))
             counts[disc.target.id] = n_on
             if disc.target.id in c.cable_ties:
                 self._paint_cable_tie(disc, origin, d_world, t, hit, intensity, returns)
 
+        if c.transient is not None and times is not None:
+            self._move_deck(c.transient, origin, d_world, t, hit, normals, moves, times)
         intensity *= np.clip(1.0 - 0.004 * np.where(hit, t, 0.0), 0.6, 1.0)  # mild range attenuation
         intensity += rng.normal(0.0, INTENSITY_NOISE, len(t))
         np.clip(intensity, 0.0, 1.0, out=intensity)
@@ -369,8 +385,29 @@ class BridgeScene:
         span = WindowTruth(name or "simulated", float(times[0]), float(times[0]) + self.scan_seconds(window))
         return scan, self.truth(counts, times_s=when, windows=(span,))
 
-    def _cast(self, origin: np.ndarray, d_world: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Cast rays on the meshes: (N,) distance along each ray (inf: nothing), hit mask and surface intensity."""
+    def _move_deck(self, transient: DeckTransient, origin, d_world, t, hit, normals, moves, times) -> None:
+        """Ranges of rays on the deck and its targets as the deck stood at each ray's time (a load crossing).
+
+        A surface with normal n moved by u up is met ``u n_z / (n . d)`` further along a ray of direction d.
+        """
+        sel = np.nonzero(hit & moves)[0]
+        if sel.size == 0:
+            return
+        x = origin[0] + d_world[sel, 0] * t[sel]
+        u = transient.factor(times[sel] - self.conditions.visit_timing.start_s) * \
+            self.model.deflection_m(x, 1.0)
+        n, d = normals[sel], d_world[sel]
+        nd = np.einsum("ij,ij->i", n, d)
+        ok = np.abs(nd) > 1e-6
+        t[sel[ok]] += u[ok] * n[ok, 2] / nd[ok]
+
+    def _cast(self, origin: np.ndarray, d_world: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Cast rays on the meshes.
+
+        Returns (N,) distance along each ray (inf: nothing), hit mask, surface intensity, (N, 3) surface normals
+        and whether each ray met the deck.
+        """
         import open3d as o3d
 
         rays = np.empty((len(d_world), 6), dtype=np.float32)
@@ -384,10 +421,12 @@ class BridgeScene:
         hit = np.isfinite(t) & (t < self.profile.max_range_m)
         cos_inc = np.abs(np.einsum("ij,ij->i", normals, d_world))
         refl = np.zeros(len(t))
+        deck = np.zeros(len(t), dtype=bool)
         for g, kind in self._kind.items():
             sel = gid == g
             refl[sel] = REFLECTANCE[kind]
-        return t, hit, refl * (0.35 + 0.65 * cos_inc)
+            deck |= sel & (kind == "deck")
+        return t, hit, refl * (0.35 + 0.65 * cos_inc), normals, deck
 
     def _walk_and_clip(self, returns: tuple[np.ndarray, ...], on_target: np.ndarray, range_m: np.ndarray,
                        intensity: np.ndarray) -> None:
@@ -428,7 +467,7 @@ class BridgeScene:
         return cand, q, t_d, visible, np.clip(-denom, 1e-3, 1.0)
 
     def _paint_disc(self, disc: _Disc, k: int, origin, d_world, t, hit, intensity, on_target,
-                    returns: _Returns | None = None) -> int:
+                    returns: _Returns | None = None, surface: tuple[np.ndarray, np.ndarray] | None = None) -> int:
         reach = disc.radius + 3 * float(self.profile.footprint_m(np.linalg.norm(disc.centre - origin)))
         cand, q, t_d, visible, cos_inc = self._plane_hits(disc.centre, disc.normal, reach, origin, d_world, t, hit)
         if cand.size == 0:
@@ -445,6 +484,9 @@ class BridgeScene:
         t[idx] = t_d[sel]
         hit[idx] = True
         on_target[cand[cover >= 0.5]] = k
+        if surface is not None:  # a deck target moves with the deck
+            surface[0][idx] = disc.normal
+            surface[1][idx] = disc.target.group == "measurement"
         if returns is not None:
             returns.add(idx, t_d[sel], cos_inc[sel], cover[sel])
         return int(np.count_nonzero(cover >= 0.5))

@@ -26,6 +26,7 @@ from common.flags import (
     FLAG_DRIFT_FROM_PLAN,
     FLAG_RANGE_WALK_UNDETERMINED,
     FLAG_SCALE_UNDETERMINED,
+    FLAG_TRANSIENTS_UNCHECKED,
 )
 from lidar.centroid import TargetCentroid, is_weak
 from lidar.systematic.adjustment import FieldModel, Sighting, VisitSightings, VisitSystematics, fit_field_model
@@ -206,4 +207,6 @@ def epoch_flags(model: FieldModel, label: str, time_source: str | None) -> list[
         out.append(FLAG_RANGE_WALK_UNDETERMINED)
     if time_source == "plan" and v.timed:
         out.append(FLAG_DRIFT_FROM_PLAN)
+    if time_source != "points":
+        out.append(FLAG_TRANSIENTS_UNCHECKED)
     return out

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from common.errors import ProcessingError
+from common.flags import FLAG_MOVED_DURING_SCAN, FLAG_TRANSIENT_REMOVED, code
 from common.progress import ProgressCallback
 from lidar.angles import direction_from_angles
 from lidar.plan import PlanTarget, ScanPlan, plan_fine_scans
@@ -22,7 +23,7 @@ from projects.store.campaign import Campaign
 
 POINTS_TOLERANCE = 0.7  # fewer than 70 % of the planned points: re-scan
 SIGMA_TOLERANCE = 1.3  # sigma over 130 % of the promised one: re-scan
-STATUSES = ("ok", "short", "imprecise", "not found")
+STATUSES = ("ok", "short", "imprecise", "moved", "not found")
 
 
 @dataclass(frozen=True)
@@ -35,7 +36,7 @@ class TargetCheck:
         Disc points measured, and promised by the plan.
     sigma_mm, goal_sigma_mm : float
         Vertical standard deviation of the centroid, and the goal, mm (NaN when not found).
-    status : {"ok", "short", "imprecise", "not found"}
+    status : {"ok", "short", "imprecise", "moved", "not found"}
     """
 
     reflector: str
@@ -166,12 +167,17 @@ def check_epoch(c: Campaign, label: str, *, goal_sigma_mm: float | None = None, 
         else:
             goal = float(goal_sigma_mm)
         ratio = cent.n_points / planned if planned else 1.0
-        if ratio < POINTS_TOLERANCE:
+        moved = [f for f in cent.flags if code(f) in (FLAG_MOVED_DURING_SCAN, FLAG_TRANSIENT_REMOVED)]
+        if moved and code(moved[0]) == FLAG_MOVED_DURING_SCAN:
+            status, note = "moved", moved[0].split(": ", 1)[1] + ": scan it again when nothing crosses"
+        elif ratio < POINTS_TOLERANCE:
             status, note = "short", f"{cent.n_points} of {planned} planned points"
         elif sigma > goal:
             status, note = "imprecise", f"sigma {sigma:.3f} mm over the goal {goal:.3f} mm"
         else:
             status, note = "ok", ""
+        if moved and status != "moved":
+            note = "; ".join(x for x in (note, moved[0].split(": ", 1)[1] + " (sigma widened)") if x)
         if any(n.startswith("weak:") for n in roi.notes):
             note = "; ".join(x for x in (note, "weak from here (grazing, sigma widened): measure it from another "
                                                "set-up if one sees it better") if x)
