@@ -43,8 +43,10 @@ log = logging.getLogger(__name__)
 PIPELINE_VERSION = "1"
 #: Version of the centroid estimate, in every stage-1 result's inputs: a change re-measures stored epochs from
 #: their kept plans (2: the disc's normal fitted on the ranges alone, see lidar.centroid._plane; 3: weak discs,
-#: 20-35 % of the beam's width, measured with a widened sigma instead of refused, see lidar.centroid.WEAK_RATIO).
-CENTROID_VERSION = "3"
+#: 20-35 % of the beam's width, measured with a widened sigma instead of refused, see lidar.centroid.WEAK_RATIO;
+#: 4: the disc's outline overrules a predicted grazing view, and a surface that moved during the window is
+#: corrected from the points' times, see lidar.centroid.apparent_cos and lidar.transients).
+CENTROID_VERSION = "4"
 #: Profile fields added later: they enter the input hash only when they differ from their default.
 _LATER_PROFILE_FIELDS = {"max_tilt_deg": MAX_TILT_DEG, "kind": "line", "step_presets": [], "windowed": True,
                          "horizontal_direction": "ccw", "horizontal_zero_deg": 0.0, "vertical_reference": "zenith",
@@ -358,7 +360,7 @@ def _stale_reason(inp: EpochInputs, params: dict) -> str | None:
         if res is None or res.stage != "measured":
             return "not measured yet"
         if res.inputs_hash != want:
-            if res.inputs_hash in (_measure_hash(inp, plan_hash, version=v) for v in ("1", "2")):
+            if res.inputs_hash in (_measure_hash(inp, plan_hash, version=v) for v in ("1", "2", "3")):
                 return "centroid estimate updated"
             return "inputs or parameters changed"
         return None
