@@ -110,7 +110,7 @@ FLAG_NOT_COMPACT = _flag("no_compact_target", WARNING, "bright points but no dis
                          "its window before leaving", words="no disc-shaped target")
 FLAG_GRAZING = _flag("grazing", INFO, "seen at grazing incidence: the disc is barely wider than the beam, its "
                      "sigma is widened for the bias of a partly resolved disc", "lidar.centroid",
-                     words="seen at grazing incidence (sigma widened)")
+                     words="grazing (sigma widened)")
 FLAG_INCIDENCE_FROM_SCAN = _flag("incidence_from_scan", INFO, "the disc's outline in the fine scan shows a "
                                  "resolved disc where the layout's normal predicted a grazing view: the scan's "
                                  "incidence is used (the layout's normal for the target may be wrong)",
@@ -186,7 +186,7 @@ FLAG_DRIFT_FROM_PLAN = _flag("drift_from_plan_times", INFO, "the fine scans carr
                              words="drift from the plan's times")
 FLAG_TRANSIENTS_UNCHECKED = _flag("transients_unchecked", INFO, "the fine scans carry no point times: a train or a "
                                   "lorry crossing while a window was scanned could not be looked for", "lidar.stage2",
-                                  words="movement during the windows not checked (no point times)")
+                                  words="no point times")
 FLAG_DRIFT_BEYOND_SPEC = _flag("drift_beyond_tolerance", WARNING, "the set-up turned more during the visit than "
                                "the instrument allows for", "lidar.stage2",
                                action="check the tripod and the instrument's levelling, and re-scan",
@@ -335,7 +335,7 @@ def words(flag: str) -> str:
     """The flag in plain words, for the report's body and one-line summaries.
 
     >>> words("grazing")
-    'seen at grazing incidence (sigma widened)'
+    'grazing (sigma widened)'
     """
     return lookup(flag).words
 
@@ -381,6 +381,58 @@ def count(flags: Iterable[str]) -> dict[str, int]:
     for f in flags:
         out[severity(f)] += 1
     return out
+
+
+def _targets_of(flag: str) -> list[str]:
+    """The targets a visit's flag names (``grazing: ... (M1 M5)`` or ``second_bright_object: R1``), or none."""
+    c = code(flag)
+    rest = flag[len(c):].lstrip(": ").strip()
+    def ids(text: str) -> list[str]:  # target ids: words with a digit (M1, R12, P3a)
+        words_ = text.split()
+        return words_ if words_ and all(any(ch.isdigit() for ch in t) and t.replace("#", "").isalnum()
+                                        for t in words_) else []
+
+    if rest.endswith(")") and "(" in rest and not is_from_baseline(flag):
+        return ids(rest[rest.rindex("(") + 1:-1])
+    return ids(rest)
+
+
+def summary(flags: Iterable[str]) -> str:
+    """A visit's flags in one short phrase: each warning or problem in words with its targets, information counted.
+
+    >>> summary(["normal_refitted_in_epoch", "grazing: the disc is 67 % of the beam's width (M5)",
+    ...          "grazing: the disc is 61 % of the beam's width (M1)", "second_bright_object: R1"])
+    'second bright object beside the target: R1; deck normal re-fitted; 2 targets grazing (sigma widened)'
+    >>> summary([])
+    '-'
+    """
+    by_code: dict[str, list[str]] = {}
+    detail: dict[str, str] = {}
+    order: list[str] = []
+    for f in flags:
+        c = code(f)
+        if c not in by_code:
+            by_code[c] = []
+            order.append(c)
+        found = _targets_of(f)
+        by_code[c] += [t for t in found if t not in by_code[c]]
+        if not found and f != c and not is_from_baseline(f):
+            detail.setdefault(c, f[len(c):].lstrip(": ").strip())
+    order.sort(key=lambda c: -SEVERITIES.index(REGISTRY[c].severity) if c in REGISTRY else 0)
+    parts = []
+    for c in order:
+        ids, w = by_code[c], words(c)
+        if REGISTRY[c].severity != INFO:
+            parts.append(f"{w}: {' '.join(ids)}" if ids else f"{w} ({detail[c]})" if c in detail else w)
+        else:
+            parts.append(f"{len(ids)} target{'s' if len(ids) > 1 else ''} {w}" if ids else w)
+    return "; ".join(parts) or "-"
+
+
+def first_action(flags: Iterable[str]) -> str:
+    """The action of the most serious flag among ``flags`` (empty when none asks for one)."""
+    ranked = sorted((f for f in flags if severity(f) != INFO), key=lambda f: -SEVERITIES.index(severity(f)))
+    return action(ranked[0]) if ranked else ""
 
 
 def describe(flags: Iterable[str]) -> str:

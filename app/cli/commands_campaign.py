@@ -17,7 +17,7 @@ from app.cli.args import (
 from app.cli.output import dump_json, table
 from app.cli.progress import progress_bar
 from common.errors import InputError
-from common.flags import FLAG_DEPARTS, describe, severity, worst
+from common.flags import FLAG_DEPARTS, describe, first_action, severity, summary, worst
 
 #: Epochs 'status' lists without --all.
 STATUS_EPOCHS = 12
@@ -115,6 +115,8 @@ def register(sub) -> None:
                                    "measurement target against its limits.")
     add_dir(p)
     p.add_argument("--all", action="store_true", help=f"list every epoch (default: the last {STATUS_EPOCHS})")
+    p.add_argument("--verbose", action="store_true", help="every flag of every epoch in full (default: one line a "
+                   "visit, the flags in words and counts, the action below it when one is needed)")
     add_json(p, help="print the whole status as JSON (every epoch)")
     p.set_defaults(func=cmd_status)
 
@@ -446,7 +448,8 @@ def cmd_status(args) -> int:
     print(f"campaign '{data['name']}', span {data['span_m'] or '?'} m, baseline {data['baseline'] or '-'}, "
           f"{len(epochs)} epoch(s)")
     shown = epochs if args.all else epochs[-STATUS_EPOCHS:]
-    table([{**e, "flags": describe(e["flag_list"]), "scale": _scale_text(e, data["baseline"])} for e in shown],
+    table([{**e, "flags": describe(e["flag_list"]) if args.verbose else _short(summary(e["flag_list"])),
+            "scale": _scale_text(e, data["baseline"])} for e in shown],
           ["epoch", "datetime", "state", "stale", "scale", "flags"])
     if len(shown) < len(epochs):
         print(f"(last {len(shown)} of {len(epochs)} epochs; --all for every epoch)")
@@ -457,8 +460,9 @@ def cmd_status(args) -> int:
     for e in epochs:
         level = levels[e["epoch"]]
         if level in ("problem", "warning"):
-            print(f"{level.upper()} in {e['epoch']}: " +
-                  "; ".join(f for f in e["flag_list"] if severity(f) in ("problem", "warning")))
+            serious = [f for f in e["flag_list"] if severity(f) in ("problem", "warning")]
+            print(f"{level.upper()} in {e['epoch']}: " + ("; ".join(serious) if args.verbose else summary(serious)))
+            print(f"  action: {first_action(serious)}")
     if data.get("instrument"):
         print("instrument (the campaign's field model): " + instrument_line(data["instrument"]))
     print("latest displacement of each measurement target:")
@@ -473,6 +477,14 @@ def cmd_status(args) -> int:
         print(f"warning: {len(data['unlisted_files'])} file(s) in the campaign folder that the database does not list "
               f"(kept; 'bridgesurvey repair {args.dir}' registers them again): {', '.join(data['unlisted_files'])}")
     return 0
+
+
+#: The flags column of a visit's line in ``status`` (its line stays within 120 characters; --verbose for all).
+FLAGS_WIDTH = 56
+
+
+def _short(text: str) -> str:
+    return text if len(text) <= FLAGS_WIDTH else text[:FLAGS_WIDTH - 1].rstrip("; ") + "…"
 
 
 def _scale_text(e: dict, baseline: str | None) -> str:

@@ -156,8 +156,10 @@ def test_centroid_flags_decide_the_state_everywhere_reference_targets_included(p
     assert main(["status", str(processed_copy)]) == 0
     out = capsys.readouterr().out
     assert "epochs with problems: 0, with warnings: 2" in out
-    assert "WARNING in 2026-03-09: second_bright_object: R1" in out
-    assert "WARNING in 2026-03-16: clipped_by_window: M2" in out
+    assert "WARNING in 2026-03-09: second bright object beside the target: R1" in out  # in words, one line
+    assert "WARNING in 2026-03-16: target clipped by its window: M2" in out
+    assert "  action: re-scan the target with a larger window" in out  # what to do, below it
+    assert all(len(line) <= 120 for line in out.splitlines() if line.startswith("2026-"))
     assert main(["displacements", str(processed_copy)]) == 0
     rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
     assert {r["epoch"]: r["epoch_state"] for r in rows} == {"2026-03-02": "processed", "2026-03-09": "warning",
