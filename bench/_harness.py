@@ -5,14 +5,21 @@ that of the measured work alone (measured above the memory after set-up).
 """
 from __future__ import annotations
 
+import datetime
 import json
+import os
+import platform
 import subprocess
 import sys
 import textwrap
 from pathlib import Path
 
+import numpy
+
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "bench" / "out"
+#: Where a bench writes the table the documentation shows (docs/figures/NAME.md, included by the pages).
+FIGURES = ROOT / "docs" / "figures"
 
 _CHILD = """
 import json, time, gc
@@ -51,3 +58,54 @@ def row(name: str, r: dict, base: dict | None = None) -> str:
     if base is not None:
         text += f"   time x{r['seconds'] / base['seconds']:.2f}  throughput x{base['seconds'] / r['seconds']:.2f}"
     return text
+
+
+def machine() -> str:
+    """One line naming the machine a bench ran on: system, processor, cores, memory, Python and numpy."""
+    cpu = platform.processor() or platform.machine()
+    memory = ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemTotal"):
+                memory = f", {int(line.split()[1]) / 1024 ** 2:.0f} GiB"
+                break
+    except OSError:  # not Linux: the platform module's words only
+        pass
+    return (f"{platform.system()} {platform.release()} {platform.machine()}, {cpu}, {os.cpu_count()} cores{memory}, "
+            f"Python {platform.python_version()}, numpy {numpy.__version__}")
+
+
+def write_figure(name: str, table: str, *, notes: str = "", argv: list[str] | None = None) -> Path:
+    """Write a bench's Markdown table to ``docs/figures/NAME.md``, where the documentation's pages include it.
+
+    The file starts with the date, the command that wrote it (``./run bench NAME`` and the bench's own
+    arguments) and the machine line, so a figure in the documentation always says where it came from.
+
+    Parameters
+    ----------
+    name : str
+        The file's stem, by convention the bench's own (``bench/NAME.py``).
+    table : str
+        The table in Markdown (a header line, the ``|---|`` line, the rows).
+    notes : str
+        Lines printed under the table (footnotes, the run's conclusions), Markdown.
+    argv : list of str, optional
+        The bench's arguments, recorded in the command; by default ``sys.argv[1:]``.
+    """
+    args = sys.argv[1:] if argv is None else argv
+    command = " ".join(["./run bench", name, *args])
+    when = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
+    text = (f"<!-- Written by {command} (bench/_harness.py write_figure): run the bench again rather than "
+            f"editing this file. -->\n"
+            f"*Measured {when} by `{command}` on {machine()}.*\n\n{table.strip()}\n")
+    if notes.strip():
+        text += f"\n{notes.strip()}\n"
+    FIGURES.mkdir(parents=True, exist_ok=True)
+    path = FIGURES / f"{name}.md"
+    path.write_text(text, encoding="utf-8")
+    print(f"table written to {path}")
+    return path

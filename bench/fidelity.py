@@ -30,6 +30,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from _dissertation import time_figures  # noqa: E402
+from _harness import write_figure  # noqa: E402
 
 from lidar.displacement import compute_displacements  # noqa: E402
 from lidar.layout import layout_from_model  # noqa: E402
@@ -232,11 +233,11 @@ def main():
     whole_scan_scatter()
     times()
     dual_camera()
-    print("\n| claim | dissertation (section) | ours | how the set-ups differ |")
-    print("|---|---|---|---|")
-    for r in ROWS:
-        print("| " + " | ".join(r) + " |")
+    table = "| claim | dissertation (section) | ours | how the set-ups differ |\n|---|---|---|---|\n" + "\n".join(
+        "| " + " | ".join(r) + " |" for r in ROWS)
+    print("\n" + table)
     print(f"\n({time.time() - t0:.0f} s)")
+    write_figure("fidelity", table)
 
 
 if __name__ == "__main__":

@@ -33,6 +33,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _harness import write_figure
 
 from lidar.simulate.bridge import BridgeModel
 from lidar.simulate.scene import EpochConditions
@@ -112,6 +113,8 @@ def main() -> None:
     print(table(rows))
     (OUT / "long_bridges.json").write_text(json.dumps({f"{b} | {s}": v.row() for (b, s), v in rows.items()}, indent=1))
     print(f"\nlargest share beyond 3 sigma without a flag: {silent:.1%} (must be 0)")
+    if not args.quick:  # one bridge is no table for the documentation
+        write_figure("long_bridges", table(rows))
 
 
 if __name__ == "__main__":

@@ -20,6 +20,7 @@ Usage: ``./run bench normal_geometry``.
 from __future__ import annotations
 
 import numpy as np
+from _harness import write_figure
 
 from lidar.displacement import compute_displacements
 from lidar.simulate.centroids import BridgeGeometry, deflection, observe, random_station
@@ -79,6 +80,37 @@ def cell(geometry: BridgeGeometry, seeds=(0, 1, 2), epochs=20):
     return out
 
 
+LAYOUTS = (((-1.8, 1.8), "symmetric ±1.8 m"), ((-2.4, 1.2), "twin girder −2.4 / +1.2 m"))
+SEPARATIONS = (0.5, 1.8, 3.0)
+
+
+def _span(values: list[float], digits: int = 3, unit: str = " mm") -> str:
+    """'0.098 mm', or '0.089–0.090 mm' when the values differ at the shown precision."""
+    lo, hi = f"{min(values):.{digits}f}", f"{max(values):.{digits}f}"
+    return f"{lo}{unit}" if lo == hi else f"{lo}–{hi}{unit}"
+
+
+def markdown(results: dict) -> tuple[str, str]:
+    """The documentation's table (one row per span and layout, the separations side by side) and its notes."""
+    seps = " / ".join(f"{s:.1f}" for s in SEPARATIONS)
+    lines = ["| span | pier-target separation | layout | floor¹ | auto (ours) | re-fitted every epoch² |",
+             "|---|---|---|---|---|---|"]
+    within = []
+    for span in sorted({k[0] for k in results}):
+        for _, label in LAYOUTS:
+            cells = [results[(span, sep, label)] for sep in SEPARATIONS]
+            within += [c["auto"][2] for c in cells]
+            lines.append(f"| {span:.0f} m | {seps} m | {label} | {_span([c['floor'] for c in cells])} | "
+                         + " / ".join(f"{c['auto'][0]:.3f}" for c in cells) + " mm | "
+                         + _span([c["per-epoch"][0] for c in cells], 2) + " |")
+    notes = ("RMS error of the vertical displacement. ¹ the same centroids with the scanner's true orientation and "
+             "the true vertical: what no choice of normal can remove (the deck targets' own vertical noise; short "
+             "spans are scanned from closer, at steeper sight lines). ² the dissertation's formula (normal re-fitted "
+             "on the deck targets, plain mean of the pier targets). "
+             f"{_span([100 * w for w in within], 0, ' %')} of our errors lie within 2σ.")
+    return "\n".join(lines), notes
+
+
 def main() -> None:
     print(__doc__.split("Usage")[0].strip())
     print()
@@ -86,15 +118,20 @@ def main() -> None:
     print(head)
     print("-" * len(head))
     worst = 0.0
+    results: dict = {}
     for span in (20.0, 40.0, 60.0):
-        for sep in (0.5, 1.8, 3.0):
-            for offsets, label in (((-1.8, 1.8), "symmetric"), ((-2.4, 1.2), "asymmetric")):
+        for sep in SEPARATIONS:
+            for offsets, label in LAYOUTS:
                 geometry = BridgeGeometry(span_m=span, pier_separation_m=sep, girder_offsets_m=offsets)
                 res = cell(geometry)
+                res["floor"] = floor(geometry)
+                results[(span, sep, label)] = res
                 worst = max(worst, res["auto"][0])
-                print(f"{span:5.0f} {sep:8.1f} {label:>12} | {floor(geometry):.3f} mm | " + " | ".join(
+                print(f"{span:5.0f} {sep:8.1f} {label[:12]:>12} | {res['floor']:.3f} mm | " + " | ".join(
                     f"{r:.3f}/{m:.3f} mm {f:4.0%}" for r, m, f in (res[name] for name, _ in MODES)))
     print(f"\nworst RMS of auto over all geometries: {worst:.3f} mm")
+    table, notes = markdown(results)
+    write_figure("normal_geometry", table, notes=notes)
 
 
 if __name__ == "__main__":

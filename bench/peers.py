@@ -23,7 +23,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[0]))
 
-from _harness import ROOT, measure  # noqa: E402
+from _harness import ROOT, measure, write_figure  # noqa: E402
 from _peers_data import OUT, big_scan, campaign  # noqa: E402
 
 PY = sys.executable
@@ -376,13 +376,20 @@ def main(only: tuple[str, ...] = ()) -> None:
     c2c_step(npz)
     if only != ("epochs",):
         file_jobs()
-    _table()
+    table = _table()
+    if not only:  # a part of the rows is no table for the documentation
+        write_figure("peers", table, notes=(
+            "Best of three fresh processes (`plan-file` and the bare read: best of five, run in turns); peak resident "
+            "memory of each process; every ratio against the peer in the same run. CloudCompare "
+            + ("installed." if shutil.which("CloudCompare") or shutil.which("cloudcompare")
+               else "not installed: its rows are missing.")))
 
 
-def _table() -> None:
-    print("\n| job | BridgeSurvey | peer | ratio / verdict |\n|---|---|---|---|")
-    for r in ROWS:
-        print("| " + " | ".join(r) + " |")
+def _table() -> str:
+    text = "| job | BridgeSurvey | peer | ratio / verdict |\n|---|---|---|---|\n" + "\n".join(
+        "| " + " | ".join(r) + " |" for r in ROWS)
+    print("\n" + text)
+    return text
 
 
 if __name__ == "__main__":

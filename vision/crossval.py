@@ -235,14 +235,26 @@ def cross_validate(epochs: Sequence[str], time_ns: np.ndarray, lidar_mm: np.ndar
 
     Parameters
     ----------
-    epochs : labels of the LiDAR epochs, (n,).
-    time_ns : (n,) their UTC times in nanoseconds.
-    lidar_mm, lidar_sigma_mm : (n,) LiDAR displacement and its standard deviation, mm, positive up.
-    camera : the camera series (mm, positive up).
-    window_s : half-width of the time window around each epoch, seconds (default 30 min).
-    align_at_ns : align both series at the epoch nearest this time; None for least squares.
+    epochs : sequence of str, (n,)
+        Labels of the LiDAR epochs.
+    time_ns : ndarray of int64, shape (n,)
+        Their UTC times in nanoseconds.
+    lidar_mm, lidar_sigma_mm : ndarray, shape (n,)
+        LiDAR displacement and its standard deviation, mm, positive up.
+    camera : CameraSeries
+        The camera series (mm, positive up).
+    window_s : float
+        Half-width of the time window around each epoch, seconds (default 30 min).
+    align_at_ns : int, optional
+        Align both series at the epoch nearest this time; None for least squares.
+    reflector, series : str
+        The reflector and the series' name, recorded in the result.
 
-    With fewer than :data:`MIN_PAIRS` pairs the statistics are NaN and ``note`` says why.
+    Returns
+    -------
+    CrossValidation
+        The pairs and the statistics. With fewer than :data:`MIN_PAIRS` pairs the statistics are NaN and
+        ``note`` says why.
     """
     t = np.asarray(time_ns, np.int64)
     y = np.asarray(lidar_mm, float)
