@@ -34,7 +34,10 @@ def _stale(c: Campaign) -> list[Finding]:
 
 def verify_campaign(c: Campaign, *, progress: ProgressCallback | None = None) -> list[Finding]:
     """Every problem the campaign has, each with what to do (empty when it is whole)."""
-    return verify_store(c, progress=progress) + _stale(c)
+    found = verify_store(c, progress=progress)
+    if any(table != "field_models" for table, _ in c.damaged_inputs()):
+        return found  # damaged inputs (named): whether results match them cannot be said until they are put right
+    return found + _stale(c)
 
 
 def reimporters() -> dict[str, Callable]:
@@ -62,7 +65,7 @@ def repair_folder(folder: str | os.PathLike) -> tuple[list[str], list[str]]:
     """Repair a campaign folder; (what was done, what was left as it is). Nothing is deleted."""
     from projects.store.repair import repair_campaign, repair_schema_version
 
-    schema_note = repair_schema_version(Path(folder))
+    schema_notes = repair_schema_version(Path(folder))
     with Campaign.open(folder) as c:
         rep = repair_campaign(c, reimporters())
-    return ([schema_note] if schema_note else []) + list(rep.done), list(rep.left)
+    return schema_notes + list(rep.done), list(rep.left)

@@ -25,12 +25,13 @@ from pathlib import Path
 
 import numpy as np
 
+from common.errors import SurveyError
 from common.files import MB, disk_full_error, ensure_free, is_disk_full, write_atomic
 from lidar.centroid import TargetCentroid
 from lidar.layout import Layout, check_layout
 from lidar.scanner_profile import ScannerProfile
 from lidar.systematic.adjustment import FieldModel
-from projects.store import digests, field_tables, inputs, journal, schema, setup_tables
+from projects.store import digests, field_tables, inputs, journal, schema, setup_tables, wal
 from projects.store.connection import connect, open_database
 from projects.store.errors import CampaignError, CampaignLockedError, DuplicateImportError, InputError
 from projects.store.imports import (  # noqa: F401  (importers name them here)
@@ -44,6 +45,7 @@ from projects.store.imports import (  # noqa: F401  (importers name them here)
     copy_in,
     folder_files,
     header_facts,
+    not_writable,
     remove_uncommitted,
 )
 from projects.store.lock import LOCK_NAME, CampaignLock  # noqa: F401  (LOCK_NAME: likewise)
@@ -174,6 +176,8 @@ class Campaign:
                      zip(layout.ids, layout.groups, layout.xyz, layout.diameters_m, layout.normals, strict=False)])
                 conn.execute("INSERT INTO log(time, action, epoch, details) VALUES (?, 'init', NULL, ?)",
                              (now_iso(), json.dumps({"name": name, "reflectors": len(layout)})))
+                digests.seal_rows(conn, "meta")
+                digests.seal_rows(conn, "reflectors")
             conn.close()
             os.replace(tmp, folder / DB_NAME)
         except BaseException:
@@ -194,11 +198,19 @@ class Campaign:
         db = folder / DB_NAME
         if not db.is_file():
             raise CampaignError(f"{folder}: no campaign here (no {DB_NAME}); create one with 'bridgesurvey init'")
+        if writable:  # a write would fail at its end (SQLite's 'attempt to write a readonly database'): say so now
+            for p in (folder, db):
+                if not os.access(p, os.W_OK) and not os.statvfs(p).f_flag & os.ST_RDONLY:  # a medium: the lock says
+                    raise not_writable(p)
         lock = CampaignLock.acquire(folder, exclusive=writable)
         try:
+            wal.check(db)  # before SQLite reads the log: a restored database never reads another one's
             conn = open_database(db, writable=writable)
             try:
+                wal.no_automatic_checkpoints(conn)
                 cls._upgrade(conn, lock, folder, writable)
+                if writable:
+                    wal.checkpoint(conn, db)
             except BaseException:
                 conn.close()
                 raise
@@ -225,12 +237,16 @@ class Campaign:
             schema.migrate(conn, version)
             if not writable:
                 lock.downgrade()
+            schema.check_tables(conn, str(folder))
         except BlockingIOError:
             raise CampaignLockedError(f"{folder}: the campaign needs a schema upgrade but another process is "
                                       "using it; try again when it has finished") from None
 
     def close(self) -> None:
         if self.conn is not None:
+            if self.writable and not self.conn.in_transaction:
+                with contextlib.suppress(SurveyError, sqlite3.Error):  # else SQLite checkpoints as it closes
+                    wal.checkpoint(self.conn, self.folder / DB_NAME)
             self.conn.close()
             self.conn = None  # type: ignore[assignment]  # a closed campaign has no connection
         if self._lock is not None:
@@ -268,6 +284,13 @@ class Campaign:
         """Remove the temporary files an interrupted import left (never an imported file: see :mod:`.imports`)."""
         clean_temp_files(self.folder, DB_NAME)
 
+    def check_still_there(self) -> None:
+        """Raise the one line when the campaign folder is gone from where it was opened (moved, renamed, deleted)."""
+        if not (self.folder / DB_NAME).is_file():
+            raise CampaignError(f"{self.folder}: the campaign folder is no longer there (moved, renamed or deleted "
+                                "while the command ran); what was saved before is kept whole: run the command again "
+                                "where the folder is now")
+
     def listed_files(self) -> set[str]:
         """Every file of the import folders the database lists (paths relative to the campaign)."""
         return {r[0] for table in IMPORT_DIRS.values() for r in self.conn.execute(f"SELECT stored_path FROM {table}")}
@@ -282,14 +305,30 @@ class Campaign:
 
     # ------------------------------------------------------------------ metadata
     def meta(self, key: str, default: str = "") -> str:
-        """One campaign-level value of the ``meta`` table (``default`` when it is not set)."""
-        row = self.conn.execute("SELECT value FROM meta WHERE key = ?", (key,)).fetchone()
-        return default if row is None else row[0]
+        """One campaign-level value of the ``meta`` table (``default`` when it is not set).
+
+        A value that fails its digest is a :class:`CampaignError` naming it (never served).
+        """
+        row = self.conn.execute("SELECT key, value, digest FROM meta WHERE key = ?", (key,)).fetchone()
+        if row is None:
+            return default
+        self._check_row("meta", row)
+        return row["value"]
 
     def set_meta(self, key: str, value: str) -> None:
         """Set one campaign-level value (``meta`` table), in its own transaction."""
         with self.transaction() as c:
             c.execute("INSERT OR REPLACE INTO meta(key, value) VALUES (?, ?)", (key, value))
+            digests.seal_row(c, "meta", key)
+
+    def _check_row(self, table: str, row: sqlite3.Row) -> None:
+        """Raise the one line naming an input row that fails its digest (see :data:`digests.INPUTS`)."""
+        if not digests.row_is_sound(table, row):
+            raise CampaignError(damaged_input_line(self.folder, table, row[digests.INPUTS[table].key]))
+
+    def damaged_inputs(self) -> list[tuple[str, str]]:
+        """(table, key) of every input row that fails its digest (limits, epochs, reflectors, settings, field model)."""
+        return [(table, key) for table in digests.INPUTS for key in digests.damaged_rows(self.conn, table)]
 
     @property
     def name(self) -> str:
@@ -313,6 +352,7 @@ class Campaign:
         if epoch is None:
             with self.transaction() as c:
                 c.execute("UPDATE meta SET value = ? WHERE key = 'scanner_profile'", (json.dumps(profile.to_dict()),))
+                digests.seal_row(c, "meta", "scanner_profile")
                 self.log_action(c, "scanner", None, {"name": profile.name})
             return
         self.epoch(epoch)
@@ -329,6 +369,7 @@ class Campaign:
         try:
             with self.transaction() as c:
                 c.execute("UPDATE meta SET value = ? WHERE key = 'settings'", (json.dumps(s),))
+                digests.seal_row(c, "meta", "settings")
                 self.log_action(c, "scanner", epoch, {"name": profile.name, **({"setup": setup} if "setup" in entry else {})})
         except BaseException:
             journal.truncate(self.folder, mark)
@@ -342,6 +383,7 @@ class Campaign:
         s[key] = value
         with self.transaction() as c:
             c.execute("UPDATE meta SET value = ? WHERE key = 'settings'", (json.dumps(s),))
+            digests.seal_row(c, "meta", "settings")
             self.log_action(c, "setting", None, {key: value})
 
     def log_action(self, conn: sqlite3.Connection, action: str, epoch: str | None, details: dict) -> None:
@@ -357,13 +399,17 @@ class Campaign:
     # ------------------------------------------------------------------ reflectors
     def reflectors(self) -> list[Reflector]:
         """Every reflector, retired ones included: reference targets first, then by id."""
-        return [_reflector(r) for r in self.conn.execute("SELECT * FROM reflectors ORDER BY grp DESC, id")]
+        rows = self.conn.execute("SELECT * FROM reflectors ORDER BY grp DESC, id").fetchall()
+        for r in rows:
+            self._check_row("reflectors", r)
+        return [_reflector(r) for r in rows]
 
     def reflector(self, rid: str) -> Reflector:
         row = self.conn.execute("SELECT * FROM reflectors WHERE id = ?", (rid,)).fetchone()
         if row is None:
             known = ", ".join(r.id for r in self.reflectors())
             raise InputError(f"unknown reflector {rid!r}; the campaign has {known}")
+        self._check_row("reflectors", row)
         return _reflector(row)
 
     def layout(self, at: str | None = None) -> Layout:
@@ -392,6 +438,7 @@ class Campaign:
         with self.transaction() as c:
             c.execute("INSERT INTO reflectors(id, grp, x, y, z, diameter_m, installed, replaces, note) "
                       "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)", (rid, group, *xyz, diameter_m, installed, replaces, note))
+            digests.seal_row(c, "reflectors", rid)
             self.log_action(c, "reflector-add", None, {"id": rid, "group": group, "replaces": replaces})
 
     def retire_reflector(self, rid: str, when: str) -> None:
@@ -401,6 +448,7 @@ class Campaign:
         when = parse_datetime(when)
         with self.transaction() as c:
             c.execute("UPDATE reflectors SET retired = ? WHERE id = ?", (when, rid))
+            digests.seal_row(c, "reflectors", rid)
             self.log_action(c, "reflector-retire", None, {"id": rid, "when": when})
 
     def replace_reflector(self, old: str, new: str, when: str, *, xyz: Sequence[float] | None = None) -> None:
@@ -415,12 +463,17 @@ class Campaign:
             c.execute("INSERT INTO reflectors(id, grp, x, y, z, diameter_m, installed, replaces, note, nx, ny, nz) "
                       "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                       (new, r.group, *pos, r.diameter_m, when, old, f"replaces {old}", *_normal_values(r.normal_layout)))
+            digests.seal_row(c, "reflectors", old)
+            digests.seal_row(c, "reflectors", new)
             self.log_action(c, "reflector-replace", None, {"old": old, "new": new, "when": when})
 
     # ------------------------------------------------------------------ epochs and files
     def epochs(self) -> list[Epoch]:
         """Every epoch, oldest first."""
-        return [Epoch(**dict(r)) for r in self.conn.execute("SELECT * FROM epochs ORDER BY datetime, label")]
+        rows = self.conn.execute("SELECT * FROM epochs ORDER BY datetime, label").fetchall()
+        for r in rows:
+            self._check_row("epochs", r)
+        return [_epoch(r) for r in rows]
 
     def epoch(self, label: str) -> Epoch:
         """One epoch; an unknown label is an :class:`InputError` naming the epochs there are."""
@@ -429,7 +482,8 @@ class Campaign:
             labels = [e.label for e in self.epochs()]
             hint = f"; epochs are {', '.join(labels[-8:])}" if labels else "; the campaign has no epochs yet"
             raise InputError(f"no epoch {label!r} in {self.folder}{hint}")
-        return Epoch(**dict(row))
+        self._check_row("epochs", row)
+        return _epoch(row)
 
     def files(self, epoch: str, role: str | None = None, *, setup: int | None = 1) -> list[ScanFile]:
         """An epoch's scan files (``role`` ``"coarse"`` or ``"fine"``, or both), in import order.
@@ -585,6 +639,7 @@ class Campaign:
                     c.execute("INSERT INTO epochs(label, datetime, notes, created) VALUES (?, ?, ?, ?)",
                               (create_epoch["label"], create_epoch["datetime"], create_epoch.get("notes", ""),
                                now_iso()))
+                    digests.seal_row(c, "epochs", create_epoch["label"])
                 for (p, role), got, (k, frame) in zip(items, copied, placed, strict=False):
                     c.execute("INSERT INTO files(sha256, epoch, role, stored_path, original_path, size, imported, "
                               "setup, frame) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
@@ -615,6 +670,7 @@ class Campaign:
         when = parse_datetime(when)
         if self.conn.execute("SELECT 1 FROM epochs WHERE label = ?", (label,)).fetchone():
             raise InputError(f"epoch {label!r} already exists; use another --label or add-fine to add files to it")
+        inputs.check_computable(when)
         if not allow_date:
             inputs.check_epoch_date(when, [e.datetime for e in self.epochs()])
         items = [(Path(coarse), "coarse")] + [(Path(f), "fine") for f in fines]
@@ -937,6 +993,7 @@ class Campaign:
                ORDER BY e.datetime {order}, e.label {order}, d.reflector"""
         sound: dict[str, bool] = {}
         out = []
+        self.epochs()  # their dates are served with the values: a damaged epoch row is named, never served
         for r in self.conn.execute(q, args).fetchall():
             ep = r["epoch"]
             if ep not in sound:
@@ -980,8 +1037,9 @@ class Campaign:
         if reflector != "*":
             self.reflector(reflector)
         with self.transaction() as c:
-            c.execute("INSERT OR REPLACE INTO limits VALUES (?, ?, ?, ?)",
+            c.execute("INSERT OR REPLACE INTO limits(reflector, warning_mm, alarm_mm, rule) VALUES (?, ?, ?, ?)",
                       (reflector, lim.warning_mm, lim.alarm_mm, rule))
+            digests.seal_row(c, "limits", reflector)
             self.log_action(c, "limit", None, {"reflector": reflector, "rule": rule})
 
     def limit_for(self, reflector: str):
@@ -989,14 +1047,18 @@ class Campaign:
 
         row = self.conn.execute("SELECT * FROM limits WHERE reflector = ?", (reflector,)).fetchone() or \
             self.conn.execute("SELECT * FROM limits WHERE reflector = '*'").fetchone()
+        if row is not None:
+            self._check_row("limits", row)
         return None if row is None else Limit(row["warning_mm"], row["alarm_mm"], row["rule"])
 
     def limits(self) -> list[LimitRecord]:
         """Every limit set, by target ("*" is the default for all measurement targets)."""
         from projects.store.limits import Limit
 
-        return [LimitRecord(r["reflector"], Limit(r["warning_mm"], r["alarm_mm"], r["rule"]))
-                for r in self.conn.execute("SELECT * FROM limits ORDER BY reflector")]
+        rows = self.conn.execute("SELECT * FROM limits ORDER BY reflector").fetchall()
+        for r in rows:
+            self._check_row("limits", r)
+        return [LimitRecord(r["reflector"], Limit(r["warning_mm"], r["alarm_mm"], r["rule"])) for r in rows]
 
     def integrity_check(self) -> str:
         res = self.conn.execute("PRAGMA integrity_check").fetchone()[0]
@@ -1029,6 +1091,41 @@ def _header_or_none(path: Path) -> dict | None:
         return header_facts(path)
     except SurveyError:
         return None
+
+
+#: What to do about a damaged input row, by its table (see :data:`projects.store.digests.INPUTS`).
+INPUT_REMEDY = {
+    "meta": "restore campaign.sqlite from a backup",
+    "reflectors": "restore campaign.sqlite from a backup",
+    "epochs": "run 'bridgesurvey repair' (it takes the epoch's date and notes again from the journal of imports) "
+              "or restore campaign.sqlite from a backup",
+    "limits": "set it again with 'bridgesurvey limit DIR --reflector REFLECTOR --rule RULE'",
+    "field_models": "run 'bridgesurvey process' to fit it again",
+}
+
+
+def describe_input(table: str, key) -> str:
+    """An input row for a message ("limit of every measurement target", "epoch 2026-03-09", ...)."""
+    if table == "meta":
+        return {"scanner_profile": "the campaign's scanner profile", "settings": "the campaign's settings (processing "
+                "parameters, baseline, each epoch's scanner)"}.get(key, f"the campaign's {str(key).replace('_', ' ')}")
+    if table == "limits":
+        return "the limit of every measurement target (*)" if key == "*" else f"the limit of target {key}"
+    if table == "field_models":
+        return "the field model"
+    return f"{digests.INPUTS[table].name} {key}"
+
+
+def damaged_input_line(folder: Path, table: str, key) -> str:
+    """The one line naming a damaged input row and what to do (the same for every command and ``verify``)."""
+    remedy = INPUT_REMEDY[table].replace("DIR", str(folder)).replace("REFLECTOR", str(key))
+    what = describe_input(table, key)
+    return (f"{folder}: {what} is damaged in campaign.sqlite (its values do not match the checksum stored with "
+            f"them), so it is not used; {remedy}")
+
+
+def _epoch(r: sqlite3.Row) -> Epoch:
+    return Epoch(r["label"], r["datetime"], r["notes"], r["created"])
 
 
 def _reflector(r: sqlite3.Row) -> Reflector:

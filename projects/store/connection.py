@@ -32,6 +32,13 @@ def store_error(exc: sqlite3.Error, db: Path) -> SurveyError | None:
             return disk_full_error(db)
         return CampaignError(f"{db}: reading or writing the database failed (disk I/O error); check the device, "
                              f"then run 'bridgesurvey verify {db.parent}'")
+    if name.startswith("SQLITE_READONLY") or "readonly database" in text:
+        return CampaignError(f"{db}: the database cannot be written (read-only file, folder or medium); nothing was "
+                             f"changed: make {db.name}, its -wal and -shm files and its folder writable (e.g. chmod "
+                             "u+w) and run the command again")
+    if name.startswith("SQLITE_CANTOPEN") or "unable to open database" in text:
+        return CampaignError(f"{db}: the database cannot be opened any more ({text}): was the campaign folder moved, "
+                             "renamed or made read-only while the command ran? Run the command again where it is now")
     if name == "SQLITE_NOTADB" or "not a database" in text:
         return CampaignError(f"{db}: not a readable campaign database ({text}); restore campaign.sqlite from a "
                              "backup")

@@ -13,48 +13,12 @@ rows it covers; :func:`group_digest` computes one from the database, :func:`seal
 """
 from __future__ import annotations
 
-import hashlib
 import sqlite3
-import zlib
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from projects.store import setup_tables
-
-
-def value_digest(rows: Iterable[Sequence]) -> str:
-    """The digest of rows of SQL values (None, int, float, str, bytes), hex.
-
-    Text and numbers enter BLAKE2b exactly; a blob enters as its length and CRC-32 (blobs are the
-    large map previews and series arrays: CRC-32 reads them five times faster, and any damage that
-    changes a blob changes its CRC with certainty for bursts up to 32 bits, and otherwise but for
-    a chance of one in four billion).
-
-    Examples
-    --------
-    >>> value_digest([(1, 0.5, "a", None, b"x")]) == value_digest([(1, 0.5, "a", None, b"x")])
-    True
-    >>> value_digest([(1.0,)]) == value_digest([(1,)])  # a REAL is not an INTEGER
-    False
-    """
-    parts: list[bytes] = []
-    for row in rows:
-        parts.append(b"(")
-        for v in row:
-            if v is None:
-                parts.append(b"N")
-            elif isinstance(v, (bytes, bytearray, memoryview)):
-                parts.append(b"B%d:%08x;" % (len(v), zlib.crc32(v)))
-            elif isinstance(v, int):
-                parts.append(b"I%d;" % int(v))
-            elif isinstance(v, float):
-                parts.append(b"F" + float.hex(v).encode() + b";")
-            else:
-                s = str(v).encode()
-                parts.append(b"S%d:" % len(s))
-                parts.append(s)
-        parts.append(b")")
-    return hashlib.blake2b(b"".join(parts), digest_size=16).hexdigest()
+from projects.store.checksums import value_digest
 
 
 @dataclass(frozen=True)
@@ -164,3 +128,83 @@ def seal_all(conn: sqlite3.Connection, tables: Sequence[str] | None = None) -> N
     for table in (GROUPS if tables is None else tables):
         for key in keys_of(conn, table):
             seal(conn, table, key)
+
+
+# ---------------------------------------------------------------------------------------------- input rows
+@dataclass(frozen=True)
+class RowGroup:
+    """An input row every number depends on, whose digest is kept beside its values (schema 12).
+
+    Unlike a result (recomputed when it fails its digest) an input cannot be recomputed: a damaged
+    one is named in one line by every command that would use it, and by ``verify``.
+
+    Attributes
+    ----------
+    name : str
+        What a row is, for messages ("limit", "epoch", ...).
+    table : str
+        Its table.
+    key : str
+        The column naming one row.
+    columns : tuple of str
+        The columns the digest covers, in order.
+    column : str
+        The column holding the digest.
+    """
+
+    name: str
+    table: str
+    key: str
+    columns: tuple[str, ...]
+    column: str = "digest"
+
+
+INPUTS: dict[str, RowGroup] = {g.table: g for g in (
+    RowGroup("campaign setting", "meta", "key", ("key", "value")),
+    RowGroup("reflector", "reflectors", "id", ("id", "grp", "x", "y", "z", "diameter_m", "installed", "retired",
+                                                "replaces", "note", "nx", "ny", "nz")),
+    RowGroup("epoch", "epochs", "label", ("label", "datetime", "notes", "created")),
+    RowGroup("limit", "limits", "reflector", ("reflector", "warning_mm", "alarm_mm", "rule")),
+    RowGroup("field model", "field_models", "id", ("id", "model", "digest", "created"), column="row_digest"),
+)}
+#: Rows of ``meta`` that are not sealed: the schema version, which migrations and ``repair`` write.
+UNSEALED_META = frozenset({"schema_version"})
+
+
+def row_digest(table: str, row: sqlite3.Row | Sequence) -> str:
+    """The digest of one input row of ``table`` (a ``sqlite3.Row`` with the group's columns, or their values)."""
+    g = INPUTS[table]
+    values = tuple(row[c] for c in g.columns) if isinstance(row, sqlite3.Row) else tuple(row)
+    return value_digest([(g.table,), values])
+
+
+def row_is_sound(table: str, row: sqlite3.Row) -> bool:
+    """Whether an input row (read with its digest column) still has the digest it was written with."""
+    g = INPUTS[table]
+    if table == "meta" and row["key"] in UNSEALED_META:
+        return True
+    stored = row[g.column]
+    return stored is not None and stored == row_digest(table, row)
+
+
+def seal_row(conn: sqlite3.Connection, table: str, key) -> None:
+    """Store the digest of one input row just written (inside the transaction that wrote it)."""
+    g = INPUTS[table]
+    row = conn.execute(f"SELECT {', '.join(g.columns)} FROM {table} WHERE {g.key} = ?", (key,)).fetchone()
+    if row is not None:
+        conn.execute(f"UPDATE {table} SET {g.column} = ? WHERE {g.key} = ?", (row_digest(table, tuple(row)), key))
+
+
+def seal_rows(conn: sqlite3.Connection, table: str) -> None:
+    """Store the digest of every row of an input table (creating a campaign; the migration that brought them)."""
+    g = INPUTS[table]
+    for (key,) in conn.execute(f"SELECT {g.key} FROM {table}").fetchall():
+        if not (table == "meta" and key in UNSEALED_META):
+            seal_row(conn, table, key)
+
+
+def damaged_rows(conn: sqlite3.Connection, table: str) -> list:
+    """The keys of the rows of an input table whose digest does not match their values."""
+    g = INPUTS[table]
+    rows = conn.execute(f"SELECT {', '.join(g.columns)}, {g.column} FROM {table} ORDER BY {g.key}").fetchall()
+    return [r[g.key] for r in rows if not row_is_sound(table, r)]

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from lidar.centroid import TargetCentroid
+from projects.store.checksums import value_digest
 
 SCHEMA = """
 CREATE TABLE centroid_extras (
@@ -144,10 +145,16 @@ def read_set_extras(conn: sqlite3.Connection, epoch: str) -> dict:
 # ---------------------------------------------------------------------------------------------- field model
 def write_field_model(conn: sqlite3.Connection, model_json: dict, digest: str, created: str) -> None:
     """Replace the stored field model (caller's transaction)."""
-    conn.execute("INSERT OR REPLACE INTO field_models VALUES (1, ?, ?, ?)", (json.dumps(model_json), digest, created))
+    conn.execute("INSERT OR REPLACE INTO field_models(id, model, digest, created) VALUES (1, ?, ?, ?)",
+                 (json.dumps(model_json), digest, created))
+    row = conn.execute("SELECT id, model, digest, created FROM field_models WHERE id = 1").fetchone()
+    conn.execute("UPDATE field_models SET row_digest = ? WHERE id = 1",
+                 (value_digest([("field_models",), tuple(row)]),))
 
 
 def read_field_model(conn: sqlite3.Connection) -> tuple[dict, str] | None:
-    """The stored field model's JSON and digest, or None."""
-    r = conn.execute("SELECT model, digest FROM field_models WHERE id = 1").fetchone()
-    return None if r is None else (json.loads(r[0]), r[1])
+    """The stored field model's JSON and digest, or None (also when it fails its row digest: fitted again)."""
+    r = conn.execute("SELECT id, model, digest, created, row_digest FROM field_models WHERE id = 1").fetchone()
+    if r is None or r[4] != value_digest([("field_models",), tuple(r)[:4]]):
+        return None
+    return json.loads(r[1]), r[2]

@@ -12,13 +12,23 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from common.errors import InputError
 from common.flags import PROBLEM, WARNING, worst
 from projects.store.records import DisplacementRecord
 
 
 def ns_of(when: dt.datetime) -> int:
-    """A timezone-aware date-time as nanoseconds since 1970 (UTC), to the microsecond."""
-    return int(round(when.timestamp() * 1e6)) * 1000
+    """A timezone-aware date-time as nanoseconds since 1970 (UTC), to the microsecond.
+
+    A date-time outside what 64 bits of nanoseconds hold (an epoch dated in year 1 by mistake) is an
+    :class:`InputError` naming it, never an overflow.
+    """
+    ns = int(round(when.timestamp() * 1e6)) * 1000
+    if not -(2**63) < ns < 2**63:
+        raise InputError(f"date {when.isoformat()} is outside the years BridgeSurvey computes with (1678 to 2261); "
+                         "an epoch with such a date cannot be shown on a time axis: check the epochs' dates with "
+                         "'bridgesurvey status'")
+    return ns
 
 
 @dataclass(frozen=True)
@@ -100,7 +110,8 @@ def histories_from_records(records: Iterable[DisplacementRecord], limits: Mappin
 
     Examples
     --------
-    >>> from projects.store.records import DisplacementRecord
+    >>> from common.errors import InputError
+    from projects.store.records import DisplacementRecord
     >>> recs = [DisplacementRecord("e1", "2026-03-02T09:00:00+00:00", "M1", 0.0, 0.0, (), (), "e1"),
     ...         DisplacementRecord("e2", "2026-03-09T09:00:00+00:00", "M1", -0.0021, 0.0001, (), (), "e1")]
     >>> h = histories_from_records(recs)["M1"]

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from common.files import MB, disk_full_error, ensure_free, is_disk_full
+from projects.store.errors import CampaignError
 
 SCANS_DIR = "scans"
 CAMERA_DIR = "camera"
@@ -63,7 +64,10 @@ def copy_in(folder: Path, src: Path, sub: str) -> Copied:
     and met while copying, with nothing left behind.
     """
     target = folder / sub
-    target.mkdir(exist_ok=True)
+    try:
+        target.mkdir(exist_ok=True)
+    except PermissionError:
+        raise not_writable(target) from None
     size = src.stat().st_size
     if src.resolve().parent == target.resolve():
         sha = _sha256(src)
@@ -91,8 +95,18 @@ def copy_in(folder: Path, src: Path, sub: str) -> Copied:
             tmp.unlink()
         if isinstance(exc, Exception) and is_disk_full(exc):
             raise disk_full_error(target, size + IMPORT_MARGIN_BYTES) from None
+        if isinstance(exc, PermissionError) and exc.filename and Path(exc.filename).parent == target:
+            raise not_writable(target) from None
         raise
     return Copied(sha, rel, size, True)
+
+
+def not_writable(path: Path) -> CampaignError:
+    """The one line for a campaign folder (or its database) this user may not write: nothing was changed."""
+    what = "folder" if path.is_dir() else "file"
+    return CampaignError(f"{path}: this {what} is read-only (permission denied), so the command cannot write the "
+                         f"campaign; nothing was changed: make it writable (e.g. chmod -R u+w '{path}') and run the "
+                         "command again")
 
 
 def _sha256(path: Path) -> str:

@@ -20,6 +20,23 @@ from common.errors import InputError
 DATE_SPAN_YEARS = 3.0
 #: The years a campaign's first epoch may fall in without confirmation (first and last).
 PLAUSIBLE_YEARS = (1980, 2099)
+#: The years a date-time as nanoseconds since 1970 in 64 bits holds (every time axis of the product: series,
+#: histories, plots): a date outside them is refused even with ``--allow-date``.
+COMPUTABLE_YEARS = (1678, 2261)
+
+
+def check_computable(when: str) -> None:
+    """Refuse a date the product cannot compute with (outside :data:`COMPUTABLE_YEARS`), whatever the options.
+
+    >>> check_computable("0001-01-01")
+    Traceback (most recent call last):
+    ...
+    common.errors.InputError: date 0001-01-01 is outside the years BridgeSurvey computes with (1678 to 2261), even with --allow-date; check --date
+    """
+    w = _aware(when)
+    if not COMPUTABLE_YEARS[0] <= w.year <= COMPUTABLE_YEARS[1]:
+        raise InputError(f"date {w.date()} is outside the years BridgeSurvey computes with ({COMPUTABLE_YEARS[0]} to "
+                         f"{COMPUTABLE_YEARS[1]}), even with --allow-date; check --date")
 
 
 def _aware(text: str) -> dt.datetime:

@@ -1,7 +1,9 @@
 """Putting a campaign right again after a restore or damage, without ever deleting an imported file.
 
 * :func:`repair_schema_version`: a ``meta.schema_version`` that is missing or unreadable is set
-  again from what the tables show (:func:`projects.store.schema.inferred_version`).
+  again from what the tables show (:func:`projects.store.schema.inferred_version`), never lower than
+  it was; tables the version needs and the database lost are made again when their rows are results
+  (recomputed) or are held by the journal of imports, else the one line names what it cannot mend.
 * :func:`repair_campaign`: every file in the import folders that the database does not list, and
   that the journal of imports (:mod:`projects.store.journal`) knows, is registered again when its
   checksum (and, for a scan, its header) still matches its import: a scan into its epoch (the
@@ -15,13 +17,14 @@ Each step is its own transaction and is logged; what could not be done is said w
 """
 from __future__ import annotations
 
+import json
 import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from common.errors import SurveyError
-from projects.store import digests, journal, schema
+from projects.store import digests, journal, schema, wal
 from projects.store.campaign import DB_NAME, Campaign, sha256_of
 from projects.store.connection import connect
 from projects.store.errors import CampaignError
@@ -40,10 +43,98 @@ class RepairReport:
     left: list[str] = field(default_factory=list)
 
 
-def repair_schema_version(folder: str | os.PathLike) -> str | None:
-    """Set a missing or unreadable schema version from the tables; returns what it did, None when it was fine.
+#: Tables whose rows are results: made again empty when lost, their rows recomputed by ``process`` (or the
+#: command that made them); a row left in another table that pointed into them is removed with them.
+RECOMPUTED = frozenset({
+    "plans", "map_previews", "epoch_results", "centroids", "centroid_extras", "closure_centroids",
+    "displacement_sets", "displacements", "reference_checks", "displacement_extras", "displacement_set_extras",
+    "field_models", "setup_plans", "setup_previews", "setup_results", "comparisons", "crossvals"})
+#: Tables whose rows the journal of imports holds: made again empty, then filled by :func:`repair_campaign`.
+FROM_JOURNAL = frozenset({"epochs", "files", "camera_series", "env_series", "predictions"})
+#: The campaign's log: made again empty (its history is lost, nothing computed depends on it).
+LOG = frozenset({"log"})
+#: Tables whose rows the campaign's log holds: made again from the last rule set for each target.
+FROM_LOG = frozenset({"limits"})
 
-    Holds the writer lock while it looks; a version newer than this BridgeSurvey is left alone.
+
+def _orphans_removed(conn) -> int:
+    """Remove rows of the remade tables that point to rows that are gone (repeated until none is left)."""
+    removed = 0
+    for _ in range(8):
+        bad = [(t, rowid) for t, rowid, *_ in conn.execute("PRAGMA foreign_key_check").fetchall()
+               if t in RECOMPUTED | FROM_JOURNAL and rowid is not None]
+        if not bad:
+            break
+        for t, rowid in bad:
+            conn.execute(f"DELETE FROM {t} WHERE rowid = ?", (rowid,))
+        removed += len(bad)
+    return removed
+
+
+def _remake_tables(conn, folder: Path, missing: list[str]) -> list[str]:
+    """Make lost tables of the current schema again (see :data:`RECOMPUTED`), or raise naming what cannot be."""
+    tables = [m for m in missing if "." not in m]
+    lost = [m for m in missing if m not in RECOMPUTED | FROM_JOURNAL | LOG | FROM_LOG]
+    if "limits" in tables and "log" in tables:
+        lost.append("limits (the log that held its rules is lost too)")
+    if lost:
+        what = ", ".join(lost)
+        raise CampaignError(f"{folder}: campaign.sqlite lacks {what}, which 'repair' cannot make again (nothing else "
+                            "holds "
+                            + ("them" if len(lost) > 1 else "it") + "); nothing was changed: restore campaign.sqlite "
+                            "from a backup")
+    conn.execute("BEGIN IMMEDIATE")
+    try:
+        for t in tables:
+            for stmt in schema.creation_sql(t):
+                conn.execute(stmt)
+        removed = _orphans_removed(conn)
+        rules = _limits_from_log(conn) if "limits" in tables else {}
+    except BaseException:
+        conn.rollback()
+        raise
+    conn.commit()
+    out = []
+    for t in tables:
+        if t == "limits":
+            out.append("table limits made again from the campaign's log: " + (
+                "; ".join(f"{'every measurement target' if r == '*' else r} {rule}" for r, rule in rules.items())
+                or "no limit had been set") + " (check them with 'bridgesurvey status')")
+            continue
+        how = ("its rows are recomputed by 'process'" if t in RECOMPUTED else
+               "the campaign's log starts again" if t in LOG else "filled again from the journal of imports")
+        out.append(f"table {t} made again ({how})")
+    if removed:
+        out.append(f"{removed} row(s) that belonged to the lost rows removed (they are recomputed)")
+    return out
+
+
+def _limits_from_log(conn) -> dict[str, str]:
+    """Set the limits again, each target's last rule in the campaign's log (``limit`` lines); the rules set."""
+    from projects.store.limits import parse_rule
+
+    rules: dict[str, str] = {}
+    for (details,) in conn.execute("SELECT details FROM log WHERE action = 'limit' ORDER BY id"):
+        d = json.loads(details)
+        if d.get("reflector") and d.get("rule"):
+            rules[d["reflector"]] = d["rule"]
+    row = conn.execute("SELECT value FROM meta WHERE key = 'span_m'").fetchone()
+    span = float(row[0]) if row is not None and row[0] else None
+    for reflector, rule in rules.items():
+        lim = parse_rule(rule, span)
+        conn.execute("INSERT OR REPLACE INTO limits(reflector, warning_mm, alarm_mm, rule) VALUES (?, ?, ?, ?)",
+                     (reflector, lim.warning_mm, lim.alarm_mm, rule))
+        digests.seal_row(conn, "limits", reflector)
+    return dict(sorted(rules.items()))
+
+
+def repair_schema_version(folder: str | os.PathLike) -> list[str]:
+    """Put the schema right: a missing or unreadable version set from the tables, lost tables made again.
+
+    The recorded version is never lowered: tables that a version needs and the database lacks are lost
+    tables, made again when what they held can be recomputed or read again from the journal of imports
+    (:data:`RECOMPUTED`, :data:`FROM_JOURNAL`), else a :class:`CampaignError` naming them (nothing changed).
+    Returns what was done (empty when all was fine). Holds the writer lock; a newer version is left alone.
     """
     folder = Path(folder)
     db = folder / DB_NAME
@@ -51,25 +142,50 @@ def repair_schema_version(folder: str | os.PathLike) -> str | None:
         raise CampaignError(f"{folder}: no campaign here (no {DB_NAME})")
     lock = CampaignLock.acquire(folder, exclusive=True)
     try:
+        wal.check(db)
         conn = connect(db)
         try:
-            try:
-                schema.version_of(conn, str(folder))
-                return None
-            except CampaignError:
-                pass
-            version = schema.inferred_version(conn)
-            if version < 1:
-                raise CampaignError(f"{db}: its tables are not a campaign's; restore campaign.sqlite from a backup")
-            before = schema.recorded_version(conn)
-            with conn:
-                conn.execute("INSERT OR REPLACE INTO meta(key, value) VALUES ('schema_version', ?)", (str(version),))
-            return (f"schema version set to {version} from the tables (it was "
-                    f"{'not recorded' if before is None else repr(before)})")
+            return _repair_schema(conn, folder, db)
         finally:
             conn.close()
     finally:
         lock.release()
+
+
+def _repair_schema(conn, folder: Path, db: Path) -> list[str]:
+    try:
+        schema.version_of(conn, str(folder))
+        return []
+    except CampaignError as exc:
+        if "lacks table meta" in str(exc):
+            raise
+    text = schema.recorded_version(conn)
+    try:
+        recorded: int | None = int(str(text).strip())
+    except ValueError:
+        recorded = None
+    if recorded is not None and recorded >= 1:
+        if recorded == schema.SCHEMA_VERSION:
+            missing = schema.missing_parts(conn)
+            columns = [m for m in missing if "." in m]
+            if columns:
+                raise CampaignError(f"{folder}: campaign.sqlite lacks the column(s) {', '.join(columns)} of its schema "
+                                    "version, which 'repair' cannot make again; nothing was changed: restore "
+                                    "campaign.sqlite from a backup")
+            return _remake_tables(conn, folder, missing)
+        have = schema.inferred_version(conn)
+        if have < recorded:
+            raise CampaignError(f"{folder}: campaign.sqlite says schema version {recorded} but lacks tables of it (its "
+                                f"tables are complete only up to version {have}); 'repair' never lowers the version "
+                                "and cannot make tables of an older version again: restore campaign.sqlite from a "
+                                "backup")
+    version = schema.inferred_version(conn)
+    if version < 1:
+        raise CampaignError(f"{db}: its tables are not a campaign's; restore campaign.sqlite from a backup")
+    with conn:
+        conn.execute("INSERT OR REPLACE INTO meta(key, value) VALUES ('schema_version', ?)", (str(version),))
+    return [f"schema version set to {version} from the tables (it was "
+            f"{'not recorded' if text is None else repr(text)})"]
 
 
 def _register_scan(c: Campaign, rel: str, e: dict) -> str:
@@ -80,6 +196,7 @@ def _register_scan(c: Campaign, rel: str, e: dict) -> str:
         if conn.execute("SELECT 1 FROM epochs WHERE label = ?", (label,)).fetchone() is None:
             conn.execute("INSERT INTO epochs(label, datetime, notes, created) VALUES (?, ?, ?, ?)",
                          (label, e["epoch_datetime"], e.get("epoch_notes", ""), e.get("imported", "")))
+            digests.seal_row(conn, "epochs", label)
             created = True
         conn.execute("INSERT INTO files(sha256, epoch, role, stored_path, original_path, size, imported, setup, frame) "
                      "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)", (e["sha256"], label, e["role"], rel,

@@ -7,6 +7,7 @@ with the new version number, so a failed or interrupted upgrade leaves the campa
 """
 from __future__ import annotations
 
+import functools
 import sqlite3
 from collections.abc import Callable
 
@@ -16,7 +17,7 @@ from projects.store.errors import CampaignError
 from projects.store.field_tables import SCHEMA as FIELD_SCHEMA
 from projects.store.setup_tables import SCHEMA as SETUP_SCHEMA
 
-SCHEMA_VERSION = 11
+SCHEMA_VERSION = 12
 
 SCHEMA_V1 = """
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -107,6 +108,13 @@ def _add_digests(conn: sqlite3.Connection) -> None:
     for table in digests.V10_TABLES:
         conn.execute(f"ALTER TABLE {table} ADD COLUMN digest TEXT")
     digests.seal_all(conn, digests.V10_TABLES)
+
+
+def _add_row_digests(conn: sqlite3.Connection) -> None:
+    """Migration 12: a digest beside every input row (limits, epochs, reflectors, settings, the field model)."""
+    for g in digests.INPUTS.values():
+        conn.execute(f"ALTER TABLE {g.table} ADD COLUMN {g.column} TEXT")
+        digests.seal_rows(conn, g.table)
 
 
 Migration = str | Callable[[sqlite3.Connection], None]
@@ -209,6 +217,10 @@ MIGRATIONS: dict[int, Migration] = {
     # 11: visits with several set-ups (each file's set-up, the plans, map previews and centroids of set-ups 2, 3...)
     #     and scans read through a scanner pose (each file's frame) (projects.store.setup_tables).
     11: SETUP_SCHEMA,
+    # 12: every input row a number depends on (limits, epochs with their dates, reflectors, the scanner profiles
+    #     and settings in meta, the field model) carries the digest of its values (projects.store.digests.INPUTS),
+    #     so a changed alarm limit or epoch date is named, never served.
+    12: _add_row_digests,
 }
 
 #: What each migration leaves that can be seen in the tables: version -> (table, column or None).
@@ -216,7 +228,7 @@ MIGRATIONS: dict[int, Migration] = {
 MARKS: dict[int, tuple[str, str | None]] = {
     1: ("displacements", None), 2: ("map_previews", None), 3: ("comparisons", None), 4: ("camera_series", None),
     5: ("reflectors", "nx"), 6: ("env_series", None), 7: ("predictions", None), 9: ("field_models", None),
-    10: ("plans", "digest"), 11: ("setup_plans", None),
+    10: ("plans", "digest"), 11: ("setup_plans", None), 12: ("limits", "digest"),
 }
 
 
@@ -285,6 +297,60 @@ def recorded_version(conn: sqlite3.Connection) -> str | None:
     return None if row is None else str(row[0])
 
 
+@functools.lru_cache(maxsize=1)
+def _reference() -> tuple[dict[str, tuple[str, ...]], dict[str, tuple[str, ...]]]:
+    """The tables of a new campaign: table -> its columns, and table -> the SQL creating it (and its indexes)."""
+    conn = sqlite3.connect(":memory:")
+    try:
+        create(conn)
+        names = [r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table' AND name NOT LIKE "
+                                            "'sqlite_%' ORDER BY name")]
+        columns = {t: tuple(r[1] for r in conn.execute(f"PRAGMA table_info({t})")) for t in names}
+        sql = {t: tuple(r[0] for r in conn.execute("SELECT sql FROM sqlite_master WHERE tbl_name = ? AND sql IS NOT "
+                                                   "NULL ORDER BY type DESC", (t,))) for t in names}
+    finally:
+        conn.close()
+    return columns, sql
+
+
+def creation_sql(table: str) -> tuple[str, ...]:
+    """The statements that create ``table`` (and its indexes) as a new campaign of this version has it."""
+    return _reference()[1][table]
+
+
+def missing_parts(conn: sqlite3.Connection) -> list[str]:
+    """The tables (``"limits"``) and columns (``"files.setup"``) of the current schema that a database lacks."""
+    have = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+    out = []
+    for table, columns in _reference()[0].items():
+        if table not in have:
+            out.append(table)
+            continue
+        got = {r[1] for r in conn.execute(f"PRAGMA table_info({table})")}
+        out += [f"{table}.{col}" for col in columns if col not in got]
+    return out
+
+
+def missing_tables_error(where: str, missing: list[str]) -> CampaignError:
+    """The one line for a campaign database that lost tables or columns of its version (never an old campaign)."""
+    what = ", ".join(missing)
+    return CampaignError(f"{where}: campaign.sqlite is damaged: it lacks {'table' if len(missing) == 1 else 'tables'} "
+                         f"{what}; run 'bridgesurvey repair {where}' (it makes again what can be recomputed or read "
+                         "from the journal of imports, and says what it cannot), or restore campaign.sqlite from a "
+                         "backup")
+
+
+def check_tables(conn: sqlite3.Connection, where: str = "campaign") -> None:
+    """Raise the one-line :class:`CampaignError` when a current campaign lacks a table or column of its schema."""
+    missing = missing_parts(conn)
+    if missing:
+        raise missing_tables_error(where, missing)
+
+
+def _has_meta(conn: sqlite3.Connection) -> bool:
+    return conn.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'meta'").fetchone() is not None
+
+
 def version_of(conn: sqlite3.Connection, where: str = "campaign") -> int:
     """The schema version of a campaign database, checked against its tables.
 
@@ -292,6 +358,10 @@ def version_of(conn: sqlite3.Connection, where: str = "campaign") -> int:
     ``where`` (the campaign folder). A version newer than this BridgeSurvey's is returned as it is
     (the caller refuses it).
     """
+    if not _has_meta(conn) and structural_version(conn) > 0:
+        raise CampaignError(f"{where}: campaign.sqlite is damaged: it lacks table meta (the campaign's name, schema "
+                            "version, scanner and settings); BridgeSurvey cannot make it again: restore "
+                            "campaign.sqlite from a backup")
     text = recorded_version(conn)
     hint = ("run 'bridgesurvey repair' on the campaign folder to set it from the tables, or restore "
             "campaign.sqlite from a backup")
@@ -303,6 +373,9 @@ def version_of(conn: sqlite3.Connection, where: str = "campaign") -> int:
         what = "no schema version" if text is None else f"{text!r}"
         raise CampaignError(f"{where}: campaign.sqlite has an unreadable schema version ({what}); {hint}")
     if version > SCHEMA_VERSION:
+        return version
+    if version == SCHEMA_VERSION:  # the current version: a missing table is damage, named as such
+        check_tables(conn, where)
         return version
     have = structural_version(conn)
     if have == 0:

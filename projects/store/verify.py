@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 from common.progress import ProgressCallback, report
 from projects.store import digests, journal
-from projects.store.campaign import DB_NAME, Campaign, sha256_of
+from projects.store.campaign import DB_NAME, INPUT_REMEDY, Campaign, describe_input, sha256_of
 
 #: What to do about a damaged result, by the table it is kept in.
 REMEDY = {
@@ -122,6 +122,13 @@ def _results(c: Campaign) -> list[Finding]:
             for table, key in c.damaged_results()]
 
 
+def _inputs(c: Campaign) -> list[Finding]:
+    return [Finding("damaged", describe_input(table, key), "damaged (its values do not match the checksum stored with "
+                    "them); every command that would use it stops with one line",
+                    INPUT_REMEDY[table].replace("DIR", str(c.folder)).replace("REFLECTOR", str(key)))
+            for table, key in c.damaged_inputs()]
+
+
 def verify_store(c: Campaign, *, progress: ProgressCallback | None = None) -> list[Finding]:
     """Every problem of the campaign's database, imported files and stored results (see the module notes)."""
     report(progress, 0.0, "checking the database")
@@ -129,6 +136,7 @@ def verify_store(c: Campaign, *, progress: ProgressCallback | None = None) -> li
     out += _files(c, progress)
     report(progress, 0.9, "checking the stored results")
     out += _unlisted(c)
+    out += _inputs(c)
     out += _results(c)
     report(progress, 1.0, "checked")
     return out

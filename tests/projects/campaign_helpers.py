@@ -10,7 +10,7 @@ def snapshot(folder: Path) -> dict:
     """Everything a campaign holds: file checksums plus a dump of the database."""
     out = {}
     for p in sorted(folder.rglob("*")):
-        if p.is_file() and p.name not in (".lock",) and not p.name.endswith(("-wal", "-shm")):
+        if p.is_file() and p.name not in (".lock",) and not p.name.endswith(("-wal", "-shm", "-wal.owner")):
             if p.suffix == ".sqlite":
                 conn = sqlite3.connect(p)
                 out[str(p.relative_to(folder))] = "\n".join(conn.iterdump())

@@ -25,6 +25,7 @@ from projects.results.table import displacement_table
 from projects.store import schema
 from projects.store.campaign import Campaign
 from projects.store.history import DisplacementHistory, histories
+from projects.store.inputs import COMPUTABLE_YEARS
 from projects.store.previews import MapPreview
 from projects.store.records import (
     DisplacementSet,
@@ -121,6 +122,11 @@ def select_epochs(c: Campaign, scope: ReportScope) -> list[Epoch]:
     if not epochs:
         raise InputError(f"{c.folder}: the campaign has no epochs yet; add one (Epoch ▸ Add epoch… in the "
                          "application, or 'bridgesurvey add-epoch DIR')")
+    for e in epochs:  # every date goes on a time axis (history plots): one the axis cannot hold is one line
+        if not COMPUTABLE_YEARS[0] <= e.when.year <= COMPUTABLE_YEARS[1]:
+            raise InputError(f"{c.folder}: epoch {e.label} is dated {e.datetime[:10]}, outside the years a report can "
+                             f"place on a time axis ({COMPUTABLE_YEARS[0]} to {COMPUTABLE_YEARS[1]}); no report was "
+                             "written: restore campaign.sqlite from a backup made before that epoch was added")
     labels = [e.label for e in epochs]
     for lab in (scope.epoch, scope.start, scope.end):
         if lab is not None and lab not in labels:

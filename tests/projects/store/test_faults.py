@@ -29,7 +29,7 @@ import pytest
 
 from app.cli.main import main
 from projects.store import campaign as campaign_module
-from projects.store import imports, journal, schema
+from projects.store import digests, imports, journal, schema
 from projects.store.campaign import DB_NAME, Campaign
 from tests.projects.campaign_helpers import snapshot
 
@@ -341,7 +341,9 @@ def test_a_real_full_disk(processed, small_disk, tmp_path, capsys):
     # a writer killed after its commit leaves its change in the write-ahead log (not yet in the database file)
     subprocess.run([sys.executable, "-c", "import os, sqlite3, sys\n"
                     "c = sqlite3.connect(sys.argv[1]); c.execute('PRAGMA wal_autocheckpoint = 0')\n"
-                    "c.execute(\"UPDATE meta SET value = 'Renamed bridge' WHERE key = 'name'\"); c.commit()\n"
+                    "from projects.store.digests import row_digest\n"
+                    "c.execute(\"UPDATE meta SET value = 'Renamed bridge', digest = ? WHERE key = 'name'\",\n"
+                    "          (row_digest('meta', ('name', 'Renamed bridge')),)); c.commit()\n"
                     "os._exit(0)", str(camp / DB_NAME)], check=True)
     assert (camp / (DB_NAME + "-wal")).stat().st_size > 0
     filler = _fill(small_disk)
@@ -382,7 +384,8 @@ def test_a_real_full_disk(processed, small_disk, tmp_path, capsys):
     filler.unlink()
     conn = sqlite3.connect(camp / DB_NAME)  # the name back as it was, row for row
     with conn:
-        conn.execute("UPDATE meta SET value = 'Test bridge' WHERE key = 'name'")
+        conn.execute("UPDATE meta SET value = 'Test bridge', digest = ? WHERE key = 'name'",
+                     (digests.row_digest("meta", ("name", "Test bridge")),))
     conn.close()
     assert snapshot(camp) == before
     assert run(capsys, "process", camp)[0] in (0, 3)

@@ -124,8 +124,16 @@ def test_a_failing_migration_leaves_the_campaign_at_its_version(camp, monkeypatc
     assert snapshot(camp) == before
 
 
+def back_to_version_11(conn: sqlite3.Connection) -> None:
+    """Undo migration 12 (the digests of input rows) of a current campaign."""
+    for g in digests.INPUTS.values():
+        conn.execute(f"ALTER TABLE {g.table} DROP COLUMN {g.column}")
+    conn.execute("UPDATE meta SET value = '11' WHERE key = 'schema_version'")
+
+
 def _back_to_version_9(conn: sqlite3.Connection) -> None:
-    """Undo migrations 11 (the set-up tables and file columns) and 10 (the digests) of a current campaign."""
+    """Undo migrations 12, 11 (the set-up tables and file columns) and 10 (the digests) of a current campaign."""
+    back_to_version_11(conn)
     for table in ("setup_plans", "setup_previews", "setup_results"):
         conn.execute(f"DROP TABLE {table}")
     for column in ("setup", "frame"):

@@ -11,7 +11,7 @@ from common.errors import InputError
 from lidar.io.poses import FileFrame
 from lidar.layout import read_layout_csv
 from lidar.scanner_catalogue import get_scanner
-from projects.store import journal, schema
+from projects.store import digests, journal, schema
 from projects.store.campaign import DB_NAME, Campaign
 from projects.store.repair import repair_campaign
 from projects.store.verify import verify_store
@@ -128,10 +128,12 @@ def test_a_campaign_of_version_10_reads_its_files_as_set_up_1(camp):
         conn.execute(f"DROP TABLE {table}")
     for column in ("setup", "frame"):
         conn.execute(f"ALTER TABLE files DROP COLUMN {column}")
+    for g in digests.INPUTS.values():  # and what version 12 added
+        conn.execute(f"ALTER TABLE {g.table} DROP COLUMN {g.column}")
     conn.execute("UPDATE meta SET value = '10' WHERE key = 'schema_version'")
     conn.commit()
     conn.close()
     with Campaign.open(camp) as c:
-        assert schema.version_of(c.conn) == schema.SCHEMA_VERSION == 11
+        assert schema.version_of(c.conn) == schema.SCHEMA_VERSION == 12
         (f,) = c.files("e1", setup=None)
         assert f.setup == 1 and f.frame is None and c.setups("e1") == [1] and c.damaged_results() == []
