@@ -422,10 +422,13 @@ def _process_summary(rows: list[dict], baseline) -> str:
 
 def cmd_displacements(args) -> int:
     from common.files import write_atomic
-    from projects.results.table import displacement_table, to_csv
+    from projects.results.table import damaged_line, displacement_table, to_csv
 
     with _open(args.dir, writable=False) as c:
         rows = displacement_table(c)
+        damaged = damaged_line(c)
+    if damaged:  # never rows dropped without a word (the CSV itself keeps its contract: a header, then rows)
+        print(f"bridgesurvey: warning: {damaged}", file=sys.stderr)
     text = to_csv(rows) if args.format == "csv" else json.dumps(rows, indent=2)
     if args.out:
         write_atomic(args.out, text)
@@ -603,10 +606,14 @@ def _set_scanner(args) -> int:
 
 def cmd_export(args) -> int:
     from projects.outputs.exports import export
+    from projects.results.table import damaged_line
 
     with _open(args.dir, writable=False) as c:
         path = export(c, args.out)
+        damaged = damaged_line(c)
     print(f"wrote {path}")
+    if damaged:
+        print(f"bridgesurvey: warning: {damaged}", file=sys.stderr)
     return 0
 
 

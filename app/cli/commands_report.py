@@ -1,6 +1,8 @@
 """The ``report`` command: a PDF survey report of one visit, a period or the whole campaign."""
 from __future__ import annotations
 
+import sys
+
 from app.cli.args import add_dir, add_epoch, output_file
 from app.cli.progress import progress_bar
 
@@ -22,11 +24,15 @@ def register(sub) -> None:
 
 def cmd_report(args) -> int:
     from projects.outputs.report import ReportScope, write_report
+    from projects.results.table import damaged_line
     from projects.store.campaign import Campaign
 
     scope = ReportScope(epoch=args.epoch, start=args.start, end=args.end)
     with Campaign.open(args.dir, writable=False) as c:
         with progress_bar("report") as cb:
             path = write_report(c, args.out, scope, author=args.author, progress=cb)
+        damaged = damaged_line(c)
     print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB)")
+    if damaged:  # the epoch's page says it too
+        print(f"bridgesurvey: warning: {damaged}", file=sys.stderr)
     return 0

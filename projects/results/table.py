@@ -84,6 +84,19 @@ def displacement_table(c: Campaign, *, states: Mapping[str, EpochState] | None =
     return rows
 
 
+def damaged_line(c: Campaign, labels=None) -> str | None:
+    """The line naming epochs whose stored displacements are damaged and left out of the table (None: none is).
+
+    ``labels`` narrows it to those epochs (default: every epoch).
+    """
+    bad = [lab for lab in c.damaged_displacements() if labels is None or lab in labels]
+    if not bad:
+        return None
+    return (f"the displacements of epoch{'s' if len(bad) > 1 else ''} {', '.join(bad)} are damaged in "
+            f"campaign.sqlite (they do not match the checksum stored with them) and are left out; run "
+            f"'bridgesurvey process {c.folder}' to compute them again")
+
+
 def to_csv(rows: list[dict], columns=DISPLACEMENT_COLUMNS) -> str:
     """Rows as CSV text with the given columns (default the displacement table's; missing values as empty cells)."""
     return csv_text(rows, columns)

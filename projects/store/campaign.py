@@ -810,6 +810,11 @@ class Campaign:
             return None
         return row
 
+    def damaged_displacements(self) -> list[str]:
+        """The epochs whose stored displacements fail their digest (left out of every table: say so)."""
+        return [key[0] for key in digests.keys_of(self.conn, "displacement_sets")
+                if not self.is_sound("displacement_sets", key)]
+
     def _displacements_sound(self, epoch: str) -> bool:
         return self.is_sound("displacement_sets", (epoch,))
 
@@ -1097,9 +1102,10 @@ def _header_or_none(path: Path) -> dict | None:
 INPUT_REMEDY = {
     "meta": "restore campaign.sqlite from a backup",
     "reflectors": "restore campaign.sqlite from a backup",
-    "epochs": "run 'bridgesurvey repair' (it takes the epoch's date and notes again from the journal of imports) "
+    "epochs": "run 'bridgesurvey repair DIR' (it takes the epoch's date and notes again from the journal of imports) "
               "or restore campaign.sqlite from a backup",
-    "limits": "set it again with 'bridgesurvey limit DIR --reflector REFLECTOR --rule RULE'",
+    "limits": "run 'bridgesurvey repair DIR' (it takes the rule again from the campaign's log) or set it again with "
+              "'bridgesurvey limit DIR --reflector 'REFLECTOR' --rule RULE'",
     "field_models": "run 'bridgesurvey process' to fit it again",
 }
 
@@ -1107,7 +1113,7 @@ INPUT_REMEDY = {
 def describe_input(table: str, key) -> str:
     """An input row for a message ("limit of every measurement target", "epoch 2026-03-09", ...)."""
     if table == "meta":
-        return {"scanner_profile": "the campaign's scanner profile", "settings": "the campaign's settings (processing "
+        return {"scanner_profile": "the campaign's scanner profile", "settings": "the campaign's settings record (processing "
                 "parameters, baseline, each epoch's scanner)"}.get(key, f"the campaign's {str(key).replace('_', ' ')}")
     if table == "limits":
         return "the limit of every measurement target (*)" if key == "*" else f"the limit of target {key}"

@@ -25,7 +25,7 @@ from pathlib import Path
 
 from common.errors import SurveyError
 from projects.store import digests, journal, schema, wal
-from projects.store.campaign import DB_NAME, Campaign, sha256_of
+from projects.store.campaign import DB_NAME, Campaign, damaged_input_line, describe_input, sha256_of
 from projects.store.connection import connect
 from projects.store.errors import CampaignError
 from projects.store.imports import header_matches
@@ -278,10 +278,45 @@ def _replay_epoch_scanners(c: Campaign, labels: set[str], out: RepairReport) -> 
         out.done.append(f"epoch {label}: {what} ({doc.get('name', '?')}) set again from the journal")
 
 
+def _damaged_inputs(c: Campaign, out: RepairReport) -> None:
+    """Put damaged input rows right from what else holds them: an epoch's date from the journal, a limit from the log.
+
+    The others (reflectors, the campaign's settings and scanner) are held nowhere else: left, with the reason.
+    """
+    for table, key in c.damaged_inputs():
+        what = describe_input(table, key)
+        if table == "epochs":
+            scans = [e for e in journal.entries(c.folder) if e.get("kind") == "scan" and e.get("epoch") == key
+                     and e.get("epoch_datetime")]
+            if scans:
+                e = scans[0]
+                with c.transaction() as conn:
+                    conn.execute("UPDATE epochs SET datetime = ?, notes = ? WHERE label = ?",
+                                 (e["epoch_datetime"], e.get("epoch_notes", ""), key))
+                    digests.seal_row(conn, "epochs", key)
+                    c.log_action(conn, "repair", key, {"damaged": "epochs", "datetime": e["epoch_datetime"]})
+                out.done.append(f"{what}: damaged; its date ({e['epoch_datetime']}) and notes set again from the "
+                                "journal of imports")
+                continue
+        if table == "limits":
+            rules = [json.loads(r[0]) for r in c.conn.execute("SELECT details FROM log WHERE action = 'limit' "
+                                                              "ORDER BY id")]
+            rule = next((d["rule"] for d in reversed(rules) if d.get("reflector") == key and d.get("rule")), None)
+            if rule is not None:
+                c.set_limit(key, rule)
+                out.done.append(f"{what}: damaged; set again from the campaign's log ({rule})")
+                continue
+        if table == "field_models":
+            out.done.append(f"{what}: damaged; 'process' fits it again")
+            continue
+        out.left.append(damaged_input_line(c.folder, table, key))
+
+
 def repair_campaign(c: Campaign, reimporters: Mapping[str, Reimporter] | None = None) -> RepairReport:
     """Register again what the database lost, read damaged series again (see the module notes)."""
     reimporters = reimporters or {}
     out = RepairReport()
+    _damaged_inputs(c, out)
     entries = journal.latest_by_path(c.folder)
     before = {e.label for e in c.epochs()}
     sha_by_path: dict[str, str] = {}

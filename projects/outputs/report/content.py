@@ -21,7 +21,7 @@ from common.errors import InputError, SurveyError
 from common.flags import FLAG_SECOND_OBJECT
 from projects.processing.stages import PIPELINE_VERSION, baseline_epoch, parameters
 from projects.results.state import epoch_state
-from projects.results.table import displacement_table
+from projects.results.table import damaged_line, displacement_table
 from projects.store import schema
 from projects.store.campaign import Campaign
 from projects.store.history import DisplacementHistory, histories
@@ -85,6 +85,7 @@ class EpochSection:
     state_flags: tuple[str, ...] = ()
     systematics: dict = field(default_factory=dict)  # what its displacements were corrected for (scale, drift)
     setups: dict = field(default_factory=dict)  # how its set-ups were joined (lidar.setups), if several
+    damaged: str = ""  # the line saying its stored displacements are damaged and left out (empty: they are not)
 
 
 @dataclass(frozen=True, eq=False)
@@ -207,7 +208,8 @@ def gather(c: Campaign, scope: ReportScope = ReportScope(), *, author: str | Non
             lab, e.datetime, e.notes, res.stage if res else "imported",
             c.stored_plan(lab), c.map_preview(lab) if with_previews else None,
             c.centroids(lab), tuple(c.reference_checks(lab)), c.displacement_set(lab), tuple(c.files(lab, setup=None)),
-            state, tuple(state_flags), c.systematics(lab), c.systematics(lab).get("setups") or {}))
+            state, tuple(state_flags), c.systematics(lab), c.systematics(lab).get("setups") or {},
+            damaged_line(c, [lab]) or ""))
     last_time = chosen[-1].datetime
     first_time = chosen[0].datetime
     # A visit report shows the history up to the visit; a period report the period itself.

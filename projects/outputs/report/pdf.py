@@ -343,6 +343,8 @@ def epoch_section(e: EpochSection, content: ReportContent, ss: Any, *, new_page:
             out += [Spacer(1, 2), Paragraph("Joint frame residuals of the shared targets (largest first)", ss["Small"]),
                     _table(residuals, (20, 16, 24, 22, 20), ss)]
     rows = [r for r in content.displacements if r["epoch"] == e.label]
+    if e.damaged:
+        out.append(Paragraph(f"<font color='#d62728'><b>DAMAGED:</b> {_esc(e.damaged)}</font>", ss["Normal"]))
     if rows:
         table = [["Target", "Displacement [mm]", "σ [mm]", "State", "Flags"]]
         for r in rows:
