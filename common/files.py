@@ -8,9 +8,11 @@ from __future__ import annotations
 import contextlib
 import csv
 import errno
+import fcntl
 import io
 import math
 import os
+import re
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -69,6 +71,56 @@ def ensure_free(path: str | os.PathLike, need_bytes: int) -> None:
         raise disk_full_error(path, need_bytes)
 
 
+#: The temporary name :func:`atomic_output` writes under: ``.STEM.part.SUFFIX`` beside the output.
+TEMP_OUTPUT = re.compile(r"^\.[^/]+\.part(\.[A-Za-z0-9]{1,8})?$")
+
+
+def _hold(tmp: Path) -> int | None:
+    """Create ``tmp`` and hold a lock on it while it is written (a file whose lock is free is a killed writer's)."""
+    try:
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+    except OSError:
+        return None  # the writer meets the same problem and says it
+    with contextlib.suppress(OSError):
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    return fd
+
+
+def stale_temp_files(folder: str | os.PathLike) -> list[Path]:
+    """The temporary output files in ``folder`` that no writer holds (left by a killed command), by name."""
+    out = []
+    try:
+        names = sorted(os.listdir(folder))
+    except OSError:
+        return out
+    for name in names:
+        p = Path(folder) / name
+        if not TEMP_OUTPUT.match(name) or not p.is_file():
+            continue
+        try:
+            fd = os.open(p, os.O_RDONLY)
+        except OSError:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            continue  # a writer at work holds it
+        finally:
+            os.close(fd)
+        out.append(p)
+    return out
+
+
+def remove_stale_temp_files(folder: str | os.PathLike) -> list[Path]:
+    """Remove the temporary output files a killed command left in ``folder``; returns what was removed."""
+    removed = []
+    for p in stale_temp_files(folder):
+        with contextlib.suppress(OSError):
+            p.unlink()
+            removed.append(p)
+    return removed
+
+
 @contextlib.contextmanager
 def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success it is renamed to ``path``, on failure removed.
@@ -76,9 +128,13 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
     A crash never leaves half a file under the final name. The temporary name
     keeps the suffix: some writers (laspy, matplotlib) choose the encoding from it. A full disk,
     met by the writer or by the rename, is a :class:`DiskFullError` (the temporary file removed).
+    The temporary file is locked while it is written: the temporary files a killed command left in
+    the same folder (their lock free) are removed first.
     """
     final = Path(path)
     tmp = final.with_name(f".{final.stem}.part{final.suffix}")
+    remove_stale_temp_files(final.parent)
+    held = _hold(tmp)
     try:
         yield tmp
         os.replace(tmp, final)
@@ -93,6 +149,8 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
         if tmp.exists():
             with contextlib.suppress(OSError):
                 tmp.unlink()
+        if held is not None:
+            os.close(held)
 
 
 def write_atomic(path: str | os.PathLike, data: str | bytes) -> Path:

@@ -439,11 +439,16 @@ def cmd_displacements(args) -> int:
 
 
 def cmd_status(args) -> int:
+    from common.files import stale_temp_files
     from projects.results.corrections import instrument_line
     from projects.results.state import campaign_status
 
     with _open(args.dir, writable=False) as c:
         data = campaign_status(c)
+        left = [p.name for p in stale_temp_files(c.folder)]
+    if left:
+        print(f"note: temporary file(s) a killed command left: {', '.join(left)} (the next writing command on the "
+              "campaign removes them)", file=sys.stderr)
     if args.json:
         dump_json(data)
         return 0

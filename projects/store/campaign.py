@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from common.errors import SurveyError
-from common.files import MB, disk_full_error, ensure_free, is_disk_full, write_atomic
+from common.files import MB, disk_full_error, ensure_free, is_disk_full, remove_stale_temp_files, write_atomic
 from lidar.centroid import TargetCentroid
 from lidar.layout import Layout, check_layout
 from lidar.scanner_profile import ScannerProfile
@@ -283,6 +283,7 @@ class Campaign:
     def _clean_temp_files(self) -> None:
         """Remove the temporary files an interrupted import left (never an imported file: see :mod:`.imports`)."""
         clean_temp_files(self.folder, DB_NAME)
+        remove_stale_temp_files(self.folder)  # outputs a killed command was writing here (bias.json...)
 
     def check_still_there(self) -> None:
         """Raise the one line when the campaign folder is gone from where it was opened (moved, renamed, deleted)."""
@@ -1113,8 +1114,9 @@ INPUT_REMEDY = {
 def describe_input(table: str, key) -> str:
     """An input row for a message ("limit of every measurement target", "epoch 2026-03-09", ...)."""
     if table == "meta":
-        return {"scanner_profile": "the campaign's scanner profile", "settings": "the campaign's settings record (processing "
-                "parameters, baseline, each epoch's scanner)"}.get(key, f"the campaign's {str(key).replace('_', ' ')}")
+        return {"scanner_profile": "the campaign's scanner profile",
+                "settings": "the campaign's settings record (processing parameters, baseline, each epoch's scanner)",
+                }.get(key, f"the campaign's {str(key).replace('_', ' ')}")
     if table == "limits":
         return "the limit of every measurement target (*)" if key == "*" else f"the limit of target {key}"
     if table == "field_models":

@@ -110,8 +110,7 @@ def histories_from_records(records: Iterable[DisplacementRecord], limits: Mappin
 
     Examples
     --------
-    >>> from common.errors import InputError
-    from projects.store.records import DisplacementRecord
+    >>> from projects.store.records import DisplacementRecord
     >>> recs = [DisplacementRecord("e1", "2026-03-02T09:00:00+00:00", "M1", 0.0, 0.0, (), (), "e1"),
     ...         DisplacementRecord("e2", "2026-03-09T09:00:00+00:00", "M1", -0.0021, 0.0001, (), (), "e1")]
     >>> h = histories_from_records(recs)["M1"]

@@ -31,7 +31,7 @@ def check_computable(when: str) -> None:
     >>> check_computable("0001-01-01")
     Traceback (most recent call last):
     ...
-    common.errors.InputError: date 0001-01-01 is outside the years BridgeSurvey computes with (1678 to 2261), even with --allow-date; check --date
+    common.errors.InputError: date 0001-01-01 is outside the years BridgeSurvey computes with (1678 to 2261), ...
     """
     w = _aware(when)
     if not COMPUTABLE_YEARS[0] <= w.year <= COMPUTABLE_YEARS[1]:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from common.files import stale_temp_files
 from common.progress import ProgressCallback, report
 from projects.store import digests, journal
 from projects.store.campaign import DB_NAME, INPUT_REMEDY, Campaign, describe_input, sha256_of
@@ -129,6 +130,11 @@ def _inputs(c: Campaign) -> list[Finding]:
             for table, key in c.damaged_inputs()]
 
 
+def _temporary(c: Campaign) -> list[Finding]:
+    return [Finding("temporary", p.name, "a temporary file a killed command left", "the next writing command on the "
+                    "campaign removes it (or delete it)") for p in stale_temp_files(c.folder)]
+
+
 def verify_store(c: Campaign, *, progress: ProgressCallback | None = None) -> list[Finding]:
     """Every problem of the campaign's database, imported files and stored results (see the module notes)."""
     report(progress, 0.0, "checking the database")
@@ -137,6 +143,7 @@ def verify_store(c: Campaign, *, progress: ProgressCallback | None = None) -> li
     report(progress, 0.9, "checking the stored results")
     out += _unlisted(c)
     out += _inputs(c)
+    out += _temporary(c)
     out += _results(c)
     report(progress, 1.0, "checked")
     return out
