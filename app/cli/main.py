@@ -203,7 +203,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         # The last resort for what the system refused under the command's feet (a campaign folder moved, renamed
         # or made read-only while it ran): one line, never a traceback. Each store write says it better itself.
         where = f"{exc.filename}: " if exc.filename else ""
-        what = "no longer there" if isinstance(exc, FileNotFoundError) else "not writable (permission denied)"
+        what = "no longer there" if isinstance(exc, FileNotFoundError) else "permission denied"
         print(f"bridgesurvey: error: {where}{what}; was the folder moved, renamed or made read-only while the command "
               "ran? Nothing was committed that is not whole: run the command again where the folder is now",
               file=sys.stderr)

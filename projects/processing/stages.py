@@ -141,8 +141,15 @@ def check_scan(path: str | Path, sha256: str | None) -> None:
     0.35 s of CPU for a 100 MB scan on our machine (``sha256sum``'s user time; 0.5 s wall under load),
     against several seconds to decode the same file's points; the reader then finds it in the page cache.
     """
-    if sha256 and sha256_of(Path(path)) != sha256:
-        folder = Path(path).parent.parent
+    if not sha256:
+        return
+    folder = Path(path).parent.parent
+    try:
+        got = sha256_of(Path(path))
+    except OSError as exc:
+        raise ProcessingError(f"{path}: the scan cannot be read ({exc.strerror}); 'bridgesurvey verify {folder}' "
+                              "says what to do") from None
+    if got != sha256:
         raise ProcessingError(f"{path}: this scan changed since its import (its checksum is not the one recorded "
                               "then), so its visit is not processed with it; restore it from a backup or import the "
                               f"original again ('bridgesurvey verify {folder}' lists every changed file)")
