@@ -88,7 +88,7 @@ def _hold(tmp: Path) -> int | None:
 
 def stale_temp_files(folder: str | os.PathLike) -> list[Path]:
     """The temporary output files in ``folder`` that no writer holds (left by a killed command), by name."""
-    out = []
+    out: list[Path] = []
     try:
         names = sorted(os.listdir(folder))
     except OSError:
