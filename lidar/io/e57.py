@@ -96,6 +96,35 @@ def read_e57(path: str | os.PathLike, *, progress: ProgressCallback | None = Non
     return scans
 
 
+def acquisition_starts(path: str | os.PathLike) -> list[float | None]:
+    """Each scan's ``acquisitionStart`` (GPS seconds, as the file stores it), None where a scan has none.
+
+    Raises
+    ------
+    ScanFormatError
+        Not a readable E57 file.
+    """
+    import pye57
+
+    p = check_readable(path)
+    check_e57(p)
+    try:
+        with quiet_stderr():
+            e57 = pye57.E57(str(p), mode="r")
+    except Exception as exc:
+        raise ScanFormatError(p, f"not a readable E57 file ({first_line(exc)})") from exc
+    try:
+        return [float(node["acquisitionStart"]["dateTimeValue"].value()) if node.isDefined("acquisitionStart")
+                else None for node in (e57.data3d[k] for k in range(e57.scan_count))]
+    except Exception as exc:
+        raise ScanFormatError(p, f"corrupt E57 header ({first_line(exc)})") from exc
+    finally:
+        try:
+            e57.close()
+        except Exception:
+            pass
+
+
 #: Point fields pye57's buffers do not know, read through libE57 directly: (name, numpy dtype).
 _TIME_FIELDS = (("timeStamp", np.float64), ("isTimeStampInvalid", np.int8))
 
