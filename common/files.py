@@ -8,6 +8,7 @@ from __future__ import annotations
 import contextlib
 import csv
 import errno
+import hashlib
 import io
 import math
 import os
@@ -24,6 +25,15 @@ DEFAULT_NEED_BYTES = 32 * MB
 
 class DiskFullError(SurveyError):
     """The device a file is written to has no space left; nothing was changed."""
+
+
+def sha256_of(path: str | os.PathLike, chunk: int = 8 << 20) -> str:
+    """The SHA-256 of a file (hex), read in chunks of ``chunk`` bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while block := fh.read(chunk):
+            h.update(block)
+    return h.hexdigest()
 
 
 def free_bytes(path: str | os.PathLike) -> int | None:

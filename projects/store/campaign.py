@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import contextlib
 import datetime as dt
-import hashlib
 import json
 import os
 import sqlite3
@@ -25,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from common.files import MB, disk_full_error, ensure_free, is_disk_full, write_atomic
+from common.files import MB, disk_full_error, ensure_free, is_disk_full, sha256_of, write_atomic
 from lidar.centroid import TargetCentroid
 from lidar.layout import Layout, check_layout
 from lidar.scanner_profile import ScannerProfile
@@ -89,15 +88,6 @@ def parse_datetime(text: str) -> str:
     if value.tzinfo is None:
         value = value.replace(tzinfo=dt.UTC)
     return value.isoformat()
-
-
-def sha256_of(path: Path, chunk: int = 8 << 20) -> str:
-    """The SHA-256 of a file (hex), read in chunks."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        while block := fh.read(chunk):
-            h.update(block)
-    return h.hexdigest()
 
 
 def _normal_values(n) -> tuple:
@@ -557,12 +547,14 @@ class Campaign:
         return shas
 
     def _import(self, epoch: str, items: Sequence[tuple[Path, str]], *, setup: int | None, validate, frames_of,
-                create_epoch: dict | None, placed: list | None = None) -> list[str]:
+                create_epoch: dict | None, placed: list | None = None, shas: list[str] | None = None) -> list[str]:
         """Import coarse and fine files of one epoch in one transaction (see :meth:`import_files`).
 
-        ``placed`` is each file's (set-up, frame JSON) when already worked out (:func:`setup_tables.place_files`).
+        ``placed`` is each file's (set-up, frame JSON) when already worked out (:func:`setup_tables.place_files`),
+        ``shas`` their checksums when already checked (:meth:`_checked_new`): each file is hashed once.
         """
-        shas = self._checked_new(items)
+        if shas is None:
+            shas = self._checked_new(items)
         if placed is None:
             existing = [] if create_epoch is not None else self.files(epoch, setup=None)
             placed = setup_tables.place_files(epoch, items, existing, setup=setup, frames_of=frames_of,
@@ -573,8 +565,8 @@ class Campaign:
         marks: list[int] = []
         try:
             # each copy journaled at once: a kill leaves none unknown
-            for (p, role), (k, frame) in zip(items, placed, strict=False):
-                got = copy_in(self.folder, p, SCANS_DIR)
+            for (p, role), (k, frame), sha in zip(items, placed, shas, strict=True):
+                got = copy_in(self.folder, p, SCANS_DIR, sha256=sha)
                 copied.append(got)
                 marks.append(self._journal(got, p, {"kind": "scan", "epoch": epoch, "role": role, "setup": k,
                                                     "frame": frame, "epoch_datetime": ep["datetime"],
@@ -618,11 +610,11 @@ class Campaign:
         if not allow_date:
             inputs.check_epoch_date(when, [e.datetime for e in self.epochs()])
         items = [(Path(coarse), "coarse")] + [(Path(f), "fine") for f in fines]
-        self._checked_new(items)
+        shas = self._checked_new(items)
         placed = setup_tables.place_files(label, items, [], setup=1, frames_of=frames_of, validate=validate)
         self._pin_baseline_before(when)  # after every file was read: a refused file changes nothing
         self._import(label, items, setup=1, validate=validate, frames_of=frames_of,
-                     create_epoch={"label": label, "datetime": when, "notes": notes}, placed=placed)
+                     create_epoch={"label": label, "datetime": when, "notes": notes}, placed=placed, shas=shas)
         return label
 
     def add_setup(self, label: str, coarse: str | os.PathLike, fines: Sequence = (), *, validate=None,

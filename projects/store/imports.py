@@ -18,7 +18,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-from common.files import MB, disk_full_error, ensure_free, is_disk_full
+from common.files import MB, disk_full_error, ensure_free, is_disk_full, sha256_of
 
 SCANS_DIR = "scans"
 CAMERA_DIR = "camera"
@@ -54,8 +54,11 @@ def stored_name(sha256: str, original_name: str) -> str:
     return f"{sha256[:16]}_{safe}"
 
 
-def copy_in(folder: Path, src: Path, sub: str) -> Copied:
+def copy_in(folder: Path, src: Path, sub: str, *, sha256: str | None = None) -> Copied:
     """Copy ``src`` into ``folder/sub`` (temporary name, fsync, rename, read-only).
+
+    ``sha256`` is the file's checksum when the caller has it (the import checked the file against the
+    campaign with it): the copy then does not hash the file again. Without it the copy hashes as it copies.
 
     A file already there under its final name is kept as it is (an import run again after a crash,
     or a file the database lost): ``created`` is False. A file already inside ``folder/sub`` is taken
@@ -66,19 +69,20 @@ def copy_in(folder: Path, src: Path, sub: str) -> Copied:
     target.mkdir(exist_ok=True)
     size = src.stat().st_size
     if src.resolve().parent == target.resolve():
-        sha = _sha256(src)
+        sha = sha256 or sha256_of(src)
         return Copied(sha, f"{sub}/{src.name}", size, False)
     ensure_free(target, size + IMPORT_MARGIN_BYTES)
     tmp = target / f".import-{uuid.uuid4().hex}"
-    h = hashlib.sha256()
+    h = hashlib.sha256() if sha256 is None else None
     try:
         with open(src, "rb") as fin, open(tmp, "wb") as fout:
             while block := fin.read(8 << 20):
-                h.update(block)
+                if h is not None:
+                    h.update(block)
                 fout.write(block)
             fout.flush()
             os.fsync(fout.fileno())
-        sha = h.hexdigest()
+        sha = h.hexdigest() if h is not None else str(sha256)
         rel = f"{sub}/{stored_name(sha, src.name)}"
         final = folder / rel
         if final.exists():
@@ -93,14 +97,6 @@ def copy_in(folder: Path, src: Path, sub: str) -> Copied:
             raise disk_full_error(target, size + IMPORT_MARGIN_BYTES) from None
         raise
     return Copied(sha, rel, size, True)
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        while block := fh.read(8 << 20):
-            h.update(block)
-    return h.hexdigest()
 
 
 def remove_uncommitted(folder: Path, copied: Iterable[Copied]) -> None:

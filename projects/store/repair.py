@@ -21,8 +21,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from common.errors import SurveyError
+from common.files import sha256_of
 from projects.store import digests, journal, schema
-from projects.store.campaign import DB_NAME, Campaign, sha256_of
+from projects.store.campaign import DB_NAME, Campaign
 from projects.store.connection import connect
 from projects.store.errors import CampaignError
 from projects.store.imports import header_matches

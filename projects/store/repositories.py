@@ -17,6 +17,7 @@ from contextlib import AbstractContextManager as ContextManager
 from pathlib import Path
 from typing import Protocol
 
+from common.files import sha256_of
 from projects.store import digests
 from projects.store.errors import CampaignError, DuplicateImportError, InputError
 from projects.store.records import ComparisonRecord, CrossvalRecord, EventRecord, PredictionRecord, SeriesRecord
@@ -87,8 +88,6 @@ class SeriesRepository(_Repository):
 
     def checksum_if_new(self, table: str, path: Path) -> str:
         """The file's sha256, refusing a file already imported into ``table`` under some series name."""
-        from projects.store.campaign import sha256_of
-
         table = _series_table(table)
         sha = sha256_of(path)
         row = self._conn.execute(f"SELECT name, original_path FROM {table} WHERE sha256 = ?", (sha,)).fetchone()

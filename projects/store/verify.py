@@ -18,9 +18,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from common.files import sha256_of
 from common.progress import ProgressCallback, report
 from projects.store import digests, journal
-from projects.store.campaign import DB_NAME, Campaign, sha256_of
+from projects.store.campaign import DB_NAME, Campaign
 
 #: What to do about a damaged result, by the table it is kept in.
 REMEDY = {
