@@ -8,6 +8,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from skimage.measure import label
 
+from common.arrays import median_and_sigma
 from common.errors import InputError
 from lidar.reflectance_map import ReflectanceMap
 
@@ -84,10 +85,7 @@ def auto_threshold(values: np.ndarray) -> float:
         v = a[np.isfinite(a)]
     if not np.issubdtype(v.dtype, np.floating):
         v = v.astype(np.float64)
-    bg = float(np.median(v))
-    np.subtract(v, bg, out=v)  # v is the sample's own copy (boolean indexing): |v - bg| is made in it
-    np.abs(v, out=v)
-    mad = float(np.median(v, overwrite_input=True)) * 1.4826
+    bg, mad = median_and_sigma(v, overwrite_input=True)  # v is the sample's own copy (boolean indexing)
     return max(bg + 3.0 * mad, bg + 0.5 * (top - bg))
 
 
