@@ -62,3 +62,21 @@ def median_and_sigma(values: np.ndarray, *, skip_nan: bool = False,
     dev = np.subtract(v, med, out=v if overwrite_input else None)
     np.abs(dev, out=dev)
     return med, MAD_TO_SIGMA * float(np.median(dev, overwrite_input=True))
+
+
+def thin_to_voxels(xyz: np.ndarray, voxel_m: float) -> np.ndarray:
+    """One point of each occupied cube of ``voxel_m``: the first one, the points kept in their order.
+
+    Parameters
+    ----------
+    xyz : (N, 3) float array, metres
+    voxel_m : float
+        Edge of the cubes (aligned on multiples of it), metres.
+
+    Returns
+    -------
+    (M, 3) array of ``xyz``'s rows (M <= N)
+    """
+    key = np.floor(xyz / voxel_m).astype(np.int64)
+    _, first = np.unique(key, axis=0, return_index=True)
+    return xyz[np.sort(first)]

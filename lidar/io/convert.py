@@ -21,8 +21,9 @@ import numpy as np
 
 from common.errors import InputError, ScanFormatError
 from common.files import atomic_output
+from common.pcd import binary_pcd_header
 from common.progress import ProgressCallback, report
-from lidar.io._common import pose_to_text, quaternion_from_pose
+from lidar.io._common import pose_to_text
 from lidar.io.las import (
     las_header_for,
     las_point_chunks,
@@ -31,6 +32,7 @@ from lidar.io.las import (
     point_records,
     zero_records,
 )
+from lidar.io.pcd import pcd_viewpoint
 from lidar.io.stream import CHUNK_POINTS, Chunk, ScanStream, open_stream
 
 #: Outputs written chunk by chunk.
@@ -230,17 +232,9 @@ def _records(fh: BinaryIO, chunks: Iterator[Chunk], rec_dt: np.dtype, first: _Pa
 
 
 def _write_pcd(tmp: Path, suffix: str, chunks: Iterator[Chunk], first: _Pass1, pose) -> None:
-    if pose is not None:
-        q, t = quaternion_from_pose(pose)
-        viewpoint = " ".join(f"{v:.12g}" for v in (*t, *q))
-    else:
-        viewpoint = "0 0 0 1 0 0 0"
-    n = first.n
-    header = ("# .PCD v0.7 - written by BridgeSurvey\nVERSION 0.7\nFIELDS x y z intensity\nSIZE 8 8 8 4\n"
-              f"TYPE F F F F\nCOUNT 1 1 1 1\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT {viewpoint}\nPOINTS {n}\nDATA binary\n")
     rec_dt = np.dtype([("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("intensity", "<f4")])
     with open(tmp, "wb") as fh:
-        fh.write(header.encode("ascii"))
+        fh.write(binary_pcd_header(rec_dt, first.n, viewpoint=pcd_viewpoint(pose)))
         _records(fh, chunks, rec_dt, first)
 
 

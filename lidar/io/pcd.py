@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from common.errors import ScanFormatError
+from common.pcd import NO_VIEWPOINT, binary_pcd_header
 from lidar.io._common import (
     atomic_output,
     check_readable,
@@ -230,17 +231,16 @@ def write_pcd(scan: Scan, path: str | os.PathLike) -> Path:
     rec = np.empty(n, dtype=[("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("intensity", "<f4")])
     rec["x"], rec["y"], rec["z"] = scan.xyz_socs.T
     rec["intensity"] = raw
-    if scan.pose is not None:
-        q, t = quaternion_from_pose(scan.pose)
-        viewpoint = " ".join(f"{v:.12g}" for v in (*t, *q))
-    else:
-        viewpoint = "0 0 0 1 0 0 0"
-    header = (
-        "# .PCD v0.7 - written by BridgeSurvey\nVERSION 0.7\nFIELDS x y z intensity\nSIZE 8 8 8 4\n"
-        f"TYPE F F F F\nCOUNT 1 1 1 1\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT {viewpoint}\nPOINTS {n}\nDATA binary\n"
-    )
     with atomic_output(final) as tmp:
         with open(tmp, "wb") as fh:
-            fh.write(header.encode("ascii"))
+            fh.write(binary_pcd_header(rec.dtype, n, viewpoint=pcd_viewpoint(scan.pose)))
             fh.write(rec.tobytes())
     return final
+
+
+def pcd_viewpoint(pose: np.ndarray | None) -> str:
+    """A PCD ``VIEWPOINT`` (tx ty tz qw qx qy qz) of a scanner pose (SOCS -> project frame), or of none."""
+    if pose is None:
+        return NO_VIEWPOINT
+    q, t = quaternion_from_pose(pose)
+    return " ".join(f"{v:.12g}" for v in (*t, *q))

@@ -26,3 +26,11 @@ def test_median_and_sigma_is_the_median_and_1_4826_times_the_median_absolute_dev
     m32, s32 = median_and_sigma(with_nan, skip_nan=True)
     assert m32 == float(np.nanmedian(with_nan)) and s32 == 1.4826 * float(np.nanmedian(np.abs(with_nan - m32)))
     assert all(np.isnan(median_and_sigma(with_nan)))
+
+
+def test_thin_to_voxels_keeps_the_first_point_of_each_cube_in_order():
+    from common.arrays import thin_to_voxels
+
+    xyz = np.array([[0.01, 0.0, 0.0], [0.5, 0.5, 0.5], [0.02, 0.03, 0.01], [-0.01, 0.0, 0.0], [0.6, 0.4, 0.45]])
+    np.testing.assert_array_equal(thin_to_voxels(xyz, 0.1), xyz[[0, 1, 3, 4]])
+    np.testing.assert_array_equal(thin_to_voxels(xyz, 1.0), xyz[[0, 3]])
