@@ -154,7 +154,7 @@ def read_pcd(path: str | os.PathLike) -> Scan:
         if h.points * h.row_bytes > body_bytes:
             raise ScanFormatError(p, f"truncated or lying PCD header: it declares {h.points} points of "
                                      f"{h.row_bytes} bytes, the file holds {body_bytes // max(h.row_bytes, 1)}")
-        rec = np.fromfile(p, dtype=_record_dtype(h), count=h.points, offset=h.data_start)
+        rec = np.fromfile(p, dtype=record_dtype(h), count=h.points, offset=h.data_start)
         cols = [rec[f"f{k}"] if h.counts[k] == 1 else rec[f"f{k}"][:, 0] for k in range(len(h.fields))]
     else:
         cols = _read_compressed(p, h, body_bytes)
@@ -169,7 +169,8 @@ def read_pcd(path: str | os.PathLike) -> Scan:
                      metadata={"pcd_data": h.mode, "fields": list(h.fields)})
 
 
-def _record_dtype(h: PcdHeader) -> np.dtype:
+def record_dtype(h: PcdHeader) -> np.dtype:
+    """The numpy record type of a binary PCD's points (fields named f0, f1...; a field of COUNT > 1 a sub-array)."""
     return np.dtype([(f"f{k}", _TYPES[(t, s)], (c,)) if c > 1 else (f"f{k}", _TYPES[(t, s)])
                      for k, (s, t, c) in enumerate(zip(h.sizes, h.types, h.counts, strict=False))])
 

@@ -172,20 +172,20 @@ def _las_blocks(s: ScanStream, starts: list[int], block_points: int) -> list[Chu
 def _e57_xml(p: Path):
     import xml.etree.ElementTree as ET
 
-    from lidar.io.e57_header import _logical
+    from lidar.io.e57_header import logical_bytes
 
     size = p.stat().st_size
     with open(p, "rb") as fh:
         head = fh.read(48)
         xml_off, xml_len = np.frombuffer(head[24:40], "<u8")
-        return ET.fromstring(_logical(p, fh, int(xml_off), int(xml_len), size))
+        return ET.fromstring(logical_bytes(p, fh, int(xml_off), int(xml_len), size))
 
 
 def _e57_float(node, *names: str) -> float | None:
-    from lidar.io.e57_header import _NS
+    from lidar.io.e57_header import NS
 
     for name in names:
-        node = node.find(_NS + name) if node is not None else None
+        node = node.find(NS + name) if node is not None else None
     if node is None or node.text is None:
         return None
     try:
@@ -195,7 +195,7 @@ def _e57_float(node, *names: str) -> float | None:
 
 
 def _open_e57(p: Path) -> ScanStream:
-    from lidar.io.e57_header import _NS, check_e57
+    from lidar.io.e57_header import NS, check_e57
 
     facts = check_e57(p)
     if not facts.scans:
@@ -204,7 +204,7 @@ def _open_e57(p: Path) -> ScanStream:
                                      "point cloud from the scanner software")
         raise ScanFormatError(p, "the E57 file holds no scans")
     root = _e57_xml(p)
-    data3d = root.find(_NS + "data3D")
+    data3d = root.find(NS + "data3D")
     nodes = list(data3d) if data3d is not None else []
     scans = []
     for k, (f, node) in enumerate(zip(facts.scans, nodes, strict=False)):
@@ -381,10 +381,10 @@ def _open_pcd(p: Path) -> ScanStream:
 
 
 def _pcd_records(s: ScanStream) -> tuple[np.ndarray, list[str], str | None]:
-    from lidar.io.pcd import _record_dtype
+    from lidar.io.pcd import record_dtype
 
     h = s.details["header"]
-    rec = np.memmap(s.path, dtype=_record_dtype(h), mode="r", offset=h.data_start, shape=(h.points,))
+    rec = np.memmap(s.path, dtype=record_dtype(h), mode="r", offset=h.data_start, shape=(h.points,))
     cols = [f"f{find_column(h.fields, a)}" for a in ("x", "y", "z")]
     ci = find_column(h.fields, "intensity")
     return rec, cols, f"f{ci}" if ci is not None else None
