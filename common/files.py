@@ -12,11 +12,12 @@ import hashlib
 import io
 import math
 import os
+import tempfile
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from common.errors import SurveyError
+from common.errors import InputError, SurveyError
 
 MB = 1 << 20
 #: What a write whose size is not known beforehand is assumed to need (an output file, a database change).
@@ -117,8 +118,6 @@ def write_atomic(path: str | os.PathLike, data: str | bytes) -> Path:
 
 def json_safe(obj: Any) -> Any:
     """``obj`` with every non-finite float replaced by None (JSON has no NaN), lists for tuples."""
-    import math
-
     if isinstance(obj, float) and not math.isfinite(obj):
         return None
     if isinstance(obj, dict):
@@ -130,8 +129,6 @@ def json_safe(obj: Any) -> Any:
 
 def output_folder(path: str | os.PathLike) -> Path:
     """A folder to write results into, created if missing; InputError when a file is in the way."""
-    from common.errors import InputError
-
     out = Path(path)
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: exists and is not a folder")
@@ -175,8 +172,6 @@ def check_output(path: str | os.PathLike, *, folder: bool = False, suffixes: Seq
     ...
     common.errors.InputError: no-such-folder/plan.json: the folder no-such-folder does not exist; create it first
     """
-    from common.errors import InputError
-
     out = Path(path)
     if folder:
         if out.exists() and not out.is_dir():
@@ -213,8 +208,6 @@ def _can_create_in(folder: Path) -> bool:
     ``os.access`` answers yes to root everywhere, also on a read-only file system or in /proc, where the
     writer would fail only after the computing.
     """
-    import tempfile
-
     try:
         fd, probe = tempfile.mkstemp(prefix=".bridgesurvey-probe-", dir=folder)
     except OSError:

@@ -10,6 +10,7 @@ from app.cli.commands_campaign import add_setup_option, open_campaign, setup_dat
 from app.cli.output import dump_json, table
 from app.cli.progress import progress_bar
 from common.errors import InputError
+from common.files import write_atomic
 
 
 def register(sub) -> None:
@@ -190,7 +191,6 @@ def cmd_stations(args) -> int:
     if pair is None:
         advice.save(args.out)
     else:
-        from common.files import write_atomic
 
         write_atomic(args.out, json.dumps({**advice.to_json(), "pair": pair.to_json()}, indent=1))
     if args.png is not None:

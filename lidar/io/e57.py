@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import uuid
 from pathlib import Path
 
 import numpy as np
@@ -245,8 +246,6 @@ def _write_timed_scan(e57, data: dict, time_s: np.ndarray, *, name: str, rotatio
 
     Coordinates and intensity are stored as pye57 stores them (single precision), the times in double.
     """
-    import uuid
-
     from pye57 import libe57
 
     imf = e57.image_file

@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from common.errors import SurveyError
 from common.files import MB, disk_full_error, ensure_free, is_disk_full, sha256_of, write_atomic
 from lidar.centroid import TargetCentroid
 from lidar.layout import Layout, check_layout
@@ -58,6 +59,7 @@ from projects.store.records import (
     Reflector,
     ScanFile,
     StoredPlan,
+    now_iso,
 )
 from projects.store.repositories import (
     ComparisonRepository,
@@ -70,11 +72,6 @@ from projects.store.repositories import (
 DB_NAME = "campaign.sqlite"
 #: The campaign's field model as a file for other tools (versioned JSON, :meth:`FieldModel.to_json`).
 BIAS_FILE = "bias.json"
-
-
-def now_iso() -> str:
-    """The current UTC time, ISO 8601 to the second."""
-    return dt.datetime.now(dt.UTC).replace(microsecond=0).isoformat()
 
 
 def parse_datetime(text: str) -> str:
@@ -1015,7 +1012,6 @@ def _layout_of(reflectors: Sequence[Reflector], at: str | None) -> Layout:
 
 
 def _header_or_none(path: Path) -> dict | None:
-    from common.errors import SurveyError
 
     try:
         return header_facts(path)

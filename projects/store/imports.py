@@ -18,6 +18,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
+from common.errors import SurveyError
 from common.files import MB, disk_full_error, ensure_free, is_disk_full, sha256_of
 
 SCANS_DIR = "scans"
@@ -168,8 +169,6 @@ def header_facts(path: Path) -> dict:
 
 def header_matches(path: Path, recorded: dict | None) -> bool:
     """Whether the header of ``path`` reads and says what was recorded at its import."""
-    from common.errors import SurveyError
-
     try:
         facts = header_facts(path)
     except (SurveyError, OSError):
