@@ -24,6 +24,7 @@ import struct
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -31,12 +32,12 @@ import numpy as np
 from common.errors import ScanFormatError
 from common.progress import ProgressCallback, report
 from lidar.io._common import atomic_output, check_readable, first_line, make_scan, raw_for_writing
-from lidar.io.las_header import LasHeaderFacts, check_las_header
+from lidar.io.las_header import POSE_RECORD_ID, POSE_USER_ID, LasHeaderFacts, check_las_header
 from lidar.scan import Scan
 
-#: VLR in which BridgeSurvey keeps the scanner pose (SOCS -> project frame) of a scan.
-POSE_VLR_USER_ID = "BridgeSurvey"
-POSE_VLR_RECORD_ID = 4401
+#: VLR in which BridgeSurvey keeps the scanner pose (SOCS -> project frame) of a scan (read by check_las_header).
+POSE_VLR_USER_ID = POSE_USER_ID.decode()
+POSE_VLR_RECORD_ID = POSE_RECORD_ID
 
 #: Points per chunk: small for LAS (buffers stay in cache), larger for LAZ (lazrs parallelises inside a chunk).
 LAS_CHUNK_POINTS = 262_144
@@ -60,37 +61,29 @@ def _errors() -> tuple[type[BaseException], ...]:
     return _laspy().errors.LaspyException, ValueError, OSError, RuntimeError, struct.error
 
 
+#: The point formats (0-10) whose records hold ``gps_time``, and where (bytes into the record).
+GPS_TIME_OFFSET = {1: 20, 3: 20, 4: 20, 5: 20, 6: 22, 7: 22, 8: 22, 9: 22, 10: 22}
+
+
 @dataclass(frozen=True, eq=False)
 class LasFile:
     """A LAS/LAZ file whose header was checked against the file, and what the header says.
+
+    Read from the header's bytes (:func:`lidar.io.las_header.check_las_header`): laspy is imported only
+    for what needs it (the dimension names, laspy's header to copy records with, LAZ decoding).
 
     Attributes
     ----------
     path : Path
     facts : LasHeaderFacts
-        The checked header fields (:func:`lidar.io.las_header.check_las_header`).
+        The checked header fields.
     pose : (4, 4) float64 array or None
         The scanner pose BridgeSurvey's own writer stores (SOCS -> project frame).
-    dimensions : tuple of str
-        The point format's dimension names (``"X"``, ``"intensity"``, ``"gps_time"``...).
-    mins, maxs : tuple of 3 floats
-        The bounds the header declares, metres.
-    creation_date : datetime.date or None
-    gps_time_type : int
-        1 when the points' ``gps_time`` is adjusted standard GPS time, 0 for GPS week time.
-    header : laspy.LasHeader
-        laspy's reading of the header (to write records with the input's header, :func:`point_records`).
     """
 
     path: Path
     facts: LasHeaderFacts
     pose: np.ndarray | None
-    dimensions: tuple[str, ...]
-    mins: tuple[float, ...]
-    maxs: tuple[float, ...]
-    creation_date: dt.date | None
-    gps_time_type: int
-    header: object
 
     @property
     def points(self) -> int:
@@ -111,16 +104,43 @@ class LasFile:
     @property
     def has_time(self) -> bool:
         """The point format has a ``gps_time`` field."""
-        return "gps_time" in self.dimensions
+        return self.facts.point_format in GPS_TIME_OFFSET
 
+    @property
+    def gps_time_type(self) -> int:
+        """1 when the points' ``gps_time`` is adjusted standard GPS time, 0 for GPS week time."""
+        return self.facts.global_encoding & 1
 
-def _pose_from_header(header) -> np.ndarray | None:
-    for vlr in list(header.vlrs) + list(getattr(header, "evlrs", None) or []):
-        if getattr(vlr, "user_id", "") == POSE_VLR_USER_ID and getattr(vlr, "record_id", None) == POSE_VLR_RECORD_ID:
-            data = getattr(vlr, "record_data", b"")
-            if len(data) == 128:
-                return np.array(struct.unpack("<16d", data)).reshape(4, 4)
-    return None
+    @property
+    def creation_date(self) -> dt.date | None:
+        return self.facts.creation_date
+
+    @property
+    def mins(self) -> tuple[float, ...]:
+        return self.facts.mins
+
+    @property
+    def maxs(self) -> tuple[float, ...]:
+        return self.facts.maxs
+
+    @cached_property
+    def header(self):
+        """The header as laspy reads it (to write records with the input's header, :func:`point_records`)."""
+        laspy = _laspy()
+        try:
+            with laspy.open(self.path, laz_backend=_laz_backend()) as reader:
+                header = reader.header
+        except _errors() as exc:
+            raise ScanFormatError(self.path, f"not a readable LAS/LAZ file ({first_line(exc)})") from exc
+        if int(header.point_count) != self.points:
+            raise ScanFormatError(self.path, f"LAS point count unclear: {int(header.point_count)} read, "
+                                             f"{self.points} checked")
+        return header
+
+    @property
+    def dimensions(self) -> tuple[str, ...]:
+        """The point format's dimension names (``"X"``, ``"intensity"``, ``"gps_time"``, extra bytes...)."""
+        return tuple(self.header.point_format.dimension_names)
 
 
 def open_las(path: str | os.PathLike) -> LasFile:
@@ -133,21 +153,10 @@ def open_las(path: str | os.PathLike) -> LasFile:
     """
     p = check_readable(path)
     facts = check_las_header(p)  # refuse lying headers before laspy allocates or loops on them
-    laspy = _laspy()
-    try:
-        with laspy.open(p, laz_backend=_laz_backend()) as reader:
-            h = reader.header
-            n = int(h.point_count)
-            las = LasFile(p, facts, _pose_from_header(h), tuple(h.point_format.dimension_names),
-                          tuple(float(v) for v in h.mins), tuple(float(v) for v in h.maxs), h.creation_date,
-                          int(h.global_encoding.gps_time_type), h)
-    except _errors() as exc:
-        raise ScanFormatError(p, f"not a readable LAS/LAZ file ({first_line(exc)})") from exc
-    if n != facts.point_count:
-        raise ScanFormatError(p, f"LAS point count unclear: {n} read, {facts.point_count} checked")
-    if n == 0:
+    if facts.point_count == 0:
         raise ScanFormatError(p, "the LAS header declares 0 points; nothing to read")
-    return las
+    pose = np.array(struct.unpack("<16d", facts.pose_record)).reshape(4, 4) if facts.pose_record else None
+    return LasFile(p, facts, pose)
 
 
 def read_las(path: str | os.PathLike, *, progress: ProgressCallback | None = None,
@@ -238,8 +247,7 @@ def _scale_into(out_arrays, start, records: np.ndarray, scales, offsets):
 def _decode_las(las: LasFile, out_arrays, chunk_points: int, progress: ProgressCallback | None) -> None:
     """Scale the point records chunk by chunk on two threads (the page faults of one overlap the other's work)."""
     n = las.points
-    dtype = _laspy().PointFormat(las.facts.point_format).dtype()
-    records = LasRecords(las, dtype=_padded(dtype, las.facts.record_length))
+    records = LasRecords(las, dtype=_scaled_fields(las))
     try:
         def work(start: int) -> int:
             stop = min(start + chunk_points, n)
@@ -253,13 +261,14 @@ def _decode_las(las: LasFile, out_arrays, chunk_points: int, progress: ProgressC
         records.close()
 
 
-def _padded(dtype: np.dtype, record_length: int) -> np.dtype:
-    """A point format's record dtype stretched to the file's record length (extra bytes skipped)."""
-    if dtype.itemsize == record_length:
-        return dtype
-    fields = dict(dtype.fields or {})
-    return np.dtype({"names": list(fields), "formats": [f[0] for f in fields.values()],
-                     "offsets": [f[1] for f in fields.values()], "itemsize": record_length})
+def _scaled_fields(las: LasFile) -> np.dtype:
+    """The record dtype of the fields :func:`read_las` reads: X, Y, Z, the intensity (and ``gps_time``)."""
+    names, formats, offsets = ["X", "Y", "Z", "intensity"], ["<i4", "<i4", "<i4", "<u2"], [0, 4, 8, 12]
+    if las.has_time:
+        names.append("gps_time")
+        formats.append("<f8")
+        offsets.append(GPS_TIME_OFFSET[las.facts.point_format])
+    return np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": las.facts.record_length})
 
 
 #: Every LAS point format (0-10) starts X, Y, Z (int32) and the intensity (uint16).
@@ -414,8 +423,8 @@ def open_las_writer(path: str | os.PathLike, header, *, compress: bool):
 
 
 def point_records(las: LasFile, records: np.ndarray):
-    """Laspy point records of ``las``'s point format holding ``records`` (from :func:`las_point_chunks`)."""
-    return _laspy().PackedPointRecord(records, las.header.point_format)  # type: ignore[attr-defined]
+    """The laspy point records of ``las``'s point format holding ``records`` (from :func:`las_point_chunks`)."""
+    return _laspy().PackedPointRecord(records, las.header.point_format)
 
 
 def zero_records(header, n: int):
