@@ -22,6 +22,7 @@ import numpy as np
 
 from common.errors import ScanFormatError
 from lidar.io._common import check_readable, first_line, pose_from_quaternion, quiet_stderr
+from lidar.io.e57 import opened_e57
 from lidar.io.las import LasFile, las_blocks, las_point_chunks, open_las, scaled_xyz
 from lidar.io.names import find_column
 
@@ -232,41 +233,30 @@ _E57_FIELDS = ("cartesianX", "cartesianY", "cartesianZ", "cartesianInvalidState"
 
 
 def _e57_chunks(s: ScanStream, index: int, chunk_points: int, *, first_only: bool = False) -> Iterator[Chunk]:
-    import pye57
-
-    try:
-        with quiet_stderr():
-            e57 = pye57.E57(str(s.path), mode="r")
-    except Exception as exc:
-        raise ScanFormatError(s.path, f"not a readable E57 file ({first_line(exc)})") from exc
     done = 0
-    try:
-        with quiet_stderr():
-            header = e57.get_header(index)
-            wanted = [f for f in header.point_fields if f in _E57_FIELDS]
-            data, buffers = e57.make_buffers(wanted, min(chunk_points, header.point_count))
-            reader = header.points.reader(buffers)
+    with opened_e57(s.path) as e57:
         try:
-            while True:
-                with quiet_stderr():
-                    got = reader.read()
-                if got == 0:
-                    break
-                done += got
-                yield _e57_chunk(s.path, {k: v[:got] for k, v in data.items()})
-                if first_only:
-                    return
-        finally:
-            reader.close()
-    except ScanFormatError:
-        raise
-    except Exception as exc:
-        raise ScanFormatError(s.path, f"corrupt E57 data after {done} points ({first_line(exc)})") from exc
-    finally:
-        try:
-            e57.close()
-        except Exception:
-            pass
+            with quiet_stderr():
+                header = e57.get_header(index)
+                wanted = [f for f in header.point_fields if f in _E57_FIELDS]
+                data, buffers = e57.make_buffers(wanted, min(chunk_points, header.point_count))
+                reader = header.points.reader(buffers)
+            try:
+                while True:
+                    with quiet_stderr():
+                        got = reader.read()
+                    if got == 0:
+                        break
+                    done += got
+                    yield _e57_chunk(s.path, {k: v[:got] for k, v in data.items()})
+                    if first_only:
+                        return
+            finally:
+                reader.close()
+        except ScanFormatError:
+            raise
+        except Exception as exc:
+            raise ScanFormatError(s.path, f"corrupt E57 data after {done} points ({first_line(exc)})") from exc
     if done != s.scans[index].points:
         raise ScanFormatError(s.path, f"truncated: scan {index} declares {s.scans[index].points} points, {done} "
                                       "could be read")
