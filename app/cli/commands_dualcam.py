@@ -1,17 +1,11 @@
 """The dual-camera commands: calibrate a set-up from images, measure displacements, simulate a data set."""
 from __future__ import annotations
 
-import csv
-import io
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 from app.cli.args import input_file, input_folder, output_file, output_folder
 from app.cli.progress import progress_bar
-from common.errors import InputError, ProcessingError
-from common.files import write_atomic
 
 if TYPE_CHECKING:
     import numpy as np
@@ -49,6 +43,7 @@ def register(sub) -> None:
 
 
 def _board(text: str) -> tuple[int, int]:
+    from common.errors import InputError
 
     try:
         c, r = (int(v) for v in text.lower().split("x"))
@@ -60,7 +55,9 @@ def _board(text: str) -> tuple[int, int]:
 
 
 def _pattern(path: Path) -> np.ndarray:
+    import numpy as np
 
+    from common.errors import InputError
 
     try:
         rows = [ln.split(",") for ln in path.read_text().splitlines()[1:] if ln.strip()]
@@ -75,7 +72,9 @@ def _pattern(path: Path) -> np.ndarray:
 
 
 def cmd_calibrate(args) -> int:
+    import numpy as np
 
+    from common.errors import ProcessingError
     from vision.compensation import calibrate_dual_camera
     from vision.images import detect_boards, detect_sequence, list_images
     from vision.setup_io import save_setup
@@ -106,8 +105,12 @@ def cmd_calibrate(args) -> int:
 
 
 def cmd_measure(args) -> int:
+    import csv
+    import io
 
+    import numpy as np
 
+    from common.files import write_atomic
     from vision.compensation import measure_dual_camera
     from vision.images import detect_sequence, list_images
     from vision.setup_io import load_setup
@@ -139,6 +142,7 @@ def cmd_measure(args) -> int:
 
 def _infer_board(setup) -> tuple[int, int]:
     """Inner corners (cols, rows) from the stored board points (row by row)."""
+    import numpy as np
 
     pts = setup.board_points_m
     cols = int(np.sum(np.isclose(pts[:, 1], pts[0, 1])))
@@ -146,6 +150,7 @@ def _infer_board(setup) -> tuple[int, int]:
 
 
 def _times(path: Path, n: int) -> list[str]:
+    from common.errors import InputError
     from projects.store.campaign import parse_datetime
 
     try:

@@ -3,8 +3,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 from app.cli.args import add_json, input_file, output_file, output_folder
 from app.cli.output import dump_json, table
 from app.cli.progress import progress_bar
@@ -91,6 +89,7 @@ def _analyse(args):
 
 
 def _match_rows(coarse):
+    import numpy as np
 
     from lidar.angles import spherical_from_xyz
 
@@ -198,6 +197,7 @@ def _parse_move(text: str):
 
 
 def cmd_simulate(args) -> int:
+    import numpy as np
 
     from lidar.layout import layout_from_model, write_layout_csv
     from lidar.plan import ScanPlan

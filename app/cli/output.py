@@ -6,10 +6,6 @@ import math
 import sys
 from collections.abc import Sequence
 
-import numpy as np
-
-from common.files import json_safe
-
 
 def table(rows: Sequence[dict], columns: Sequence[str], out=None) -> None:
     out = out or sys.stdout
@@ -33,6 +29,7 @@ def dump_json(obj, out=None) -> None:
     out = out or sys.stdout
 
     def default(o):
+        import numpy as np
 
         if isinstance(o, np.ndarray):
             return o.tolist()
@@ -40,5 +37,6 @@ def dump_json(obj, out=None) -> None:
             return o.item()
         raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
+    from common.files import json_safe
 
     out.write(json.dumps(json_safe(obj), indent=2, default=default) + "\n")
