@@ -281,6 +281,8 @@ def xyz_intensity_dtype(record_length: int) -> np.dtype:
 class LasRecords:
     """An uncompressed LAS file's point records, mapped from the page cache window by window.
 
+    The file stays open until :meth:`close` is called.
+
     Parameters
     ----------
     las : LasFile
@@ -288,8 +290,6 @@ class LasRecords:
     dtype : numpy dtype, keyword-only
         The record type the records are viewed as (its size is the file's record length); default: only
         X, Y, Z and the intensity (:func:`xyz_intensity_dtype`).
-
-    Call :meth:`close` when done (the file stays open until then).
     """
 
     def __init__(self, las: LasFile, *, dtype: np.dtype | None = None):
