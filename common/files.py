@@ -9,15 +9,17 @@ import contextlib
 import csv
 import errno
 import fcntl
+import hashlib
 import io
 import math
 import os
 import re
+import tempfile
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from common.errors import SurveyError
+from common.errors import InputError, SurveyError
 
 MB = 1 << 20
 #: What a write whose size is not known beforehand is assumed to need (an output file, a database change).
@@ -26,6 +28,15 @@ DEFAULT_NEED_BYTES = 32 * MB
 
 class DiskFullError(SurveyError):
     """The device a file is written to has no space left; nothing was changed."""
+
+
+def sha256_of(path: str | os.PathLike, chunk: int = 8 << 20) -> str:
+    """The SHA-256 of a file (hex), read in chunks of ``chunk`` bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while block := fh.read(chunk):
+            h.update(block)
+    return h.hexdigest()
 
 
 def free_bytes(path: str | os.PathLike) -> int | None:
@@ -165,8 +176,6 @@ def write_atomic(path: str | os.PathLike, data: str | bytes) -> Path:
 
 def json_safe(obj: Any) -> Any:
     """``obj`` with every non-finite float replaced by None (JSON has no NaN), lists for tuples."""
-    import math
-
     if isinstance(obj, float) and not math.isfinite(obj):
         return None
     if isinstance(obj, dict):
@@ -178,8 +187,6 @@ def json_safe(obj: Any) -> Any:
 
 def output_folder(path: str | os.PathLike) -> Path:
     """A folder to write results into, created if missing; InputError when a file is in the way."""
-    from common.errors import InputError
-
     out = Path(path)
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: exists and is not a folder")
@@ -223,8 +230,6 @@ def check_output(path: str | os.PathLike, *, folder: bool = False, suffixes: Seq
     ...
     common.errors.InputError: no-such-folder/plan.json: the folder no-such-folder does not exist; create it first
     """
-    from common.errors import InputError
-
     out = Path(path)
     if folder:
         if out.exists() and not out.is_dir():
@@ -261,8 +266,6 @@ def _can_create_in(folder: Path) -> bool:
     ``os.access`` answers yes to root everywhere, also on a read-only file system or in /proc, where the
     writer would fail only after the computing.
     """
-    import tempfile
-
     try:
         fd, probe = tempfile.mkstemp(prefix=".bridgesurvey-probe-", dir=folder)
     except OSError:

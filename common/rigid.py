@@ -211,6 +211,19 @@ def rotations_from_rotvecs(rotvecs: ArrayLike) -> np.ndarray:
     return np.eye(3)[None] + s * k + c * (k @ k)
 
 
+def rotate_vectors(v: ArrayLike, rotvec: ArrayLike) -> np.ndarray:
+    """(N, 3) vectors rotated by (N, 3) (or (1, 3)) rotation vectors (axis * angle, rad), by Rodrigues' formula."""
+    v = np.asarray(v, dtype=np.float64)
+    rotvec = np.asarray(rotvec, dtype=np.float64)
+    theta = np.linalg.norm(rotvec, axis=1, keepdims=True)
+    safe = np.where(theta > 0, theta, 1.0)
+    k = rotvec / safe
+    cos, sin = np.cos(theta), np.sin(theta)
+    kxv = np.cross(k, v)
+    kdv = np.einsum("ij,ij->i", np.broadcast_to(k, v.shape), v)[:, None]
+    return v * cos + kxv * sin + k * kdv * (1.0 - cos)
+
+
 def rotation_from_rotvec(rotvec: ArrayLike) -> np.ndarray:
     """(3, 3) rotation matrix of a rotation vector (axis * angle, rad), by Rodrigues' formula.
 

@@ -4,8 +4,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from skimage.measure import label
 
-from common.arrays import median
+from common.arrays import median_and_sigma
 from common.errors import InputError
 from lidar.reflectance_map import ReflectanceMap
 
@@ -82,10 +85,7 @@ def auto_threshold(values: np.ndarray) -> float:
         v = a[np.isfinite(a)]
     if not np.issubdtype(v.dtype, np.floating):
         v = v.astype(np.float64)
-    bg = median(v)
-    np.subtract(v, bg, out=v)  # v is the sample's own copy (boolean indexing): |v - bg| is made in it
-    np.abs(v, out=v)
-    mad = median(v, overwrite_input=True) * 1.4826
+    bg, mad = median_and_sigma(v, overwrite_input=True)  # v is the sample's own copy (boolean indexing)
     return max(bg + 3.0 * mad, bg + 0.5 * (top - bg))
 
 
@@ -116,13 +116,14 @@ def detect_reflectors(rmap: ReflectanceMap, *, target_diameter_m: float = 0.05, 
     # azimuth, then zenith.
     img = rmap.max_intensity.T
     thr = auto_threshold(img) if threshold is None else float(threshold)
-    runs = component_runs(img >= thr)  # NaN (empty cells) compares False
-    if runs.n == 0:
+    labels, n = label(img >= thr, connectivity=2, return_num=True)  # NaN (empty cells) compares False
+    if n == 0:
         return DetectionResult((), (), thr, rmap.step_deg)
-    w = runs.shape[0]  # (columns, rows)
-    cols, rows, lab = runs.cells()  # the bright cells only, in the transposed view's row-major order
+    w = labels.shape[0]  # (columns, rows)
+    cols, rows = np.nonzero(labels)  # the bright cells only, in the transposed view's row-major order
+    lab = labels[cols, rows]
     if rmap.full_circle:
-        roots, col_shift = _merge_across_seam(runs.line(0), runs.line(w - 1), runs.n, w)
+        roots, col_shift = _merge_across_seam(labels[0], labels[w - 1], n, w)
         cols = cols + col_shift[lab]  # seam-merged blobs continue past the last column
         lab = roots[lab]
     vals = img[cols % w, rows]
@@ -168,162 +169,26 @@ def detect_reflectors(rmap: ReflectanceMap, *, target_diameter_m: float = 0.05, 
     return DetectionResult(tuple(kept), tuple(rejected), thr, rmap.step_deg)
 
 
-@dataclass(frozen=True)
-class ComponentRuns:
-    """The 8-connected groups of a 2-D mask's True cells, as runs (consecutive True cells of a row).
-
-    Runs come in row-major order of their first cell, so their cells, one run after the other, are the mask's
-    True cells in the order ``np.nonzero`` gives them. ``group`` numbers the groups 1..n in row-major order of
-    their first cell (``scipy.ndimage.label``'s numbering with a 3x3 structure).
-    """
-
-    shape: tuple[int, int]
-    row: np.ndarray  # (R,) int64
-    col: np.ndarray  # (R,) int64: first column of each run
-    length: np.ndarray  # (R,) int64
-    group: np.ndarray  # (R,) int64, 1..n
-    n: int
-
-    def cells(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Row, column and group of every True cell, in row-major order."""
-        return np.repeat(self.row, self.length), _ranges(self.col, self.length), np.repeat(self.group, self.length)
-
-    def line(self, r: int) -> np.ndarray:
-        """The groups along row ``r`` (0 outside the mask), shape (W,)."""
-        out = np.zeros(self.shape[1], np.int64)
-        on = self.row == r
-        out[_ranges(self.col[on], self.length[on])] = np.repeat(self.group[on], self.length[on])
-        return out
-
-
-def component_runs(mask: np.ndarray) -> ComponentRuns:
-    """The 8-connected groups of True cells of a 2-D mask, found on its runs.
-
-    The runs are read off the True cells' positions (``np.flatnonzero``) and joined where they touch a run of
-    the next row, so a large blob costs its rows and the whole map one pass: no image of labels is made (a
-    coarse map's was 27 MB).
-
-    Parameters
-    ----------
-    mask : (H, W) bool array
-
-    Returns
-    -------
-    ComponentRuns
-    """
-    mask = np.asarray(mask, dtype=bool)
-    h, w = mask.shape
-    pos = np.flatnonzero(mask)
-    if pos.size == 0:
-        empty = np.zeros(0, np.int64)
-        return ComponentRuns((h, w), empty, empty, empty, empty, 0)
-    row, col = np.divmod(pos, w)
-    new = np.ones(pos.size, bool)
-    new[1:] = (pos[1:] != pos[:-1] + 1) | (col[1:] == 0)
-    first_cell = np.flatnonzero(new)
-    run_row, run_col = row[first_cell], col[first_cell]
-    length = np.diff(np.append(first_cell, pos.size))
-    # positions in rows padded by one cell each side (row * (w + 2) + column + 1), one past each run's end
-    start = run_row * (w + 2) + run_col + 1
-    stop = start + length
-    # a run touches the runs of the row above that end at or after its start - 1 and begin at or before its
-    # stop: in that row's (sorted) runs a contiguous range, found by two binary searches
-    above = (run_row - 1) * (w + 2)
-    first = np.searchsorted(stop, start - (w + 2))  # first run of the row above ending at >= start - 1
-    last = np.searchsorted(start, stop - (w + 2), side="right") - 1  # last one starting <= stop
-    first = np.maximum(first, np.searchsorted(start, above))
-    last = np.minimum(last, np.searchsorted(start, above + (w + 2)) - 1)
-    n_pairs = np.where(run_row > 0, np.maximum(last - first + 1, 0), 0)
-    runs_a, runs_b = _ranges(first, n_pairs), np.repeat(np.arange(start.size), n_pairs)
-    roots, group = np.unique(join_groups(start.size, runs_a, runs_b), return_inverse=True)
-    return ComponentRuns((h, w), run_row, run_col, length, group.reshape(-1).astype(np.int64) + 1, int(roots.size))
-
-
-def label_components(mask: np.ndarray) -> tuple[np.ndarray, int]:
-    """Label the 8-connected groups of True cells of a 2-D mask, numbered in row-major order of first cell.
-
-    The labelling ``scipy.ndimage.label`` gives with a 3x3 structure, in plain numpy (importing scipy.ndimage
-    cost every command that plans a visit 0.3 s), painted from :func:`component_runs`.
-
-    Parameters
-    ----------
-    mask : (H, W) bool array
-
-    Returns
-    -------
-    labels : (H, W) int32 array
-        0 outside the mask, 1..n inside; two cells share a label when a chain of True cells, each touching
-        the next at a side or a corner, joins them.
-    n : int
-        Number of groups.
-    """
-    runs = component_runs(mask)
-    labels = np.zeros(runs.shape, np.int32)
-    rows, cols, group = runs.cells()
-    labels[rows, cols] = group
-    return labels, runs.n
-
-
-def _ranges(first: np.ndarray, length: np.ndarray) -> np.ndarray:
-    """The integers first[i], first[i] + 1, ... (length[i] of them) for every i, one after the other."""
-    return np.repeat(first, length) + (np.arange(length.sum()) - np.repeat(np.cumsum(length) - length, length))
-
-
-def join_groups(n: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The groups of ``n`` items that the pairs ``(a[i], b[i])`` join (union-find in numpy).
-
-    Parameters
-    ----------
-    n : int
-        Items 0 .. n-1.
-    a, b : (P,) int arrays
-        Pairs of items in one group.
-
-    Returns
-    -------
-    (n,) int array
-        Each item's group, named by its smallest item (so groups come in the order of their first item).
-    """
-    parent = np.arange(n)
-    a, b = np.asarray(a, dtype=np.intp), np.asarray(b, dtype=np.intp)
-    while True:  # hook the larger root onto the smaller, then compress every path fully
-        pa, pb = parent[a], parent[b]
-        apart = pa != pb
-        if not apart.any():
-            return parent
-        np.minimum.at(parent, np.maximum(pa[apart], pb[apart]), np.minimum(pa[apart], pb[apart]))
-        while True:
-            up = parent[parent]
-            if np.array_equal(up, parent):
-                break
-            parent = up
-
-
 def _merge_across_seam(first: np.ndarray, last: np.ndarray, n: int, width: int) -> tuple[np.ndarray, np.ndarray]:
     """Join blobs touching both the first and last column of a full-circle map.
 
     ``first`` and ``last`` are the labels (1..n, 0 for none) down the map's first and last columns. Returns, per
-    label, its merged label (``roots[label]``) and the column shift (0 or width) that makes the merged blob's
-    columns continuous.
+    label, its merged label (``roots[label]``: the largest label of the blobs joined, one that reaches the last
+    column) and the column shift (0 or width) that makes the merged blob's columns continuous (the joined blobs
+    of the first column continue after the last one).
     """
-    parent = np.arange(n + 1)
-
-    def find(a):
-        while parent[a] != a:
-            parent[a] = parent[parent[a]]
-            a = parent[a]
-        return a
-
-    for r in range(first.size):
-        for dr in (-1, 0, 1):
-            rr = r + dr
-            if 0 <= rr < first.size and last[r] and first[rr]:
-                a, b = find(last[r]), find(first[rr])
-                if a != b:
-                    parent[b] = a
+    pairs = [(int(last[r]), int(first[rr])) for r in range(first.size) for rr in (r - 1, r, r + 1)
+             if 0 <= rr < first.size and last[r] and first[rr]]
+    roots = np.arange(n + 1)
     shift = np.zeros(n + 1, dtype=np.int64)
-    roots = np.array([find(k) for k in range(n + 1)])
-    for k in range(1, n + 1):
-        if roots[k] != k:  # merged: its columns (near column 0) continue after the last column
-            shift[k] = width
+    if not pairs:
+        return roots, shift
+    a, b = np.array(pairs).T
+    _, group = connected_components(coo_matrix((np.ones(a.size), (a, b)), shape=(n + 1, n + 1)), directed=False)
+    top = np.zeros(group.max() + 1, np.int64)
+    np.maximum.at(top, group, np.arange(n + 1))
+    roots = top[group]
+    on_first = np.zeros(n + 1, bool)
+    on_first[first] = True
+    shift[(roots != np.arange(n + 1)) & on_first] = width
     return roots, shift

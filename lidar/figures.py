@@ -8,6 +8,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from common.files import atomic_output
+
 if TYPE_CHECKING:
     from lidar.detection import DetectionResult
     from lidar.identification import Identification
@@ -77,8 +79,6 @@ def reflectance_map_figure(rmap: ReflectanceMap, *, detections: DetectionResult 
 
 def save_figure(fig: Any, path: str | os.PathLike) -> Path:
     """Write a matplotlib Figure to ``path`` (format from the suffix) atomically; returns the path."""
-    from common.files import atomic_output
-
     with atomic_output(path) as tmp:
         fig.savefig(tmp)
     return Path(path)

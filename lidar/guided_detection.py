@@ -15,6 +15,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from common.arrays import median_and_sigma
 from lidar.angles import spherical_from_xyz
 from lidar.detection import Detection, DetectionResult
 from lidar.identification import Identification
@@ -55,8 +56,7 @@ def bright_near(rmap: ReflectanceMap, xyz_socs: np.ndarray, threshold: float, *,
     _, _, wide = _patch(rmap, row[0], col[0], 3 * k)
     if near.size == 0 or not np.any(np.isfinite(near)):
         return None
-    bg = float(np.nanmedian(wide))
-    mad = 1.4826 * float(np.nanmedian(np.abs(wide - bg)))
+    bg, mad = median_and_sigma(wide, skip_nan=True)
     a, b = (int(v) for v in np.unravel_index(int(np.nanargmax(near)), near.shape))
     if float(near[a, b]) < bg + max(MIN_CONTRAST * (threshold - bg), MIN_MAD_FACTOR * mad, 0.05):
         return False
@@ -133,8 +133,7 @@ def recover_predicted(rmap: ReflectanceMap, detections: DetectionResult, identif
         _, _, wide = _patch(rmap, row[0], col[0], 3 * k)
         if near.size == 0 or not np.any(np.isfinite(near)):
             continue
-        bg = float(np.nanmedian(wide))
-        mad = 1.4826 * float(np.nanmedian(np.abs(wide - bg)))
+        bg, mad = median_and_sigma(wide, skip_nan=True)
         a, b = (int(v) for v in np.unravel_index(int(np.nanargmax(near)), near.shape))
         peak = float(near[a, b])
         if peak < bg + max(MIN_CONTRAST * (detections.threshold - bg), MIN_MAD_FACTOR * mad, 0.05):

@@ -15,11 +15,12 @@ from itertools import combinations
 
 import numpy as np
 from numpy.typing import ArrayLike
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from common.arrays import unique_sorted
 from common.errors import InputError, ProcessingError
 from common.rigid import Transform, fit_rigid, pairwise_distances
-from lidar.detection import join_groups
 from lidar.layout import Layout
 
 
@@ -134,9 +135,13 @@ def _competing_groups(near: np.ndarray) -> list[tuple[list[int], list[int]]]:
     """Connected groups (layout rows, detection columns) of the bipartite graph ``near``, by first row."""
     n_rows = near.shape[0]
     r, c = np.nonzero(near)
-    group = join_groups(n_rows + near.shape[1], r, n_rows + c)  # rows are items 0.., columns after them
+    # the bipartite graph's groups: rows are nodes 0.., columns after them; groups are numbered in the order of
+    # their first node, so in the order of their first row
+    n_nodes = n_rows + near.shape[1]
+    _, group = connected_components(coo_matrix((np.ones(r.size), (r, n_rows + c)), shape=(n_nodes, n_nodes)),
+                                    directed=False)
     out = []
-    for g in unique_sorted(group[r]):  # a group's name is its first row
+    for g in unique_sorted(group[r]):
         rows = np.flatnonzero(group[:n_rows] == g)
         out.append(([int(k) for k in rows], [int(k) for k in np.flatnonzero(group[n_rows:] == g)]))
     return out

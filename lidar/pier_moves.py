@@ -25,6 +25,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from common.errors import SurveyError
 from common.flags import FLAG_REFERENCE_AMBIGUOUS, FLAG_REFERENCE_MOVED, FLAG_REFERENCE_UNRESOLVED
 from lidar.displacement_result import EpochDisplacements
 
@@ -135,8 +136,6 @@ def resolve_ambiguous_move(result: EpochDisplacements, base: Mapping, groups: Ma
 
 def _explain(solve: Callable, stable: list, checks, flags: list, base: Mapping, groups: Mapping[str, str]):
     """(chi-square, dof, result) of one explanation, or None when it cannot be computed or judged."""
-    from common.errors import SurveyError
-
     try:
         candidate = solve(stable, checks, flags)
     except SurveyError:  # an explanation that cannot be computed is no explanation

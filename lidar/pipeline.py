@@ -10,7 +10,6 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import ArrayLike
 
-from common.arrays import median
 from common.errors import InputError
 from common.flags import FLAG_NOT_FOUND, FLAG_UNRESOLVED
 from common.progress import ProgressCallback, report, scaled
@@ -73,7 +72,7 @@ def analyse_map(rmap: ReflectanceMap, layout: Layout, *, threshold: float | None
                 up_layout: ArrayLike = (0.0, 0.0, 1.0), station_xy: ArrayLike | None = None,
                 progress: ProgressCallback | None = None) -> CoarseAnalysis:
     """Detection and identification on a coarse scan's reflectance map (see :func:`analyse_coarse`)."""
-    diameter = median(layout.diameters_m)
+    diameter = float(np.median(layout.diameters_m))
     det = detect_reflectors(rmap, target_diameter_m=diameter, threshold=threshold)
     report(progress, 0.5, "identifying reflectors")
     ident = identify_reflectors(det.xyz(), layout, tolerance_m=tolerance_m, max_tilt_deg=max_tilt_deg,

@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from common.errors import InputError
+from common.files import write_atomic
 from lidar.angles import AngularWindow, direction_from_angles, spherical_from_xyz, window_around
 from lidar.reflectance_map import ReflectanceMap
 from lidar.scanner_profile import VZ1000, ScannerProfile
@@ -162,7 +163,6 @@ class ScanPlan:
                    tuple((str(x["reflector"]), str(x["reason"])) for x in d.get("skipped", ())))
 
     def save(self, path: str | os.PathLike) -> Path:
-        from common.files import write_atomic
 
         return write_atomic(path, json.dumps(self.to_json(), indent=2))
 

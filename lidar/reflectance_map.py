@@ -8,7 +8,6 @@ last columns are neighbours.
 """
 from __future__ import annotations
 
-import mmap
 import os
 import threading
 from collections import deque
@@ -20,10 +19,11 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike
 
-from common.errors import InputError, ScanFormatError
+from common.errors import InputError
 from common.progress import ProgressCallback, report
 from common.validation import require_points
 from lidar.angles import ATAN_DEG32, direction_from_angles, spherical32, wrap_phi
+from lidar.io.las import LasFile, LasRecords, open_las
 from lidar.native import coarse_map_library
 
 #: Points per chunk: small enough that a chunk's float32 temporaries stay in the caches.
@@ -554,58 +554,24 @@ def reduce_map(rmap: ReflectanceMap, *, max_cells: int = 1_000_000) -> Reflectan
                           full_circle=rmap.full_circle, n_points=rmap.n_points)
 
 
-class _LasPoints:
-    """An uncompressed LAS file's point records, mapped from the page cache window by window, in float32.
+class _LasPoints(LasRecords):
+    """An uncompressed LAS file's point records (:class:`lidar.io.las.LasRecords`), binned in float32.
 
     Only X, Y, Z and the intensity of each record are touched: the scan is never held as float64 arrays.
     The raw intensity is binned and the map normalised over the file's own range afterwards, exactly as
     :func:`lidar.io.read_scan` normalises a LAS file's intensity.
     """
 
-    def __init__(self, path: Path):
-        from lidar.io.las_header import check_las_header
-
-        facts = check_las_header(path)
-        size = int(facts.record_length)
-        # every LAS point format (0-10) starts X, Y, Z (int32) and intensity (uint16): only those are read
-        self.dtype = np.dtype({"names": ["xyz", "intensity"], "formats": ["V12", "<u2"], "offsets": [0, 12],
-                               "itemsize": size})
-        self.path, self.n, self.first = path, facts.point_count, facts.offset_to_points
-        self.scales = np.asarray(facts.scales, np.float64)
-        self.offsets = np.asarray(facts.offsets, np.float64)
+    def __init__(self, las: LasFile):
+        super().__init__(las)
+        self.scales, self.offsets = las.scales, las.offsets
         self.limits: tuple[float, float] | None = None
-        if facts.point_count == 0:
-            raise ScanFormatError(path, "the LAS header declares 0 points; nothing to read")
-        self.fd = os.open(path, os.O_RDONLY)
         self._batch: tuple[int, np.ndarray] | None = None  # the mapped records of the batch being binned
         self._batch_lock = threading.Lock()
 
     def close(self) -> None:
         self._batch = None
-        os.close(self.fd)
-
-    def _records(self, start: int, stop: int) -> np.ndarray:
-        """Records ``start`` to ``stop`` as raw bytes, mapped read-only from the file (unmapped when dropped).
-
-        A plain mapping: the threads that read the records fault the pages in, 16 at a fault and both threads at
-        once. A copy (``preadv``) cost 0.04 s a pass of a 532 MB file, and windows mapped at once
-        (``MAP_POPULATE``) were populated under the address space's lock, the other thread's mappings waiting:
-        0.04 s more for the map of that file. A window at a time keeps the resident memory to a few chunks.
-        """
-        size = self.dtype.itemsize
-        begin, end = self.first + start * size, self.first + stop * size
-        if os.fstat(self.fd).st_size < end:  # shortened since its header was read: a mapping would crash
-            raise ScanFormatError(self.path, "truncated: the point records end early")
-        base = begin - begin % mmap.ALLOCATIONGRANULARITY
-        try:
-            window = mmap.mmap(self.fd, end - base, flags=mmap.MAP_SHARED,
-                               prot=mmap.PROT_READ, offset=base)
-        except OSError:  # a file system that cannot map files: read a copy
-            copy = np.empty(end - begin, np.uint8)
-            if os.preadv(self.fd, [copy], begin) != copy.size:  # type: ignore[list-item]
-                raise ScanFormatError(self.path, "truncated: the point records end early") from None
-            return copy
-        return np.frombuffer(window, np.uint8, count=end - begin, offset=begin - base)
+        super().close()
 
     def _xyz32(self, xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Coordinates in float32 of records' X, Y, Z bytes (``V12``), scaled in float64 and rounded once.
@@ -632,7 +598,7 @@ class _LasPoints:
 
         def sample(start: int) -> _Survey:
             stop = min(start + window, self.n)
-            raw = self._records(start, stop)
+            raw = self.raw(start, stop)
             if lib is None:
                 xyz = np.ascontiguousarray(raw.view(self.dtype)["xyz"][::stride])
                 t, p, _ = spherical32(*self._xyz32(xyz))
@@ -649,7 +615,7 @@ class _LasPoints:
         return total
 
     def chunk(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        rec = self._records(start, stop).view(self.dtype)
+        rec = self.records(start, stop)
         t, p, r = spherical32(*self._xyz32(rec["xyz"]))
         return t, p, r, rec["intensity"].astype(np.float32)
 
@@ -674,7 +640,7 @@ class _LasPoints:
         first = start - start % span
         with self._batch_lock:
             if self._batch is None or self._batch[0] != first:
-                self._batch = (first, self._records(first, min(first + span, self.n)))
+                self._batch = (first, self.raw(first, min(first + span, self.n)))
             raw = self._batch[1]
         size = self.dtype.itemsize
         return raw[(start - first) * size:(stop - first) * size]
@@ -711,10 +677,9 @@ def reflectance_map_from_file(path: str | os.PathLike, *, step_deg: float | None
 
     p = Path(path)
     if sniff_format(p) == "las":
-        from lidar.io.las_header import check_las_header
-
-        if not check_las_header(p).compressed:
-            points = _LasPoints(p)
+        las = open_las(p)
+        if not las.compressed:
+            points = _LasPoints(las)
             try:
                 return binned_map(points, step_deg=step_deg, progress=progress)
             finally:

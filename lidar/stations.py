@@ -16,8 +16,12 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 from collections.abc import Mapping, Sequence
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field, replace
+from pickle import PicklingError
 from typing import Any
 
 import numpy as np
@@ -25,6 +29,7 @@ from numpy.typing import ArrayLike
 
 from common.errors import InputError, SurveyError
 from common.progress import ProgressCallback, report
+from common.rigid import fit_rigid
 from lidar.layout import Layout, bridge_axis, target_normals
 from lidar.pipeline import plan_times
 from lidar.plan import PlanTarget, coarse_step_needed_deg, plan_fine_scans
@@ -329,8 +334,6 @@ def _carry(base: Mapping[str, _Sighted], epoch: Mapping[str, _Sighted]) -> dict[
 
     A rigid fit of the shared targets carries the baseline positions into the station's frame.
     """
-    from common.rigid import fit_rigid
-
     shared = [i for i in epoch if i in base]
     if len(shared) < 3:
         return {}
@@ -415,11 +418,7 @@ def survey_stations(layout: Layout, positions_layout: np.ndarray, *, profile: Sc
     Each station costs about 0.1-0.2 s (the displacement uncertainty is propagated exactly as
     processing does), so a 600-position grid takes about half a minute on two cores.
     """
-    import os
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-    from concurrent.futures.process import BrokenProcessPool
     from multiprocessing import get_context
-    from pickle import PicklingError
 
     pos = np.asarray(positions_layout, dtype=np.float64).reshape(-1, 3)
     if len(pos) == 0:

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from common.errors import InputError
 from common.files import write_atomic
 from common.progress import ProgressCallback, report
 from lidar.figures import save_figure
@@ -103,7 +104,6 @@ def build_demo(folder: str | os.PathLike, *, weeks: int = 52, seed: int = 2026,
     """Build (or resume building) the demo campaign in ``folder``."""
     folder = Path(folder)
     if weeks < 2:
-        from common.errors import InputError
 
         raise InputError("the demo needs at least 2 weeks")
     model = BridgeModel()

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from common.errors import SurveyError
 from common.flags import PROBLEM, WARNING, code, severity
 from lidar.layout import read_layout_csv
 from lidar.plan import ScanPlan
@@ -121,7 +122,6 @@ class ProductPlanner:
         self.labels: dict[Path, str] = {}
 
     def __call__(self, folder: Path, coarse: Path) -> list:
-        from common.errors import SurveyError
 
         if not (self.dir / "campaign.sqlite").exists():
             with Campaign.create(self.dir, name="study", layout=read_layout_csv(self.layout_csv),

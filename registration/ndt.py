@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from common.arrays import thin_to_voxels
+from common.pcd import binary_pcd_header
 from common.progress import ProgressCallback, report
 from registration.errors import InputError, RegistrationError
 from registration.icp import IcpResult, check_clouds
@@ -33,17 +35,8 @@ def ndt_available() -> bool:
 
 
 def _write_pcd(path: Path, xyz: np.ndarray) -> None:
-    n = len(xyz)
-    head = (f"VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH {n}\nHEIGHT 1\n"
-            f"VIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA binary\n")
-    path.write_bytes(head.encode("ascii") + np.ascontiguousarray(xyz, dtype="<f4").tobytes())
-
-
-def _voxel_thin(xyz: np.ndarray, voxel_m: float) -> np.ndarray:
-    """One point per occupied voxel (the first), to keep PCL's input small."""
-    keys = np.floor(xyz / voxel_m).astype(np.int64)
-    _, first = np.unique(keys, axis=0, return_index=True)
-    return xyz[np.sort(first)]
+    rec = np.ascontiguousarray(xyz, dtype="<f4").view([("x", "<f4"), ("y", "<f4"), ("z", "<f4")]).reshape(-1)
+    path.write_bytes(binary_pcd_header(rec.dtype, len(rec)) + rec.tobytes())
 
 
 def parse_transform(text: str) -> np.ndarray:
@@ -106,8 +99,8 @@ def refine_ndt(source_xyz: np.ndarray, target_xyz: np.ndarray, initial: Transfor
         raise InputError("NDT resolution, step, voxel and iterations must be positive")
     off = tgt.mean(axis=0) if offset is None else np.asarray(offset, dtype=np.float64)
     shift = Transform(np.eye(3), -off)
-    s = _voxel_thin(initial.then(shift).apply(src), voxel_m)
-    t = _voxel_thin(tgt - off, voxel_m)
+    s = thin_to_voxels(initial.then(shift).apply(src), voxel_m)
+    t = thin_to_voxels(tgt - off, voxel_m)
     report(progress, 0.1, f"NDT ({len(s):,} and {len(t):,} points)")
     with tempfile.TemporaryDirectory(prefix="bridgesurvey-ndt-") as tmp_name:
         tmp = Path(tmp_name)

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from common.arrays import median_and_sigma
 from registration.errors import InputError
 
 #: Voxel edge of the local planes that give each point its normal (metres).
@@ -251,7 +252,7 @@ def _joint_fit(ds: tuple[np.ndarray, np.ndarray], dl: tuple[np.ndarray, np.ndarr
         for k, sel in enumerate((e == 0, e == 1)):
             r = res[sel & keep]
             std[k] = max(float(np.sqrt(np.mean(r ** 2))), 1e-6)
-            mad = 1.4826 * float(np.median(np.abs(r - np.median(r))))
+            mad = median_and_sigma(r)[1]
             new[sel] = np.abs(res[sel]) <= max(3.5 * mad, 1e-5)
         w = np.where(e == 0, 1.0 / std[0] ** 2, 1.0 / std[1] ** 2)
         if np.array_equal(new, keep):

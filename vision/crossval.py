@@ -18,6 +18,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from common.arrays import median_and_sigma
 from common.errors import InputError, ProcessingError
 from common.flags import FLAG_FEW_CAMERA_SAMPLES, FLAG_NO_CAMERA_DATA, FLAG_NO_LIDAR_VALUE
 from vision.series import CameraSeries
@@ -141,9 +142,9 @@ def pair_with_camera(time_ns: np.ndarray, camera: CameraSeries, *, window_s: flo
         v = v[np.isfinite(v)]
         cam_n[k] = len(v)
         if len(v):
-            med = np.median(v)
+            med, sigma = median_and_sigma(v)
             cam[k] = med
-            spread = 1.4826 * np.median(np.abs(v - med)) if len(v) > 2 else np.nan
+            spread = sigma if len(v) > 2 else np.nan
             cam_s[k] = 1.2533 * spread / np.sqrt(len(v)) if np.isfinite(spread) else 0.0
     return CameraAtEpochs(cam, cam_s, cam_n)
 

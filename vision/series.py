@@ -19,6 +19,7 @@ Times are stored as UTC (int64 nanoseconds); naive times take the ``timezone`` a
 """
 from __future__ import annotations
 
+import datetime as dt
 import io
 import os
 import re
@@ -107,7 +108,6 @@ class CameraSeries:
         return len(self.time_ns)
 
     def summary(self) -> dict:
-        import datetime as dt
 
         def iso(ns):
             return dt.datetime.fromtimestamp(int(ns) / 1e9, dt.UTC).isoformat()
@@ -446,7 +446,6 @@ def _parse_times(raw, timezone: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _zone(name: str):
-    import datetime as dt
 
     m = re.fullmatch(r"(?:UTC)?([+-])(\d\d):?(\d\d)", name.strip())
     if m:

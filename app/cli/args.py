@@ -15,6 +15,8 @@ import weakref
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 
+from common.errors import InputError
+
 #: The positional DIR of every campaign command (explained once in the top-level help too).
 DIR_HELP = "the campaign folder: the one 'bridgesurvey init' created (it holds campaign.sqlite and the imported scans)"
 DIR_EXPLAINED = ("DIR is a campaign folder, one per bridge: 'bridgesurvey init DIR ...' creates it, and every "
@@ -103,8 +105,6 @@ def input_folder(p: argparse.ArgumentParser, *flags: str, help: str, **kw) -> ar
 
 def check_input(path: Path, *, folder: bool = False) -> None:
     """Refuse, in one line, an input that is missing, of the wrong kind (a folder for a file) or unreadable."""
-    from common.errors import InputError
-
     if not path.exists():
         raise InputError(f"{path}: no such {'folder' if folder else 'file'}; check the path")
     if folder and not path.is_dir():
@@ -117,7 +117,7 @@ def check_input(path: Path, *, folder: bool = False) -> None:
 
 def check_paths(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
     """Check every marked path option of ``parser`` (the command being run), inputs first, then outputs."""
-    from common.files import check_output
+    from common.files import check_output  # csv, hashlib, tempfile: 0.11 s of every command's start (importtime)
 
     checked = [(a, _CHECKED[a]) for a in parser._actions if a in _CHECKED]
     checked.sort(key=lambda item: item[1][0].startswith("output"))

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from app.cli.args import LazyChoices, add_dir, add_json, input_file, output_folder
-from app.cli.commands_campaign import _open
+from app.cli.commands_campaign import open_campaign
 from app.cli.output import dump_json, table
 
 
@@ -83,7 +83,7 @@ def register(sub) -> None:
 def cmd_env_import(args) -> int:
     from projects.series.environment import import_env
 
-    with _open(args.dir) as c:
+    with open_campaign(args.dir) as c:
         name, s = import_env(c, args.file, kind=args.kind, name=args.name, column=args.column, unit=args.unit,
                              timezone=args.timezone)
     summ = s.summary()
@@ -97,7 +97,7 @@ def cmd_env_import(args) -> int:
 def cmd_env_list(args) -> int:
     from projects.series.environment import env_records
 
-    with _open(args.dir, writable=False) as c:
+    with open_campaign(args.dir, writable=False) as c:
         rows = env_records(c)
     if args.json:
         dump_json([r.to_dict() for r in rows])
@@ -112,7 +112,7 @@ def cmd_env_list(args) -> int:
 def cmd_event_add(args) -> int:
     from projects.series.environment import add_event
 
-    with _open(args.dir) as c:
+    with open_campaign(args.dir) as c:
         eid = add_event(c, date=args.date, kind=args.kind, label=args.label, load_kn_m=args.load_kn_m)
     print(f"event {eid} added: {args.kind} '{args.label}' on {args.date}")
     return 0
@@ -121,7 +121,7 @@ def cmd_event_add(args) -> int:
 def cmd_event_list(args) -> int:
     from projects.series.environment import events
 
-    with _open(args.dir, writable=False) as c:
+    with open_campaign(args.dir, writable=False) as c:
         rows = [e.to_dict() for e in events(c)]
     if args.json:
         dump_json(rows)
@@ -133,7 +133,7 @@ def cmd_event_list(args) -> int:
 def cmd_prediction_import(args) -> int:
     from projects.series.predictions import import_prediction
 
-    with _open(args.dir) as c:
+    with open_campaign(args.dir) as c:
         out = import_prediction(c, args.file, align_at=args.align_at, lsq=args.align == "lsq")
     how = f"at {args.align_at}" if args.align_at else "by least squares"
     table([{"reflector": k, **v} for k, v in sorted(out.items())], ["reflector", "offset_mm", "residual_rms_mm", "pairs"])
@@ -144,7 +144,7 @@ def cmd_prediction_import(args) -> int:
 def cmd_analyse(args) -> int:
     from projects.analysis.run import write_analysis
 
-    with _open(args.dir, writable=False) as c:
+    with open_campaign(args.dir, writable=False) as c:
         doc, paths = write_analysis(c, args.out, horizon_days=args.horizon_days,
                                     long_term_factor=args.long_term_factor,
                                     reference_temperature=args.reference_temperature)

@@ -5,6 +5,7 @@ import json
 from pathlib import Path
 
 from app.cli.progress import progress_bar
+from common.errors import InputError
 
 
 def register(sub) -> None:
@@ -43,7 +44,6 @@ def register(sub) -> None:
 
 
 def _options(args):
-    from common.errors import InputError
     from projects.compare.whole_scan import ChangeOptions
 
     try:

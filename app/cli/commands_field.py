@@ -6,10 +6,11 @@ import math
 import sys
 
 from app.cli.args import add_dir, add_epoch, add_json, input_file, output_file
-from app.cli.commands_campaign import _open, add_setup_option, setup_date, setup_of
+from app.cli.commands_campaign import add_setup_option, open_campaign, setup_date, setup_of
 from app.cli.output import dump_json, table
 from app.cli.progress import progress_bar
 from common.errors import InputError
+from common.files import write_atomic
 
 
 def register(sub) -> None:
@@ -109,7 +110,7 @@ def cmd_field_sheet(args) -> int:
     from projects.outputs.field_sheet import write_field_sheet
     from projects.processing.stages import plan_epoch
 
-    with _open(args.dir) as c:
+    with open_campaign(args.dir) as c:
         c.epoch(args.epoch)
         setup = setup_of(c, args)
         with progress_bar("planning") as cb:
@@ -143,7 +144,7 @@ def _pair(advice, layout, asked: bool):
 def cmd_check(args) -> int:
     from projects.field.check import check_epoch
 
-    with _open(args.dir) as c:
+    with open_campaign(args.dir) as c:
         c.epoch(args.epoch)
         setup = setup_of(c, args)
         with progress_bar("measuring the fine scans") as cb:
@@ -181,7 +182,7 @@ def cmd_stations(args) -> int:
     area = read_area_csv(args.area) if args.area is not None else None
     if args.top < 0:
         raise InputError("--top must not be negative")
-    with _open(args.dir, writable=False) as c:
+    with open_campaign(args.dir, writable=False) as c:
         with progress_bar("evaluating stations") as cb:
             advice = advise_stations(c, area_xy=area, height_m=args.height_m, grid_m=args.grid_m,
                                      ground_z=args.ground_z, progress=cb)
@@ -190,7 +191,6 @@ def cmd_stations(args) -> int:
     if pair is None:
         advice.save(args.out)
     else:
-        from common.files import write_atomic
 
         write_atomic(args.out, json.dumps({**advice.to_json(), "pair": pair.to_json()}, indent=1))
     if args.png is not None:

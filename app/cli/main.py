@@ -12,6 +12,7 @@ they need when they run): ``bridgesurvey --help`` and a refused command start in
 from __future__ import annotations
 
 import argparse
+import difflib
 import gc
 import importlib
 import logging
@@ -167,8 +168,6 @@ def _command_of(argv: Sequence[str]) -> str | None:
 
 def _refuse_unknown(parser: argparse.ArgumentParser, extra: Sequence[str]) -> None:
     """An unknown argument, reported with the usage of the command it was given to (exit 2)."""
-    import difflib
-
     options = [s for a in parser._actions for s in a.option_strings]
     hint = ""
     for word in extra:

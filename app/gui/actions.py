@@ -11,6 +11,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from common.errors import InputError
+from common.files import write_atomic
 from common.progress import scaled
 
 
@@ -143,7 +144,6 @@ def crossval(session, progress: Callable):
 
 
 def export_csv(session, path: Path) -> Path:
-    from common.files import write_atomic
     from projects.results.table import displacement_table, to_csv
 
     with session.read() as c:

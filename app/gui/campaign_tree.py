@@ -77,7 +77,7 @@ class CampaignTree(QTreeWidget):
         self.select_key(*sel.focus)
 
     def populate(self, status: dict, reflectors, series) -> None:
-        """Rebuild from :func:`projects.results.state.campaign_status`, the reflectors and the camera series."""
+        """Rebuild from :func:`projects.results.status.campaign_status`, the reflectors and the camera series."""
         selected = self.current_key()
         self.blockSignals(True)
         self.clear()

@@ -188,7 +188,7 @@ class AddEpochDialog(QDialog):
             self.when_source.setText("set by hand")
 
     def _coarse_chosen(self, path: str) -> None:
-        from projects.store.scan_time import scan_file_time
+        from lidar.io.scan_time import scan_file_time
 
         if self._date_by_hand or not path.strip() or not Path(path.strip()).is_file():
             return

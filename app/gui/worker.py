@@ -1,6 +1,7 @@
 """Long work off the GUI thread: one job at a time, with progress, cancel and clean error messages."""
 from __future__ import annotations
 
+import importlib
 import logging
 import threading
 import time
@@ -27,7 +28,6 @@ def preload_native_modules() -> None:
     if _preloaded:
         return
     _preloaded = True
-    import importlib
 
     for name in NATIVE_MODULES:
         try:

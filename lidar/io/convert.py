@@ -12,7 +12,6 @@
 from __future__ import annotations
 
 import os
-import struct
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,8 +21,18 @@ import numpy as np
 
 from common.errors import InputError, ScanFormatError
 from common.files import atomic_output
+from common.pcd import binary_pcd_header
 from common.progress import ProgressCallback, report
-from lidar.io._common import first_line, pose_to_text, quaternion_from_pose
+from lidar.io._common import pose_to_text
+from lidar.io.las import (
+    las_header_for,
+    las_point_chunks,
+    las_scale_for,
+    open_las_writer,
+    point_records,
+    zero_records,
+)
+from lidar.io.pcd import pcd_viewpoint
 from lidar.io.stream import CHUNK_POINTS, Chunk, ScanStream, open_stream
 
 #: Outputs written chunk by chunk.
@@ -128,26 +137,16 @@ def _whole(src: Path, dst: Path, indices: list[int], stream: ScanStream) -> Conv
 
 def _copy_las(stream: ScanStream, dst: Path, chunk_points: int, progress: ProgressCallback | None) -> int:
     """Copy every point record with the input's header; laspy (de)compresses."""
-    import laspy
-
-    from lidar.io.las import _laz_backend
-
-    n = stream.scans[0].points
+    las = stream.details["las"]
+    n = las.points
     done = 0
     compress = dst.suffix.lower() == ".laz"
-    try:
-        with laspy.open(stream.path, laz_backend=_laz_backend()) as reader, atomic_output(dst) as tmp:
-            header = reader.header
-            with laspy.open(tmp, mode="w", header=header, do_compress=compress,
-                            laz_backend=_laz_backend() if compress else None) as writer:
-                for pts in reader.chunk_iterator(chunk_points):
-                    writer.write_points(pts)
-                    done += len(pts)
-                    report(progress, done / max(n, 1), "converting")
-    except (laspy.errors.LaspyException, ValueError, OSError, RuntimeError) as exc:
-        raise ScanFormatError(stream.path, f"damaged point data after {done} points ({first_line(exc)})") from exc
-    if done != n:
-        raise ScanFormatError(stream.path, f"truncated: the header declares {n} points, {done} could be read")
+    with atomic_output(dst) as tmp:
+        with open_las_writer(tmp, las.header, compress=compress) as writer:
+            for rec in las_point_chunks(las, chunk_points):
+                writer.write_points(point_records(las, rec))
+                done += len(rec)
+                report(progress, done / max(n, 1), "converting")
     return done
 
 
@@ -191,27 +190,11 @@ def _las_intensity(raw: np.ndarray, first: _Pass1) -> np.ndarray:
 
 
 def _write_las(tmp: Path, suffix: str, chunks: Iterator[Chunk], first: _Pass1, pose) -> None:
-    import laspy
-
-    from lidar.io.las import POSE_VLR_RECORD_ID, POSE_VLR_USER_ID, _laz_backend
-
     lo = np.floor(first.lo)
-    extent = float(np.max(first.hi - lo))
-    scale = 1e-5
-    while extent / scale > 2.0e9:
-        scale *= 10
-    header = laspy.LasHeader(point_format=6, version="1.4")
-    header.offsets = lo
-    header.scales = np.array([scale] * 3)
-    if pose is not None:
-        header.vlrs.append(laspy.VLR(user_id=POSE_VLR_USER_ID, record_id=POSE_VLR_RECORD_ID,
-                                     description="SOCS pose 4x4 float64",
-                                     record_data=struct.pack("<16d", *np.asarray(pose, np.float64).ravel())))
-    compress = suffix == ".laz"
-    with laspy.open(tmp, mode="w", header=header, do_compress=compress,
-                    laz_backend=_laz_backend() if compress else None) as writer:
+    header = las_header_for(lo, las_scale_for(lo, first.hi), pose)
+    with open_las_writer(tmp, header, compress=suffix == ".laz") as writer:
         for c in chunks:
-            rec = laspy.ScaleAwarePointRecord.zeros(len(c.xyz), header=header)
+            rec = zero_records(header, len(c.xyz))
             rec.x, rec.y, rec.z = c.xyz[:, 0], c.xyz[:, 1], c.xyz[:, 2]
             rec.intensity = _las_intensity(_raw_out(c, first), first)
             writer.write_points(rec)
@@ -249,17 +232,9 @@ def _records(fh: BinaryIO, chunks: Iterator[Chunk], rec_dt: np.dtype, first: _Pa
 
 
 def _write_pcd(tmp: Path, suffix: str, chunks: Iterator[Chunk], first: _Pass1, pose) -> None:
-    if pose is not None:
-        q, t = quaternion_from_pose(pose)
-        viewpoint = " ".join(f"{v:.12g}" for v in (*t, *q))
-    else:
-        viewpoint = "0 0 0 1 0 0 0"
-    n = first.n
-    header = ("# .PCD v0.7 - written by BridgeSurvey\nVERSION 0.7\nFIELDS x y z intensity\nSIZE 8 8 8 4\n"
-              f"TYPE F F F F\nCOUNT 1 1 1 1\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT {viewpoint}\nPOINTS {n}\nDATA binary\n")
     rec_dt = np.dtype([("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("intensity", "<f4")])
     with open(tmp, "wb") as fh:
-        fh.write(header.encode("ascii"))
+        fh.write(binary_pcd_header(rec_dt, first.n, viewpoint=pcd_viewpoint(pose)))
         _records(fh, chunks, rec_dt, first)
 
 

@@ -1,7 +1,10 @@
 """E57 reading (every scan in the file, with its pose) and writing, through pye57."""
 from __future__ import annotations
 
+import contextlib
 import os
+import uuid
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -59,8 +62,6 @@ def read_e57(path: str | os.PathLike, *, progress: ProgressCallback | None = Non
     ScanFormatError
         Not an E57 file, a checksum error, a scan without points, or no scans.
     """
-    import pye57
-
     p = check_readable(path)
     facts = check_e57(p)  # pages, XML and point counts checked before libE57 allocates anything
     if not facts.scans:
@@ -72,28 +73,60 @@ def read_e57(path: str | os.PathLike, *, progress: ProgressCallback | None = Non
         if s.record_count == 0:
             raise ScanFormatError(p, f"scan {k} ({s.name}) holds no points")
     scans: list[Scan] = []
+    with opened_e57(p) as e57:
+        try:
+            count = e57.scan_count
+            if count == 0:
+                raise ScanFormatError(p, "the E57 file holds no scans")
+            for i in range(count):
+                scans.append(_read_one(e57, p, i, facts.version))
+                report(progress, (i + 1) / count, f"E57 scan {i + 1}/{count}")
+        except ScanFormatError:
+            raise
+        except Exception as exc:
+            raise ScanFormatError(p, f"corrupt E57 data ({first_line(exc)})") from exc
+    return scans
+
+
+@contextlib.contextmanager
+def opened_e57(p: Path) -> Iterator:
+    """pye57's reader of an E57 file (checked by :func:`lidar.io.e57_header.check_e57`), closed after use.
+
+    Raises
+    ------
+    ScanFormatError
+        libE57 cannot open the file.
+    """
+    import pye57
+
     try:
         with quiet_stderr():
             e57 = pye57.E57(str(p), mode="r")
     except Exception as exc:
         raise ScanFormatError(p, f"not a readable E57 file ({first_line(exc)})") from exc
     try:
-        count = e57.scan_count
-        if count == 0:
-            raise ScanFormatError(p, "the E57 file holds no scans")
-        for i in range(count):
-            scans.append(_read_one(e57, p, i, facts.version))
-            report(progress, (i + 1) / count, f"E57 scan {i + 1}/{count}")
-    except ScanFormatError:
-        raise
-    except Exception as exc:
-        raise ScanFormatError(p, f"corrupt E57 data ({first_line(exc)})") from exc
+        yield e57
     finally:
-        try:
+        with contextlib.suppress(Exception):
             e57.close()
-        except Exception:
-            pass
-    return scans
+
+
+def acquisition_starts(path: str | os.PathLike) -> list[float | None]:
+    """Each scan's ``acquisitionStart`` (GPS seconds, as the file stores it), None where a scan has none.
+
+    Raises
+    ------
+    ScanFormatError
+        Not a readable E57 file.
+    """
+    p = check_readable(path)
+    check_e57(p)
+    with opened_e57(p) as e57:
+        try:
+            return [float(node["acquisitionStart"]["dateTimeValue"].value()) if node.isDefined("acquisitionStart")
+                    else None for node in (e57.data3d[k] for k in range(e57.scan_count))]
+        except Exception as exc:
+            raise ScanFormatError(p, f"corrupt E57 header ({first_line(exc)})") from exc
 
 
 #: Point fields pye57's buffers do not know, read through libE57 directly: (name, numpy dtype).
@@ -216,8 +249,6 @@ def _write_timed_scan(e57, data: dict, time_s: np.ndarray, *, name: str, rotatio
 
     Coordinates and intensity are stored as pye57 stores them (single precision), the times in double.
     """
-    import uuid
-
     from pye57 import libe57
 
     imf = e57.image_file

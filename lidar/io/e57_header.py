@@ -25,7 +25,7 @@ PAGE = 1024
 PAGE_DATA = 1020
 #: Upper bound on the XML section (real files: a few kB to a few MB).
 MAX_XML_BYTES = 64 << 20
-_NS = "{http://www.astm.org/COMMIT/E57/2010-e57-v1.0}"
+NS = "{http://www.astm.org/COMMIT/E57/2010-e57-v1.0}"
 
 
 @dataclass(frozen=True)
@@ -54,7 +54,7 @@ def _crc32c(data: bytes) -> int:
     return crc32c.crc32c(data)
 
 
-def _logical(p: Path, fh, physical: int, length: int, size: int) -> bytes:
+def logical_bytes(p: Path, fh, physical: int, length: int, size: int) -> bytes:
     """Read ``length`` logical bytes from a physical offset, checking each page's CRC."""
     out = bytearray()
     off = physical
@@ -75,14 +75,14 @@ def _logical(p: Path, fh, physical: int, length: int, size: int) -> bytes:
 
 
 def _child(node, name):
-    return node.find(_NS + name) if node is not None else None
+    return node.find(NS + name) if node is not None else None
 
 
 def _bits(p: Path, proto) -> tuple[int, tuple[str, ...]]:
     bits = 0
     names = []
     for field in list(proto):
-        tag = field.tag.replace(_NS, "")
+        tag = field.tag.replace(NS, "")
         names.append(tag)
         kind = field.get("type", "")
         try:
@@ -131,8 +131,8 @@ def check_e57(path: str | Path) -> E57Facts:
             raise ScanFormatError(p, f"E57 header claims an XML section of {xml_len} bytes (file: {size})")
         if xml_off < 48 or xml_off >= size:
             raise ScanFormatError(p, f"E57 XML offset {xml_off} lies outside the file")
-        _logical(p, fh, 0, 48, size)  # page 0's checksum covers the header itself
-        text = _logical(p, fh, xml_off, xml_len, size)
+        logical_bytes(p, fh, 0, 48, size)  # page 0's checksum covers the header itself
+        text = logical_bytes(p, fh, xml_off, xml_len, size)
         try:
             root = ET.fromstring(text)
         except ET.ParseError as exc:
@@ -156,7 +156,7 @@ def check_e57(path: str | Path) -> E57Facts:
             bits, fields = _bits(p, _child(pts, "prototype"))
             section_bytes = 0
             if count:
-                sec = _logical(p, fh, offset, 32, size)
+                sec = logical_bytes(p, fh, offset, 32, size)
                 if sec[0] != 1:
                     raise ScanFormatError(p, f"E57 scan {k} ({name}): fileOffset {offset} is not a point section")
                 section_bytes = struct.unpack_from("<Q", sec, 8)[0]

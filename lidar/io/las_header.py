@@ -14,6 +14,7 @@ payload).
 """
 from __future__ import annotations
 
+import datetime as dt
 import math
 import struct
 from dataclasses import dataclass
@@ -49,6 +50,14 @@ class LasHeaderFacts:
     scales: tuple[float, ...]
     offsets: tuple[float, ...]
     file_size: int
+    #: (x, y, z) bounds the header declares, metres
+    mins: tuple[float, ...] = (0.0, 0.0, 0.0)
+    maxs: tuple[float, ...] = (0.0, 0.0, 0.0)
+    #: the header's creation day, None when it gives none (a zero year or day)
+    creation_date: dt.date | None = None
+    global_encoding: int = 0
+    #: the payload of BridgeSurvey's pose VLR (or EVLR), when the file has one
+    pose_record: bytes | None = None
 
 
 def _u(fmt: str, blob: bytes, at: int):
@@ -56,7 +65,7 @@ def _u(fmt: str, blob: bytes, at: int):
 
 
 def _records(p: Path, fh, kind: str, start: int, count: int, end: int):
-    """Walk a VLR or EVLR chain, each record inside [start, end); yield each record's header bytes."""
+    """Walk a VLR or EVLR chain, each record inside [start, end); yield each record's header bytes and position."""
     head_len, length_fmt = (VLR_HEADER, "H") if kind == "VLR" else (EVLR_HEADER, "Q")
     pos = start
     for k in range(count):
@@ -68,7 +77,7 @@ def _records(p: Path, fh, kind: str, start: int, count: int, end: int):
         if length > end - pos - head_len:
             raise ScanFormatError(p, f"LAS {kind} {k} claims {length} bytes, running past "
                                      f"{'the point data' if kind == 'VLR' else 'the end of the file'}")
-        yield rh
+        yield rh, pos + head_len
         pos += head_len + length
 
 
@@ -149,8 +158,11 @@ def check_las_header(path: str | Path) -> LasHeaderFacts:
         if vlr_count > room // VLR_HEADER:
             raise ScanFormatError(p, f"LAS header claims {vlr_count} VLRs; the {room} bytes before the point "
                                      f"data hold at most {room // VLR_HEADER}")
-        laszip = any(vh[2:18].rstrip(b"\0") == LASZIP_USER_ID and _u("H", vh, 18) == LASZIP_RECORD_ID
-                     for vh in _records(p, fh, "VLR", header_size, vlr_count, offset_points))
+        laszip = False
+        pose_record = None
+        for vh, at in list(_records(p, fh, "VLR", header_size, vlr_count, offset_points)):
+            laszip |= vh[2:18].rstrip(b"\0") == LASZIP_USER_ID and _u("H", vh, 18) == LASZIP_RECORD_ID
+            pose_record = _pose_record(fh, vh, at, "H") or pose_record
         compressed = compressed_bit or laszip
         if compressed_bit and not laszip:
             raise ScanFormatError(p, "the point format says LAZ-compressed but the file has no LASzip VLR")
@@ -162,8 +174,8 @@ def check_las_header(path: str | Path) -> LasHeaderFacts:
             if evlr_count > (size - evlr_start) // EVLR_HEADER:
                 raise ScanFormatError(p, f"LAS header claims {evlr_count} EVLRs; the file holds at most "
                                          f"{(size - evlr_start) // EVLR_HEADER}")
-            for _ in _records(p, fh, "EVLR", evlr_start, evlr_count, size):
-                pass
+            for vh, at in list(_records(p, fh, "EVLR", evlr_start, evlr_count, size)):
+                pose_record = _pose_record(fh, vh, at, "Q") or pose_record
             data_end = evlr_start
     data_bytes = data_end - offset_points
     if compressed:
@@ -177,4 +189,30 @@ def check_las_header(path: str | Path) -> LasHeaderFacts:
         version=f"{major}.{minor}", point_format=point_format, record_length=record_length, point_count=count,
         offset_to_points=offset_points, vlr_count=vlr_count, evlr_count=evlr_count, compressed=compressed,
         scales=tuple(scales), offsets=tuple(offsets), file_size=size,
+        mins=(_u("d", head, 187), _u("d", head, 203), _u("d", head, 219)),
+        maxs=(_u("d", head, 179), _u("d", head, 195), _u("d", head, 211)),
+        creation_date=_day(_u("H", head, 92), _u("H", head, 90)), global_encoding=_u("H", head, 6),
+        pose_record=pose_record,
     )
+
+
+#: The VLR in which BridgeSurvey's writer keeps a scan's pose (:mod:`lidar.io.las`).
+POSE_USER_ID = b"BridgeSurvey"
+POSE_RECORD_ID = 4401
+
+
+def _pose_record(fh, rh: bytes, at: int, length_fmt: str) -> bytes | None:
+    """The payload of a record that is BridgeSurvey's pose (128 bytes), else None."""
+    if rh[2:18].rstrip(b"\0") != POSE_USER_ID or _u("H", rh, 18) != POSE_RECORD_ID or _u(length_fmt, rh, 20) != 128:
+        return None
+    fh.seek(at)
+    data = fh.read(128)
+    return data if len(data) == 128 else None
+
+
+def _day(year: int, day_of_year: int) -> dt.date | None:
+    """A creation day as laspy reads it: None for a year or day that makes no date."""
+    try:
+        return dt.date(year, 1, 1) + dt.timedelta(day_of_year - 1)
+    except (ValueError, OverflowError):
+        return None

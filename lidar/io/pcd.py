@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from common.errors import ScanFormatError
+from common.pcd import NO_VIEWPOINT, binary_pcd_header
 from lidar.io._common import (
     atomic_output,
     check_readable,
@@ -153,7 +154,7 @@ def read_pcd(path: str | os.PathLike) -> Scan:
         if h.points * h.row_bytes > body_bytes:
             raise ScanFormatError(p, f"truncated or lying PCD header: it declares {h.points} points of "
                                      f"{h.row_bytes} bytes, the file holds {body_bytes // max(h.row_bytes, 1)}")
-        rec = np.fromfile(p, dtype=_record_dtype(h), count=h.points, offset=h.data_start)
+        rec = np.fromfile(p, dtype=record_dtype(h), count=h.points, offset=h.data_start)
         cols = [rec[f"f{k}"] if h.counts[k] == 1 else rec[f"f{k}"][:, 0] for k in range(len(h.fields))]
     else:
         cols = _read_compressed(p, h, body_bytes)
@@ -168,7 +169,8 @@ def read_pcd(path: str | os.PathLike) -> Scan:
                      metadata={"pcd_data": h.mode, "fields": list(h.fields)})
 
 
-def _record_dtype(h: PcdHeader) -> np.dtype:
+def record_dtype(h: PcdHeader) -> np.dtype:
+    """The numpy record type of a binary PCD's points (fields named f0, f1...; a field of COUNT > 1 a sub-array)."""
     return np.dtype([(f"f{k}", _TYPES[(t, s)], (c,)) if c > 1 else (f"f{k}", _TYPES[(t, s)])
                      for k, (s, t, c) in enumerate(zip(h.sizes, h.types, h.counts, strict=False))])
 
@@ -230,17 +232,16 @@ def write_pcd(scan: Scan, path: str | os.PathLike) -> Path:
     rec = np.empty(n, dtype=[("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("intensity", "<f4")])
     rec["x"], rec["y"], rec["z"] = scan.xyz_socs.T
     rec["intensity"] = raw
-    if scan.pose is not None:
-        q, t = quaternion_from_pose(scan.pose)
-        viewpoint = " ".join(f"{v:.12g}" for v in (*t, *q))
-    else:
-        viewpoint = "0 0 0 1 0 0 0"
-    header = (
-        "# .PCD v0.7 - written by BridgeSurvey\nVERSION 0.7\nFIELDS x y z intensity\nSIZE 8 8 8 4\n"
-        f"TYPE F F F F\nCOUNT 1 1 1 1\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT {viewpoint}\nPOINTS {n}\nDATA binary\n"
-    )
     with atomic_output(final) as tmp:
         with open(tmp, "wb") as fh:
-            fh.write(header.encode("ascii"))
+            fh.write(binary_pcd_header(rec.dtype, n, viewpoint=pcd_viewpoint(scan.pose)))
             fh.write(rec.tobytes())
     return final
+
+
+def pcd_viewpoint(pose: np.ndarray | None) -> str:
+    """A PCD ``VIEWPOINT`` (tx ty tz qw qx qy qz) of a scanner pose (SOCS -> project frame), or of none."""
+    if pose is None:
+        return NO_VIEWPOINT
+    q, t = quaternion_from_pose(pose)
+    return " ".join(f"{v:.12g}" for v in (*t, *q))

@@ -22,6 +22,8 @@ import numpy as np
 
 from common.errors import ScanFormatError
 from lidar.io._common import check_readable, first_line, pose_from_quaternion, quiet_stderr
+from lidar.io.e57 import opened_e57
+from lidar.io.las import LasFile, las_blocks, las_point_chunks, open_las, scaled_xyz
 from lidar.io.names import find_column
 
 #: Points per chunk by default: about 50 MB of temporaries.
@@ -140,101 +142,51 @@ def open_stream(path: str | os.PathLike) -> ScanStream:
                                               "version": str(meta.get("version", ""))}, loaded)
 
 
-# ------------------------------------------------------------------ LAS / LAZ
+# ------------------------------------------------------------------ LAS / LAZ (lidar.io.las reads them)
 def _open_las(p: Path) -> ScanStream:
-    import laspy
-
-    from lidar.io.las import POSE_VLR_RECORD_ID, POSE_VLR_USER_ID, _laz_backend
-    from lidar.io.las_header import check_las_header
-
-    facts = check_las_header(p)
-    try:
-        with laspy.open(p, laz_backend=_laz_backend()) as reader:
-            h = reader.header
-            pose = None
-            for vlr in list(h.vlrs) + list(getattr(h, "evlrs", None) or []):
-                if getattr(vlr, "user_id", "") == POSE_VLR_USER_ID and getattr(vlr, "record_id", None) == \
-                        POSE_VLR_RECORD_ID and len(getattr(vlr, "record_data", b"")) == 128:
-                    pose = np.frombuffer(vlr.record_data, "<f8").reshape(4, 4).copy()
-            dims = list(h.point_format.dimension_names)
-            bounds = (tuple(float(v) for v in h.mins), tuple(float(v) for v in h.maxs))
-    except (laspy.errors.LaspyException, ValueError, OSError, RuntimeError) as exc:
-        raise ScanFormatError(p, f"not a readable LAS/LAZ file ({first_line(exc)})") from exc
-    if facts.point_count == 0:
-        raise ScanFormatError(p, "the LAS header declares 0 points; nothing to read")
+    las = open_las(p)
+    facts = las.facts
     details = {"format": "LAZ" if facts.compressed else "LAS", "version": facts.version,
                "point_format": facts.point_format, "record_length": facts.record_length,
                "scales": facts.scales, "offsets": facts.offsets, "compressed": facts.compressed,
-               "dimensions": dims, "vlrs": facts.vlr_count, "evlrs": facts.evlr_count}
-    scan = StreamScan(p.stem, facts.point_count, pose, None, True, bounds)
+               "dimensions": list(las.dimensions), "vlrs": facts.vlr_count, "evlrs": facts.evlr_count, "las": las}
+    scan = StreamScan(p.stem, facts.point_count, las.pose, None, True, (las.mins, las.maxs))
     return ScanStream(p, "las", [scan], True, details)
 
 
+def _las_chunk(las: LasFile, rec: np.ndarray) -> Chunk:
+    return Chunk(scaled_xyz(las, rec), np.asarray(rec["intensity"]).copy())
+
+
 def _las_chunks(s: ScanStream, index: int, chunk_points: int) -> Iterator[Chunk]:
-    import laspy
-
-    from lidar.io.las import _laz_backend
-
-    scales = np.asarray(s.details["scales"], np.float64)
-    offsets = np.asarray(s.details["offsets"], np.float64)
-    done = 0
-    try:
-        with laspy.open(s.path, laz_backend=_laz_backend()) as reader:
-            for pts in reader.chunk_iterator(chunk_points):
-                rec = pts.array
-                m = len(rec)
-                xyz = np.empty((m, 3))
-                for k, name in enumerate(("X", "Y", "Z")):
-                    xyz[:, k] = rec[name] * scales[k] + offsets[k]
-                done += m
-                yield Chunk(xyz, np.asarray(rec["intensity"]).copy())
-    except ScanFormatError:
-        raise
-    except (laspy.errors.LaspyException, ValueError, OSError, RuntimeError) as exc:
-        raise ScanFormatError(s.path, f"damaged point data after {done} points ({first_line(exc)})") from exc
-    if done != s.scans[index].points:
-        raise ScanFormatError(s.path, f"truncated: the header declares {s.scans[index].points} points but only "
-                                      f"{done} could be read")
+    las = s.details["las"]
+    for rec in las_point_chunks(las, chunk_points):
+        yield _las_chunk(las, rec)
 
 
 def _las_blocks(s: ScanStream, starts: list[int], block_points: int) -> list[Chunk]:
-    import laspy
-
-    from lidar.io.las import _laz_backend
-
-    scales = np.asarray(s.details["scales"], np.float64)
-    offsets = np.asarray(s.details["offsets"], np.float64)
-    out = []
-    try:
-        with laspy.open(s.path, laz_backend=_laz_backend()) as reader:
-            for st in starts:
-                reader.seek(st)
-                rec = reader.read_points(block_points).array
-                xyz = np.column_stack([rec[c] * scales[k] + offsets[k] for k, c in enumerate("XYZ")])
-                out.append(Chunk(xyz, np.asarray(rec["intensity"]).copy()))
-    except (laspy.errors.LaspyException, ValueError, OSError, RuntimeError) as exc:
-        raise ScanFormatError(s.path, f"damaged point data ({first_line(exc)})") from exc
-    return out
+    las = s.details["las"]
+    return [_las_chunk(las, rec) for rec in las_blocks(las, starts, block_points)]
 
 
 # ------------------------------------------------------------------ E57
 def _e57_xml(p: Path):
     import xml.etree.ElementTree as ET
 
-    from lidar.io.e57_header import _logical
+    from lidar.io.e57_header import logical_bytes
 
     size = p.stat().st_size
     with open(p, "rb") as fh:
         head = fh.read(48)
         xml_off, xml_len = np.frombuffer(head[24:40], "<u8")
-        return ET.fromstring(_logical(p, fh, int(xml_off), int(xml_len), size))
+        return ET.fromstring(logical_bytes(p, fh, int(xml_off), int(xml_len), size))
 
 
 def _e57_float(node, *names: str) -> float | None:
-    from lidar.io.e57_header import _NS
+    from lidar.io.e57_header import NS
 
     for name in names:
-        node = node.find(_NS + name) if node is not None else None
+        node = node.find(NS + name) if node is not None else None
     if node is None or node.text is None:
         return None
     try:
@@ -244,7 +196,7 @@ def _e57_float(node, *names: str) -> float | None:
 
 
 def _open_e57(p: Path) -> ScanStream:
-    from lidar.io.e57_header import _NS, check_e57
+    from lidar.io.e57_header import NS, check_e57
 
     facts = check_e57(p)
     if not facts.scans:
@@ -253,7 +205,7 @@ def _open_e57(p: Path) -> ScanStream:
                                      "point cloud from the scanner software")
         raise ScanFormatError(p, "the E57 file holds no scans")
     root = _e57_xml(p)
-    data3d = root.find(_NS + "data3D")
+    data3d = root.find(NS + "data3D")
     nodes = list(data3d) if data3d is not None else []
     scans = []
     for k, (f, node) in enumerate(zip(facts.scans, nodes, strict=False)):
@@ -281,41 +233,30 @@ _E57_FIELDS = ("cartesianX", "cartesianY", "cartesianZ", "cartesianInvalidState"
 
 
 def _e57_chunks(s: ScanStream, index: int, chunk_points: int, *, first_only: bool = False) -> Iterator[Chunk]:
-    import pye57
-
-    try:
-        with quiet_stderr():
-            e57 = pye57.E57(str(s.path), mode="r")
-    except Exception as exc:
-        raise ScanFormatError(s.path, f"not a readable E57 file ({first_line(exc)})") from exc
     done = 0
-    try:
-        with quiet_stderr():
-            header = e57.get_header(index)
-            wanted = [f for f in header.point_fields if f in _E57_FIELDS]
-            data, buffers = e57.make_buffers(wanted, min(chunk_points, header.point_count))
-            reader = header.points.reader(buffers)
+    with opened_e57(s.path) as e57:
         try:
-            while True:
-                with quiet_stderr():
-                    got = reader.read()
-                if got == 0:
-                    break
-                done += got
-                yield _e57_chunk(s.path, {k: v[:got] for k, v in data.items()})
-                if first_only:
-                    return
-        finally:
-            reader.close()
-    except ScanFormatError:
-        raise
-    except Exception as exc:
-        raise ScanFormatError(s.path, f"corrupt E57 data after {done} points ({first_line(exc)})") from exc
-    finally:
-        try:
-            e57.close()
-        except Exception:
-            pass
+            with quiet_stderr():
+                header = e57.get_header(index)
+                wanted = [f for f in header.point_fields if f in _E57_FIELDS]
+                data, buffers = e57.make_buffers(wanted, min(chunk_points, header.point_count))
+                reader = header.points.reader(buffers)
+            try:
+                while True:
+                    with quiet_stderr():
+                        got = reader.read()
+                    if got == 0:
+                        break
+                    done += got
+                    yield _e57_chunk(s.path, {k: v[:got] for k, v in data.items()})
+                    if first_only:
+                        return
+            finally:
+                reader.close()
+        except ScanFormatError:
+            raise
+        except Exception as exc:
+            raise ScanFormatError(s.path, f"corrupt E57 data after {done} points ({first_line(exc)})") from exc
     if done != s.scans[index].points:
         raise ScanFormatError(s.path, f"truncated: scan {index} declares {s.scans[index].points} points, {done} "
                                       "could be read")
@@ -430,10 +371,10 @@ def _open_pcd(p: Path) -> ScanStream:
 
 
 def _pcd_records(s: ScanStream) -> tuple[np.ndarray, list[str], str | None]:
-    from lidar.io.pcd import _record_dtype
+    from lidar.io.pcd import record_dtype
 
     h = s.details["header"]
-    rec = np.memmap(s.path, dtype=_record_dtype(h), mode="r", offset=h.data_start, shape=(h.points,))
+    rec = np.memmap(s.path, dtype=record_dtype(h), mode="r", offset=h.data_start, shape=(h.points,))
     cols = [f"f{find_column(h.fields, a)}" for a in ("x", "y", "z")]
     ci = find_column(h.fields, "intensity")
     return rec, cols, f"f{ci}" if ci is not None else None

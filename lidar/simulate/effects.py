@@ -40,6 +40,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from common.errors import InputError
+from common.rigid import rotate_vectors
 
 STRENGTH_REFERENCE_RANGE_M = 15.0
 ARCSEC = np.pi / (180.0 * 3600.0)  # radians in one arcsecond
@@ -279,11 +280,11 @@ class DriftModel:
 
     def to_start(self, vectors_current: np.ndarray, elapsed_s: ArrayLike) -> np.ndarray:
         """(N, 3) vectors given in the instrument's frame at ``elapsed_s``, expressed in its starting frame."""
-        return _rotate(vectors_current, self.angles_rad(elapsed_s))
+        return rotate_vectors(vectors_current, self.angles_rad(elapsed_s))
 
     def to_current(self, vectors_start: np.ndarray, elapsed_s: ArrayLike) -> np.ndarray:
         """(N, 3) vectors of the starting frame as the instrument reports them at ``elapsed_s`` (inverse of to_start)."""
-        return _rotate(vectors_start, -self.angles_rad(elapsed_s))
+        return rotate_vectors(vectors_start, -self.angles_rad(elapsed_s))
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -298,18 +299,6 @@ class DriftModel:
         out = {f.name: float(d.get(f.name) or 0.0) for f in fields(cls) if f.name != "jump_after_s"}
         jump_after = d.get("jump_after_s")
         return cls(**out, jump_after_s=float("inf") if jump_after is None else float(jump_after))
-
-
-def _rotate(v: np.ndarray, rotvec: np.ndarray) -> np.ndarray:
-    """Rodrigues' rotation of (N, 3) vectors by (N, 3) (or (1, 3)) rotation vectors, radians."""
-    v = np.asarray(v, dtype=np.float64)
-    theta = np.linalg.norm(rotvec, axis=1, keepdims=True)
-    safe = np.where(theta > 0, theta, 1.0)
-    k = rotvec / safe
-    cos, sin = np.cos(theta), np.sin(theta)
-    kxv = np.cross(k, v)
-    kdv = np.einsum("ij,ij->i", np.broadcast_to(k, v.shape), v)[:, None]
-    return v * cos + kxv * sin + k * kdv * (1.0 - cos)
 
 
 @dataclass(frozen=True)

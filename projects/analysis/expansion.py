@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from projects.analysis.models import _wls
+from projects.analysis.models import wls
 
 #: Fewest epochs with an along-span value and a temperature for a coefficient.
 MIN_EPOCHS = 3
@@ -51,7 +51,7 @@ def _slope(temp: np.ndarray, along: np.ndarray, sigma: np.ndarray) -> tuple[floa
     x = np.column_stack([np.ones_like(temp), temp])
     if np.linalg.cond(x.T @ (w[:, None] * x)) > 1e12:
         return math.nan, math.nan
-    beta, cov, chi2, _, _ = _wls(x, along, w)
+    beta, cov, chi2, _, _ = wls(x, along, w)
     dof = len(temp) - 2
     s2 = chi2 / dof if dof > 0 else 1.0
     return float(beta[1]), float(math.sqrt(cov[1, 1] * max(1.0, s2)))

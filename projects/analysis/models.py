@@ -215,7 +215,8 @@ class Candidate:
         return None if i is None else (float(self.coef[i]), float(self.scaled_cov[i, i]))
 
 
-def _wls(X: np.ndarray, y: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float, np.ndarray]:
+def wls(X: np.ndarray, y: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float, np.ndarray]:
+    """Weighted least squares of ``y`` on the columns of ``X``: (coefficients, covariance, chi2, AICc, residuals)."""
     sw = np.sqrt(w)
     A = X * sw[:, None]
     b = y * sw
@@ -238,7 +239,7 @@ def fit_candidate(t: np.ndarray, d: np.ndarray, w: np.ndarray, spec: ModelSpec) 
     X = design_matrix(t, terms, creep_law=spec.creep_law, temperature_deviation=spec.temperature_deviation())[use]
     if X.shape[0] <= X.shape[1] + 1 or np.linalg.matrix_rank(X) < X.shape[1]:
         return None
-    coef, cov, chi2, aicc, resid = _wls(X, d[use], w[use])
+    coef, cov, chi2, aicc, resid = wls(X, d[use], w[use])
     return Candidate(spec, terms, use, coef, cov, chi2, aicc, resid)
 
 

@@ -26,8 +26,9 @@ from common.progress import ProgressCallback, report, scaled
 from projects.compare.span import SpanFrame, pivot, span_frame
 from projects.processing.stages import baseline_epoch, read_files
 from projects.results.table import displacement_table
-from projects.store.campaign import Campaign, now_iso
+from projects.store.campaign import Campaign
 from projects.store.errors import CampaignError
+from projects.store.records import now_iso
 from registration.change import METHODS, ChangeResult, cloud_to_cloud, core_points_grid, m3c2, prefetch_py4dgeo
 from registration.icp import IcpResult, refine_icp, stable_mask
 from registration.ndt import refine_ndt

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from common.arrays import thin_to_voxels
 from common.errors import InputError
 from common.files import write_atomic
 from common.progress import ProgressCallback, report, scaled
@@ -123,9 +124,7 @@ def seen_surfaces(c: Campaign, last: LastStation, *, voxel_m: float = 0.05,
     scan = read_files(c, c.files(last.label, "coarse"), scaled(progress, 0.0, 0.8))
     report(progress, 0.8, "the scan's surfaces as obstacles")  # (a cancel stops here, before the voxels)
     xyz = (scan.xyz_socs - last.translation) @ last.rotation  # R^T (x - t), row-wise
-    key = np.floor(xyz / voxel_m).astype(np.int64)
-    _, first = np.unique(key, axis=0, return_index=True)
-    return xyz[np.sort(first)].astype(np.float32)
+    return thin_to_voxels(xyz, voxel_m).astype(np.float32)
 
 
 def advise_stations(c: Campaign, *, area_xy: np.ndarray | None = None, height_m: float = DEFAULT_INSTRUMENT_HEIGHT_M,

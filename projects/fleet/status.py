@@ -114,7 +114,7 @@ def _days_since(iso: str, today: dt.date) -> int:
 
 def bridge_status(folder: str | os.PathLike, *, today: dt.date | None = None) -> BridgeStatus:
     """Summary of one campaign, read-only; an unreadable campaign gets its one-line error instead."""
-    from projects.results.state import campaign_status
+    from projects.results.status import campaign_status
     from projects.series.camera import crossval_summaries
 
     folder = Path(folder)

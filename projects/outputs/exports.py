@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from common.errors import InputError
 from common.files import write_atomic
 from projects.results.state import epoch_state
 from projects.results.table import displacement_table, to_csv
@@ -43,7 +44,6 @@ def export(c: Campaign, path: str | os.PathLike) -> Path:
     if p.suffix.lower() == ".csv":
         return write_atomic(p, to_csv(displacement_table(c)))
     if p.suffix.lower() != ".xlsx":
-        from common.errors import InputError
 
         raise InputError(f"{p}: export writes .xlsx (all tables) or .csv (displacements)")
     from openpyxl import Workbook

@@ -57,28 +57,29 @@ def write_field_sheet(plan: ScanPlan, path: str | os.PathLike, *, campaign_name:
     from reportlab.lib.units import mm
     from reportlab.platypus import Image, Paragraph, Spacer
 
-    from projects.outputs.report.pdf import _esc, _styles, _table, write_landscape_pdf
+    from projects.outputs.report.flowables import esc, styles, table
+    from projects.outputs.report.pdf import write_landscape_pdf
 
-    ss = _styles()
+    ss = styles()
     p = plan.profile
     when = f" ({epoch_date})" if epoch_date and epoch_date != plan.epoch else ""
-    story = [Paragraph(_esc(f"Field sheet — {campaign_name or 'campaign'}, epoch {plan.epoch}{when}"),
+    story = [Paragraph(esc(f"Field sheet — {campaign_name or 'campaign'}, epoch {plan.epoch}{when}"),
                        ss["Heading1"]),
-             Paragraph(_esc(f"Scanner: {p.name}. Angles as the instrument shows them: {p.angle_convention()}. "
+             Paragraph(esc(f"Scanner: {p.name}. Angles as the instrument shows them: {p.angle_convention()}. "
                             f"Resolution: {p.resolution_label}."), ss["Normal"])]
     total, budget = plan.total_seconds, plan.budget_seconds
     over = total > budget * 1.0001
-    story.append(Paragraph(_esc(
+    story.append(Paragraph(esc(
         f"Total {total / 60:.1f} min for {len(plan.rois)} windows against a budget of {budget / 60:.0f} min"
         + (" — OVER BUDGET" if over else f" ({100 * total / budget:.0f} % of it)")
         + (f"; one full-dome scan at {p.preset_label(plan.dome_step_deg)} ({plan.dome_seconds / 60:.1f} min), "
            "every window is cut from it" if plan.dome_step_deg else "")
         + f". {plan.points_per_target} points planned per target."), ss["Normal"]))
     for w in plan.warnings:
-        story.append(Paragraph(_esc(f"⚠ {w}"), ss["Small"]))
+        story.append(Paragraph(esc(f"⚠ {w}"), ss["Small"]))
     if plan.rois:
         first = plan.instrument_window(plan.rois[0])
-        story.append(Paragraph(_esc(
+        story.append(Paragraph(esc(
             f"Check before scanning: aim at {plan.rois[0].reflector}; the instrument should read about "
             f"H {0.5 * (first['h_start_deg'] + first['h_end_deg']):.3f}°, "
             f"V {0.5 * (first['v_start_deg'] + first['v_end_deg']):.3f}°. If it does not, the instrument's zero "
@@ -98,9 +99,9 @@ def write_field_sheet(plan: ScanPlan, path: str | os.PathLike, *, campaign_name:
                      f"{roi.range_m:.2f}", f"{roi.incidence_deg:.0f}", f"{roi.expected_target_points:,}",
                      f"{roi.expected_seconds:.0f}", "; ".join(roi.notes)])
     widths = [7, 20, 24, 34, 34, 34, 14, 17, 16, 15, 52]
-    story.append(_table(rows, widths, ss))
+    story.append(table(rows, widths, ss))
     story.append(Spacer(1, 3 * mm))
-    story.append(Paragraph(_esc(
+    story.append(Paragraph(esc(
         "Tick each window when scanned. Import the fine scans before leaving and run "
         "'bridgesurvey check DIR --epoch L' (or Epoch ▸ Check fine scans in the application): it lists "
         "targets that came out short and writes a re-scan plan."), ss["Small"]))

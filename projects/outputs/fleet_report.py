@@ -13,37 +13,38 @@ def write_fleet_report(status: dict, path: str | os.PathLike, *, title: str = "B
     from reportlab.lib.units import mm
     from reportlab.platypus import Paragraph, Spacer
 
-    from projects.outputs.report.pdf import _esc, _num, _styles, _table, write_landscape_pdf
+    from projects.outputs.report.flowables import esc, num, styles, table
+    from projects.outputs.report.pdf import write_landscape_pdf
 
-    ss = _styles()
+    ss = styles()
     ov = status["overview"]
-    story = [Paragraph(_esc(f"{title}: {ov['bridges']} bridges"), ss["Heading1"]),
-             Paragraph(_esc(f"Written {dt.datetime.now().strftime('%Y-%m-%d %H:%M')}. In alarm: {ov['alarm']}; "
+    story = [Paragraph(esc(f"{title}: {ov['bridges']} bridges"), ss["Heading1"]),
+             Paragraph(esc(f"Written {dt.datetime.now().strftime('%Y-%m-%d %H:%M')}. In alarm: {ov['alarm']}; "
                             f"warning: {ov['warning']}; ok: {ov['ok']}; no limit or no displacement yet: "
                             f"{ov['unknown']}; unreadable: {ov['unreadable']}. Epochs with work left: "
                             f"{ov['work_left']}."), ss["Normal"])]
     if ov["overdue"]:
-        story.append(Paragraph(_esc(f"Overdue (no visit for more than {ov['overdue_days']} days): "
+        story.append(Paragraph(esc(f"Overdue (no visit for more than {ov['overdue_days']} days): "
                                     + ", ".join(ov["overdue"])), ss["Normal"]))
     root = _common_root([b["folder"] for b in status["bridges"]])
     if root:
-        story.append(Paragraph(_esc(f"Folders are under {root}."), ss["Normal"]))
+        story.append(Paragraph(esc(f"Folders are under {root}."), ss["Normal"]))
     story.append(Spacer(1, 4 * mm))
     rows = [["Bridge", "State", "Worst target", "Displacement (mm)", "Alarm limit (mm)", "Last epoch",
              "Days since", "Work left", "Problems", "Cross-validation", "Folder"]]
     colours = []
     for k, b in enumerate(status["bridges"], start=1):
-        cv = "; ".join(f"{x['series']}: RMSE {_num(x.get('rmse_mm'))} mm" for x in b["crossval"]) or "–"
+        cv = "; ".join(f"{x['series']}: RMSE {num(x.get('rmse_mm'))} mm" for x in b["crossval"]) or "–"
         if b["error"]:
             rows.append([b["name"], "unreadable", "–", "–", "–", "–", "–", "–", "–", "–", f"{_short(b['folder'], root)}: {b['error']}"])
             colours.append((k, 1, STATE_COLOURS["unknown"]))
             continue
-        rows.append([b["name"], b["state"], b["worst_target"] or "–", _num(b["worst_displacement_mm"]),
-                     _num(b["worst_limit_mm"]), f"{b['last_epoch'] or '–'} {b['last_date'] or ''}",
+        rows.append([b["name"], b["state"], b["worst_target"] or "–", num(b["worst_displacement_mm"]),
+                     num(b["worst_limit_mm"]), f"{b['last_epoch'] or '–'} {b['last_date'] or ''}",
                      "–" if b["days_since"] is None else str(b["days_since"]), str(b["work_left"]),
                      str(b["problems"]), cv, _short(b["folder"], root)])
         colours.append((k, 1, STATE_COLOURS.get(b["state"], "#eeeeee")))
-    story.append(_table(rows, [38, 18, 18, 22, 20, 34, 14, 14, 15, 40, 44], ss, cell_colours=colours))
+    story.append(table(rows, [38, 18, 18, 22, 20, 34, 14, 14, 15, 40, 44], ss, cell_colours=colours))
     return write_landscape_pdf(story, path, title=title)
 
 

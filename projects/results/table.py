@@ -9,8 +9,10 @@ its centroid flags included).
 from __future__ import annotations
 
 from collections.abc import Mapping
+from datetime import datetime
 
 from common.files import csv_text
+from common.flags import FLAG_DEPARTS, worst
 from projects.results.state import EpochState, departures, epoch_states
 from projects.store.campaign import Campaign
 
@@ -45,10 +47,6 @@ def displacement_table(c: Campaign, *, states: Mapping[str, EpochState] | None =
 
     ``states`` are the epochs' states when the caller has them already (default: computed here).
     """
-    from datetime import datetime
-
-    from common.flags import FLAG_DEPARTS, worst
-
     when = {e.label: e.when for e in c.epochs()}
     settings = c.settings()
     casting = datetime.fromisoformat(settings["casting_date"]) if settings.get("casting_date") else None

@@ -8,6 +8,7 @@ and bad rows reported) and kept read-only in the campaign's ``environment/`` fol
 """
 from __future__ import annotations
 
+import datetime as dt
 import os
 from dataclasses import dataclass
 
@@ -120,7 +121,6 @@ def add_event(c: Campaign, *, date: str, kind: str, label: str, load_kn_m: float
     if not epochs:
         raise InputError("the campaign has no epoch yet; add the visits before the events between them")
     first, last = epochs[0].datetime, epochs[-1].datetime
-    import datetime as dt
 
     limit = (dt.datetime.fromisoformat(last) + dt.timedelta(days=366)).isoformat()
     if when < first or when > limit:

@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from common.errors import InputError
-from projects.store.campaign import PREDICTION_DIR, Campaign, parse_datetime, sha256_of
+from common.files import sha256_of
+from projects.store.campaign import PREDICTION_DIR, Campaign, parse_datetime
 from projects.store.history import histories
 
 DAY_NS = 86_400 * 10**9

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import contextlib
 import datetime as dt
-import hashlib
 import json
 import os
 import sqlite3
@@ -26,7 +25,15 @@ from pathlib import Path
 import numpy as np
 
 from common.errors import SurveyError
-from common.files import MB, disk_full_error, ensure_free, is_disk_full, remove_stale_temp_files, write_atomic
+from common.files import (
+    MB,
+    disk_full_error,
+    ensure_free,
+    is_disk_full,
+    remove_stale_temp_files,
+    sha256_of,
+    write_atomic,
+)
 from lidar.centroid import TargetCentroid
 from lidar.layout import Layout, check_layout
 from lidar.scanner_profile import ScannerProfile
@@ -48,6 +55,7 @@ from projects.store.imports import (  # noqa: F401  (importers name them here)
     not_writable,
     remove_uncommitted,
 )
+from projects.store.limits import parse_rule
 from projects.store.lock import LOCK_NAME, CampaignLock  # noqa: F401  (LOCK_NAME: likewise)
 from projects.store.records import (
     DisplacementRecord,
@@ -61,6 +69,7 @@ from projects.store.records import (
     Reflector,
     ScanFile,
     StoredPlan,
+    now_iso,
 )
 from projects.store.repositories import (
     ComparisonRepository,
@@ -75,11 +84,6 @@ DB_NAME = "campaign.sqlite"
 BIAS_FILE = "bias.json"
 
 
-def now_iso() -> str:
-    """The current UTC time, ISO 8601 to the second."""
-    return dt.datetime.now(dt.UTC).replace(microsecond=0).isoformat()
-
-
 def parse_datetime(text: str) -> str:
     """Normalise an ISO 8601 date or date-time; naive values are taken as UTC."""
     try:
@@ -91,15 +95,6 @@ def parse_datetime(text: str) -> str:
     if value.tzinfo is None:
         value = value.replace(tzinfo=dt.UTC)
     return value.isoformat()
-
-
-def sha256_of(path: Path, chunk: int = 8 << 20) -> str:
-    """The SHA-256 of a file (hex), read in chunks."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        while block := fh.read(chunk):
-            h.update(block)
-    return h.hexdigest()
 
 
 def _normal_values(n) -> tuple:
@@ -612,12 +607,14 @@ class Campaign:
         return shas
 
     def _import(self, epoch: str, items: Sequence[tuple[Path, str]], *, setup: int | None, validate, frames_of,
-                create_epoch: dict | None, placed: list | None = None) -> list[str]:
+                create_epoch: dict | None, placed: list | None = None, shas: list[str] | None = None) -> list[str]:
         """Import coarse and fine files of one epoch in one transaction (see :meth:`import_files`).
 
-        ``placed`` is each file's (set-up, frame JSON) when already worked out (:func:`setup_tables.place_files`).
+        ``placed`` is each file's (set-up, frame JSON) when already worked out (:func:`setup_tables.place_files`),
+        ``shas`` their checksums when already checked (:meth:`_checked_new`): each file is hashed once.
         """
-        shas = self._checked_new(items)
+        if shas is None:
+            shas = self._checked_new(items)
         if placed is None:
             existing = [] if create_epoch is not None else self.files(epoch, setup=None)
             placed = setup_tables.place_files(epoch, items, existing, setup=setup, frames_of=frames_of,
@@ -628,8 +625,8 @@ class Campaign:
         marks: list[int] = []
         try:
             # each copy journaled at once: a kill leaves none unknown
-            for (p, role), (k, frame) in zip(items, placed, strict=False):
-                got = copy_in(self.folder, p, SCANS_DIR)
+            for (p, role), (k, frame), sha in zip(items, placed, shas, strict=True):
+                got = copy_in(self.folder, p, SCANS_DIR, sha256=sha)
                 copied.append(got)
                 marks.append(self._journal(got, p, {"kind": "scan", "epoch": epoch, "role": role, "setup": k,
                                                     "frame": frame, "epoch_datetime": ep["datetime"],
@@ -675,11 +672,11 @@ class Campaign:
         if not allow_date:
             inputs.check_epoch_date(when, [e.datetime for e in self.epochs()])
         items = [(Path(coarse), "coarse")] + [(Path(f), "fine") for f in fines]
-        self._checked_new(items)
+        shas = self._checked_new(items)
         placed = setup_tables.place_files(label, items, [], setup=1, frames_of=frames_of, validate=validate)
         self._pin_baseline_before(when)  # after every file was read: a refused file changes nothing
         self._import(label, items, setup=1, validate=validate, frames_of=frames_of,
-                     create_epoch={"label": label, "datetime": when, "notes": notes}, placed=placed)
+                     create_epoch={"label": label, "datetime": when, "notes": notes}, placed=placed, shas=shas)
         return label
 
     def add_setup(self, label: str, coarse: str | os.PathLike, fines: Sequence = (), *, validate=None,
@@ -1037,7 +1034,6 @@ class Campaign:
 
     # ------------------------------------------------------------------ limits
     def set_limit(self, reflector: str, rule: str) -> None:
-        from projects.store.limits import parse_rule
 
         lim = parse_rule(rule, self.span_m)
         if reflector != "*":
@@ -1091,7 +1087,6 @@ def _layout_of(reflectors: Sequence[Reflector], at: str | None) -> Layout:
 
 
 def _header_or_none(path: Path) -> dict | None:
-    from common.errors import SurveyError
 
     try:
         return header_facts(path)

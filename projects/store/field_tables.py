@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import sqlite3
 from collections.abc import Mapping
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -72,8 +73,6 @@ def centroid_extra(tc: TargetCentroid, time_source: str) -> dict:
 
 def with_extra(tc: TargetCentroid, extra: dict | None) -> TargetCentroid:
     """A stored centroid with its extra details put back."""
-    from dataclasses import replace
-
     if not extra:
         return tc
     normal = np.array([_nan(v) for v in extra.get("normal") or [None] * 3], dtype=np.float64)

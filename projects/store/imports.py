@@ -18,7 +18,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-from common.files import MB, disk_full_error, ensure_free, is_disk_full
+from common.errors import SurveyError
+from common.files import MB, disk_full_error, ensure_free, is_disk_full, sha256_of
 from projects.store.errors import CampaignError
 
 SCANS_DIR = "scans"
@@ -55,8 +56,11 @@ def stored_name(sha256: str, original_name: str) -> str:
     return f"{sha256[:16]}_{safe}"
 
 
-def copy_in(folder: Path, src: Path, sub: str) -> Copied:
+def copy_in(folder: Path, src: Path, sub: str, *, sha256: str | None = None) -> Copied:
     """Copy ``src`` into ``folder/sub`` (temporary name, fsync, rename, read-only).
+
+    ``sha256`` is the file's checksum when the caller has it (the import checked the file against the
+    campaign with it): the copy then does not hash the file again. Without it the copy hashes as it copies.
 
     A file already there under its final name is kept as it is (an import run again after a crash,
     or a file the database lost): ``created`` is False. A file already inside ``folder/sub`` is taken
@@ -70,19 +74,20 @@ def copy_in(folder: Path, src: Path, sub: str) -> Copied:
         raise not_writable(target) from None
     size = src.stat().st_size
     if src.resolve().parent == target.resolve():
-        sha = _sha256(src)
+        sha = sha256 or sha256_of(src)
         return Copied(sha, f"{sub}/{src.name}", size, False)
     ensure_free(target, size + IMPORT_MARGIN_BYTES)
     tmp = target / f".import-{uuid.uuid4().hex}"
-    h = hashlib.sha256()
+    h = hashlib.sha256() if sha256 is None else None
     try:
         with open(src, "rb") as fin, open(tmp, "wb") as fout:
             while block := fin.read(8 << 20):
-                h.update(block)
+                if h is not None:
+                    h.update(block)
                 fout.write(block)
             fout.flush()
             os.fsync(fout.fileno())
-        sha = h.hexdigest()
+        sha = h.hexdigest() if h is not None else str(sha256)
         rel = f"{sub}/{stored_name(sha, src.name)}"
         final = folder / rel
         if final.exists():
@@ -107,14 +112,6 @@ def not_writable(path: Path) -> CampaignError:
     return CampaignError(f"{path}: this {what} is read-only (permission denied), so the command cannot write the "
                          f"campaign; nothing was changed: make it writable (e.g. chmod -R u+w '{path}') and run the "
                          "command again")
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        while block := fh.read(8 << 20):
-            h.update(block)
-    return h.hexdigest()
 
 
 def remove_uncommitted(folder: Path, copied: Iterable[Copied]) -> None:
@@ -186,8 +183,6 @@ def header_facts(path: Path) -> dict:
 
 def header_matches(path: Path, recorded: dict | None) -> bool:
     """Whether the header of ``path`` reads and says what was recorded at its import."""
-    from common.errors import SurveyError
-
     try:
         facts = header_facts(path)
     except (SurveyError, OSError):

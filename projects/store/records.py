@@ -17,6 +17,11 @@ from typing import Any
 import numpy as np
 
 
+def now_iso() -> str:
+    """The current UTC time, ISO 8601 to the second."""
+    return dt.datetime.now(dt.UTC).replace(microsecond=0).isoformat()
+
+
 class _Plain:
     """Records that export themselves as plain values (tables, JSON)."""
 

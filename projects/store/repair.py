@@ -24,11 +24,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from common.errors import SurveyError
+from common.files import sha256_of
 from projects.store import digests, journal, schema, wal
-from projects.store.campaign import DB_NAME, Campaign, damaged_input_line, describe_input, sha256_of
+from projects.store.campaign import DB_NAME, Campaign, damaged_input_line, describe_input
 from projects.store.connection import connect
 from projects.store.errors import CampaignError
 from projects.store.imports import header_matches
+from projects.store.limits import parse_rule
 from projects.store.lock import CampaignLock
 
 #: ``reimporter(campaign, stored_file, journal_entry) -> what it did`` for a kind of series file.
@@ -111,8 +113,6 @@ def _remake_tables(conn, folder: Path, missing: list[str]) -> list[str]:
 
 def _limits_from_log(conn) -> dict[str, str]:
     """Set the limits again, each target's last rule in the campaign's log (``limit`` lines); the rules set."""
-    from projects.store.limits import parse_rule
-
     rules: dict[str, str] = {}
     for (details,) in conn.execute("SELECT details FROM log WHERE action = 'limit' ORDER BY id"):
         d = json.loads(details)

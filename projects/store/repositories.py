@@ -17,9 +17,17 @@ from contextlib import AbstractContextManager as ContextManager
 from pathlib import Path
 from typing import Protocol
 
+from common.files import sha256_of
 from projects.store import digests
 from projects.store.errors import CampaignError, DuplicateImportError, InputError
-from projects.store.records import ComparisonRecord, CrossvalRecord, EventRecord, PredictionRecord, SeriesRecord
+from projects.store.records import (
+    ComparisonRecord,
+    CrossvalRecord,
+    EventRecord,
+    PredictionRecord,
+    SeriesRecord,
+    now_iso,
+)
 
 SERIES_TABLES = {"camera_series": "camera", "env_series": "environment"}
 
@@ -40,12 +48,6 @@ class StoreCore(Protocol):
     def is_sound(self, table: str, key: Sequence) -> bool:
         """Whether a stored group still matches its digest."""
         ...
-
-
-def _now() -> str:
-    from projects.store.campaign import now_iso
-
-    return now_iso()
 
 
 def _series_table(table: str) -> str:
@@ -87,8 +89,6 @@ class SeriesRepository(_Repository):
 
     def checksum_if_new(self, table: str, path: Path) -> str:
         """The file's sha256, refusing a file already imported into ``table`` under some series name."""
-        from projects.store.campaign import sha256_of
-
         table = _series_table(table)
         sha = sha256_of(path)
         row = self._conn.execute(f"SELECT name, original_path FROM {table} WHERE sha256 = ?", (sha,)).fetchone()
@@ -106,7 +106,7 @@ class SeriesRepository(_Repository):
         col, value = ("reflector", reflector) if table == "camera_series" else ("kind", kind)
         conn.execute(f"INSERT INTO {table}(name, {col}, sha256, stored_path, original_path, imported, options, "
                      "summary, arrays) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                     (name, value, sha256, stored_path, original_path, _now(), json.dumps(options),
+                     (name, value, sha256, stored_path, original_path, now_iso(), json.dumps(options),
                       json.dumps(summary), arrays))
         digests.seal(conn, table, (name,))
 
@@ -147,7 +147,7 @@ class EventRepository(_Repository):
         """Record an event (already checked) and log it; returns its id."""
         with self._core.transaction() as conn:
             cur = conn.execute("INSERT INTO events(date, kind, label, load_kn_m, created) VALUES (?, ?, ?, ?, ?)",
-                               (date, kind, label, load_kn_m, _now()))
+                               (date, kind, label, load_kn_m, now_iso()))
             self._core.log_action(conn, "event-add", None, {"id": cur.lastrowid, "date": date, "kind": kind,
                                                             "label": label})
         return int(cur.lastrowid or 0)
@@ -166,7 +166,7 @@ class PredictionRepository(_Repository):
         """Record (or replace) a target's prediction inside the import's transaction."""
         conn.execute("INSERT OR REPLACE INTO predictions(reflector, sha256, stored_path, original_path, imported, "
                      "options, arrays) VALUES (?, ?, ?, ?, ?, ?, ?)",
-                     (reflector, sha256, stored_path, original_path, _now(), json.dumps(options), arrays))
+                     (reflector, sha256, stored_path, original_path, now_iso(), json.dumps(options), arrays))
         digests.seal(conn, "predictions", (reflector,))
 
     def all(self) -> list[PredictionRecord]:
@@ -185,7 +185,7 @@ class CrossvalRepository(_Repository):
         """Keep a camera series' cross-validation summary (JSON-safe document) and log ``details``."""
         with self._core.transaction() as conn:
             conn.execute("INSERT OR REPLACE INTO crossvals(series, summary, created) VALUES (?, ?, ?)",
-                         (series, json.dumps(summary), _now()))
+                         (series, json.dumps(summary), now_iso()))
             digests.seal(conn, "crossvals", (series,))
             self._core.log_action(conn, "crossval", None, details)
 
@@ -204,7 +204,7 @@ class ComparisonRepository(_Repository):
         with self._core.transaction() as conn:
             conn.execute("INSERT OR REPLACE INTO comparisons(from_epoch, to_epoch, method, summary, created) "
                          "VALUES (?, ?, ?, ?, ?)", (summary["from"], summary["to"], summary["method"],
-                                                    json.dumps(summary, default=float), _now()))
+                                                    json.dumps(summary, default=float), now_iso()))
             digests.seal(conn, "comparisons", (summary["from"], summary["to"], summary["method"]))
             self._core.log_action(conn, "compare", summary["to"], {"from": summary["from"],
                                                                    "method": summary["method"]})

@@ -18,10 +18,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from common.files import stale_temp_files
+from common.files import sha256_of, stale_temp_files
 from common.progress import ProgressCallback, report
 from projects.store import digests, journal
-from projects.store.campaign import DB_NAME, INPUT_REMEDY, Campaign, describe_input, sha256_of
+from projects.store.campaign import DB_NAME, INPUT_REMEDY, Campaign, describe_input
 
 #: What to do about a damaged result, by the table it is kept in.
 REMEDY = {

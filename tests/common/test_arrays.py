@@ -1,7 +1,6 @@
 import numpy as np
-import pytest
 
-from common.arrays import median, unique_sorted
+from common.arrays import unique_sorted
 
 
 def test_unique_sorted_is_numpys_unique():
@@ -13,22 +12,25 @@ def test_unique_sorted_is_numpys_unique():
         np.testing.assert_array_equal(got, np.unique(values))
 
 
-@pytest.mark.parametrize("n", [1, 2, 7, 1000, 1001])
-@pytest.mark.parametrize("dtype", [np.float32, np.float64, np.int64])
-def test_median_is_numpys_median(n, dtype):
-    v = (np.random.default_rng(n).normal(size=n) * 100).astype(dtype)
-    assert median(v) == float(np.median(v))
-    assert median(np.sort(v)[::-1]) == float(np.median(v))  # not contiguous, any order
+def test_median_and_sigma_is_the_median_and_1_4826_times_the_median_absolute_deviation():
+    from scipy.stats import median_abs_deviation
+
+    from common.arrays import median_and_sigma
+
+    v = np.random.default_rng(5).normal(3.0, 2.0, 1001)
+    med, sigma = median_and_sigma(v)
+    assert med == float(np.median(v)) and sigma == 1.4826 * float(median_abs_deviation(v))
+    w = v.copy()
+    assert median_and_sigma(w, overwrite_input=True) == (med, sigma)
+    with_nan = np.append(v, np.nan).astype(np.float32).reshape(2, -1)
+    m32, s32 = median_and_sigma(with_nan, skip_nan=True)
+    assert m32 == float(np.nanmedian(with_nan)) and s32 == 1.4826 * float(np.nanmedian(np.abs(with_nan - m32)))
+    assert all(np.isnan(median_and_sigma(with_nan)))
 
 
-def test_median_of_an_empty_array_or_one_with_a_nan_is_nan_as_numpys():
-    assert np.isnan(median(np.array([]))) and np.isnan(median(np.array([1.0, np.nan, 3.0])))
-    assert np.isnan(median(np.array([np.nan, 2.0]))) and np.isnan(median(np.array([np.nan])))
-    assert np.isnan(np.median(np.array([1.0, np.nan, 3.0])))  # the behaviour copied
+def test_thin_to_voxels_keeps_the_first_point_of_each_cube_in_order():
+    from common.arrays import thin_to_voxels
 
-
-def test_median_overwriting_its_input_partitions_it_in_place():
-    v = np.random.default_rng(3).normal(size=1001)
-    want, kept = float(np.median(v)), v.copy()
-    assert median(v, overwrite_input=True) == want
-    assert not np.array_equal(v, kept) and np.array_equal(np.sort(v), np.sort(kept))
+    xyz = np.array([[0.01, 0.0, 0.0], [0.5, 0.5, 0.5], [0.02, 0.03, 0.01], [-0.01, 0.0, 0.0], [0.6, 0.4, 0.45]])
+    np.testing.assert_array_equal(thin_to_voxels(xyz, 0.1), xyz[[0, 1, 3, 4]])
+    np.testing.assert_array_equal(thin_to_voxels(xyz, 1.0), xyz[[0, 3]])

@@ -112,10 +112,10 @@ def test_a_file_system_that_cannot_map_files_gives_the_same_map(tmp_path, monkey
 
 
 def test_a_file_shortened_after_its_header_was_read_is_one_error(tmp_path, monkeypatch):
-    import lidar.io.las_header as las_header
+    import lidar.io.las as las
 
     path = _las(tmp_path / "s.las", 100_000, point_format=6, scale=1e-4, full_circle=False, seed=6)
-    check = las_header.check_las_header
+    check = las.check_las_header
 
     def check_then_shorten(p):  # another program cuts the file between the header check and the reading
         facts = check(p)
@@ -123,6 +123,6 @@ def test_a_file_shortened_after_its_header_was_read_is_one_error(tmp_path, monke
             fh.truncate(facts.offset_to_points + 1000 * facts.record_length)
         return facts
 
-    monkeypatch.setattr(las_header, "check_las_header", check_then_shorten)
+    monkeypatch.setattr(las, "check_las_header", check_then_shorten)
     with pytest.raises(ScanFormatError, match="truncated"):
         reflectance_map_from_file(path)

@@ -56,6 +56,16 @@ def test_full_circle_scan_merges_blobs_across_the_seam():
     assert abs((det.detections[0].phi_deg + 180) % 360 - 180) < 0.02
 
 
+def test_a_blob_of_the_first_column_joins_every_blob_of_the_last_it_touches_and_only_it_moves():
+    from lidar.detection import _merge_across_seam
+
+    first = np.array([0, 1, 1, 1, 0, 0, 2])  # labels down the first column: blobs 1 and 2
+    last = np.array([0, 5, 0, 6, 0, 0, 0])  # down the last column: blobs 5 and 6, both beside blob 1
+    roots, shift = _merge_across_seam(first, last, 6, 10)
+    assert roots.tolist() == [0, 6, 2, 3, 4, 6, 6]  # one blob, named by its largest label
+    assert shift.tolist() == [0, 10, 0, 0, 0, 0, 0]  # blob 1 continues after the last column; 5 and 6 stay
+
+
 def test_large_bright_patch_is_rejected_not_detected():
     xyz, inten = grid_scan((80, 95), (0, 30), 0.02, bright=[(85, 10, 0.07), (88, 20, 1.5)])
     det = detect_reflectors(reflectance_map(xyz, inten), target_diameter_m=0.05, threshold=0.6)

@@ -15,7 +15,7 @@ estimates is ``B_CS(1)->CS(k) = inv(G_k)``.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -107,7 +107,6 @@ class RigGeometry:
                    sub_fov_m=0.05e-3 * 1920, board=Checkerboard((21, 13), 0.004))
 
     def with_resolution(self, width: int, height: int) -> RigGeometry:
-        from dataclasses import replace
 
         return replace(self, resolution=(int(width), int(height)))
 

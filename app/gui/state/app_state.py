@@ -19,6 +19,7 @@ Events of :class:`AppState`:
 """
 from __future__ import annotations
 
+import html
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -40,7 +41,7 @@ VIEWS = ("displacements", "map", "fine", "cloud", "camera", "stations", "analysi
 class Snapshot:
     """What the campaign holds, read at once for the views.
 
-    ``status`` is :func:`projects.results.state.campaign_status` (every epoch's state by
+    ``status`` is :func:`projects.results.status.campaign_status` (every epoch's state by
     :func:`projects.results.state.epoch_state`), ``reflectors`` and ``series`` (camera series) are
     store records, ``histories`` maps a target id to its :class:`projects.store.history.DisplacementHistory`,
     ``context`` is a :class:`projects.series.context.PlotContext`.
@@ -73,7 +74,7 @@ class Selection:
 
 def read_snapshot(access) -> Snapshot:
     """Everything the views show of a campaign, in one shared-lock read."""
-    from projects.results.state import campaign_status
+    from projects.results.status import campaign_status
     from projects.series.camera import series_records
     from projects.series.context import plot_context
     from projects.store.history import histories
@@ -270,7 +271,6 @@ class AppState:
                         return series_html(row)
                 return campaign_html(c, self.snapshot.status)
         except SurveyError as exc:
-            import html
 
             return f"<p>{html.escape(in_app_words(str(exc)))}</p>"
 

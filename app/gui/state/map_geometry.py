@@ -5,6 +5,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from common.errors import InputError
+
 
 @dataclass(frozen=True)
 class CellRect:
@@ -44,7 +46,6 @@ def window_of_cells(rect: CellRect, theta0: float, phi0: float, step: float) -> 
 def window_from_cells(preview, plan, rect: CellRect, rid: str, reflector):
     """A new plan window for ``rid`` from a rectangle drawn on an epoch's map preview (its range from the
     map's cells, its steps for the plan's points on a target of that size)."""
-    from common.errors import InputError
     from lidar.plan import new_roi
 
     rmap = preview.reflectance_map

@@ -56,7 +56,7 @@ def _for_epoch(e: dict) -> NextStep | None:
 def next_step(status: dict, selected_epoch: str | None) -> NextStep:
     """The next step for ``selected_epoch`` (or, when it has none left, the first epoch with work left).
 
-    ``status`` is :func:`projects.results.state.campaign_status` (its ``epochs``: ``epoch``, ``state``,
+    ``status`` is :func:`projects.results.status.campaign_status` (its ``epochs``: ``epoch``, ``state``,
     ``stale``).
     """
     epochs = status.get("epochs", [])

@@ -4,11 +4,13 @@ from __future__ import annotations
 import io
 import os
 from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, wait
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from common.files import atomic_output
 from common.flags import FLAG_NO_CAMERA_DATA, REGISTRY, code, describe, severity
 from common.progress import ProgressCallback, report, scaled
 from projects.outputs.report.analysis_page import analysis_section
@@ -33,7 +35,6 @@ def write_landscape_pdf(story: list, path: str | os.PathLike, *, title: str) -> 
     from reportlab.lib.units import mm
     from reportlab.platypus import SimpleDocTemplate
 
-    from common.files import atomic_output
 
     with atomic_output(path) as tmp:
         SimpleDocTemplate(str(tmp), pagesize=landscape(A4), leftMargin=10 * mm, rightMargin=10 * mm,
@@ -258,7 +259,6 @@ def render_maps(sections: Sequence[EpochSection], preview_of: Callable | None = 
             images.append(_render_map_job(j))
     else:
         import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor, wait
 
         # spawn, not fork: safe inside the desktop application's threads
         pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
@@ -526,7 +526,6 @@ def build_pdf(content: ReportContent, path: str | os.PathLike, *, preview_of: Ca
             story += epoch_section(e, content, ss, new_page=k > 0, map_jpeg=jpeg)
     story += log_section(content, ss)
     report(progress, 0.9, "writing PDF")
-    from common.files import atomic_output
 
     with atomic_output(path) as tmp:
         _make_doc(tmp, content).build(story)

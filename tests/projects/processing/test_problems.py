@@ -11,7 +11,8 @@ from app.cli.main import main
 from lidar.simulate import EpochConditions, ScannerSetup
 from lidar.simulate.files import load_scene, save_scene, simulate_coarse, simulate_fine
 from projects.processing.stages import plan_epoch
-from projects.results.state import campaign_status, epoch_state
+from projects.results.state import epoch_state
+from projects.results.status import campaign_status
 from projects.store.campaign import Campaign
 from tests.projects.conftest import MODEL
 

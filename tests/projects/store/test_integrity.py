@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from app.cli.main import main
-from common.files import DiskFullError, atomic_output, write_atomic
+from common.files import DiskFullError, atomic_output, sha256_of, write_atomic
 from lidar.layout import read_layout_csv
 from projects.store import digests, journal, lock, schema
 from projects.store.campaign import DB_NAME, Campaign
@@ -279,3 +279,34 @@ def test_an_earlier_epoch_never_becomes_the_baseline_silently(processed_copy, fi
     assert f"dated before the baseline {labels[0]}" in out
     with Campaign.open(processed_copy, writable=False) as c:
         assert c.settings()["baseline"] == labels[0]
+
+
+def test_an_imported_scan_is_hashed_once(camp, field_copy, monkeypatch):
+    """add-epoch hashes each file once: the duplicate check's checksum names the copy, which hashes nothing."""
+    import hashlib
+    import types
+
+    import projects.store.campaign as campaign
+    import projects.store.imports as imports
+
+    hashed: list[str] = []
+
+    def counted(path, *args, **kwargs):
+        hashed.append(str(path))
+        return sha256_of(path, *args, **kwargs)
+
+    def copy_hash(*args):  # with bytes: the first 64 KiB the journal records (header_facts), not the file
+        if not args:
+            hashed.append("copy")
+        return hashlib.sha256(*args)
+
+    coarse = field_copy / "v0" / "coarse.laz"
+    monkeypatch.setattr(campaign, "sha256_of", counted)
+    monkeypatch.setattr(imports, "sha256_of", counted)
+    monkeypatch.setattr(imports, "hashlib", types.SimpleNamespace(sha256=copy_hash))
+    with Campaign.open(camp) as c:
+        c.add_epoch("2026-03-02", "2026-03-02T09:00:00+00:00", coarse)
+        stored = c.files("2026-03-02")[0]
+    assert hashed == [str(coarse)]
+    assert stored.sha256 == sha256_of(coarse)
+    assert sha256_of(camp / stored.stored_path) == stored.sha256

@@ -33,7 +33,7 @@ def test_window_of_cells_keeps_the_plan_contract_across_zero():
 
 def test_window_from_cells_and_the_details_html_on_a_campaign(processed_copy):
     from app.gui.state.details_html import campaign_html, epoch_html, reflector_html
-    from projects.results.state import campaign_status
+    from projects.results.status import campaign_status
     from projects.store.campaign import Campaign
 
     with Campaign.open(processed_copy, writable=False) as c:

@@ -12,6 +12,10 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+from lidar.io import sniff_format
+from lidar.io.e57 import acquisition_starts
+from lidar.io.las import first_point_time, open_las
+
 GPS_EPOCH = dt.datetime(1980, 1, 6, tzinfo=dt.UTC)
 #: GPS - UTC in seconds from each date on (the leap seconds since the GPS epoch).
 GPS_UTC_OFFSET = ((dt.date(1981, 7, 1), 1), (dt.date(1982, 7, 1), 2), (dt.date(1983, 7, 1), 3),
@@ -52,17 +56,14 @@ def _plausible(when: dt.datetime) -> bool:
 
 
 def _las_time(p: Path) -> ScanTime | None:
-    import laspy
-
-    with laspy.open(p) as reader:
-        h = reader.header
-        if "gps_time" in h.point_format.dimension_names and int(h.global_encoding.gps_time_type) == 1 \
-                and h.point_count > 0:
-            first = next(reader.chunk_iterator(1))
-            when = gps_to_utc(float(first.gps_time[0]) + 1e9)  # adjusted standard GPS time
+    las = open_las(p)
+    if las.gps_time_type == 1:  # adjusted standard GPS time
+        first = first_point_time(las)
+        if first is not None:
+            when = gps_to_utc(first + 1e9)
             if _plausible(when):
                 return ScanTime(when.replace(microsecond=0), "the GPS time of its first point")
-        day = h.creation_date
+    day = las.creation_date
     if day is not None:
         when = dt.datetime(day.year, day.month, day.day, tzinfo=dt.UTC)
         if _plausible(when):
@@ -71,18 +72,11 @@ def _las_time(p: Path) -> ScanTime | None:
 
 
 def _e57_time(p: Path) -> ScanTime | None:
-    import pye57
-
-    e = pye57.E57(str(p))
-    try:
-        for k in range(e.scan_count):
-            scan = e.data3d[k]
-            if scan.isDefined("acquisitionStart"):
-                when = gps_to_utc(float(scan["acquisitionStart"]["dateTimeValue"].value()))
-                if _plausible(when):
-                    return ScanTime(when.replace(microsecond=0), "the E57 scan's acquisitionStart")
-    finally:
-        e.close()
+    for start in acquisition_starts(p):
+        if start is not None:
+            when = gps_to_utc(start)
+            if _plausible(when):
+                return ScanTime(when.replace(microsecond=0), "the E57 scan's acquisitionStart")
     return None
 
 
@@ -91,8 +85,6 @@ def scan_file_time(path: str | os.PathLike) -> ScanTime | None:
 
     Never raises for a damaged file: the import itself reports that, in its own words.
     """
-    from lidar.io import sniff_format
-
     p = Path(path)
     try:
         fmt = sniff_format(p)

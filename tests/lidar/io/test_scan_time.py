@@ -4,7 +4,7 @@ from pathlib import Path
 
 import numpy as np
 
-from projects.store.scan_time import gps_to_utc, scan_file_time
+from lidar.io.scan_time import gps_to_utc, scan_file_time
 
 DATA = Path(__file__).resolve().parents[2] / "data"
 

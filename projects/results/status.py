@@ -1,0 +1,53 @@
+"""A campaign's status at a glance: what ``bridgesurvey status``, the report and the application's tree show.
+
+Apart from :mod:`projects.results.state` (an epoch's state from its flags), which the displacement table
+(:mod:`projects.results.table`) needs, while the status needs the table.
+"""
+from __future__ import annotations
+
+import math
+
+from common.flags import count
+from projects.processing.stages import baseline_epoch, stale_epochs
+from projects.results.corrections import epoch_corrections, instrument_summary
+from projects.results.state import epoch_states
+from projects.results.table import displacement_table
+from projects.store.campaign import Campaign
+from projects.store.verify import REMEDY, describe_group
+
+
+def campaign_status(c: Campaign) -> dict:
+    """Name, span, baseline, epochs, instrument, the latest row of every target, and warnings.
+
+    ``epochs`` carry their state, staleness and flags; ``instrument`` is the campaign's range walk and axis
+    errors as its field model found them (:func:`~projects.results.corrections.instrument_summary`; None
+    before one is fitted).
+
+    ``warnings`` are the layout's (targets no station could reach) and the stored results that fail their
+    checksum (not shown, recomputed by ``process``); ``unlisted_files`` the files of the
+    import folders the database does not list (never deleted: ``bridgesurvey repair`` registers them).
+    """
+    stale = stale_epochs(c)
+    states = epoch_states(c)
+    epochs = []
+    for e in c.epochs():
+        s = states[e.label]
+        corr = epoch_corrections(c.systematics(e.label))
+        epochs.append({"epoch": e.label, "datetime": e.datetime[:16], "state": s.state,
+                       "stale": stale.get(e.label, ""), "flags": "; ".join(s.flags), "flag_list": list(s.flags),
+                       "severity": count(s.flags),
+                       "scale_ppm": None if corr is None else round(corr.scale_ppm, 2) + 0.0,
+                       "scale_sigma_ppm": None if corr is None else round(corr.scale_sigma_ppm, 2) + 0.0,
+                       "drift_arcsec_h": None if corr is None or not corr.timed
+                       else round(math.hypot(corr.tilt_arcsec_h, corr.twist_arcsec_h), 1) + 0.0})
+    damaged = [f"stored {describe_group(t, k)}: damaged (fails its checksum), not shown; {REMEDY[t]}"
+               for t, k in c.damaged_results()]
+    latest = {}
+    for r in displacement_table(c, states=states):
+        if r["displacement_mm"] is not None or r["reflector"] not in latest:  # keep the last good value
+            latest[r["reflector"]] = r
+    fitted = c.field_model()
+    return {"name": c.name, "span_m": c.span_m, "baseline": baseline_epoch(c), "epochs": epochs,
+            "instrument": None if fitted is None else instrument_summary(fitted[0]),
+            "targets": list(latest.values()), "warnings": c.layout_warnings() + damaged,
+            "unlisted_files": c.unlisted_files()}
