@@ -122,13 +122,15 @@ def register(sub) -> None:
 
     p = sub.add_parser("reflector", help="list, add, retire or replace reflectors",
                        description="The campaign's reflector targets: list them, add one, retire one, or replace "
-                                   "one by another whose history continues the old one's.")
-    add_dir(p)
+                                   "one by another whose history continues the old one's "
+                                   "(bridgesurvey reflector ACTION DIR ...).")
     rs = p.add_subparsers(dest="action", metavar="ACTION")
     rs.required = True
     q = rs.add_parser("list", help="every reflector with its group, position and life")
+    add_dir(q)
     add_json(q)
     q = rs.add_parser("add", help="a new reflector (from a date on)")
+    add_dir(q)
     q.add_argument("id", help="the new reflector's id")
     q.add_argument("--group", required=True, choices=("reference", "measurement"),
                    help="reference (on a pier) or measurement (under the deck)")
@@ -136,14 +138,17 @@ def register(sub) -> None:
     q.add_argument("--diameter-mm", type=float, default=50.0, help="target diameter (50)")
     q.add_argument("--installed", default=None, help="ISO date from which scans should hold it")
     q = rs.add_parser("retire", help="a reflector that is gone (kept in the history)")
+    add_dir(q)
     q.add_argument("id", help="the reflector's id")
     q.add_argument("--date", required=True, help="ISO date from which it is gone")
     q = rs.add_parser("replace", help="a new reflector continuing an old one's history")
+    add_dir(q)
     q.add_argument("old", help="the id of the reflector replaced")
     q.add_argument("new", help="the id of its replacement")
     q.add_argument("--date", required=True, help="ISO date of the replacement")
     q.add_argument("--xyz", default=None, help="new position if not the same place")
-    p.set_defaults(func=cmd_reflector)
+    for q in rs.choices.values():
+        q.set_defaults(func=cmd_reflector)
 
     p = sub.add_parser("limit", help="set warning/alarm limits",
                        description="Rules: abs:WARN_MM,ALARM_MM | span:NW,NA (L/NW, L/NA) | kr-rail:0-200|200-270|270-350"
