@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import shlex
 import sys
 from pathlib import Path
 
@@ -33,6 +34,9 @@ def register(sub) -> None:
     p.add_argument("--span-m", type=float, default=None, help="span length, for span-fraction limits")
     p.add_argument("--scanner", default=None,
                    help="scanner profile: a name from 'bridgesurvey scanners' or a profile .json (default Riegl VZ-1000)")
+    p.add_argument("--timezone", default="UTC", metavar="ZONE",
+                   help="the bridge's time zone: imported times without an offset are read in it (IANA name such as "
+                        "Europe/Berlin, or +hh:mm; default UTC; 'settings DIR timezone ZONE' changes it)")
     p.set_defaults(func=cmd_init)
 
     p = sub.add_parser("add-epoch", help="import a visit: its coarse scan (and fine scans, if any)",
@@ -166,7 +170,9 @@ def register(sub) -> None:
                                    "recomputes exactly the results it affects\n(stale: plan = plans and centroids "
                                    "of every epoch, displacements = displacements only, baseline = every "
                                    "displacement).\n\n" + help_text() + "\n  scanner (NAME | FILE.json): the "
-                                   "campaign's instrument (with --epoch: one visit's)")
+                                   "campaign's instrument (with --epoch: one visit's)\n  timezone (an IANA name such as "
+                                   "Europe/Berlin, or +hh:mm; default UTC): the zone imported times without an "
+                                   "offset are read in")
     add_dir(p)
     p.add_argument("key", nargs="?", help="the parameter to change (see above; none: list them all)")
     p.add_argument("value", nargs="?", help="its new value (none: back to the default)")
@@ -255,9 +261,11 @@ def cmd_init(args) -> int:
 
     profile = get_scanner(args.scanner or DEFAULT_SCANNER)
     layout = read_layout_csv(args.layout, default_diameter_m=args.target_diameter_mm / 1000.0)
-    with Campaign.create(args.dir, name=args.name, layout=layout, span_m=args.span_m, profile=profile) as c:
+    with Campaign.create(args.dir, name=args.name, layout=layout, span_m=args.span_m, profile=profile,
+                         timezone=args.timezone) as c:
         print(f"created campaign '{c.name}' in {args.dir} with {len(layout)} reflectors "
-              f"({len(layout.ids_in('reference'))} reference, {len(layout.ids_in('measurement'))} measurement)")
+              f"({len(layout.ids_in('reference'))} reference, {len(layout.ids_in('measurement'))} measurement), "
+              f"time zone {c.timezone}")
         for w in c.layout_warnings():
             print(f"warning: {w}")
     return 0
@@ -450,8 +458,8 @@ def cmd_status(args) -> int:
         dump_json(data)
         return 0
     epochs = data["epochs"]
-    print(f"campaign '{data['name']}', span {data['span_m'] or '?'} m, baseline {data['baseline'] or '-'}, "
-          f"{len(epochs)} epoch(s)")
+    print(f"campaign '{data['name']}', span {data['span_m'] or '?'} m, time zone {data['timezone']}, "
+          f"baseline {data['baseline'] or '-'}, {len(epochs)} epoch(s)")
     shown = epochs if args.all else epochs[-STATUS_EPOCHS:]
     table([{**e, "flags": describe(e["flag_list"]) if args.verbose else _short(summary(e["flag_list"])),
             "scale": _scale_text(e, data["baseline"])} for e in shown],
@@ -568,6 +576,8 @@ def cmd_settings(args) -> int:
 
     if args.key == "scanner":
         return _set_scanner(args)
+    if args.key == "timezone":
+        return _set_timezone(args)
     if args.epoch is not None:
         raise InputError("--epoch goes with the 'scanner' setting only")
     if args.key is None:
@@ -575,7 +585,9 @@ def cmd_settings(args) -> int:
             params = parameters(c)
             params["baseline"] = c.settings().get("baseline")
             params["scanner"] = c.profile.name
-        table([{"key": k, "value": v, "default": DEFAULTS.get(k)} for k, v in params.items()],
+            params["timezone"] = c.timezone
+        defaults = {**DEFAULTS, "timezone": "UTC"}
+        table([{"key": k, "value": v, "default": defaults.get(k)} for k, v in params.items()],
               ["key", "value", "default"])
         return 0
     with _open(args.dir) as c:
@@ -588,6 +600,17 @@ def cmd_settings(args) -> int:
               "at the next 'bridgesurvey process' (the change is in the campaign log)", file=sys.stderr)
     print(f"{args.key} = {args.value}; {len(stale)} epoch(s) need processing for their centroids "
           "(displacements follow); run 'bridgesurvey process'")
+    return 0
+
+
+def _set_timezone(args) -> int:
+    if args.epoch is not None:
+        raise InputError("--epoch goes with the 'scanner' setting only")
+    with _open(args.dir) as c:
+        old = c.timezone
+        c.set_timezone(args.value or "UTC")
+        print(f"timezone = {c.timezone} (was {old}): imports from now on read times without an offset in it; "
+              "series imported before keep the zone they were read in")
     return 0
 
 
@@ -621,4 +644,7 @@ def cmd_demo(args) -> int:
     with progress_bar("demo campaign") as cb:
         result = build_demo(args.dir, weeks=args.weeks, seed=args.seed, progress=cb)
     print(result.summary())
+    folder = shlex.quote(str(args.dir))
+    print(f"open it in the application: ./run gui {folder} (from the source folder; installed: bridgesurvey-gui "
+          f"{folder}); on the command line: bridgesurvey status {folder}")
     return 0

@@ -386,7 +386,8 @@ class Commands:
                 default = midspan_reflector(c)
             except SurveyError:
                 default = None
-        dlg = ImportCameraDialog(meas, default, self.parent, self.host.folders)
+            zone = c.timezone
+        dlg = ImportCameraDialog(meas, default, self.parent, self.host.folders, zone=zone)
         if dlg.exec() != ImportCameraDialog.Accepted:
             return
         v = dlg.values()
@@ -394,8 +395,9 @@ class Commands:
         def done(r):
             name, summary = r
             self.state.refresh()
-            self.state.status.result(f"camera series {name!r} imported: {summary['rows']:,} rows; next: Camera ▸ "
-                                     "Cross-validate with LiDAR")
+            self.state.status.result(f"camera series {name!r} imported: {summary['rows']:,} rows, "
+                                     f"{summary['bad_rows']} bad row(s) left out, times {summary['times']}; "
+                                     "next: Camera ▸ Cross-validate with LiDAR")
 
         self._job("Importing the camera series", lambda p: actions.import_camera(self.state.access, v, p), done)
 
@@ -408,7 +410,9 @@ class Commands:
 
     # ------------------------------------------------------------------ analysis inputs
     def import_env(self) -> None:
-        dlg = ImportEnvDialog(self.parent, self.host.folders)
+        with self.state.read() as c:
+            zone = c.timezone
+        dlg = ImportEnvDialog(self.parent, self.host.folders, zone=zone)
         if dlg.exec() != ImportEnvDialog.Accepted:
             return
         v = dlg.values()
@@ -417,7 +421,8 @@ class Commands:
             name, summary = r
             self.state.refresh()
             self.state.status.result(f"{v['kind']} series {name!r} imported: {summary['rows']:,} rows, "
-                                     f"{summary['bad_rows']} bad row(s); next: Analysis ▸ Analyse")
+                                     f"{summary['bad_rows']} bad row(s) left out, times {summary['times']}; "
+                                     "next: Analysis ▸ Analyse")
 
         self._job("Importing the environment series", lambda p: actions.import_env(self.state.access, v, p), done)
 

@@ -220,7 +220,7 @@ def epoch_state(c: Campaign, label: str) -> tuple[str, list[str]]:
 
 
 def campaign_status(c: Campaign) -> dict:
-    """Name, span, baseline, epochs, instrument, the latest row of every target, and warnings.
+    """Name, span, time zone, baseline, epochs, instrument, the latest row of every target, and warnings.
 
     ``epochs`` carry their state, staleness and flags; ``instrument`` is the campaign's range walk and axis
     errors as its field model found them (:func:`~projects.results.corrections.instrument_summary`; None
@@ -256,7 +256,7 @@ def campaign_status(c: Campaign) -> dict:
         if r["displacement_mm"] is not None or r["reflector"] not in latest:  # keep the last good value
             latest[r["reflector"]] = r
     fitted = c.field_model()
-    return {"name": c.name, "span_m": c.span_m, "baseline": baseline_epoch(c), "epochs": epochs,
+    return {"name": c.name, "span_m": c.span_m, "timezone": c.timezone, "baseline": baseline_epoch(c), "epochs": epochs,
             "instrument": None if fitted is None else instrument_summary(fitted[0]),
             "targets": list(latest.values()), "warnings": c.layout_warnings() + damaged,
             "unlisted_files": c.unlisted_files()}

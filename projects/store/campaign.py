@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from common.files import MB, disk_full_error, ensure_free, is_disk_full, write_atomic
+from common.series import check_zone
 from lidar.centroid import TargetCentroid
 from lidar.layout import Layout, check_layout
 from lidar.scanner_profile import ScannerProfile
@@ -138,10 +139,11 @@ class Campaign:
     # ------------------------------------------------------------------ opening
     @classmethod
     def create(cls, folder: str | os.PathLike, *, name: str, layout: Layout, span_m: float | None = None,
-               profile: ScannerProfile | None = None) -> Campaign:
+               profile: ScannerProfile | None = None, timezone: str = "UTC") -> Campaign:
         """Create a new campaign folder (which must not hold a campaign yet).
 
-        ``profile`` is the scanner (default: the catalogue's Riegl VZ-1000, the dissertation's).
+        ``profile`` is the scanner (default: the catalogue's Riegl VZ-1000, the dissertation's); ``timezone`` the
+        zone of imported times without an offset (:attr:`timezone`).
         """
         if profile is None:
             from lidar.scanner_catalogue import DEFAULT_SCANNER, get_scanner
@@ -153,6 +155,7 @@ class Campaign:
         if span_m is not None and not (np.isfinite(span_m) and span_m > 0):
             raise InputError(f"span length must be positive, got {span_m}")
         check_layout(layout)
+        timezone = check_zone(timezone)
         if (folder / DB_NAME).exists():
             raise CampaignError(f"{folder}: already holds a campaign; open it instead of creating one")
         if folder.exists() and not folder.is_dir():
@@ -166,7 +169,7 @@ class Campaign:
             with conn:
                 meta = {"name": name.strip(), "span_m": "" if span_m is None else repr(float(span_m)),
                         "scanner_profile": json.dumps(profile.to_dict()), "created": now_iso(),
-                        "settings": json.dumps({})}
+                        "settings": json.dumps({"timezone": timezone})}
                 conn.executemany("INSERT INTO meta(key, value) VALUES (?, ?)", meta.items())
                 conn.executemany(
                     "INSERT INTO reflectors(id, grp, x, y, z, diameter_m, nx, ny, nz) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
@@ -343,6 +346,15 @@ class Campaign:
         with self.transaction() as c:
             c.execute("UPDATE meta SET value = ? WHERE key = 'settings'", (json.dumps(s),))
             self.log_action(c, "setting", None, {key: value})
+
+    @property
+    def timezone(self) -> str:
+        """The campaign's time zone: imported times without an offset are read in it (IANA name or +hh:mm)."""
+        return str(self.settings().get("timezone") or "UTC")
+
+    def set_timezone(self, name: str) -> None:
+        """Change :attr:`timezone` (series imported before keep the zone they were read in)."""
+        self.set_setting("timezone", check_zone(name))
 
     def log_action(self, conn: sqlite3.Connection, action: str, epoch: str | None, details: dict) -> None:
         """Add a line to the campaign's log inside the transaction ``conn``."""
