@@ -435,11 +435,11 @@ def _process_summary(rows: list[dict], baseline) -> str:
 
 def cmd_displacements(args) -> int:
     from common.files import write_atomic
-    from projects.results.table import displacement_table, to_csv
+    from projects.results.table import displacement_table, to_csv, written_rows
 
     with _open(args.dir, writable=False) as c:
         rows = displacement_table(c)
-    text = to_csv(rows) if args.format == "csv" else json.dumps(rows, indent=2)
+    text = to_csv(rows) if args.format == "csv" else json.dumps(written_rows(rows), indent=2)
     if args.out:
         write_atomic(args.out, text)
         print(f"wrote {len(rows)} rows to {args.out}")
