@@ -239,7 +239,12 @@ def _frames_of(args):
 
     def frames_of(path: Path, fallback):
         with progress_bar(f"checking {path.name}") as cb:
-            return file_frames(path, given=given, fallback=fallback, progress=cb)
+            frames = file_frames(path, given=given, fallback=fallback, progress=cb)
+        dropped, points = sum(f.dropped_points for f in frames), sum(f.points for f in frames)
+        if dropped:
+            print(f"note: {path}: {dropped:,} of {dropped + points:,} points ({100 * dropped / (dropped + points):.1f} "
+                  "%) have a NaN or infinite coordinate and are left out")
+        return frames
     return frames_of
 
 

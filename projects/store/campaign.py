@@ -383,11 +383,14 @@ class Campaign:
         return _layout_of(self.reflectors(), at)
 
     def layout_warnings(self, epoch: str | None = None) -> list[str]:
-        """Warnings about the layout (at an epoch's date, with its scanner): targets no station could reach."""
+        """Warnings about the layout (at an epoch's date, with its scanner).
+
+        Too few reference targets (:func:`inputs.few_references`), and targets no station could reach.
+        """
         at = self.epoch(epoch).datetime if epoch else None
         layout, profile = self.layout(at), self.profile_for(epoch)
-        return inputs.unreachable_targets(layout.ids, layout.xyz, max_range_m=float(profile.max_range_m),
-                                          scanner=f"the {profile.name}")
+        return inputs.few_references(layout.ids_in("reference")) + inputs.unreachable_targets(
+            layout.ids, layout.xyz, max_range_m=float(profile.max_range_m), scanner=f"the {profile.name}")
 
     def add_reflector(self, rid: str, group: str, xyz: Sequence[float], *, diameter_m: float = 0.05,
                       installed: str | None = None, replaces: str | None = None, note: str = "") -> None:
