@@ -29,7 +29,7 @@ from app.gui.dialogs import (
 )
 from app.gui.state.app_state import AppState
 from app.gui.state.folders import LastFolders
-from app.gui.state.words import in_app_words
+from app.gui.state.words import in_app_words, windows_text
 from common.errors import SurveyError
 
 
@@ -218,7 +218,7 @@ class Commands:
         def done(result):
             new, plans = result
             self.state.refresh()
-            what = ", ".join(f"set-up {k}: {len(p.rois)} windows, {p.total_seconds / 60:.1f} min"
+            what = ", ".join(f"set-up {k}: {windows_text(p.rois)}, {p.total_seconds / 60:.1f} min"
                              for k, p in zip(new, plans, strict=False))
             self.state.status.result(f"{label}: {what}; next: scan them and add the fine scans (Epoch ▸ Add fine "
                                      "scans to the selected epoch…, they go to the set-up added last)")
@@ -235,7 +235,7 @@ class Commands:
             self.state.refresh()
             self.state.select(epoch=label)
             self.state.request_view("map")
-            self.state.status.result(f"{label} planned: {len(plan.rois)} windows, {plan.total_seconds / 60:.1f} min; "
+            self.state.status.result(f"{label} planned: {windows_text(plan.rois)}, {plan.total_seconds / 60:.1f} min; "
                                      "export the plan for the scanner (Export plan JSON…) or print the field sheet")
 
         self._job(f"Planning {label}", lambda p: actions.plan(self.state.access, label, p), done)

@@ -38,6 +38,7 @@ from PySide6.QtWidgets import (
 )
 
 from app.gui.state.map_geometry import CellRect, window_of_cells
+from app.gui.state.words import windows_text
 from app.gui.widgets import ElidedLabel
 from lidar.plan import RoiPlan, ScanPlan
 
@@ -46,6 +47,8 @@ from lidar.plan import RoiPlan, ScanPlan
 GROUP_COLOURS = {"reference": QColor("#17becf"), "measurement": QColor("#2ca02c"), "": QColor("#d62728")}
 DETECTION_COLOUR = QColor("#ff7f0e")
 NO_RETURN = (0xdf, 0xe9, 0xf5)  # the report's light blue: no return (sky)
+#: A window selected from the tree smaller than this on the screen (pixels) is zoomed on (issue 41: 7x6 px).
+MIN_SHOWN_PX = 40
 TAG_Z, WINDOW_Z, DETECTION_Z = 30.0, 10.0, 5.0
 
 
@@ -612,7 +615,7 @@ class MapView(QWidget):
                 self.table.setItem(row, col, item)
         if self.plan is not None:
             over = self.plan.total_seconds > self.plan.budget_seconds
-            self.total.setText(f"{len(self.items)} windows, {self.plan.total_seconds / 60:.1f} min of "
+            self.total.setText(f"{windows_text(self.plan.rois)}, {self.plan.total_seconds / 60:.1f} min of "
                                f"{self.plan.budget_seconds / 60:.0f} min budget"
                                + (" — OVER BUDGET" if over else "") + (" (edited, not saved)" if self.dirty else ""))
             self.total.setStyleSheet("color: #d62728;" if over else "")
@@ -636,8 +639,9 @@ class MapView(QWidget):
             it.setSelected(k in rows)
 
     def select_reflector(self, rid: str | None) -> None:
-        """Select a target's window and bring it into view (the zoom stays as it is); not a user's pick,
-        so it is not reported back (``reflectorPicked``)."""
+        """Select a target's window and bring it into view, zoomed on it when it is too small on the screen to be
+        seen or edited (below :data:`MIN_SHOWN_PX`); not a user's pick, so it is not reported back
+        (``reflectorPicked``)."""
         it = next((it for it in self.items if it.roi.reflector == rid), None)
         if it is None or it.isSelected():
             return
@@ -647,7 +651,11 @@ class MapView(QWidget):
             it.setSelected(True)
         finally:
             self._selecting = False
-        self.view.ensureVisible(it, 40, 40)
+        shown = self.view.mapFromScene(it.scene_rect()).boundingRect()
+        if min(shown.width(), shown.height()) < MIN_SHOWN_PX:
+            self.zoom_to(rid)
+        else:
+            self.view.ensureVisible(it, 40, 40)
 
     def zoom_to(self, rid: str) -> None:
         """Zoom on a target's window with its surroundings."""
