@@ -101,6 +101,9 @@ def register(sub) -> None:
     add_epoch(p, required=False, action="append", default=None,
               help="only this epoch (repeatable; default: every epoch)")
     add_json(p, help="print what was done as JSON (every epoch, with its action and state)")
+    p.add_argument("--accept-check", action="store_true",
+                   help="process an epoch whose on-site check asked for a re-scan as it is (the choice is logged); "
+                        "without it such an epoch is refused until its re-scan is added")
     p.set_defaults(func=cmd_process)
 
     p = sub.add_parser("displacements", help="print or write the displacement history",
@@ -371,6 +374,7 @@ def cmd_process(args) -> int:
     from projects.results.state import epoch_states
 
     with _open(args.dir) as c:
+        _check_verdicts_allow(c, args)
         had_displacements = {e.label for e in c.epochs() if c.displacement_set(e.label) is not None}
         with progress_bar("processing") as cb:
             summary = process(c, args.epoch, progress=cb)
@@ -392,6 +396,24 @@ def cmd_process(args) -> int:
               "; ".join(f"{lab}: {flag}" for lab, flag in summary.problems.items()), file=sys.stderr)
         return EXIT_PROBLEM
     return 0
+
+
+def _check_verdicts_allow(c, args) -> None:
+    """Refuse (one line, nothing changed) to process an epoch whose check asked for a re-scan not yet added,
+    unless ``--accept-check`` (then the acceptance is logged)."""
+    from projects.field.check import pending_rescans
+
+    for label in args.epoch or ():
+        c.epoch(label)
+    pending = pending_rescans(c, args.epoch or [e.label for e in c.epochs()])  # what 'process' brings up to date
+    if not pending:
+        return
+    if not args.accept_check:
+        what = "; ".join(f"{label}: the check asked to {v.line()}" for label, v in pending.items())
+        raise InputError(f"{what}; add the re-scan's fine scans (bridgesurvey add-fine {args.dir} --epoch "
+                         f"{next(iter(pending))} FILE...), or process as it is with --accept-check")
+    for label in pending:
+        c.accept_check(label)
 
 
 def _process_rows(summary, states: dict, had_displacements: set) -> list[dict]:
@@ -475,6 +497,9 @@ def cmd_status(args) -> int:
     tally = {s: sum(w == s for w in levels.values()) for s in ("problem", "warning", "info")}
     print(f"epochs with problems: {tally['problem']}, with warnings: {tally['warning']}, "
           f"with information flags only: {tally['info']}")
+    for e in epochs:
+        if e["rescan"]:
+            print(f"CHECK of {e['epoch']}: {e['check']}; next: the re-scan (add-fine), or process --accept-check")
     for e in epochs:
         level = levels[e["epoch"]]
         if level in ("problem", "warning"):

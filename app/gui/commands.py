@@ -241,12 +241,25 @@ class Commands:
         self._job(f"Planning {label}", lambda p: actions.plan(self.state.access, label, p), done)
 
     def process(self) -> None:
+        pending = actions.pending_rescans(self.state.access)  # the check is binding: its re-scan asks first
+        if pending:
+            lines = "\n".join(f"{label}: {line}" for label, line in pending.items())
+            answer = QMessageBox.question(
+                self.parent, "Process", f"The check before leaving asked for a re-scan:\n\n{lines}\n\nProcess as it "
+                "is anyway? (No: add the re-scan's fine scans first, Epoch ▸ Add fine scans to the selected epoch…)",
+                QMessageBox.Yes | QMessageBox.No, QMessageBox.No)
+            if answer != QMessageBox.Yes:
+                self.state.status.result("not processed: the re-scan first (Epoch ▸ Add fine scans to the selected "
+                                         "epoch…)")
+                return
+        accept = tuple(pending)
+
         def done(summary):
             self.state.refresh()
             if summary.failed:
                 self.state.report_error("Processing", "; ".join(f"{o.epoch}: {o.message}" for o in summary.failed))
 
-        self._job("Processing", lambda p: actions.process(self.state.access, p), done)
+        self._job("Processing", lambda p: actions.process(self.state.access, p, accept_check=accept), done)
 
     def field_sheet(self) -> None:
         label = self._need_epoch("Field sheet", "an epoch (its coarse scan)")

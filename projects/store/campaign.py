@@ -49,6 +49,7 @@ from projects.store.imports import (  # noqa: F401  (importers name them here)
 )
 from projects.store.lock import LOCK_NAME, CampaignLock  # noqa: F401  (LOCK_NAME: likewise)
 from projects.store.records import (
+    CheckVerdict,
     DisplacementRecord,
     DisplacementSet,
     Epoch,
@@ -360,6 +361,49 @@ class Campaign:
         """Add a line to the campaign's log inside the transaction ``conn``."""
         conn.execute("INSERT INTO log(time, action, epoch, details) VALUES (?, ?, ?, ?)",
                      (now_iso(), action, epoch, json.dumps(details, default=str)))
+
+    # ------------------------------------------------------------------ the on-site check's verdict
+    def save_check_verdict(self, epoch: str, *, setup: int, rescan: dict[str, str], drifted: bool) -> None:
+        """Record what the check of ``epoch`` (set-up ``setup``) said.
+
+        ``rescan`` maps each target it asked to re-scan to why. Kept in the campaign's log (no table of its own);
+        :meth:`check_verdict` reads it back.
+        """
+        self.epoch(epoch)
+        with self.transaction() as c:
+            self.log_action(c, "check", epoch, {"setup": int(setup), "rescan": dict(rescan), "drifted": bool(drifted)})
+
+    def accept_check(self, epoch: str) -> None:
+        """The user processes ``epoch`` as it is, although its check asked for a re-scan (logged)."""
+        verdict = self.check_verdict(epoch)
+        with self.transaction() as c:
+            self.log_action(c, "check-accepted", epoch, {"rescan": list(verdict.rescan) if verdict else []})
+
+    def check_verdict(self, epoch: str) -> CheckVerdict | None:
+        """What the check last said of ``epoch``'s fine scans, or None.
+
+        None: never checked, or fine scans were added since (the re-scan came in, the old verdict no longer holds).
+        With several set-ups, each set-up's latest check counts; the targets to re-scan are all of theirs.
+        """
+        rows = self.conn.execute("SELECT id, time, action, details FROM log WHERE epoch = ? AND action IN "
+                                 "('check', 'check-accepted', 'import') ORDER BY id", (epoch,)).fetchall()
+        latest: dict[int, tuple[str, dict]] = {}
+        accepted = False
+        for r in rows:
+            d = json.loads(r["details"])
+            if r["action"] == "check":
+                latest[int(d.get("setup", 1))] = (r["time"], d)
+                accepted = False
+            elif r["action"] == "check-accepted":
+                accepted = True
+            elif d.get("role") == "fine" and latest:  # fine scans added after the check: it no longer holds
+                latest.clear()
+                accepted = False
+        if not latest:
+            return None
+        reasons = {t: why for _, d in latest.values() for t, why in d.get("rescan", {}).items()}
+        return CheckVerdict(epoch, max(t for t, _ in latest.values()), tuple(reasons), reasons,
+                            any(d.get("drifted") for _, d in latest.values()), accepted)
 
     def log(self) -> list[LogEntry]:
         """The campaign's log, oldest first."""

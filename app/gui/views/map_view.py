@@ -662,5 +662,5 @@ class MapView(QWidget):
         for it in self.items:
             if it.roi.reflector == rid:
                 r = it.scene_rect()
-                pad = max(r.width(), r.height()) * 6
+                pad = max(r.width(), r.height()) * 3
                 self.view.fitInView(r.adjusted(-pad, -pad, pad, pad), Qt.KeepAspectRatio)
