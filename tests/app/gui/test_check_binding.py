@@ -12,8 +12,7 @@ from tests.projects.field.test_field_check import LABEL, short_visit  # noqa: F4
 pytestmark = pytest.mark.gui
 
 
-def test_after_a_check_asking_for_a_rescan_the_next_step_is_the_rescan_and_process_asks(window, short_visit, qtbot,
-                                                                                        monkeypatch):
+def test_the_rescan_comes_next_and_process_asks(window, short_visit, qtbot, monkeypatch):  # noqa: F811
     from PySide6.QtWidgets import QMessageBox
 
     camp, _ = short_visit
