@@ -88,5 +88,6 @@ def read_camera_series(path: str | os.PathLike, *, column: str | None = None, ti
     s = read_series(path, quantity=DISPLACEMENT, column=column, timezone=timezone, unit=unit, positive=positive,
                     gap_factor=gap_factor)
     return CameraSeries(time_ns=s.time_ns, value_mm=s.values, source=s.source, column=s.column, unit=s.unit_read,
-                        bad_rows=s.bad_rows, n_bad=s.n_bad, n_rows=s.n_rows, n_missing=s.n_missing, n_duplicates=s.n_duplicates,
+                        bad_rows=s.bad_rows, n_bad=s.n_bad, n_rows=s.n_rows, n_missing=s.n_missing,
+                        n_duplicates=s.n_duplicates,
                         gaps=s.gaps, sampling_s=s.sampling_s, times_read=s.times_read, notes=s.notes)

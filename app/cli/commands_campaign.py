@@ -173,7 +173,8 @@ def register(sub) -> None:
                                    "recomputes exactly the results it affects\n(stale: plan = plans and centroids "
                                    "of every epoch, displacements = displacements only, baseline = every "
                                    "displacement).\n\n" + help_text() + "\n  scanner (NAME | FILE.json): the "
-                                   "campaign's instrument (with --epoch: one visit's)\n  timezone (an IANA name such as "
+                                   "campaign's instrument (with --epoch: one visit's)\n  timezone (an IANA name "
+                                   "such as "
                                    "Europe/Berlin, or +hh:mm; default UTC): the zone imported times without an "
                                    "offset are read in")
     add_dir(p)

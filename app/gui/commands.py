@@ -246,7 +246,8 @@ class Commands:
             lines = "\n".join(f"{label}: {line}" for label, line in pending.items())
             answer = QMessageBox.question(
                 self.parent, "Process", f"The check before leaving asked for a re-scan:\n\n{lines}\n\nProcess as it "
-                "is anyway? (No: add the re-scan's fine scans first, Epoch ▸ Add fine scans to the selected epoch…)",
+                "is anyway? (No: add the re-scan's fine scans first, Epoch ▸ Add fine scans to the selected "
+                "epoch…)",
                 QMessageBox.Yes | QMessageBox.No, QMessageBox.No)
             if answer != QMessageBox.Yes:
                 self.state.status.result("not processed: the re-scan first (Epoch ▸ Add fine scans to the selected "

@@ -223,9 +223,9 @@ def campaign_status(c: Campaign) -> dict:
     """Name, span, time zone, baseline, epochs, instrument, the latest row of every target, and warnings.
 
     ``epochs`` carry their state, staleness and flags, the on-site check's verdict (``check``, None when none
-    holds) and the targets it asks to re-scan (``rescan``, empty once the re-scan is added or accepted); ``instrument`` is the campaign's range walk and axis
-    errors as its field model found them (:func:`~projects.results.corrections.instrument_summary`; None
-    before one is fitted).
+    holds) and the targets it asks to re-scan (``rescan``, empty once the re-scan is added or accepted);
+    ``instrument`` is the campaign's range walk and axis errors as its field model found them
+    (:func:`~projects.results.corrections.instrument_summary`; None before one is fitted).
 
     ``warnings`` are the layout's (targets no station could reach) and the stored results that fail their
     checksum (not shown, recomputed by ``process``); ``unlisted_files`` the files of the

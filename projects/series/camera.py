@@ -37,8 +37,8 @@ def import_series(c: Campaign, path: str | os.PathLike, *, name: str | None = No
     """Read a camera series file, copy it into the campaign (read-only) and store the series.
 
     ``timezone`` is the zone of times without an offset (default: the campaign's, :attr:`Campaign.timezone`);
-    the series' ``times_read`` says which was assumed. Nothing changes in the campaign unless the whole file was read; a file already imported
-    (same checksum) or an existing name is refused.
+    the series' ``times_read`` says which was assumed. Nothing changes in the campaign unless the whole file was
+    read; a file already imported (same checksum) or an existing name is refused.
     """
     path, name = c.series.check_new("camera_series", path, name, "a camera series")
     rid = reflector or midspan_reflector(c)
