@@ -132,6 +132,14 @@ class Commands:
         label = self.state.map.label
         if plan is None or label is None:
             return
+        cut = self.state.map.cut_targets(plan)
+        if cut:  # said before it is saved: a window that cuts its target gives fewer points than the plan says
+            names = ", ".join(f"{r.reflector} (planned {r.expected_target_points:,} points on it)" for r in cut)
+            if QMessageBox.question(self.parent, "Save plan", f"These windows do not hold their whole target: "
+                                    f"{names}. The scan would give fewer points on them than planned. Save anyway?",
+                                    QMessageBox.Yes | QMessageBox.No, QMessageBox.No) != QMessageBox.Yes:
+                self.state.status.result("plan not saved: widen or move the windows over their targets")
+                return
 
         def done(_r):
             self.state.map.editor.mark_saved(plan.rois)
