@@ -488,6 +488,60 @@ def _plan_full_dome(targets: Sequence[PlanTarget], *, epoch: str, profile: Scann
 
 
 # ---------------------------------------------------------------------- editing a plan by hand
+#: A window edited by hand keeps at least this margin around its target's disc, metres: the centroid needs the
+#: disc's whole rim and a ring of background around it.
+MIN_EDIT_MARGIN_M = 0.02
+
+
+def target_extent(xyz_socs: ArrayLike, *, diameter_m: float, margin_m: float = MIN_EDIT_MARGIN_M) -> AngularWindow:
+    """The smallest window holding a target's disc and a margin around it.
+
+    Parameters
+    ----------
+    xyz_socs : (3,) array_like
+        The target's centre in the scanner frame, metres.
+    diameter_m : float, keyword-only
+        The disc's diameter, metres.
+    margin_m : float, keyword-only
+        Kept around the disc, metres (default :data:`MIN_EDIT_MARGIN_M`).
+
+    Returns
+    -------
+    AngularWindow
+        Its steps are the extent's own size (the extent is a bound, not a scan).
+
+    Examples
+    --------
+    >>> w = target_extent([0.0, 20.0, 0.0], diameter_m=0.05)  # 20 m away, level: 0.045 m each side
+    >>> round(w.theta_max_deg - w.theta_min_deg, 4), round(w.phi_max_deg - w.phi_min_deg, 4)
+    (0.2578, 0.2578)
+    """
+    theta_a, phi_a, rng = spherical_from_xyz(np.asarray(xyz_socs, dtype=np.float64).reshape(1, 3))
+    theta, phi, r = float(theta_a[0]), float(phi_a[0]), float(rng[0])
+    half_t = math.degrees(math.atan((diameter_m / 2.0 + margin_m) / max(r, 1e-3)))
+    half_p = half_t / max(math.sin(math.radians(theta)), 1e-3)
+    lo, hi = max(theta - half_t, 0.0), min(theta + half_t, 180.0)
+    return AngularWindow(phi - half_p, phi + half_p, lo, hi, 2 * half_p, hi - lo)
+
+
+def holds(window: AngularWindow, extent: AngularWindow) -> bool:
+    """Whether ``window`` holds the whole of ``extent`` (azimuths compared across the 0/360 seam).
+
+    >>> e = target_extent([0.0, 20.0, 0.0], diameter_m=0.05)
+    >>> holds(AngularWindow(e.phi_min_deg - 0.1, e.phi_max_deg + 0.1, 89.0, 91.0, 0.01, 0.01), e)
+    True
+    >>> holds(AngularWindow(e.phi_min_deg + 0.05, e.phi_max_deg, 89.0, 91.0, 0.01, 0.01), e)
+    False
+    """
+    tol = 1e-6  # degrees: windows are stored to 1e-6
+    if extent.theta_min_deg < window.theta_min_deg - tol or extent.theta_max_deg > window.theta_max_deg + tol:
+        return False
+    shift = 360.0 * round(((window.phi_min_deg + window.phi_max_deg) - (extent.phi_min_deg + extent.phi_max_deg))
+                          / 720.0)
+    return (extent.phi_min_deg + shift >= window.phi_min_deg - tol
+            and extent.phi_max_deg + shift <= window.phi_max_deg + tol)
+
+
 EDITED_NOTE = "window edited by hand"
 
 

@@ -243,8 +243,8 @@ def add_demo_story(c: Campaign, folder: Path, *, weeks: int, seed: int, start: d
         if m3["thermal_mm_per_degC"] is not None:
             notes.append(f"analysis of M3: {m3['thermal_mm_per_degC']:.3f} ± {m3['thermal_sigma']:.3f} mm/°C "
                          f"(simulated {THERMAL_MM_PER_DEGC:.3f}); "
-                         + "; ".join(f"{e['label']} {e['step_mm']} mm (simulated "
-                                     f"{-next(s for _, lab, s in DEAD_LOAD_WEEKS if lab == e['label']):.1f})"
+                         + "; ".join(f"{e['label']} {e['step_mm']:+.2f} mm (simulated "
+                                     f"{-next(s for _, lab, s in DEAD_LOAD_WEEKS if lab == e['label']):+.2f})"
                                      for e in m3["events"] if e["step_mm"] is not None))
         notes.append(f"analysis: {folder / 'analysis' / 'analysis.json'}")
     return notes

@@ -17,13 +17,17 @@ def register(sub) -> None:
     es.required = True
     q = es.add_parser("import", help="import a series (CSV/text; the file is kept read-only in the campaign)")
     add_dir(q)
-    input_file(q, "file", help="the series file: a time column and a value column (CSV or text)")
+    input_file(q, "file", help="the series file: a time column and a value column (CSV or text; separated by "
+                                "commas, semicolons, tabs or spaces; decimal commas read; bad rows left out and "
+                                "counted)")
     q.add_argument("--kind", required=True, choices=kinds, metavar="KIND", help="what it measures: %(choices)s")
     q.add_argument("--name", default=None, help="series name (default: the file name)")
     q.add_argument("--column", default=None, help="the value column when the header does not tell")
     q.add_argument("--unit", default=None, help="the values' unit when the header does not tell (degC, degF, K, "
                                                  "W/m2, mm, cm, %%...)")
-    q.add_argument("--timezone", default="UTC", help="for times without an offset (IANA name or +hh:mm)")
+    q.add_argument("--timezone", default=None, metavar="ZONE",
+                   help="the zone of times without an offset (IANA name or +hh:mm; default: the campaign's, "
+                        "see 'status')")
     q.set_defaults(func=cmd_env_import)
     q = es.add_parser("list", help="the imported series")
     add_dir(q)
@@ -86,12 +90,25 @@ def cmd_env_import(args) -> int:
     with open_campaign(args.dir) as c:
         name, s = import_env(c, args.file, kind=args.kind, name=args.name, column=args.column, unit=args.unit,
                              timezone=args.timezone)
-    summ = s.summary()
-    print(f"imported {args.kind} series {name!r}: {summ['rows']} rows from {summ['start']} to {summ['end']}, "
-          f"{summ['bad_rows']} bad row(s), {summ['gaps']} gap(s), {summ['missing_values']} missing value(s)")
-    for line in summ["first_bad_lines"][:3]:
-        print(f"  bad {line}")
+    print_import(f"{args.kind} series {name!r}", s.summary())
     return 0
+
+
+def print_import(what: str, summ: dict) -> None:
+    """The lines an import of a series prints: what was read, how the times were read, what was left out."""
+    print(f"imported {what}: {summ['rows']} rows from {summ['start']} to {summ['end']}, column "
+          f"'{summ['column']}' in {summ['unit_read']}, {summ['gaps']} gap(s), {summ['missing_values']} missing "
+          f"value(s)")
+    print(f"  times: {summ['times']}")
+    if summ["bad_rows"]:
+        print(f"  {summ['bad_rows']} bad row(s) of {summ['rows_in_file']} left out (could not be read):")
+    for line in summ["first_bad_lines"][:5]:
+        print(f"    {line}")
+    if summ["bad_rows"] > 5:
+        print(f"    ... and {summ['bad_rows'] - 5} more")
+    for note in summ["notes"]:
+        if "could not be read" not in note:
+            print(f"  note: {note}")
 
 
 def cmd_env_list(args) -> int:

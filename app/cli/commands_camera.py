@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from app.cli.args import add_dir, add_json, input_file, output_folder
+from app.cli.commands_analysis import print_import
 from app.cli.output import dump_json, table
 from common.flags import FLAG_NO_CAMERA_DATA
 
@@ -22,7 +23,9 @@ def register(sub) -> None:
     q.add_argument("--name", default=None, help="series name (default: the file name)")
     q.add_argument("--reflector", default=None, help="LiDAR target the camera watches (default: the one at midspan)")
     q.add_argument("--column", default=None, help="value column, when the file has several")
-    q.add_argument("--timezone", default="UTC", help="zone of times without an offset: IANA name or +hh:mm (UTC)")
+    q.add_argument("--timezone", default=None, metavar="ZONE",
+                   help="the zone of times without an offset (IANA name or +hh:mm; default: the campaign's, "
+                        "see 'status')")
     q.add_argument("--unit", default=None, help="unit of the values when the file does not say (default mm)")
     q.add_argument("--positive", choices=("up", "down"), default="up", help="the file's sign convention (up)")
     add_json(q, help="print the import summary as JSON")
@@ -59,14 +62,7 @@ def cmd_camera_import(args) -> int:
     if args.json:
         dump_json({"name": name, "reflector": rid, **s})
         return 0
-    print(f"imported camera series '{name}' for {rid}: {s['rows']} rows from {s['start']} to {s['end']}, "
-          f"sampling {s['sampling_s']:.0f} s, column '{s['column']}' ({s['unit']})")
-    print(f"  missing values {s['missing_values']}, gaps {s['gaps']}, bad rows {s['bad_rows']}"
-          + (f", repeated times {s['duplicates_dropped']}" if s["duplicates_dropped"] else ""))
-    for line in s["first_bad_lines"]:
-        print(f"  left out: {line}")
-    for note in s["notes"]:
-        print(f"  note: {note}")
+    print_import(f"camera series '{name}' for {rid} (sampling {s['sampling_s']:.0f} s)", s)
     return 0
 
 

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import shlex
 import sys
 from pathlib import Path
 
@@ -33,6 +34,9 @@ def register(sub) -> None:
     p.add_argument("--span-m", type=float, default=None, help="span length, for span-fraction limits")
     p.add_argument("--scanner", default=None,
                    help="scanner profile: a name from 'bridgesurvey scanners' or a profile .json (default Riegl VZ-1000)")
+    p.add_argument("--timezone", default="UTC", metavar="ZONE",
+                   help="the bridge's time zone: imported times without an offset are read in it (IANA name such as "
+                        "Europe/Berlin, or +hh:mm; default UTC; 'settings DIR timezone ZONE' changes it)")
     p.set_defaults(func=cmd_init)
 
     p = sub.add_parser("add-epoch", help="import a visit: its coarse scan (and fine scans, if any)",
@@ -97,6 +101,9 @@ def register(sub) -> None:
     add_epoch(p, required=False, action="append", default=None,
               help="only this epoch (repeatable; default: every epoch)")
     add_json(p, help="print what was done as JSON (every epoch, with its action and state)")
+    p.add_argument("--accept-check", action="store_true",
+                   help="process an epoch whose on-site check asked for a re-scan as it is (the choice is logged); "
+                        "without it such an epoch is refused until its re-scan is added")
     p.set_defaults(func=cmd_process)
 
     p = sub.add_parser("displacements", help="print or write the displacement history",
@@ -122,13 +129,15 @@ def register(sub) -> None:
 
     p = sub.add_parser("reflector", help="list, add, retire or replace reflectors",
                        description="The campaign's reflector targets: list them, add one, retire one, or replace "
-                                   "one by another whose history continues the old one's.")
-    add_dir(p)
+                                   "one by another whose history continues the old one's "
+                                   "(bridgesurvey reflector ACTION DIR ...).")
     rs = p.add_subparsers(dest="action", metavar="ACTION")
     rs.required = True
     q = rs.add_parser("list", help="every reflector with its group, position and life")
+    add_dir(q)
     add_json(q)
     q = rs.add_parser("add", help="a new reflector (from a date on)")
+    add_dir(q)
     q.add_argument("id", help="the new reflector's id")
     q.add_argument("--group", required=True, choices=("reference", "measurement"),
                    help="reference (on a pier) or measurement (under the deck)")
@@ -136,14 +145,17 @@ def register(sub) -> None:
     q.add_argument("--diameter-mm", type=float, default=50.0, help="target diameter (50)")
     q.add_argument("--installed", default=None, help="ISO date from which scans should hold it")
     q = rs.add_parser("retire", help="a reflector that is gone (kept in the history)")
+    add_dir(q)
     q.add_argument("id", help="the reflector's id")
     q.add_argument("--date", required=True, help="ISO date from which it is gone")
     q = rs.add_parser("replace", help="a new reflector continuing an old one's history")
+    add_dir(q)
     q.add_argument("old", help="the id of the reflector replaced")
     q.add_argument("new", help="the id of its replacement")
     q.add_argument("--date", required=True, help="ISO date of the replacement")
     q.add_argument("--xyz", default=None, help="new position if not the same place")
-    p.set_defaults(func=cmd_reflector)
+    for q in rs.choices.values():
+        q.set_defaults(func=cmd_reflector)
 
     p = sub.add_parser("limit", help="set warning/alarm limits",
                        description="Rules: abs:WARN_MM,ALARM_MM | span:NW,NA (L/NW, L/NA) | kr-rail:0-200|200-270|270-350"
@@ -161,7 +173,10 @@ def register(sub) -> None:
                                    "recomputes exactly the results it affects\n(stale: plan = plans and centroids "
                                    "of every epoch, displacements = displacements only, baseline = every "
                                    "displacement).\n\n" + help_text() + "\n  scanner (NAME | FILE.json): the "
-                                   "campaign's instrument (with --epoch: one visit's)")
+                                   "campaign's instrument (with --epoch: one visit's)\n  timezone (an IANA name "
+                                   "such as "
+                                   "Europe/Berlin, or +hh:mm; default UTC): the zone imported times without an "
+                                   "offset are read in")
     add_dir(p)
     p.add_argument("key", nargs="?", help="the parameter to change (see above; none: list them all)")
     p.add_argument("value", nargs="?", help="its new value (none: back to the default)")
@@ -228,7 +243,12 @@ def _frames_of(args):
 
     def frames_of(path: Path, fallback):
         with progress_bar(f"checking {path.name}") as cb:
-            return file_frames(path, given=given, fallback=fallback, progress=cb)
+            frames = file_frames(path, given=given, fallback=fallback, progress=cb)
+        dropped, points = sum(f.dropped_points for f in frames), sum(f.points for f in frames)
+        if dropped:
+            print(f"note: {path}: {dropped:,} of {dropped + points:,} points ({100 * dropped / (dropped + points):.1f} "
+                  "%) have a NaN or infinite coordinate and are left out")
+        return frames
     return frames_of
 
 
@@ -250,9 +270,11 @@ def cmd_init(args) -> int:
 
     profile = get_scanner(args.scanner or DEFAULT_SCANNER)
     layout = read_layout_csv(args.layout, default_diameter_m=args.target_diameter_mm / 1000.0)
-    with Campaign.create(args.dir, name=args.name, layout=layout, span_m=args.span_m, profile=profile) as c:
+    with Campaign.create(args.dir, name=args.name, layout=layout, span_m=args.span_m, profile=profile,
+                         timezone=args.timezone) as c:
         print(f"created campaign '{c.name}' in {args.dir} with {len(layout)} reflectors "
-              f"({len(layout.ids_in('reference'))} reference, {len(layout.ids_in('measurement'))} measurement)")
+              f"({len(layout.ids_in('reference'))} reference, {len(layout.ids_in('measurement'))} measurement), "
+              f"time zone {c.timezone}")
         for w in c.layout_warnings():
             print(f"warning: {w}")
     return 0
@@ -353,6 +375,7 @@ def cmd_process(args) -> int:
     from projects.results.state import epoch_states
 
     with open_campaign(args.dir) as c:
+        _check_verdicts_allow(c, args)
         had_displacements = {e.label for e in c.epochs() if c.displacement_set(e.label) is not None}
         with progress_bar("processing") as cb:
             summary = process(c, args.epoch, progress=cb)
@@ -374,6 +397,24 @@ def cmd_process(args) -> int:
               "; ".join(f"{lab}: {flag}" for lab, flag in summary.problems.items()), file=sys.stderr)
         return EXIT_PROBLEM
     return 0
+
+
+def _check_verdicts_allow(c, args) -> None:
+    """Refuse (one line, nothing changed) to process an epoch whose check asked for a re-scan not yet added,
+    unless ``--accept-check`` (then the acceptance is logged)."""
+    from projects.field.check import pending_rescans
+
+    for label in args.epoch or ():
+        c.epoch(label)
+    pending = pending_rescans(c, args.epoch or [e.label for e in c.epochs()])  # what 'process' brings up to date
+    if not pending:
+        return
+    if not args.accept_check:
+        what = "; ".join(f"{label}: the check asked to {v.line()}" for label, v in pending.items())
+        raise InputError(f"{what}; add the re-scan's fine scans (bridgesurvey add-fine {args.dir} --epoch "
+                         f"{next(iter(pending))} FILE...), or process as it is with --accept-check")
+    for label in pending:
+        c.accept_check(label)
 
 
 def _process_rows(summary, states: dict, had_displacements: set) -> list[dict]:
@@ -422,14 +463,14 @@ def _process_summary(rows: list[dict], baseline) -> str:
 
 def cmd_displacements(args) -> int:
     from common.files import write_atomic  # csv, hashlib, tempfile: 0.11 s of every command's start (importtime)
-    from projects.results.table import damaged_line, displacement_table, to_csv
+    from projects.results.table import damaged_line, displacement_table, to_csv, written_rows
 
     with open_campaign(args.dir, writable=False) as c:
         rows = displacement_table(c)
         damaged = damaged_line(c)
     if damaged:  # never rows dropped without a word (the CSV itself keeps its contract: a header, then rows)
         print(f"bridgesurvey: warning: {damaged}", file=sys.stderr)
-    text = to_csv(rows) if args.format == "csv" else json.dumps(rows, indent=2)
+    text = to_csv(rows) if args.format == "csv" else json.dumps(written_rows(rows), indent=2)
     if args.out:
         write_atomic(args.out, text)
         print(f"wrote {len(rows)} rows to {args.out}")
@@ -453,8 +494,8 @@ def cmd_status(args) -> int:
         dump_json(data)
         return 0
     epochs = data["epochs"]
-    print(f"campaign '{data['name']}', span {data['span_m'] or '?'} m, baseline {data['baseline'] or '-'}, "
-          f"{len(epochs)} epoch(s)")
+    print(f"campaign '{data['name']}', span {data['span_m'] or '?'} m, time zone {data['timezone']}, "
+          f"baseline {data['baseline'] or '-'}, {len(epochs)} epoch(s)")
     shown = epochs if args.all else epochs[-STATUS_EPOCHS:]
     table([{**e, "flags": describe(e["flag_list"]) if args.verbose else _short(summary(e["flag_list"])),
             "scale": _scale_text(e, data["baseline"])} for e in shown],
@@ -465,6 +506,9 @@ def cmd_status(args) -> int:
     tally = {s: sum(w == s for w in levels.values()) for s in ("problem", "warning", "info")}
     print(f"epochs with problems: {tally['problem']}, with warnings: {tally['warning']}, "
           f"with information flags only: {tally['info']}")
+    for e in epochs:
+        if e["rescan"]:
+            print(f"CHECK of {e['epoch']}: {e['check']}; next: the re-scan (add-fine), or process --accept-check")
     for e in epochs:
         level = levels[e["epoch"]]
         if level in ("problem", "warning"):
@@ -570,6 +614,8 @@ def cmd_settings(args) -> int:
 
     if args.key == "scanner":
         return _set_scanner(args)
+    if args.key == "timezone":
+        return _set_timezone(args)
     if args.epoch is not None:
         raise InputError("--epoch goes with the 'scanner' setting only")
     if args.key is None:
@@ -577,7 +623,9 @@ def cmd_settings(args) -> int:
             params = parameters(c)
             params["baseline"] = c.settings().get("baseline")
             params["scanner"] = c.profile.name
-        table([{"key": k, "value": v, "default": DEFAULTS.get(k)} for k, v in params.items()],
+            params["timezone"] = c.timezone
+        defaults = {**DEFAULTS, "timezone": "UTC"}
+        table([{"key": k, "value": v, "default": defaults.get(k)} for k, v in params.items()],
               ["key", "value", "default"])
         return 0
     with open_campaign(args.dir) as c:
@@ -590,6 +638,17 @@ def cmd_settings(args) -> int:
               "at the next 'bridgesurvey process' (the change is in the campaign log)", file=sys.stderr)
     print(f"{args.key} = {args.value}; {len(stale)} epoch(s) need processing for their centroids "
           "(displacements follow); run 'bridgesurvey process'")
+    return 0
+
+
+def _set_timezone(args) -> int:
+    if args.epoch is not None:
+        raise InputError("--epoch goes with the 'scanner' setting only")
+    with open_campaign(args.dir) as c:
+        old = c.timezone
+        c.set_timezone(args.value or "UTC")
+        print(f"timezone = {c.timezone} (was {old}): imports from now on read times without an offset in it; "
+              "series imported before keep the zone they were read in")
     return 0
 
 
@@ -627,4 +686,7 @@ def cmd_demo(args) -> int:
     with progress_bar("demo campaign") as cb:
         result = build_demo(args.dir, weeks=args.weeks, seed=args.seed, progress=cb)
     print(result.summary())
+    folder = shlex.quote(str(args.dir))
+    print(f"open it in the application: ./run gui {folder} (from the source folder; installed: bridgesurvey-gui "
+          f"{folder}); on the command line: bridgesurvey status {folder}")
     return 0

@@ -178,15 +178,48 @@ def _refuse_unknown(parser: argparse.ArgumentParser, extra: Sequence[str]) -> No
     parser.error(f"unrecognized arguments: {' '.join(extra)}{hint}")
 
 
+def _actions_of(parser: argparse.ArgumentParser, command: str) -> dict[str, argparse.ArgumentParser]:
+    """The actions of ``command`` (``env`` -> import, list), or {} for a command without actions."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction) and command in action.choices:
+            sub = action.choices[command]
+            return next((dict(a.choices) for a in sub._actions if isinstance(a, argparse._SubParsersAction)), {})
+    return {}
+
+
+def action_first(parser: argparse.ArgumentParser, argv: Sequence[str]) -> list[str]:
+    """``argv`` in the one order of commands with actions, ``COMMAND ACTION DIR ...``, with a hint when swapped.
+
+    Every command with actions takes its action right after its name (``env import DIR FILE``, ``fleet status
+    ROOT``, ``reflector list DIR``). The other order (``reflector DIR list``) is read as the same command; a line
+    on stderr shows the order to use.
+    """
+    argv = list(argv)
+    words = [i for i, w in enumerate(argv) if not w.startswith("-")]
+    if len(words) < 3:
+        return argv
+    command, first, second = (argv[i] for i in words[:3])
+    actions = _actions_of(parser, command)
+    if not actions or first in actions or second not in actions or words[2] != words[1] + 1:
+        return argv
+    argv.insert(words[1], argv.pop(words[2]))
+    rest = " ".join(argv[words[1] + 1:])
+    print(f"bridgesurvey: note: the action comes first: bridgesurvey {command} {second} {rest}", file=sys.stderr)
+    return argv
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(_command_of(argv))
+    argv = action_first(parser, argv)
     args, extra = parser.parse_known_args(argv)
     command_parser = getattr(args, "_parser", parser)
     if extra:
         _refuse_unknown(command_parser, extra)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
+    if not args.verbose:  # a damaged LAZ: laspy logs its own ERROR line before the one line we print
+        logging.getLogger("laspy").setLevel(logging.CRITICAL)
     if args.command in SINGLE_THREADED_BLAS:  # read when numpy loads: the command imports it later
         os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     try:

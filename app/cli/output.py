@@ -6,19 +6,26 @@ import math
 import sys
 from collections.abc import Sequence
 
+from common.numbers import shown
+
 
 def table(rows: Sequence[dict], columns: Sequence[str], out=None) -> None:
     out = out or sys.stdout
     if not rows:
         out.write("(none)\n")
         return
-    def fmt(v):
+    def fmt(v, column):
         if isinstance(v, float):
-            return "-" if math.isnan(v) else f"{v:.4f}".rstrip("0").rstrip(".") if abs(v) < 1e5 else f"{v:.1f}"
+            if math.isnan(v):
+                return "-"
+            fixed = shown(column, v)  # millimetres to 0.01 in every table (common.numbers)
+            if fixed is not None:
+                return fixed
+            return f"{v:.4f}".rstrip("0").rstrip(".") if abs(v) < 1e5 else f"{v:.1f}"
         if isinstance(v, (list, tuple)):
             return ",".join(str(x) for x in v) or "-"
         return "-" if v is None or v == "" else str(v)
-    cells = [[fmt(r.get(c)) for c in columns] for r in rows]
+    cells = [[fmt(r.get(c), c) for c in columns] for r in rows]
     widths = [max(len(c), *(len(row[i]) for row in cells)) for i, c in enumerate(columns)]
     out.write("  ".join(c.ljust(w) for c, w in zip(columns, widths, strict=False)).rstrip() + "\n")
     for row in cells:

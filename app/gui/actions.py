@@ -84,11 +84,22 @@ def save_plan(session, label: str, scan_plan) -> None:
         save_edited_plan(c, label, scan_plan)
 
 
-def process(session, progress: Callable):
+def process(session, progress: Callable, *, accept_check: tuple[str, ...] = ()):
+    """Process what is stale; ``accept_check``: epochs whose check asked for a re-scan, processed as they are."""
     from projects.processing.stages import process as run
 
     with session.write() as c:
+        for label in accept_check:
+            c.accept_check(label)
         return run(c, progress=progress)
+
+
+def pending_rescans(session) -> dict[str, str]:
+    """``epoch -> the check's verdict`` of the epochs whose check asked for a re-scan not made nor accepted."""
+    from projects.field.check import pending_rescans as pending
+
+    with session.read() as c:
+        return {label: v.line() for label, v in pending(c, [e.label for e in c.epochs()]).items()}
 
 
 def inspect(session, label: str, rid: str, progress: Callable):

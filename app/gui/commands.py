@@ -29,7 +29,7 @@ from app.gui.dialogs import (
 )
 from app.gui.state.app_state import AppState
 from app.gui.state.folders import LastFolders
-from app.gui.state.words import in_app_words
+from app.gui.state.words import in_app_words, windows_text
 from common.errors import SurveyError
 
 
@@ -132,6 +132,14 @@ class Commands:
         label = self.state.map.label
         if plan is None or label is None:
             return
+        cut = self.state.map.cut_targets(plan)
+        if cut:  # said before it is saved: a window that cuts its target gives fewer points than the plan says
+            names = ", ".join(f"{r.reflector} (planned {r.expected_target_points:,} points on it)" for r in cut)
+            if QMessageBox.question(self.parent, "Save plan", f"These windows do not hold their whole target: "
+                                    f"{names}. The scan would give fewer points on them than planned. Save anyway?",
+                                    QMessageBox.Yes | QMessageBox.No, QMessageBox.No) != QMessageBox.Yes:
+                self.state.status.result("plan not saved: widen or move the windows over their targets")
+                return
 
         def done(_r):
             self.state.map.editor.mark_saved(plan.rois)
@@ -218,7 +226,7 @@ class Commands:
         def done(result):
             new, plans = result
             self.state.refresh()
-            what = ", ".join(f"set-up {k}: {len(p.rois)} windows, {p.total_seconds / 60:.1f} min"
+            what = ", ".join(f"set-up {k}: {windows_text(p.rois)}, {p.total_seconds / 60:.1f} min"
                              for k, p in zip(new, plans, strict=False))
             self.state.status.result(f"{label}: {what}; next: scan them and add the fine scans (Epoch ▸ Add fine "
                                      "scans to the selected epoch…, they go to the set-up added last)")
@@ -235,18 +243,32 @@ class Commands:
             self.state.refresh()
             self.state.select(epoch=label)
             self.state.request_view("map")
-            self.state.status.result(f"{label} planned: {len(plan.rois)} windows, {plan.total_seconds / 60:.1f} min; "
+            self.state.status.result(f"{label} planned: {windows_text(plan.rois)}, {plan.total_seconds / 60:.1f} min; "
                                      "export the plan for the scanner (Export plan JSON…) or print the field sheet")
 
         self._job(f"Planning {label}", lambda p: actions.plan(self.state.access, label, p), done)
 
     def process(self) -> None:
+        pending = actions.pending_rescans(self.state.access)  # the check is binding: its re-scan asks first
+        if pending:
+            lines = "\n".join(f"{label}: {line}" for label, line in pending.items())
+            answer = QMessageBox.question(
+                self.parent, "Process", f"The check before leaving asked for a re-scan:\n\n{lines}\n\nProcess as it "
+                "is anyway? (No: add the re-scan's fine scans first, Epoch ▸ Add fine scans to the selected "
+                "epoch…)",
+                QMessageBox.Yes | QMessageBox.No, QMessageBox.No)
+            if answer != QMessageBox.Yes:
+                self.state.status.result("not processed: the re-scan first (Epoch ▸ Add fine scans to the selected "
+                                         "epoch…)")
+                return
+        accept = tuple(pending)
+
         def done(summary):
             self.state.refresh()
             if summary.failed:
                 self.state.report_error("Processing", "; ".join(f"{o.epoch}: {o.message}" for o in summary.failed))
 
-        self._job("Processing", lambda p: actions.process(self.state.access, p), done)
+        self._job("Processing", lambda p: actions.process(self.state.access, p, accept_check=accept), done)
 
     def field_sheet(self) -> None:
         label = self._need_epoch("Field sheet", "an epoch (its coarse scan)")
@@ -386,7 +408,8 @@ class Commands:
                 default = midspan_reflector(c)
             except SurveyError:
                 default = None
-        dlg = ImportCameraDialog(meas, default, self.parent, self.host.folders)
+            zone = c.timezone
+        dlg = ImportCameraDialog(meas, default, self.parent, self.host.folders, zone=zone)
         if dlg.exec() != ImportCameraDialog.Accepted:
             return
         v = dlg.values()
@@ -394,8 +417,9 @@ class Commands:
         def done(r):
             name, summary = r
             self.state.refresh()
-            self.state.status.result(f"camera series {name!r} imported: {summary['rows']:,} rows; next: Camera ▸ "
-                                     "Cross-validate with LiDAR")
+            self.state.status.result(f"camera series {name!r} imported: {summary['rows']:,} rows, "
+                                     f"{summary['bad_rows']} bad row(s) left out, times {summary['times']}; "
+                                     "next: Camera ▸ Cross-validate with LiDAR")
 
         self._job("Importing the camera series", lambda p: actions.import_camera(self.state.access, v, p), done)
 
@@ -408,7 +432,9 @@ class Commands:
 
     # ------------------------------------------------------------------ analysis inputs
     def import_env(self) -> None:
-        dlg = ImportEnvDialog(self.parent, self.host.folders)
+        with self.state.read() as c:
+            zone = c.timezone
+        dlg = ImportEnvDialog(self.parent, self.host.folders, zone=zone)
         if dlg.exec() != ImportEnvDialog.Accepted:
             return
         v = dlg.values()
@@ -417,7 +443,8 @@ class Commands:
             name, summary = r
             self.state.refresh()
             self.state.status.result(f"{v['kind']} series {name!r} imported: {summary['rows']:,} rows, "
-                                     f"{summary['bad_rows']} bad row(s); next: Analysis ▸ Analyse")
+                                     f"{summary['bad_rows']} bad row(s) left out, times {summary['times']}; "
+                                     "next: Analysis ▸ Analyse")
 
         self._job("Importing the environment series", lambda p: actions.import_env(self.state.access, v, p), done)
 

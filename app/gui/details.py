@@ -1,6 +1,7 @@
 """The details panel: the HTML of the selection (built in :mod:`app.gui.state.details_html`) in a text browser."""
 from __future__ import annotations
 
+from PySide6.QtGui import QTextOption
 from PySide6.QtWidgets import QTextBrowser
 
 
@@ -9,3 +10,5 @@ class DetailsPanel(QTextBrowser):
         super().__init__(parent)
         self.setOpenExternalLinks(False)
         self.setMinimumWidth(200)
+        # lines break between words only (Qt's default also breaks a word that does not fit, mid-word)
+        self.setWordWrapMode(QTextOption.WrapMode.WordWrap)

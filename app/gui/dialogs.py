@@ -251,7 +251,7 @@ class ImportCameraDialog(QDialog):
     """A camera series file and how to read it."""
 
     def __init__(self, reflectors: list[str], default: str | None, parent=None,
-                 folders: LastFolders | None = None):
+                 folders: LastFolders | None = None, zone: str = "UTC"):
         super().__init__(parent)
         self.setWindowTitle("Import camera series")
         lay = QVBoxLayout(self)
@@ -263,7 +263,8 @@ class ImportCameraDialog(QDialog):
         self.reflector.addItems(reflectors)
         if default in reflectors:
             self.reflector.setCurrentText(default)
-        self.timezone = QLineEdit("UTC")
+        self.timezone = QLineEdit(zone)
+        self.timezone.setToolTip("the campaign's time zone unless you change it here")
         self.positive = QComboBox()
         self.positive.addItems(["up", "down"])
         form.addRow("File", self.file)
@@ -276,14 +277,14 @@ class ImportCameraDialog(QDialog):
 
     def values(self) -> dict:
         return {"file": self.file.text(), "name": self.name.text().strip() or None,
-                "reflector": self.reflector.currentText() or None, "timezone": self.timezone.text().strip() or "UTC",
+                "reflector": self.reflector.currentText() or None, "timezone": self.timezone.text().strip() or None,
                 "positive": self.positive.currentText()}
 
 
 class ImportEnvDialog(QDialog):
     """An environment series (temperature, sun, rain, snow, humidity) and how to read it."""
 
-    def __init__(self, parent=None, folders: LastFolders | None = None):
+    def __init__(self, parent=None, folders: LastFolders | None = None, zone: str = "UTC"):
         from projects.series.environment import KINDS
 
         super().__init__(parent)
@@ -300,7 +301,8 @@ class ImportEnvDialog(QDialog):
         self.column.setPlaceholderText("when the header does not tell")
         self.unit = QLineEdit()
         self.unit.setPlaceholderText("when the header does not tell (degC, degF, K, W/m2, mm, cm, %)")
-        self.timezone = QLineEdit("UTC")
+        self.timezone = QLineEdit(zone)
+        self.timezone.setToolTip("the campaign's time zone unless you change it here")
         form.addRow("File", self.file)
         form.addRow("Kind", self.kind)
         form.addRow("Series name", self.name)
@@ -316,7 +318,7 @@ class ImportEnvDialog(QDialog):
     def values(self) -> dict:
         return {"file": self.file.text(), "kind": self.kind.currentData(), "name": self.name.text().strip() or None,
                 "column": self.column.text().strip() or None, "unit": self.unit.text().strip() or None,
-                "timezone": self.timezone.text().strip() or "UTC"}
+                "timezone": self.timezone.text().strip() or None}
 
 
 class AddEventDialog(QDialog):

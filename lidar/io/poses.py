@@ -18,7 +18,7 @@ import math
 import os
 import re
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -222,6 +222,9 @@ class FileFrame:
         Where the pose came from: ``"file"`` (the scan's own), ``"pose"`` (a pose file), ``"origin"``, or "".
     given : str
         The pose file's path or the origin as typed, for the record.
+    points, dropped_points : int
+        Points read for the set-up, and points left out of them because a coordinate was NaN or infinite (what the
+        import tells the user; not stored, not part of :attr:`key`).
     """
 
     scans: tuple[int, ...] | None = None
@@ -229,6 +232,8 @@ class FileFrame:
     carry: bool = False
     source: str = ""
     given: str = ""
+    points: int = field(default=0, compare=False)
+    dropped_points: int = field(default=0, compare=False)
 
     def to_json(self) -> dict:
         return {"scans": None if self.scans is None else list(self.scans),
@@ -333,4 +338,6 @@ def file_frames(path: str | os.PathLike, *, given: FileFrame | None = None, fall
     if given is not None and len(groups) > 1:
         raise InputError(f"{p}: holds {len(groups)} scan positions with their own poses; one --pose cannot carry "
                          "them all (import it without --pose, or one scan position a file)")
-    return [_frame_of(p, scans, g, given, fallback, several) for g in groups]
+    return [replace(_frame_of(p, scans, g, given, fallback, several), points=sum(len(scans[k]) for k in g),
+                    dropped_points=sum(int(dict(scans[k].metadata).get("dropped_nonfinite_points", 0)) for k in g))
+            for g in groups]

@@ -125,7 +125,11 @@ class EpochCheck:
 
 def check_epoch(c: Campaign, label: str, *, goal_sigma_mm: float | None = None, setup: int = 1,
                 progress: ProgressCallback | None = None) -> EpochCheck:
-    """Measure the epoch's (set-up's) fine scans and judge every planned target (see the module notes)."""
+    """Measure the epoch's (set-up's) fine scans and judge every planned target (see the module notes).
+
+    The verdict is kept in the campaign (:meth:`Campaign.check_verdict`): a re-scan it asks for is the visit's next
+    step, and processing the epoch without it needs the user's word (:func:`pending_rescans`).
+    """
     from projects.processing.stages import run_stage1, save_stage1, stage1_job
 
     job = stage1_job(c, label, setup)  # one read of the store; an unknown epoch says so
@@ -184,8 +188,23 @@ def check_epoch(c: Campaign, label: str, *, goal_sigma_mm: float | None = None, 
         rows.append(TargetCheck(roi.reflector, roi.group, True, int(cent.n_points), planned, sigma, goal, status, note))
         if status != "ok":
             retry.append((roi, cent, ratio))
-    return EpochCheck(label, tuple(rows), _rescan_plan(plan, retry, diam) if retry else None,
-                      _closure_check(plan, cents, closures))
+    out = EpochCheck(label, tuple(rows), _rescan_plan(plan, retry, diam) if retry else None,
+                     _closure_check(plan, cents, closures))
+    # the verdict binds what comes next (the re-scan, and 'process' asks first): kept in the campaign
+    c.save_check_verdict(label, setup=setup, rescan={t.reflector: t.status if not t.found else t.note or t.status
+                                                          for t in out.short},
+                         drifted=out.closure is not None and out.closure.status == "drifted")
+    return out
+
+
+def pending_rescans(c: Campaign, epochs) -> dict:
+    """``epoch -> CheckVerdict`` of the ``epochs`` whose check asked for a re-scan neither made nor accepted."""
+    out = {}
+    for label in epochs:
+        verdict = c.check_verdict(label)
+        if verdict is not None and verdict.asks_rescan:
+            out[label] = verdict
+    return out
 
 
 def _rescan_plan(plan: ScanPlan, retry, diam: dict) -> ScanPlan:

@@ -70,16 +70,23 @@ def survey_roots(roots: Sequence[str | os.PathLike]) -> tuple[list[Path], list[t
             queue.append(p)
         else:
             raise InputError(f"{p}: no such folder or fleet file")
+    seen: set[str] = set()  # folders walked, resolved: a link back up the tree is walked once
     for root in queue:
-        base = len(root.resolve().parts)
-        for dirpath, dirnames, filenames in os.walk(root):
+        base = len(root.parts)
+        # a campaign folder may be a link (a bridge's folder kept on another disk): links are followed
+        for dirpath, dirnames, filenames in os.walk(root, followlinks=True):
             here = Path(dirpath)
+            real = str(here.resolve())
+            if real in seen:
+                dirnames[:] = []
+                continue
+            seen.add(real)
             if DB_NAME in filenames:
-                found.setdefault(str(here.resolve()), here)
+                found.setdefault(real, here)
                 dirnames[:] = []  # a campaign's own folders hold no campaign
                 continue
             dirnames[:] = sorted(d for d in dirnames if not d.startswith(".") and
-                                 len(Path(dirpath, d).resolve().parts) - base <= MAX_DEPTH)
+                                 len(Path(dirpath, d).parts) - base <= MAX_DEPTH)
     return sorted(found.values(), key=lambda p: str(p)), missing
 
 

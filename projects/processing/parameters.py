@@ -158,8 +158,9 @@ PROCESSING = tuple(p for p in PARAMETERS if p.stage in ("plan", "displacements")
 DEFAULTS: dict[str, Any] = {p.name: p.default for p in PROCESSING}
 STAGE1_KEYS = tuple(p.name for p in PROCESSING if p.stage == "plan")
 STAGE2_KEYS = tuple(p.name for p in PROCESSING if p.stage == "displacements")
-#: Names ``settings`` takes besides the parameters: the scanner has a command form of its own.
-OTHER_SETTINGS = ("scanner",)
+#: Names ``settings`` takes besides the parameters: the scanner and the campaign's time zone
+#: (:attr:`projects.store.campaign.Campaign.timezone`), each handled on its own.
+OTHER_SETTINGS = ("scanner", "timezone")
 
 
 def parameter(name: str) -> Parameter:

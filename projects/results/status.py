@@ -17,9 +17,11 @@ from projects.store.verify import REMEDY, describe_group
 
 
 def campaign_status(c: Campaign) -> dict:
-    """Name, span, baseline, epochs, instrument, the latest row of every target, and warnings.
+    """Name, span, time zone, baseline, epochs, instrument, the latest row of every target, and warnings.
 
-    ``epochs`` carry their state, staleness and flags; ``instrument`` is the campaign's range walk and axis
+    ``epochs`` carry their state, staleness and flags, the on-site check's verdict (``check``, None when none
+    holds) and the targets it asks to re-scan (``rescan``, empty once the re-scan is added or accepted);
+    ``instrument`` is the campaign's range walk and axis
     errors as its field model found them (:func:`~projects.results.corrections.instrument_summary`; None
     before one is fitted).
 
@@ -33,7 +35,11 @@ def campaign_status(c: Campaign) -> dict:
     for e in c.epochs():
         s = states[e.label]
         corr = epoch_corrections(c.systematics(e.label))
+        verdict = c.check_verdict(e.label)
         epochs.append({"epoch": e.label, "datetime": e.datetime[:16], "state": s.state,
+                       "check": None if verdict is None else verdict.line() + (" (processed as it is, by choice)"
+                                                                               if verdict.accepted else ""),
+                       "rescan": list(verdict.rescan) if verdict is not None and verdict.asks_rescan else [],
                        "stale": stale.get(e.label, ""), "flags": "; ".join(s.flags), "flag_list": list(s.flags),
                        "severity": count(s.flags),
                        "scale_ppm": None if corr is None else round(corr.scale_ppm, 2) + 0.0,
@@ -47,7 +53,7 @@ def campaign_status(c: Campaign) -> dict:
         if r["displacement_mm"] is not None or r["reflector"] not in latest:  # keep the last good value
             latest[r["reflector"]] = r
     fitted = c.field_model()
-    return {"name": c.name, "span_m": c.span_m, "baseline": baseline_epoch(c), "epochs": epochs,
+    return {"name": c.name, "span_m": c.span_m, "timezone": c.timezone, "baseline": baseline_epoch(c), "epochs": epochs,
             "instrument": None if fitted is None else instrument_summary(fitted[0]),
             "targets": list(latest.values()), "warnings": c.layout_warnings() + damaged,
             "unlisted_files": c.unlisted_files()}

@@ -13,6 +13,7 @@ from datetime import datetime
 
 from common.files import csv_text
 from common.flags import FLAG_DEPARTS, worst
+from common.numbers import written
 from projects.results.state import EpochState, departures, epoch_states
 from projects.store.campaign import Campaign
 
@@ -96,5 +97,13 @@ def damaged_line(c: Campaign, labels=None) -> str | None:
 
 
 def to_csv(rows: list[dict], columns=DISPLACEMENT_COLUMNS) -> str:
-    """Rows as CSV text with the given columns (default the displacement table's; missing values as empty cells)."""
-    return csv_text(rows, columns)
+    """Rows as CSV text with the given columns (default the displacement table's; missing values as empty cells).
+
+    Millimetres are written to 0.001 mm (:func:`common.numbers.written`).
+    """
+    return csv_text(written_rows(rows), columns)
+
+
+def written_rows(rows: list[dict]) -> list[dict]:
+    """The rows as files for scripts hold them: millimetres to 0.001 mm (:func:`common.numbers.written`)."""
+    return [{k: written(k, v) for k, v in r.items()} for r in rows]

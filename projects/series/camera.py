@@ -32,18 +32,20 @@ def midspan_reflector(c: Campaign) -> str:
 
 
 def import_series(c: Campaign, path: str | os.PathLike, *, name: str | None = None,
-                  reflector: str | None = None, column: str | None = None, timezone: str = "UTC",
+                  reflector: str | None = None, column: str | None = None, timezone: str | None = None,
                   unit: str | None = None, positive: str = "up") -> tuple[str, CameraSeries]:
     """Read a camera series file, copy it into the campaign (read-only) and store the series.
 
-    Nothing changes in the campaign unless the whole file was read; a file already imported
-    (same checksum) or an existing name is refused.
+    ``timezone`` is the zone of times without an offset (default: the campaign's, :attr:`Campaign.timezone`);
+    the series' ``times_read`` says which was assumed. Nothing changes in the campaign unless the whole file was
+    read; a file already imported (same checksum) or an existing name is refused.
     """
     path, name = c.series.check_new("camera_series", path, name, "a camera series")
     rid = reflector or midspan_reflector(c)
     if c.reflector(rid).is_reference:
         raise InputError(f"{rid} is a reference target; pair the camera with a measurement target")
     sha = c.series.checksum_if_new("camera_series", path)
+    timezone = timezone or c.timezone
     series = read_camera_series(path, column=column, timezone=timezone, unit=unit, positive=positive)
     options = {"column": series.column, "unit": series.unit, "timezone": timezone, "positive": positive}
     summary = series.summary()

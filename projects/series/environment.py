@@ -3,8 +3,9 @@
 Environment series are air and structure temperature, sun, rain, snow and humidity; events are
 construction steps, loads and repairs.
 
-Series are read by the same robust importer as camera series (separators, units, time zones, gaps
-and bad rows reported) and kept read-only in the campaign's ``environment/`` folder.
+Series are read by the one series reader, :func:`common.series.read_series`, as camera series are
+(separators, decimal commas, units, time zones, gaps and bad rows reported), and kept read-only in the
+campaign's ``environment/`` folder.
 """
 from __future__ import annotations
 
@@ -15,9 +16,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from common.errors import InputError
+from common.series import Quantity, Series, read_series, series_arrays_from_npz, series_npz_bytes
 from projects.store.campaign import ENV_DIR, Campaign, parse_datetime
 from projects.store.records import EventRecord, SeriesRecord
-from vision.series import CameraSeries, Quantity, read_camera_series
 
 _TEMP_UNITS = {"degc": (1.0, 0.0), "c": (1.0, 0.0), "°c": (1.0, 0.0), "celsius": (1.0, 0.0),
                "degf": (5 / 9, -160 / 9), "f": (5 / 9, -160 / 9), "°f": (5 / 9, -160 / 9),
@@ -57,33 +58,36 @@ class EnvSeries:
 
 
 def import_env(c: Campaign, path: str | os.PathLike, *, kind: str, name: str | None = None,
-               column: str | None = None, unit: str | None = None, timezone: str = "UTC"
-               ) -> tuple[str, CameraSeries]:
+               column: str | None = None, unit: str | None = None, timezone: str | None = None
+               ) -> tuple[str, Series]:
     """Read an environment series file, copy it into the campaign (read-only) and store it.
 
-    Nothing changes unless the whole file was read; the same file twice or a name in use is refused.
+    ``timezone`` is the zone of times without an offset (default: the campaign's, :attr:`Campaign.timezone`);
+    the series' ``times_read`` says which was assumed. Bad rows are left out and counted. Nothing changes unless
+    the file was read; the same file twice or a name in use is refused.
     """
     if kind not in KINDS:
         raise InputError(f"unknown series kind {kind!r}; use one of {', '.join(KINDS)}")
+    zone = timezone or c.timezone
     path, name = c.series.check_new("env_series", path, name, "an environment series")
     sha = c.series.checksum_if_new("env_series", path)
     q = KINDS[kind]
-    series = read_camera_series(path, column=column, timezone=timezone, unit=unit, quantity=q)
-    if not np.any(np.isfinite(series.value_mm)):
+    series = read_series(path, quantity=q, column=column, timezone=zone, unit=unit)
+    if not np.any(np.isfinite(series.values)):
         raise InputError(f"{path}: every {q.noun} value is missing")
-    options = {"column": series.column, "unit_read": series.unit, "unit": q.stored_unit, "timezone": timezone}
+    options = {"column": series.column, "unit_read": series.unit_read, "unit": q.stored_unit, "timezone": zone}
     summary = series.summary()
-    summary["unit"] = q.stored_unit
+
     def record(conn, rel):
         c.series.insert(conn, "env_series", name=name, kind=kind, sha256=sha, stored_path=rel,
                         original_path=str(path.resolve()), options=options, summary=summary,
-                        arrays=series.to_npz_bytes())
+                        arrays=series_npz_bytes(series.time_ns, series.values))
         c.log_action(conn, "env-import", None, {"name": name, "kind": kind, "file": str(path), "sha256": sha,
-                                           "rows": len(series), "bad_rows": series.n_bad})
+                                           "rows": len(series), "bad_rows": series.n_bad, "timezone": zone})
 
     c.import_file(path, sha, ENV_DIR, record, journal_entry={  # what 'repair' needs to read it again
         "kind": "environment", "name": name, "series_kind": kind,
-        "read": {"column": column, "unit": unit, "timezone": timezone}})
+        "read": {"column": column, "unit": unit, "timezone": zone}})
     return name, series
 
 
@@ -96,7 +100,7 @@ def load_env(c: Campaign, *, kind: str | None = None, name: str | None = None) -
     """Stored series of a kind (or the one named), oldest import first."""
     out = []
     for r in c.series.records("env_series", kind=kind, name=name):
-        t, v = CameraSeries.arrays_from_npz(c.series.arrays("env_series", r.name))
+        t, v = series_arrays_from_npz(c.series.arrays("env_series", r.name))
         out.append(EnvSeries(r.name, r.kind, r.options["unit"], t, v))
     if name is not None and not out:
         raise InputError(f"no environment series {name!r} in the campaign")

@@ -34,6 +34,7 @@ from common.files import (
     sha256_of,
     write_atomic,
 )
+from common.series import check_zone
 from lidar.centroid import TargetCentroid
 from lidar.layout import Layout, check_layout
 from lidar.scanner_profile import ScannerProfile
@@ -58,6 +59,7 @@ from projects.store.imports import (  # noqa: F401  (importers name them here)
 from projects.store.limits import parse_rule
 from projects.store.lock import LOCK_NAME, CampaignLock  # noqa: F401  (LOCK_NAME: likewise)
 from projects.store.records import (
+    CheckVerdict,
     DisplacementRecord,
     DisplacementSet,
     Epoch,
@@ -135,10 +137,11 @@ class Campaign:
     # ------------------------------------------------------------------ opening
     @classmethod
     def create(cls, folder: str | os.PathLike, *, name: str, layout: Layout, span_m: float | None = None,
-               profile: ScannerProfile | None = None) -> Campaign:
+               profile: ScannerProfile | None = None, timezone: str = "UTC") -> Campaign:
         """Create a new campaign folder (which must not hold a campaign yet).
 
-        ``profile`` is the scanner (default: the catalogue's Riegl VZ-1000, the dissertation's).
+        ``profile`` is the scanner (default: the catalogue's Riegl VZ-1000, the dissertation's); ``timezone`` the
+        zone of imported times without an offset (:attr:`timezone`).
         """
         if profile is None:
             from lidar.scanner_catalogue import DEFAULT_SCANNER, get_scanner
@@ -150,6 +153,7 @@ class Campaign:
         if span_m is not None and not (np.isfinite(span_m) and span_m > 0):
             raise InputError(f"span length must be positive, got {span_m}")
         check_layout(layout)
+        timezone = check_zone(timezone)
         if (folder / DB_NAME).exists():
             raise CampaignError(f"{folder}: already holds a campaign; open it instead of creating one")
         if folder.exists() and not folder.is_dir():
@@ -163,7 +167,7 @@ class Campaign:
             with conn:
                 meta = {"name": name.strip(), "span_m": "" if span_m is None else repr(float(span_m)),
                         "scanner_profile": json.dumps(profile.to_dict()), "created": now_iso(),
-                        "settings": json.dumps({})}
+                        "settings": json.dumps({"timezone": timezone})}
                 conn.executemany("INSERT INTO meta(key, value) VALUES (?, ?)", meta.items())
                 conn.executemany(
                     "INSERT INTO reflectors(id, grp, x, y, z, diameter_m, nx, ny, nz) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
@@ -382,10 +386,62 @@ class Campaign:
             digests.seal_row(c, "meta", "settings")
             self.log_action(c, "setting", None, {key: value})
 
+    @property
+    def timezone(self) -> str:
+        """The campaign's time zone: imported times without an offset are read in it (IANA name or +hh:mm)."""
+        return str(self.settings().get("timezone") or "UTC")
+
+    def set_timezone(self, name: str) -> None:
+        """Change :attr:`timezone` (series imported before keep the zone they were read in)."""
+        self.set_setting("timezone", check_zone(name))
+
     def log_action(self, conn: sqlite3.Connection, action: str, epoch: str | None, details: dict) -> None:
         """Add a line to the campaign's log inside the transaction ``conn``."""
         conn.execute("INSERT INTO log(time, action, epoch, details) VALUES (?, ?, ?, ?)",
                      (now_iso(), action, epoch, json.dumps(details, default=str)))
+
+    # ------------------------------------------------------------------ the on-site check's verdict
+    def save_check_verdict(self, epoch: str, *, setup: int, rescan: dict[str, str], drifted: bool) -> None:
+        """Record what the check of ``epoch`` (set-up ``setup``) said.
+
+        ``rescan`` maps each target it asked to re-scan to why. Kept in the campaign's log (no table of its own);
+        :meth:`check_verdict` reads it back.
+        """
+        self.epoch(epoch)
+        with self.transaction() as c:
+            self.log_action(c, "check", epoch, {"setup": int(setup), "rescan": dict(rescan), "drifted": bool(drifted)})
+
+    def accept_check(self, epoch: str) -> None:
+        """The user processes ``epoch`` as it is, although its check asked for a re-scan (logged)."""
+        verdict = self.check_verdict(epoch)
+        with self.transaction() as c:
+            self.log_action(c, "check-accepted", epoch, {"rescan": list(verdict.rescan) if verdict else []})
+
+    def check_verdict(self, epoch: str) -> CheckVerdict | None:
+        """What the check last said of ``epoch``'s fine scans, or None.
+
+        None: never checked, or fine scans were added since (the re-scan came in, the old verdict no longer holds).
+        With several set-ups, each set-up's latest check counts; the targets to re-scan are all of theirs.
+        """
+        rows = self.conn.execute("SELECT id, time, action, details FROM log WHERE epoch = ? AND action IN "
+                                 "('check', 'check-accepted', 'import') ORDER BY id", (epoch,)).fetchall()
+        latest: dict[int, tuple[str, dict]] = {}
+        accepted = False
+        for r in rows:
+            d = json.loads(r["details"])
+            if r["action"] == "check":
+                latest[int(d.get("setup", 1))] = (r["time"], d)
+                accepted = False
+            elif r["action"] == "check-accepted":
+                accepted = True
+            elif d.get("role") == "fine" and latest:  # fine scans added after the check: it no longer holds
+                latest.clear()
+                accepted = False
+        if not latest:
+            return None
+        reasons = {t: why for _, d in latest.values() for t, why in d.get("rescan", {}).items()}
+        return CheckVerdict(epoch, max(t for t, _ in latest.values()), tuple(reasons), reasons,
+                            any(d.get("drifted") for _, d in latest.values()), accepted)
 
     def log(self) -> list[LogEntry]:
         """The campaign's log, oldest first."""
@@ -413,11 +469,14 @@ class Campaign:
         return _layout_of(self.reflectors(), at)
 
     def layout_warnings(self, epoch: str | None = None) -> list[str]:
-        """Warnings about the layout (at an epoch's date, with its scanner): targets no station could reach."""
+        """Warnings about the layout (at an epoch's date, with its scanner).
+
+        Too few reference targets (:func:`inputs.few_references`), and targets no station could reach.
+        """
         at = self.epoch(epoch).datetime if epoch else None
         layout, profile = self.layout(at), self.profile_for(epoch)
-        return inputs.unreachable_targets(layout.ids, layout.xyz, max_range_m=float(profile.max_range_m),
-                                          scanner=f"the {profile.name}")
+        return inputs.few_references(layout.ids_in("reference")) + inputs.unreachable_targets(
+            layout.ids, layout.xyz, max_range_m=float(profile.max_range_m), scanner=f"the {profile.name}")
 
     def add_reflector(self, rid: str, group: str, xyz: Sequence[float], *, diameter_m: float = 0.05,
                       installed: str | None = None, replaces: str | None = None, note: str = "") -> None:

@@ -80,6 +80,27 @@ def check_epoch_date(when: str, others: Sequence[str]) -> None:
                      f"({lo.date()} to {hi.date()}); {hint}")
 
 
+#: Fewer reference targets than this is a warning (2 are accepted: the least a frame needs).
+REFERENCES_ADVISED = 3
+
+
+def few_references(ids: Sequence[str]) -> list[str]:
+    """A warning when the layout has fewer than :data:`REFERENCES_ADVISED` reference targets (``ids``: theirs).
+
+    Examples
+    --------
+    >>> print(few_references(["R1", "R2"])[0])  # doctest: +NORMALIZE_WHITESPACE
+    the layout has only 2 reference targets (R1, R2): when one of them moves, processing can tell that the
+    distance between them changed but not which one moved, and the epoch's displacements cannot be trusted;
+    glue at least one more on a pier (two on each pier is best)
+    """
+    if len(ids) >= REFERENCES_ADVISED:
+        return []
+    return [f"the layout has only {len(ids)} reference targets ({', '.join(ids)}): when one of them moves, "
+            "processing can tell that the distance between them changed but not which one moved, and the epoch's "
+            "displacements cannot be trusted; glue at least one more on a pier (two on each pier is best)"]
+
+
 def unreachable_targets(ids: Sequence[str], xyz: np.ndarray, *, max_range_m: float, scanner: str = "the scanner"
                         ) -> list[str]:
     """One warning per target farther from the other targets than the scanner reaches.

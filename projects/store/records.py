@@ -274,6 +274,48 @@ class LogEntry(_Plain):
 
 
 @dataclass(frozen=True)
+class CheckVerdict(_Plain):
+    """What the on-site check last said of an epoch's fine scans, while it still holds.
+
+    Attributes
+    ----------
+    epoch : str
+    time : str
+        When the (latest) check was made.
+    rescan : tuple of str
+        The targets it asked to re-scan (empty: every target was good).
+    reasons : dict
+        ``target -> why`` ("211 of 1036 planned points", "not found"...).
+    drifted : bool
+        Whether the closure showed the set-up turned beyond the instrument's tolerance (a re-scan too).
+    accepted : bool
+        Whether the user chose to process the epoch as it is (``process --accept-check``, or the application's
+        question answered yes).
+    """
+
+    epoch: str
+    time: str
+    rescan: tuple[str, ...] = ()
+    reasons: dict = field(default_factory=dict)
+    drifted: bool = False
+    accepted: bool = False
+
+    @property
+    def asks_rescan(self) -> bool:
+        """Whether the check asked for a re-scan that was neither made nor accepted."""
+        return (bool(self.rescan) or self.drifted) and not self.accepted
+
+    def line(self) -> str:
+        """The verdict in one line: 're-scan M3 (211 of 1036 planned points)'."""
+        if not self.rescan and not self.drifted:
+            return "every target good"
+        what = [f"{t} ({self.reasons[t]})" if self.reasons.get(t) else t for t in self.rescan]
+        if self.drifted:
+            what.append("the set-up (it turned beyond the instrument's tolerance)")
+        return "re-scan " + ", ".join(what)
+
+
+@dataclass(frozen=True)
 class SeriesRecord(_Plain):
     """An imported time series (a camera's displacements or an environment quantity), without its arrays.
 

@@ -5,6 +5,7 @@ import html
 
 import numpy as np
 
+from app.gui.state.words import windows_text
 from common.flags import describe
 from projects.processing.stages import baseline_epoch
 from projects.results.corrections import corrections_line, instrument_line
@@ -59,7 +60,7 @@ def epoch_html(c, label: str) -> str:
                      f"{f.original_path.rsplit('/', 1)[-1]} ({f.size / 1e6:.1f} MB, sha256 {f.sha256[:12]}…)"))
     stored = c.stored_plan(label)
     if stored is not None:
-        rows.append(("Plan", f"{len(stored.plan.rois)} windows, {stored.plan.total_seconds / 60:.1f} min"
+        rows.append(("Plan", f"{windows_text(stored.plan.rois)}, {stored.plan.total_seconds / 60:.1f} min"
                              + (" (edited by hand)" if stored.edited else "")))
     corrected = corrections_line(c.systematics(label), baseline=label == baseline_epoch(c))
     if corrected:

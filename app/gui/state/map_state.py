@@ -12,7 +12,8 @@ from psygnal import Signal
 from app.gui.state.map_geometry import CellRect, window_from_cells
 from app.gui.state.plan_edit import PlanEditor
 from common.errors import InputError
-from lidar.plan import RoiPlan
+from lidar.angles import AngularWindow
+from lidar.plan import RoiPlan, ScanPlan, holds, target_extent
 
 
 class MapState:
@@ -25,6 +26,7 @@ class MapState:
         self.label: str | None = None
         self.preview = None  # projects.store.previews.MapPreview
         self.editor = PlanEditor()
+        self.diameters: dict[str, float] = {}  # each target's disc, m
 
     def show(self, access, label: str | None, *, reload: bool = False) -> None:
         """Show ``label``'s map and plan; the epoch already shown stays as it is (its windows may be under
@@ -37,6 +39,7 @@ class MapState:
         with access.read() as c:
             preview = c.map_preview(label)
             plan = c.plan(label)
+            self.diameters = {r.id: float(r.diameter_m) for r in c.reflectors()}
         if preview is None:
             self.clear(f"Epoch {label} has not been planned yet: Epoch ▸ Plan the selected epoch (or Process).")
             return
@@ -49,6 +52,25 @@ class MapState:
         self.label, self.preview = None, None
         self.message.emit(text)
         self.editor.load(None)
+
+    def extent(self, reflector: str) -> AngularWindow | None:
+        """The least a window of ``reflector`` must hold: its disc and a margin (:func:`lidar.plan.target_extent`)
+        where the map found it; None for a target the map did not find (its window may go where the user sees it)."""
+        if self.preview is None:
+            return None
+        match = next((m for m in self.preview.identification.matches if m.id == reflector), None)
+        if match is None or match.detection is None:
+            return None
+        return target_extent(match.xyz_socs, diameter_m=self.diameters.get(reflector, 0.05))
+
+    def cut_targets(self, plan: ScanPlan | None) -> list[RoiPlan]:
+        """The windows of ``plan`` that do not hold their whole target: it would give fewer points than expected."""
+        out = []
+        for roi in plan.rois if plan is not None else ():
+            ext = self.extent(roi.reflector)
+            if ext is not None and not roi.closure and not holds(roi.window, ext):
+                out.append(roi)
+        return out
 
     def free_targets(self, reflectors) -> list[str]:
         """The ids of ``reflectors`` (records, not retired) that have no window in the plan yet."""

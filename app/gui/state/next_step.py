@@ -11,6 +11,9 @@ the selected epoch (else the latest) as a button, so a surveyor never has to gue
 'plan'
 >>> next_step({"epochs": []}, None).text
 'Next: add the first epoch'
+>>> checked = {"epoch": "e2", "state": "measured", "stale": "new", "rescan": ["M3"], "check": "re-scan M3"}
+>>> next_step({"epochs": [eps[0], checked]}, None).text  # the check asked for a re-scan: that comes first
+'Next: re-scan M3 of e2'
 """
 from __future__ import annotations
 
@@ -48,6 +51,11 @@ def _for_epoch(e: dict) -> NextStep | None:
     if state == "scanned":
         return NextStep("check", f"Next: check {label} before leaving", label,
                         f"{label} has fine scans: check that every target got enough points before leaving the site")
+    if e.get("rescan"):  # the check is binding: its re-scan comes before processing
+        names = ", ".join(e["rescan"])
+        return NextStep("add_fine", f"Next: re-scan {names} of {label}", label,
+                        f"the check of {label} asked: {e.get('check')}; scan the re-scan plan and add its files "
+                        "(processing it as it is asks first)")
     if state == "measured" or e.get("stale"):
         return NextStep("process", "Next: process", label, f"{label} is measured: compute its displacements")
     return None

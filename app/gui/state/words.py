@@ -75,3 +75,17 @@ def in_app_words(message: str) -> str:
     text = _INIT_OPTION.sub(_field, text)
     text = _ADD_FINE.sub(MENUS["add-fine"], text)
     return _OPTION.sub(_field, text)
+
+
+def windows_text(rois) -> str:
+    """How many windows a plan has, the closure window told apart, in the same words everywhere.
+
+    >>> from types import SimpleNamespace as R
+    >>> windows_text([R(closure=False)] * 9 + [R(closure=True)])
+    '9 windows + the closure window'
+    >>> windows_text([R(closure=False)])
+    '1 window'
+    """
+    n = sum(not r.closure for r in rois)
+    text = f"{n} window{'' if n == 1 else 's'}"
+    return text + (" + the closure window" if any(r.closure for r in rois) else "")

@@ -38,6 +38,7 @@ from PySide6.QtWidgets import (
 )
 
 from app.gui.state.map_geometry import CellRect, window_of_cells
+from app.gui.state.words import windows_text
 from app.gui.widgets import ElidedLabel
 from lidar.plan import RoiPlan, ScanPlan
 
@@ -46,6 +47,10 @@ from lidar.plan import RoiPlan, ScanPlan
 GROUP_COLOURS = {"reference": QColor("#17becf"), "measurement": QColor("#2ca02c"), "": QColor("#d62728")}
 DETECTION_COLOUR = QColor("#ff7f0e")
 NO_RETURN = (0xdf, 0xe9, 0xf5)  # the report's light blue: no return (sky)
+#: A window selected from the tree smaller than this on the screen (pixels) is zoomed on (issue 41: 7x6 px).
+MIN_SHOWN_PX = 40
+#: The note of a window that does not hold its whole target (the disc and its margin).
+CUT_NOTE = "the window cuts the target: fewer points on it than planned"
 TAG_Z, WINDOW_Z, DETECTION_Z = 30.0, 10.0, 5.0
 
 
@@ -70,7 +75,10 @@ class MapGeometry:
         return float(np.mod(phi - self.phi0, 360.0)) / self.step
 
     def rect_of(self, roi: RoiPlan) -> QRectF:
-        w = roi.window
+        return self.rect_of_window(roi.window)
+
+    def rect_of_window(self, w) -> QRectF:
+        """The scene rectangle of an angular window (an :class:`lidar.angles.AngularWindow`)."""
         width = (w.phi_max_deg - w.phi_min_deg) / self.step
         right = self.ncols - self._u(w.phi_min_deg)
         y0 = (w.theta_min_deg - self.theta0) / self.step
@@ -144,6 +152,8 @@ class RoiItem(QGraphicsRectItem):
         self.setZValue(WINDOW_Z)
         self.label = TagItem(roi.reflector, colour, dx=0.0, dy=-3.0, parent=self)  # above the box's corner
         self._edges = None
+        #: The scene rectangle the window must keep holding (its target's disc and margin), or None.
+        self.keep: QRectF | None = None
 
     def scene_rect(self) -> QRectF:
         return self.mapRectToScene(self.rect())
@@ -153,9 +163,14 @@ class RoiItem(QGraphicsRectItem):
         return max(view.transform().m11(), 1e-9) if view else 1.0
 
     def _edges_at(self, pos: QPointF):
-        """The edges (nearest one per axis) within a few screen pixels of ``pos``."""
-        tol = self.HANDLE_PX / self._scale()
+        """The edges (nearest one per axis) within a few screen pixels of ``pos``.
+
+        The handles never take more than a quarter of the window on each side: the middle of a small window
+        (a few pixels on the screen) is its body, which moves it. (They took all of it: a drag meant to move a
+        7x6 px window moved its corner and shrank it instead.)
+        """
         r = self.rect()
+        tol = min(self.HANDLE_PX / self._scale(), 0.25 * min(r.width(), r.height()))
         edges = set()
         dl, dr = abs(pos.x() - r.left()), abs(pos.x() - r.right())
         if min(dl, dr) < tol:
@@ -199,6 +214,12 @@ class RoiItem(QGraphicsRectItem):
                 r.setTop(min(p.y(), r.bottom() - min_size))
             if "b" in self._edges:
                 r.setBottom(max(p.y(), r.top() + min_size))
+            if self.keep is not None:  # never below the target's disc and its margin
+                k = self.keep.translated(-self.pos())
+                r.setLeft(min(r.left(), k.left()))
+                r.setRight(max(r.right(), k.right()))
+                r.setTop(min(r.top(), k.top()))
+                r.setBottom(max(r.bottom(), k.bottom()))
             self.set_scene_rect(self.mapRectToScene(r))
             self.on_change(self, False)
             return
@@ -210,9 +231,21 @@ class RoiItem(QGraphicsRectItem):
         self.on_change(self, True)
 
     def itemChange(self, change, value):  # noqa: N802
+        if change == QGraphicsItem.ItemPositionChange and self.keep is not None and not self._edges:
+            value = self._holding(QPointF(value))  # a move keeps the target inside
         if change == QGraphicsItem.ItemPositionHasChanged and self.scene() is not None and not self._edges:
             self.on_change(self, False)
         return super().itemChange(change, value)
+
+    def _holding(self, pos: QPointF) -> QPointF:
+        """``pos`` moved the least for the window there to hold :attr:`keep` (an axis it cannot hold: as it is)."""
+        k, w, h = self.keep, self.rect().width(), self.rect().height()
+        x, y = pos.x(), pos.y()
+        if w >= k.width():
+            x = min(max(x, k.right() - w), k.left())
+        if h >= k.height():
+            y = min(max(y, k.bottom() - h), k.top())
+        return QPointF(x, y)
 
     def set_scene_rect(self, rect: QRectF) -> None:
         self.prepareGeometryChange()
@@ -525,6 +558,8 @@ class MapView(QWidget):
                 it = have.get(roi.reflector)
                 if it is None:
                     it = RoiItem(roi, self.geometry_.rect_of(roi), self._roi_changed)
+                    ext = self.state.extent(roi.reflector)
+                    it.keep = None if ext is None else self.geometry_.rect_of_window(ext)
                     self.scene.addItem(it)
                 elif it.roi is not roi:
                     it.roi = roi
@@ -600,19 +635,25 @@ class MapView(QWidget):
 
     def _refresh_table(self) -> None:
         self.table.setRowCount(len(self.items))
+        cut = {r.reflector for r in self.state.cut_targets(self.plan)}
         for row, it in enumerate(self.items):
             r = it.roi
             w = r.window
-            vals = [r.reflector, "pier" if r.group == "reference" else "deck", f"{w.phi_max_deg - w.phi_min_deg:.3f} × {w.theta_max_deg - w.theta_min_deg:.3f}",
+            notes = ((CUT_NOTE,) if r.reflector in cut else ()) + r.notes
+            points = f"< {r.expected_target_points:,}" if r.reflector in cut else f"{r.expected_target_points:,}"
+            vals = [r.reflector, "pier" if r.group == "reference" else "deck",
+                    f"{w.phi_max_deg - w.phi_min_deg:.3f} × {w.theta_max_deg - w.theta_min_deg:.3f}",
                     f"{w.phi_step_deg:.4f} / {w.theta_step_deg:.4f}", f"{r.expected_points:,}",
-                    f"{r.expected_target_points:,}", f"{r.expected_seconds:.1f}", "; ".join(r.notes) or "–"]
+                    points, f"{r.expected_seconds:.1f}", "; ".join(notes) or "–"]
             for col, v in enumerate(vals):
                 item = QTableWidgetItem(v)
                 item.setToolTip(v)
+                if r.reflector in cut:
+                    item.setForeground(QColor("#d62728"))
                 self.table.setItem(row, col, item)
         if self.plan is not None:
             over = self.plan.total_seconds > self.plan.budget_seconds
-            self.total.setText(f"{len(self.items)} windows, {self.plan.total_seconds / 60:.1f} min of "
+            self.total.setText(f"{windows_text(self.plan.rois)}, {self.plan.total_seconds / 60:.1f} min of "
                                f"{self.plan.budget_seconds / 60:.0f} min budget"
                                + (" — OVER BUDGET" if over else "") + (" (edited, not saved)" if self.dirty else ""))
             self.total.setStyleSheet("color: #d62728;" if over else "")
@@ -636,8 +677,9 @@ class MapView(QWidget):
             it.setSelected(k in rows)
 
     def select_reflector(self, rid: str | None) -> None:
-        """Select a target's window and bring it into view (the zoom stays as it is); not a user's pick,
-        so it is not reported back (``reflectorPicked``)."""
+        """Select a target's window and bring it into view, zoomed on it when it is too small on the screen to be
+        seen or edited (below :data:`MIN_SHOWN_PX`); not a user's pick, so it is not reported back
+        (``reflectorPicked``)."""
         it = next((it for it in self.items if it.roi.reflector == rid), None)
         if it is None or it.isSelected():
             return
@@ -647,12 +689,16 @@ class MapView(QWidget):
             it.setSelected(True)
         finally:
             self._selecting = False
-        self.view.ensureVisible(it, 40, 40)
+        shown = self.view.mapFromScene(it.scene_rect()).boundingRect()
+        if min(shown.width(), shown.height()) < MIN_SHOWN_PX:
+            self.zoom_to(rid)
+        else:
+            self.view.ensureVisible(it, 40, 40)
 
     def zoom_to(self, rid: str) -> None:
         """Zoom on a target's window with its surroundings."""
         for it in self.items:
             if it.roi.reflector == rid:
                 r = it.scene_rect()
-                pad = max(r.width(), r.height()) * 6
+                pad = max(r.width(), r.height()) * 3
                 self.view.fitInView(r.adjusted(-pad, -pad, pad, pad), Qt.KeepAspectRatio)

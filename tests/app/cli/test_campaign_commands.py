@@ -111,7 +111,7 @@ def test_bad_inputs_leave_the_campaign_unchanged(campaign, field_copy, capsys, t
          "already exists"),
         (["add-fine", str(campaign), "--epoch", "1999-01-01", str(field_copy / "v1" / "coarse.laz")], "no epoch"),
         (["process", str(campaign), "--epoch", "nope"], "no epoch 'nope'"),
-        (["reflector", str(campaign), "retire", "Q7", "--date", "2026-05-01"], "unknown reflector 'Q7'"),
+        (["reflector", "retire", str(campaign), "Q7", "--date", "2026-05-01"], "unknown reflector 'Q7'"),
         (["limit", str(campaign), "--rule", "banana"], "not understood"),
         (["export", str(campaign), "--out", str(tmp_path / "x.doc")], "give a name ending in .xlsx or .csv"),
         (["export", str(campaign), "--out", str(tmp_path / "nope" / "x.xlsx")], "does not exist"),
@@ -133,10 +133,10 @@ def test_bad_inputs_leave_the_campaign_unchanged(campaign, field_copy, capsys, t
 
 
 def test_reflector_life_cycle(campaign, capsys):
-    assert main(["reflector", str(campaign), "add", "M6", "--group", "measurement", "--xyz", "20,0,7",
+    assert main(["reflector", "add", str(campaign), "M6", "--group", "measurement", "--xyz", "20,0,7",
                  "--installed", "2026-06-01"]) == 0
-    assert main(["reflector", str(campaign), "replace", "M2", "M2b", "--date", "2026-07-01"]) == 0
-    assert main(["reflector", str(campaign), "list", "--json"]) == 0
+    assert main(["reflector", "replace", str(campaign), "M2", "M2b", "--date", "2026-07-01"]) == 0
+    assert main(["reflector", "list", str(campaign), "--json"]) == 0
     rows = {r["id"]: r for r in json.loads(capsys.readouterr().out.split("\n", 2)[-1])}
     assert rows["M2"]["retired"].startswith("2026-07-01") and rows["M2b"]["replaces"] == "M2"
     with Campaign.open(campaign, writable=False) as c:

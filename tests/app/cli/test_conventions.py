@@ -79,7 +79,7 @@ def test_every_campaign_dir_is_explained_and_epoch_and_json_have_help():
     (["process", "DIR", "--epochs", "X"], "usage: bridgesurvey process"),
     (["status", "DIR", "--everything"], "usage: bridgesurvey status"),
     (["fleet", "status", "ROOT", "--jsn"], "usage: bridgesurvey fleet status"),
-    (["reflector", "DIR", "list", "--bogus"], "usage: bridgesurvey reflector DIR list"),
+    (["reflector", "list", "DIR", "--bogus"], "usage: bridgesurvey reflector list"),
 ])
 def test_a_mistake_shows_the_usage_of_its_own_command(argv, usage, capsys):
     with pytest.raises(SystemExit) as exc:

@@ -33,3 +33,14 @@ def test_the_demo_ends_before_the_day_it_is_built():
             last = start + dt.timedelta(weeks=weeks - 1)
             assert last.date() < today and (today - last.date()).days <= 7
             assert last.weekday() == 0 and last.time() == demo.VISIT_TIME
+
+
+def test_the_demo_says_how_to_open_its_folder(tmp_path, capsys):
+    """'./run demo DIR' ends with how to open DIR (issue 41 item 7): './run gui' alone opens another folder."""
+    from app.cli.main import main
+
+    folder = tmp_path / "my demo"
+    assert main(["demo", str(folder), "--weeks", "2"]) == 0
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    assert last == (f"open it in the application: ./run gui '{folder}' (from the source folder; installed: "
+                    f"bridgesurvey-gui '{folder}'); on the command line: bridgesurvey status '{folder}'")

@@ -178,3 +178,48 @@ def test_stations_cli_with_an_area_writes_json_and_map(processed_copy, tmp_path)
     area.write_text("x,y\n1,2\n")
     r = _cli("stations", processed_copy, "--out", out, "--area", area)
     assert r.returncode == 1 and "area.csv" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_the_check_is_binding(short_visit, field_copy, tmp_path):
+    """Issue 41 item 2: after a check that asks for a re-scan, the next step is the re-scan, 'process' refuses in one
+    line (the campaign unchanged) unless --accept-check, and the verdict is kept in the campaign."""
+    from app.gui.state.next_step import next_step
+    from projects.results.status import campaign_status
+
+    camp, _ = short_visit
+    assert _cli("check", camp, "--epoch", LABEL).returncode == 3
+    with Campaign.open(camp, writable=False) as c:
+        verdict = c.check_verdict(LABEL)
+        status = campaign_status(c)
+    assert verdict.rescan == ("M2", "M3") and verdict.asks_rescan and not verdict.accepted
+    assert verdict.reasons["M3"] == "not found" and "of" in verdict.reasons["M2"]
+    step = next_step(status, LABEL)
+    assert step.command == "add_fine" and step.text == f"Next: re-scan M2, M3 of {LABEL}"
+    r = _cli("status", camp)
+    assert f"CHECK of {LABEL}: re-scan M2 (" in r.stdout
+    before = snapshot(camp)
+    r = _cli("process", camp)
+    assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1
+    assert r.stderr.startswith(f"bridgesurvey: error: {LABEL}: the check asked to re-scan M2 (")
+    assert "M3 (not found)" in r.stderr and r.stderr.strip().endswith("or process as it is with --accept-check")
+    assert snapshot(camp) == before
+
+    # the re-scan comes in: the old verdict no longer holds, and processing goes ahead without a word
+    rescan = tmp_path / "rescan"
+    shutil.copytree(camp, rescan, ignore=shutil.ignore_patterns(".lock"))
+    with Campaign.open(rescan) as c:
+        plan = check_epoch(c, LABEL).rescan
+        fine, _ = simulate_fine(field_copy / "v0", list(plan.rois), model=MODEL, name="fine-rescan.laz")
+        c.import_files(LABEL, [fine], "fine")
+        assert c.check_verdict(LABEL) is None
+    assert _cli("process", rescan).returncode == 0
+
+    # or the surveyor processes it as it is: said once, logged, and the next step moves on
+    r = _cli("process", camp, "--accept-check")
+    assert r.returncode in (0, 3), r.stderr
+    with Campaign.open(camp, writable=False) as c:
+        verdict = c.check_verdict(LABEL)
+        assert verdict.accepted and not verdict.asks_rescan
+        assert [e.action for e in c.log()][-3:].count("check-accepted") == 1
+        assert next_step(campaign_status(c), LABEL).command != "add_fine"
+    assert "(processed as it is, by choice)" in _cli("status", camp, "--json").stdout

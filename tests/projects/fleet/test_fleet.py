@@ -68,6 +68,21 @@ def test_find_campaigns_in_folders_and_fleet_files(fleet, tmp_path):
     assert r.returncode == 1 and "no such folder" in r.stderr and len(r.stderr.strip().splitlines()) == 1
 
 
+def test_fleet_status_follows_a_linked_campaign_once(processed, tmp_path):
+    """A bridge's folder kept on another disk and linked into the fleet folder is a bridge (issue 41 item 7)."""
+    elsewhere = tmp_path / "other-disk" / "bridge-c"
+    shutil.copytree(processed, elsewhere, ignore=shutil.ignore_patterns(".lock"))
+    root = tmp_path / "fleet"
+    root.mkdir()
+    (root / "bridge-c").symlink_to(elsewhere, target_is_directory=True)
+    (root / "loop").symlink_to(root, target_is_directory=True)  # a link back up: walked once, no endless walk
+    assert [p.name for p in find_campaigns([root])] == ["bridge-c"]
+    r = _cli("fleet", "status", root, "--json")
+    assert r.returncode == 0, r.stderr
+    doc = json.loads(r.stdout)
+    assert doc["overview"]["bridges"] == 1 and doc["bridges"][0]["epochs"] == 3
+
+
 def test_fleet_status_and_report_list_every_bridge_and_the_unreadable_one(fleet, tmp_path):
     broken = fleet / "broken"
     broken.mkdir()

@@ -33,7 +33,8 @@ def camera_csv(tmp_path):
 def test_import_and_crossvalidate(processed_copy, camera_csv, tmp_path, capsys):
     assert main(["camera", "import", str(processed_copy), str(camera_csv)]) == 0
     out = capsys.readouterr().out
-    assert "imported camera series 'midspan' for M3" in out and "gaps 1" in out
+    assert "imported camera series 'midspan' for M3" in out and "1 gap(s)" in out
+    assert "times: with their UTC offsets" in out
     assert (processed_copy / "camera").is_dir()
     stored = list((processed_copy / "camera").iterdir())
     assert len(stored) == 1 and stored[0].read_bytes() == camera_csv.read_bytes()

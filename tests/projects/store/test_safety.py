@@ -65,7 +65,7 @@ def test_second_writer_is_refused_with_a_clear_message(campaign):
     with Campaign.open(campaign):
         with pytest.raises(CampaignLockedError, match="in use by BridgeSurvey process"):
             Campaign.open(campaign)
-        res = subprocess.run(CLI + ["reflector", str(campaign), "retire", "R1", "--date", "2026-01-01"],
+        res = subprocess.run(CLI + ["reflector", "retire", str(campaign), "R1", "--date", "2026-01-01"],
                              cwd=Path(__file__).resolve().parents[3], capture_output=True, text=True)
         assert res.returncode == 1 and "in use by" in res.stderr
     with Campaign.open(campaign, writable=False):
