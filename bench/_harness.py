@@ -97,6 +97,9 @@ def write_figure(name: str, table: str, *, notes: str = "", argv: list[str] | No
         The bench's arguments, recorded in the command; by default ``sys.argv[1:]``.
     """
     args = sys.argv[1:] if argv is None else argv
+    if SMALL in args:  # a small run's table is no figure for the documentation
+        print(f"small mode: {FIGURES / f'{name}.md'} left as it was")
+        return FIGURES / f"{name}.md"
     command = " ".join(["./run bench", name, *args])
     when = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
     text = (f"<!-- Written by {command} (bench/_harness.py write_figure): run the bench again rather than "
@@ -109,3 +112,22 @@ def write_figure(name: str, table: str, *, notes: str = "", argv: list[str] | No
     path.write_text(text, encoding="utf-8")
     print(f"table written to {path}")
     return path
+
+
+#: A bench given this flag runs its small mode: the same code path on a smaller scene, fewer repetitions or smaller
+#: files, in seconds (``tests/test_benches.py`` runs every bench so inside ``./run test``).
+SMALL = "--small"
+#: The line a bench prints its key figures on (JSON after the prefix): what the small-mode test checks.
+FIGURES_LINE = "BENCH-FIGURES "
+
+
+def small_mode(argv: list[str] | None = None) -> tuple[bool, list[str]]:
+    """Whether ``--small`` is among the arguments (default ``sys.argv[1:]``), and the other arguments."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    return SMALL in args, [a for a in args if a != SMALL]
+
+
+def figures(**values: float | int | None) -> None:
+    """Print the bench's key figures as one line of JSON (read by the small-mode test; NaN printed as null)."""
+    clean = {k: (None if v is None or (isinstance(v, float) and v != v) else v) for k, v in values.items()}
+    print(FIGURES_LINE + json.dumps(clean), flush=True)

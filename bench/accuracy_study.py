@@ -5,7 +5,8 @@
 2. Honesty of the reported sigma over many random epochs: share of |error| / sigma < 2.
 3. Traps: a cable tie beside a reference target; a reference target moved by 5 mm.
 
-Usage: ``./run bench accuracy_study [N_EPOCHS]`` (default 40 random epochs).
+Usage: ``./run bench accuracy_study [N_EPOCHS]`` (default 40 random epochs); ``--small``: 1000 points a
+target only, 2 positions x 2 loads, 4 random epochs and two traps, in seconds.
 """
 from __future__ import annotations
 
@@ -15,6 +16,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from _harness import figures, small_mode  # noqa: E402
 
 from lidar.displacement import compute_displacements  # noqa: E402
 from lidar.simulate import EpochConditions, ScannerSetup  # noqa: E402
@@ -30,8 +33,8 @@ def errors(base, base_truth, ep, ep_truth, **kw):
     return out, res
 
 
-def lab_design(min_points: int, seed0: int = 100, mode="reference"):
-    cases = [(pos, load) for pos in LAB_POSITIONS for load in LAB_LOADS_MM]
+def lab_design(min_points: int, seed0: int = 100, mode="reference", *, positions: int = 3, loads: int = 4):
+    cases = [(pos, load) for pos in LAB_POSITIONS[:positions] for load in LAB_LOADS_MM[:loads]]
     results = [fine_epoch(EpochConditions(midspan_displacement_m=load / 1000), pos, seed=seed0 + k,
                           min_points=min_points) for k, (pos, load) in enumerate(cases)]
     base, base_truth = results[0][0], results[0][1]
@@ -58,13 +61,13 @@ def honesty(n_epochs: int, seed0: int = 500):
     return float(np.mean(ratios < 2)), float(np.sqrt(np.mean(np.square(errs)))), float(np.median(ratios))
 
 
-def traps():
+def traps(moves_tried: int = 5):
     base = fine_epoch(EpochConditions(), LAB_POSITIONS[0], seed=900)
     tie = fine_epoch(EpochConditions(midspan_displacement_m=-0.005, cable_ties=("R1",)), LAB_POSITIONS[1], seed=901)
     e_tie, _ = errors(base[0], base[1], tie[0], tie[1])
     moves = []
     for target, vec in (("R4", (0.005, 0, 0)), ("R4", (0, 0.005, 0)), ("R4", (0, 0, 0.005)), ("R1", (0, 0.005, 0)),
-                        ("R2", (0.0035, 0, -0.0035))):
+                        ("R2", (0.0035, 0, -0.0035)))[:moves_tried]:
         moved = fine_epoch(EpochConditions(midspan_displacement_m=-0.005, moved_targets={target: vec}),
                            LAB_POSITIONS[2], seed=902)
         e_mov, res = errors(base[0], base[1], moved[0], moved[1])
@@ -74,23 +77,31 @@ def traps():
     return max(abs(x[1]) for x in e_tie), tie[0]["R1"].flags, moves
 
 
-def main(n_epochs: int = 40) -> None:
-    print("Lab design (3 positions x 4 loads, vs case 1), 5 mm range noise:")
+def main(n_epochs: int = 40, *, small: bool = False) -> None:
+    cases = dict(positions=2, loads=2) if small else {}
+    print("Lab design (" + ("2 positions x 2 loads" if small else "3 positions x 4 loads")
+          + ", vs case 1), 5 mm range noise:")
     print(f"{'points/target':>14} {'RMS mm':>8} {'max mm':>8} {'min n':>7} {'median n':>9}")
-    for mp in (500, 1000, 2000, 4000):
-        rms, mx, nmin, nmed = lab_design(mp)
+    lab = {}
+    for mp in (1000,) if small else (500, 1000, 2000, 4000):
+        rms, mx, nmin, nmed = lab[mp] = lab_design(mp, **cases)
         print(f"{mp:>14} {rms * 1000:8.3f} {mx * 1000:8.3f} {nmin:7d} {nmed:9d}")
-    rms, mx, _, _ = lab_design(1000, mode="epoch")
+    rms, mx, _, _ = lab_design(1000, mode="epoch", **cases)
     print(f"  (normal re-fitted per epoch as in the dissertation, 1000 points: RMS {rms * 1000:.3f} mm, max {mx * 1000:.3f} mm)")
-    frac, rms, med = honesty(n_epochs)
+    frac, rms_h, med = honesty(n_epochs)
     print(f"Honest sigma over {n_epochs} random epochs x 5 targets: |error|/sigma < 2 for {frac * 100:.1f} % "
-          f"(median ratio {med:.2f}); RMS error {rms * 1000:.3f} mm")
-    e_tie, flags, moves = traps()
+          f"(median ratio {med:.2f}); RMS error {rms_h * 1000:.3f} mm")
+    e_tie, flags, moves = traps(2 if small else 5)
     print(f"Cable tie beside R1: max displacement error {e_tie * 1000:.3f} mm (R1 flags: {', '.join(flags)})")
     for target, vec, moved, suspect, eflags, err in moves:
         print(f"{target} moved by {np.round(np.array(vec) * 1000, 1)} mm (bridge frame): flagged moved {moved}, "
               f"suspect {suspect}, epoch flags {list(eflags)}, max displacement error {err * 1000:.3f} mm")
+    figures(lab_rms_mm=lab[1000][0] * 1000, lab_max_mm=lab[1000][1] * 1000, lab_min_points=lab[1000][2],
+            lab_epoch_normal_rms_mm=rms * 1000, honest_within_2sigma=frac, honest_rms_mm=rms_h * 1000,
+            tie_max_error_mm=e_tie * 1000, moves_tried=len(moves),
+            moves_caught=sum(1 for m in moves if m[2] or m[3] or m[4]))
 
 
 if __name__ == "__main__":
-    main(int(sys.argv[1]) if len(sys.argv) > 1 else 40)
+    _small, _args = small_mode()
+    main(int(_args[0]) if _args else 4 if _small else 40, small=_small)

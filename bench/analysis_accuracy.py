@@ -11,7 +11,8 @@ the model does not know (up to 0.15 mm, from the time of day).
 Two creep laws generate the truth: the model's own (ACI 209 time shape, time parameter 10-60 days) and a
 different one (exponential, 1 - exp(-t / 60 d)), to show what a wrong creep law costs.
 
-Usage: ``./run bench analysis_accuracy``. This runs at the level of displacement histories: the
+Usage: ``./run bench analysis_accuracy [N]`` (``--small``: 4 campaigns a law). This runs at the level of
+displacement histories: the
 simulated scans behind each epoch are what the LiDAR benches measure.
 """
 from __future__ import annotations
@@ -20,9 +21,10 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from _harness import write_figure
+from _harness import figures, small_mode, write_figure
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
 
 from projects.analysis.models import Event, creep_shape, effective_temperature, fit_target  # noqa: E402
 
@@ -71,6 +73,7 @@ LAWS = {"model": "ACI 209 shape (time parameter 10–60 d)", "exponential": "exp
 def main(n: int = 30, seed: int = 15):
     lines = ["| truth's creep law | " + " | ".join(COLUMNS.values()) + " | all |", "|---" * (len(COLUMNS) + 2) + "|"]
     ratios = []
+    found = {}
     for law in ("model", "exponential"):
         rng = np.random.default_rng(seed)
         z = {k: [] for k in NAMES}
@@ -94,12 +97,17 @@ def main(n: int = 30, seed: int = 15):
             print(f"| {name} | {np.mean(zz <= 2) * 100:.0f} % ({len(zz)}) | {np.sqrt(np.mean(np.square(err[k]))):.3f} | "
                   f"{np.sqrt(np.mean(zz ** 2)):.2f} |")
         print(f"| all | {np.mean(np.array(allz) <= 2) * 100:.0f} % | | |")
+        found[f"{law}_within_2sigma"] = float(np.mean(np.array(allz) <= 2))
+        found[f"{law}_thermal_rms_error"] = float(np.sqrt(np.mean(np.square(err["b"]))))
+        found[f"{law}_estimates"] = len(allz)
         lines.append(f"| {LAWS[law]} | " + " | ".join(f"{np.mean(np.abs(np.array(z[k])) <= 2):.0%}" for k in COLUMNS)
                      + f" | {np.mean(np.array(allz) <= 2):.0%} |")
     write_figure("analysis_accuracy", "\n".join(lines),
                  notes=f"Share of the {n} recovered values within 2σ of the truth; RMS |error|/σ "
                        f"{min(ratios):.2f}–{max(ratios):.2f}.")
+    figures(campaigns=n, **found)
 
 
 if __name__ == "__main__":
-    main(*(int(a) for a in sys.argv[1:2]))
+    _small, _args = small_mode()
+    main(*(tuple(int(a) for a in _args[:1]) or ((4,) if _small else ())))

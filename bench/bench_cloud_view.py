@@ -4,7 +4,7 @@ Baseline, measured in the same run: ``QtInteractor.add_points`` of the same clou
 frame. Ours: the view's decimation for display (at most 1.5 M points) and its interactive level of
 detail (at most 150 k points while the view moves). Needs an X display; without one it re-runs
 itself under Xvfb. On Xvfb, OpenGL is software-rendered: real graphics cards are far faster, the
-ratios are what carry over. Usage: ``./run bench bench_cloud_view [N_POINTS]``.
+ratios are what carry over. Usage: ``./run bench bench_cloud_view [N_POINTS]`` (``--small``: 50,000 points).
 """
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ import sys
 import time
 
 import numpy as np
+from _harness import figures, small_mode
 
 
 def frame_ms(plotter, frames: int = 5) -> float:
@@ -63,12 +64,14 @@ def main(n: int) -> None:
     print(f"BridgeSurvey view, moving (<=150 k)   {moving:8.0f} ms/frame   x{moving / base:.2f}")
     print(f"  RESULT: while moving {moving:.0f} ms/frame ({1000 / moving:.1f} fps), x{moving / base:.3f} of drawing "
           "every point")
+    figures(points=n, shown=len(keep), plain_ms=base, still_ms=still, moving_ms=moving)
     p.close()
     del app
 
 
 if __name__ == "__main__":
-    n = int(sys.argv[1]) if len(sys.argv) > 1 else 10_000_000
+    _small, _args = small_mode()
+    n = int(_args[0]) if _args else 50_000 if _small else 10_000_000
     if not os.environ.get("DISPLAY") and shutil.which("xvfb-run") and not os.environ.get("_BENCH_XVFB"):
         env = {**os.environ, "QT_QPA_PLATFORM": "xcb", "_BENCH_XVFB": "1"}
         sys.exit(subprocess.call(["xvfb-run", "-a", "-s", "-screen 0 1600x1000x24", sys.executable, __file__, str(n)],

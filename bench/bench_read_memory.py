@@ -3,7 +3,7 @@
 Each read runs in a fresh process; its peak RSS above the process's baseline
 (after imports) is divided by the size of what it returns (xyz float64,
 intensity float32, raw intensity). Target: about 2x plus a constant.
-Usage: ``./run bench bench_read_memory [N]`` (default 2,000,000 points).
+Usage: ``./run bench bench_read_memory [N]`` (default 2,000,000 points; ``--small``: 100,000).
 """
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+from _harness import figures, small_mode
 
 CHILD = """
 import resource, sys
@@ -36,6 +37,7 @@ def main(n: int) -> None:
     raw = rng.integers(0, 65535, n).astype(np.uint16)
     scan = Scan(xyz_socs=rng.uniform(-50, 50, (n, 3)), intensity=normalise_intensity(raw), intensity_raw=raw)
     print(f"{n:,} points; peak memory above the baseline / decoded arrays")
+    found = {}
     with tempfile.TemporaryDirectory() as tmp:
         for suffix in (".las", ".laz", ".e57", ".ply", ".pcd", ".ptx", ".pts", ".xyz"):
             path = write_scan(scan, Path(tmp) / f"s{suffix}")
@@ -43,7 +45,11 @@ def main(n: int) -> None:
             peak, decoded = (int(v) for v in out.stdout.split())
             print(f"{suffix:5s} file {path.stat().st_size / 2**20:7.1f} MiB  decoded {decoded / 2**20:6.1f} MiB  "
                   f"peak {peak / 2**20:7.1f} MiB  ratio {peak / decoded:4.2f}x")
+            found[f"peak_mb_{suffix[1:]}"] = peak / 2**20
+            found[f"decoded_mb_{suffix[1:]}"] = decoded / 2**20
+    figures(points=n, **found)
 
 
 if __name__ == "__main__":
-    main(int(sys.argv[1]) if len(sys.argv) > 1 else 2_000_000)
+    _small, _args = small_mode()
+    main(int(_args[0]) if _args else 100_000 if _small else 2_000_000)

@@ -2,7 +2,8 @@
 
 Same clouds, same parameters, each in a fresh process; the wrapper overhead target is <= 10 %.
 Clouds: a synthetic scene of ground and pier faces with 3 mm noise, 1 M and 10 M points.
-Usage: ``./run bench bench_registration [SIZES...]`` (default 1000000 10000000).
+Usage: ``./run bench bench_registration [SIZES...]`` (default 1000000 10000000; ``--small``: 30000, one process
+each).
 """
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[0]))
 
-from _harness import measure, row  # noqa: E402
+from _harness import figures, measure, row, small_mode  # noqa: E402
 
 SCENE = """
 import numpy as np
@@ -70,20 +71,25 @@ d, u = py4dgeo.M3C2(epochs=(e1, e2), corepoints=core - off, normal_radii=(0.5,),
 """
 
 
-def main(sizes=(1_000_000, 10_000_000)) -> None:
+def main(sizes=(1_000_000, 10_000_000), *, repeat: int = 2) -> None:
+    found = {}
     for n in sizes:
         setup = SCENE.format(n=n)
-        b_icp = measure(setup, PLAIN_ICP, repeat=2)
-        o_icp = measure(setup, OURS_ICP, repeat=2)
+        b_icp = measure(setup, PLAIN_ICP, repeat=repeat)
+        o_icp = measure(setup, OURS_ICP, repeat=repeat)
         print(row(f"Open3D ICP, plain calls, {n / 1e6:g} M", b_icp))
         print(row(f"refine_icp, {n / 1e6:g} M", o_icp, b_icp), flush=True)
-        b_m3c2 = measure(setup + CORE, PLAIN_M3C2, repeat=2)
-        o_m3c2 = measure(setup + CORE, OURS_M3C2, repeat=2)
+        b_m3c2 = measure(setup + CORE, PLAIN_M3C2, repeat=repeat)
+        o_m3c2 = measure(setup + CORE, OURS_M3C2, repeat=repeat)
         print(row(f"py4dgeo M3C2, plain, {n / 1e6:g} M", b_m3c2))
         print(row(f"registration.m3c2, {n / 1e6:g} M", o_m3c2, b_m3c2))
         print(f"RESULT {n / 1e6:g} M points: wrapper overhead ICP {o_icp['seconds'] / b_icp['seconds'] - 1:+.1%}, "
               f"M3C2 {o_m3c2['seconds'] / b_m3c2['seconds'] - 1:+.1%} (target <= +10 %)", flush=True)
+        found[f"icp_ratio_{n}"] = o_icp["seconds"] / b_icp["seconds"]
+        found[f"m3c2_ratio_{n}"] = o_m3c2["seconds"] / b_m3c2["seconds"]
+    figures(**found)
 
 
 if __name__ == "__main__":
-    main(tuple(int(a) for a in sys.argv[1:]) or (1_000_000, 10_000_000))
+    _small, _args = small_mode()
+    main(tuple(int(a) for a in _args) or ((30_000,) if _small else (1_000_000, 10_000_000)), repeat=1 if _small else 2)

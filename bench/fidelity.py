@@ -16,7 +16,9 @@ Rows:
 5. Whole-scan per-bin scatter at a 0.05 deg step in 2.5 m bins (chapter 5, Figures 59-60): about 5 mm.
 6. Scan and visit times of the VZ-1000 (section 4.3.2).
 
-Usage: ``./run bench fidelity`` (about 10 minutes on two cores).
+Usage: ``./run bench fidelity`` (about 10 minutes on two cores); ``--small``: the same rows on fewer cases (the
+lab: 2 cases, coarse scans at 0.1 degrees, 300 points planned a target; 20 centroid scans, a 0.1 degree whole scan,
+2 dual-camera frames a block; the rendered lab dual-camera row left out).
 """
 from __future__ import annotations
 
@@ -30,7 +32,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from _dissertation import time_figures  # noqa: E402
-from _harness import write_figure  # noqa: E402
+from _harness import figures, small_mode, write_figure  # noqa: E402
 
 from lidar.displacement import compute_displacements  # noqa: E402
 from lidar.layout import layout_from_model  # noqa: E402
@@ -40,9 +42,12 @@ from lidar.scan import Scan  # noqa: E402
 from lidar.scanner_catalogue import get_scanner  # noqa: E402
 from lidar.simulate import BridgeModel, BridgeScene, EpochConditions, ScannerSetup  # noqa: E402
 from lidar.simulate.bridge import Target  # noqa: E402
+from registration.profile import girder_lines, span_profile  # noqa: E402
 
 VZ = get_scanner("Riegl VZ-1000")
 ROWS: list[tuple[str, str, str, str]] = []
+#: The key figures (printed on one line for the small-mode test).
+FIGURES: dict[str, float] = {}
 
 
 def row(claim, theirs, ours, differs):
@@ -77,26 +82,31 @@ def lab_positions() -> list[ScannerSetup]:
     return out
 
 
-def lab_test(seed: int = 3):
+def lab_test(seed: int = 3, *, cases: tuple[tuple[int, int], ...] | None = None, min_points: int = 1000,
+             coarse_step_deg: float = 0.05):
+    """The lab's cases as (position, load) indices (default: every position x every load, 3 x 4, as the
+    dissertation), ``min_points`` planned on each target (1000, as the dissertation), coarse scans at
+    ``coarse_step_deg``."""
     model = lab_model()
     layout = layout_from_model(model, noise_m=0.01, rng=np.random.default_rng(1))
     groups = dict(zip(layout.ids, layout.groups, strict=False))
     rng = np.random.default_rng(seed)
-    cases = []
-    for setup in lab_positions():
-        for load in LAB_LOADS_MM:
-            scene = BridgeScene(model, EpochConditions(midspan_displacement_m=load / 1000), setup, profile=VZ)
-            coarse, _ = scene.scan(scene.coarse_window(0.05), rng=rng)
-            analysis = analyse_coarse(coarse, layout, tolerance_m=0.05, max_tilt_deg=None)
-            plan = plan_from_coarse(analysis, layout, profile=VZ)
-            fine = Scan.concatenate([scene.scan(r.window, rng=rng)[0] for r in plan.rois])
-            cents = {k: c for k, c in measure_targets(fine, plan, layout, profile=VZ).items() if c.found}
-            cases.append((cents, scene.truth(), len(analysis.identification.missing)))
-    base, base_truth, _ = cases[0]
+    positions = lab_positions()
+    chosen = cases or tuple((p, k) for p in range(len(positions)) for k in range(len(LAB_LOADS_MM)))
+    results = []
+    for setup, load in ((positions[p], LAB_LOADS_MM[k]) for p, k in chosen):
+        scene = BridgeScene(model, EpochConditions(midspan_displacement_m=load / 1000), setup, profile=VZ)
+        coarse, _ = scene.scan(scene.coarse_window(coarse_step_deg), rng=rng)
+        analysis = analyse_coarse(coarse, layout, tolerance_m=0.05, max_tilt_deg=None)
+        plan = plan_from_coarse(analysis, layout, profile=VZ, min_points=min_points)
+        fine = Scan.concatenate([scene.scan(r.window, rng=rng)[0] for r in plan.rois])
+        cents = {k: c for k, c in measure_targets(fine, plan, layout, profile=VZ).items() if c.found}
+        results.append((cents, scene.truth(), len(analysis.identification.missing)))
+    base, base_truth, _ = results[0]
     out = {}
     for name, kw in (("ours", {}), ("dissertation's formula", dict(normal_mode="epoch", weighted=False))):
         errs = []
-        for cents, truth, _ in cases[1:]:
+        for cents, truth, _ in results[1:]:
             res = compute_displacements(base, cents, groups, **kw)
             for d in res.displacements:
                 true = truth.target(d.reflector).vertical_displacement_m - \
@@ -104,15 +114,17 @@ def lab_test(seed: int = 3):
                 errs.append(d.displacement_m - true)
         e = np.abs(np.array(errs)) * 1000
         out[name] = (float(np.sqrt(np.mean(e ** 2))), float(e.max()), float(np.mean(e < 0.5)))
-    missed = sum(c[2] for c in cases)
+    missed = sum(c[2] for c in results)
     o, d = out["ours"], out["dissertation's formula"]
-    row("Lab LiDAR test: LiDAR minus reference displacement, 11 cases against case 1",
+    FIGURES.update(lab_rms_mm=o[0], lab_max_mm=o[1], lab_share_below_half_mm=o[2], lab_formula_rms_mm=d[0],
+                   lab_targets_missed=missed)
+    row(f"Lab LiDAR test: LiDAR minus reference displacement, {len(results) - 1} cases against case 1",
         "\"mostly less than 0.5 mm\" (4.3.1, Fig. 32); \"0.5 mm of measurement error\" (4.4)",
         f"ours: RMS {o[0]:.3f} mm, max {o[1]:.3f} mm, {100 * o[2]:.0f} % < 0.5 mm; dissertation's formula on "
         f"the same scans: RMS {d[0]:.3f} mm, max {d[1]:.3f} mm, {100 * d[2]:.0f} % < 0.5 mm",
-        "simulated (5 mm range noise, 1000 points per target); desk 2.4 x 1.2 m and loads of 1.5 / 3 / 4.5 mm "
+        f"simulated (5 mm range noise, {min_points} points per target); desk 2.4 x 1.2 m and loads of 1.5 / 3 / 4.5 mm "
         "assumed (not in the text); scanner tilted 35 deg down (the text gives no tilt); coarse detection and "
-        f"identification included ({missed} of 108 targets not resolved in the coarse scans); the "
+        f"identification included ({missed} of {9 * len(results)} targets not resolved in the coarse scans); the "
         "dissertation's error is against a laser displacement sensor, ours against the simulator's truth")
 
 
@@ -142,6 +154,8 @@ def centroid_precision(repeats: int = 60, seed: int = 5):
     vert = xyz[:, 2] - xyz[:, 2].mean()
     rep = float(np.sqrt(np.mean([los @ cv @ los for cv in sig])))
     rep_v = float(np.sqrt(np.mean([cv[2, 2] for cv in sig])))
+    FIGURES.update(centroid_scatter_los_mm=float(np.std(along, ddof=1) * 1e3), centroid_sigma_los_mm=rep * 1e3,
+                   centroid_points=int(np.median(n)))
     row("Centroid precision of one target from 1000 points",
         "5 mm per point -> 0.16 mm (4.3.2, central limit theorem along the range)",
         f"{np.std(along, ddof=1) * 1e3:.3f} mm along the line of sight, {np.std(vert, ddof=1) * 1e3:.3f} mm vertical "
@@ -152,7 +166,9 @@ def centroid_precision(repeats: int = 60, seed: int = 5):
 
 
 # ----------------------------------------------------------------------------------------- 3-4. dual camera
-def dual_camera(per_block: int = 100):
+def dual_camera(per_block: int = 100, lab_frames: int = 40, cal_motions: int = 21, zhang_views: int = 15,
+                rendered: bool = True):
+    """The numerical study's rows and (``rendered``) the lab's compensation from rendered images."""
     from dualcamera_study import run
 
     from vision.simulate import RigGeometry, table10_schedule
@@ -169,17 +185,26 @@ def dual_camera(per_block: int = 100):
         err = np.abs(r.displacement_m - truth)[:, 1] * 1e3
         label = f"{res_px[0]}x{res_px[1]}" if res_px else "no quantisation"
         parts.append(f"{label}: single max {single:.1f}, dual RMS {np.sqrt(np.mean(err ** 2)):.2f} / max {err.max():.2f}")
+        if res_px is None:
+            FIGURES.update(dual_exact_rms_mm=float(np.sqrt(np.mean(err ** 2))))
     row("Dual-camera numerical study (vertical error, mm, whole pixels)",
         "Figure 22 only: the error falls as the resolution grows; no number in the text (3.3.1)",
         "; ".join(parts),
         "fields of view 200 x 150 mm (main) and 150 x 100 mm (sub) as in the text (non-square pixels on the "
         "16:10 sensor); one calibration of 21 rig motions; cannot compare numbers with a figure")
+    if not rendered:
+        print("  (the lab dual-camera row renders images for minutes: left out of the small mode, which "
+              "dualcamera_study --small runs)", flush=True)
+        return
     lab = RigGeometry.laboratory()
-    P = pan_tilt_drift(40)
+    P = pan_tilt_drift(lab_frames)
     tr = np.column_stack([np.zeros(len(P)), np.linspace(0.0, -0.005, len(P))])
-    r = run(lab, P, tr, mode="render", cal_rotation=3e-3, cal_translation=0.005)
+    r = run(lab, P, tr, mode="render", cal_rotation=3e-3, cal_translation=0.005, cal_motions=cal_motions,
+            zhang_views=zhang_views)
     false = r.single_camera_m - tr
     after = r.displacement_m - tr
+    FIGURES.update(lab_camera_false_mm=float(np.linalg.norm(false, axis=1).max() * 1e3),
+                   lab_camera_after_mm=float(np.linalg.norm(after, axis=1).max() * 1e3))
     row("Lab dual-camera: false displacement before and after compensation (max over the motion)",
         "44.1 mm -> 1.1 mm (3.3.2, Fig. 26; the text does not say vertical or 2-D)",
         f"vertical {np.abs(false[:, 1]).max() * 1e3:.1f} -> {np.abs(after[:, 1]).max() * 1e3:.2f} mm; 2-D "
@@ -189,21 +214,23 @@ def dual_camera(per_block: int = 100):
 
 
 # ----------------------------------------------------------------------------------------- 5. whole scan
-def whole_scan_scatter(seed: int = 9):
-    from registration.profile import span_profile
-
+def whole_scan_scatter(seed: int = 9, *, step_deg: float = 0.05):
     model = BridgeModel()
     setup = ScannerSetup((20.0, -14.0, 1.5), heading_deg=25.0)
     scene = BridgeScene(model, EpochConditions(), setup, profile=VZ)
-    scan, _ = scene.scan(scene.coarse_window(0.05), rng=np.random.default_rng(seed))
-    xyz = scan.xyz_socs @ setup.rotation.T + np.asarray(setup.position_m)  # into the bridge frame (truth pose)
-    meas = np.array([t.centre_m for t in model.targets if t.group == "measurement"])
-    prof = span_profile(xyz, xyz, meas, bin_m=2.5)
+    scan, _ = scene.scan(scene.coarse_window(step_deg), rng=np.random.default_rng(seed))
+    # into the bridge frame (truth pose), which is the span frame here: station along x, lateral y, height z
+    xyz = scan.xyz_socs @ setup.rotation.T + np.asarray(setup.position_m)
+    meas = [t for t in model.targets if t.group == "measurement"]
+    lines = girder_lines(np.array([t.centre_m[:2] for t in meas]), np.array([t.centre_m[2] for t in meas]))
+    faces = (model.pier_length_m / 2, model.span_m - model.pier_length_m / 2)  # from the first pier to the last
+    prof = span_profile(xyz, xyz, lines, stations_m=faces, bin_m=2.5)
     std = np.array([b.std_from_m for b in prof.bins]) * 1e3
-    row("Whole-scan profile: spread of the deck-underside heights per 2.5 m bin at a 0.05 deg step",
+    FIGURES.update(whole_scan_median_std_mm=float(np.median(std)), whole_scan_bins=len(std))
+    row(f"Whole-scan profile: spread of the deck-underside heights per 2.5 m bin at a {step_deg:g} deg step",
         "about 5 mm (chapter 5, Fig. 60); about 6 mm of variation within 2.5 m (5.5)",
         f"median {np.median(std):.1f} mm, {np.percentile(std, 10):.1f}-{np.percentile(std, 90):.1f} mm (10-90 %) "
-        f"over {len(std)} bins of two girder lines",
+        f"over {len(std)} bins of {len(lines)} girder lines",
         "simulated flat box girder (no cross-beams, bearings or formwork marks) seen from 14 m: the spread is "
         "range noise alone, so ours is a lower bound of what a real deck gives")
 
@@ -211,6 +238,7 @@ def whole_scan_scatter(seed: int = 9):
 # ----------------------------------------------------------------------------------------- 6. times
 def times():
     f = time_figures(VZ)
+    FIGURES.update(pier_minutes_max=f["pier_min"][1], visit_minutes=f["visit_min"])
     row("VZ-1000: 1000 points on a pier target",
         "3 min (4.3.2)", f"{f['pier_min'][0]:.1f}-{f['pier_min'][1]:.1f} min at 15-30 m",
         "the 120 s per-window overhead is calibrated on this figure; ranges assumed")
@@ -226,18 +254,21 @@ def times():
 
 
 def main():
+    small, _ = small_mode()
     t0 = time.time()
-    print("Fidelity to the dissertation (running the set-ups)...")
-    lab_test()
-    centroid_precision()
-    whole_scan_scatter()
+    print("Fidelity to the dissertation (running the set-ups)" + (", small mode..." if small else "..."))
+    # small: the first position unloaded, the second with the largest load (a change of position and of load)
+    lab_test(**(dict(cases=((0, 0), (1, 3)), min_points=300, coarse_step_deg=0.1) if small else {}))
+    centroid_precision(**(dict(repeats=20) if small else {}))
+    whole_scan_scatter(**(dict(step_deg=0.1) if small else {}))
     times()
-    dual_camera()
+    dual_camera(**(dict(per_block=2, rendered=False) if small else {}))
     table = "| claim | dissertation (section) | ours | how the set-ups differ |\n|---|---|---|---|\n" + "\n".join(
         "| " + " | ".join(r) + " |" for r in ROWS)
     print("\n" + table)
     print(f"\n({time.time() - t0:.0f} s)")
-    write_figure("fidelity", table)
+    write_figure("fidelity", table)  # not in the small mode (--small among the arguments)
+    figures(**FIGURES)
 
 
 if __name__ == "__main__":

@@ -23,7 +23,8 @@ their own row (must be 0), the same for the along-span movements (must be 0), an
 expected.
 
 Usage: ``./run bench long_bridges [--visits N] [--quick] [--seed S]`` (about 1 min a set-up visit of a long bridge
-on a loaded two-core machine; ``--quick``: the three-span bridge only).
+on a loaded two-core machine; ``--quick``: the three-span bridge only; ``--small``: a short two-span bridge, two
+set-ups a visit, 2 visits, coarse scans at 0.1 degrees, in about a minute).
 """
 from __future__ import annotations
 
@@ -33,7 +34,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _harness import write_figure
+from _harness import SMALL, figures, write_figure
 
 from lidar.simulate.bridge import BridgeModel
 from lidar.simulate.scene import EpochConditions
@@ -53,6 +54,9 @@ STATIONS = {
     "two, ends": (0.28, 0.72),
     "two, end + middle": (0.1, 0.5),
 }
+#: The small mode's bridge and stations: the multi-span layout and two set-ups a visit, on a short bridge.
+SMALL_BRIDGES = {"2 x 15 m": (15.0, 15.0)}
+SMALL_STATIONS = {"two, ends": (0.28, 0.72)}
 OUT = Path(__file__).resolve().parent / "out"
 
 
@@ -67,7 +71,8 @@ def _stations(model: BridgeModel, fractions: tuple, rng: np.random.Generator) ->
                           rng.uniform(1.4, 1.6)), heading_deg=float(rng.uniform(0.0, 360.0))) for f in fractions]
 
 
-def scenario(root: Path, spans: tuple, fractions: tuple, *, visits: int, seed: int) -> StudyScore:
+def scenario(root: Path, spans: tuple, fractions: tuple, *, visits: int, seed: int,
+             coarse_step_deg: float = 0.05) -> StudyScore:
     """One bridge and station plan: simulate, import, process, score."""
     model = _multi(spans)
     rng = np.random.default_rng(seed)
@@ -76,7 +81,8 @@ def scenario(root: Path, spans: tuple, fractions: tuple, *, visits: int, seed: i
     stations = [_stations(model, fractions, rng) for _ in conditions]
     # the surveyor says roughly where set-up 1 stands (a symmetric bridge is otherwise refused as ambiguous)
     hint = f"{fractions[0] * model.length_m:.1f},{-(model.deck_width_m / 2 + 8.0):.1f}"
-    return run_study(root, model, conditions, stations=stations, seed=seed, settings={"station_xy": hint})["corrected"]
+    return run_study(root, model, conditions, stations=stations, seed=seed, settings={"station_xy": hint},
+                     coarse_step_deg=coarse_step_deg)["corrected"]
 
 
 def table(rows: dict) -> str:
@@ -94,27 +100,39 @@ def main() -> None:
     ap.add_argument("--visits", type=int, default=3)
     ap.add_argument("--seed", type=int, default=28)
     ap.add_argument("--quick", action="store_true", help="the three-span bridge only")
+    ap.add_argument(SMALL, action="store_true", help="a short two-span bridge, two set-ups, 2 visits (seconds)")
     args = ap.parse_args()
     print(__doc__.split("Usage")[0].strip() + "\n")
     OUT.mkdir(exist_ok=True)
     bridges = {k: v for k, v in BRIDGES.items() if not args.quick or k.startswith("3")}
+    stations = STATIONS
+    if args.small:
+        bridges, stations = SMALL_BRIDGES, SMALL_STATIONS
+        args.visits = min(args.visits, 2)
     rows: dict = {}
     silent = 0.0
     for n, (bridge, spans) in enumerate(bridges.items()):
-        for m, (name, fractions) in enumerate(STATIONS.items()):
+        for m, (name, fractions) in enumerate(stations.items()):
             t0 = time.perf_counter()
-            s = scenario(OUT / "long_bridges" / f"b{n}s{m}", spans, fractions, visits=args.visits,
-                         seed=args.seed + 10 * n + m)
+            s = scenario(OUT / ("long_bridges_small" if args.small else "long_bridges") / f"b{n}s{m}", spans,
+                         fractions, visits=args.visits, seed=args.seed + 10 * n + m,
+                         coarse_step_deg=0.1 if args.small else 0.05)
             rows[(bridge, name)] = s
             silent = max(silent, s.silent_beyond_3sigma if s.errors_mm else 0.0,
                          s.along_silent_beyond_3sigma if s.along_errors_mm else 0.0)
             print(f"{bridge}, {name}: {s.row()} ({time.perf_counter() - t0:.0f} s)", flush=True)
     print()
     print(table(rows))
-    (OUT / "long_bridges.json").write_text(json.dumps({f"{b} | {s}": v.row() for (b, s), v in rows.items()}, indent=1))
+    if not args.small:
+        (OUT / "long_bridges.json").write_text(json.dumps({f"{b} | {s}": v.row() for (b, s), v in rows.items()},
+                                                          indent=1))
     print(f"\nlargest share beyond 3 sigma without a flag: {silent:.1%} (must be 0)")
-    if not args.quick:  # one bridge is no table for the documentation
+    if not args.quick and not args.small:  # one bridge is no table for the documentation
         write_figure("long_bridges", table(rows))
+    scores = list(rows.values())
+    figures(scenarios=len(rows), visits=args.visits, displacements=sum(len(s.errors_mm) for s in scores),
+            missing=sum(s.missing for s in scores), expected=sum(s.expected for s in scores),
+            rms_mm_max=float(np.nanmax([s.rms_mm for s in scores])), silent_beyond_3sigma_max=silent)
 
 
 if __name__ == "__main__":

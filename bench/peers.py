@@ -6,7 +6,8 @@ Peers: py4dgeo and Open3D (in the project's environment), laspy, and CloudCompar
 (coarse scans at 0.06 degrees, 1.2-1.3 M points, 0 / -4 / -7 mm at midspan), processed as a campaign, and a
 whole-bridge coarse scan of about 19 M points as LAS. Every figure is the best of three fresh processes (plan-file
 and the bare read: of five, run in turns); every ratio is against a peer measured in the same run.
-Usage: ``./run bench peers [epochs | files]``.
+Usage: ``./run bench peers [epochs | files]`` (``--small``: every row on a campaign scanned at 0.12 degrees and a
+0.4 M-point scan, simulated once into ``bench/out/peers-small``, one run each).
 """
 from __future__ import annotations
 
@@ -23,13 +24,28 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[0]))
 
-from _harness import ROOT, measure, write_figure  # noqa: E402
-from _peers_data import OUT, big_scan, campaign  # noqa: E402
+from _harness import ROOT, figures, small_mode, write_figure  # noqa: E402
+from _harness import measure as _measure  # noqa: E402
+from _peers_data import OUT, SMALL_OUT, SMALL_POINTS, SMALL_STEP_DEG, big_scan, campaign  # noqa: E402
 
 PY = sys.executable
 CLI = str(Path(PY).with_name("bridgesurvey"))
 ENV = {**os.environ, "MPLBACKEND": "Agg", "PYTHONPATH": str(ROOT)}
 ROWS: list[tuple[str, str, str, str]] = []
+#: The key figures (printed on one line for the small-mode test).
+FIGURES: dict[str, float] = {}
+#: Small mode (``--small``): the small data and one run of everything.
+SMALL = False
+
+
+def data() -> Path:
+    """The folder of this run's data."""
+    return SMALL_OUT if SMALL else OUT
+
+
+def measure(setup: str, body: str, *, repeat: int = 3) -> dict:
+    """:func:`_harness.measure`, once in small mode."""
+    return _measure(setup, body, repeat=1 if SMALL else repeat)
 
 
 #: Runs a command and reports its wall time and peak memory. A small launcher process forks it, so the
@@ -46,11 +62,12 @@ print("@@" + json.dumps({"rc": p.returncode, "seconds": dt,
 """
 
 
-def run(cmd: list[str], *, repeat: int = 3, cwd: Path = OUT) -> dict:
+def run(cmd: list[str], *, repeat: int = 3, cwd: Path | None = None) -> dict:
     """Best wall time of ``cmd`` (fresh process each time) and its largest peak resident memory (MiB)."""
     best, peak, out = None, 0.0, ""
-    for _ in range(repeat):
-        proc = subprocess.run([PY, "-c", _LAUNCHER, *cmd], cwd=cwd, env=ENV, capture_output=True, text=True)
+    for _ in range(1 if SMALL else repeat):
+        proc = subprocess.run([PY, "-c", _LAUNCHER, *cmd], cwd=cwd or data(), env=ENV, capture_output=True,
+                              text=True)
         lines = proc.stdout.splitlines()
         r = json.loads(lines[-1][2:]) if lines and lines[-1].startswith("@@") else {"rc": -1}
         if r["rc"] != 0:
@@ -67,7 +84,7 @@ def run_alternating(a: list[str], b: list[str], *, rounds: int = 5) -> tuple[dic
     Both see the same moments of a shared machine: a virtual machine's speed drifts over minutes, and three
     runs of one, then three of the other, can land in different spells.
     """
-    runs = [(run(a, repeat=1), run(b, repeat=1)) for _ in range(rounds)]
+    runs = [(run(a, repeat=1), run(b, repeat=1)) for _ in range(1 if SMALL else rounds)]
     return (min((x for x, _ in runs), key=lambda r: r["seconds"]) | {"peak_mb": max(x["peak_mb"] for x, _ in runs)},
             min((y for _, y in runs), key=lambda r: r["seconds"]) | {"peak_mb": max(y["peak_mb"] for _, y in runs)})
 
@@ -88,7 +105,7 @@ def ratio(a: float, b: float) -> str:
 # ------------------------------------------------------------------ the comparison's arrays
 def arrays(camp: Path) -> Path:
     """Both epochs in the campaign frame (targets + ICP), cropped, and the core points, saved once."""
-    path = OUT / "arrays.npz"
+    path = camp.parent / "arrays.npz"
     if path.exists():
         return path
     from projects.compare.whole_scan import bring_to_campaign_frame
@@ -133,6 +150,7 @@ algo = py4dgeo.M3C2(epochs=(e1, e2), corepoints=core - off, normal_radii=[0.5], 
                     registration_error=float(d['reg_err'][0]))
 dist, unc = algo.run()
 """)
+    FIGURES["m3c2_ratio"] = ours["seconds"] / peer["seconds"]
     add("M3C2 step, same arrays", f"{ours['seconds']:.2f} s", f"py4dgeo {peer['seconds']:.2f} s",
         ratio(ours["seconds"], peer["seconds"]))
 
@@ -160,6 +178,7 @@ dist = np.asarray(b.compute_point_cloud_distance(a))
     if cc is not None:
         peer += f"; CloudCompare 2.11 -C2C_DIST {cc:.2f} s (its own timings)"
         verdict += f", {ratio(ours['seconds'], cc)} of CloudCompare"
+    FIGURES["c2c_ratio_to_open3d"] = ours["seconds"] / o3d["seconds"]
     add(f"C2C distance step, {n / 1e6:.1f} M points", f"{ours['seconds']:.2f} s", peer, verdict)
 
 
@@ -178,7 +197,7 @@ def cloudcompare_c2c(npz: Path) -> float | None:
     if exe is None:
         return None
     d = np.load(npz)
-    folder = Path(tempfile.mkdtemp(dir=OUT))
+    folder = Path(tempfile.mkdtemp(dir=data()))
     for name in ("xa", "xb"):
         np.savetxt(folder / f"{name}.xyz", d[name] - d["xa"].mean(axis=0), fmt="%.5f")
     cmd = ["xvfb-run", "-a", exe, "-SILENT", "-NO_TIMESTAMP", "-AUTO_SAVE", "OFF", "-O", "xb.xyz", "-O", "xa.xyz",
@@ -208,7 +227,7 @@ def registration_row(camp: Path) -> None:
     from registration.icp import stable_mask
     from tests.projects.conftest import MODEL
 
-    field = OUT / "field"
+    field = camp.parent / "field"
     p0, p2 = load_scene(field / "v0")[0], load_scene(field / "v2")[0]
     truth = np.linalg.inv(p0.pose) @ p2.pose  # SOCS of visit 2 -> SOCS of visit 0 (the campaign frame)
     pts = p2.to_socs(np.array([t.centre_m for t in MODEL.targets]))
@@ -229,17 +248,21 @@ def registration_row(camp: Path) -> None:
         a_b = np.array([cb[i].xyz_socs for i in refs])
         a_2 = np.array([c2[i].xyz_socs for i in refs])
     ours = err(e.transform.matrix)
+    FIGURES.update(registration_error_mean_mm=ours[0], registration_error_max_mm=ours[1])
     start = e.registration.transform.matrix
     ms, mt = stable_mask(src, a_2, exclude_above_m=6.0), stable_mask(base, a_b, exclude_above_m=6.0)
     plain, dt_plain = _open3d_icp(src[ms], base[mt], start, kernel=False)
     tukey, dt_tukey = _open3d_icp(src[ms], base[mt], start, kernel=True)
-    whole, dt_whole = _open3d_icp(src, base, start, kernel=False)
+    # Open3D on the whole cloud takes minutes on a busy machine: left out of the small mode, saying so
+    whole, dt_whole = (None, 0.0) if SMALL else _open3d_icp(src, base, start, kernel=False)
+    others = [err(plain)[0], err(tukey)[0]] + ([] if whole is None else [err(whole)[0]])
     add("registration: targets + ICP (pose error at the 9 targets, mean / max)",
         f"{ours[0]:.2f} / {ours[1]:.2f} mm, {ours_s:.2f} s (with reading)",
         f"Open3D point-to-plane on the stable parts {err(plain)[0]:.2f} / {err(plain)[1]:.2f} mm ({dt_plain:.2f} s); "
         f"with a Tukey kernel {err(tukey)[0]:.2f} / {err(tukey)[1]:.2f} mm ({dt_tukey:.2f} s); on the whole cloud "
-        f"{err(whole)[0]:.2f} / {err(whole)[1]:.2f} mm ({dt_whole:.2f} s)",
-        "best" if ours[0] <= min(err(plain)[0], err(tukey)[0], err(whole)[0]) else "not the best")
+        + ("(not run in the small mode)" if whole is None else f"{err(whole)[0]:.2f} / {err(whole)[1]:.2f} mm "
+                                                                 f"({dt_whole:.2f} s)"),
+        "best" if ours[0] <= min(others) else "not the best")
 
 
 def _open3d_icp(src, tgt, start, *, kernel: bool):
@@ -289,14 +312,14 @@ def compare_job(camp: Path, npz: Path) -> None:
     with Campaign.open(camp, writable=False) as c:
         (fa,), (fb,) = c.files("2026-03-02", "coarse"), c.files("2026-03-16", "coarse")
         a, b = str(c.path_of(fa)), str(c.path_of(fb))
-    work = Path(tempfile.mkdtemp(dir=OUT))
+    work = Path(tempfile.mkdtemp(dir=data()))
     copy = work / "camp"
     shutil.copytree(camp, copy, ignore=shutil.ignore_patterns(".lock"))
     outs = iter(range(100))
     ours = run([CLI, "compare", str(copy), "--from", "2026-03-02", "--to", "2026-03-16", "--method", "m3c2",
                 "--out", str(work / "o")], repeat=1)
     best = ours
-    for _ in range(2):
+    for _ in range(0 if SMALL else 2):
         best_try = run([CLI, "compare", str(copy), "--from", "2026-03-02", "--to", "2026-03-16", "--method", "m3c2",
                         "--out", str(work / f"o{next(outs)}")], repeat=1)
         best = best_try if best_try["seconds"] < best["seconds"] else best
@@ -306,13 +329,15 @@ def compare_job(camp: Path, npz: Path) -> None:
 
 
 def file_jobs() -> None:
-    las, layout, step = big_scan()
+    las, layout, step = big_scan(SMALL_OUT, points=SMALL_POINTS) if SMALL else big_scan()
     n = json.loads((las.parent / "meta.json").read_text())["points"]
     size_mb = las.stat().st_size / 2**20
     print(f"big scan: {n:,} points, {size_mb:.0f} MiB, step {step} deg", flush=True)
     header = run(script(f"import laspy\nwith laspy.open({str(las)!r}) as r: h = r.header; print(h.point_count)"))
     info = run([CLI, "info", str(las), "--json"])
     got = json.loads(info["stdout"])[0]["scans"][0]
+    FIGURES.update(big_points=n, info_theta_step_deg=got["theta_step_deg"], info_phi_step_deg=got["phi_step_deg"],
+                   truth_step_deg=step)
     add(f"`info` on {n / 1e6:.1f} M points", f"{info['seconds']:.2f} s, {info['peak_mb']:.0f} MiB, step "
         f"{got['theta_step_deg']:.4f} x {got['phi_step_deg']:.4f} deg (truth {step})",
         f"laspy header read {header['seconds']:.2f} s, {header['peak_mb']:.0f} MiB",
@@ -327,7 +352,7 @@ def file_jobs() -> None:
         f"{got['theta_step_deg']:.4f} x {got['phi_step_deg']:.4f} deg",
         f"laspy read + numpy bounds {full['seconds']:.2f} s, {full['peak_mb']:.0f} MiB",
         f"{ratio(stats['seconds'], full['seconds'])} time, {ratio(stats['peak_mb'], full['peak_mb'])} memory")
-    work = Path(tempfile.mkdtemp(dir=OUT))
+    work = Path(tempfile.mkdtemp(dir=data()))
     conv = run([CLI, "convert", str(las), str(work / "a.laz"), "--force"], repeat=2)
     peer = run(script(f"import laspy\nlaspy.read({str(las)!r}).write({str(work / 'b.laz')!r})"), repeat=2)
     add(f"LAS -> LAZ, {n / 1e6:.1f} M points", f"{conv['seconds']:.2f} s, {conv['peak_mb']:.0f} MiB, lossless",
@@ -335,7 +360,7 @@ def file_jobs() -> None:
         f"{ratio(conv['seconds'], peer['seconds'])} time, {ratio(conv['peak_mb'], peer['peak_mb'])} memory")
     shutil.rmtree(work, ignore_errors=True)
     plan, bare = run_alternating(
-        [CLI, "plan-file", str(las), "--layout", str(layout), "--out", str(OUT / "plan.json"), "--json"],
+        [CLI, "plan-file", str(las), "--layout", str(layout), "--out", str(data() / "plan.json"), "--json"],
         script(f"""
 import laspy, numpy as np
 las = laspy.read({str(las)!r})
@@ -361,12 +386,14 @@ theta = np.degrees(np.arctan2(np.hypot(x, y), z)); phi = np.degrees(np.arctan2(y
 
 def main(only: tuple[str, ...] = ()) -> None:
     """Every row, or only the rows of the groups named (``epochs``, ``files``)."""
-    OUT.mkdir(parents=True, exist_ok=True)
+    if SMALL:  # made again every time: data an older version wrote would hide what this one breaks
+        shutil.rmtree(SMALL_OUT, ignore_errors=True)
+    data().mkdir(parents=True, exist_ok=True)
     if only == ("files",):
         file_jobs()
         _table()
         return
-    camp = campaign()
+    camp = campaign(SMALL_OUT, step_deg=SMALL_STEP_DEG) if SMALL else campaign()
     npz = arrays(camp)
     print(f"epochs: {np.load(npz)['xa'].shape[0]:,} and {np.load(npz)['xb'].shape[0]:,} points after cropping",
           flush=True)
@@ -389,8 +416,10 @@ def _table() -> str:
     text = "| job | BridgeSurvey | peer | ratio / verdict |\n|---|---|---|---|\n" + "\n".join(
         "| " + " | ".join(r) + " |" for r in ROWS)
     print("\n" + text)
+    figures(rows=len(ROWS), **FIGURES)
     return text
 
 
 if __name__ == "__main__":
-    main(tuple(sys.argv[1:]))
+    SMALL, _args = small_mode()
+    main(tuple(_args))

@@ -17,7 +17,8 @@ Printed:
 3. Detection recall of the coarse scan by coarse step, range and incidence.
 4. The time model against the dissertation's VZ-1000 figures (section 4.3.2).
 
-Usage: ``./run bench plan_predictions`` (about 5 minutes on two cores).
+Usage: ``./run bench plan_predictions`` (about 5 minutes on two cores; ``--small``: the 25 m bridge, one visit after
+the baseline, at a 0.08 degree coarse step).
 """
 from __future__ import annotations
 
@@ -25,6 +26,7 @@ import math
 
 import numpy as np
 from _dissertation import time_figures  # noqa: E402  (bench/ is on the path when run as a script)
+from _harness import figures, small_mode
 
 from lidar.displacement import Observation, compute_displacements
 from lidar.layout import layout_from_model
@@ -87,10 +89,12 @@ def incidence_and_range(scene, tid):
     return math.degrees(math.acos(abs(np.asarray(t.normal_socs) @ (c / r)))), r
 
 
-def run(stations_per_bridge: int = 10, seed: int = 7):
+def run(stations_per_bridge: int = 10, seed: int = 7, *, bridges: tuple[str, ...] = tuple(BRIDGES),
+        steps: tuple[float, ...] = STEPS):
     rng = np.random.default_rng(seed)
     points_rows, sigma_rows, recall_rows = [], [], []
-    for name, model in BRIDGES.items():
+    for name in bridges:
+        model = BRIDGES[name]
         layout = layout_from_model(model, noise_m=0.02, rng=np.random.default_rng(1))
         groups = dict(zip(layout.ids, layout.groups, strict=False))
         base_setup = _station(rng, model)
@@ -98,7 +102,7 @@ def run(stations_per_bridge: int = 10, seed: int = 7):
         base_obs = {k: Observation(c.xyz_socs, c.cov) for k, c in base.items()}
         for k in range(stations_per_bridge):
             setup = _station(rng, model)
-            step = STEPS[k % len(STEPS)]
+            step = steps[k % len(steps)]
             # predicted before the visit: layout + baseline only (the layout's frame is the bridge frame here)
             pred = predict_station(layout, setup.position_m, profile=VZ, baseline=base_obs)
             cents, plan, counts, analysis, scene = visit(model, layout, setup, -rng.uniform(0.002, 0.012), step, rng)
@@ -204,12 +208,18 @@ def report_time_model():
 
 
 def main():
+    small, _ = small_mode()
     print("Honest predictions: plan and station advisor against the simulated visits")
-    points, sigmas, recall = run()
+    points, sigmas, recall = run(**(dict(stations_per_bridge=1, bridges=tuple(BRIDGES)[:1], steps=(0.08,))
+                                    if small else {}))
     report_points(points)
     report_sigma(sigmas)
     report_recall(recall)
     report_time_model()
+    q = np.array([r[3] / r[4] for r in sigmas])
+    figures(windows=len(points), points_plan_to_scanned_median=float(np.median([r[3] / max(r[4], 1) for r in points])),
+            sigma_predicted_to_reported_median=float(np.median(q)) if q.size else None,
+            recall_with_guided=float(np.mean([r[3] for r in recall])))
 
 
 if __name__ == "__main__":
