@@ -23,6 +23,7 @@ import numpy as np
 from common.errors import CancelledError, InputError, ProcessingError, SurveyError
 from common.flags import PROBLEM, severity
 from common.progress import ProgressCallback, report, scaled
+from common.series import series_arrays_from_npz
 from lidar.identification import MAX_TILT_DEG
 from lidar.io import read_scan
 from lidar.io.poses import read_in_scanner_frame
@@ -37,7 +38,6 @@ from projects.processing.parameters import DEFAULTS, parameter, stage1_params, s
 from projects.store.campaign import Campaign, sha256_of
 from projects.store.previews import encode_preview
 from projects.store.records import EpochInputs, ScanFile
-from vision.series import CameraSeries
 
 log = logging.getLogger(__name__)
 
@@ -533,7 +533,7 @@ def _air_series(c: Campaign) -> list[tuple[str, np.ndarray, np.ndarray]]:
     out = []
     for r in c.series.records("env_series"):
         if r.kind in ("temperature", "pressure", "humidity"):
-            times, values = CameraSeries.arrays_from_npz(c.series.arrays("env_series", r.name))
+            times, values = series_arrays_from_npz(c.series.arrays("env_series", r.name))
             out.append((r.kind, times, values))
     return out
 
