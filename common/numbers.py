@@ -32,7 +32,7 @@ def shown(column: str, value: float) -> str | None:
     return text.lstrip("-") if float(text) == 0 else text  # -0.001 mm is shown as 0.00, not -0.00
 
 
-def written(column: str, value):
+def written(column: str, value: object) -> object:
     """``value`` of ``column`` as a file for scripts holds it: rounded to its unit's decimals (others unchanged)."""
     d = decimals(column)
     if d is None or not isinstance(value, float) or not math.isfinite(value):

@@ -158,7 +158,7 @@ def series_arrays_from_npz(data: bytes) -> tuple[np.ndarray, np.ndarray]:
         return z["time_ns"].astype(np.int64), values.astype(np.float64)
 
 
-def zone_of(name: str):
+def zone_of(name: str) -> Any:
     """The time zone called ``name``: an IANA name (returned as is), ``UTC``, or an offset ``+hh:mm``."""
     m = re.fullmatch(r"(?:UTC)?([+-])(\d\d):?(\d\d)", name.strip())
     if m:

@@ -18,6 +18,7 @@ import struct
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
+from typing import BinaryIO
 
 from common.errors import ScanFormatError
 
@@ -54,7 +55,7 @@ def _crc32c(data: bytes) -> int:
     return crc32c.crc32c(data)
 
 
-def logical_bytes(p: Path, fh, physical: int, length: int, size: int) -> bytes:
+def logical_bytes(p: Path, fh: BinaryIO, physical: int, length: int, size: int) -> bytes:
     """Read ``length`` logical bytes from a physical offset, checking each page's CRC."""
     out = bytearray()
     off = physical

@@ -26,6 +26,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -124,7 +125,7 @@ class LasFile:
         return self.facts.maxs
 
     @cached_property
-    def header(self):
+    def header(self) -> Any:
         """The header as laspy reads it (to write records with the input's header, :func:`point_records`)."""
         laspy = _laspy()
         try:
@@ -389,7 +390,7 @@ def first_point_time(las: LasFile) -> float | None:
     return float(las_blocks(las, [0], 1)[0]["gps_time"][0])
 
 
-def las_header_for(lo: np.ndarray, scale_m: float, pose: np.ndarray | None):
+def las_header_for(lo: np.ndarray, scale_m: float, pose: np.ndarray | None) -> Any:
     """The laspy header of every LAS file BridgeSurvey writes: LAS 1.4 point format 6, its pose in a VLR.
 
     ``lo`` is the offset (metres), ``scale_m`` the coordinate resolution.
@@ -416,18 +417,18 @@ def las_scale_for(lo: np.ndarray, hi: np.ndarray) -> float:
     return scale_m
 
 
-def open_las_writer(path: str | os.PathLike, header, *, compress: bool):
+def open_las_writer(path: str | os.PathLike, header: Any, *, compress: bool) -> Any:
     """A laspy writer of point records with ``header`` (LAZ when ``compress``), a context manager."""
     return _laspy().open(path, mode="w", header=header, do_compress=compress,
                          laz_backend=_laz_backend() if compress else None)
 
 
-def point_records(las: LasFile, records: np.ndarray):
+def point_records(las: LasFile, records: np.ndarray) -> Any:
     """The laspy point records of ``las``'s point format holding ``records`` (from :func:`las_point_chunks`)."""
     return _laspy().PackedPointRecord(records, las.header.point_format)
 
 
-def zero_records(header, n: int):
+def zero_records(header: Any, n: int) -> Any:
     """``n`` zeroed point records of ``header``'s format, their x, y, z settable in metres."""
     return _laspy().ScaleAwarePointRecord.zeros(n, header=header)
 

@@ -65,8 +65,9 @@ def test_usage_errors_exit_2(capsys):
     assert e.value.code == 2
 
 
-def test_planning_from_a_las_file_imports_no_scipy(visit, tmp_path, capsys):
-    """plan-file's start-up: labelling and assignment are plain numpy (issue 27: scipy's import was 0.5 s)."""
+def test_planning_from_a_las_file_labels_with_scikit_image(visit, tmp_path, capsys):
+    """plan-file labels the coarse map's blobs with scikit-image, the library the user named (issue 43; its import
+    costs the command about 0.3 s of the 0.58 s it lost against the hand-written labelling, issue 27's figure)."""
     from tests.app.cli.test_conventions import _modules_after
 
     las = tmp_path / "coarse.las"
@@ -75,5 +76,5 @@ def test_planning_from_a_las_file_imports_no_scipy(visit, tmp_path, capsys):
     out = tmp_path / "plan.json"
     r = _modules_after(f"from app.cli.main import main\nrc = main(['plan-file', {str(las)!r}, '--layout', "
                        f"{str(visit / 'layout.csv')!r}, '--out', {str(out)!r}])\nassert rc == 0, rc")
-    assert not [m for m in r["loaded"] if m.split(".")[0] == "scipy"], r["loaded"]
+    assert "skimage.measure" in r["loaded"]
     assert len(json.loads(out.read_text())["rois"]) >= 9  # every target of the layout planned

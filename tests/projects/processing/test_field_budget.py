@@ -33,7 +33,7 @@ def test_the_model_is_stored_versioned_and_every_row_has_its_budget(processed, c
         if r["epoch"] == r["baseline"] or not r["displacement_mm"]:
             continue
         terms = [float(r[k]) for k in BUDGET]
-        assert float(r["sigma_mm"]) == pytest.approx(math.sqrt(sum(t * t for t in terms)), abs=2e-4)
+        assert float(r["sigma_mm"]) == pytest.approx(math.sqrt(sum(t * t for t in terms)), abs=2e-3)  # each printed to 0.001 mm
         assert r["along_mm"] and r["scale_ppm"] and float(r["scale_sigma_ppm"]) > 0
 
 
