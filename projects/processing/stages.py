@@ -528,14 +528,9 @@ def _measured_setups(c: Campaign, label: str) -> tuple[tuple[int, ...], tuple[in
                                                             and r.stage == "measured"))
 
 
-def _air_series(c: Campaign) -> list[tuple[str, np.ndarray, np.ndarray]]:
-    """The campaign's air series (temperature, pressure, humidity) as (kind, times ns, values)."""
-    out = []
-    for r in c.series.records("env_series"):
-        if r.kind in ("temperature", "pressure", "humidity"):
-            times, values = series_arrays_from_npz(c.series.arrays("env_series", r.name))
-            out.append((r.kind, times, values))
-    return out
+def _air_series(c: Campaign, records: Sequence) -> list[tuple[str, np.ndarray, np.ndarray]]:
+    """The air series ``records`` (temperature, pressure, humidity) as (kind, times ns, values)."""
+    return [(r.kind, *series_arrays_from_npz(c.series.arrays("env_series", r.name))) for r in records]
 
 
 def stage2_inputs(c: Campaign, baseline: str) -> Stage2Inputs:
@@ -546,7 +541,7 @@ def stage2_inputs(c: Campaign, baseline: str) -> Stage2Inputs:
         epochs = c.epochs()
         order = {e.label: n for n, e in enumerate(epochs)}
         air_records = [r for r in c.series.records("env_series") if r.kind in ("temperature", "pressure", "humidity")]
-        series = _air_series(c) if air_records else []
+        series = _air_series(c, air_records)
         visits = []
         for e in epochs:
             digest = _stage1_hash(c, e.label)
@@ -562,8 +557,9 @@ def stage2_inputs(c: Campaign, baseline: str) -> Stage2Inputs:
         stored = c.field_model()
         stored_digests = {v.label: ds.inputs_hash for v in visits if (ds := c.displacement_set(v.label)) is not None}
         replaced = {r.replaces for r in refl.values() if r.replaces}
+        rows = c.displacements() if replaced else []  # one read, not one a replaced target
         history = {old: tuple(StoredDisplacement(d.epoch, order[d.epoch], float(d.displacement_m), float(d.sigma_m))
-                              for d in c.displacements() if d.reflector == old and d.displacement_m is not None
+                              for d in rows if d.reflector == old and d.displacement_m is not None
                               and d.sigma_m is not None and d.epoch in order)
                    for old in replaced}
     return Stage2Inputs(baseline, tuple(visits), {rid: r.group for rid, r in refl.items()},
