@@ -49,6 +49,7 @@ from common.flags import (
     in_baseline,
     severity,
     words,
+    worst,
 )
 from lidar.centroid import TargetCentroid
 from lidar.displacement_result import Displacement, EpochDisplacements
@@ -278,6 +279,108 @@ class _Visits:
         return joined_displacements(self.side(b), self.side(lab), groups, model=self.model, **options)
 
 
+#: What each part of a visit's stored ``inputs`` means when it no longer matches (``status`` says it before processing).
+INPUT_PARTS = {"centroids": "its centroids changed", "baseline": "the baseline changed",
+               "settings": "a processing setting changed", "reflectors": "the reflectors changed (added, retired or "
+               "replaced)", "air": "the air series changed (imported or removed)"}
+
+
+def input_parts(inputs: Stage2Inputs, stage1_digest: str, baseline_digest: str) -> dict[str, str]:
+    """A visit's stage-2 inputs by part, each a short digest (stored in its systematics as ``inputs``).
+
+    Whether a stored visit is out of date can then be told part by part without fitting anything
+    (:data:`INPUT_PARTS` says what each means); the field model, fitted at processing, is not among them.
+    """
+    return {"centroids": stage1_digest[:16], "baseline": f"{inputs.baseline}:{baseline_digest[:16]}",
+            "settings": inputs_digest(dict(inputs.digest_params))[:16],
+            "reflectors": inputs_digest(list(inputs.reflectors_key))[:16],
+            "air": inputs_digest(list(inputs.air_key))[:16]}
+
+
+def stale_parts(stored: Mapping[str, str], now: Mapping[str, str]) -> list[str]:
+    """What changed between a visit's stored input parts and today's, in words (empty: nothing known changed).
+
+    >>> stale_parts({"air": "a1", "settings": "s"}, {"air": "a2", "settings": "s"})
+    ['the air series changed (imported or removed)']
+    """
+    return [INPUT_PARTS[k] for k in INPUT_PARTS if k in stored and k in now and stored[k] != now[k]]
+
+
+#: A stored value is revised when processing moves it by at least this share of its stored sigma (or it appears,
+#: disappears, or its row's most serious flag changes severity).
+REVISION_SIGMAS = 0.5
+
+
+@dataclass(frozen=True)
+class Revision:
+    """A value or state already stored (and perhaps reported) that processing changed.
+
+    Attributes
+    ----------
+    epoch, target : str
+    old, new : str
+        The value as the report printed it: ``-2.10 ± 0.10 mm`` and the row's most serious flag in words, or
+        ``no value``.
+    why : str
+        What made processing recompute it.
+    """
+
+    epoch: str
+    target: str
+    old: str
+    new: str
+    why: str
+
+    def line(self) -> str:
+        return f"{self.epoch} {self.target}: {self.old} → {self.new} ({self.why})"
+
+    def to_json(self) -> dict:
+        return {"epoch": self.epoch, "target": self.target, "old": self.old, "new": self.new, "why": self.why}
+
+
+def _said(d_m: float | None, s_m: float | None, flags: Sequence[str]) -> str:
+    level = worst(flags)
+    serious = [f for f in flags if severity(f) == level] if level in (WARNING, PROBLEM) else []
+    value = "no value" if d_m is None or not np.isfinite(d_m) else \
+        f"{d_m * 1e3:+.2f} ± {(s_m or 0.0) * 1e3:.2f} mm"
+    return value + (f" ({level}: {words(serious[0])})" if serious else "")
+
+
+def _loud(flags: Sequence[str]) -> str | None:
+    """The most serious severity when it asks the surveyor to act (warning, problem), else None."""
+    level = worst(flags)
+    return level if level in (WARNING, PROBLEM) else None
+
+
+def revisions(label: str, stored: Mapping[str, tuple[float | None, float | None, Sequence[str]]],
+              new: EpochDisplacements, why: str) -> list[Revision]:
+    """The stored values of one visit that ``new`` changes beyond :data:`REVISION_SIGMAS` or in severity.
+
+    Parameters
+    ----------
+    label : str
+        The visit.
+    stored : mapping target -> (displacement m or None, sigma m or None, flags)
+        Its rows as stored before this run.
+    new : EpochDisplacements
+        What processing computed for it now.
+    why : str
+        What made processing recompute it, in words.
+    """
+    out = []
+    for d in new.displacements:
+        if d.reflector not in stored:
+            continue
+        old_d, old_s, old_f = stored[d.reflector]
+        had = old_d is not None and np.isfinite(old_d)
+        has_ = np.isfinite(d.displacement_m)
+        moved = had and has_ and abs(d.displacement_m - old_d) >= max(REVISION_SIGMAS * (old_s or 0.0), 1e-5)
+        if had != has_ or moved or _loud(old_f) != _loud(d.flags):
+            out.append(Revision(label, d.reflector, _said(old_d, old_s, old_f),
+                                _said(float(d.displacement_m), float(d.sigma_m), d.flags), why))
+    return out
+
+
 def fit_model(inputs: Stage2Inputs) -> FieldModel:
     """The campaign's field model over every measured visit's set-ups (the stored one kept while it holds)."""
     vs = _Visits(inputs)
@@ -342,6 +445,7 @@ def run_stage2(inputs: Stage2Inputs, *, model: FieldModel | None = None) -> Stag
         v = vs.by_label[lab]
         flags, systematics = _setup_terms(vs, lab, epoch_flags(model, lab, v.time_sources.get(1, "none")),
                                           systematics_json(model, lab, v.time_sources.get(1, "none")))
+        systematics["inputs"] = input_parts(inputs, v.stage1_digest, vs.by_label[baseline].stage1_digest)
         air = atmosphere_flags(model, lab, v.air, vs.by_label[baseline].air, wavelength_nm=v.wavelength_nm)
         result = replace(result, flags=tuple(result.flags) + tuple(flags) + tuple(air))
         out.append(EpochDisplacementResult(lab, result, systematics, h, reason))

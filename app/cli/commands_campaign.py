@@ -515,6 +515,13 @@ def cmd_status(args) -> int:
             serious = [f for f in e["flag_list"] if severity(f) in ("problem", "warning")]
             print(f"{level.upper()} in {e['epoch']}: " + ("; ".join(serious) if args.verbose else summary(serious)))
             print(f"  action: {first_action(serious)}")
+    rev = data.get("revisions")
+    if rev and rev["revised"]:  # values already stored (perhaps reported) that processing changed: never silent
+        lines = rev["revised"] if args.verbose else rev["revised"][:STATUS_REVISIONS]
+        print(f"revised by the processing of {rev['time'][:16].replace('T', ' ')}: {len(rev['revised'])} value(s)"
+              + ("" if len(lines) == len(rev["revised"]) else " (--verbose for all)"))
+        for r in lines:
+            print(f"  {r['epoch']} {r['target']}: {r['old']} → {r['new']} ({r['why']})")
     if data.get("instrument"):
         print("instrument (the campaign's field model): " + instrument_line(data["instrument"]))
     print("latest displacement of each measurement target:")
@@ -530,6 +537,9 @@ def cmd_status(args) -> int:
               f"(kept; 'bridgesurvey repair {args.dir}' registers them again): {', '.join(data['unlisted_files'])}")
     return 0
 
+
+#: Revisions ``status`` lists without --verbose.
+STATUS_REVISIONS = 3
 
 #: The flags column of a visit's line in ``status`` (its line stays within 120 characters; --verbose for all).
 FLAGS_WIDTH = 56

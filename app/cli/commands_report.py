@@ -9,9 +9,11 @@ from app.cli.progress import progress_bar
 
 def register(sub) -> None:
     p = sub.add_parser("report", help="write a PDF survey report (one visit, a period, or everything)",
-                       description="A PDF for the bridge owner: summary with alarm states, layout and target "
-                                   "state, displacement histories, every epoch's map, plan and centroids, and a "
-                                   "processing log with versions, parameters and file checksums.")
+                       description="A PDF for the bridge owner: summary with every target's state and σ, the visits "
+                                   "that need attention (a page each), layout, displacement histories, analysis and "
+                                   "the field budget, in words. --detail adds the appendix: every visit's map, plan "
+                                   "and centroids with flag codes, the field model's tables, and a processing log "
+                                   "with versions, parameters, file checksums and the action log.")
     add_dir(p)
     output_file(p, "--out", required=True, help="the PDF to write", suffixes=(".pdf",))
     g = p.add_mutually_exclusive_group()
@@ -19,6 +21,8 @@ def register(sub) -> None:
     g.add_argument("--from", dest="start", metavar="LABEL", help="first epoch of the period")
     p.add_argument("--to", dest="end", metavar="LABEL", help="last epoch of the period")
     p.add_argument("--author", help="who prepared the report (default: your login name)")
+    p.add_argument("--detail", action="store_true",
+                   help="add the appendix: every visit's page, the field model's tables, the processing log")
     p.set_defaults(func=cmd_report)
 
 
@@ -30,7 +34,7 @@ def cmd_report(args) -> int:
     scope = ReportScope(epoch=args.epoch, start=args.start, end=args.end)
     with Campaign.open(args.dir, writable=False) as c:
         with progress_bar("report") as cb:
-            path = write_report(c, args.out, scope, author=args.author, progress=cb)
+            path = write_report(c, args.out, scope, author=args.author, progress=cb, detail=args.detail)
         damaged = damaged_line(c)
     print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB)")
     if damaged:  # the epoch's page says it too

@@ -36,7 +36,8 @@ def draw_target(ax: Any, doc: dict, target: dict, *, legend: str = "below") -> N
 
     Measured displacements (grey, ±2σ), the temperature-corrected series (blue, ±2σ, when there is a thermal
     term), the fitted model at the reference temperature (black, its ±2σ band shaded) and the events
-    (dashed, numbered above the axes). ``legend`` is ``below`` (under the axes) or ``none``.
+    (dashed, numbered above the axes), and the design prediction as aligned (dashed teal, when one is imported).
+    ``legend`` is ``below`` (under the axes) or ``none``.
     """
     import matplotlib.transforms as mtransforms
 
@@ -65,6 +66,12 @@ def draw_target(ax: Any, doc: dict, target: dict, *, legend: str = "below") -> N
         ax.fill_between(when, cv - 2 * cs, cv + 2 * cs, color=COLOURS["model"], alpha=0.12, lw=0, zorder=1)
         handles.append(ax.plot(when, cv, color=COLOURS["model"], lw=1.1, zorder=4,
                                label="fitted model" + (" at that temperature" if thermal else "") + " (band ±2σ)")[0])
+    pred = target.get("prediction_curve")
+    if pred and pred["days"]:  # the design prediction, aligned as the analysis table's offset says
+        handles.append(ax.plot(_dates(origin, _array(pred["days"])), _array(pred["mm"]), color=COLOURS["series"],
+                               lw=1.0, ls=(0, (4, 2)), zorder=3,
+                               label=f"design prediction, aligned ({target.get('prediction_alignment', '')}: "
+                                     f"offset {target.get('prediction_offset_mm') or 0:+.1f} mm)")[0])
     top = mtransforms.blended_transform_factory(ax.transData, ax.transAxes)
     from matplotlib.lines import Line2D
 

@@ -86,6 +86,11 @@ def analyse_campaign(c: Campaign, *, horizon_days: float = 365.0, long_term_fact
             tj["prediction_offset_mm"] = _num(preds[rid][2]["offset_mm"])
             tj["prediction_residual_rms_mm"] = _num(preds[rid][2]["residual_rms_mm"])
             tj["prediction_alignment"] = preds[rid][2]["align_at"] or "least squares"
+            tp, vp = preds[rid][0], preds[rid][1]  # the aligned design curve over the measured epochs, to draw
+            keep = (tp >= mine.time_ns.min() - 30 * DAY_NS) & (tp <= mine.time_ns.max() + 30 * DAY_NS)
+            step = max(1, int(keep.sum()) // 400)
+            tj["prediction_curve"] = {"days": [_num(float(v), 3) for v in ((tp[keep] - origin) / DAY_NS)[::step]],
+                                      "mm": [_num(float(v), 3) for v in vp[keep][::step]]}
         if casting is not None:
             tj["concrete_age_days"] = [_num(v + (origin - casting) / DAY_NS, 2) for v in fit.epoch_days]
         tj.update(along[rid].to_json() if rid in along else {})

@@ -32,7 +32,18 @@ from lidar.pipeline import analyse_coarse, measure_fine, plan_from_coarse
 from lidar.plan import ScanPlan
 from lidar.scan import Scan
 from lidar.scanner_profile import ScannerProfile
-from lidar.stage2 import Stage2Inputs, StoredDisplacement, VisitInputs, inputs_digest, run_stage2
+from lidar.stage2 import (
+    Stage2Inputs,
+    StoredDisplacement,
+    VisitInputs,
+    inputs_digest,
+    revisions,
+    run_stage2,
+    stale_parts,
+)
+
+#: Why a stored visit was recomputed when only the campaign's field model changed (a newer visit re-fitted it).
+FIELD_REFIT = "the field model was re-fitted with the newer visits"
 from lidar.systematic.campaign_fit import air_near
 from projects.processing.parameters import DEFAULTS, parameter, stage1_params, stage2_params
 from projects.store.campaign import Campaign, sha256_of
@@ -46,8 +57,9 @@ PIPELINE_VERSION = "1"
 #: their kept plans (2: the disc's normal fitted on the ranges alone, see lidar.centroid._plane; 3: weak discs,
 #: 20-35 % of the beam's width, measured with a widened sigma instead of refused, see lidar.centroid.WEAK_RATIO;
 #: 4: the disc's outline overrules a predicted grazing view, and a surface that moved during the window is
-#: corrected from the points' times, see lidar.centroid.apparent_cos and lidar.transients).
-CENTROID_VERSION = "4"
+#: corrected from the points' times, see lidar.centroid.apparent_cos and lidar.transients; 5: stray bright returns
+#: beside a grazing disc are no second object below lidar.centroid.SECOND_OBJECT_SHARE_GRAZING).
+CENTROID_VERSION = "5"
 #: Profile fields added later: they enter the input hash only when they differ from their default.
 _LATER_PROFILE_FIELDS = {"max_tilt_deg": MAX_TILT_DEG, "kind": "line", "step_presets": [], "windowed": True,
                          "horizontal_direction": "ccw", "horizontal_zero_deg": 0.0, "vertical_reference": "zenith",
@@ -533,6 +545,47 @@ def _air_series(c: Campaign, records: Sequence) -> list[tuple[str, np.ndarray, n
     return [(r.kind, *series_arrays_from_npz(c.series.arrays("env_series", r.name))) for r in records]
 
 
+def _air_records(c: Campaign) -> list:
+    """The environment series stage 2 reads (the air: temperature, pressure, humidity)."""
+    return [r for r in c.series.records("env_series") if r.kind in ("temperature", "pressure", "humidity")]
+
+
+def _reflectors_key(refl: dict) -> tuple:
+    return tuple(sorted((k, repr(v)) for k, v in refl.items()))
+
+
+def stale_displacements(c: Campaign) -> dict[str, str]:
+    """Measured epochs whose stored displacements ``process`` would recompute for a known reason: label -> why.
+
+    Told without fitting anything, from the input parts each visit's displacements were computed with
+    (:func:`lidar.stage2.input_parts`): an imported air series, a changed setting, reflector or baseline, new
+    centroids. A measured epoch without displacements is stale too. What a re-fitted field model will change
+    is not known before it is fitted: processing lists it as revisions.
+    """
+    base = baseline_epoch(c)
+    if base is None:
+        return {}
+    params = parameters(c)
+    base_digest = _stage1_hash(c, base) or ""
+    now = {"baseline": f"{base}:{base_digest[:16]}", "settings": inputs_digest(dict(stage2_params(params)))[:16],
+           "reflectors": inputs_digest(list(_reflectors_key({r.id: r for r in c.reflectors()})))[:16],
+           "air": inputs_digest(list(sorted(r.sha256 for r in _air_records(c))))[:16]}
+    out = {}
+    for e in c.epochs():
+        digest = _stage1_hash(c, e.label)
+        if not digest:
+            continue
+        if c.displacement_set(e.label) is None:
+            out[e.label] = "displacements not computed yet"
+            continue
+        stored = c.systematics(e.label).get("inputs")
+        if stored:  # visits processed before the parts were recorded: nothing known
+            why = stale_parts(stored, {**now, "centroids": digest[:16]})
+            if why:
+                out[e.label] = "; ".join(why)
+    return out
+
+
 def stage2_inputs(c: Campaign, baseline: str) -> Stage2Inputs:
     """Everything stage 2 needs of the campaign, read in one snapshot (see :class:`lidar.stage2.Stage2Inputs`)."""
     with c.snapshot():
@@ -540,7 +593,7 @@ def stage2_inputs(c: Campaign, baseline: str) -> Stage2Inputs:
         refl = {r.id: r for r in c.reflectors()}
         epochs = c.epochs()
         order = {e.label: n for n, e in enumerate(epochs)}
-        air_records = [r for r in c.series.records("env_series") if r.kind in ("temperature", "pressure", "humidity")]
+        air_records = _air_records(c)
         series = _air_series(c, air_records)
         visits = []
         for e in epochs:
@@ -564,7 +617,7 @@ def stage2_inputs(c: Campaign, baseline: str) -> Stage2Inputs:
                    for old in replaced}
     return Stage2Inputs(baseline, tuple(visits), {rid: r.group for rid, r in refl.items()},
                         {rid: r.replaces for rid, r in refl.items() if r.replaces},
-                        tuple(sorted((k, repr(v)) for k, v in refl.items())), params, stage2_params(params),
+                        _reflectors_key(refl), params, stage2_params(params),
                         tuple(sorted(r.sha256 for r in air_records)), None if stored is None else stored[0],
                         stored_digests, history, order)
 
@@ -577,11 +630,23 @@ def update_displacements(c: Campaign, baseline: str, *, reasons: dict | None = N
     of one, as a visit of its own), then each changed epoch's displacements. What it computed is stored in one
     transaction. ``reasons`` (epoch -> ``"field"``, ``"inputs"`` or ``"new"``) says why each was recomputed.
     """
+    why = stale_displacements(c)
     inputs = stage2_inputs(c, baseline)
     if baseline not in [v.label for v in inputs.visits]:
         return []
     result = run_stage2(inputs)
-    c.save_stage2(baseline, result.model if result.model_changed else None, result.epochs)
+    revised = []
+    again = [e for e in result.epochs if e.reason != "new"]
+    if again:  # what was stored (and perhaps reported) and changes now: never silent
+        stored: dict[str, dict] = {e.label: {} for e in again}
+        for d in c.displacements():
+            if d.epoch in stored:
+                stored[d.epoch][d.reflector] = (d.displacement_m, d.sigma_m, d.flags)
+        for e in again:
+            because = FIELD_REFIT if e.reason == "field" else why.get(e.label) or "its inputs changed"
+            revised += revisions(e.label, stored[e.label], e.displacements, because)
+    c.save_stage2(baseline, result.model if result.model_changed else None, result.epochs,
+                  revisions=[r.to_json() for r in revised])
     if reasons is not None:
         reasons.update({e.label: e.reason for e in result.epochs if e.reason != "new"})
     return result.labels

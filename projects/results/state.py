@@ -195,12 +195,18 @@ def epoch_states(c: Campaign, labels: Sequence[str] | None = None, *,
     for lab in wanted:
         ds = c.displacement_set(lab)
         targets = per_target[lab]
-        for rid, cent in c.centroids(lab).items():
-            if (lab, rid) in with_rows:  # its row says it (a missing target's reason in its 'missing' flag)
-                if cent.found:
-                    targets.setdefault(rid, []).extend(f for f in cent.flags if f not in targets.get(rid, ()))
+        sightings: dict[str, list] = {}
+        for k in c.setups(lab):  # every set-up's: a target one could not see and another measured is measured
+            for rid, cent in c.centroids(lab, k).items():
+                sightings.setdefault(rid, []).append(cent)
+        for rid, seen in sightings.items():
+            found = [t for t in seen if t.found]
+            if found or (lab, rid) in with_rows:  # its row says a missing target's reason ('missing' flag)
+                for t in found:
+                    targets.setdefault(rid, []).extend(f for f in t.flags if f not in targets.get(rid, ()))
                 continue
-            targets.setdefault(rid, []).extend(_one_name(cent.flags))
+            for t in seen:
+                targets.setdefault(rid, []).extend(f for f in _one_name(t.flags) if f not in targets[rid])
         flags = (_own_flags(c, lab, ds.flags) if ds is not None else []) + target_flags(targets)
         out[lab] = EpochState(lab, decide_state(_stage(c, lab, ds is not None), flags), tuple(flags))
     return out

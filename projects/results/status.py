@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 
 from common.flags import count
-from projects.processing.stages import baseline_epoch, stale_epochs
+from projects.processing.stages import baseline_epoch, stale_displacements, stale_epochs
 from projects.results.corrections import epoch_corrections, instrument_summary
 from projects.results.state import epoch_states
 from projects.results.table import displacement_table
@@ -25,11 +25,16 @@ def campaign_status(c: Campaign) -> dict:
     errors as its field model found them (:func:`~projects.results.corrections.instrument_summary`; None
     before one is fitted).
 
+    ``revisions`` are the stored values the last processing that changed any changed (time, and each
+    revision's epoch, target, old, new and why; :class:`lidar.stage2.Revision`), None when none ever did.
+
     ``warnings`` are the layout's (targets no station could reach) and the stored results that fail their
     checksum (not shown, recomputed by ``process``); ``unlisted_files`` the files of the
     import folders the database does not list (never deleted: ``bridgesurvey repair`` registers them).
     """
     stale = stale_epochs(c)
+    for label, why in stale_displacements(c).items():  # what processing will recompute, known before it runs
+        stale.setdefault(label, why)
     states = epoch_states(c)
     epochs = []
     for e in c.epochs():
@@ -52,8 +57,10 @@ def campaign_status(c: Campaign) -> dict:
     for r in displacement_table(c, states=states):
         if r["displacement_mm"] is not None or r["reflector"] not in latest:  # keep the last good value
             latest[r["reflector"]] = r
+    last = c.last_revisions()
+    revised = None if last is None else {"time": last.time, "revised": last.details.get("revised", [])}
     fitted = c.field_model()
     return {"name": c.name, "span_m": c.span_m, "timezone": c.timezone, "baseline": baseline_epoch(c), "epochs": epochs,
             "instrument": None if fitted is None else instrument_summary(fitted[0]),
             "targets": list(latest.values()), "warnings": c.layout_warnings() + damaged,
-            "unlisted_files": c.unlisted_files()}
+            "unlisted_files": c.unlisted_files(), "revisions": revised}

@@ -448,6 +448,11 @@ class Campaign:
         return [LogEntry(r["id"], r["time"], r["action"], r["epoch"], json.loads(r["details"]))
                 for r in self.conn.execute("SELECT * FROM log ORDER BY id")]
 
+    def last_revisions(self) -> LogEntry | None:
+        """The newest ``revisions`` entry of the log (stored values that processing changed), or None."""
+        r = self.conn.execute("SELECT * FROM log WHERE action = 'revisions' ORDER BY id DESC LIMIT 1").fetchone()
+        return None if r is None else LogEntry(r["id"], r["time"], r["action"], r["epoch"], json.loads(r["details"]))
+
     # ------------------------------------------------------------------ reflectors
     def reflectors(self) -> list[Reflector]:
         """Every reflector, retired ones included: reference targets first, then by id."""
@@ -978,18 +983,22 @@ class Campaign:
         got = field_tables.read_field_model(self.conn)
         return None if got is None else (FieldModel.from_json(got[0]), got[1])
 
-    def save_stage2(self, baseline: str, model: FieldModel | None, epochs: Sequence) -> None:
+    def save_stage2(self, baseline: str, model: FieldModel | None, epochs: Sequence, *,
+                    revisions: Sequence[dict] = ()) -> None:
         """Store what stage 2 computed, in one transaction: the field model when it changed, each epoch's displacements.
 
         ``epochs`` are :class:`lidar.stage2.EpochDisplacementResult` (label, displacements, inputs hash,
-        systematics). The campaign's ``bias.json`` (the model as a file, for other tools) is written after the
-        commit, atomically.
+        systematics); ``revisions`` (:meth:`lidar.stage2.Revision.to_json`) the stored values they changed,
+        logged as one ``revisions`` entry (:meth:`last_revisions`). The campaign's ``bias.json`` (the model as
+        a file, for other tools) is written after the commit, atomically.
         """
         with self.transaction() as c:
             if model is not None:
                 field_tables.write_field_model(c, model.to_json(), model.digest(), now_iso())
             for e in epochs:
                 self._write_displacements(c, e.label, baseline, e.displacements, e.inputs_hash, e.systematics)
+            if revisions:
+                self.log_action(c, "revisions", None, {"revised": list(revisions)})
         if model is not None:
             write_atomic(self.folder / BIAS_FILE, json.dumps(model.to_json(), indent=1) + "\n")
 

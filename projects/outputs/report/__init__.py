@@ -43,7 +43,7 @@ def _preview_from_scan(c: Campaign):
 
 
 def write_report(c: Campaign, path: str | os.PathLike, scope: ReportScope = ReportScope(), *,
-                 author: str | None = None, progress: ProgressCallback | None = None) -> Path:
+                 author: str | None = None, progress: ProgressCallback | None = None, detail: bool = False) -> Path:
     """Write the PDF report of ``scope`` (default: whole campaign) to ``path``.
 
     Parameters
@@ -57,10 +57,14 @@ def write_report(c: Campaign, path: str | os.PathLike, scope: ReportScope = Repo
     author : str, optional, keyword-only
         Who prepared the report (default: the login name).
     progress : callable, optional, keyword-only
+    detail : bool, keyword-only
+        Add the appendix: every visit's page with flag codes, the field model's tables, the processing log.
+        Default False: the main body (summary, the visits that need attention, histories, analysis, budget).
     """
     from projects.outputs.report.pdf import build_pdf
 
     path = Path(path)
     _check_output(path)
     content = gather(c, scope, author=author)
-    return build_pdf(content, path, preview_of=_preview_from_scan(c), progress=scaled(progress, 0.05, 1.0))
+    return build_pdf(content, path, preview_of=_preview_from_scan(c), progress=scaled(progress, 0.05, 1.0),
+                     detail=detail)

@@ -70,6 +70,10 @@ _DESCRIBE: dict[str, Callable[[dict], tuple[str, str, str]]] = {
     "plan": lambda d: ("fine scans planned", "", f"plan stored (inputs {str(d.get('inputs_hash', ''))[:8]})"),
     "measure": lambda d: ("centroids measured", "", f"{d.get('found', '?')} targets found"),
     "displacements": lambda d: ("displacements computed", "", f"against baseline {d.get('baseline', '?')}"),
+    "revisions": lambda d: ("stored values revised", "", f"{_count(len(d.get('revised', [])), 'value')}: "
+                            + "; ".join(f"{r['epoch']} {r['target']} {r['old']} → {r['new']}"
+                                        for r in d.get("revised", [])[:3])
+                            + (" …" if len(d.get("revised", [])) > 3 else "")),
     "limit": lambda d: ("limit set", "", f"{_target(d.get('reflector'))}: {d.get('rule', '')}"),
     "setting": lambda d: ("setting changed", "", _pairs(d)),
     "scanner": lambda d: ("scanner chosen", "", str(d.get("name", ""))),

@@ -95,6 +95,11 @@ def analysis_section(content: ReportContent, ss: Any) -> list:
              + (f"; concrete cast {doc['casting_date'][:10]}" if doc.get("casting_date") else "")
              + ". Values are ± one standard deviation; the creep coefficient is the creep developed by the last "
                "epoch over the step (* : see the note under the target's figure).")
+    if any(t.get("prediction_offset_mm") is not None for t in doc["targets"]):
+        intro += (" Design prediction: the offset is the constant added to the design model's curve so that it "
+                  "meets the measurements (at the alignment date, or by least squares over every visit); the RMS is "
+                  "how far the measurements stay from the aligned curve. The aligned curve is drawn dashed in each "
+                  "target's figure.")
     out = [PageBreak(), Paragraph("Analysis: temperature, events, creep and projection", ss["Heading1"]),
            Paragraph(esc(intro), ss["Small"])]
     for w in doc["warnings"]:

@@ -29,13 +29,20 @@ INTRO = ("Each visit's centroids are corrected before their displacements are co
          "axis errors) and drift.")
 
 
-def _range_walk_text(content: ReportContent) -> str:
+def _range_walk_text(content: ReportContent, *, detail: bool = True) -> str:
+    """The instrument as the field model found it; ``detail``: with the competing laws and the adjustment's size."""
     model = content.extras["field"]["model"]
     rw = model.range_walk
     text = f"Range walk: {describe_basis(rw.basis)}"
     if rw.basis:
         text += " (r0 = 15 m)" if any("r2" in b or "strength" in b or b.startswith("step_q") for b in rw.basis) else ""
         text += "; determined by the campaign's data" if rw.determined else "; not determined: its prior is in σ"
+    if not detail:
+        close = sum(plausible([a[2] for a in rw.alternatives])) if len(rw.alternatives) > 1 else 1
+        if close > 1:
+            text += (f"; {close - 1} other law{'s' if close > 2 else ''} fit the data about as well, and the largest "
+                     "difference they would make is included in σ")
+        return text + f". The instrument's axis errors the data support: {model.axes.describe()}."
     if len(rw.alternatives) > 1:
         ranked = sorted(rw.alternatives, key=lambda a: -a[2])
         close = [a for a, ok in zip(ranked, plausible([a[2] for a in ranked]), strict=False) if ok]
@@ -83,18 +90,53 @@ def budget_rows(content: ReportContent) -> list[list]:
     return rows
 
 
+def _overview(content: ReportContent) -> str:
+    """The visits' corrections and the budget in a few sentences (the main body; the tables are in the appendix)."""
+    extra = content.extras["field"]
+    corr = [c for c in (epoch_corrections(extra["systematics"].get(e.label) or {}) for e in content.epochs)
+            if c is not None]
+    parts = []
+    scales = [c.scale_ppm for c in corr]
+    if scales:
+        parts.append(f"the atmosphere's range scale ranged from {min(scales):+.0f} to {max(scales):+.0f} ppm "
+                     f"(median σ {np.median([c.scale_sigma_ppm for c in corr]):.1f} ppm)")
+    drift = [np.hypot(c.tilt_arcsec_h, c.twist_arcsec_h) for c in corr if c.timed]
+    if drift:
+        parts.append(f"the set-ups drifted by up to {max(drift):.0f}″/h (median {np.median(drift):.0f}″/h)")
+    left = sorted({t for c in corr for t in c.left_out})
+    if left:
+        parts.append(f"targets left out of a visit's fit for not fitting it: {', '.join(left)}")
+    valued = [r for r in content.displacements if r["displacement_mm"] is not None]
+    if valued:
+        names = [c[6:-3] for c in BUDGET_COLUMNS]
+        med = [np.median([r[c] for r in valued if r.get(c) is not None] or [np.nan]) for c in BUDGET_COLUMNS]
+        terms = ", ".join(f"{n} {v:.3f}" for n, v in zip(names, med, strict=True) if np.isfinite(v))
+        parts.append(f"over the report's {len(valued)} values the median σ is "
+                     f"{np.median([r['sigma_mm'] for r in valued]):.3f} mm, of which (each term's median, mm) {terms}")
+    return ("Over these visits " + "; ".join(parts) + ".") if parts else ""
+
+
 def field_section(content: ReportContent, ss: Any) -> list:
-    """Flowables of the field error budget (``content.extras['field']``)."""
+    """Flowables of the field error budget (``content.extras['field']``): the main body's page, in words."""
     from reportlab.platypus import PageBreak, Paragraph, Spacer
 
     from projects.outputs.field_figures import field_model_figure
 
     extra = content.extras["field"]
-    out = [PageBreak(), Paragraph("Field error budget", ss["Heading1"]), Paragraph(esc(INTRO), ss["Small"]),
-           Spacer(1, 3),
-           figure_flowable(field_model_figure(extra["model"], extra["times"], measured=extra["measured"],
-                                              figsize=FIGURE_SIZE_IN), 176),
-           Paragraph(esc(_range_walk_text(content)), ss["Small"]), Spacer(1, 4),
+    return [PageBreak(), Paragraph("Field error budget", ss["Heading1"]), Paragraph(esc(INTRO), ss["Small"]),
+            Spacer(1, 3),
+            figure_flowable(field_model_figure(extra["model"], extra["times"], measured=extra["measured"],
+                                               figsize=FIGURE_SIZE_IN), 176),
+            Paragraph(esc(_range_walk_text(content, detail=False)), ss["Small"]), Spacer(1, 3),
+            Paragraph(esc(_overview(content)), ss["Small"])]
+
+
+def field_appendix(content: ReportContent, ss: Any) -> list:
+    """The field model's tables (appendix B): the laws it weighed, each visit's corrections, the budget by visit."""
+    from reportlab.platypus import PageBreak, Paragraph
+
+    out = [PageBreak(), Paragraph("Appendix B: the field model by visit", ss["Heading1"]),
+           Paragraph(esc(_range_walk_text(content)), ss["Small"]),
            Paragraph("Each visit's corrections", ss["Heading2"]),
            table(visit_rows(content), (24, 30, 22, 22, 16, 14, 48), ss)]
     budget = budget_rows(content)

@@ -11,16 +11,18 @@ from typing import Any
 import numpy as np
 
 from common.files import atomic_output
-from common.flags import FLAG_NO_CAMERA_DATA, REGISTRY, code, describe, severity
+from common.flags import FLAG_NO_CAMERA_DATA, REGISTRY, code, describe, first_action, severity, summary
 from common.progress import ProgressCallback, report, scaled
 from projects.outputs.report.analysis_page import analysis_section
 from projects.outputs.report.content import EpochSection, ReportContent
-from projects.outputs.report.field_page import field_section
+from projects.outputs.report.field_page import field_appendix, field_section
 from projects.outputs.report.flowables import esc, figure_flowable, fonts, num, styles, table
 from projects.results.corrections import corrections_line
 from projects.series.context import WHOLE_DAY_COVERAGE
 
 PAGE_MARGIN_MM = 16
+#: The states of a visit that needs the reader's attention (its page in the main body).
+ATTENTION_STATES = ("warning", "problem")
 STATE_COLOURS = {"ok": "#c8e6c9", "warning": "#ffe0b2", "alarm": "#ffcdd2", "unknown": "#eeeeee"}
 
 
@@ -120,13 +122,13 @@ def summary_section(content: ReportContent, ss: Any) -> list:
         out.append(Paragraph(f"{len(content.epochs)} epoch(s) in this report; displacements against baseline "
                              f"epoch {_esc(content.baseline)}. Latest value of every measurement target "
                              f"(epoch {last_epoch} unless noted):", ss["Normal"]))
-        table = [["Target", "Epoch", "Displacement [mm]", "σ [mm]", "Warning / alarm [mm]", "State", "Flags"]]
+        table = [["Target", "Epoch", "Displacement [mm]", "σ [mm]", "Warning / alarm [mm]", "State", "Remarks"]]
         colours = []
         for k, rid in enumerate(sorted(latest), start=1):
             r = latest[rid]
             table.append([rid, r["epoch"], _num(r["displacement_mm"]), _num(r["sigma_mm"], "{:.3f}"),
                           f"{_num(r['warning_mm'], '{:.1f}')} / {_num(r['alarm_mm'], '{:.1f}')}", r["state"],
-                          r["flags"].replace(";", ", ") or "–"])
+                          row_words(r)])
             colours.append((k, 5, STATE_COLOURS.get(r["state"], "#ffffff")))
         out += [Spacer(1, 4), _table(table, (18, 24, 26, 16, 30, 16, 48), ss, cell_colours=colours)]
         problem_epochs = []
@@ -134,7 +136,12 @@ def summary_section(content: ReportContent, ss: Any) -> list:
             fl = sec.displacement_set.flags if sec.displacement_set else ()
             bad = [f for f in fl if severity(f) == "problem"]
             if bad:
-                problem_epochs.append(f"{sec.label} ({bad[0]})")
+                problem_epochs.append(f"{sec.label} ({summary(bad[:1])})")
+        attention = [sec.label for sec in content.epochs if sec.state in ATTENTION_STATES]
+        out.append(Spacer(1, 4))
+        out.append(Paragraph(_esc(f"Visits that need attention: {', '.join(attention)} (a page each below)."
+                                  if attention else "No visit in this report needs attention: every value is within "
+                                                    "its σ or carries a remark that says why."), ss["Normal"]))
         if problem_epochs:
             out.append(Spacer(1, 4))
             out.append(Paragraph("<font color='#d62728'><b>Epochs without a trustworthy result:</b> " +
@@ -279,23 +286,48 @@ def render_maps(sections: Sequence[EpochSection], preview_of: Callable | None = 
 STATE_TEXT_COLOURS = {"warning": "#b35900", "problem": "#d62728"}
 
 
-def state_line(e: EpochSection) -> str:
-    """``State: warning (second_bright_object: ...)`` as ``status`` gives it, then the epoch's notes (markup)."""
+def row_words(r: dict) -> str:
+    """A displacement row's flags in words, most serious first (the report's body: no flag codes)."""
+    flags = [f for f in r["flags"].split(";") if f]
+    return summary(flags) if flags else "–"
+
+
+def flags_text(flags, *, words: bool) -> str:
+    """Flags as the body says them (words) or as the appendix lists them (codes, by severity)."""
+    flags = [f for f in flags if f]
+    if not flags:
+        return ""
+    return summary(flags) if words else describe(flags)
+
+
+def state_line(e: EpochSection, *, words: bool = False) -> str:
+    """``State: warning (second_bright_object: ...)`` as ``status --verbose`` gives it, then the epoch's notes.
+
+    ``words``: as the one-line status says it, with the action. Returns markup.
+    """
     colour = STATE_TEXT_COLOURS.get(e.state)
     state = f"<b>{_esc(e.state)}</b>" if colour is None else f"<font color='{colour}'><b>{_esc(e.state)}</b></font>"
-    flags = describe(e.state_flags) if e.state_flags else ""
+    flags = flags_text(e.state_flags, words=words)
     text = f"State: {state}" + (f" ({_esc(flags)})" if flags else "") + "."
+    todo = first_action(e.state_flags) if words else ""
+    if todo:
+        text += f" <b>To do:</b> {_esc(todo[:1].upper() + todo[1:])}."
     return text + (f" {_esc(e.notes)}" if e.notes else "")
 
 
 def epoch_section(e: EpochSection, content: ReportContent, ss: Any, *, new_page: bool = True,
-                  map_jpeg: bytes | None = None) -> list:
-    """Flowables of one epoch; ``map_jpeg`` from :func:`render_maps` (None: the epoch has no map)."""
+                  map_jpeg: bytes | None = None, words: bool = False) -> list:
+    """Flowables of one epoch; ``map_jpeg`` from :func:`render_maps` (None: the epoch has no map).
+
+    ``words``: flags said in words (the main body's page of a visit that needs attention); otherwise their
+    codes (the appendix, whose flag table explains them).
+    """
     from reportlab.platypus import PageBreak, Paragraph, Spacer
 
     out = [PageBreak()] if new_page else []
-    out += [Paragraph(f"Epoch {_esc(e.label)} — {e.datetime[:16].replace('T', ' ')}", ss["Heading2"]),
-            Paragraph(state_line(e), ss["Small"])]
+    out += [Paragraph(f"{'Visit' if words else 'Epoch'} {_esc(e.label)} — {e.datetime[:16].replace('T', ' ')}",
+                      ss["Heading2"]),
+            Paragraph(state_line(e, words=words), ss["Small"])]
     if map_jpeg is not None:
         from reportlab.lib.units import mm
         from reportlab.platypus import Image
@@ -311,12 +343,12 @@ def epoch_section(e: EpochSection, content: ReportContent, ss: Any, *, new_page:
                              f"{_num((ident.get('fit_rms_m') or float('nan')) * 100, '{:.1f}')} cm, "
                              f"predicted (not seen): {', '.join(ident.get('missing', [])) or 'none'}.", ss["Small"]))
         table = [["Target", "Steps φ×θ [°]", "Planned time [s]", "Planned pts on target", "Points in window",
-                  "Points on target", "σx / σy / σz [mm]", "Flags"]]
+                  "Points on target", "σx / σy / σz [mm]", "Remarks" if words else "Flags"]]
         colours = []
         for k, r in enumerate(plan.rois, start=1):
             t = e.centroids.get(r.reflector)
             sig = "–" if t is None or not t.found else " / ".join(f"{v * 1000:.2f}" for v in t.sigma_m)
-            flags = "not scanned yet" if t is None else (", ".join(t.flags) or "–")
+            flags = "not scanned yet" if t is None else (flags_text(t.flags, words=words) or "–")
             n_on = "–" if t is None else str(t.n_points)
             table.append([r.reflector, f"{r.window.phi_step_deg:.4f}×{r.window.theta_step_deg:.4f}",
                           f"{r.expected_seconds:.0f}", str(r.expected_target_points or "–"),
@@ -346,21 +378,22 @@ def epoch_section(e: EpochSection, content: ReportContent, ss: Any, *, new_page:
     if e.damaged:
         out.append(Paragraph(f"<font color='#d62728'><b>DAMAGED:</b> {_esc(e.damaged)}</font>", ss["Normal"]))
     if rows:
-        table = [["Target", "Displacement [mm]", "σ [mm]", "State", "Flags"]]
+        table = [["Target", "Displacement [mm]", "σ [mm]", "State", "Remarks" if words else "Flags"]]
         for r in rows:
             table.append([r["reflector"], _num(r["displacement_mm"]), _num(r["sigma_mm"], "{:.3f}"), r["state"],
-                          r["flags"].replace(";", ", ") or "–"])
+                          row_words(r) if words else (r["flags"].replace(";", ", ") or "–")])
         epoch_flags = e.displacement_set.flags if e.displacement_set else ()
-        out += [Spacer(1, 4), Paragraph("Displacements" + (f" (epoch flags, {_esc(describe(epoch_flags))})"
-                                                           if epoch_flags else ""),
+        said = flags_text(epoch_flags, words=words)
+        out += [Spacer(1, 4), Paragraph("Displacements" + (f" (the visit: {_esc(said)})" if said else ""),
                                         ss["Small"]), _table(table, (20, 30, 20, 20, 88), ss)]
         corrected = corrections_line(e.systematics, baseline=e.label == content.baseline)
         if corrected:
             out.append(Paragraph(_esc(f"Corrected for: {corrected}."), ss["Small"]))
         problems = [f for f in epoch_flags if severity(f) == "problem"]
         if problems:
-            out.insert(0, Paragraph(f"<font color='#d62728'><b>PROBLEM:</b> {_esc('; '.join(problems))}</font>",
-                                    ss["Normal"]))
+            out.insert(1 if new_page else 0, Paragraph(
+                f"<font color='#d62728'><b>PROBLEM:</b> {_esc(flags_text(problems, words=words))}</font>",
+                ss["Normal"]))
     return out
 
 
@@ -383,7 +416,7 @@ def log_section(content: ReportContent, ss: Any, *, max_log_rows: int = 400) -> 
 
     from projects.outputs.report.action_log import action_row
 
-    out = [PageBreak(), Paragraph("Processing log", ss["Heading1"]),
+    out = [PageBreak(), Paragraph("Appendix C: processing log", ss["Heading1"]),
            Paragraph("Everything needed to trace the numbers: software versions, processing parameters, the "
                      "checksum of every scan file used, and the campaign's action log.", ss["Small"]),
            Paragraph("Software", ss["Heading2"]),
@@ -466,8 +499,8 @@ def crossval_section(content: ReportContent, ss: Any) -> list:
            Paragraph("The camera series of the midspan target (its own zero, set by the alignment below) against "
                      "the LiDAR displacements: each epoch is paired with the median of the camera samples around "
                      "its time.", ss["Small"])]
-    for summary, camera in content.extras["crossvals"]:
-        cv = CrossValidation.from_json(summary)
+    for stored, camera in content.extras["crossvals"]:
+        cv = CrossValidation.from_json(stored)
         al = cv.alignment
         how = (f"aligned at epoch {al['epoch']}" if al["method"] == "at-date" else "aligned by least squares")
         out.append(Paragraph(f"{_esc(cv.series)} against LiDAR target {_esc(cv.reflector)}", ss["Heading2"]))
@@ -497,34 +530,78 @@ EXTRA_SECTIONS: dict[str, Callable] = {"comparisons": comparison_section, "cross
                                        "analysis": analysis_section, "field": field_section}
 
 
+def attention_section(content: ReportContent, ss: Any, maps: Sequence[bytes | None]) -> list:
+    """The visits that need attention (a warning or a problem), a page each, in words.
+
+    None of them: nothing (the summary says so in one line).
+    """
+    from reportlab.platypus import PageBreak, Paragraph
+
+    chosen = [(e, m) for e, m in zip(content.epochs, maps, strict=True) if e.state in ATTENTION_STATES]
+    if not chosen:  # the summary says so in one line
+        return []
+    out = [PageBreak(), Paragraph("Visits that need attention", ss["Heading1"])]
+    out.append(Paragraph(_esc(f"{len(chosen)} of {len(content.epochs)} visits: each with what was seen, what to do, "
+                              "its map and its values. The other visits' pages are in the appendix."), ss["Small"]))
+    for k, (e, jpeg) in enumerate(chosen):
+        out += epoch_section(e, content, ss, new_page=k > 0, map_jpeg=jpeg, words=True)
+    return out
+
+
+def appendix_note(content: ReportContent, ss: Any) -> list:
+    """The main body's last lines when the appendix is left out: where the detail is."""
+    from reportlab.platypus import Paragraph, Spacer
+
+    return [Spacer(1, 10), Paragraph("Appendix", ss["Heading1"]),
+            Paragraph("Not included in this report: every visit's page (map, plan, centroids and their flags), the "
+                      "field model's per-visit tables, the processing parameters, the scan files' checksums, the flag "
+                      "codes and the action log. Write the report with the appendix (<font face='Courier'>"
+                      "bridgesurvey report DIR --out FILE --detail</font>), or export the tables (<font face='Courier'>bridgesurvey export DIR</font>).",
+                      ss["Small"])]
+
+
 def build_pdf(content: ReportContent, path: str | os.PathLike, *, preview_of: Callable | None = None,
-              progress: ProgressCallback | None = None) -> Path:
-    """Write the report to ``path`` (through a temporary file, so a failure leaves no half PDF)."""
+              progress: ProgressCallback | None = None, detail: bool = False) -> Path:
+    """Write the report to ``path`` (through a temporary file, so a failure leaves no half PDF).
+
+    The main body: title, summary, the visits that need attention (a page each), layout, histories and the
+    optional sections (analysis, field budget, comparisons, camera cross-checks), in words. ``detail`` adds
+    the appendix: every visit's page, the field model's tables and the processing log with flag codes.
+    """
+    from reportlab.platypus import PageBreak, Paragraph
+
     path = Path(path)
     ss = _styles()
     story = title_page(content, ss)
     report(progress, 0.02, "summary")
     story += summary_section(content, ss)
-    report(progress, 0.04, "layout")  # between the sections: each call lets a cancel stop the report
+    shown = [e for e in content.epochs if detail or e.state in ATTENTION_STATES]
+    maps = render_maps(shown, preview_of, progress=scaled(progress, 0.03, 0.5))
+    by_label = {e.label: m for e, m in zip(shown, maps, strict=True)}
+    report(progress, 0.5, "visits that need attention")
+    story += attention_section(content, ss, [by_label.get(e.label) for e in content.epochs])
+    report(progress, 0.52, "layout")  # between the sections: each call lets a cancel stop the report
     story += layout_section(content, ss)
-    report(progress, 0.05, "history")
+    report(progress, 0.55, "history")
     story += history_section(content, ss)
     for name, builder in EXTRA_SECTIONS.items():
         if name in content.extras:
-            report(progress, 0.08, name)
+            report(progress, 0.6, name)
             story += builder(content, ss)
-    if content.epochs:
-        from reportlab.platypus import PageBreak, Paragraph
-
-        story += [PageBreak(), Paragraph("Epochs", ss["Heading1"]),
-                  Paragraph("Per epoch: the coarse scan's reflectance map with detections and the planned fine-scan "
+    if not detail:
+        story += appendix_note(content, ss)
+    else:
+        story += [PageBreak(), Paragraph("Appendix A: every visit", ss["Heading1"]),
+                  Paragraph("Per visit: the coarse scan's reflectance map with detections and the planned fine-scan "
                             "windows, the plan against what the fine scans held, the centroids with their "
-                            "uncertainty and flags, the reference check and the displacements.", ss["Small"])]
-        maps = render_maps(content.epochs, preview_of, progress=scaled(progress, 0.1, 0.6))
-        for k, (e, jpeg) in enumerate(zip(content.epochs, maps, strict=False)):
-            report(progress, 0.6 + 0.2 * k / len(content.epochs), f"epoch {e.label}")
-            story += epoch_section(e, content, ss, new_page=k > 0, map_jpeg=jpeg)
-    story += log_section(content, ss)
+                            "uncertainty and flags, the reference check and the displacements. Flag codes are "
+                            "explained in appendix C.", ss["Small"])]
+        for k, e in enumerate(content.epochs):
+            report(progress, 0.65 + 0.2 * k / len(content.epochs), f"epoch {e.label}")
+            story += epoch_section(e, content, ss, new_page=k > 0, map_jpeg=by_label.get(e.label))
+        if "field" in content.extras:
+            story += field_appendix(content, ss)
+        story += log_section(content, ss)
     report(progress, 0.9, "writing PDF")
 
     with atomic_output(path) as tmp:

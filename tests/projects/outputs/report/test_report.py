@@ -12,8 +12,11 @@ from tests.projects.campaign_helpers import snapshot
 
 pytestmark = pytest.mark.skipif(shutil.which("pdftoppm") is None, reason="needs poppler-utils (./run installs it)")
 
-SECTIONS = ("Displacement survey report", "Summary", "Limits in force", "Reflector layout and target state",
-            "Displacement history", "Epochs", "Reference group check", "Processing log", "Scan files", "Action log")
+#: The main body's sections, and the appendix's (``--detail``).
+BODY = ("Displacement survey report", "Summary", "Limits in force", "attention",
+        "Reflector layout and target state", "Displacement history", "Field error budget")
+SECTIONS = BODY + ("Appendix A: every visit", "Reference group check", "Appendix B: the field model by visit",
+                   "Appendix C: processing log", "Scan files", "Action log")
 
 
 def pages_as_images(pdf, tmp_path, dpi=40):
@@ -30,7 +33,7 @@ def pdf_text(pdf) -> str:
 def test_whole_campaign_report_has_every_section_and_no_blank_page(processed, tmp_path, capsys):
     out = tmp_path / "report.pdf"
     before = snapshot(processed)
-    assert main(["report", str(processed), "--out", str(out), "--author", "A. Surveyor"]) == 0
+    assert main(["report", str(processed), "--out", str(out), "--author", "A. Surveyor", "--detail"]) == 0
     assert "wrote" in capsys.readouterr().out
     assert snapshot(processed) == before  # a report never changes the campaign
     text = pdf_text(out)
@@ -56,14 +59,34 @@ def test_whole_campaign_report_has_every_section_and_no_blank_page(processed, tm
         assert ink > 0.01, f"page {k} is blank"
 
 
+def test_the_main_body_speaks_words_and_the_appendix_is_asked_for(processed, tmp_path):
+    """Without --detail: the body's sections, no flag code anywhere, the visits that need attention only, and a
+    line saying where the detail is (issue 38: a report a bridge owner reads)."""
+    from common.flags import REGISTRY
+
+    out = tmp_path / "body.pdf"
+    assert main(["report", str(processed), "--out", str(out)]) == 0
+    text = pdf_text(out)
+    flat = " ".join(text.split())
+    for s in BODY:
+        assert s in text, s
+    assert "Appendix A" not in text and "Action log" not in text and "--detail" in flat
+    codes = [c for c in REGISTRY if "_" in c and c in flat]
+    assert not codes, f"flag codes in the report's body: {codes}"
+    detail = tmp_path / "detail.pdf"
+    assert main(["report", str(processed), "--out", str(detail), "--detail"]) == 0
+    assert len(pages_as_images(out, tmp_path)) < len(pages_as_images(detail, tmp_path / ".."))
+
+
 def test_visit_and_period_reports(processed, tmp_path):
     visit = tmp_path / "visit.pdf"
-    assert main(["report", str(processed), "--out", str(visit), "--epoch", "2026-03-09"]) == 0
+    assert main(["report", str(processed), "--out", str(visit), "--epoch", "2026-03-09", "--detail"]) == 0
     text = pdf_text(visit)
     assert "Epoch 2026-03-09" in text and "Epoch 2026-03-16" not in text and "Epoch 2026-03-02" not in text
     assert "visit of 2026-03-09" in text
     period = tmp_path / "period.pdf"
-    assert main(["report", str(processed), "--out", str(period), "--from", "2026-03-09", "--to", "2026-03-16"]) == 0
+    assert main(["report", str(processed), "--out", str(period), "--from", "2026-03-09", "--to", "2026-03-16",
+                 "--detail"]) == 0
     text = pdf_text(period)
     assert "Epoch 2026-03-09" in text and "Epoch 2026-03-16" in text and "Epoch 2026-03-02" not in text
 
@@ -189,7 +212,7 @@ def test_the_report_reads_like_a_professionals(processed_copy, field, tmp_path):
     with Campaign.open(processed_copy) as c:
         c.add_epoch("2026-03-23", "2026-03-23T09:00:00+00:00", las)
     out = tmp_path / "r.pdf"
-    assert main(["report", str(processed_copy), "--out", str(out)]) == 0
+    assert main(["report", str(processed_copy), "--out", str(out), "--detail"]) == 0
     text = pdf_text(out)
     with Campaign.open(processed_copy, writable=False) as c:
         states = {e.label: epoch_state(c, e.label)[0] for e in c.epochs()}
