@@ -2,9 +2,9 @@
 
 An epoch's state is the one :func:`projects.results.state.epoch_state` decides (through
 ``campaign_status``, the same as ``bridgesurvey status`` and the report print): imported, planned,
-scanned, measured, processed, or — processed with a flag that deserves a look or makes the result
-untrustworthy — ``warning`` (orange, a warning sign) or ``problem`` (red, bold, a stop sign). Their
-flags and what they mean are in the tooltip.
+scanned, measured, processed (plain text), or — processed with a flag that asks the surveyor to act or makes the
+result untrustworthy — ``warning`` (orange, a warning sign) or ``problem`` (red, bold, a stop sign): only what
+needs action is coloured. Their flags and what they mean are in the tooltip.
 """
 from __future__ import annotations
 
@@ -50,11 +50,10 @@ class CampaignTree(QTreeWidget):
         it = QTreeWidgetItem(parent, [text, shown_state or state])
         it.setData(0, KIND, kind)
         it.setData(0, KEY, key)
-        if state in STATE_COLOURS:
-            it.setForeground(1, QBrush(QColor(STATE_COLOURS[state])))
-        if state in MARKED:
+        if state in MARKED:  # colour only what needs action (issue 38): the other states are plain text
             it.setIcon(1, self.style().standardIcon(MARKED[state]))
             it.setForeground(0, QBrush(QColor(STATE_COLOURS[state])))
+            it.setForeground(1, QBrush(QColor(STATE_COLOURS[state])))
         if state in ("problem", "alarm"):
             bold = QFont(self.font())
             bold.setBold(True)
