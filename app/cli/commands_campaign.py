@@ -513,15 +513,18 @@ def cmd_status(args) -> int:
         level = levels[e["epoch"]]
         if level in ("problem", "warning"):
             serious = [f for f in e["flag_list"] if severity(f) in ("problem", "warning")]
-            print(f"{level.upper()} in {e['epoch']}: " + ("; ".join(serious) if args.verbose else summary(serious)))
-            print(f"  action: {first_action(serious)}")
+            said = f"{level.upper()} in {e['epoch']}: " + ("; ".join(serious) if args.verbose else summary(serious))
+            todo = f"  action: {first_action(serious)}"
+            print(said if args.verbose else _line(said))
+            print(todo if args.verbose else _line(todo))
     rev = data.get("revisions")
     if rev and rev["revised"]:  # values already stored (perhaps reported) that processing changed: never silent
         lines = rev["revised"] if args.verbose else rev["revised"][:STATUS_REVISIONS]
         print(f"revised by the processing of {rev['time'][:16].replace('T', ' ')}: {len(rev['revised'])} value(s)"
               + ("" if len(lines) == len(rev["revised"]) else " (--verbose for all)"))
         for r in lines:
-            print(f"  {r['epoch']} {r['target']}: {r['old']} → {r['new']} ({r['why']})")
+            text = f"  {r['epoch']} {r['target']}: {r['old']} → {r['new']} ({r['why']})"
+            print(text if args.verbose else _line(text))
     if data.get("instrument"):
         print("instrument (the campaign's field model): " + instrument_line(data["instrument"]))
     print("latest displacement of each measurement target:")
@@ -543,6 +546,14 @@ STATUS_REVISIONS = 3
 
 #: The flags column of a visit's line in ``status`` (its line stays within 120 characters; --verbose for all).
 FLAGS_WIDTH = 56
+
+
+#: A line of ``status`` without --verbose, at most (characters).
+STATUS_LINE = 120
+
+
+def _line(text: str) -> str:
+    return text if len(text) <= STATUS_LINE else text[:STATUS_LINE - 1].rstrip("; ,") + "…"
 
 
 def _short(text: str) -> str:
