@@ -119,6 +119,15 @@ class WarningScore:
         return sum((v[2] in ("warning", "problem")) == warned for v in these), len(these)
 
     @property
+    def unprocessed_text(self) -> str:
+        """``0``, or ``2 (trap 2)``: the visits refused, by class."""
+        left = [v[1] for v in self.visits if v[2] not in ("processed", "warning", "problem")]
+        if not left:
+            return "0"
+        return f"{len(left)} (" + ", ".join(f"{k} {left.count(k)}" for k in ("clean", "train", "trap")
+                                           if left.count(k)) + ")"
+
+    @property
     def unprocessed(self) -> int:
         """Visits the product refused to plan or process (each said why when it refused)."""
         return sum(v[2] not in ("processed", "warning", "problem") for v in self.visits)
@@ -142,7 +151,7 @@ def run(root: Path, camp: Campaign_, *, coarse_step_deg: float) -> WarningScore:
                 continue
             klass = "trap" if k in camp.traps else "train" if k in camp.trains else "clean"
             s = states[e.label]
-            loud = "; ".join(f for f in s.flags if severity(f) in (WARNING, PROBLEM))
+            loud = "; ".join(f for f in s.flags if severity(f) in (WARNING, PROBLEM)) or values.refused.get(e.label, "")
             out.visits.append((e.label, klass, s.state, " ".join(camp.traps.get(k, ())), loud))
     return out
 
@@ -179,7 +188,7 @@ def table(rows: dict[str, WarningScore]) -> str:
         rw, rn = s.share("train", True)
         v = s.values
         lines.append(f"| {name} | {cw} of {cn} | {tq} of {tn} | {f'{rw} of {rn}' if rn else '–'} | "
-                     f"{v.rms_mm:.3f} / {v.max_mm:.2f} | {v.silent_beyond_3sigma:.1%} | {s.unprocessed} |")
+                     f"{v.rms_mm:.3f} / {v.max_mm:.2f} | {v.silent_beyond_3sigma:.1%} | {s.unprocessed_text} |")
     return "\n".join(lines)
 
 

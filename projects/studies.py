@@ -64,6 +64,7 @@ class StudyScore:
     reference_flags: list = field(default_factory=list)  # (epoch, flag) of reference-check flags raised
     missing: int = 0
     expected: int = 0
+    refused: dict = field(default_factory=dict)  # epoch -> the line planning refused it with
 
     @property
     def rms_mm(self) -> float:
@@ -120,6 +121,7 @@ class ProductPlanner:
         self.settings = settings or {}
         self.count = 0
         self.labels: dict[Path, str] = {}
+        self.refused: dict[str, str] = {}  # epoch -> the line planning refused it with
 
     def __call__(self, folder: Path, coarse: Path) -> list:
 
@@ -142,7 +144,8 @@ class ProductPlanner:
                 c.add_epoch(label, when.isoformat(), coarse)
             try:
                 plan: ScanPlan = plan_epoch(c, label, setup=setup)
-            except SurveyError:
+            except SurveyError as exc:
+                self.refused[label] = str(exc).splitlines()[0]
                 return []
         return list(plan.rois)
 
@@ -174,6 +177,7 @@ def run_study(root: Path, model: BridgeModel, visits: Sequence[EpochConditions],
                 c.import_files(label, [fine], "fine", setup=_setup_number(folder))
         process(c)
     out = {"corrected": score_campaign(camp, field_dir, planner.labels)}
+    out["corrected"].refused = dict(planner.refused)
     if compare_without:
         other = root / "campaign-uncorrected"
         shutil.rmtree(other, ignore_errors=True)
