@@ -1,6 +1,7 @@
 """Fleet commands: status and report over many campaigns, and processing them on a Dask cluster."""
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 from app.cli.args import add_json, output_file
@@ -34,7 +35,13 @@ def register(sub) -> None:
                                   "and see the campaign folders at the same paths. A campaign another process is "
                                   "writing is skipped. Ctrl-C stops cleanly (what is saved stays).")
     q.add_argument("roots", type=Path, nargs="+", metavar="ROOT", help=ROOT_HELP)
-    q.add_argument("--scheduler", default=None, help="address of a running Dask scheduler, e.g. tcp://host:8786")
+    q.add_argument("--scheduler", default=None,
+                   help="address of a running Dask scheduler: tls://host:8786 on a network (with the certificates), "
+                        "tcp://127.0.0.1:8786 on this machine")
+    q.add_argument("--tls-ca-file", default=None, metavar="PEM",
+                   help="the certificate authority of a tls:// scheduler's cluster (default: Dask's configuration)")
+    q.add_argument("--tls-cert", default=None, metavar="PEM", help="this client's certificate for a tls:// scheduler")
+    q.add_argument("--tls-key", default=None, metavar="PEM", help="this client's private key for a tls:// scheduler")
     q.add_argument("--workers", type=int, default=None, help="worker processes of the local cluster (default: cores)")
     add_json(q, help="print what was done as JSON")
     q.set_defaults(func=cmd_fleet_process)
@@ -72,10 +79,14 @@ def cmd_fleet_report(args) -> int:
 
 
 def cmd_fleet_process(args) -> int:
-    from projects.fleet.process import fleet_process
+    from projects.fleet.process import TlsFiles, fleet_process, scheduler_warning
 
+    given = (args.tls_ca_file, args.tls_cert, args.tls_key)
+    tls = TlsFiles(*given) if any(given) else None
+    if args.scheduler and (warning := scheduler_warning(args.scheduler)):
+        print(f"bridgesurvey: warning: {warning}", file=sys.stderr)
     with progress_bar("fleet") as cb:
-        run = fleet_process(args.roots, scheduler=args.scheduler, workers=args.workers, progress=cb)
+        run = fleet_process(args.roots, scheduler=args.scheduler, workers=args.workers, tls=tls, progress=cb)
     if args.json:
         dump_json(run.to_json())
     else:

@@ -18,8 +18,11 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import socket
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
+from urllib.parse import urlsplit
 
 from common.errors import InputError, SurveyError
 from common.processes import quiet_resource_tracker
@@ -78,15 +81,94 @@ def _task(job):
     return run_stage1(job)
 
 
+@dataclass(frozen=True)
+class TlsFiles:
+    """The certificates of a ``tls://`` scheduler's cluster, PEM files.
+
+    Attributes
+    ----------
+    ca_file : path
+        The certificate authority that signed the cluster's certificates (the scheduler's and ours).
+    cert, key : path
+        This client's certificate and its private key.
+    """
+
+    ca_file: str
+    cert: str
+    key: str
+
+
+#: Hosts a plain ``tcp://`` scheduler may have without a warning: this machine.
+LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
+#: Dask's configuration keys a ``tls://`` address reads its certificates from when none are given.
+DASK_TLS_KEYS = "distributed.comm.tls.ca-file, distributed.comm.tls.client.cert and distributed.comm.tls.client.key"
+
+
+def scheduler_warning(address: str) -> str | None:
+    """One line when ``address`` is a plain (unencrypted, unauthenticated) connection to another machine.
+
+    A Dask scheduler runs whatever its clients send: on a network it must only accept clients that hold the
+    cluster's certificates (``tls://`` with :class:`TlsFiles` or Dask's configuration).
+
+    >>> scheduler_warning("tcp://127.0.0.1:8786") is None
+    True
+    >>> scheduler_warning("tcp://10.0.0.7:8786").startswith("tcp://10.0.0.7:8786 is a plain connection")
+    True
+    """
+    parts = urlsplit(address if "://" in address else f"tcp://{address}")
+    if parts.scheme != "tcp":
+        return None
+    host = parts.hostname or ""
+    if host in LOCAL_HOSTS or host == socket.gethostname():
+        return None
+    return (f"{address} is a plain connection to another machine: its scheduler runs whatever any client on the "
+            "network sends, and nothing is encrypted; use tls:// with the cluster's certificates (--tls-ca-file, "
+            "--tls-cert, --tls-key, or Dask's configuration: see the fleet guide)")
+
+
+def scheduler_security(address: str, tls: TlsFiles | None = None):
+    """The ``distributed.Security`` a scheduler address needs (None for a plain one).
+
+    ``tls://`` takes the certificates given (all three, existing files) or, without them, Dask's configuration
+    (:data:`DASK_TLS_KEYS`); neither is an :class:`~common.errors.InputError` saying what to give. Certificates
+    with a plain address are refused (they would not be used).
+    """
+    from distributed import Security
+
+    scheme = urlsplit(address).scheme if "://" in address else "tcp"
+    if scheme != "tls":
+        if tls is not None:
+            raise InputError(f"{address}: certificates go with a tls:// scheduler address; this one is {scheme}://")
+        return None
+    if tls is None:
+        sec = Security()  # Dask's configuration (~/.config/dask/*.yaml, DASK_DISTRIBUTED__COMM__TLS__* variables)
+        if not (sec.tls_ca_file and sec.tls_client_cert):
+            raise InputError(f"{address}: a tls:// scheduler needs the cluster's certificates: give --tls-ca-file, "
+                             f"--tls-cert and --tls-key, or set {DASK_TLS_KEYS} in Dask's configuration")
+        return Security(tls_ca_file=sec.tls_ca_file, tls_client_cert=sec.tls_client_cert,
+                        tls_client_key=sec.tls_client_key, require_encryption=True)
+    files = (("--tls-ca-file", tls.ca_file), ("--tls-cert", tls.cert), ("--tls-key", tls.key))
+    for what, path in files:
+        if not path:
+            raise InputError(f"{address}: {what} is missing: a tls:// scheduler needs --tls-ca-file, --tls-cert and "
+                             "--tls-key together")
+    for what, path in files:
+        if not Path(path).is_file():
+            raise InputError(f"{path}: no such file ({what})")
+    return Security(tls_ca_file=str(tls.ca_file), tls_client_cert=str(tls.cert), tls_client_key=str(tls.key),
+                    require_encryption=True)
+
+
 @contextlib.contextmanager
-def _client(scheduler: str | None, workers: int | None):
+def _client(scheduler: str | None, workers: int | None, tls: TlsFiles | None = None):
     try:
         from distributed import Client, LocalCluster
     except ImportError:  # pragma: no cover - a dependency of the package
         raise InputError("fleet processing needs dask.distributed; reinstall BridgeSurvey") from None
     if scheduler:
+        security = scheduler_security(scheduler, tls)
         try:
-            client = Client(scheduler, timeout="20s")
+            client = Client(scheduler, timeout="20s", security=security)
         except (OSError, TimeoutError) as exc:
             raise InputError(f"cannot reach the Dask scheduler at {scheduler} ({exc}); start it with "
                              "'dask scheduler' and its workers with 'dask worker ADDRESS'") from None
@@ -111,21 +193,27 @@ def _client(scheduler: str | None, workers: int | None):
 
 
 def fleet_process(roots: Sequence[str | os.PathLike], *, scheduler: str | None = None,
-                  workers: int | None = None, progress: ProgressCallback | None = None) -> FleetRun:
+                  workers: int | None = None, tls: TlsFiles | None = None,
+                  progress: ProgressCallback | None = None) -> FleetRun:
     """Bring every campaign under ``roots`` up to date on a Dask cluster (see the module notes).
 
     Parameters
     ----------
     roots : sequence of folders or fleet files
     scheduler : str, optional, keyword-only
-        Address of a running Dask scheduler (``tcp://host:8786``); default: a LocalCluster here.
+        Address of a running Dask scheduler (``tls://host:8786`` on a network, ``tcp://`` on this machine; see
+        :func:`scheduler_warning`); default: a LocalCluster here.
     workers : int, optional, keyword-only
         Worker processes of the LocalCluster (default one per core, at most 4).
+    tls : TlsFiles, optional, keyword-only
+        The certificates of a ``tls://`` scheduler's cluster (default: Dask's configuration).
     progress : callable, optional, keyword-only
     """
     if workers is not None and workers < 1:
         raise InputError(f"--workers must be at least 1, got {workers}")
     folders = find_campaigns(roots)
+    if scheduler:  # certificates checked before any campaign is opened
+        scheduler_security(scheduler, tls)
     run = FleetRun()
     with contextlib.ExitStack() as stack:
         open_campaigns: dict[str, Campaign] = {}
@@ -154,7 +242,7 @@ def fleet_process(roots: Sequence[str | os.PathLike], *, scheduler: str | None =
                         cr.summary.outcomes.append(EpochOutcome(e.label, "failed", str(exc)))
         run.tasks = len(jobs)
         if jobs or scheduler:  # a scheduler given is checked even when there is nothing to do
-            client, run.cluster = stack.enter_context(_client(scheduler, workers))
+            client, run.cluster = stack.enter_context(_client(scheduler, workers, tls))
             if jobs:
                 _run_tasks(client, jobs, open_campaigns, run, progress)
         for cr in run.campaigns:
