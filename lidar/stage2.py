@@ -381,11 +381,71 @@ def revisions(label: str, stored: Mapping[str, tuple[float | None, float | None,
     return out
 
 
-def fit_model(inputs: Stage2Inputs) -> FieldModel:
-    """The campaign's field model over every measured visit's set-ups (the stored one kept while it holds)."""
+def _first_seen(inputs: Stage2Inputs, vs: _Visits) -> dict[str, str]:
+    """Each target's first visit from the baseline on (a target installed later is referred to it)."""
+    labels = [v.label for v in inputs.visits]
+    first: dict[str, str] = {}
+    for lab in labels[labels.index(inputs.baseline):]:
+        for rid in vs.found(lab):
+            first.setdefault(rid, lab)
+    return first
+
+
+def _bases(inputs: Stage2Inputs, vs: _Visits, lab: str, first_seen: Mapping[str, str]) -> list[str]:
+    """The visits ``lab``'s displacements are referred to: the baseline, and the first visits of later targets."""
+    labels = [v.label for v in inputs.visits]
+    if labels.index(lab) < labels.index(inputs.baseline):  # dated before the baseline: negative time against it
+        return [inputs.baseline]
+    groups = inputs.groups
+    meas_here = [m for m in vs.found(lab) if groups.get(m) == "measurement"]
+    return sorted({first_seen[m] for m in meas_here} | {inputs.baseline}, key=labels.index)
+
+
+def _core_digest(inputs: Stage2Inputs, vs: _Visits, lab: str, bases: Sequence[str]) -> str:
+    """The digest of a visit's inputs apart from the field model (its centroids, its bases', the settings...)."""
+    key = {"v": "1", "epoch": vs.by_label[lab].stage1_digest, "params": dict(inputs.digest_params),
+           "bases": {b: vs.by_label[b].stage1_digest for b in bases}, "reflectors": list(inputs.reflectors_key),
+           "air": list(inputs.air_key)}
+    return inputs_digest(key)
+
+
+def frozen_visits(inputs: Stage2Inputs) -> set[str]:
+    """The visits the field model's window leaves out whose stored values stand (``field_window``).
+
+    The model is fitted over the baseline and the newest ``field_window`` measured visits (0: all); an older
+    visit keeps the displacements computed while it was among them, as long as its own inputs (apart from the
+    model) are unchanged. One whose inputs changed (a setting, the air, a reflector) is not frozen: the model
+    is then fitted over every visit again, so it can be recomputed.
+    """
+    window = int(inputs.params.get("field_window", 0) or 0)
+    labels = [v.label for v in inputs.visits]
+    if not window or len(labels) <= window + 1:
+        return set()
+    vs = _Visits(inputs)
+    first_seen = _first_seen(inputs, vs)
+    newest = set(labels[-window:]) | {inputs.baseline}
+    frozen = set()
+    for lab in labels:
+        if lab in newest:
+            continue
+        stored = inputs.stored_digests.get(lab)
+        if stored is None or stored.split(":")[0] != _core_digest(inputs, vs, lab, _bases(inputs, vs, lab,
+                                                                                            first_seen)):
+            return set()  # an old visit to compute again: fit over every visit
+        frozen.add(lab)
+    return frozen
+
+
+def fit_model(inputs: Stage2Inputs, *, leave_out: set[str] | None = None) -> FieldModel:
+    """The campaign's field model over the measured visits' set-ups (the stored one kept while it holds).
+
+    ``leave_out``: visits not fitted (default :func:`frozen_visits`, those the ``field_window`` leaves out).
+    """
+    leave_out = frozen_visits(inputs) if leave_out is None else leave_out
     vs = _Visits(inputs)
     groups = dict(inputs.groups)
-    return refit(inputs.stored_model, inputs.baseline, list(vs.setup_visits), groups, vs.found_setup_visit,
+    fitted = [sv for sv, (lab, _) in vs.setup_visits.items() if lab not in leave_out]
+    return refit(inputs.stored_model, inputs.baseline, fitted, groups, vs.found_setup_visit,
                  vs.closures_setup_visit, enabled=bool(inputs.params.get("field_model", True)))
 
 
@@ -409,31 +469,22 @@ def run_stage2(inputs: Stage2Inputs, *, model: FieldModel | None = None) -> Stag
     baseline = inputs.baseline
     if baseline not in labels:
         raise ProcessingError(f"the baseline {baseline} is not a measured epoch")
+    frozen = frozen_visits(inputs)
     if model is None:
-        model = fit_model(inputs)
+        model = fit_model(inputs, leave_out=frozen)
     changed = inputs.stored_model is None or model.digest() != inputs.stored_model.digest()
     vs = _Visits(inputs, model)
-    groups = dict(inputs.groups)
-    start = labels.index(baseline)
-    first_seen: dict[str, str] = {}
-    for lab in labels[start:]:
-        for rid in vs.found(lab):
-            first_seen.setdefault(rid, lab)
+    first_seen = _first_seen(inputs, vs)
     history = {t: list(rows) for t, rows in inputs.history.items()}
     out = []
     for pos, lab in enumerate(labels):
-        meas_here = [m for m in vs.found(lab) if groups.get(m) == "measurement"]
-        if pos < start:  # dated before the baseline: negative time against it, never a new baseline
-            bases = [baseline]
-        else:
-            bases = sorted({first_seen[m] for m in meas_here} | {baseline}, key=labels.index)
-        key = {"v": "1", "epoch": vs.by_label[lab].stage1_digest, "params": dict(inputs.digest_params),
-               "bases": {b: vs.by_label[b].stage1_digest for b in bases}, "reflectors": list(inputs.reflectors_key),
-               "air": list(inputs.air_key)}
+        if lab in frozen:  # left out of the model's window, its inputs unchanged: its stored values stand
+            continue
+        bases = _bases(inputs, vs, lab, first_seen)
         field_key: dict = {b: visit_digest(model, b, lab) for b in bases}
         if any(vs.several(x) for x in [*bases, lab]):
             field_key["setups"] = vs.key(sorted({*bases, lab}))
-        core = inputs_digest(key)
+        core = _core_digest(inputs, vs, lab, bases)
         h = f"{core}:{inputs_digest(field_key)}"
         stored = inputs.stored_digests.get(lab)
         if stored == h:

@@ -80,6 +80,10 @@ CHECKS: dict[str, tuple[float, dict[str, tuple[float | None, float | None]]]] = 
                     "info_theta_step_deg": PRESENT, "truth_step_deg": PRESENT}),
     "plan_predictions": (900, {"windows": (9, 9), "points_plan_to_scanned_median": (0.5, 2.0),
                                "sigma_predicted_to_reported_median": (0.5, 2.0), "recall_with_guided": (0.3, 1.0)}),
+    # eight weekly visits with the field window at 3: the eighth recomputes at most the window's visits
+    "years": (900, {"visits": (8, 8), "window": (3, 3), "recomputed_last": (0, 3),
+                    "process_ratio_last_to_first": (0.0, 10.0), "status_s_last": (0.0, 30.0),
+                    "folder_mb_last": (1.0, None)}),
     # one campaign of three visits, the last with a cable tie beside M3: it must warn, and nothing be silent
     "warnings_truth": (900, {"campaigns": (1, 1), "unprocessed": (0, 0), "clean_visits": (1, 1), "trapped_visits": (1, 1),
                              "trapped_visits_quiet": (0.0, 0.0), "silent_beyond_3sigma_max": (0.0, 0.0),

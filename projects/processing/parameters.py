@@ -30,6 +30,13 @@ def _positive_float(text: str) -> float:
     return v
 
 
+def _count_or_zero(text: str) -> int:
+    v = int(text)
+    if v < 0:
+        raise ValueError
+    return v
+
+
 def _optional_positive(text: str) -> float | None:
     return None if text.strip().lower() in ("none", "auto", "") else _positive_float(text)
 
@@ -89,8 +96,8 @@ class Parameter:
     values : str
         What may be given, for the help ("a number > 0", "auto | reference | epoch").
     added_later : bool
-        A stage-1 parameter added after campaigns were processed without it: it enters the input hash only
-        when it differs from its default, so those campaigns are not measured again for nothing.
+        A parameter added after campaigns were processed without it: it enters the input hash (stage 1's or
+        stage 2's) only when it differs from its default, so those campaigns are not processed again for nothing.
     """
 
     name: str
@@ -138,6 +145,10 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("field_model", True, _boolean, "displacements",
               "correct the atmosphere's scale, the retro-reflector range walk and the set-up's drift, estimated "
               "from the campaign's own targets (false: rigid motion only, as before)", "true | false"),
+    Parameter("field_window", 52, _count_or_zero, "displacements",
+              "visits the field model is fitted over: the baseline and the newest N; an earlier visit keeps the "
+              "values computed while it was among them, so a visit costs the same in year ten as in year one "
+              "(0: every visit)", "0 | a whole number > 0", added_later=True),
     Parameter("normal_mode", "auto", _normal_mode, "displacements",
               "deck normal: carried from the baseline, re-fitted each epoch, or both combined (auto)",
               "auto | reference | epoch"),
@@ -180,7 +191,7 @@ def stage1_params(params: dict) -> dict:
 
 def stage2_params(params: dict) -> dict:
     """The parameters stage 2 depends on."""
-    return {k: params[k] for k in STAGE2_KEYS}
+    return {k: params[k] for k in STAGE2_KEYS if not BY_NAME[k].added_later or params[k] != BY_NAME[k].default}
 
 
 def help_text() -> str:

@@ -80,3 +80,27 @@ def test_stage2_inputs_travel_to_another_process(campaign):
     a = [d.displacement_m for d in here.epoch("e2").displacements.displacements]
     b = [d.displacement_m for d in there.epoch("e2").displacements.displacements]
     assert np.allclose(a, b, rtol=0, atol=1e-12)
+
+
+@pytest.mark.slow
+def test_the_field_window_keeps_older_visits_and_bounds_the_work(campaign):
+    """Issue 44: with ``field_window`` N the model is fitted over the baseline and the newest N visits; an older
+    visit keeps its stored values unless its own inputs change (then every visit is fitted again)."""
+    from lidar.stage2 import frozen_visits
+
+    visits, _ = campaign
+    e4 = replace(visits[2], label="e4", stage1_digest="stage1-e4")  # a fourth visit, the third's scans again
+    params = {**DEFAULTS, "field_window": 1}
+    kw = dict(params=params, digest_params=stage2_params(params))
+    first = run_stage2(_inputs(visits, **kw))
+    stored = {e.label: e.inputs_hash for e in first.epochs}
+    four = _inputs((*visits, e4), stored_model=first.model, stored_digests=stored, **kw)
+    assert frozen_visits(four) == {"e2", "e3"}  # the baseline and the newest (e4) are fitted
+    result = run_stage2(four)
+    assert "e2" not in result.labels and "e3" not in result.labels and "e4" in result.labels
+    assert "e2" not in result.model.visits or result.model.visits.get("e2") == first.model.visits.get("e2")
+    moved = {**params, "moved_tolerance_m": 0.002}  # a setting changed: every visit computed again
+    again = run_stage2(_inputs((*visits, e4), stored_model=result.model,
+                               stored_digests={**stored, **{e.label: e.inputs_hash for e in result.epochs}},
+                               params=moved, digest_params=stage2_params(moved)))
+    assert again.labels == ["e1", "e2", "e3", "e4"]
