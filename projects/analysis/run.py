@@ -131,7 +131,9 @@ def _aliasing_warnings(epoch_times: list[dt.datetime], temperature: tuple[np.nda
     hours = np.array([e.astimezone(dt.UTC).hour + e.minute / 60 for e in epoch_times])
     if len(hours) >= 3:
         ang = hours / 24 * 2 * np.pi
-        spread = math.sqrt(-2 * math.log(max(math.hypot(np.cos(ang).mean(), np.sin(ang).mean()), 1e-9))) * 24 / (2 * np.pi)
+        # the circular spread; the mean resultant length is clipped to 1 (every visit at the same hour rounds above)
+        resultant = min(max(math.hypot(np.cos(ang).mean(), np.sin(ang).mean()), 1e-9), 1.0)
+        spread = math.sqrt(-2 * math.log(resultant)) * 24 / (2 * np.pi)
         if spread > 3.0:
             out.append(f"the epochs were scanned at very different times of day (spread {spread:.1f} h): the daily "
                        "temperature swing aliases into the weekly series")

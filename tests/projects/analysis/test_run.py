@@ -77,3 +77,13 @@ def test_the_command_line_prints_the_notes():
     assert "event 1 slab" in out and "creep coefficient -" in out
     assert "note: negative creep coefficient: the target moved back after the step (recovery)" in out
     assert "no thermal term" in out and str(DAY_NS) not in out
+
+
+def test_visits_all_at_the_same_hour_have_no_spread():
+    """Found by the years bench: 10 visits at 09:00 round the mean resultant above 1 (a math domain error)."""
+    import datetime as dt
+
+    from projects.analysis.run import _aliasing_warnings
+
+    times = [dt.datetime(2026, 1, 5, 9, 0, tzinfo=dt.UTC) + dt.timedelta(weeks=k) for k in range(10)]
+    assert not any("times of day" in w for w in _aliasing_warnings(times, None, 0))
