@@ -645,11 +645,18 @@ class MapView(QWidget):
                     f"{w.phi_max_deg - w.phi_min_deg:.3f} × {w.theta_max_deg - w.theta_min_deg:.3f}",
                     f"{w.phi_step_deg:.4f} / {w.theta_step_deg:.4f}", f"{r.expected_points:,}",
                     points, f"{r.expected_seconds:.1f}", "; ".join(notes) or "–"]
+            colour = QColor("#d62728") if r.reflector in cut else None
             for col, v in enumerate(vals):
+                # only the cells that changed: every new cell makes the table measure its columns and rows again
+                # (they fit their contents), which took most of a second on each step of a drag
+                old = self.table.item(row, col)
+                if old is not None and old.text() == v and (old.data(Qt.UserRole) == (colour is not None)):
+                    continue
                 item = QTableWidgetItem(v)
                 item.setToolTip(v)
-                if r.reflector in cut:
-                    item.setForeground(QColor("#d62728"))
+                item.setData(Qt.UserRole, colour is not None)
+                if colour is not None:
+                    item.setForeground(colour)
                 self.table.setItem(row, col, item)
         if self.plan is not None:
             over = self.plan.total_seconds > self.plan.budget_seconds
