@@ -61,6 +61,13 @@ class Ticks:
                         last = frames[-1]
                         print(f"STALL {stalled:.1f} s: {' > '.join(ours)} | {Path(last.filename).name}:{last.name}",
                               flush=True)
+                        for ident, fr in sys._current_frames().items():  # the worker, when it held the lock
+                            if ident not in (main, threading.get_ident()):
+                                st = traceback.extract_stack(fr)
+                                ours = [f"{Path(f.filename).name}:{f.lineno} {f.name}" for f in st
+                                        if "site-packages" not in f.filename and "threading" not in f.filename][-4:]
+                                print(f"    worker: {' > '.join(ours)} | {Path(st[-1].filename).name}:{st[-1].name}"
+                                      f":{st[-1].lineno}", flush=True)
             threading.Thread(target=watch, daemon=True).start()
 
     def longest_gap(self, t0: float, t1: float) -> float:

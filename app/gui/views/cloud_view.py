@@ -145,11 +145,13 @@ class CloudView(QWidget):
         self.scale = prepared.scale
         if not change:
             actor = p.add_points(pts, scalars=cloud.value_name, cmap="cividis", point_size=2, clim=prepared.clim,
-                                 scalar_bar_args=bar, render=False)
+                                 scalar_bar_args=bar, render=False,
+                                 reset_camera=False)
             legend = "colours: intensity, from its 1st to its 99.5th percentile"
         else:  # signed change: diverging colours, symmetric about zero, scaled on the structure
             actor = p.add_points(pts, scalars=cloud.value_name, cmap="RdBu", point_size=4, clim=prepared.clim,
-                                 nan_color="grey", scalar_bar_args=bar, render=False)
+                                 nan_color="grey", scalar_bar_args=bar, render=False,
+                                 reset_camera=False)
             legend = "M3C2 change, red negative, blue positive; " + self.scale.legend + "; grey: no value"
         p.add_text(legend, position="upper_left", font_size=10, color="white", name="legend", render=False)
         self.actor = with_interactive_lod(p, actor, pts, keep=prepared.lod) if prepared.lod is not None else actor
@@ -182,12 +184,12 @@ class CloudView(QWidget):
         rest = [k for k in range(len(xyz)) if k not in sel]
         if rest:
             p.add_mesh(pv.PolyData(xyz[rest]).glyph(geom=pv.Sphere(radius=0.12), scale=False, orient=False),
-                       color="#ff5555", name="markers", render=False)
+                       color="#ff5555", name="markers", render=False, reset_camera=False)
         if sel:
             p.add_mesh(pv.PolyData(xyz[sel]).glyph(geom=pv.Sphere(radius=0.2), scale=False, orient=False),
-                       color="yellow", name="markers_sel", render=False)
+                       color="yellow", name="markers_sel", render=False, reset_camera=False)
         p.add_point_labels(xyz, list(cloud.marker_ids), font_size=14, text_color="white", shape_opacity=0.4,
-                           name="labels", always_visible=True, render=False)
+                           name="labels", always_visible=True, render=False, reset_camera=False)
 
     def _picked(self, point) -> None:
         if self.cloud is None or not len(self.cloud.marker_xyz):
