@@ -18,10 +18,11 @@ import numpy as np
 
 from common.progress import ProgressCallback, report
 
-#: Points drawn when the view is still (about 0.3 s a frame with software OpenGL).
-POINT_BUDGET = 150_000
+#: Points drawn when the view is still (0.15-0.3 s a frame with software OpenGL on two busy cores; 150 k points
+#: held the interface up to 0.8 s on the first frame of a cloud).
+POINT_BUDGET = 100_000
 #: Points drawn while the view is being rotated or zoomed.
-INTERACTIVE_POINTS = 50_000
+INTERACTIVE_POINTS = 40_000
 #: Percentile of |change| on the structure that the colour scale reaches.
 SCALE_PERCENTILE = 98.0
 
