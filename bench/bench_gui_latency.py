@@ -10,7 +10,9 @@ is drawn; the issue's target is no gap above 0.5 s over the whole visit (41: "th
 
 Needs an X display with OpenGL for the 3-D view; without one it re-runs itself under Xvfb (software OpenGL, so the
 3-D hand-over is slower than on a real graphics card). Usage: ``./run bench bench_gui_latency`` (coarse scans at
-0.06°, about 1.2 M points each) or ``--small`` (0.12°, about 0.3 M points).
+0.06°, about 1.2 M points each) or ``--small`` (0.12°, about 0.3 M points). ``BENCH_SHOTS=DIR`` saves a picture
+of the window after each action; ``BENCH_STALLS=1`` prints where the interface thread (and the worker) was during
+each pause.
 """
 from __future__ import annotations
 
@@ -128,6 +130,9 @@ def run(step_deg: float, small: bool) -> None:
         ticks = Ticks()
         rows: list[tuple[str, float, float]] = []
         camp = tmp / "bridge"
+        shots = Path(os.environ["BENCH_SHOTS"]) if os.environ.get("BENCH_SHOTS") else None
+        if shots is not None:
+            shots.mkdir(parents=True, exist_ok=True)
         rescans = 0
 
         def wait(ms: int) -> None:
@@ -145,6 +150,8 @@ def run(step_deg: float, small: bool) -> None:
             t1 = time.perf_counter()
             gap = ticks.longest_gap(t0, t1)
             rows.append((name, gap, t1 - t0))
+            if shots is not None:  # what the window showed at the end of the action, to look at
+                win.grab().save(str(shots / f"{len(rows):02d}-{name.replace(':', '').replace(' ', '-')}.png"))
             print(f"{name:<48s} longest gap {gap * 1000:7.0f} ms   ({t1 - t0:6.1f} s)", flush=True)
 
         def do(menu: str, entry: str):
