@@ -534,8 +534,9 @@ def _air_series(c: Campaign, records: Sequence) -> list[tuple[str, np.ndarray, n
 
 
 def skipped_rescans(verdict) -> dict[str, str]:
-    """``target -> why`` of the re-scans a check asked for and the user processed without (``*``: the set-up turned);
-    empty without a check, when it asked for none, or while it is still pending (the visit is not processed then).
+    """The re-scans a check asked for and the user processed without: ``target -> why`` (``*``: the set-up turned).
+
+    Empty without a check, when it asked for none, or while it is still pending (the visit is not processed then).
 
     >>> from projects.store.records import CheckVerdict
     >>> skipped_rescans(CheckVerdict("e", "t", ("M3",), {"M3": "211 of 1036 planned points"}, accepted=True))
