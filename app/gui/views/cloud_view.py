@@ -29,8 +29,7 @@ def with_interactive_lod(plotter, actor, points, *, max_points: int = INTERACTIV
     ``keep``: the indices of that copy, prepared in the worker (by default every n-th point within ``max_points``).
     """
     import pyvista as pv
-    from vtkmodules.vtkRenderingCore import vtkPolyDataMapper
-    from vtkmodules.vtkRenderingLOD import vtkLODActor
+    from vtkmodules.vtkRenderingLOD import vtkLODActor  # not "import vtk": it loads every VTK module (seconds)
 
     n = points.n_points
     if keep is None:
@@ -40,7 +39,7 @@ def with_interactive_lod(plotter, actor, points, *, max_points: int = INTERACTIV
     sub = pv.PolyData(np.asarray(points.points)[keep].copy())
     for name in points.point_data.keys():
         sub.point_data[name] = np.asarray(points.point_data[name])[keep]
-    coarse = vtkPolyDataMapper()
+    coarse = actor.GetMapper().NewInstance()  # a mapper of the same kind
     coarse.ShallowCopy(actor.GetMapper())
     coarse.SetInputData(sub)
     lod = vtkLODActor()
