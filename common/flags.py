@@ -229,6 +229,11 @@ FLAG_SETUP_NOT_MEASURED = _flag("setup_not_measured", WARNING, "a set-up of the 
                                 "failed): the targets only it sees are missing", "lidar.stage2",
                                 action="import its fine scans ('bridgesurvey add-fine --setup K') and process",
                                 words="a set-up without fine scans")
+FLAG_RESCAN_SKIPPED = _flag("rescan_skipped", WARNING, "the check before leaving asked for a re-scan of this target "
+                            "(or of a reference target, or of the whole set-up); the visit was processed without one",
+                            "lidar.stage2", action="distrust the value beyond its sigma; scan the target again at the "
+                            "next visit, or add the re-scan's fine scans to this visit and process again",
+                            words="processed without the re-scan the check asked for")
 FLAG_CHAINED = _flag("chained_to_replaced_target", INFO, "history continues from a replaced target",
                      "lidar.stage2", words="history continued from a replaced target")
 FLAG_DEPARTS = _flag("departs_from_prediction", WARNING, "the displacement departs from the design prediction "

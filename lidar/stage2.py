@@ -40,6 +40,7 @@ from common.flags import (
     FLAG_NO_DISPLACEMENT,
     FLAG_NOT_FOUND,
     FLAG_PIERS_NOT_MEASURED,
+    FLAG_RESCAN_SKIPPED,
     FLAG_SETUP_NOT_MEASURED,
     FLAG_UNRESOLVED,
     PROBLEM,
@@ -99,6 +100,10 @@ class VisitInputs:
         Temperature degC, pressure hPa and relative humidity 0..1 around the visit (None without a temperature).
     wavelength_nm : float
         The scanner's wavelength (for the atmosphere's scale).
+    rescan : mapping target -> str
+        The targets the check before leaving asked to re-scan, when the visit was processed without the re-scan
+        (``process --accept-check``), with why; ``*`` for the whole set-up (it turned). Their rows say so
+        (:data:`common.flags.FLAG_RESCAN_SKIPPED`).
     """
 
     label: str
@@ -110,6 +115,7 @@ class VisitInputs:
     time_sources: Mapping[int, str] = field(default_factory=dict)
     air: Air | None = None
     wavelength_nm: float = 1550.0
+    rescan: Mapping[str, str] = field(default_factory=dict)
 
     @property
     def unmeasured(self) -> tuple[int, ...]:
@@ -406,6 +412,8 @@ def _core_digest(inputs: Stage2Inputs, vs: _Visits, lab: str, bases: Sequence[st
     key = {"v": "1", "epoch": vs.by_label[lab].stage1_digest, "params": dict(inputs.digest_params),
            "bases": {b: vs.by_label[b].stage1_digest for b in bases}, "reflectors": list(inputs.reflectors_key),
            "air": list(inputs.air_key)}
+    if vs.by_label[lab].rescan:  # only then: the digests of visits without one stay as they were
+        key["rescan"] = sorted(vs.by_label[lab].rescan.items())
     return inputs_digest(key)
 
 
@@ -499,6 +507,8 @@ def run_stage2(inputs: Stage2Inputs, *, model: FieldModel | None = None) -> Stag
         systematics["inputs"] = input_parts(inputs, v.stage1_digest, vs.by_label[baseline].stage1_digest)
         air = atmosphere_flags(model, lab, v.air, vs.by_label[baseline].air, wavelength_nm=v.wavelength_nm)
         result = replace(result, flags=tuple(result.flags) + tuple(flags) + tuple(air))
+        if v.rescan:
+            result = _with_rescan_skipped(result, v.rescan, dict(inputs.groups))
         out.append(EpochDisplacementResult(lab, result, systematics, h, reason))
         for d in result.displacements:  # a later visit's chain reads this run's values
             if d.reflector in history:
@@ -508,6 +518,30 @@ def run_stage2(inputs: Stage2Inputs, *, model: FieldModel | None = None) -> Stag
                                                    float(d.sigma_m)))
                 history[d.reflector] = rows
     return Stage2Result(model, changed, tuple(out))
+
+
+def _with_rescan_skipped(result: EpochDisplacements, rescan: Mapping[str, str],
+                         groups: Mapping[str, str]) -> EpochDisplacements:
+    """Flag the rows of a visit processed without the re-scan its check asked for.
+
+    The rows of the targets to re-scan, and every row when it was a reference target or the whole set-up (``*``),
+    carry :data:`FLAG_RESCAN_SKIPPED` with the check's reason.
+
+    >>> rows = (Displacement("M1", 0.0, 1e-4, 0.0, 0.0), Displacement("M2", 0.0, 1e-4, 0.0, 0.0))
+    >>> r = EpochDisplacements(rows, (), (), np.zeros(3), np.zeros(3), "auto")
+    >>> [d.flags for d in _with_rescan_skipped(r, {"M2": "not found"}, {"M2": "measurement"}).displacements]
+    [(), ('rescan_skipped: not found',)]
+    >>> [d.flags for d in _with_rescan_skipped(r, {"R1": "short"}, {"R1": "reference"}).displacements]
+    [('rescan_skipped: R1: short',), ('rescan_skipped: R1: short',)]
+    """
+    every = [f"{t}: {why}" if t != "*" else why for t, why in sorted(rescan.items())
+             if t == "*" or groups.get(t) == "reference"]
+    rows = []
+    for d in result.displacements:
+        said = ([rescan[d.reflector]] if d.reflector in rescan else []) + every
+        new = tuple(f"{FLAG_RESCAN_SKIPPED}: {w}" for w in said)
+        rows.append(replace(d, flags=tuple(d.flags) + tuple(f for f in new if f not in d.flags)) if new else d)
+    return replace(result, displacements=tuple(rows))
 
 
 def _setup_terms(vs: _Visits, lab: str, flags: list, systematics: dict) -> tuple[list, dict]:

@@ -21,7 +21,8 @@ def build_demo(folder: Path, progress: Callable):
     return build(folder, progress=progress)
 
 
-def create_campaign(*, folder: str, name: str, layout: str, span_m: float | None, diameter_mm: float) -> Path:
+def create_campaign(*, folder: str, name: str, layout: str, span_m: float | None, diameter_mm: float,
+                    timezone: str = "UTC") -> Path:
     from lidar.layout import read_layout_csv
     from projects.store.campaign import Campaign
 
@@ -30,7 +31,7 @@ def create_campaign(*, folder: str, name: str, layout: str, span_m: float | None
     if not layout:
         raise InputError("choose the reflector layout file (id,group,x,y,z)")
     lay = read_layout_csv(layout, default_diameter_m=diameter_mm / 1000.0)
-    Campaign.create(folder, name=name, layout=lay, span_m=span_m).close()
+    Campaign.create(folder, name=name, layout=lay, span_m=span_m, timezone=timezone).close()
     return Path(folder)
 
 

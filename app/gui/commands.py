@@ -28,9 +28,12 @@ from app.gui.dialogs import (
     ask_save_path,
 )
 from app.gui.state.app_state import AppState
+from app.gui.state.cloud_display import prepare_cloud
 from app.gui.state.folders import LastFolders
 from app.gui.state.words import in_app_words, windows_text
+from app.gui.views.fine_figure import draw_inspection
 from common.errors import SurveyError
+from common.progress import scaled
 
 
 class CommandHost(Protocol):
@@ -100,12 +103,9 @@ class Commands:
         dlg = NewCampaignDialog(self.parent, self.host.folders)
         if dlg.exec() != NewCampaignDialog.Accepted:
             return
-        try:
-            folder = actions.create_campaign(**dlg.values())
-        except SurveyError as exc:
-            self.state.report_error("New campaign", str(exc))
-            return
-        self.state.open(folder)
+        v = dlg.values()
+        self._job(f"Creating the campaign {v['name'] or v['folder']}", lambda p: actions.create_campaign(**v),
+                  self.state.open)
 
     def build_demo(self, folder: Path) -> None:
         self._job("Building the demo campaign", lambda p: actions.build_demo(folder, p),
@@ -328,23 +328,32 @@ class Commands:
             self.state.outputs.message.emit("fine", "Select an epoch and a target (tree, map or 3-D view), then "
                                                     "Epoch ▸ Inspect the selected target's fine scan.")
             return
-        self._job(f"Reading the window of {rid} in {label}",
-                  lambda p: actions.inspect(self.state.access, label, rid, p), self.state.outputs.inspection.emit)
+        def job(p):  # read and drawn in the worker: the view only shows the picture
+            ins = actions.inspect(self.state.access, label, rid, scaled(p, 0.0, 0.7))
+            p(0.7, "drawing the window")
+            return draw_inspection(ins)
+
+        self._job(f"Reading the window of {rid} in {label}", job, self.state.outputs.inspection.emit)
 
     def show_cloud(self, mode: str) -> None:
         label = self._need_epoch("3-D view")
         if not label:
             return
-        if mode == "intensity":
-            self._job(f"Loading the scan of {label}", lambda p: actions.epoch_cloud(self.state.access, label, p),
-                      self.state.outputs.cloud.emit)
-        else:
-            def done(cloud):
-                self.state.outputs.cloud.emit(cloud)
-                self.state.refresh()
 
-            self._job(f"Comparing {label} with the baseline", lambda p: actions.change_cloud(self.state.access, label, p),
-                      done)
+        def done(prepared):  # only the hand-over to VTK runs here: the cloud was thinned and prepared in the job
+            self.state.outputs.cloud.emit(prepared)
+            if mode != "intensity":
+                self.state.refresh()
+            self.state.status.result(prepared.status)
+
+        if mode == "intensity":
+            self._job(f"Loading the scan of {label}",
+                      lambda p: prepare_cloud(actions.epoch_cloud(self.state.access, label, scaled(p, 0.0, 0.9)),
+                                              progress=scaled(p, 0.9, 1.0)), done)
+        else:
+            self._job(f"Comparing {label} with the baseline",
+                      lambda p: prepare_cloud(actions.change_cloud(self.state.access, label, scaled(p, 0.0, 0.95)),
+                                              progress=scaled(p, 0.95, 1.0)), done)
 
     # ------------------------------------------------------------------ campaign settings
     def _ask(self, title: str, label: str, text: str = "") -> str | None:

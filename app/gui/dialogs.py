@@ -114,8 +114,14 @@ def _hint(text: str) -> QLabel:
 
 
 # ---------------------------------------------------------------------- campaign and epochs
+def machine_zone() -> str:
+    """This machine's time zone as an IANA name (UTC when the system does not say)."""
+    name = bytes(QTimeZone.systemTimeZoneId()).decode()
+    return "UTC" if name in ("", "Etc/UTC", "UTC", "Universal", "Zulu") else name
+
+
 class NewCampaignDialog(QDialog):
-    """Folder, name, layout CSV, span and default target diameter of a new campaign."""
+    """Folder, name, layout CSV, span, default target diameter and time zone of a new campaign."""
 
     def __init__(self, parent=None, folders: LastFolders | None = None):
         super().__init__(parent)
@@ -128,17 +134,25 @@ class NewCampaignDialog(QDialog):
         self.span = QDoubleSpinBox(decimals=2, minimum=0.0, maximum=5000.0, value=0.0, suffix=" m")
         self.span.setSpecialValueText("unknown")
         self.diameter = QDoubleSpinBox(decimals=0, minimum=5, maximum=1000, value=50, suffix=" mm")
+        self.timezone = QComboBox()  # the zone of imported times without an offset (init --timezone)
+        self.timezone.setEditable(True)
+        self.timezone.addItems(sorted({"UTC", *(bytes(z).decode() for z in QTimeZone.availableTimeZoneIds())}))
+        self.timezone.setCurrentText(machine_zone())
+        self.timezone.setToolTip("Times in imported files that carry no offset are read in this zone (an IANA name "
+                                 "such as Europe/Berlin, or +hh:mm); this machine's zone unless you choose another")
         form.addRow("Campaign folder", self.folder)
         form.addRow("Structure name", self.name)
         form.addRow("Reflector layout (id,group,x,y,z)", self.layout_csv)
         form.addRow("Span", self.span)
         form.addRow("Target diameter", self.diameter)
+        form.addRow("Time zone", self.timezone)
         lay.addLayout(form)
         _buttons(self, lay)
 
     def values(self) -> dict:
         return {"folder": self.folder.text(), "name": self.name.text().strip(), "layout": self.layout_csv.text(),
-                "span_m": self.span.value() or None, "diameter_mm": self.diameter.value()}
+                "span_m": self.span.value() or None, "diameter_mm": self.diameter.value(),
+                "timezone": self.timezone.currentText().strip() or "UTC"}
 
 
 class AddEpochDialog(QDialog):

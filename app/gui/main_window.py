@@ -169,6 +169,9 @@ class MainWindow(QMainWindow):
         self.progress.hide()
         self.cancel_btn = QPushButton("Cancel")
         self.cancel_btn.hide()
+        self.zone_label = QLabel()  # the open campaign's time zone, always in sight
+        self.zone_label.setToolTip("The campaign's time zone: imported times without an offset are read in it")
+        self.statusBar().addPermanentWidget(self.zone_label)
         self.statusBar().addPermanentWidget(self.progress)
         self.statusBar().addPermanentWidget(self.cancel_btn)
 
@@ -274,6 +277,7 @@ class MainWindow(QMainWindow):
         st.error.connect(lambda title, message: show_error(self, title, message))
         st.refreshed.connect(self.tree.show_snapshot)
         st.refreshed.connect(self.displacements.show_snapshot)
+        st.refreshed.connect(lambda snap: self.zone_label.setText(f"zone {snap.status.get('timezone') or 'UTC'}"))
         st.selection_changed.connect(self.tree.show_selection)
         st.selection_changed.connect(self.displacements.show_selection)
         st.selection_changed.connect(self.map_view.show_selection)
@@ -327,6 +331,7 @@ class MainWindow(QMainWindow):
         self.tree.clear()
         self.tree_dock.setWindowTitle("Campaign")
         self.details.clear()
+        self.zone_label.clear()
         self.setWindowTitle("BridgeSurvey")
         self.stack.setCurrentWidget(self.welcome)
         self._set_campaign_enabled(False)
@@ -342,8 +347,8 @@ class MainWindow(QMainWindow):
     def _show_progress(self, running: bool, fraction: float, cancelling: bool) -> None:
         self.progress.setVisible(running)
         self.cancel_btn.setVisible(running)
-        self.progress.setValue(int(fraction * 1000))
-        self.cancel_btn.setEnabled(not cancelling)
+        self.progress.setValue(int(fraction * 1000) if running else 0)
+        self.cancel_btn.setEnabled(running and not cancelling)
         self.cancel_btn.setText("Cancelling…" if cancelling else "Cancel")
 
     def _tree_picked(self, kind: str, key: str) -> None:

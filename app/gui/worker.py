@@ -17,8 +17,11 @@ log = logging.getLogger(__name__)
 #: Native extensions jobs load. Loading one for the first time in a worker thread while the GUI thread
 #: draws with OpenGL can deadlock (the dynamic loader's lock against the GIL: seen with Open3D under
 #: VTK), so they are all imported in the GUI thread before the first job starts.
+#: The 3-D view's VTK and the worker's matplotlib are loaded then too: imported at the first *3-D ▸ Show* or the first
+#: picture, they held the interface for seconds.
 NATIVE_MODULES = ("open3d", "_py4dgeo", "laspy", "lazrs", "pye57", "cv2", "scipy.spatial", "scipy.optimize", "pandas",
-                  "openpyxl", "reportlab.pdfgen.canvas")
+                  "openpyxl", "reportlab.pdfgen.canvas", "matplotlib.backends.backend_agg", "pyvista", "pyvistaqt",
+                  "vtkmodules.vtkRenderingLOD")
 _preloaded = False
 
 

@@ -586,6 +586,25 @@ def stale_displacements(c: Campaign) -> dict[str, str]:
     return out
 
 
+def skipped_rescans(verdict) -> dict[str, str]:
+    """The re-scans a check asked for and the user processed without: ``target -> why`` (``*``: the set-up turned).
+
+    Empty without a check, when it asked for none, or while it is still pending (the visit is not processed then).
+
+    >>> from projects.store.records import CheckVerdict
+    >>> skipped_rescans(CheckVerdict("e", "t", ("M3",), {"M3": "211 of 1036 planned points"}, accepted=True))
+    {'M3': '211 of 1036 planned points'}
+    >>> skipped_rescans(CheckVerdict("e", "t", ("M3",), {"M3": "not found"})), skipped_rescans(None)
+    ({}, {})
+    """
+    if verdict is None or not verdict.accepted:
+        return {}
+    out = {t: verdict.reasons.get(t, "re-scan asked") for t in verdict.rescan}
+    if verdict.drifted:
+        out["*"] = "the closure showed the set-up turned beyond the instrument's tolerance"
+    return out
+
+
 def stage2_inputs(c: Campaign, baseline: str) -> Stage2Inputs:
     """Everything stage 2 needs of the campaign, read in one snapshot (see :class:`lidar.stage2.Stage2Inputs`)."""
     with c.snapshot():
@@ -606,7 +625,7 @@ def stage2_inputs(c: Campaign, baseline: str) -> Stage2Inputs:
                 e.label, digest, every, measured, {k: c.centroids(e.label, k) for k in every},
                 {k: c.closure_centroids(e.label, k) for k in measured},
                 {k: c.time_source(e.label, k) or "none" for k in measured}, air,
-                c.profile_for(e.label).wavelength_nm))
+                c.profile_for(e.label).wavelength_nm, skipped_rescans(c.check_verdict(e.label))))
         stored = c.field_model()
         stored_digests = {v.label: ds.inputs_hash for v in visits if (ds := c.displacement_set(v.label)) is not None}
         replaced = {r.replaces for r in refl.values() if r.replaces}

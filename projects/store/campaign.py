@@ -53,8 +53,10 @@ from projects.store.imports import (  # noqa: F401  (importers name them here)
     copy_in,
     folder_files,
     header_facts,
+    link_by_visit,
     not_writable,
     remove_uncommitted,
+    visit_link_name,
 )
 from projects.store.limits import parse_rule
 from projects.store.lock import LOCK_NAME, CampaignLock  # noqa: F401  (LOCK_NAME: likewise)
@@ -715,7 +717,18 @@ class Campaign:
         except BaseException:
             self._undo_import(copied, marks)
             raise
+        self._link_by_visit(epoch, [(got.rel, role, k, p.name) for (p, role), got, (k, _) in
+                                    zip(items, copied, placed, strict=True)])
         return shas
+
+    def _link_by_visit(self, epoch: str, stored: Sequence[tuple[str, str, int, str]]) -> None:
+        """Link the scans just stored under the names the surveyor gave them, per visit.
+
+        ``stored``: each file's stored path, role, set-up and original name (see
+        :data:`projects.store.imports.BY_VISIT`; a file system without symbolic links is said in the log).
+        """
+        for rel, role, setup, name in stored:
+            link_by_visit(self.folder, rel, epoch, visit_link_name(role, setup, name))
 
     def add_epoch(self, label: str, when: str, coarse: str | os.PathLike, fines: Sequence = (), *, notes: str = "",
                   validate=None, allow_date: bool = False, frames_of=None) -> str:

@@ -5,12 +5,14 @@ name (``<first 16 hex digits of its sha256>_<original name>``) and made read-onl
 journal line (:mod:`projects.store.journal`) is written, then the database transaction commits. A
 process killed at any moment leaves at most a temporary file (removed by the next writer: the only
 files the product ever deletes from an import folder) or a complete file the database may not list
-(reported by ``status`` and ``verify``, registered again by ``repair``; never removed).
+(reported by ``status`` and ``verify``, registered again by ``repair``; never removed). Each stored scan is
+also linked under the name the surveyor gave it, per visit (``scans/by-visit/<epoch>/``, :func:`link_by_visit`).
 """
 from __future__ import annotations
 
 import contextlib
 import hashlib
+import logging
 import os
 import re
 import uuid
@@ -21,6 +23,8 @@ from pathlib import Path
 from common.errors import SurveyError
 from common.files import MB, disk_full_error, ensure_free, is_disk_full, sha256_of
 from projects.store.errors import CampaignError
+
+log = logging.getLogger(__name__)
 
 SCANS_DIR = "scans"
 CAMERA_DIR = "camera"
@@ -54,6 +58,48 @@ def stored_name(sha256: str, original_name: str) -> str:
     """
     safe = "".join(ch if ch.isalnum() or ch in "._-" else "_" for ch in original_name)
     return f"{sha256[:16]}_{safe}"
+
+
+#: Under the scans folder: one folder per visit with a link, named as the surveyor's file was, to each stored scan
+#: (``scans/by-visit/<epoch>/<role>-<original name>``). The stored files keep their checksum names (what the
+#: campaign's database and ``verify`` go by); the links are for a person looking for a visit's scans.
+BY_VISIT = "by-visit"
+
+
+def visit_link_name(role: str, setup: int, original_name: str) -> str:
+    """The name of a stored scan's link in its visit's folder.
+
+    >>> visit_link_name("fine", 1, "M3 rescan.laz"), visit_link_name("coarse", 2, "c.e57")
+    ('fine-M3 rescan.laz', 'coarse-setup2-c.e57')
+    """
+    name = original_name.replace("/", "_").replace("\\", "_").lstrip(".") or "scan"
+    return f"{role}{'' if setup == 1 else f'-setup{setup}'}-{name}"
+
+
+def link_by_visit(folder: Path, rel: str, epoch: str, name: str) -> Path | None:
+    """Link the stored scan ``folder/rel`` as ``scans/by-visit/<epoch>/<name>`` (a relative symbolic link).
+
+    A name already taken by another file gets ``-2``, ``-3``…; an existing link to the same file is kept. Where the
+    file system has no symbolic links the log says so and None is returned: the link is a convenience, the
+    import stands without it.
+    """
+    d = folder / SCANS_DIR / BY_VISIT / epoch
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+        target = Path(os.path.relpath(folder / rel, d))
+        stem, dot, ext = name.rpartition(".") if "." in name else (name, "", "")
+        for k in range(1, 1000):
+            link = d / (name if k == 1 else f"{stem}-{k}{dot}{ext}")
+            if link.is_symlink():
+                if Path(os.readlink(link)) == target:
+                    return link
+                continue
+            if not link.exists():
+                link.symlink_to(target)
+                return link
+    except OSError as exc:
+        log.warning("no link to %s in %s: %s", rel, d, exc)
+    return None
 
 
 def copy_in(folder: Path, src: Path, sub: str, *, sha256: str | None = None) -> Copied:

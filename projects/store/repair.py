@@ -29,7 +29,7 @@ from projects.store import digests, journal, schema, wal
 from projects.store.campaign import DB_NAME, Campaign, damaged_input_line, describe_input
 from projects.store.connection import connect
 from projects.store.errors import CampaignError
-from projects.store.imports import header_matches
+from projects.store.imports import BY_VISIT, SCANS_DIR, header_matches, link_by_visit, visit_link_name
 from projects.store.limits import parse_rule
 from projects.store.lock import CampaignLock
 
@@ -333,4 +333,24 @@ def repair_campaign(c: Campaign, reimporters: Mapping[str, Reimporter] | None = 
             out.left.append(f"{rel}: not registered again ({exc})")
     _replay_epoch_scanners(c, {e.label for e in c.epochs()} - before, out)
     _damaged_series(c, entries, reimporters, out)
+    _visit_links(c, out)
     return out
+
+
+def _visit_links(c: Campaign, out: RepairReport) -> None:
+    """Link every registered scan under its own name in its visit's folder.
+
+    For a campaign made before there were such links, or one whose links were removed.
+    """
+    d = c.folder / SCANS_DIR / BY_VISIT
+
+    def count() -> int:
+        return sum(1 for p in d.rglob("*") if p.is_symlink()) if d.is_dir() else 0
+
+    n = count()
+    for e in c.epochs():
+        for f in c.files(e.label, setup=None):
+            link_by_visit(c.folder, f.stored_path, e.label, visit_link_name(f.role, f.setup, Path(f.original_path).name))
+    made = count() - n
+    if made:
+        out.done.append(f"{made} scan(s) linked under the names they were imported with, in {SCANS_DIR}/{BY_VISIT}/")

@@ -213,6 +213,7 @@ class AppState:
     def show_view(self, name: str) -> None:
         """The window shows the view ``name`` now: load what it needs for the selection."""
         self.visible_view = name
+        self.status.view_changed(name)
         self._load_visible()
 
     def request_view(self, name: str) -> None:

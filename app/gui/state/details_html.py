@@ -21,6 +21,7 @@ def _rows(pairs) -> str:
 def campaign_html(c, status: dict) -> str:
     n_proc = sum(e["state"] in ("processed", "warning", "problem") for e in status["epochs"])
     rows = [("Folder", str(c.folder)), ("Span", f"{c.span_m:g} m" if c.span_m else "-"), ("Scanner", c.profile.name),
+            ("Time zone", f"{c.timezone} (imported times without an offset)"),
             ("Epochs", f"{len(status['epochs'])} ({n_proc} processed)"), ("Baseline", status["baseline"] or "-"),
             ("Reflectors", len(c.reflectors()))]
     if status.get("instrument"):  # what the field model found of the instrument, as `status` says it

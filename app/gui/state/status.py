@@ -6,7 +6,10 @@ ask to cancel it in between (``cancelling``). The rules the status bar keeps:
 - a job that ends never leaves its last progress line behind: it says how it ended;
 - a job's own result line (``report written to …``) is not overwritten by the generic "done" that
   follows it, nor by passing information, for :data:`HOLD_S` seconds;
-- a failure stays until the next job starts (the dialog may have been closed without reading).
+- a failure stays until the next job starts (the dialog may have been closed without reading);
+- a failure resets the progress indicator (no Cancel left enabled) before it is reported;
+- a line about a job's outcome belongs to the tab it was said on: another tab shown clears it
+  (:meth:`StatusLine.view_changed`), so "Comparing …: done" does not linger over the map.
 
 >>> s = StatusLine(clock=lambda: 0.0)
 >>> s.started("Writing the report"); s.message.text
@@ -30,6 +33,8 @@ from psygnal import Signal
 HOLD_S = 8.0
 #: Milliseconds the status bar shows a finished job's line (0: until replaced).
 DONE_TIMEOUT_MS = 15_000
+#: The kinds of line that belong to the tab they were said on (cleared when another tab is shown).
+SCOPED = ("done", "result", "cancelled", "info")
 
 
 @dataclass(frozen=True)
@@ -43,6 +48,7 @@ class StatusMessage:
     text: str
     kind: str = ""
     timeout_ms: int = 0
+    view: str = ""  # the tab shown when it was said ("" : the whole window)
 
 
 class StatusLine:
@@ -60,6 +66,7 @@ class StatusLine:
         self.is_cancelling = False
         self._held_until = -1.0
         self._result_posted = False
+        self.view = ""  # the tab shown now
 
     @property
     def running(self) -> bool:
@@ -104,6 +111,7 @@ class StatusLine:
 
     def failed(self, message: str) -> None:
         title = self.title or "The last task"
+        self.progress_changed.emit(False, 0.0, False)  # before the error box: no bar at 10 % with Cancel enabled
         self._show(StatusMessage(f"{title} failed: {message}", "failed"))
         self._held_until = float("inf")  # until the next job starts
 
@@ -120,6 +128,16 @@ class StatusLine:
         self._show(StatusMessage(text, "info", timeout_ms))
         return True
 
+    def view_changed(self, view: str) -> None:
+        """Another tab is shown: a line about an outcome said on another tab goes (a running job's stays)."""
+        self.view = view
+        m = self.message
+        if m.kind in SCOPED and m.view and m.view != view:
+            self._held_until = -1.0
+            self._show(StatusMessage(""))
+
     def _show(self, message: StatusMessage) -> None:
+        if message.kind in SCOPED and not message.view:
+            message = StatusMessage(message.text, message.kind, message.timeout_ms, self.view)
         self.message = message
         self.changed.emit(message)

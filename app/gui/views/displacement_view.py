@@ -43,6 +43,7 @@ class DisplacementView(QWidget):
         self.selected_epoch = None
         self._points = []  # (x, y, history, index) drawn, for hover and picking
         self._annot = None  # the hover label of the current plot
+        self._stale = False  # changed while hidden: redrawn when shown
         self.canvas.mpl_connect("motion_notify_event", self._on_move)
         self.canvas.mpl_connect("button_press_event", self._on_click)
 
@@ -101,7 +102,16 @@ class DisplacementView(QWidget):
                         textcoords="offset points", ha="right" if right else "left", va="top", fontsize=7,
                         color="tab:purple", bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.8))
 
+    def showEvent(self, event):  # noqa: N802
+        super().showEvent(event)
+        if self._stale:
+            self.redraw()
+
     def redraw(self) -> None:
+        if not self.isVisible():  # drawn when its tab is shown: building the plot holds the interface a while
+            self._stale = True
+            return
+        self._stale = False
         fig = self.canvas.figure
         fig.clear()
         ax = fig.add_subplot(111)

@@ -17,7 +17,6 @@ import math
 from collections.abc import Callable
 
 import numpy as np
-from matplotlib import colormaps
 from PySide6.QtCore import QPointF, QRectF, Qt, QTimer, Signal
 from PySide6.QtGui import QBrush, QColor, QFont, QFontMetricsF, QImage, QKeySequence, QPainter, QPen, QPixmap, QShortcut
 from PySide6.QtWidgets import (
@@ -58,9 +57,14 @@ def map_image(max_intensity: np.ndarray) -> QImage:
     """Grey image (empty cells light blue) of a (rows, cols) intensity map in [0, 1], mirrored left-right
     (azimuth grows to the left)."""
     m = np.fliplr(max_intensity)
-    rgba = (colormaps["gray"](np.clip(np.nan_to_num(m, nan=0.0), 0.0, 1.0)) * 255).astype(np.uint8)
-    rgba[np.isnan(m)] = (*NO_RETURN, 255)
+    # matplotlib's "gray" colormap by hand (its 256 levels, floor(v * 256)): the colormap call took most of a second
+    # on the interface thread for a map of millions of cells
+    grey = np.minimum(np.clip(np.nan_to_num(m, nan=0.0), 0.0, 1.0) * 256.0, 255.0).astype(np.uint8)
     h, w = m.shape
+    rgba = np.empty((h, w, 4), np.uint8)
+    rgba[..., :3] = grey[..., None]
+    rgba[..., 3] = 255
+    rgba[np.isnan(m)] = (*NO_RETURN, 255)
     img = QImage(np.ascontiguousarray(rgba).data, w, h, 4 * w, QImage.Format_RGBA8888)
     return img.copy()  # own the pixels
 
@@ -645,11 +649,18 @@ class MapView(QWidget):
                     f"{w.phi_max_deg - w.phi_min_deg:.3f} × {w.theta_max_deg - w.theta_min_deg:.3f}",
                     f"{w.phi_step_deg:.4f} / {w.theta_step_deg:.4f}", f"{r.expected_points:,}",
                     points, f"{r.expected_seconds:.1f}", "; ".join(notes) or "–"]
+            colour = QColor("#d62728") if r.reflector in cut else None
             for col, v in enumerate(vals):
+                # only the cells that changed: every new cell makes the table measure its columns and rows again
+                # (they fit their contents), which took most of a second on each step of a drag
+                old = self.table.item(row, col)
+                if old is not None and old.text() == v and (old.data(Qt.UserRole) == (colour is not None)):
+                    continue
                 item = QTableWidgetItem(v)
                 item.setToolTip(v)
-                if r.reflector in cut:
-                    item.setForeground(QColor("#d62728"))
+                item.setData(Qt.UserRole, colour is not None)
+                if colour is not None:
+                    item.setForeground(colour)
                 self.table.setItem(row, col, item)
         if self.plan is not None:
             over = self.plan.total_seconds > self.plan.budget_seconds

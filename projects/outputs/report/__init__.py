@@ -13,7 +13,7 @@ import os
 from pathlib import Path
 
 from common.errors import InputError
-from common.progress import ProgressCallback, scaled
+from common.progress import ProgressCallback, report, scaled
 from projects.outputs.report.content import ReportContent, ReportScope, gather
 from projects.store.campaign import Campaign
 
@@ -65,6 +65,7 @@ def write_report(c: Campaign, path: str | os.PathLike, scope: ReportScope = Repo
 
     path = Path(path)
     _check_output(path)
-    content = gather(c, scope, author=author)
-    return build_pdf(content, path, preview_of=_preview_from_scan(c), progress=scaled(progress, 0.05, 1.0),
+    report(progress, 0.0, "reading the campaign")  # from the start: reading a long campaign takes seconds
+    content = gather(c, scope, author=author, progress=scaled(progress, 0.0, 0.3))
+    return build_pdf(content, path, preview_of=_preview_from_scan(c), progress=scaled(progress, 0.3, 1.0),
                      detail=detail)

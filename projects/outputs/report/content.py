@@ -19,6 +19,7 @@ import numpy as np
 
 from common.errors import InputError, SurveyError
 from common.flags import FLAG_SECOND_OBJECT
+from common.progress import ProgressCallback, report
 from projects.processing.stages import PIPELINE_VERSION, baseline_epoch, parameters
 from projects.results.state import epoch_state
 from projects.results.table import damaged_line, displacement_table
@@ -196,12 +197,13 @@ def _field_extra(c: Campaign, sections: Sequence[EpochSection]) -> dict | None:
 
 
 def gather(c: Campaign, scope: ReportScope = ReportScope(), *, author: str | None = None,
-           with_previews: bool = True) -> ReportContent:
-    """Collect the report's facts for ``scope`` from an open campaign."""
+           with_previews: bool = True, progress: ProgressCallback | None = None) -> ReportContent:
+    """Collect the report's facts for ``scope`` from an open campaign (``progress``: per epoch, then per part)."""
     chosen = select_epochs(c, scope)
     sections = []
-    for e in chosen:
+    for k, e in enumerate(chosen):
         lab = e.label
+        report(progress, 0.6 * k / len(chosen), f"reading epoch {lab}")
         res = c.result(lab)
         state, state_flags = epoch_state(c, lab)
         sections.append(EpochSection(
@@ -214,6 +216,7 @@ def gather(c: Campaign, scope: ReportScope = ReportScope(), *, author: str | Non
     first_time = chosen[0].datetime
     # A visit report shows the history up to the visit; a period report the period itself.
     since = "" if scope.epoch is not None else first_time
+    report(progress, 0.6, "reading the displacements")
     rows = [r for r in displacement_table(c) if since <= r["datetime"] <= last_time]
     if scope.epoch is not None:  # a visit report shows the history up to that visit
         text = f"visit of {chosen[0].datetime[:16].replace('T', ' ')} (epoch {scope.epoch})"
@@ -222,6 +225,7 @@ def gather(c: Campaign, scope: ReportScope = ReportScope(), *, author: str | Non
     else:
         text = f"period {chosen[0].label} to {chosen[-1].label}, {len(chosen)} epochs"
     in_scope = {r["epoch"] for r in rows}
+    report(progress, 0.7, "reading the histories and comparisons")
     hist = {rid: h.select([lab in in_scope for lab in h.epochs]) for rid, h in histories(c).items()}
     from projects.compare.whole_scan import comparisons
 
@@ -240,6 +244,7 @@ def gather(c: Campaign, scope: ReportScope = ReportScope(), *, author: str | Non
     if len({r["epoch"] for r in rows}) >= 4:
         from projects.analysis.run import analyse_campaign
 
+        report(progress, 0.8, "analysing temperature, events and trend")
         try:
             extras["analysis"] = analyse_campaign(c)
         except SurveyError as exc:  # no displacements to analyse: the report says so elsewhere
@@ -247,6 +252,7 @@ def gather(c: Campaign, scope: ReportScope = ReportScope(), *, author: str | Non
     field_extra = _field_extra(c, sections)
     if field_extra is not None:
         extras["field"] = field_extra
+    report(progress, 1.0, "the campaign read")
     log_rows = [r for r in c.log() if r.epoch is None or r.epoch in {s.label for s in sections}]
     return ReportContent(
         name=c.name, folder=str(c.folder), span_m=c.span_m, scanner=c.profile.name,

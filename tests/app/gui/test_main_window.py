@@ -132,7 +132,7 @@ def test_fine_scan_view_shows_the_split_cluster_and_centroid(window, processed_c
     assert ins.disc.sum() == ins.centroid.n_points and ins.bright.sum() >= ins.cluster.sum() >= ins.disc.sum()
     assert np.linalg.norm(ins.centroid.xyz_socs - ins.stored.xyz_socs) < 1e-9  # the same computation as processing
     assert "σx/σy/σz" in window.fine_view.info.text()
-    assert len(window.fine_view.canvas.figure.axes) >= 2
+    assert len(window.fine_view.picture.figure.axes) >= 2 and not window.fine_view.image.pixmap().isNull()
 
 
 def test_new_campaign_add_epoch_plan_and_a_bad_file(window, field_copy, tmp_path, qtbot, errors, monkeypatch):
@@ -142,8 +142,9 @@ def test_new_campaign_add_epoch_plan_and_a_bad_file(window, field_copy, tmp_path
     monkeypatch.setattr(NewCampaignDialog, "exec", lambda self: NewCampaignDialog.Accepted)
     monkeypatch.setattr(NewCampaignDialog, "values", lambda self: {
         "folder": str(camp), "name": "GUI bridge", "layout": str(field_copy / "layout.csv"), "span_m": 40.0,
-        "diameter_mm": 50.0})
+        "diameter_mm": 50.0, "timezone": "UTC"})
     window.commands.new_campaign()
+    wait_job(qtbot, window)
     assert window.state.is_open and window.state.name == "GUI bridge"
     values = {"datetime": "2026-04-01T09:00:00Z", "label": "2026-04-01", "coarse": str(field_copy / "v0" / "coarse.laz"),
               "fines": [], "notes": "from the GUI"}
