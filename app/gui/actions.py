@@ -169,11 +169,11 @@ def export_xlsx(session, path: Path) -> Path:
         return export(c, path)
 
 
-def report(session, path: Path, progress: Callable) -> Path:
+def report(session, path: Path, progress: Callable, *, detail: bool = False) -> Path:
     from projects.outputs.report import write_report
 
     with session.read() as c:
-        return write_report(c, path, progress=progress)
+        return write_report(c, path, progress=progress, detail=detail)
 
 
 def set_limit(session, reflector: str, rule: str) -> str:

@@ -517,8 +517,10 @@ class Commands:
 
         self._quick("Repair campaign", fn, lambda n: f"repair: {n} repair(s); nothing was deleted")
 
-    def write_report(self) -> None:
-        path = ask_save_path(self.parent, "Write report", self.host.folders, "report.pdf", "PDF (*.pdf)")
+    def write_report(self, *, detail: bool = False) -> None:
+        """The owner's report (main body); ``detail``: with the appendix (every visit's page, the action log)."""
+        path = ask_save_path(self.parent, "Write report" + (" with the appendix" if detail else ""),
+                             self.host.folders, "report.pdf", "PDF (*.pdf)")
         if path is not None:
-            self._job("Writing the report", lambda p: actions.report(self.state.access, path, p),
+            self._job("Writing the report", lambda p: actions.report(self.state.access, path, p, detail=detail),
                       lambda r: self.state.status.result(f"report written to {r}"))

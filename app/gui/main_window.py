@@ -240,6 +240,7 @@ class MainWindow(QMainWindow):
         self._action(m, "Export &displacements (CSV)…", cmd.export_csv)
         self._action(m, "Export &workbook (XLSX)…", cmd.export_xlsx)
         self.act_report = self._action(m, "Write &report (PDF)…", cmd.write_report, "Ctrl+R")
+        self._action(m, "Write report with the &appendix (PDF)…", lambda: cmd.write_report(detail=True))
         m = mb.addMenu("&View")
         m.addAction(self.tree_dock.toggleViewAction())
         m.addAction(self.details_dock.toggleViewAction())

@@ -193,6 +193,11 @@ def test_camera_import_crossval_and_report_export(window, processed_copy, tmp_pa
     window.commands.write_report()
     wait_job(qtbot, window)
     assert out.stat().st_size > 10_000 and out.read_bytes()[:4] == b"%PDF"
+    detail = tmp_path / "detail.pdf"
+    monkeypatch.setattr("app.gui.commands.ask_save_path", lambda *a: detail)
+    window.commands.write_report(detail=True)  # Reports ▸ Write report with the appendix
+    wait_job(qtbot, window)
+    assert detail.stat().st_size > out.stat().st_size
     csv_out = tmp_path / "d.csv"
     monkeypatch.setattr("app.gui.commands.ask_save_path", lambda *a: csv_out)
     window.commands.export_csv()
