@@ -3,30 +3,13 @@ from __future__ import annotations
 
 import sys
 
-from app.cli.args import add_dir, add_epoch, output_file
 from app.cli.progress import progress_bar
-
-
-def register(sub) -> None:
-    p = sub.add_parser("report", help="write a PDF survey report (one visit, a period, or everything)",
-                       description="A PDF for the bridge owner: summary with alarm states, layout and target "
-                                   "state, displacement histories, every epoch's map, plan and centroids, and a "
-                                   "processing log with versions, parameters and file checksums.")
-    add_dir(p)
-    output_file(p, "--out", required=True, help="the PDF to write", suffixes=(".pdf",))
-    g = p.add_mutually_exclusive_group()
-    add_epoch(g, required=False, help="report on one visit (with the history up to it): its label")
-    g.add_argument("--from", dest="start", metavar="LABEL", help="first epoch of the period")
-    p.add_argument("--to", dest="end", metavar="LABEL", help="last epoch of the period")
-    p.add_argument("--author", help="who prepared the report (default: your login name)")
-    p.set_defaults(func=cmd_report)
+from projects.outputs.report import ReportScope, write_report
+from projects.results.table import damaged_line
+from projects.store.campaign import Campaign
 
 
 def cmd_report(args) -> int:
-    from projects.outputs.report import ReportScope, write_report
-    from projects.results.table import damaged_line
-    from projects.store.campaign import Campaign
-
     scope = ReportScope(epoch=args.epoch, start=args.start, end=args.end)
     with Campaign.open(args.dir, writable=False) as c:
         with progress_bar("report") as cb:

@@ -6,6 +6,9 @@ import math
 import sys
 from collections.abc import Sequence
 
+import numpy as np
+
+from common.files import json_safe
 from common.numbers import shown
 
 
@@ -36,14 +39,11 @@ def dump_json(obj, out=None) -> None:
     out = out or sys.stdout
 
     def default(o):
-        import numpy as np
-
         if isinstance(o, np.ndarray):
             return o.tolist()
         if isinstance(o, (np.floating, np.integer)):
             return o.item()
         raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
-    from common.files import json_safe
 
     out.write(json.dumps(json_safe(obj), indent=2, default=default) + "\n")
