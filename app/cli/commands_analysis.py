@@ -1,8 +1,8 @@
 """Explaining the displacements: environment series, events, and the analysis."""
 from __future__ import annotations
 
-from app.cli.commands_campaign import open_campaign
-from app.cli.output import dump_json, table
+from app.cli.campaigns import open_campaign
+from app.cli.output import dump_json, print_import, table
 from projects.analysis.run import write_analysis
 from projects.series.environment import add_event, env_records, events, import_env
 from projects.series.predictions import import_prediction
@@ -15,22 +15,6 @@ def cmd_env_import(args) -> int:
     print_import(f"{args.kind} series {name!r}", s.summary())
     return 0
 
-
-def print_import(what: str, summ: dict) -> None:
-    """The lines an import of a series prints: what was read, how the times were read, what was left out."""
-    print(f"imported {what}: {summ['rows']} rows from {summ['start']} to {summ['end']}, column "
-          f"'{summ['column']}' in {summ['unit_read']}, {summ['gaps']} gap(s), {summ['missing_values']} missing "
-          f"value(s)")
-    print(f"  times: {summ['times']}")
-    if summ["bad_rows"]:
-        print(f"  {summ['bad_rows']} bad row(s) of {summ['rows_in_file']} left out (could not be read):")
-    for line in summ["first_bad_lines"][:5]:
-        print(f"    {line}")
-    if summ["bad_rows"] > 5:
-        print(f"    ... and {summ['bad_rows'] - 5} more")
-    for note in summ["notes"]:
-        if "could not be read" not in note:
-            print(f"  note: {note}")
 
 
 def cmd_env_list(args) -> int:

@@ -1,8 +1,7 @@
 """Camera commands: import a dual-camera displacement series, list them, cross-validate with LiDAR."""
 from __future__ import annotations
 
-from app.cli.commands_analysis import print_import
-from app.cli.output import dump_json, table
+from app.cli.output import dump_json, print_import, table
 from common.flags import FLAG_NO_CAMERA_DATA
 from projects.series.camera import crossvalidate, import_series, save_crossval, series_records, write_crossval_outputs
 from projects.store.campaign import Campaign

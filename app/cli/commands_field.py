@@ -5,57 +5,17 @@ import json
 import math
 import sys
 
-from app.cli.commands_campaign import open_campaign, setup_date, setup_of
+from app.cli.campaigns import open_campaign, setup_date, setup_of
 from app.cli.output import dump_json, table
 from app.cli.progress import progress_bar
 from common.errors import InputError
 from common.files import write_atomic
 from lidar.figures import save_figure
-from lidar.scanner_catalogue import CATALOGUE, get_scanner
 from projects.field.check import check_epoch
 from projects.field.station_pairs import propose_pair
 from projects.field.stations import advise_stations, read_area_csv, station_map_figure
 from projects.outputs.field_sheet import write_field_sheet
 from projects.processing.stages import plan_epoch
-
-
-def cmd_scanners(args) -> int:
-    if args.name is None:
-        rows = [{"name": p.name, "kind": p.kind, "rate_pts_s": int(p.pulse_rate_hz),
-                 "range_noise_mm": p.range_noise_m * 1000, "windows": "yes" if p.windowed else "full dome only",
-                 "resolutions": ", ".join(lab for lab, _ in p.step_presets) or
-                 f"free, >= {p.min_theta_step_deg:g}/{p.min_phi_step_deg:g} deg"} for p in CATALOGUE.values()]
-        if args.json:
-            dump_json([p.to_dict() for p in CATALOGUE.values()])
-        else:
-            table(rows, ["name", "kind", "rate_pts_s", "range_noise_mm", "windows", "resolutions"])
-        return 0
-    prof = get_scanner(args.name)
-    if args.json:
-        dump_json(prof.to_dict())
-        return 0
-    src = dict(prof.sources)
-    if prof.step_presets:
-        for k in ("min_theta_step_deg", "min_phi_step_deg"):
-            src.setdefault(k, "the finest preset")
-    for k in ("horizontal_direction", "horizontal_zero_deg", "vertical_reference"):
-        if "angles" in src:
-            src.setdefault(k, src["angles"])
-    src.setdefault("max_tilt_deg", "assumed: a levelled set-up; 2 deg leaves room for the layout's errors")
-    d = prof.to_dict()
-
-    def shown(k, v):
-        if k == "step_presets":
-            labels = [x["label"] for x in v]
-            return f"{len(labels)}: {labels[0]} ... {labels[-1]}" if len(labels) > 2 else ", ".join(labels) or "-"
-        return ", ".join(str(x) for x in v) if isinstance(v, list) else v
-    rows = [{"field": k, "value": shown(k, v), "source": src.get(k, "")} for k, v in d.items()
-            if k not in ("sources", "notes")]
-    table(rows, ["field", "value", "source"])
-    print(f"angles: {prof.angle_convention()} ({src.get('angles', '')})")
-    if prof.notes:
-        print(prof.notes)
-    return 0
 
 
 def cmd_field_sheet(args) -> int:

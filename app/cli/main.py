@@ -58,7 +58,8 @@ COMMAND_GROUPS: tuple[tuple[str, tuple[str, ...]], ...] = (
 COMMAND_MODULES: dict[str, str] = {
     **dict.fromkeys(("init", "reflector", "limit", "settings", "demo", "add-epoch", "add-setup", "plan", "add-fine",
                      "process", "status", "displacements", "export"), "campaign"),
-    **dict.fromkeys(("field-sheet", "check", "scanners", "stations"), "field"),
+    **dict.fromkeys(("field-sheet", "check", "stations"), "field"),
+    "scanners": "scanners",
     "report": "report",
     **dict.fromkeys(("env", "event", "prediction", "analyse"), "analysis"),
     "compare": "compare",

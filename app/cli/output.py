@@ -47,3 +47,20 @@ def dump_json(obj, out=None) -> None:
 
 
     out.write(json.dumps(json_safe(obj), indent=2, default=default) + "\n")
+
+
+def print_import(what: str, summ: dict) -> None:
+    """The lines an import of a series prints: what was read, how the times were read, what was left out."""
+    print(f"imported {what}: {summ['rows']} rows from {summ['start']} to {summ['end']}, column "
+          f"'{summ['column']}' in {summ['unit_read']}, {summ['gaps']} gap(s), {summ['missing_values']} missing "
+          f"value(s)")
+    print(f"  times: {summ['times']}")
+    if summ["bad_rows"]:
+        print(f"  {summ['bad_rows']} bad row(s) of {summ['rows_in_file']} left out (could not be read):")
+    for line in summ["first_bad_lines"][:5]:
+        print(f"    {line}")
+    if summ["bad_rows"] > 5:
+        print(f"    ... and {summ['bad_rows'] - 5} more")
+    for note in summ["notes"]:
+        if "could not be read" not in note:
+            print(f"  note: {note}")

@@ -1,4 +1,4 @@
-"""The parsers of explaining the displacements: environment series, events, and the analysis.
+"""The parsers of the commands explaining the displacements: environment series, events, and the analysis.
 
 They name each command's function in app.cli.commands_analysis (``func``), which the program imports when the command
 runs: building them imports nothing else.

@@ -1,4 +1,4 @@
-"""The parsers of field commands: scanners (the instrument catalogue), field-sheet, check (before leaving the site), stations.
+"""The parsers of field commands: field-sheet, check (before leaving the site), stations.
 
 They name each command's function in app.cli.commands_field (``func``), which the program imports when the command
 runs: building them imports nothing else.
@@ -10,14 +10,6 @@ from app.cli.parsers.campaign import add_setup_option
 
 
 def register(sub) -> None:
-    p = sub.add_parser("scanners", help="the scanner catalogue: what each instrument offers, with sources",
-                       description="Without NAME: list the catalogue. With NAME (or a profile .json): every value "
-                                   "of that profile and where it came from. Choose one with 'init --scanner' or "
-                                   "'settings DIR scanner NAME'.")
-    p.add_argument("name", nargs="?", help="a scanner of the catalogue (quoted: \"Leica RTC360\") or a profile .json")
-    add_json(p, help="print the catalogue (or the profile) as JSON")
-    p.set_defaults(func="cmd_scanners")
-
     p = sub.add_parser("field-sheet", help="printable PDF of an epoch's plan in the instrument's own terms",
                        description="Each window with a map thumbnail, the angles and resolution to enter on the "
                                    "instrument, expected points and seconds, and the total against the budget.")
