@@ -15,13 +15,14 @@ from itertools import combinations
 
 import numpy as np
 from numpy.typing import ArrayLike
+from scipy.optimize import linear_sum_assignment
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from common.arrays import unique_sorted
 from common.errors import InputError, ProcessingError
 from common.rigid import Transform, fit_rigid, pairwise_distances
-from lidar.layout import Layout
+from lidar.layout import Layout, target_normals
 
 
 @dataclass(frozen=True)
@@ -171,8 +172,6 @@ def _enumerate_matchings(rows: list[int], near: np.ndarray, d: np.ndarray,
 
 
 def _assign_scipy(d: np.ndarray, tol: float) -> list[tuple[int, int, float]]:
-    from scipy.optimize import linear_sum_assignment
-
     rows, cols = linear_sum_assignment(np.where(d <= tol, d, 1e6))
     return [(int(r), int(c), float(d[r, c])) for r, c in zip(rows, cols, strict=False) if d[r, c] <= tol]
 
@@ -221,8 +220,6 @@ def _unseen(r: np.ndarray, t: np.ndarray, layout: Layout, matched: set, det: np.
     facing; True where the map does show a target there (one the blob search missed). The first two
     count against the solution, the third for it.
     """
-    from lidar.layout import target_normals
-
     normals = target_normals(layout, up=up_layout) @ np.asarray(r).T
     pred = layout.xyz @ np.asarray(r).T + t
     reach = EVIDENCE_REACH * float(np.max(np.linalg.norm(det, axis=1)))

@@ -23,6 +23,7 @@ from common.errors import InputError
 from common.progress import ProgressCallback, report
 from common.validation import require_points
 from lidar.angles import ATAN_DEG32, direction_from_angles, spherical32, wrap_phi
+from lidar.io import read_scan, sniff_format
 from lidar.io.las import LasFile, LasRecords, open_las
 from lidar.native import coarse_map_library
 
@@ -673,8 +674,6 @@ def reflectance_map_from_file(path: str | os.PathLike, *, step_deg: float | None
     InputError
         The scan has no intensity.
     """
-    from lidar.io import read_scan, sniff_format
-
     p = Path(path)
     if sniff_format(p) == "las":
         las = open_las(p)

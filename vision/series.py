@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from common.series import Quantity, read_series, series_arrays_from_npz, series_npz_bytes
+from common.series import Quantity, Series, read_series, series_arrays_from_npz, series_npz_bytes
 
 UNITS_MM = {"um": 1e-3, "µm": 1e-3, "micron": 1e-3, "mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4, "inch": 25.4}
 VALUE_NAMES = ("displacement", "disp", "deflection", "vertical", "dy", "uy", "value", "y")
@@ -53,8 +53,6 @@ class CameraSeries:
 
     def summary(self) -> dict:
         """What the import found (see :meth:`common.series.Series.summary`); ``unit`` is the unit read."""
-        from common.series import Series
-
         s = Series(self.time_ns, self.value_mm, "mm", unit_read=self.unit, column=self.column,
                    bad_rows=self.bad_rows, n_bad=self.n_bad, n_rows=self.n_rows, n_missing=self.n_missing,
                    n_duplicates=self.n_duplicates, gaps=self.gaps, sampling_s=self.sampling_s,

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 from app.cli.campaigns import open_campaign
 from app.cli.output import dump_json, print_import, table
-from projects.analysis.run import write_analysis
 from projects.series.environment import add_event, env_records, events, import_env
 from projects.series.predictions import import_prediction
 
@@ -57,6 +56,9 @@ def cmd_prediction_import(args) -> int:
 
 
 def cmd_analyse(args) -> int:
+    # local: the analysis's figures (matplotlib) cost env, event and prediction 0.33 s of start-up (measured)
+    from projects.analysis.run import write_analysis
+
     with open_campaign(args.dir, writable=False) as c:
         doc, paths = write_analysis(c, args.out, horizon_days=args.horizon_days,
                                     long_term_factor=args.long_term_factor,

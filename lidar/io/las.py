@@ -28,6 +28,7 @@ from functools import cached_property
 from pathlib import Path
 from typing import Any
 
+import laspy
 import numpy as np
 
 from common.errors import ScanFormatError
@@ -47,8 +48,6 @@ LAZ_CHUNK_POINTS = 1_000_000
 
 def _laspy():
     """laspy, imported when a LAS/LAZ file is read through it (its import pulls requests in: a CLI start-up cost)."""
-    import laspy
-
     return laspy
 
 

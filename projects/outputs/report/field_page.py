@@ -9,9 +9,11 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from reportlab.platypus import PageBreak, Paragraph, Spacer
 
 from lidar.systematic.adjustment import ALTERNATIVE_BIC
 from lidar.systematic.range_walk import PLAUSIBLE_BIC, describe_basis, plausible
+from projects.outputs.field_figures import field_model_figure
 from projects.outputs.report.content import ReportContent
 from projects.outputs.report.flowables import esc, figure_flowable, num, table
 from projects.results.corrections import epoch_corrections
@@ -85,10 +87,6 @@ def budget_rows(content: ReportContent) -> list[list]:
 
 def field_section(content: ReportContent, ss: Any) -> list:
     """Flowables of the field error budget (``content.extras['field']``)."""
-    from reportlab.platypus import PageBreak, Paragraph, Spacer
-
-    from projects.outputs.field_figures import field_model_figure
-
     extra = content.extras["field"]
     out = [PageBreak(), Paragraph("Field error budget", ss["Heading1"]), Paragraph(esc(INTRO), ss["Small"]),
            Spacer(1, 3),
