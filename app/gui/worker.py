@@ -36,7 +36,10 @@ def preload_native_modules() -> None:
         except Exception as exc:  # the job that needs it reports the problem in its own words
             log.warning("could not load %s: %s", name, exc)
 
-    coarse_map_library()  # our own compiled coarse map, loaded by ctypes (None where it is not built)
+    try:
+        coarse_map_library()  # our own compiled coarse map, loaded by ctypes
+    except SurveyError as exc:  # not built: the job that maps a scan reports it in its own words
+        log.warning("%s", exc)
 
 
 class _JobThread(QThread):
