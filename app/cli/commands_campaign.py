@@ -184,7 +184,7 @@ def _check_verdicts_allow(c, args) -> None:
     """Refuse (one line, nothing changed) to process an epoch whose check asked for a re-scan not yet added,
     unless ``--accept-check`` (then the acceptance is logged)."""
     # local: the processing (the pipeline, scikit-image) costs init, reflector, limit, displacements 0.18 s (measured)
-    from projects.field.check import pending_rescans
+    from projects.onsite.check import pending_rescans
     for label in args.epoch or ():
         c.epoch(label)
     pending = pending_rescans(c, args.epoch or [e.label for e in c.epochs()])  # what 'process' brings up to date

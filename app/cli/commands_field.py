@@ -11,9 +11,9 @@ from app.cli.progress import progress_bar
 from common.errors import InputError
 from common.files import write_atomic
 from lidar.figures import save_figure
-from projects.field.check import check_epoch
-from projects.field.station_pairs import propose_pair
-from projects.field.stations import advise_stations, read_area_csv, station_map_figure
+from projects.onsite.check import check_epoch
+from projects.onsite.station_pairs import propose_pair
+from projects.onsite.stations import advise_stations, read_area_csv, station_map_figure
 from projects.outputs.field_sheet import write_field_sheet
 from projects.processing.stages import plan_epoch
 

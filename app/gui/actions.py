@@ -19,10 +19,10 @@ from lidar.scanner_catalogue import CATALOGUE, get_scanner
 from projects.analysis.run import analyse_campaign
 from projects.compare.whole_scan import save_comparison
 from projects.demo import build_demo as build
-from projects.field.check import check_epoch
-from projects.field.check import pending_rescans as pending
-from projects.field.stations import advise_stations
 from projects.fleet.status import fleet_status as status
+from projects.onsite.check import check_epoch
+from projects.onsite.check import pending_rescans as pending
+from projects.onsite.stations import advise_stations
 from projects.outputs.exports import export
 from projects.outputs.field_sheet import write_field_sheet
 from projects.outputs.inspection import change_cloud as change

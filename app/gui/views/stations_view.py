@@ -15,7 +15,7 @@ from PySide6.QtWidgets import (
 )
 
 from app.gui.views.mpl import PlotCanvas
-from projects.field.stations import draw_station_map
+from projects.onsite.stations import draw_station_map
 
 TOP = 10
 
