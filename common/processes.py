@@ -16,6 +16,7 @@ import os
 import sys
 import warnings
 from collections.abc import Iterator
+from multiprocessing import resource_tracker
 
 
 @contextlib.contextmanager
@@ -39,8 +40,6 @@ def _stderr_to_null() -> Iterator[None]:
 
 def quiet_resource_tracker() -> None:
     """Start (and relaunch) this process's multiprocessing resource tracker with a silent standard error."""
-    from multiprocessing import resource_tracker
-
     tracker = resource_tracker._resource_tracker
     if getattr(tracker, "_bridgesurvey_quiet", False):
         return

@@ -6,9 +6,13 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import matplotlib
 import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.patches import Rectangle
 
 from common.files import atomic_output
+from lidar.angles import spherical_from_xyz
 
 if TYPE_CHECKING:
     from lidar.detection import DetectionResult
@@ -25,9 +29,6 @@ def reflectance_map_figure(rmap: ReflectanceMap, *, detections: DetectionResult 
     ``fixed_layout`` places the axes at fixed positions instead of running matplotlib's layout
     engine: several times faster, for drawing many maps (reports).
     """
-    from matplotlib.figure import Figure
-    from matplotlib.patches import Rectangle
-
     if fixed_layout:
         fig = Figure(figsize=figsize, dpi=110)
         ax = fig.add_axes((0.085, 0.14, 0.80, 0.77))
@@ -38,7 +39,6 @@ def reflectance_map_figure(rmap: ReflectanceMap, *, detections: DetectionResult 
         cax = None
     img = np.ma.masked_invalid(rmap.max_intensity)
     extent = rmap.extent_deg
-    import matplotlib
 
     cmap = matplotlib.colormaps["gray"].with_extremes(bad="#dfe9f5")  # light blue: no return (sky)
     im = ax.imshow(img, cmap=cmap, vmin=0, vmax=1, extent=extent, aspect="auto", interpolation="nearest")
@@ -59,8 +59,6 @@ def reflectance_map_figure(rmap: ReflectanceMap, *, detections: DetectionResult 
             ax.plot(unwrap(d.phi_deg), d.theta_deg, "o", mfc="none", mec="tab:orange", ms=9, mew=1.2)
     if identification is not None:
         for m in identification.matches:
-            from lidar.angles import spherical_from_xyz
-
             t, p, _ = spherical_from_xyz(np.array([m.xyz_socs]))
             colour = "tab:cyan" if m.group == "reference" else "tab:green"
             ax.annotate(m.id + (" (pred.)" if m.predicted else ""), (unwrap(p[0]), t[0]), color=colour,

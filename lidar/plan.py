@@ -23,6 +23,7 @@ from numpy.typing import ArrayLike
 from common.errors import InputError
 from common.files import write_atomic
 from lidar.angles import AngularWindow, direction_from_angles, spherical_from_xyz, window_around
+from lidar.centroid import UNRESOLVED_RATIO, WEAK_RATIO, resolvability
 from lidar.reflectance_map import ReflectanceMap
 from lidar.scanner_profile import VZ1000, ScannerProfile
 
@@ -382,8 +383,6 @@ def _measurable(targets: Sequence[PlanTarget], profile: ScannerProfile) -> tuple
     would be refused. Below :data:`lidar.centroid.WEAK_RATIO` it is measured with a widened sigma: weak,
     planned only in the time left (:func:`_weak_windows`), most resolvable first.
     """
-    from lidar.centroid import UNRESOLVED_RATIO, WEAK_RATIO, resolvability
-
     keep, weak, skipped = [], [], []
     for t in targets:
         r = float(np.linalg.norm(t.xyz_socs))

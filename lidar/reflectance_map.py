@@ -23,6 +23,7 @@ from common.errors import InputError
 from common.progress import ProgressCallback, report
 from common.validation import require_points
 from lidar.angles import ATAN_DEG32, direction_from_angles, spherical32, wrap_phi
+from lidar.io import read_scan, sniff_format
 from lidar.io.las import LasFile, LasRecords, open_las
 from lidar.native import coarse_map_library
 
@@ -166,7 +167,7 @@ class PointSource(Protocol):
 
     def survey(self, stride: int) -> _Survey: ...
 
-    def chunk(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]: ...
+    def bin(self, start: int, stop: int, grid: _Grid, scratch: _Scratch) -> _Partial | None: ...
 
 
 class _ArrayPoints:
@@ -180,9 +181,10 @@ class _ArrayPoints:
         t, p, _ = _angles32(self.xyz[::stride])
         return _Survey.of_angles(t, p)
 
-    def chunk(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def bin(self, start: int, stop: int, grid: _Grid, scratch: _Scratch) -> _Partial | None:
+        """Points ``start`` to ``stop`` binned on ``grid`` (their float32 angles, by numpy)."""
         t, p, r = _angles32(self.xyz[start:stop])
-        return t, p, r, np.asarray(self.intensity[start:stop], dtype=np.float32)
+        return _Partial.of(grid.cells(t, p), r, np.asarray(self.intensity[start:stop], dtype=np.float32))
 
 
 def reflectance_map(xyz_socs: np.ndarray, intensity: np.ndarray, *, step_deg: float | None = None,
@@ -230,8 +232,9 @@ def binned_map(points: PointSource, *, step_deg: float | None = None,
     """The reflectance map of a point source (see :func:`reflectance_map`, :func:`reflectance_map_from_file`).
 
     ``points`` has ``n``, ``limits`` (the raw intensity range mapped onto [0, 1]; None: found while binning),
-    ``survey(stride)`` (the :class:`_Survey` of every ``stride``-th point) and
-    ``chunk(start, stop) -> (theta, phi, range, intensity)`` in float32 degrees (phi in [0, 360)).
+    ``survey(stride)`` (the :class:`_Survey` of every ``stride``-th point) and ``bin(start, stop, grid,
+    scratch)`` (the :class:`_Partial` of points ``start`` to ``stop``). The chunks' sums are merged and the
+    cells finished by the compiled loops (:mod:`lidar.native`).
     """
     _check_step(step_deg)
     n = points.n
@@ -257,21 +260,14 @@ def binned_map(points: PointSource, *, step_deg: float | None = None,
     if height * width > 80_000_000:
         raise InputError(f"reflectance map of {height}x{width} cells is too large; use a coarser step than "
                          f"{step_deg:.4f} deg")
-    acc = _Accumulator(height * width)
+    acc = _Accumulator(height * width)  # loads the compiled loops first: a missing library is one error, at once
     starts = list(range(0, n, CHUNK))
     grid = _Grid(phi0=float(phi0), inv=inv, row_lo=row_lo, height=height, width=width)
-    compiled = getattr(points, "binned", None)
     slots = [_Scratch() for _ in range(BATCH)]  # chunk k is binned in slots[k % BATCH]
 
     def bin_chunk(job: tuple[int, _Scratch]) -> _Partial | None:
         start, scratch = job
-        stop = min(start + CHUNK, n)
-        if compiled is not None:
-            part = compiled(start, stop, grid, scratch)
-            if part is not NotImplemented:
-                return part
-        t, p, r, inten = points.chunk(start, stop)
-        return _Partial.of(grid.cells(t, p), r, inten)  # both threads bin at once
+        return points.bin(start, min(start + CHUNK, n), scratch=scratch, grid=grid)  # both threads bin at once
 
     # the chunks' sums are added in file order, whichever thread finishes first: float32 sums in another
     # order round differently, and the map (and every window planned from it) would depend on the timing.
@@ -354,7 +350,7 @@ class _Partial:
     @classmethod
     def of_records(cls, lib, records: np.ndarray, n: int, record_length: int, scales: np.ndarray,
                    offsets: np.ndarray, grid: _Grid, scratch: _Scratch) -> _Partial:
-        """The partial of ``n`` LAS records (raw bytes) by the compiled loops: the numpy path's sums to the bit.
+        """The partial of ``n`` LAS records (raw bytes) by the compiled loops (:meth:`of` of their float32 angles).
 
         Its arrays are ``scratch``'s, valid until the scratch bins another chunk.
         """
@@ -406,32 +402,23 @@ class _Accumulator:
         self.max_i: np.ndarray = np.zeros(cells, np.float32)
         self.max_i.fill(-np.inf)
         self.i_lo, self.i_hi = np.inf, -np.inf
+        self.lib = coarse_map_library()
 
     def merge(self, part: _Partial | None) -> None:
         """Add one chunk's binned sums (:class:`_Partial`) into the map's cells, rounded to float32 first."""
         if part is None:
             return
         sl = slice(part.lo, part.lo + part.count.size)
-        lib = coarse_map_library()
-        if lib is not None:  # one pass instead of four, the same operations
-            lib.bs_merge(part.count.size, part.count, part.sum_i, part.sum_r, part.max_i, self.count[sl],
-                         self.sum_i[sl], self.sum_r[sl], self.max_i[sl])
-        else:
-            self.count[sl] += part.count.astype(np.int32)
-            self.sum_i[sl] += part.sum_i.astype(np.float32)
-            self.sum_r[sl] += part.sum_r.astype(np.float32)
-            np.maximum(self.max_i[sl], part.max_i, out=self.max_i[sl])
+        # one pass: counts and sums rounded to int32 and float32 and added, maxima kept
+        self.lib.bs_merge(part.count.size, part.count, part.sum_i, part.sum_r, part.max_i, self.count[sl],
+                          self.sum_i[sl], self.sum_r[sl], self.max_i[sl])
         self.i_lo, self.i_hi = min(self.i_lo, part.i_lo), max(self.i_hi, part.i_hi)
 
     def finish(self, limits, height, width, row_lo, phi0, step, full, n) -> ReflectanceMap:
         lo, hi = limits if limits is not None else (self.i_lo, self.i_hi)
         scale = np.float32(1.0 / (hi - lo)) if hi > lo else np.float32(0.0)
         normalise = limits != (0.0, 1.0)  # raw values binned: normalise the cells (an affine map commutes with means)
-        lib = coarse_map_library()
-        if lib is not None:
-            row_used, col_used = self._finish_compiled(lib, height, width, normalise, np.float32(lo), scale)
-        else:
-            row_used, col_used = self._finish_numpy(height, width, normalise, np.float32(lo), scale)
+        row_used, col_used = self._finish_cells(height, width, normalise, np.float32(lo), scale)
         count, sum_i, sum_r, max_i = self.count, self.sum_i, self.sum_r, self.max_i
 
         def grid(a):  # column-major storage -> (rows=theta, cols=phi) view
@@ -448,24 +435,13 @@ class _Accumulator:
             count=grid(count)[cut], full_circle=full, n_points=n,
         )
 
-    def _finish_numpy(self, height, width, normalise, lo, scale) -> tuple[np.ndarray, np.ndarray]:
-        """Means, normalised intensities and NaN maxima of empty cells in place; the rows and columns used."""
-        count, sum_i, sum_r, max_i = self.count, self.sum_i, self.sum_r, self.max_i
-        empty = count == 0
-        with np.errstate(invalid="ignore", divide="ignore"):
-            sum_i /= count  # in place: the sums become means
-            sum_r /= count
-        if normalise:
-            for a in (sum_i, max_i):
-                a -= lo
-                a *= scale
-                np.clip(a, 0.0, 1.0, out=a)
-        max_i[empty] = np.nan
-        used = ~empty.reshape(width, height)  # column-major storage
-        return used.any(axis=0), used.any(axis=1)
+    def _finish_cells(self, height, width, normalise, lo, scale) -> tuple[np.ndarray, np.ndarray]:
+        """The cells finished in place by the compiled loop; the rows and columns used.
 
-    def _finish_compiled(self, lib, height, width, normalise, lo, scale) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`_finish_numpy` by the compiled loop, half the columns on each of two threads."""
+        Sums become means, intensities are normalised (``(v - lo) * scale`` clipped to [0, 1]) and the maxima of
+        empty cells NaN; half the columns on each of two threads.
+        """
+        lib = self.lib
         halves = [(0, width // 2), (width // 2, width)]
         rows = [np.zeros(height, np.uint8) for _ in halves]
         col_used = np.zeros(width, np.uint8)
@@ -573,20 +549,6 @@ class _LasPoints(LasRecords):
         self._batch = None
         super().close()
 
-    def _xyz32(self, xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Coordinates in float32 of records' X, Y, Z bytes (``V12``), scaled in float64 and rounded once.
-
-        Scaled as the reader scales them. The X, Y, Z bytes are copied out first: in records of an odd
-        length most of the integers are unaligned, and numpy casts unaligned integers at half its speed.
-        """
-        ints = np.ascontiguousarray(xyz).view("<i4").reshape(-1, 3)
-        out = []
-        for k in range(3):
-            v = np.multiply(ints[:, k], self.scales[k])
-            v += self.offsets[k]
-            out.append(v.astype(np.float32))
-        return out[0], out[1], out[2]
-
     def survey(self, stride: int) -> _Survey:
         """The survey of every ``stride``-th point, a window of about 32 MiB at a time on two threads.
 
@@ -599,10 +561,6 @@ class _LasPoints(LasRecords):
         def sample(start: int) -> _Survey:
             stop = min(start + window, self.n)
             raw = self.raw(start, stop)
-            if lib is None:
-                xyz = np.ascontiguousarray(raw.view(self.dtype)["xyz"][::stride])
-                t, p, _ = spherical32(*self._xyz32(xyz))
-                return _Survey.of_angles(t, p)
             part = _Survey.empty()
             lib.bs_record_survey(raw, -(-(stop - start) // stride), size, stride, self.scales, self.offsets,
                                  ATAN_DEG32, part.azimuth_hist, part.occupied, part.theta_span)
@@ -614,20 +572,9 @@ class _LasPoints(LasRecords):
                 total = total.add(part)
         return total
 
-    def chunk(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        rec = self.records(start, stop)
-        t, p, r = spherical32(*self._xyz32(rec["xyz"]))
-        return t, p, r, rec["intensity"].astype(np.float32)
-
-    def binned(self, start: int, stop: int, grid: _Grid, scratch: _Scratch):
-        """Records ``start`` to ``stop`` binned on ``grid`` in ``scratch`` by the compiled loops.
-
-        NotImplemented where the library is not built.
-        """
-        lib = coarse_map_library()
-        if lib is None:
-            return NotImplemented
-        return _Partial.of_records(lib, self._batch_records(start, stop), stop - start, self.dtype.itemsize,
+    def bin(self, start: int, stop: int, grid: _Grid, scratch: _Scratch) -> _Partial | None:
+        """Records ``start`` to ``stop`` binned on ``grid`` in ``scratch`` by the compiled loops."""
+        return _Partial.of_records(coarse_map_library(), self._batch_records(start, stop), stop - start, self.dtype.itemsize,
                                    self.scales, self.offsets, grid, scratch)
 
     def _batch_records(self, start: int, stop: int) -> np.ndarray:
@@ -673,8 +620,6 @@ def reflectance_map_from_file(path: str | os.PathLike, *, step_deg: float | None
     InputError
         The scan has no intensity.
     """
-    from lidar.io import read_scan, sniff_format
-
     p = Path(path)
     if sniff_format(p) == "las":
         las = open_las(p)

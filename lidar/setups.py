@@ -36,6 +36,7 @@ import numpy as np
 from common.errors import ProcessingError
 from common.flags import FLAG_SETUP_JOIN_MISFIT, FLAG_SETUP_NOT_JOINED
 from common.rigid import fit_rigid, rotation_from_rotvec, skew
+from lidar.centroid import is_weak
 from lidar.displacement import compute_displacements
 from lidar.displacement_result import EpochDisplacements, Observation
 from lidar.systematic.adjustment import ARCSEC, FieldModel
@@ -376,8 +377,6 @@ def without_weak_duplicates(setups: Mapping[int, Mapping[str, Any]]) -> dict[int
     set-up's sharp sighting of the same target it still pulls the set-ups' motion (on the long-bridges bench,
     0.2-0.4 mm, 2-4 sigma, on the joined targets). It is kept only where no set-up sees the target better.
     """
-    from lidar.centroid import is_weak
-
     sharp = {t for cents in setups.values() for t, c in cents.items() if not is_weak(c.flags)}
     return {k: {t: c for t, c in cents.items() if t not in sharp or not is_weak(c.flags)} for k, cents in setups.items()}
 

@@ -21,11 +21,14 @@ from collections.abc import Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field, replace
+from multiprocessing import get_context
 from pickle import PicklingError
 from typing import Any
 
 import numpy as np
+from matplotlib.path import Path as MplPath
 from numpy.typing import ArrayLike
+from scipy.spatial import cKDTree
 
 from common.errors import InputError, SurveyError
 from common.progress import ProgressCallback, report
@@ -162,8 +165,6 @@ class Obstacles:
     """
 
     def __init__(self, xyz_layout: np.ndarray, *, radius_m: float = 0.03):
-        from scipy.spatial import cKDTree
-
         pts = np.asarray(xyz_layout, dtype=np.float64).reshape(-1, 3)
         self.radius_m = float(radius_m)
         self.tree = cKDTree(pts[np.all(np.isfinite(pts), axis=1)]) if len(pts) else None
@@ -362,8 +363,6 @@ def default_area(layout: Layout, *, up: ArrayLike = (0.0, 0.0, 1.0), reach_m: fl
 
 def grid_in_polygon(polygon_xy: np.ndarray, grid_m: float) -> np.ndarray:
     """(M, 2) grid points (spacing ``grid_m``) inside a polygon of (K, 2) vertices."""
-    from matplotlib.path import Path as MplPath
-
     poly = np.asarray(polygon_xy, dtype=np.float64)
     if poly.ndim != 2 or poly.shape[1] != 2 or len(poly) < 3 or not np.all(np.isfinite(poly)):
         raise InputError("the allowed area needs at least 3 finite x,y vertices")
@@ -418,8 +417,6 @@ def survey_stations(layout: Layout, positions_layout: np.ndarray, *, profile: Sc
     Each station costs about 0.1-0.2 s (the displacement uncertainty is propagated exactly as
     processing does), so a 600-position grid takes about half a minute on two cores.
     """
-    from multiprocessing import get_context
-
     pos = np.asarray(positions_layout, dtype=np.float64).reshape(-1, 3)
     if len(pos) == 0:
         raise InputError("no candidate station: the allowed area holds no grid position")

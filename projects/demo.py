@@ -16,13 +16,26 @@ from lidar.figures import save_figure
 from lidar.layout import layout_from_model
 from lidar.simulate import BridgeModel, EpochConditions, ScannerSetup
 from lidar.simulate.files import simulate_coarse, simulate_fine
+from projects.analysis.run import write_analysis
 from projects.outputs.exports import export
 from projects.outputs.figures import displacement_history_figure
+from projects.outputs.report import write_report
 from projects.processing.stages import plan_epoch, process
 from projects.results.table import displacement_table, to_csv
+from projects.series.camera import (
+    crossvalidate,
+    import_series,
+    save_crossval,
+    series_records,
+    write_crossval_outputs,
+)
+from projects.series.context import plot_context
+from projects.series.environment import add_event, env_records, events, import_env
+from projects.series.predictions import import_prediction, predictions
 from projects.store.campaign import DB_NAME, Campaign
 from projects.store.errors import CampaignError
 from projects.store.history import histories
+from vision.simulate.series import simulate_series, write_series_csv
 
 #: Visits are on Mondays at this time (UTC); the last one is the latest Monday before the day the demo is built,
 #: so a fresh demo never holds a visit, a temperature or a camera reading from the future.
@@ -159,9 +172,6 @@ def build_demo(folder: str | os.PathLike, *, weeks: int = 52, seed: int = 2026,
         report(progress, 0.978, "temperature, events, design prediction, analysis")
         story = add_demo_story(c, folder, weeks=weeks, seed=seed, start=start)
         report(progress, 0.98, "report")
-        from projects.outputs.report import write_report
-        from projects.series.context import plot_context
-
         rows = displacement_table(c)
         csv_path = write_atomic(folder / "displacements.csv", to_csv(rows))
         plot = save_figure(displacement_history_figure(histories(c), title=c.name, context=plot_context(c)),
@@ -200,10 +210,6 @@ def add_demo_story(c: Campaign, folder: Path, *, weeks: int, seed: int, start: d
     An hourly temperature series, the two dead-load events, the design prediction (no temperature,
     offset by 21.59 mm) aligned at week 8, and the analysis in ``analysis/``.
     """
-    from projects.analysis.run import write_analysis
-    from projects.series.environment import add_event, env_records, events, import_env
-    from projects.series.predictions import import_prediction, predictions
-
     field = folder / "field"
     field.mkdir(exist_ok=True)
     t0 = _ns(start)
@@ -255,15 +261,6 @@ def add_demo_camera(c: Campaign, folder: Path, *, weeks: int, seed: int, start: 
 
     Its own zero, 0.2 mm noise, a ten-day outage, a few empty readings), imported and cross-validated.
     """
-    from projects.series.camera import (
-        crossvalidate,
-        import_series,
-        save_crossval,
-        series_records,
-        write_crossval_outputs,
-    )
-    from vision.simulate.series import simulate_series, write_series_csv
-
     t0 = _ns(start)
     week_ns = 7 * 86400 * 10 ** 9
 

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike
+from scipy.spatial import cKDTree
 
 from common.arrays import unique_sorted
 from common.progress import ProgressCallback, report
@@ -248,8 +249,6 @@ class _Level:
     """
 
     def __init__(self, source: np.ndarray, target: np.ndarray, voxel_m: float, kernel_m: float):
-        from scipy.spatial import cKDTree
-
         self.source, self.max_distance_m, self.kernel_m = source, 2.5 * voxel_m, kernel_m
         self.fit_source = source[::-(-len(source) // FIT_POINTS)]
         # column-major: each call of surface_normals takes the target's columns as views, not copies

@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from common.arrays import thin_to_voxels
 from common.pcd import binary_pcd_header
@@ -89,8 +90,6 @@ def refine_ndt(source_xyz: np.ndarray, target_xyz: np.ndarray, initial: Transfor
     RegistrationError
         PCL is not installed, failed, or found no fit.
     """
-    from scipy.spatial import cKDTree
-
     if not ndt_available():
         raise RegistrationError(f"PCL's {PROGRAM} is not installed: install Debian's pcl-tools "
                                 "(./run setup does so as root) or use --registration icp")

@@ -21,7 +21,7 @@ import numpy as np
 from common.arrays import median_and_sigma
 from common.errors import InputError, ProcessingError
 from common.flags import FLAG_FEW_CAMERA_SAMPLES, FLAG_NO_CAMERA_DATA, FLAG_NO_LIDAR_VALUE
-from vision.series import CameraSeries
+from common.series import Series
 
 #: Fewer paired epochs than this give no statistics: a note says so and every statistic is NaN.
 MIN_PAIRS = 5
@@ -128,9 +128,9 @@ class CameraAtEpochs:
     count: np.ndarray  # (n,) int
 
 
-def pair_with_camera(time_ns: np.ndarray, camera: CameraSeries, *, window_s: float) -> CameraAtEpochs:
+def pair_with_camera(time_ns: np.ndarray, camera: Series, *, window_s: float) -> CameraAtEpochs:
     """The camera samples within ``window_s`` seconds of each epoch time (n,), as medians with a robust sigma."""
-    ct, cv = camera.time_ns, camera.value_mm
+    ct, cv = camera.time_ns, camera.values
     t = np.asarray(time_ns, np.int64)
     lo = np.searchsorted(ct, t - int(window_s * 1e9), side="left")
     hi = np.searchsorted(ct, t + int(window_s * 1e9), side="right")
@@ -230,7 +230,7 @@ def _pair_flags(camera_n: int, lidar_mm: float) -> tuple[str, ...]:
 
 
 def cross_validate(epochs: Sequence[str], time_ns: np.ndarray, lidar_mm: np.ndarray, lidar_sigma_mm: np.ndarray,
-                   camera: CameraSeries, *, window_s: float = 1800.0, align_at_ns: int | None = None,
+                   camera: Series, *, window_s: float = 1800.0, align_at_ns: int | None = None,
                    reflector: str = "", series: str = "") -> CrossValidation:
     """Pair LiDAR epochs with the camera series, align the camera's zero and compare.
 
@@ -242,7 +242,7 @@ def cross_validate(epochs: Sequence[str], time_ns: np.ndarray, lidar_mm: np.ndar
         Their UTC times in nanoseconds.
     lidar_mm, lidar_sigma_mm : ndarray, shape (n,)
         LiDAR displacement and its standard deviation, mm, positive up.
-    camera : CameraSeries
+    camera : Series
         The camera series (mm, positive up).
     window_s : float
         Half-width of the time window around each epoch, seconds (default 30 min).

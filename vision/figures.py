@@ -7,8 +7,8 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
+from common.series import Series
 from vision.crossval import CrossValidation
-from vision.series import CameraSeries
 
 
 def _fmt(v: float, fmt: str) -> str:
@@ -53,14 +53,14 @@ def _pairs_with(cv: CrossValidation, attr: str):
     return p, _dates(ns.astype(np.int64))
 
 
-def overlay_figure(cv: CrossValidation, camera: CameraSeries | None = None, *, ax: Any = None) -> Any:
+def overlay_figure(cv: CrossValidation, camera: Series | None = None, *, ax: Any = None) -> Any:
     """Camera series (aligned) with the LiDAR epochs and their +-2 sigma error bars."""
     fig = None
     if ax is None:
         fig = Figure(figsize=(10, 4.2), layout="constrained")
         ax = fig.add_subplot()
     if camera is not None and len(camera):
-        t, lo, hi = _envelope(camera.time_ns, camera.value_mm + cv.offset_mm)
+        t, lo, hi = _envelope(camera.time_ns, camera.values + cv.offset_mm)
         ax.fill_between(_dates(t), lo, hi, color="tab:orange", alpha=0.35, lw=0, label="camera (min-max)")
         ax.plot(_dates(t), (lo + hi) / 2, color="tab:orange", lw=0.6)
     p, tt = _pairs_with(cv, "lidar_mm")

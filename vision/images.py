@@ -5,6 +5,7 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from common.errors import InputError, ProcessingError
@@ -27,8 +28,6 @@ def list_images(folder: str | os.PathLike) -> list[Path]:
 
 def read_gray(path: Path) -> np.ndarray:
     """An image file as a 2-D grayscale array indexed (row, col); a clear error when it cannot be read."""
-    import cv2
-
     img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
     if img is None:
         raise InputError(f"{path}: not a readable image (corrupt, truncated or not an image format)")

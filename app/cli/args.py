@@ -117,7 +117,7 @@ def check_input(path: Path, *, folder: bool = False) -> None:
 
 def check_paths(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
     """Check every marked path option of ``parser`` (the command being run), inputs first, then outputs."""
-    from common.files import check_output  # csv, hashlib, tempfile: 0.11 s of every command's start (importtime)
+    from common.files import check_output  # local: csv, hashlib, tempfile: 0.11 s of every command's start (importtime)
 
     checked = [(a, _CHECKED[a]) for a in parser._actions if a in _CHECKED]
     checked.sort(key=lambda item: item[1][0].startswith("output"))

@@ -1,50 +1,29 @@
 """The dual-camera commands: calibrate a set-up from images, measure displacements, simulate a data set."""
 from __future__ import annotations
 
+import csv
+import io
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from app.cli.args import input_file, input_folder, output_file, output_folder
+import numpy as np
+
 from app.cli.progress import progress_bar
+from common.errors import InputError, ProcessingError
+from common.files import write_atomic
+from projects.store.campaign import parse_datetime
+from vision.compensation import calibrate_dual_camera, measure_dual_camera
+from vision.images import detect_boards, detect_sequence, list_images
+from vision.setup_io import load_setup, save_setup
+from vision.simulate.images import write_dualcam_dataset
+from vision.simulate.rig import Checkerboard
+from vision.sub_camera import calibrate_intrinsics
 
 if TYPE_CHECKING:
     import numpy as np
 
 
-def register(sub) -> None:
-    p = sub.add_parser("dualcam", help="the dual-camera method from images: calibrate, measure, simulate",
-                       description="Camera-motion compensated displacement of a main target (circles) watched by "
-                                   "a main camera whose motion a rigidly attached sub-camera measures on a "
-                                   "checkerboard. Frames are image files in name order.")
-    actions = p.add_subparsers(dest="action", metavar="ACTION")
-    actions.required = True
-    q = actions.add_parser("calibrate", help="calibrate a set-up: Zhang views, then the rig moved with both "
-                                             "targets still (first frame = rest)")
-    input_folder(q, "--zhang", required=True, help="folder of sub-camera images of the board, tilted")
-    input_folder(q, "--main", required=True, help="folder of main-camera calibration frames")
-    input_folder(q, "--sub", required=True, help="folder of sub-camera calibration frames")
-    input_file(q, "--pattern", required=True, help="CSV x_mm,y_mm of the main target's features (y up)")
-    q.add_argument("--board", required=True, help="inner corners of the checkerboard, COLSxROWS (e.g. 20x12)")
-    q.add_argument("--square-mm", type=float, required=True, help="checkerboard square size")
-    output_file(q, "--out", required=True, help="set-up file to write (JSON)")
-    q.set_defaults(func=cmd_calibrate)
-    q = actions.add_parser("measure", help="compensated displacement of every measurement frame")
-    input_file(q, "--setup", required=True, help="the set-up file 'dualcam calibrate' wrote")
-    input_folder(q, "--main", required=True, help="folder of main-camera measurement frames")
-    input_folder(q, "--sub", required=True, help="folder of sub-camera measurement frames (same order)")
-    input_file(q, "--times", default=None, help="CSV frame,timestamp (default: frame numbers only)")
-    output_file(q, "--out", required=True, help="series CSV (readable by 'camera import')")
-    q.set_defaults(func=cmd_measure)
-    q = actions.add_parser("simulate", help="render a synthetic image set with ground truth (lab geometry)")
-    output_folder(q, "dir", metavar="FOLDER", help="folder to write the image set into (created when missing)")
-    q.add_argument("--frames", type=int, default=24, help="measurement frames (24)")
-    q.add_argument("--motions", type=int, default=21, help="calibration motions of the rig (21)")
-    q.set_defaults(func=cmd_simulate)
-
-
 def _board(text: str) -> tuple[int, int]:
-    from common.errors import InputError
-
     try:
         c, r = (int(v) for v in text.lower().split("x"))
         if c < 2 or r < 2:
@@ -55,10 +34,6 @@ def _board(text: str) -> tuple[int, int]:
 
 
 def _pattern(path: Path) -> np.ndarray:
-    import numpy as np
-
-    from common.errors import InputError
-
     try:
         rows = [ln.split(",") for ln in path.read_text().splitlines()[1:] if ln.strip()]
         pts = np.array([[float(a), float(b)] for a, b, *_ in rows]) / 1000.0
@@ -72,15 +47,6 @@ def _pattern(path: Path) -> np.ndarray:
 
 
 def cmd_calibrate(args) -> int:
-    import numpy as np
-
-    from common.errors import ProcessingError
-    from vision.compensation import calibrate_dual_camera
-    from vision.images import detect_boards, detect_sequence, list_images
-    from vision.setup_io import save_setup
-    from vision.simulate.rig import Checkerboard
-    from vision.sub_camera import calibrate_intrinsics
-
     corners = _board(args.board)
     pattern = _pattern(args.pattern)
     board = Checkerboard((corners[0] + 1, corners[1] + 1), args.square_mm / 1000.0)
@@ -105,16 +71,6 @@ def cmd_calibrate(args) -> int:
 
 
 def cmd_measure(args) -> int:
-    import csv
-    import io
-
-    import numpy as np
-
-    from common.files import write_atomic
-    from vision.compensation import measure_dual_camera
-    from vision.images import detect_sequence, list_images
-    from vision.setup_io import load_setup
-
     setup = load_setup(args.setup)
     nc_nr = _infer_board(setup)
     main, sub = list_images(args.main), list_images(args.sub)
@@ -142,17 +98,12 @@ def cmd_measure(args) -> int:
 
 def _infer_board(setup) -> tuple[int, int]:
     """Inner corners (cols, rows) from the stored board points (row by row)."""
-    import numpy as np
-
     pts = setup.board_points_m
     cols = int(np.sum(np.isclose(pts[:, 1], pts[0, 1])))
     return cols, len(pts) // cols
 
 
 def _times(path: Path, n: int) -> list[str]:
-    from common.errors import InputError
-    from projects.store.campaign import parse_datetime
-
     try:
         rows = [ln.split(",") for ln in path.read_text().splitlines()[1:] if ln.strip()]
         out = [parse_datetime(r[1].strip()) for r in rows]
@@ -166,8 +117,6 @@ def _times(path: Path, n: int) -> list[str]:
 
 
 def cmd_simulate(args) -> int:
-    from vision.simulate.images import write_dualcam_dataset
-
     with progress_bar("rendering") as cb:
         info = write_dualcam_dataset(args.dir, n_frames=args.frames, n_calibration=args.motions, progress=cb)
     d = info["folder"]

@@ -5,111 +5,20 @@ import json
 import math
 import sys
 
-from app.cli.args import add_dir, add_epoch, add_json, input_file, output_file
-from app.cli.commands_campaign import add_setup_option, open_campaign, setup_date, setup_of
+from app.cli.campaigns import open_campaign, setup_date, setup_of
 from app.cli.output import dump_json, table
 from app.cli.progress import progress_bar
 from common.errors import InputError
 from common.files import write_atomic
-
-
-def register(sub) -> None:
-    p = sub.add_parser("scanners", help="the scanner catalogue: what each instrument offers, with sources",
-                       description="Without NAME: list the catalogue. With NAME (or a profile .json): every value "
-                                   "of that profile and where it came from. Choose one with 'init --scanner' or "
-                                   "'settings DIR scanner NAME'.")
-    p.add_argument("name", nargs="?", help="a scanner of the catalogue (quoted: \"Leica RTC360\") or a profile .json")
-    add_json(p, help="print the catalogue (or the profile) as JSON")
-    p.set_defaults(func=cmd_scanners)
-
-    p = sub.add_parser("field-sheet", help="printable PDF of an epoch's plan in the instrument's own terms",
-                       description="Each window with a map thumbnail, the angles and resolution to enter on the "
-                                   "instrument, expected points and seconds, and the total against the budget.")
-    add_dir(p)
-    add_epoch(p)
-    output_file(p, "--out", required=True, help="PDF to write", suffixes=(".pdf",))
-    add_setup_option(p)
-    p.set_defaults(func=cmd_field_sheet)
-
-    p = sub.add_parser("check", help="before leaving the site: is every target found, with enough points?",
-                       description="Measures the epoch's fine scans and reports per target: found, points against "
-                                   "the plan, vertical centroid sigma against the goal (what the plan promised, "
-                                   "+30 %). Writes a re-scan plan (plan JSON) for the targets that fall short. "
-                                   "Exit 0 when all are good, 3 when some fall short. The centroids are kept: "
-                                   "'process' then computes the displacements without measuring again.")
-    add_dir(p)
-    add_epoch(p)
-    output_file(p, "--out", default=None, help="re-scan plan JSON to write (when a target falls short)")
-    p.add_argument("--goal-mm", type=float, default=None, help="vertical centroid sigma goal (default: the plan's)")
-    add_json(p, help="print every target's check as JSON")
-    add_setup_option(p)
-    p.set_defaults(func=cmd_check)
-
-    p = sub.add_parser("stations", help="where to stand: predicted sigma of every target from candidate positions",
-                       description="Evaluates scanner positions on a grid inside the allowed area and predicts, "
-                                   "for each, the sigma of every target's vertical displacement (range, incidence, "
-                                   "footprint and the points the plan would get), hidden targets and scan time.")
-    add_dir(p)
-    output_file(p, "--out", required=True, help="stations JSON to write (best first)")
-    input_file(p, "--area", default=None, help="area.csv: x,y polygon vertices in the layout frame "
-                                               "(default: a 25 m band on both sides of the bridge)")
-    p.add_argument("--height-m", type=float, default=1.5, help="instrument height above the ground (1.5 m)")
-    p.add_argument("--grid-m", type=float, default=2.0, help="grid spacing (2 m)")
-    p.add_argument("--ground-z", type=float, default=None,
-                   help="ground height in the layout frame (default: from the last measured station)")
-    output_file(p, "--png", default=None, help="also draw the station map (PNG)")
-    p.add_argument("--top", type=int, default=5, help="stations to print (5)")
-    p.add_argument("--pair", action="store_true",
-                   help="also propose two set-ups for one visit: the best station and the second that most improves "
-                        "the worst target (proposed anyway when the best station hides a deck target)")
-    p.set_defaults(func=cmd_stations)
-
-
-def cmd_scanners(args) -> int:
-    from lidar.scanner_catalogue import CATALOGUE, get_scanner
-
-    if args.name is None:
-        rows = [{"name": p.name, "kind": p.kind, "rate_pts_s": int(p.pulse_rate_hz),
-                 "range_noise_mm": p.range_noise_m * 1000, "windows": "yes" if p.windowed else "full dome only",
-                 "resolutions": ", ".join(lab for lab, _ in p.step_presets) or
-                 f"free, >= {p.min_theta_step_deg:g}/{p.min_phi_step_deg:g} deg"} for p in CATALOGUE.values()]
-        if args.json:
-            dump_json([p.to_dict() for p in CATALOGUE.values()])
-        else:
-            table(rows, ["name", "kind", "rate_pts_s", "range_noise_mm", "windows", "resolutions"])
-        return 0
-    prof = get_scanner(args.name)
-    if args.json:
-        dump_json(prof.to_dict())
-        return 0
-    src = dict(prof.sources)
-    if prof.step_presets:
-        for k in ("min_theta_step_deg", "min_phi_step_deg"):
-            src.setdefault(k, "the finest preset")
-    for k in ("horizontal_direction", "horizontal_zero_deg", "vertical_reference"):
-        if "angles" in src:
-            src.setdefault(k, src["angles"])
-    src.setdefault("max_tilt_deg", "assumed: a levelled set-up; 2 deg leaves room for the layout's errors")
-    d = prof.to_dict()
-
-    def shown(k, v):
-        if k == "step_presets":
-            labels = [x["label"] for x in v]
-            return f"{len(labels)}: {labels[0]} ... {labels[-1]}" if len(labels) > 2 else ", ".join(labels) or "-"
-        return ", ".join(str(x) for x in v) if isinstance(v, list) else v
-    rows = [{"field": k, "value": shown(k, v), "source": src.get(k, "")} for k, v in d.items()
-            if k not in ("sources", "notes")]
-    table(rows, ["field", "value", "source"])
-    print(f"angles: {prof.angle_convention()} ({src.get('angles', '')})")
-    if prof.notes:
-        print(prof.notes)
-    return 0
+from lidar.figures import save_figure
+from projects.onsite.check import check_epoch
+from projects.onsite.station_pairs import propose_pair
+from projects.onsite.stations import advise_stations, read_area_csv, station_map_figure
+from projects.outputs.field_sheet import write_field_sheet
+from projects.processing.stages import plan_epoch
 
 
 def cmd_field_sheet(args) -> int:
-    from projects.outputs.field_sheet import write_field_sheet
-    from projects.processing.stages import plan_epoch
-
     with open_campaign(args.dir) as c:
         c.epoch(args.epoch)
         setup = setup_of(c, args)
@@ -128,8 +37,6 @@ EXIT_SHORT = 3
 
 def _pair(advice, layout, asked: bool):
     """The proposed pair of set-ups, when asked or when the best single station hides a deck target."""
-    from projects.field.station_pairs import propose_pair
-
     best = next((s for s in advice.stations if s.predicted_sigma_mm), None)
     deck = {t for t, g in zip(layout.ids, layout.groups, strict=False) if g == "measurement"}
     if not asked and (best is None or not deck & (set(best.hidden) | set(best.weak))):
@@ -142,8 +49,6 @@ def _pair(advice, layout, asked: bool):
 
 
 def cmd_check(args) -> int:
-    from projects.field.check import check_epoch
-
     with open_campaign(args.dir) as c:
         c.epoch(args.epoch)
         setup = setup_of(c, args)
@@ -176,9 +81,6 @@ def cmd_check(args) -> int:
 
 
 def cmd_stations(args) -> int:
-    from lidar.figures import save_figure
-    from projects.field.stations import advise_stations, read_area_csv, station_map_figure
-
     area = read_area_csv(args.area) if args.area is not None else None
     if args.top < 0:
         raise InputError("--top must not be negative")

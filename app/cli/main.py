@@ -51,21 +51,24 @@ COMMAND_GROUPS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("many bridges", ("fleet",)),
 )
 
-#: The module of this package that registers each command: a command given on the line is parsed by a parser of
-#: its module's commands only (importing and building all of them took 0.02-0.03 s of every command's start).
+#: The group of each command: ``app.cli.parsers.GROUP`` registers its parser, ``app.cli.commands_GROUP`` holds the
+#: function that runs it. A command given on the line is parsed by a parser of its group's commands only (importing
+#: and building all of them took 0.02-0.03 s of every command's start); its functions' module, which imports what the
+#: commands need at its top, is imported when the command runs (see :func:`command_function`).
 COMMAND_MODULES: dict[str, str] = {
     **dict.fromkeys(("init", "reflector", "limit", "settings", "demo", "add-epoch", "add-setup", "plan", "add-fine",
-                     "process", "status", "displacements", "export"), "commands_campaign"),
-    **dict.fromkeys(("field-sheet", "check", "scanners", "stations"), "commands_field"),
-    "report": "commands_report",
-    **dict.fromkeys(("env", "event", "prediction", "analyse"), "commands_analysis"),
-    "compare": "commands_compare",
-    **dict.fromkeys(("camera", "crossval"), "commands_camera"),
-    **dict.fromkeys(("info", "convert"), "commands_scanfiles"),
-    **dict.fromkeys(("detect", "plan-file", "centroids", "simulate"), "commands_files"),
-    "dualcam": "commands_dualcam",
-    "fleet": "commands_fleet",
-    **dict.fromkeys(("verify", "repair"), "commands_store"),
+                     "process", "status", "displacements", "export"), "campaign"),
+    **dict.fromkeys(("field-sheet", "check", "stations"), "field"),
+    "scanners": "scanners",
+    "report": "report",
+    **dict.fromkeys(("env", "event", "prediction", "analyse"), "analysis"),
+    "compare": "compare",
+    **dict.fromkeys(("camera", "crossval"), "camera"),
+    **dict.fromkeys(("info", "convert"), "scanfiles"),
+    **dict.fromkeys(("detect", "plan-file", "centroids", "simulate"), "files"),
+    "dualcam": "dualcam",
+    "fleet": "fleet",
+    **dict.fromkeys(("verify", "repair"), "store"),
 }
 
 #: The commands over scan and image files: their work is the product's own loops (compiled, on two threads) and
@@ -154,11 +157,22 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     else:
         modules = list(dict.fromkeys(COMMAND_MODULES.values()))  # each once, in the table's order
     for name in modules:
-        importlib.import_module(f"app.cli.{name}").register(sub)
+        importlib.import_module(f"app.cli.parsers.{name}").register(sub)
     _finish(parser)
     fill = lambda text: textwrap.fill(text, width, break_on_hyphens=False)  # noqa: E731
     parser.description = "\n\n".join((fill(DESCRIPTION), _command_list(sub.helps, width), fill(DIR_EXPLAINED)))
     return parser
+
+
+def command_function(args: argparse.Namespace):
+    """The function that runs the parsed command (the parser names it in ``func``), from its group's module.
+
+    The module is imported here, only for the command that runs: the command modules import numpy, the store and
+    the processing at their tops, which ``bridgesurvey --help`` and a refused command never need (they start in
+    0.08 s; importing every command module would make it about 2 s).
+    """
+    module = importlib.import_module(f"app.cli.commands_{COMMAND_MODULES[args.command]}")
+    return getattr(module, args.func)
 
 
 def _command_of(argv: Sequence[str]) -> str | None:
@@ -224,7 +238,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     try:
         check_paths(command_parser, args)
-        return int(args.func(args) or 0)
+        return int(command_function(args)(args) or 0)
     except SurveyError as exc:
         print(f"bridgesurvey: error: {exc}", file=sys.stderr)
         return EXIT_ERROR

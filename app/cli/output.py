@@ -6,6 +6,9 @@ import math
 import sys
 from collections.abc import Sequence
 
+import numpy as np
+
+from common.files import json_safe
 from common.numbers import shown
 
 
@@ -36,14 +39,28 @@ def dump_json(obj, out=None) -> None:
     out = out or sys.stdout
 
     def default(o):
-        import numpy as np
-
         if isinstance(o, np.ndarray):
             return o.tolist()
         if isinstance(o, (np.floating, np.integer)):
             return o.item()
         raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
-    from common.files import json_safe
 
     out.write(json.dumps(json_safe(obj), indent=2, default=default) + "\n")
+
+
+def print_import(what: str, summ: dict) -> None:
+    """The lines an import of a series prints: what was read, how the times were read, what was left out."""
+    print(f"imported {what}: {summ['rows']} rows from {summ['start']} to {summ['end']}, column "
+          f"'{summ['column']}' in {summ['unit_read']}, {summ['gaps']} gap(s), {summ['missing_values']} missing "
+          f"value(s)")
+    print(f"  times: {summ['times']}")
+    if summ["bad_rows"]:
+        print(f"  {summ['bad_rows']} bad row(s) of {summ['rows_in_file']} left out (could not be read):")
+    for line in summ["first_bad_lines"][:5]:
+        print(f"    {line}")
+    if summ["bad_rows"] > 5:
+        print(f"    ... and {summ['bad_rows'] - 5} more")
+    for note in summ["notes"]:
+        if "could not be read" not in note:
+            print(f"  note: {note}")

@@ -6,6 +6,8 @@ import sys
 import time
 from collections.abc import Callable, Iterator
 
+from tqdm import tqdm
+
 #: Seconds between two progress lines when stderr is not a terminal (a log file, CI, a pipe).
 LINE_INTERVAL_S = 2.0
 
@@ -26,7 +28,6 @@ def progress_bar(description: str, *, enabled: bool = True,
     if not sys.stderr.isatty():
         yield from _lines(description, interval_s)
         return
-    from tqdm import tqdm
 
     bar = tqdm(total=1000, desc=description, file=sys.stderr, leave=False,
                bar_format="{desc}: {percentage:3.0f}%|{bar}| {postfix}")

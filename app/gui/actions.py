@@ -13,19 +13,40 @@ from pathlib import Path
 from common.errors import InputError
 from common.files import write_atomic
 from common.progress import scaled
+from lidar.io.poses import file_frames
+from lidar.layout import read_layout_csv
+from lidar.scanner_catalogue import CATALOGUE, get_scanner
+from projects.analysis.run import analyse_campaign
+from projects.compare.whole_scan import save_comparison
+from projects.demo import build_demo as build
+from projects.fleet.status import fleet_status as status
+from projects.onsite.check import check_epoch
+from projects.onsite.check import pending_rescans as pending
+from projects.onsite.stations import advise_stations
+from projects.outputs.exports import export
+from projects.outputs.field_sheet import write_field_sheet
+from projects.outputs.inspection import change_cloud as change
+from projects.outputs.inspection import epoch_cloud as cloud
+from projects.outputs.inspection import inspect_target
+from projects.outputs.report import write_report
+from projects.processing.stages import baseline_epoch, plan_epoch, save_edited_plan
+from projects.processing.stages import process as run
+from projects.processing.stages import set_parameter as setp
+from projects.results.integrity import repair_folder, verify_campaign
+from projects.results.table import displacement_table, to_csv
+from projects.series.camera import crossvalidate, import_series, save_crossval
+from projects.series.environment import add_event as add
+from projects.series.environment import import_env as imp
+from projects.store.campaign import Campaign, parse_datetime
+from projects.store.limits import set_limit_rule
 
 
 def build_demo(folder: Path, progress: Callable):
-    from projects.demo import build_demo as build
-
     return build(folder, progress=progress)
 
 
 def create_campaign(*, folder: str, name: str, layout: str, span_m: float | None, diameter_mm: float,
                     timezone: str = "UTC") -> Path:
-    from lidar.layout import read_layout_csv
-    from projects.store.campaign import Campaign
-
     if not folder:
         raise InputError("choose a folder for the campaign")
     if not layout:
@@ -37,16 +58,12 @@ def create_campaign(*, folder: str, name: str, layout: str, span_m: float | None
 
 def _validator(progress: Callable):
     """The import's file reader: each file read and checked (a scan in a project frame needs its pose)."""
-    from lidar.io.poses import file_frames
-
     def frames_of(path, fallback):
         return file_frames(path, fallback=fallback, progress=scaled(progress, 0.0, 0.5))
     return frames_of
 
 
 def add_epoch(session, v: dict, progress: Callable) -> str:
-    from projects.store.campaign import parse_datetime
-
     if not v["coarse"]:
         raise InputError("choose the coarse scan of the visit")
     when = parse_datetime(v["datetime"])
@@ -63,8 +80,6 @@ def add_fine(session, label: str, paths, progress: Callable) -> None:
 
 def add_setup(session, label: str, coarse, progress: Callable) -> tuple[list[int], list]:
     """Add another set-up (station) to an epoch from its coarse scan and plan it; (set-ups, their plans)."""
-    from projects.processing.stages import plan_epoch
-
     with session.write() as c:
         new = c.add_setup(label, coarse, frames_of=_validator(progress))
         plans = [plan_epoch(c, label, setup=k, progress=scaled(progress, 0.5, 1.0)) for k in new]
@@ -72,23 +87,17 @@ def add_setup(session, label: str, coarse, progress: Callable) -> tuple[list[int
 
 
 def plan(session, label: str, progress: Callable):
-    from projects.processing.stages import plan_epoch
-
     with session.write() as c:
         return plan_epoch(c, label, progress=progress)
 
 
 def save_plan(session, label: str, scan_plan) -> None:
-    from projects.processing.stages import save_edited_plan
-
     with session.write() as c:
         save_edited_plan(c, label, scan_plan)
 
 
 def process(session, progress: Callable, *, accept_check: tuple[str, ...] = ()):
     """Process what is stale; ``accept_check``: epochs whose check asked for a re-scan, processed as they are."""
-    from projects.processing.stages import process as run
-
     with session.write() as c:
         for label in accept_check:
             c.accept_check(label)
@@ -97,31 +106,21 @@ def process(session, progress: Callable, *, accept_check: tuple[str, ...] = ()):
 
 def pending_rescans(session) -> dict[str, str]:
     """``epoch -> the check's verdict`` of the epochs whose check asked for a re-scan not made nor accepted."""
-    from projects.field.check import pending_rescans as pending
-
     with session.read() as c:
         return {label: v.line() for label, v in pending(c, [e.label for e in c.epochs()]).items()}
 
 
 def inspect(session, label: str, rid: str, progress: Callable):
-    from projects.outputs.inspection import inspect_target
-
     with session.read() as c:
         return inspect_target(c, label, rid, progress=progress)
 
 
 def epoch_cloud(session, label: str, progress: Callable):
-    from projects.outputs.inspection import epoch_cloud as cloud
-
     with session.read() as c:
         return cloud(c, label, progress=progress)
 
 
 def change_cloud(session, label: str, progress: Callable):
-    from projects.compare.whole_scan import save_comparison
-    from projects.outputs.inspection import change_cloud as change
-    from projects.processing.stages import baseline_epoch
-
     with session.write() as c:
         base = baseline_epoch(c)
         if base is None:
@@ -134,8 +133,6 @@ def change_cloud(session, label: str, progress: Callable):
 
 
 def import_camera(session, v: dict, progress: Callable):
-    from projects.series.camera import import_series
-
     if not v["file"]:
         raise InputError("choose the camera series file")
     progress(0.1, "reading the series")
@@ -146,8 +143,6 @@ def import_camera(session, v: dict, progress: Callable):
 
 
 def crossval(session, progress: Callable):
-    from projects.series.camera import crossvalidate, save_crossval
-
     progress(0.1, "pairing LiDAR epochs with the camera")
     with session.write() as c:
         cv, _ = crossvalidate(c)
@@ -156,30 +151,22 @@ def crossval(session, progress: Callable):
 
 
 def export_csv(session, path: Path) -> Path:
-    from projects.results.table import displacement_table, to_csv
-
     with session.read() as c:
         return write_atomic(path, to_csv(displacement_table(c)))
 
 
 def export_xlsx(session, path: Path) -> Path:
-    from projects.outputs.exports import export
-
     with session.read() as c:
         return export(c, path)
 
 
 def report(session, path: Path, progress: Callable, *, detail: bool = False) -> Path:
-    from projects.outputs.report import write_report
-
     with session.read() as c:
         return write_report(c, path, progress=progress, detail=detail)
 
 
 def set_limit(session, reflector: str, rule: str) -> str:
     """Set a limit rule (also ``prediction:T``); returns what was set, in one line."""
-    from projects.store.limits import set_limit_rule
-
     with session.write() as c:
         return set_limit_rule(c, reflector, rule)
 
@@ -195,16 +182,11 @@ def replace_reflector(session, old: str, new: str, when: str) -> None:
 
 
 def set_parameter(session, key: str, text: str) -> None:
-    from projects.processing.stages import set_parameter as setp
-
     with session.write() as c:
         setp(c, key, text)
 
 
 def field_sheet(session, label: str, path: Path, progress: Callable) -> Path:
-    from projects.outputs.field_sheet import write_field_sheet
-    from projects.processing.stages import plan_epoch
-
     with session.write() as c:
         plan = plan_epoch(c, label, progress=scaled(progress, 0.0, 0.8))
         return write_field_sheet(plan, path, campaign_name=c.name, preview=c.map_preview(label),
@@ -212,51 +194,37 @@ def field_sheet(session, label: str, path: Path, progress: Callable) -> Path:
 
 
 def check(session, label: str, progress: Callable):
-    from projects.field.check import check_epoch
-
     with session.write() as c:
         return check_epoch(c, label, progress=progress)
 
 
 def stations(session, grid_m: float, height_m: float, progress: Callable):
     """The station advice and the layout it was made on."""
-    from projects.field.stations import advise_stations
-
     with session.read() as c:
         return advise_stations(c, grid_m=grid_m, height_m=height_m, progress=progress), c.layout()
 
 
 def scanner_names() -> list[str]:
-    from lidar.scanner_catalogue import CATALOGUE
-
     return list(CATALOGUE)
 
 
 def set_scanner(session, name: str, epoch: str | None = None) -> None:
-    from lidar.scanner_catalogue import get_scanner
-
     profile = get_scanner(name)
     with session.write() as c:
         c.set_profile(profile, epoch=epoch)
 
 
 def fleet_status(folder: str) -> dict:
-    from projects.fleet.status import fleet_status as status
-
     return status([folder])
 
 
 def analyse(session) -> dict:
-    from projects.analysis.run import analyse_campaign
-
     with session.read() as c:
         return analyse_campaign(c)
 
 
 def import_env(session, v: dict, progress: Callable):
     """Import an environment series (``v``: file, kind, name, column, unit, timezone)."""
-    from projects.series.environment import import_env as imp
-
     if not v["file"]:
         raise InputError("choose the series file")
     progress(0.1, "reading the series")
@@ -268,15 +236,13 @@ def import_env(session, v: dict, progress: Callable):
 
 def add_event(session, v: dict) -> int:
     """Record an event (``v``: date, kind, label, load_kn_m or None)."""
-    from projects.series.environment import add_event as add
-
     with session.write() as c:
         return add(c, date=v["date"], kind=v["kind"], label=v["label"], load_kn_m=v["load_kn_m"])
 
 
 def import_prediction(session, v: dict, progress: Callable) -> dict:
     """Import a design prediction (``v``: file, align_at or None for least squares, casting_date or None)."""
-    from projects.processing.stages import set_parameter as setp
+    # local: this function has the name of the one it calls (an import at the top would need another name)
     from projects.series.predictions import import_prediction as imp
 
     if not v["file"]:
@@ -296,14 +262,10 @@ def import_prediction(session, v: dict, progress: Callable) -> dict:
 
 def verify(session, progress: Callable) -> list:
     """Every problem of the open campaign, each with what to do (Campaign ▸ Verify campaign)."""
-    from projects.results.integrity import verify_campaign
-
     with session.read() as c:
         return verify_campaign(c, progress=progress)
 
 
 def repair(session) -> tuple[list[str], list[str]]:
     """Repair the open campaign's folder (Campaign ▸ Repair campaign): what was done, what was left."""
-    from projects.results.integrity import repair_folder
-
     return repair_folder(session.folder)

@@ -32,8 +32,12 @@ from app.gui.state.cloud_display import prepare_cloud
 from app.gui.state.folders import LastFolders
 from app.gui.state.words import in_app_words, windows_text
 from app.gui.views.fine_figure import draw_inspection
+from app.gui.views.fleet_view import FleetView
 from common.errors import SurveyError
 from common.progress import scaled
+from projects.processing.parameters import BY_NAME, PARAMETERS
+from projects.processing.stages import parameters
+from projects.series.camera import midspan_reflector
 
 
 class CommandHost(Protocol):
@@ -113,8 +117,6 @@ class Commands:
 
     def open_fleet(self, folder: str | None = None) -> None:
         """List every campaign under a folder (worst state first) and open any of them."""
-        from app.gui.views.fleet_view import FleetView
-
         folder = folder or ask_folder(self.parent, "Folder holding the campaigns", self.host.folders, "campaigns")
         if not folder:
             return
@@ -391,9 +393,6 @@ class Commands:
                         lambda _r: f"{new} replaces {rid} from {when}; its history continues {rid}'s")
 
     def set_parameter(self) -> None:
-        from projects.processing.parameters import BY_NAME, PARAMETERS
-        from projects.processing.stages import parameters
-
         with self.state.read() as c:
             current = {**parameters(c), **{k: v for k, v in c.settings().items() if k in BY_NAME}}
         keys = [p.name for p in PARAMETERS]
@@ -409,8 +408,6 @@ class Commands:
 
     # ------------------------------------------------------------------ camera
     def import_camera(self) -> None:
-        from projects.series.camera import midspan_reflector
-
         with self.state.read() as c:
             meas = [r.id for r in c.reflectors() if not r.is_reference and not r.retired]
             try:

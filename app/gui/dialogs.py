@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from PySide6.QtCore import QDate, QDateTime, Qt, QTimeZone
+from PySide6.QtGui import QColor
 from PySide6.QtWidgets import (
     QCheckBox,
     QComboBox,
@@ -23,12 +24,16 @@ from PySide6.QtWidgets import (
     QMessageBox,
     QPushButton,
     QRadioButton,
+    QTableWidget,
+    QTableWidgetItem,
     QVBoxLayout,
     QWidget,
 )
 
 from app.gui.state.folders import LastFolders
 from common.errors import SurveyError
+from lidar.io.scan_time import scan_file_time
+from projects.series.environment import EVENT_KINDS, KINDS
 
 SCAN_FILTER = "Scans (*.las *.laz *.e57 *.ply *.pcd *.ptx *.xyz *.txt *.asc);;All files (*)"
 SERIES_FILTER = "Series (*.csv *.txt *.tsv *.dat);;All files (*)"
@@ -202,8 +207,6 @@ class AddEpochDialog(QDialog):
             self.when_source.setText("set by hand")
 
     def _coarse_chosen(self, path: str) -> None:
-        from lidar.io.scan_time import scan_file_time
-
         if self._date_by_hand or not path.strip() or not Path(path.strip()).is_file():
             return
         t = scan_file_time(path.strip())
@@ -299,8 +302,6 @@ class ImportEnvDialog(QDialog):
     """An environment series (temperature, sun, rain, snow, humidity) and how to read it."""
 
     def __init__(self, parent=None, folders: LastFolders | None = None, zone: str = "UTC"):
-        from projects.series.environment import KINDS
-
         super().__init__(parent)
         self.setWindowTitle("Import environment series")
         lay = QVBoxLayout(self)
@@ -339,8 +340,6 @@ class AddEventDialog(QDialog):
     """A construction step, load, repair… with its date and, for a load, the load added."""
 
     def __init__(self, parent=None, default_date: str | None = None):
-        from projects.series.environment import EVENT_KINDS
-
         super().__init__(parent)
         self.setWindowTitle("Add event")
         lay = QVBoxLayout(self)
@@ -424,9 +423,6 @@ class CheckDialog(QDialog):
     """The on-site check of an epoch: one row per target, and a button to save the re-scan plan."""
 
     def __init__(self, parent, result, folders: LastFolders | None = None):
-        from PySide6.QtGui import QColor
-        from PySide6.QtWidgets import QTableWidget, QTableWidgetItem
-
         super().__init__(parent)
         self.result = result
         self.folders = folders

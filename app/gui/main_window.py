@@ -43,6 +43,7 @@ from app.gui.views.fine_view import FineScanView
 from app.gui.views.map_view import MapView
 from app.gui.views.stations_view import StationsView
 from app.gui.worker import JobRunner
+from projects.store.campaign import DB_NAME
 
 MAX_RECENT = 8
 #: The smallest screen the window is laid out for (a common laptop); a test keeps every tab within it.
@@ -399,8 +400,6 @@ class MainWindow(QMainWindow):
             self.open_campaign(folder)
 
     def open_demo(self) -> None:
-        from projects.store.campaign import DB_NAME
-
         if (self.demo_dir / DB_NAME).exists():
             self.open_campaign(self.demo_dir)
             return

@@ -13,6 +13,10 @@ import sys
 import time
 from pathlib import Path
 
+from PySide6.QtWidgets import QApplication
+
+from app.gui.main_window import MainWindow
+
 SIZES = ((1366, 768), (1920, 1080))
 
 
@@ -107,9 +111,7 @@ def main(argv=None) -> int:
     campaign = Path(argv[0] if argv else "demo-campaign")
     out = Path(argv[1] if len(argv) > 1 else "screenshots")
     out.mkdir(parents=True, exist_ok=True)
-    from PySide6.QtWidgets import QApplication
 
-    from app.gui.main_window import MainWindow
 
     app = QApplication.instance() or QApplication([])
     win = MainWindow(demo_dir=str(campaign))

@@ -11,6 +11,7 @@ from collections.abc import Callable
 from PySide6.QtCore import QObject, QThread, Signal
 
 from common.errors import CancelledError, SurveyError
+from lidar.native import coarse_map_library
 
 log = logging.getLogger(__name__)
 
@@ -37,9 +38,11 @@ def preload_native_modules() -> None:
             importlib.import_module(name)
         except Exception as exc:  # the job that needs it reports the problem in its own words
             log.warning("could not load %s: %s", name, exc)
-    from lidar.native import coarse_map_library
 
-    coarse_map_library()  # our own compiled coarse map, loaded by ctypes (None where it is not built)
+    try:
+        coarse_map_library()  # our own compiled coarse map, loaded by ctypes
+    except SurveyError as exc:  # not built: the job that maps a scan reports it in its own words
+        log.warning("%s", exc)
 
 
 class _JobThread(QThread):

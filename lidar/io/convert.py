@@ -23,7 +23,9 @@ from common.errors import InputError, ScanFormatError
 from common.files import atomic_output
 from common.pcd import binary_pcd_header
 from common.progress import ProgressCallback, report
+from lidar.io import read_scans, write_scan
 from lidar.io._common import pose_to_text
+from lidar.io.e57 import write_e57
 from lidar.io.las import (
     las_header_for,
     las_point_chunks,
@@ -33,6 +35,7 @@ from lidar.io.las import (
     zero_records,
 )
 from lidar.io.pcd import pcd_viewpoint
+from lidar.io.ply import POSE_COMMENT
 from lidar.io.stream import CHUNK_POINTS, Chunk, ScanStream, open_stream
 
 #: Outputs written chunk by chunk.
@@ -121,9 +124,6 @@ def _progressed(chunks: Iterator[Chunk], n: int, progress: ProgressCallback | No
 
 
 def _whole(src: Path, dst: Path, indices: list[int], stream: ScanStream) -> Converted:
-    from lidar.io import read_scans, write_scan
-    from lidar.io.e57 import write_e57
-
     scans = stream.loaded if stream.loaded is not None else read_scans(src)
     scans = [scans[i] for i in indices]
     if dst.suffix.lower() == ".e57":
@@ -205,8 +205,6 @@ def _raw_dtype(first: _Pass1) -> np.dtype:
 
 
 def _write_ply(tmp: Path, suffix: str, chunks: Iterator[Chunk], first: _Pass1, pose) -> None:
-    from lidar.io.ply import POSE_COMMENT
-
     dt = _raw_dtype(first).newbyteorder("<")
     ply_type = {"u1": "uchar", "i1": "char", "u2": "ushort", "i2": "short", "u4": "uint", "i4": "int",
                 "f4": "float", "f8": "double"}.get(dt.str[1:], None)

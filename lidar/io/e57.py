@@ -8,6 +8,8 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
+import pye57
+from pye57 import libe57
 
 from common.errors import ScanFormatError
 from common.progress import ProgressCallback, report
@@ -97,8 +99,6 @@ def opened_e57(p: Path) -> Iterator:
     ScanFormatError
         libE57 cannot open the file.
     """
-    import pye57
-
     try:
         with quiet_stderr():
             e57 = pye57.E57(str(p), mode="r")
@@ -135,8 +135,6 @@ _TIME_FIELDS = (("timeStamp", np.float64), ("isTimeStampInvalid", np.int8))
 
 def _read_fields(e57, header, p: Path, i: int) -> dict:
     """The point fields we use of scan ``i``, as arrays (times included when the scan has them)."""
-    from pye57 import libe57
-
     # Read only what we use: other fields (colour, return counts...) may have value
     # ranges pye57's fixed buffer types cannot hold.
     wanted = [f for f in header.point_fields if f in _WANTED]
@@ -212,8 +210,6 @@ def write_e57(scans: Scan | list[Scan], path: str | os.PathLike) -> Path:
     are (seconds) and its ``acquisitionStart`` set to the first; a scan without times is written by
     pye57 exactly as before times were written.
     """
-    import pye57
-
     if isinstance(scans, Scan):
         scans = [scans]
     final = Path(path)
@@ -249,8 +245,6 @@ def _write_timed_scan(e57, data: dict, time_s: np.ndarray, *, name: str, rotatio
 
     Coordinates and intensity are stored as pye57 stores them (single precision), the times in double.
     """
-    from pye57 import libe57
-
     imf = e57.image_file
     node = libe57.StructureNode(imf)
     node.set("guid", libe57.StringNode(imf, f"{{{uuid.uuid4()}}}"))

@@ -20,6 +20,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO
 
+import crc32c
+
 from common.errors import ScanFormatError
 
 PAGE = 1024
@@ -50,8 +52,6 @@ class E57Facts:
 
 
 def _crc32c(data: bytes) -> int:
-    import crc32c
-
     return crc32c.crc32c(data)
 
 

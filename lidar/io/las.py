@@ -50,6 +50,7 @@ LAZ_CHUNK_POINTS = 262_144
 
 def _laspy():
     """laspy, imported when a LAS/LAZ file is read through it (its import pulls requests in: a CLI start-up cost)."""
+    # local: laspy (and the requests it imports) costs plan-file and info 0.08-0.12 s of start-up (measured)
     import laspy
 
     return laspy

@@ -15,6 +15,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+import lzf
 import numpy as np
 
 from common.errors import ScanFormatError
@@ -195,8 +196,6 @@ def _read_ascii(p: Path, h: PcdHeader, body_bytes: int) -> list[np.ndarray]:
 
 
 def _read_compressed(p: Path, h: PcdHeader, body_bytes: int) -> list[np.ndarray]:
-    import lzf
-
     if body_bytes < 8:
         raise ScanFormatError(p, "truncated: the PCD compressed block has no size fields")
     with open(p, "rb") as fh:

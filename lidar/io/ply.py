@@ -16,6 +16,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from plyfile import PlyData
+from plyfile import PlyElement as PlyfileElement
 
 from common.errors import ScanFormatError
 from lidar.io._common import (
@@ -104,8 +106,6 @@ def check_ply_header(p: Path, head: bytes) -> tuple[str, list[PlyElement], int, 
 
 def read_ply(path: str | os.PathLike) -> Scan:
     """Read the ``vertex`` element of a PLY file (x, y, z and an intensity-like property)."""
-    from plyfile import PlyData
-
     p = check_readable(path)
     size = p.stat().st_size
     with open(p, "rb") as fh:
@@ -163,9 +163,6 @@ def _pose_comment(p: Path, header: bytes):
 
 def write_ply(scan: Scan, path: str | os.PathLike, *, binary: bool = True) -> Path:
     """Write x, y, z (float64) and the raw intensity as a PLY vertex element."""
-    from plyfile import PlyData
-    from plyfile import PlyElement as PlyfileElement
-
     final = Path(path)
     raw = raw_for_writing(scan)
     rec = np.empty(len(scan), dtype=[("x", "f8"), ("y", "f8"), ("z", "f8"), ("intensity", raw.dtype.str)])

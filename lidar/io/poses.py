@@ -26,6 +26,7 @@ from numpy.typing import ArrayLike
 
 from common.errors import InputError
 from common.progress import ProgressCallback
+from lidar.io import read_scan, read_scans
 from lidar.scan import Scan
 
 #: A scan whose nearest point is farther than this from the origin is not in its scanner's frame (metres).
@@ -259,8 +260,6 @@ def read_in_scanner_frame(path: str | os.PathLike, frame: FileFrame | None = Non
 
     Without a frame, the file must hold one scan (as :func:`lidar.io.read_scan`).
     """
-    from lidar.io import read_scan, read_scans
-
     if frame is None or (frame.scans is None and not frame.carry):
         return read_scan(path, progress=progress)
     if frame.scans is None:
@@ -329,8 +328,6 @@ def file_frames(path: str | os.PathLike, *, given: FileFrame | None = None, fall
     -------
     list of FileFrame, one per set-up of the file (``scans`` None for a one-scan file).
     """
-    from lidar.io import read_scans
-
     p = Path(path)
     scans = read_scans(p, progress=progress)
     groups = _groups(scans)

@@ -14,6 +14,7 @@ whole by :func:`lidar.io.read_scans` and handed out in chunks (``ScanStream.stre
 from __future__ import annotations
 
 import os
+import xml.etree.ElementTree as ET
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,10 +22,14 @@ from pathlib import Path
 import numpy as np
 
 from common.errors import ScanFormatError
+from lidar.io import pcd, read_scans, sniff_format
 from lidar.io._common import check_readable, first_line, pose_from_quaternion, quiet_stderr
 from lidar.io.e57 import opened_e57
+from lidar.io.e57_header import NS, check_e57, logical_bytes
 from lidar.io.las import LasFile, las_blocks, las_point_chunks, open_las, scaled_xyz
 from lidar.io.names import find_column
+from lidar.io.pcd import record_dtype
+from lidar.io.ply import MAX_HEADER_BYTES, POSE_COMMENT, check_ply_header
 
 #: Points per chunk by default: about 50 MB of temporaries.
 CHUNK_POINTS = 1_000_000
@@ -112,8 +117,6 @@ class ScanStream:
 
     def _whole(self) -> list:
         if self.loaded is None:
-            from lidar.io import read_scans
-
             self.loaded = read_scans(self.path)
         return self.loaded
 
@@ -126,14 +129,11 @@ def open_stream(path: str | os.PathLike) -> ScanStream:
     ScanFormatError
         The header is damaged or lies about the file (the message names the file and the field).
     """
-    from lidar.io import sniff_format
-
     p = check_readable(path)
     kind = sniff_format(p)
     opener = {"las": _open_las, "e57": _open_e57, "ply": _open_ply, "pcd": _open_pcd}.get(kind)
     if opener is not None:
         return opener(p)
-    from lidar.io import read_scans
 
     loaded = read_scans(p)  # PTX, PTS, XYZ: no header that tells the points; read whole
     scans = [StreamScan(s.name, len(s), s.pose, None, s.intensity_raw is not None) for s in loaded]
@@ -171,10 +171,6 @@ def _las_blocks(s: ScanStream, starts: list[int], block_points: int) -> list[Chu
 
 # ------------------------------------------------------------------ E57
 def _e57_xml(p: Path):
-    import xml.etree.ElementTree as ET
-
-    from lidar.io.e57_header import logical_bytes
-
     size = p.stat().st_size
     with open(p, "rb") as fh:
         head = fh.read(48)
@@ -183,8 +179,6 @@ def _e57_xml(p: Path):
 
 
 def _e57_float(node, *names: str) -> float | None:
-    from lidar.io.e57_header import NS
-
     for name in names:
         node = node.find(NS + name) if node is not None else None
     if node is None or node.text is None:
@@ -196,8 +190,6 @@ def _e57_float(node, *names: str) -> float | None:
 
 
 def _open_e57(p: Path) -> ScanStream:
-    from lidar.io.e57_header import NS, check_e57
-
     facts = check_e57(p)
     if not facts.scans:
         if facts.images:
@@ -288,8 +280,6 @@ _PLY_TYPES = {"char": "i1", "uchar": "u1", "int8": "i1", "uint8": "u1", "short":
 
 
 def _open_ply(p: Path) -> ScanStream:
-    from lidar.io.ply import MAX_HEADER_BYTES, POSE_COMMENT, check_ply_header
-
     with open(p, "rb") as fh:
         head = fh.read(MAX_HEADER_BYTES)
     fmt, elements, data_start, clean = check_ply_header(p, head)
@@ -348,11 +338,9 @@ def _ply_chunks(s: ScanStream, index: int, chunk_points: int) -> Iterator[Chunk]
 
 
 def _open_pcd(p: Path) -> ScanStream:
-    from lidar.io.pcd import MAX_HEADER_BYTES, parse_header
-
     with open(p, "rb") as fh:
-        head = fh.read(MAX_HEADER_BYTES)
-    h = parse_header(p, head)
+        head = fh.read(pcd.MAX_HEADER_BYTES)
+    h = pcd.parse_header(p, head)
     if None in [find_column(h.fields, a) for a in ("x", "y", "z")]:
         raise ScanFormatError(p, f"the PCD file has no x, y, z fields (fields: {' '.join(h.fields)[:80]})")
     if h.points == 0:
@@ -371,8 +359,6 @@ def _open_pcd(p: Path) -> ScanStream:
 
 
 def _pcd_records(s: ScanStream) -> tuple[np.ndarray, list[str], str | None]:
-    from lidar.io.pcd import record_dtype
-
     h = s.details["header"]
     rec = np.memmap(s.path, dtype=record_dtype(h), mode="r", offset=h.data_start, shape=(h.points,))
     cols = [f"f{find_column(h.fields, a)}" for a in ("x", "y", "z")]

@@ -1,24 +1,23 @@
-"""Compiled inner loops (C, called through :mod:`ctypes`), with the numpy code as the fallback.
+"""The coarse map's compiled inner loops (C, called through :mod:`ctypes`): the one implementation of its pass.
 
-The library ``_coarse_map`` is built from ``coarse_map.c`` when the package is installed (an optional
-extension of ``setup.py``: without a C compiler the install goes on and numpy does the work). Its results are
-the numpy code's to the bit (tested), so a machine without it gives the same maps, only slower. A library
-built from another version of ``coarse_map.c`` than the one beside it is left unused (``./run`` builds it
-again when the source changes).
-
-Set ``BRIDGESURVEY_NATIVE=0`` to leave the library unused.
+The library ``_coarse_map`` is built from ``coarse_map.c`` when the package is installed (``setup.py``'s
+extension; ``./run setup`` builds it again when the source changes). Every coarse map goes through it: the
+campaign's (``add-epoch``, ``plan``, ``process`` bin a scan held in memory, and the library merges and finishes
+the cells) and ``plan-file``'s and ``detect``'s (an uncompressed LAS file binned from its records). A library
+built from another version of ``coarse_map.c`` than the one beside it is refused.
 """
 from __future__ import annotations
 
 import ctypes
 import hashlib
 import importlib.machinery
-import os
 import sys
 from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
+
+from common.errors import SurveyError
 
 _HERE = Path(__file__).resolve().parent
 
@@ -28,11 +27,20 @@ def _ptr(kind):
 
 
 @lru_cache(maxsize=1)
-def coarse_map_library() -> ctypes.CDLL | None:
-    """The compiled coarse-map loops, or None (not built, not loadable, stale, big-endian host or switched off)."""
-    if os.environ.get("BRIDGESURVEY_NATIVE", "1") == "0" or sys.byteorder != "little":
-        return None
-    return load_coarse_map(_HERE)
+def coarse_map_library() -> ctypes.CDLL:
+    """The compiled coarse-map loops.
+
+    Raises
+    ------
+    SurveyError
+        The library is not built, cannot be loaded or is stale, or the machine is big-endian (the loops read
+        little-endian LAS records and arrays).
+    """
+    lib = load_coarse_map(_HERE) if sys.byteorder == "little" else None
+    if lib is None:
+        raise SurveyError("the compiled coarse map (lidar/native/_coarse_map) is not built here, or was built from "
+                          "another lidar/native/coarse_map.c: run './run setup' (it needs a C compiler) to build it")
+    return lib
 
 
 def load_coarse_map(folder: Path) -> ctypes.CDLL | None:

@@ -35,14 +35,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from common.errors import InputError
-from common.rigid import rotation_from_rotvec, rotations_from_rotvecs, skew
+from common.rigid import fit_rigid, rotation_from_rotvec, rotations_from_rotvecs, skew
 from lidar.displacement import deck_normal
 from lidar.reference_motion import across_axis
 from lidar.systematic.axes import ARCSEC, PRIOR_AXES_ARCSEC, AxisModel, axis_basis
-from lidar.systematic.range_walk import RangeWalkModel, design
+from lidar.systematic.range_walk import PRIOR_BIAS_MM, RangeWalkModel, design
+from lidar.systematic.walk_screen import bias_information, screen_laws
 
-#: Prior standard deviations: range-walk coefficients (mm), scale (ppm), drift (arcsec per hour).
-PRIOR_BIAS_MM = 2.0
+#: Prior standard deviations: scale (ppm), drift (arcsec per hour); the range walk's is range_walk.PRIOR_BIAS_MM.
 PRIOR_SCALE_PPM = 300.0
 PRIOR_DRIFT_ARCSEC_H = 30.0
 #: Added to every centroid covariance: what a centroid's own covariance leaves out (m^2 per axis).
@@ -201,11 +201,11 @@ def _whiten(cov: np.ndarray) -> np.ndarray:
     return np.linalg.inv(np.linalg.cholesky(cov + MODEL_FLOOR_M2 * np.eye(3)))
 
 
-class _Problem:
+class AdjustmentProblem:
     """The unknowns, their ordering and the linearised equations of one adjustment."""
 
     def __init__(self, visits: Sequence[VisitSightings], groups: Mapping[str, str], basis: tuple[str, ...],
-                 start: _Problem | None = None, drift: bool = True, axes: tuple[int, ...] = ()):
+                 start: AdjustmentProblem | None = None, drift: bool = True, axes: tuple[int, ...] = ()):
         self.basis = basis
         self.drift = drift
         self.axes, self.n_axes = tuple(axes), len(axes)  # the instrument's axis errors fitted (AXIS_NAMES)
@@ -245,8 +245,6 @@ class _Problem:
         return _Visit(v.label, refs, decks, timed, float(np.median(times)) if timed else 0.0, is_base=is_base)
 
     def _initialise(self) -> None:
-        from common.rigid import fit_rigid
-
         base = self.visits[0]
         seen = np.zeros(len(self.ref_ids), bool)
         for s, i in base.refs:
@@ -400,6 +398,7 @@ class _Problem:
 
     def apply_step(self, v: _Visit, dx_local: np.ndarray) -> None:
         if not v.is_base:
+            # local: scipy.spatial: 0.07-0.09 s of scanners' and reflector list's start-up (measured)
             from scipy.spatial.transform import Rotation
 
             v.q = Rotation.from_rotvec(dx_local[0:3] * 1e-3).as_matrix() @ v.q
@@ -444,7 +443,7 @@ class _Solution:
     n_data: int = 0
 
 
-def _solve_once(p: _Problem) -> tuple[_Solution, float]:
+def _solve_once(p: AdjustmentProblem) -> tuple[_Solution, float]:
     """One Gauss-Newton step with every visit's unknowns eliminated; returns the solution and the step size."""
     ns = p.n_shared
     prior_diag, b_s, chi2 = p.priors()
@@ -481,7 +480,7 @@ def _solve_once(p: _Problem) -> tuple[_Solution, float]:
     return _Solution(chi2, n_rows, n_unk, cov_s, cov_l, chi2_data, n_data), step
 
 
-def _reweight(p: _Problem) -> list[tuple[str, str]]:
+def _reweight(p: AdjustmentProblem) -> list[tuple[str, str]]:
     """Tukey weights of every block from its normalised residual; returns the (visit, target) left out."""
     out = []
     for v in p.visits:
@@ -499,7 +498,7 @@ def _reweight(p: _Problem) -> list[tuple[str, str]]:
     return out
 
 
-def _adjust(p: _Problem, *, iterations: int = 8, robust: bool = True) -> tuple[_Solution, list]:
+def _adjust(p: AdjustmentProblem, *, iterations: int = 8, robust: bool = True) -> tuple[_Solution, list]:
     sol = None
     left_out: list = []
     for it in range(iterations):
@@ -539,23 +538,21 @@ def fit_field_model(visits: Sequence[VisitSightings], groups: Mapping[str, str],
     -------
     FieldModel
     """
-    from lidar.systematic.walk_screen import bias_information, screen_laws  # it builds on this module's problem
-
     if not visits:
         raise InputError("the field model needs at least one visit")
     if not select_range_walk or len(visits) < 3:
         p, sol, left = _final_fit(visits, groups, (), None)
         return _model(p, sol, left, visits[0].label)
-    general = _Problem(visits, groups, ("1", "sat_strength"), axes=(0, 1, 2))
+    general = AdjustmentProblem(visits, groups, ("1", "sat_strength"), axes=(0, 1, 2))
     general_sol, _ = _adjust(general)
-    info = bias_information(_Problem(visits, groups, (), start=general, axes=(0, 1, 2)))
+    info = bias_information(AdjustmentProblem(visits, groups, (), start=general, axes=(0, 1, 2)))
     chosen = min(screen_laws(info, general_sol.n_data), key=lambda law: law.bic).basis
     tried = []
     while True:  # the law and the axis errors the data support, until the screen agrees with the final fit
         tried.append(chosen)
         p, sol, left = _final_fit(visits, groups, chosen, general)
         # the families screened again on the final fit (its axis errors and drift)
-        info = bias_information(_Problem(visits, groups, (), start=p, drift=p.drift, axes=p.axes))
+        info = bias_information(AdjustmentProblem(visits, groups, (), start=p, drift=p.drift, axes=p.axes))
         laws = sorted(screen_laws(info, sol.n_data), key=lambda law: law.bic)
         if laws[0].basis in tried or len(tried) >= MAX_LAW_ROUNDS:
             break
@@ -569,7 +566,7 @@ def fit_field_model(visits: Sequence[VisitSightings], groups: Mapping[str, str],
 
 
 def _final_fit(visits: Sequence[VisitSightings], groups: Mapping[str, str], basis: tuple[str, ...],
-               start: _Problem | None) -> tuple[_Problem, _Solution, list]:
+               start: AdjustmentProblem | None) -> tuple[AdjustmentProblem, _Solution, list]:
     """The range walk ``basis`` fitted with the instrument's axis errors and the set-ups' drift the data support.
 
     All three axis errors are fitted first; the subset BIC prefers follows from that fit's estimates and
@@ -578,23 +575,23 @@ def _final_fit(visits: Sequence[VisitSightings], groups: Mapping[str, str], basi
     BIC too. The fits without start from the full fit's down-weighting (re-weighting would discard the very
     blocks - the closures, the far targets - that show them, and make the model without them look better).
     """
-    p = _Problem(visits, groups, basis, start=start, axes=(0, 1, 2))
+    p = AdjustmentProblem(visits, groups, basis, start=start, axes=(0, 1, 2))
     sol, left = _adjust(p)
     keep = _supported_axes(p, sol)
     best = (p, sol, left)
     if keep != p.axes:
-        q = _Problem(visits, groups, basis, start=p, axes=keep)
+        q = AdjustmentProblem(visits, groups, basis, start=p, axes=keep)
         sol_q, _ = _adjust(q, robust=False)
         best = (q, sol_q, left)
     if any(v.timed for v in best[0].visits):
-        q = _Problem(visits, groups, basis, start=best[0], axes=keep, drift=False)
+        q = AdjustmentProblem(visits, groups, basis, start=best[0], axes=keep, drift=False)
         sol_q, _ = _adjust(q, robust=False)
         if _bic(sol_q) < _bic(best[1]):
             best = (q, sol_q, left)
     return best
 
 
-def _supported_axes(p: _Problem, sol: _Solution) -> tuple[int, ...]:
+def _supported_axes(p: AdjustmentProblem, sol: _Solution) -> tuple[int, ...]:
     """The subset of the fitted axis errors BIC prefers, from the full fit's estimates and covariance."""
     cov = sol.cov_shared[p.axis_columns, p.axis_columns]
     per_term = math.log(max(sol.n_data, 2))
@@ -610,7 +607,7 @@ def _supported_axes(p: _Problem, sol: _Solution) -> tuple[int, ...]:
     return best
 
 
-def _model(p: _Problem, sol: _Solution, left_out: list, baseline: str, alternatives: tuple = (),
+def _model(p: AdjustmentProblem, sol: _Solution, left_out: list, baseline: str, alternatives: tuple = (),
            alternative_kappas: list | None = None) -> FieldModel:
     dof = max(sol.n_rows - sol.n_unknowns, 1)
     s0 = math.sqrt(sol.chi2 / dof)

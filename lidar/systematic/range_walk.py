@@ -24,6 +24,8 @@ from numpy.typing import ArrayLike
 
 from common.errors import InputError
 
+#: Prior standard deviation of a range-walk coefficient, mm (the campaign adjustment's and the walk screen's).
+PRIOR_BIAS_MM = 2.0
 #: Range at which the strength proxy is 1 for a head-on return, metres.
 R0_M = 15.0
 #: Format version of a range-walk model's JSON form.

@@ -20,12 +20,16 @@ fitted in full.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from common.rigid import rotations_from_rotvecs
-from lidar.systematic.adjustment import ARCSEC, PRIOR_BIAS_MM, _Problem
-from lidar.systematic.range_walk import STEP_PROXIES, candidate_bases, design, step_name
+from lidar.systematic.axes import ARCSEC
+from lidar.systematic.range_walk import PRIOR_BIAS_MM, STEP_PROXIES, candidate_bases, design, step_name
+
+if TYPE_CHECKING:  # the adjustment builds on this module; its problem is only named here
+    from lidar.systematic.adjustment import AdjustmentProblem
 
 
 @dataclass(frozen=True, eq=False)
@@ -88,7 +92,7 @@ class BiasInformation:
         return self.chi2_without - float(dg @ theta), theta
 
 
-def bias_information(problem: _Problem) -> BiasInformation:
+def bias_information(problem: AdjustmentProblem) -> BiasInformation:
     """The :class:`BiasInformation` of an adjustment with no walk (``basis ()``) at its current unknowns."""
     if problem.basis:
         raise ValueError("bias_information needs the adjustment without a walk (basis ())")
@@ -132,11 +136,11 @@ def bias_information(problem: _Problem) -> BiasInformation:
                            scale_rows, (inv_xx, n_xw, rhs[:n_x]))
 
 
-def _bias_columns(problem: _Problem, v) -> np.ndarray:
+def _bias_columns(problem: AdjustmentProblem, v) -> np.ndarray:
     """(data rows, sightings) whitened derivative of a visit's residuals by each sighting's range bias (mm).
 
     A bias ``b`` moves a centroid ``b u`` along its line of sight before the drift's rotation (as
-    ``_Problem._corrected`` corrects it); the rows are :meth:`_Problem.visit_rows`' reference and deck rows.
+    ``AdjustmentProblem._corrected`` corrects it); the rows are :meth:`AdjustmentProblem.visit_rows`' reference and deck rows.
     """
     a = v.arrays
     nr, nd = len(v.refs), len(v.decks)

@@ -8,7 +8,14 @@ from __future__ import annotations
 import datetime as dt
 from typing import Any
 
+import matplotlib
+import matplotlib.dates as mdates
+import matplotlib.transforms as mtransforms
 import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+
+from projects.series.context import COLOURS
 
 
 def _array(values: list | None) -> np.ndarray:
@@ -21,10 +28,7 @@ def _dates(origin: dt.datetime, days: np.ndarray) -> list[dt.datetime]:
 
 def target_figure(doc: dict, target: dict, *, figsize: tuple[float, float] = (9.0, 4.8)) -> Any:
     """One target's analysis figure (a matplotlib Figure, no GUI toolkit), legend below the plot."""
-    import matplotlib
-
     matplotlib.use("Agg", force=False)
-    from matplotlib.figure import Figure
 
     fig = Figure(figsize=figsize, dpi=110, layout="constrained")
     draw_target(fig.add_subplot(111), doc, target, legend="below")
@@ -39,10 +43,6 @@ def draw_target(ax: Any, doc: dict, target: dict, *, legend: str = "below") -> N
     (dashed, numbered above the axes), and the design prediction as aligned (dashed teal, when one is imported).
     ``legend`` is ``below`` (under the axes) or ``none``.
     """
-    import matplotlib.transforms as mtransforms
-
-    from projects.series.context import COLOURS
-
     origin = dt.datetime.fromisoformat(doc["time_origin"])
     t = _array(target["epoch_days"])
     thermal = target["thermal_mm_per_degC"] is not None
@@ -73,7 +73,6 @@ def draw_target(ax: Any, doc: dict, target: dict, *, legend: str = "below") -> N
                                label=f"design prediction, aligned ({target.get('prediction_alignment', '')}: "
                                      f"offset {target.get('prediction_offset_mm') or 0:+.1f} mm)")[0])
     top = mtransforms.blended_transform_factory(ax.transData, ax.transAxes)
-    from matplotlib.lines import Line2D
 
     for k, e in enumerate(doc["events"], start=1):
         day = dt.datetime.fromisoformat(e["date"])
@@ -89,8 +88,6 @@ def draw_target(ax: Any, doc: dict, target: dict, *, legend: str = "below") -> N
     ax.set_title(_title(target), fontsize=9, pad=14)
     casting = doc.get("casting_date")
     if casting:
-        import matplotlib.dates as mdates
-
         c0 = mdates.date2num(dt.datetime.fromisoformat(casting[:10]))
         sec = ax.secondary_xaxis("top", functions=(lambda x: x - c0, lambda a: a + c0))
         sec.set_xlabel(f"concrete age [days since casting on {casting[:10]}]", fontsize=7)
@@ -114,8 +111,6 @@ def _title(target: dict) -> str:
 
 def along_figure(target: dict, *, figsize: tuple[float, float] = (3.6, 2.4)) -> Any:
     """A target's along-span movement against the temperature at each scan, ±2σ bars, with its fitted line."""
-    from matplotlib.figure import Figure
-
     pts = np.array(target.get("along_points") or [], dtype=np.float64).reshape(-1, 3)
     fig = Figure(figsize=figsize, dpi=110, layout="constrained")
     ax = fig.subplots()

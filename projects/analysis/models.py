@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+from scipy import stats
 
 from common.errors import InputError
 
@@ -477,7 +478,6 @@ def _thermal_fit(best: Candidate, models: Sequence[Candidate], weights: np.ndarr
     tw, t_ref = best.spec.temperature, best.spec.reference_temperature
     if tw is None or t_ref is None:
         return {"corrected_mm": d, "corrected_sigma_mm": s * scale}
-    from scipy import stats
 
     b, sb = akaike_average(weights, [m.estimate(Term("thermal")) for m in models])
     dT = np.nan_to_num(tw.at_epochs - t_ref)

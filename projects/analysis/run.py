@@ -16,9 +16,14 @@ import numpy as np
 
 from common.errors import InputError
 from common.files import write_atomic
+from lidar.figures import save_figure
+from projects.analysis.expansion import fit_along, temperatures_at
+from projects.analysis.figures import target_figure
 from projects.analysis.models import Event, EventFit, TargetFit, first_crossing, fit_target
+from projects.processing.stages import baseline_epoch
 from projects.series.environment import events as stored_events
 from projects.series.environment import load_env
+from projects.series.predictions import casting_ns, predictions
 from projects.store.campaign import Campaign
 from projects.store.history import histories
 from projects.store.limits import Limit
@@ -44,8 +49,6 @@ def _num(v: float | None, nd: int = 4) -> float | None:
 def analyse_campaign(c: Campaign, *, horizon_days: float = 365.0, long_term_factor: float | None = None,
                      reference_temperature: float | None = None) -> dict:
     """The analysis of every measurement target (the ``analysis.json`` document)."""
-    from projects.processing.stages import baseline_epoch
-
     if not (math.isfinite(horizon_days) and 0 < horizon_days <= 36525):
         raise InputError(f"the horizon must be between 1 day and 100 years, got {horizon_days} days")
     if long_term_factor is not None and not (math.isfinite(long_term_factor) and long_term_factor >= 1):
@@ -67,7 +70,6 @@ def analyse_campaign(c: Campaign, *, horizon_days: float = 365.0, long_term_fact
     stored = stored_events(c)
     evs = [Event((_ns(e.date) - origin) / DAY_NS, e.label, e.kind, e.date[:10]) for e in stored]
     epoch_times = sorted({t for h in hist.values() for t in h.times})
-    from projects.series.predictions import casting_ns, predictions
 
     preds = predictions(c)
     casting = casting_ns(c)
@@ -108,8 +110,6 @@ def _along_fits(c: Campaign, temperature: tuple[np.ndarray, np.ndarray] | None, 
     Only where a temperature series covers its epochs; the baseline's along-span movement is zero by
     definition and left out.
     """
-    from projects.analysis.expansion import fit_along, temperatures_at
-
     if temperature is None:
         return {}
     rows: dict[str, list] = {}
@@ -220,9 +220,6 @@ def write_analysis(c: Campaign, out_dir: str | os.PathLike, **kw) -> tuple[dict,
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = [write_atomic(out / "analysis.json", json.dumps(doc, indent=1))]
-    from lidar.figures import save_figure
-    from projects.analysis.figures import target_figure
-
     for t in doc["targets"]:
         paths.append(save_figure(target_figure(doc, t), out / f"analysis-{t['reflector']}.png"))
     return doc, paths

@@ -2,12 +2,11 @@
 from __future__ import annotations
 
 import numpy as np
+from matplotlib.figure import Figure
 
 
 def span_profile_figure(summary: dict):
     """Span profile of a comparison: per-bin underside height change (±2σ) and spread, with the targets' changes."""
-    from matplotlib.figure import Figure
-
     prof = summary["span_profile"]
     girders = sorted({b["girder"] for b in prof["bins"]} | {t["girder"] for t in summary.get("targets", [])})
     fig = Figure(figsize=(9, 2.6 + 1.6 * max(len(girders), 1)), layout="constrained")

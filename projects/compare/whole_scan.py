@@ -15,16 +15,19 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import laspy
 import numpy as np
-
-if TYPE_CHECKING:
-    from registration.profile import RegistrationSigma
+from scipy.spatial import cKDTree
 
 from common.errors import InputError
 from common.files import atomic_output, output_folder, write_atomic
 from common.progress import ProgressCallback, report, scaled
+from lidar.figures import save_figure
+from lidar.io import read_scans
+from lidar.io.stream import open_stream
+from projects.compare.figures import span_profile_figure
 from projects.compare.span import SpanFrame, pivot, span_frame
-from projects.processing.stages import baseline_epoch, read_files
+from projects.processing.stages import baseline_epoch, layout_up, parameters, read_files
 from projects.results.table import displacement_table
 from projects.store.campaign import Campaign
 from projects.store.errors import CampaignError
@@ -34,7 +37,10 @@ from registration.icp import IcpResult, refine_icp, stable_mask
 from registration.ndt import refine_ndt
 from registration.profile import SpanProfile, girder_lines, span_profile
 from registration.targets import TargetRegistration, register_targets
-from registration.transform import Transform
+from registration.transform import Transform, pose_difference
+
+if TYPE_CHECKING:
+    from registration.profile import RegistrationSigma
 
 SUMMARY_VERSION = 1
 
@@ -77,8 +83,6 @@ class ChangeOptions:
                                                         and self.registration_error >= 0):
             raise InputError(f"--registration-error must be zero or positive metres, got {self.registration_error}")
         if isinstance(self.corepoints, Path):
-            from lidar.io.stream import open_stream
-
             open_stream(self.corepoints)  # a missing or damaged file: one line now, not after the registration
         elif not (np.isfinite(self.corepoints) and self.corepoints > 0):
             raise InputError(f"--corepoints must be a positive grid step in metres or a point file, "
@@ -88,8 +92,6 @@ class ChangeOptions:
     def core_points(self, xyz_first: np.ndarray) -> tuple[np.ndarray, str]:
         """Core points in the campaign frame, and how they were chosen."""
         if isinstance(self.corepoints, Path):
-            from lidar.io import read_scans
-
             pts = np.vstack([s.xyz_socs for s in read_scans(self.corepoints)])
             return pts, f"file {self.corepoints} ({len(pts)} points, campaign frame)"
         return core_points_grid(xyz_first, float(self.corepoints)), f"grid of {self.corepoints:g} m"
@@ -164,8 +166,6 @@ def bring_to_campaign_frame(c: Campaign, label: str, base: str, *, refinement: s
 
 
 def _deck_mask(xyz: np.ndarray, targets: np.ndarray, radius_m: float = 1.0, band_m: float = 0.15) -> np.ndarray:
-    from scipy.spatial import cKDTree
-
     t = targets[np.isfinite(targets[:, 0])]
     d, k = cKDTree(t[:, :2]).query(xyz[:, :2], distance_upper_bound=radius_m)
     ok = np.isfinite(d)
@@ -175,14 +175,8 @@ def _deck_mask(xyz: np.ndarray, targets: np.ndarray, radius_m: float = 1.0, band
 
 
 def _prefetch() -> None:
-    """Import py4dgeo's compiled core and the figures' matplotlib in the background while the epochs are read.
-
-    What this thread imports meanwhile (the KD-tree of the stable-part masks and the ICP) is imported first,
-    so the two threads never import the same package at once.
-    """
-    import scipy.spatial  # noqa: F401
-
-    prefetch_py4dgeo("matplotlib.figure", "matplotlib.backends.backend_agg")
+    """Import py4dgeo's compiled core and matplotlib's drawing back end in the background while the epochs are read."""
+    prefetch_py4dgeo("matplotlib.backends.backend_agg")
 
 
 def compare_epochs(c: Campaign, from_label: str, to_label: str, *, method: str = "m3c2", refinement: str = "icp",
@@ -275,8 +269,6 @@ def compare_epochs(c: Campaign, from_label: str, to_label: str, *, method: str =
 def _profile(c: Campaign, base: str, epochs: tuple[EpochInFrame, EpochInFrame], clouds: tuple[np.ndarray, np.ndarray],
              *, bin_m: float) -> tuple[SpanProfile, SpanFrame]:
     """The span profile of two epochs in span coordinates tied to the layout, with their registration σ."""
-    from projects.processing.stages import layout_up, parameters
-
     layout = c.layout()
     ids = list(layout.ids)
     base_xyz, _ = _centroid_arrays(c, base, ids)
@@ -327,8 +319,6 @@ def _registration_json(e: EpochInFrame) -> dict:
                        "warnings": list(e.registration.warnings)},
            "transform": e.transform.to_json()}
     if e.icp is not None:
-        from registration.transform import pose_difference
-
         dt_m, dr_deg = pose_difference(e.registration.transform, e.icp.transform)
         voxel_cm = e.icp.voxels_m[-1] * 100
         out["icp"] = {"method": e.icp.correction.method, "fitness": e.icp.fitness,
@@ -401,17 +391,12 @@ def write_outputs(summary: dict, out_dir: str | os.PathLike) -> list[Path]:
         dw.writeheader()
         dw.writerows(bins)
     paths.append(write_atomic(out / "span_profile.csv", buf.getvalue()))
-    from lidar.figures import save_figure
-    from projects.compare.figures import span_profile_figure
-
     paths.append(save_figure(span_profile_figure(public), out / "span_profile.png"))
     return paths
 
 
 def write_change_las(change: ChangeResult, path: Path) -> Path:
     """Write a comparison's points with their change (mm) as extra dimensions of a LAS file; returns its path."""
-    import laspy
-
     hdr = laspy.LasHeader(point_format=6, version="1.4")
     hdr.scales = np.array([1e-4, 1e-4, 1e-4])
     hdr.offsets = np.floor(change.points.min(axis=0))

@@ -12,6 +12,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from common.errors import InputError, SurveyError
+from projects.results.status import campaign_status
+from projects.series.camera import crossval_summaries
 from projects.store.campaign import DB_NAME, Campaign
 
 MAX_DEPTH = 8
@@ -121,9 +123,6 @@ def _days_since(iso: str, today: dt.date) -> int:
 
 def bridge_status(folder: str | os.PathLike, *, today: dt.date | None = None) -> BridgeStatus:
     """Summary of one campaign, read-only; an unreadable campaign gets its one-line error instead."""
-    from projects.results.status import campaign_status
-    from projects.series.camera import crossval_summaries
-
     folder = Path(folder)
     today = today or dt.date.today()
     try:

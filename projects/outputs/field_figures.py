@@ -5,7 +5,9 @@ import datetime as dt
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+import matplotlib.dates as mdates
 import numpy as np
+from matplotlib.figure import Figure
 
 from lidar.systematic.adjustment import FieldModel
 from lidar.systematic.range_walk import describe_basis
@@ -98,8 +100,6 @@ def field_model_figure(model: FieldModel, times: Mapping[str, str], *,
     ``times``: epoch label -> ISO date-time (the visits the figure places on its time axes);
     ``measured``: (range m, cos incidence) of the campaign's centroids.
     """
-    from matplotlib.figure import Figure
-
     fig = Figure(figsize=figsize or (10.0, 3.0), dpi=110, layout="constrained")
     axes = fig.subplots(1, 3)
     range_walk_panel(axes[0], model, measured)
@@ -111,7 +111,6 @@ def field_model_figure(model: FieldModel, times: Mapping[str, str], *,
         for label in ax.get_xticklabels():
             label.set_rotation(30)
             label.set_fontsize(7)
-        import matplotlib.dates as mdates
 
         lo, hi = ax.get_xlim()
         if hi - lo < 2.0:  # one visit: a week either side, so that the date axis has ticks to place

@@ -12,9 +12,16 @@ import os
 from pathlib import Path
 from typing import Any
 
+import matplotlib
 import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.patches import Rectangle
+from reportlab.lib.units import mm
+from reportlab.platypus import Image, Paragraph, Spacer
 
 from lidar.plan import ScanPlan
+from projects.outputs.report.flowables import esc, styles, table
+from projects.outputs.report.pdf import write_landscape_pdf
 
 THUMB_HALF_DEG = 1.5
 
@@ -23,12 +30,8 @@ def _thumbnail_png(preview, roi) -> bytes | None:
     """A small image of the stored reflectance map around a window (None without a map)."""
     if preview is None:
         return None
-    import matplotlib
 
     matplotlib.use("Agg", force=False)
-    from matplotlib.figure import Figure
-    from matplotlib.patches import Rectangle
-
     rmap = preview.reflectance_map
     tc, pc = roi.window.centre
     half = max(THUMB_HALF_DEG, 0.8 * (roi.window.theta_max_deg - roi.window.theta_min_deg))
@@ -54,12 +57,6 @@ def _thumbnail_png(preview, roi) -> bytes | None:
 def write_field_sheet(plan: ScanPlan, path: str | os.PathLike, *, campaign_name: str = "", preview: Any = None,
                       epoch_date: str = "") -> Path:
     """Write the field sheet of ``plan`` to a PDF (``preview``: the epoch's stored map, for thumbnails)."""
-    from reportlab.lib.units import mm
-    from reportlab.platypus import Image, Paragraph, Spacer
-
-    from projects.outputs.report.flowables import esc, styles, table
-    from projects.outputs.report.pdf import write_landscape_pdf
-
     ss = styles()
     p = plan.profile
     when = f" ({epoch_date})" if epoch_date and epoch_date != plan.epoch else ""

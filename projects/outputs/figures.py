@@ -4,7 +4,10 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any, cast
 
-from projects.series.context import COLOURS, PlotContext
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+
+from projects.series.context import COLOURS, PlotContext, draw_context
 from projects.store.history import DisplacementHistory
 from projects.store.limits import Limit
 
@@ -22,8 +25,6 @@ def limit_of(h: DisplacementHistory | None) -> Limit | None:
 
 def limit_handles(limits: Sequence[Limit]) -> list:
     """Legend entries of the distinct warning and alarm levels, e.g. ``warning −16.8 mm``."""
-    from matplotlib.lines import Line2D
-
     out = []
     for key, style, name in LIMIT_STYLES:
         for v in sorted({getattr(lim, f"{key}_mm") for lim in limits if getattr(lim, f"{key}_mm")}):
@@ -47,8 +48,6 @@ def displacement_history_figure(histories: Mapping[str, DisplacementHistory], *,
     :class:`projects.series.context.PlotContext`. The legend sits above the plot, never over the data.
     ``histories`` as :func:`projects.store.history.histories` gives them (reflector -> history).
     """
-    from matplotlib.figure import Figure
-
     fig = Figure(figsize=figsize, dpi=110, layout="constrained")
     ax = fig.add_subplot(1, 1, 1)
     handles = []
@@ -67,8 +66,6 @@ def displacement_history_figure(histories: Mapping[str, DisplacementHistory], *,
     ax.set_title(title, pad=12)  # room for the event numbers above the axes
     ax.grid(alpha=0.3)
     if handles:
-        from projects.series.context import draw_context
-
         handles += draw_context(ax, context, series=series)
     figure_legend(fig, handles, ncol=max(2, int(figsize[0] / 2.2)))
     fig.autofmt_xdate()

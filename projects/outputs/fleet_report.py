@@ -5,17 +5,17 @@ import datetime as dt
 import os
 from pathlib import Path
 
+from reportlab.lib.units import mm
+from reportlab.platypus import Paragraph, Spacer
+
+from projects.outputs.report.flowables import esc, num, styles, table
+from projects.outputs.report.pdf import write_landscape_pdf
+
 STATE_COLOURS = {"ok": "#c8e6c9", "warning": "#ffe0b2", "alarm": "#ffcdd2", "unknown": "#eeeeee"}
 
 
 def write_fleet_report(status: dict, path: str | os.PathLike, *, title: str = "Bridge fleet") -> Path:
     """Write :func:`projects.fleet.fleet_status` output as a PDF."""
-    from reportlab.lib.units import mm
-    from reportlab.platypus import Paragraph, Spacer
-
-    from projects.outputs.report.flowables import esc, num, styles, table
-    from projects.outputs.report.pdf import write_landscape_pdf
-
     ss = styles()
     ov = status["overview"]
     story = [Paragraph(esc(f"{title}: {ov['bridges']} bridges"), ss["Heading1"]),

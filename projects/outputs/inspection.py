@@ -10,6 +10,7 @@ from common.progress import ProgressCallback, report, scaled
 from lidar.angles import direction_from_angles, spherical_from_xyz
 from lidar.centroid import TargetCentroid, target_centroid
 from lidar.plan import RoiPlan
+from projects.compare.whole_scan import compare_epochs
 from projects.processing.stages import read_files
 from projects.store.campaign import Campaign
 
@@ -141,8 +142,6 @@ def _targets_of(c: Campaign, label: str) -> tuple[tuple, np.ndarray]:
 def change_cloud(c: Campaign, base: str, label: str, *, max_points: int = 1_500_000,
                  progress: ProgressCallback | None = None) -> tuple[DisplayCloud, dict]:
     """M3C2 change (mm, signed) of ``label`` against ``base`` in the campaign frame, and the summary."""
-    from projects.compare.whole_scan import compare_epochs
-
     summary = compare_epochs(c, base, label, method="m3c2", progress=scaled(progress, 0.0, 0.95))
     ch = summary.pop("_arrays")["change"]
     keep = decimate(len(ch.points), max_points)

@@ -46,7 +46,7 @@ from lidar.stage2 import (
 FIELD_REFIT = "the field model was re-fitted with the newer visits"
 from lidar.systematic.campaign_fit import air_near
 from projects.processing.parameters import DEFAULTS, parameter, stage1_params, stage2_params
-from projects.store.campaign import Campaign, sha256_of
+from projects.store.campaign import Campaign, parse_datetime, sha256_of
 from projects.store.previews import encode_preview
 from projects.store.records import EpochInputs, ScanFile
 
@@ -102,7 +102,6 @@ def set_parameter(c: Campaign, key: str, text: str | None) -> None:
         c.set_setting("baseline", value)
         return
     if p.stage == "analysis":  # concrete age axes and predictions by age
-        from projects.store.campaign import parse_datetime
 
         c.set_setting(key, parse_datetime(text) if text else None)
         return

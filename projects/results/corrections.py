@@ -11,6 +11,9 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
+from lidar.systematic.axes import errors_text
+from lidar.systematic.range_walk import describe_basis
+
 #: Where the centroid times of an epoch came from, as the line says it.
 TIME_SOURCES = {"points": "times from the points", "plan": "times from the plan", "none": "no times"}
 
@@ -89,8 +92,6 @@ def instrument_summary(model) -> dict:
     words, ``none`` without one), ``range_walk_determined``, ``axis_errors`` (one ``{"axis", "arcsec",
     "sigma_arcsec"}`` a fitted error, none where the data support none) and ``sigma0``.
     """
-    from lidar.systematic.range_walk import describe_basis
-
     rw = model.range_walk
     return {"range_walk": describe_basis(rw.basis), "range_walk_determined": bool(rw.determined),
             "axis_errors": [{"axis": name, "arcsec": round(v, 1) + 0.0, "sigma_arcsec": round(s, 1)}
@@ -100,8 +101,6 @@ def instrument_summary(model) -> dict:
 
 def instrument_line(summary: Mapping) -> str:
     """``range walk: none; axis errors: vertical index +28.0 ± 7.5″`` from :func:`instrument_summary`."""
-    from lidar.systematic.axes import errors_text
-
     axes = errors_text((a["axis"], a["arcsec"], a["sigma_arcsec"]) for a in summary["axis_errors"])
     walk = summary["range_walk"] + ("" if summary["range_walk"] == "none" or summary["range_walk_determined"]
                                     else " (not determined: its prior is in σ)")

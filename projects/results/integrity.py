@@ -13,14 +13,17 @@ from collections.abc import Callable
 from pathlib import Path
 
 from common.progress import ProgressCallback
+from projects.processing.stages import baseline_epoch, stale_epochs
+from projects.series.camera import import_series
+from projects.series.environment import import_env
+from projects.series.predictions import import_prediction
 from projects.store.campaign import Campaign
+from projects.store.repair import repair_campaign, repair_schema_version
 from projects.store.verify import Finding, verify_store
 
 
 def _stale(c: Campaign) -> list[Finding]:
     """Results that do not match their inputs (processing's view), as findings."""
-    from projects.processing.stages import baseline_epoch, stale_epochs
-
     out = [Finding("stale", f"epoch {label}", f"results are stale ({why})", "run 'bridgesurvey process'")
            for label, why in stale_epochs(c).items()]
     base = baseline_epoch(c)
@@ -42,10 +45,6 @@ def verify_campaign(c: Campaign, *, progress: ProgressCallback | None = None) ->
 
 def reimporters() -> dict[str, Callable]:
     """How each kind of series file is read again (with the options of its import, from the journal)."""
-    from projects.series.camera import import_series
-    from projects.series.environment import import_env
-    from projects.series.predictions import import_prediction
-
     def camera(c, path, e):
         name, _ = import_series(c, path, name=e.get("name"), reflector=e.get("reflector"), **e.get("read", {}))
         return f"{path.parent.name}/{path.name}: camera series {name!r} read again"
@@ -63,8 +62,6 @@ def reimporters() -> dict[str, Callable]:
 
 def repair_folder(folder: str | os.PathLike) -> tuple[list[str], list[str]]:
     """Repair a campaign folder; (what was done, what was left as it is). Nothing is deleted."""
-    from projects.store.repair import repair_campaign, repair_schema_version
-
     schema_notes = repair_schema_version(Path(folder))
     with Campaign.open(folder) as c:
         rep = repair_campaign(c, reimporters())

@@ -26,6 +26,7 @@ from common.flags import (
     words,
     worst,
 )
+from projects.series.predictions import predictions
 from projects.store.campaign import Campaign
 from projects.store.records import DisplacementRecord
 
@@ -117,8 +118,6 @@ class Departure:
 def departures(c: Campaign, records: Sequence[DisplacementRecord] | None = None
                ) -> dict[tuple[str, str], Departure]:
     """``(epoch, reflector) -> Departure`` for every displacement (default: all stored) inside its prediction."""
-    from projects.series.predictions import predictions
-
     preds = predictions(c)
     if not preds:
         return {}

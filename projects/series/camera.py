@@ -10,12 +10,15 @@ import numpy as np
 
 from common.errors import ProcessingError
 from common.files import csv_text, json_safe, output_folder, write_atomic
+from common.series import Series, series_arrays_from_npz, series_npz_bytes
+from lidar.figures import save_figure
 from projects.store.campaign import CAMERA_DIR, Campaign, parse_datetime
 from projects.store.errors import InputError
 from projects.store.history import histories, ns_of
 from projects.store.records import SeriesRecord
 from vision.crossval import CrossValidation, cross_validate
-from vision.series import CameraSeries, read_camera_series
+from vision.figures import difference_figure, overlay_figure, scatter_figure
+from vision.series import read_camera_series
 
 
 def midspan_reflector(c: Campaign) -> str:
@@ -33,7 +36,7 @@ def midspan_reflector(c: Campaign) -> str:
 
 def import_series(c: Campaign, path: str | os.PathLike, *, name: str | None = None,
                   reflector: str | None = None, column: str | None = None, timezone: str | None = None,
-                  unit: str | None = None, positive: str = "up") -> tuple[str, CameraSeries]:
+                  unit: str | None = None, positive: str = "up") -> tuple[str, Series]:
     """Read a camera series file, copy it into the campaign (read-only) and store the series.
 
     ``timezone`` is the zone of times without an offset (default: the campaign's, :attr:`Campaign.timezone`);
@@ -47,13 +50,13 @@ def import_series(c: Campaign, path: str | os.PathLike, *, name: str | None = No
     sha = c.series.checksum_if_new("camera_series", path)
     timezone = timezone or c.timezone
     series = read_camera_series(path, column=column, timezone=timezone, unit=unit, positive=positive)
-    options = {"column": series.column, "unit": series.unit, "timezone": timezone, "positive": positive}
-    summary = series.summary()
+    options = {"column": series.column, "unit": series.unit_read, "timezone": timezone, "positive": positive}
+    summary = {**series.summary(), "unit": series.unit_read}  # the stored record's 'unit': the file's (format 1)
 
     def record(conn, rel):
         c.series.insert(conn, "camera_series", name=name, reflector=rid, sha256=sha, stored_path=rel,
                         original_path=str(path.resolve()), options=options, summary=summary,
-                        arrays=series.to_npz_bytes())
+                        arrays=series_npz_bytes(series.time_ns, series.values))
         c.log_action(conn, "camera-import", None, {"name": name, "file": str(path), "sha256": sha, "rows": len(series),
                                               "bad_rows": series.n_bad, "reflector": rid})
 
@@ -68,7 +71,7 @@ def series_records(c: Campaign) -> list[SeriesRecord]:
     return c.series.records("camera_series")
 
 
-def load_series(c: Campaign, name: str | None = None) -> tuple[SeriesRecord, CameraSeries]:
+def load_series(c: Campaign, name: str | None = None) -> tuple[SeriesRecord, Series]:
     """One stored series (the only one when ``name`` is None)."""
     rows = series_records(c)
     if not rows:
@@ -83,15 +86,15 @@ def load_series(c: Campaign, name: str | None = None) -> tuple[SeriesRecord, Cam
         if not match:
             raise InputError(f"no camera series {name!r}; the campaign has {', '.join(r.name for r in rows)}")
         row = match[0]
-    t, v = CameraSeries.arrays_from_npz(c.series.arrays("camera_series", row.name))
+    t, v = series_arrays_from_npz(c.series.arrays("camera_series", row.name))
     s = row.summary
-    return row, CameraSeries(time_ns=t, value_mm=v, source=row.original_path, column=row.options["column"],
-                             unit=row.options["unit"], n_bad=s["bad_rows"], n_missing=s["missing_values"],
-                             sampling_s=s["sampling_s"] or float("nan"))
+    return row, Series(time_ns=t, values=v, unit="mm", unit_read=row.options["unit"], source=row.original_path,
+                       column=row.options["column"], n_bad=s["bad_rows"], n_missing=s["missing_values"],
+                       sampling_s=s["sampling_s"] or float("nan"))
 
 
 def crossvalidate(c: Campaign, *, series: str | None = None, reflector: str | None = None,
-                  align_at: str | None = None, window_min: float = 30.0) -> tuple[CrossValidation, CameraSeries]:
+                  align_at: str | None = None, window_min: float = 30.0) -> tuple[CrossValidation, Series]:
     """Cross-validate a stored camera series with the LiDAR displacements of its reflector."""
     row, cam = load_series(c, series)
     rid = reflector or row.reflector or midspan_reflector(c)
@@ -118,11 +121,8 @@ def crossval_summaries(c: Campaign) -> list[dict]:
     return [r.summary for r in c.crossvals.all()]
 
 
-def write_crossval_outputs(cv: CrossValidation, camera: CameraSeries, out_dir: str | os.PathLike) -> list[Path]:
+def write_crossval_outputs(cv: CrossValidation, camera: Series, out_dir: str | os.PathLike) -> list[Path]:
     """``crossval.json``, ``crossval.csv`` and the overlay, difference and scatter plots (PNG)."""
-    from lidar.figures import save_figure
-    from vision.figures import difference_figure, overlay_figure, scatter_figure
-
     out = output_folder(out_dir)
     table = json_safe(cv.to_json())  # NaN -> None, which to_csv writes as an empty cell
     paths = [write_atomic(out / "crossval.json", json.dumps(table, indent=2) + "\n")]

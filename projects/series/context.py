@@ -12,7 +12,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import matplotlib.dates as mdates
+import matplotlib.transforms as mtransforms
 import numpy as np
+from matplotlib.lines import Line2D
+
+from projects.series.environment import events, load_env
 
 DAY_NS = 86_400 * 10**9
 #: A day's mean is drawn only when its valid samples cover at least this share of it (count x typical step).
@@ -91,8 +96,6 @@ def series_for_plot(time_ns: np.ndarray, values: np.ndarray) -> tuple[tuple[dt.d
 
 def plot_context(c: Any, *, kind_preference: Sequence[str] = ("structure-temperature", "temperature")) -> PlotContext:
     """Events and the first series of the preferred kinds, from an open campaign."""
-    from projects.series.environment import events, load_env
-
     evs = tuple((e.when, e.label) for e in events(c))
     for kind in kind_preference:
         series = load_env(c, kind=kind)
@@ -105,8 +108,6 @@ def plot_context(c: Any, *, kind_preference: Sequence[str] = ("structure-tempera
 
 def event_handles(ctx: PlotContext | None) -> list:
     """Legend entries for the events: a dashed line labelled ``1  label (date)`` for each."""
-    from matplotlib.lines import Line2D
-
     if ctx is None:
         return []
     return [Line2D([], [], color=COLOURS["event"], ls="--", lw=0.9,
@@ -116,8 +117,6 @@ def event_handles(ctx: PlotContext | None) -> list:
 
 def series_handle(ctx: PlotContext | None) -> list:
     """The legend entry of the environment series (empty without one)."""
-    from matplotlib.lines import Line2D
-
     if ctx is None or not len(ctx.series_days):
         return []
     return [Line2D([], [], color=COLOURS["series"], lw=1.0, label=ctx.series_label)]
@@ -131,9 +130,6 @@ def draw_context(ax: Any, ctx: PlotContext | None, *, label_events: bool = True,
     """
     if ctx is None:
         return []
-    import matplotlib.dates as mdates
-    import matplotlib.transforms as mtransforms
-
     lo, hi = ax.get_xlim()
     top = mtransforms.blended_transform_factory(ax.transData, ax.transAxes)
     for k, (when, _) in enumerate(ctx.events, start=1):

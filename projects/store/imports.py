@@ -22,6 +22,9 @@ from pathlib import Path
 
 from common.errors import SurveyError
 from common.files import MB, disk_full_error, ensure_free, is_disk_full, sha256_of
+from lidar.io import sniff_format
+from lidar.io.e57_header import check_e57
+from lidar.io.las_header import check_las_header
 from projects.store.errors import CampaignError
 
 log = logging.getLogger(__name__)
@@ -208,18 +211,12 @@ def header_facts(path: Path) -> dict:
 
     Raises the reader's :class:`~common.errors.ScanFormatError` when the header is not readable.
     """
-    from lidar.io import sniff_format
-
     kind = sniff_format(path)
     facts: dict = {"format": kind}
     if kind == "las":
-        from lidar.io.las_header import check_las_header
-
         h = check_las_header(path)
         facts.update(version=h.version, point_format=h.point_format, point_count=h.point_count)
     elif kind == "e57":
-        from lidar.io.e57_header import check_e57
-
         e = check_e57(path)
         facts.update(version=e.version, records=[s.record_count for s in e.scans])
     with open(path, "rb") as fh:

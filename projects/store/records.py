@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from projects.store.setup_tables import frames_from_json
+
 
 def now_iso() -> str:
     """The current UTC time, ISO 8601 to the second."""
@@ -121,8 +123,6 @@ class ScanFile(_Plain):
     @property
     def frames(self) -> dict:
         """Set-up number -> :class:`lidar.io.poses.FileFrame`: how the file's points reach each set-up's frame."""
-        from projects.store.setup_tables import frames_from_json
-
         return frames_from_json(self.frame)
 
     @property

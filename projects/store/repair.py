@@ -25,6 +25,7 @@ from pathlib import Path
 
 from common.errors import SurveyError
 from common.files import sha256_of
+from lidar.scanner_profile import ScannerProfile
 from projects.store import digests, journal, schema, wal
 from projects.store.campaign import DB_NAME, Campaign, damaged_input_line, describe_input
 from projects.store.connection import connect
@@ -270,7 +271,6 @@ def _replay_epoch_scanners(c: Campaign, labels: set[str], out: RepairReport) -> 
             own[(e["epoch"], int(e.get("setup") or 1))] = e["profile"]
     if not own:
         return
-    from lidar.scanner_profile import ScannerProfile
 
     for (label, setup), doc in sorted(own.items()):
         c.set_profile(ScannerProfile.from_dict(doc), epoch=label, setup=setup if setup != 1 else None)

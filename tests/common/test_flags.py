@@ -83,11 +83,11 @@ def test_older_codes_are_mapped_by_the_migration():
 @pytest.mark.slow
 def test_every_flag_the_trap_simulations_raise_is_registered():
     """The simulator's traps (cable tie, occlusion, a removed and a moved target, saturation) end in registered flags."""
+    from common.series import Series
     from lidar.displacement import compute_displacements
     from lidar.simulate import EpochConditions
     from lidar.simulate.epochs import GROUPS, LAB_POSITIONS, fine_epoch
     from vision.crossval import cross_validate
-    from vision.series import CameraSeries
 
     base, _, _, _ = fine_epoch(EpochConditions(), LAB_POSITIONS[0], seed=1, min_points=300)
     traps = [EpochConditions(cable_ties=("R1",)), EpochConditions(occluded=("M2",)),
@@ -107,7 +107,7 @@ def test_every_flag_the_trap_simulations_raise_is_registered():
         for d in res.displacements:
             seen.update(d.flags)
     day = 86_400_000_000_000
-    cam = CameraSeries(np.array([0, 1, 2, 10], dtype=np.int64) * day, np.array([0.0, 0.1, 0.2, 0.3]))
+    cam = Series(np.array([0, 1, 2, 10], dtype=np.int64) * day, np.array([0.0, 0.1, 0.2, 0.3]), "mm")
     cv = cross_validate(["a", "b", "c", "d"], np.array([0, 1, 5, 10], dtype=np.int64) * day,
                         np.array([0.0, np.nan, 0.2, 0.3]), np.full(4, 0.1), cam)
     for p in cv.pairs:

@@ -73,3 +73,7 @@ def test_stored_arrays_name_their_values_and_read_the_first_format(tmp_path):
     np.savez(buf, version=np.int64(1), time_ns=t, value_mm=v)  # as stored before version 2
     t1, v1 = series_arrays_from_npz(buf.getvalue())
     assert list(t1) == [1, 2] and v1[0] == 20.5
+    buf = io.BytesIO()
+    np.savez(buf, version=np.int64(99), time_ns=t, values=v)  # written by a later version
+    with pytest.raises(SurveyError, match="newer"):
+        series_arrays_from_npz(buf.getvalue())

@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from common.errors import ProcessingError
+from common.series import Series
 from vision.crossval import cross_validate
-from vision.series import CameraSeries
 
 H = 3600 * 10 ** 9
 
@@ -12,7 +12,7 @@ H = 3600 * 10 ** 9
 def _camera(truth, offset, noise=0.0, n_days=30, rng=None):
     rng = rng or np.random.default_rng(0)
     t = np.arange(0, n_days * 24 * H, 60 * 10 ** 9, dtype=np.int64)
-    return CameraSeries(time_ns=t, value_mm=truth(t) + offset + rng.normal(0, noise, len(t)))
+    return Series(unit="mm", time_ns=t, values=truth(t) + offset + rng.normal(0, noise, len(t)))
 
 
 def truth(t):
@@ -70,7 +70,7 @@ def test_fewer_than_min_pairs_give_no_statistics_and_say_so():
 def test_a_camera_series_of_one_row_claims_no_agreement():
     """Issue 29: one row paired with one epoch and aligned on itself read 'RMSE 0.000 mm, 100 % within 2 sigma'."""
     t = np.arange(1, 10) * 24 * H
-    one = CameraSeries(time_ns=np.array([t[4] + 60 * 10 ** 9], np.int64), value_mm=np.array([3.0]))
+    one = Series(unit="mm", time_ns=np.array([t[4] + 60 * 10 ** 9], np.int64), values=np.array([3.0]))
     cv = cross_validate([str(k) for k in range(len(t))], t, truth(t), np.full(len(t), 0.1), one)
     assert cv.n_pairs == 1 and np.isnan(cv.rmse_mm) and np.isnan(cv.within_2sigma)
     assert "only 1 pair: too few for statistics" in cv.statistics_text()
@@ -97,8 +97,8 @@ def test_an_older_summary_of_few_pairs_loses_its_statistics_when_read_back():
 def test_pairing_alignment_and_statistics_are_separate_steps():
     from vision.crossval import agreement, align_camera, pair_with_camera
 
-    cam = CameraSeries(time_ns=np.array([0, 60, 120, 3600, 7200], np.int64) * 10 ** 9,
-                       value_mm=np.array([1.0, 2.0, 3.0, np.nan, 5.0]))
+    cam = Series(unit="mm", time_ns=np.array([0, 60, 120, 3600, 7200], np.int64) * 10 ** 9,
+                       values=np.array([1.0, 2.0, 3.0, np.nan, 5.0]))
     at = pair_with_camera(np.array([60, 3600, 7200 + 60], np.int64) * 10 ** 9, cam, window_s=90)
     assert at.count.tolist() == [3, 0, 1] and at.median_mm[0] == 2.0 and np.isnan(at.median_mm[1])
     assert at.median_mm[2] == 5.0 and at.sigma_mm[2] == 0.0  # one sample: no spread to judge

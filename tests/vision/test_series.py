@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from common.errors import InputError, SurveyError
-from vision.series import CameraSeries, read_camera_series
+from vision.series import read_camera_series
 from vision.simulate.series import simulate_series, write_series_csv
 
 DAY = 86400 * 10 ** 9
@@ -15,7 +15,7 @@ def test_round_trip_of_a_simulated_file_with_zone_gap_and_nans(tmp_path):
     path = write_series_csv(tmp_path / "cam.csv", t, v, utc_offset_h=9)
     s = read_camera_series(path)
     assert np.array_equal(s.time_ns, t)
-    assert np.allclose(s.value_mm, v, atol=6e-4, equal_nan=True)
+    assert np.allclose(s.values, v, atol=6e-4, equal_nan=True)
     assert s.n_missing == int(np.isnan(v).sum()) > 0
     assert len(s.gaps) == 1 and s.gaps[0][1] - s.gaps[0][0] == DAY // 4 + 60 * 10 ** 9
     assert s.sampling_s == 60.0 and s.n_bad == 0
@@ -35,7 +35,7 @@ def test_bad_rows_are_reported_with_their_line_numbers(tmp_path):
     assert "not a date-time" in s.bad_rows[0].reason and "not a number" in s.bad_rows[1].reason
     assert "fields" in s.bad_rows[2].reason and "unit" in s.bad_rows[3].reason
     assert s.n_missing == 1 and len(s) == 300 - 4
-    assert s.value_mm[5] == pytest.approx(-0.5 * 10 * 0.01 * 10)  # 0.05 cm down -> -0.5 mm
+    assert s.values[5] == pytest.approx(-0.5 * 10 * 0.01 * 10)  # 0.05 cm down -> -0.5 mm
     assert s.summary()["first_bad_lines"][0].startswith("line 11")
 
 
@@ -45,10 +45,10 @@ def test_timezone_column_date_and_time_columns_and_unix_seconds(tmp_path):
     s = read_camera_series(tmp_path / "tz.csv")
     base = np.datetime64("2026-01-01T00:00", "ns").astype(np.int64)
     assert list(s.time_ns) == [base, base + 3600 * 10 ** 9]  # 02:00 in Berlin is 01:00 UTC: a repeated time
-    assert s.n_duplicates == 1 and list(s.value_mm) == [1.0, 2.0]
+    assert s.n_duplicates == 1 and list(s.values) == [1.0, 2.0]
     (tmp_path / "unix.txt").write_text("unix value\n1767225600 0.5\n1767225660 0.6\n")
     u = read_camera_series(tmp_path / "unix.txt", unit="m")
-    assert u.time_ns[0] == 1767225600 * 10 ** 9 and u.value_mm[1] == pytest.approx(600.0)
+    assert u.time_ns[0] == 1767225600 * 10 ** 9 and u.values[1] == pytest.approx(600.0)
 
 
 def test_naive_times_take_the_given_zone(tmp_path):
@@ -78,15 +78,3 @@ def test_binary_and_missing_files(tmp_path):
         read_camera_series(tmp_path / "b.csv")
     with pytest.raises(InputError, match="no such file"):
         read_camera_series(tmp_path / "none.csv")
-
-
-def test_stored_arrays_round_trip_and_refuse_newer_versions():
-    s = CameraSeries(time_ns=np.array([1, 2], np.int64), value_mm=np.array([0.5, np.nan]))
-    t, v = CameraSeries.arrays_from_npz(s.to_npz_bytes())
-    assert list(t) == [1, 2] and v[0] == 0.5 and np.isnan(v[1])
-    import io
-
-    buf = io.BytesIO()
-    np.savez(buf, version=np.int64(99), time_ns=t, value_mm=v)
-    with pytest.raises(InputError, match="newer"):
-        CameraSeries.arrays_from_npz(buf.getvalue())

@@ -13,6 +13,7 @@ import datetime as dt
 import os
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from common.files import write_atomic
@@ -22,8 +23,6 @@ from vision.simulate.rig import RigGeometry, SyntheticRig
 
 
 def _write_png(path: Path, img: np.ndarray) -> None:
-    import cv2
-
     ok, buf = cv2.imencode(".png", img)
     if not ok:
         raise OSError(f"{path}: PNG encoding failed")

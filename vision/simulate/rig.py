@@ -18,6 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+import cv2
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -285,8 +286,6 @@ def _sample_offsets(n: int) -> tuple[np.ndarray, np.ndarray]:
 def _to_uint8(img: np.ndarray, noise: float, rng: np.random.Generator | None, blur_px: float = 0.8) -> np.ndarray:
     """Lens blur (Gaussian point spread of ``blur_px``), sensor noise, 8-bit quantisation."""
     if blur_px > 0:
-        import cv2
-
         img = cv2.GaussianBlur(img, (0, 0), blur_px)
     if noise > 0:
         rng = rng or np.random.default_rng(0)

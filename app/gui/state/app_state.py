@@ -27,11 +27,17 @@ from typing import Any
 from psygnal import Signal
 
 from app.gui.state.campaign_access import CampaignAccess
+from app.gui.state.details_html import campaign_html, epoch_html, reflector_html, series_html
 from app.gui.state.map_state import MapState
 from app.gui.state.next_step import NextStep, next_step
 from app.gui.state.status import StatusLine
 from app.gui.state.words import in_app_words
 from common.errors import SurveyError
+from projects.results.status import campaign_status
+from projects.series.camera import crossval_summaries, load_series, series_records
+from projects.series.context import plot_context
+from projects.store.history import histories
+from vision.crossval import CrossValidation
 
 #: The views a command may ask for, by name.
 VIEWS = ("displacements", "map", "fine", "cloud", "camera", "stations", "analysis")
@@ -74,11 +80,6 @@ class Selection:
 
 def read_snapshot(access) -> Snapshot:
     """Everything the views show of a campaign, in one shared-lock read."""
-    from projects.results.status import campaign_status
-    from projects.series.camera import series_records
-    from projects.series.context import plot_context
-    from projects.store.history import histories
-
     with access.read() as c:
         return Snapshot(campaign_status(c), tuple(c.reflectors()), tuple(series_records(c)), histories(c),
                         plot_context(c))
@@ -235,9 +236,6 @@ class AppState:
             self.report_error("Show the epoch", str(exc))
 
     def _load_camera(self) -> None:
-        from projects.series.camera import crossval_summaries, load_series
-        from vision.crossval import CrossValidation
-
         with self.read() as c:
             sums = crossval_summaries(c)
             cam = load_series(c, sums[0]["series"])[1] if sums else None
@@ -255,8 +253,6 @@ class AppState:
 
     def details_html(self) -> str:
         """HTML of the focused item (the campaign, a target, an epoch or a camera series)."""
-        from app.gui.state.details_html import campaign_html, epoch_html, reflector_html, series_html
-
         if self.access is None:
             return ""
         kind, key = self.selection.focus

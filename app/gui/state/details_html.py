@@ -7,6 +7,7 @@ import numpy as np
 
 from app.gui.state.words import windows_text
 from common.flags import describe
+from lidar.setups import join_summary, join_tables
 from projects.processing.stages import baseline_epoch
 from projects.results.corrections import corrections_line, instrument_line
 from projects.results.state import epoch_state
@@ -77,7 +78,6 @@ def epoch_html(c, label: str) -> str:
         out += "</table>"
     joined = c.systematics(label).get("setups")
     if joined:  # a visit of several set-ups: how they were joined (the joint frame's QA trail)
-        from lidar.setups import join_summary, join_tables
 
         out += f"<h4>Set-ups</h4><p>{html.escape(join_summary(joined))}</p>"
         for table in join_tables(joined):

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from common.errors import InputError
+from lidar.plan import new_roi
 
 
 @dataclass(frozen=True)
@@ -46,8 +47,6 @@ def window_of_cells(rect: CellRect, theta0: float, phi0: float, step: float) -> 
 def window_from_cells(preview, plan, rect: CellRect, rid: str, reflector):
     """A new plan window for ``rid`` from a rectangle drawn on an epoch's map preview (its range from the
     map's cells, its steps for the plan's points on a target of that size)."""
-    from lidar.plan import new_roi
-
     rmap = preview.reflectance_map
     r0, r1 = int(max(rect.top, 0)), int(min(rect.bottom + 1, rmap.shape[0]))
     c0, c1 = int(max(rect.left, 0)), int(min(rect.right + 1, rmap.shape[1]))

@@ -15,6 +15,7 @@ from PySide6.QtWidgets import (
 )
 
 from app.gui.views.mpl import PlotCanvas
+from projects.analysis.figures import draw_target
 
 COLUMNS = ["target", "mm/°C", "σ", "trend mm/yr", "events (step mm, creep coefficient)", "projection"]
 
@@ -102,7 +103,6 @@ class AnalysisView(QWidget):
     def _draw(self, row: int) -> None:
         if self.doc is None or not 0 <= row < len(self.doc["targets"]):
             return
-        from projects.analysis.figures import draw_target
 
         fig = self.canvas.figure
         fig.clear()

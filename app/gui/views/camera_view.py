@@ -5,6 +5,7 @@ from PySide6.QtCore import Signal
 from PySide6.QtWidgets import QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget
 
 from app.gui.views.mpl import PlotCanvas
+from vision.figures import difference_figure, overlay_figure, scatter_figure
 
 
 class CameraView(QWidget):
@@ -32,8 +33,6 @@ class CameraView(QWidget):
 
     def set_result(self, cv, camera) -> None:
         """Draw a :class:`vision.crossval.CrossValidation` with its camera series."""
-        from vision.figures import difference_figure, overlay_figure, scatter_figure
-
         self.result = cv
         fig = self.canvas.figure
         fig.clear()

@@ -28,6 +28,7 @@ def with_interactive_lod(plotter, actor, points, *, max_points: int = INTERACTIV
 
     ``keep``: the indices of that copy, prepared in the worker (by default every n-th point within ``max_points``).
     """
+    # local: VTK (pyvista, pyvistaqt) costs the application 1-1.8 s of start-up until a 3-D view is opened (measured)
     import pyvista as pv
     from vtkmodules.vtkRenderingLOD import vtkLODActor  # not "import vtk": it loads every VTK module (seconds)
 
@@ -90,6 +91,7 @@ class CloudView(QWidget):
 
     def _ensure_plotter(self):
         if self.plotter is None:
+            # local: VTK (pyvista, pyvistaqt) costs the application 1-1.8 s of start-up until a 3-D view is opened (measured)
             from pyvistaqt import QtInteractor
 
             # auto_update=False: no render timer; VTK renders when the view is touched, we when it changes
@@ -125,6 +127,7 @@ class CloudView(QWidget):
         Only the hand-over to VTK runs here, in two turns of the event loop (the actors, then the first
         frame), so that neither holds the interface for long.
         """
+        # local: VTK (pyvista, pyvistaqt) costs the application 1-1.8 s of start-up until a 3-D view is opened (measured)
         import pyvista as pv
 
         cloud = prepared.cloud
@@ -171,6 +174,7 @@ class CloudView(QWidget):
             self.plotter.interactor.update()
 
     def _draw_markers(self) -> None:
+        # local: VTK (pyvista, pyvistaqt) costs the application 1-1.8 s of start-up until a 3-D view is opened (measured)
         import pyvista as pv
 
         cloud, p = self.cloud, self.plotter

@@ -2,12 +2,14 @@
 and a click that selects the epoch."""
 from __future__ import annotations
 
+import matplotlib.dates as mdates
 import numpy as np
 from PySide6.QtCore import Signal
 from PySide6.QtWidgets import QCheckBox, QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
 from app.gui.views.mpl import PlotCanvas
 from app.gui.widgets import ElidedLabel
+from projects.series.context import draw_context
 
 
 class DisplacementView(QWidget):
@@ -84,8 +86,6 @@ class DisplacementView(QWidget):
 
     def _draw_events(self, ax) -> None:
         """Event lines with horizontal labels along the top, staggered so that neighbours do not overlap."""
-        import matplotlib.dates as mdates
-
         events = sorted(self.context.events) if self.context is not None else []
         lo, hi = ax.get_xlim()
         last_end = [-np.inf, -np.inf, -np.inf]  # per row: where the previous label ends (axes fraction)
@@ -169,8 +169,6 @@ class DisplacementView(QWidget):
         ax.legend(loc="best", fontsize=8, ncol=2)
         self._ax = ax
         if self.context_box.isChecked() and self.context is not None:
-            from projects.series.context import draw_context
-
             draw_context(ax, self.context, label_events=False)  # the lines; horizontal labels below
             self._draw_events(ax)
         fig.autofmt_xdate()

@@ -15,6 +15,7 @@ from PySide6.QtWidgets import (
 )
 
 from app.gui.views.mpl import PlotCanvas
+from projects.onsite.stations import draw_station_map
 
 TOP = 10
 
@@ -68,8 +69,6 @@ class StationsView(QWidget):
 
     def show_advice(self, advice, layout) -> None:
         """Draw a :class:`projects.stations.StationAdvice` over its layout."""
-        from projects.field.stations import draw_station_map
-
         self.advice = advice
         fig = self.canvas.figure
         fig.clear()

@@ -15,7 +15,10 @@ from pathlib import Path
 from common.errors import InputError
 from common.progress import ProgressCallback, report, scaled
 from projects.outputs.report.content import ReportContent, ReportScope, gather
+from projects.outputs.report.pdf import build_pdf
+from projects.processing.stages import analyse_epoch_coarse, parameters
 from projects.store.campaign import Campaign
+from projects.store.previews import decode_preview, encode_preview
 
 __all__ = ["ReportContent", "ReportScope", "gather", "write_report"]
 
@@ -32,9 +35,6 @@ def _check_output(path: Path) -> None:
 def _preview_from_scan(c: Campaign):
     """For epochs planned before previews were stored: analyse the coarse scan again (slow, not saved)."""
     def preview_of(label: str):
-        from projects.processing.stages import analyse_epoch_coarse, parameters
-        from projects.store.previews import decode_preview, encode_preview
-
         if not c.files(label, "coarse"):
             return None
         analysis = analyse_epoch_coarse(c, label, c.layout(c.epoch(label).datetime), parameters(c))
@@ -61,8 +61,6 @@ def write_report(c: Campaign, path: str | os.PathLike, scope: ReportScope = Repo
         Add the appendix: every visit's page with flag codes, the field model's tables, the processing log.
         Default False: the main body (summary, the visits that need attention, histories, analysis, budget).
     """
-    from projects.outputs.report.pdf import build_pdf
-
     path = Path(path)
     _check_output(path)
     report(progress, 0.0, "reading the campaign")  # from the start: reading a long campaign takes seconds

@@ -8,6 +8,9 @@ from __future__ import annotations
 
 from typing import Any
 
+from reportlab.platypus import KeepTogether, PageBreak, Paragraph, Spacer
+
+from projects.analysis.figures import along_figure, target_figure
 from projects.outputs.report.content import ReportContent
 from projects.outputs.report.flowables import esc, figure_flowable, num, table
 
@@ -84,10 +87,6 @@ def _target_text(t: dict) -> str:
 
 def analysis_section(content: ReportContent, ss: Any) -> list:
     """What explains the displacements: temperature effect, events with creep, trend and projection, per target."""
-    from reportlab.platypus import KeepTogether, PageBreak, Paragraph, Spacer
-
-    from projects.analysis.figures import along_figure, target_figure
-
     doc = content.extras["analysis"]
     intro = (f"Each target's history fitted by weighted least squares: a thermal coefficient, each event's "
              f"immediate step and the creep after it, a trend when the data want one. Temperature: "

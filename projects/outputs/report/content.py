@@ -20,9 +20,14 @@ import numpy as np
 from common.errors import InputError, SurveyError
 from common.flags import FLAG_SECOND_OBJECT
 from common.progress import ProgressCallback, report
+from lidar.systematic.corrections import cos_incidence_of
+from projects.analysis.run import analyse_campaign
+from projects.compare.whole_scan import comparisons
 from projects.processing.stages import PIPELINE_VERSION, baseline_epoch, parameters
 from projects.results.state import epoch_state
 from projects.results.table import damaged_line, displacement_table
+from projects.series.camera import crossval_summaries, load_series
+from projects.series.context import plot_context
 from projects.store import schema
 from projects.store.campaign import Campaign
 from projects.store.history import DisplacementHistory, histories
@@ -185,8 +190,6 @@ def _target_states(c: Campaign, last: EpochSection | None) -> list[TargetState]:
 
 def _field_extra(c: Campaign, sections: Sequence[EpochSection]) -> dict | None:
     """What the field error budget page shows: the model, each epoch's record, times, the centroids' geometry."""
-    from lidar.systematic.corrections import cos_incidence_of
-
     stored = c.field_model()
     if stored is None or not any(s.systematics for s in sections):
         return None
@@ -227,23 +230,18 @@ def gather(c: Campaign, scope: ReportScope = ReportScope(), *, author: str | Non
     in_scope = {r["epoch"] for r in rows}
     report(progress, 0.7, "reading the histories and comparisons")
     hist = {rid: h.select([lab in in_scope for lab in h.epochs]) for rid, h in histories(c).items()}
-    from projects.compare.whole_scan import comparisons
 
     extras: dict[str, Any] = {}
     cmp_ = comparisons(c, {s.label for s in sections} | ({baseline_epoch(c)} if scope.epoch else set()))
     if cmp_:
         extras["comparisons"] = cmp_
-    from projects.series.camera import crossval_summaries, load_series
 
     cvs = crossval_summaries(c)
     if cvs:
         extras["crossvals"] = [(s, load_series(c, s["series"])[1]) for s in cvs]
-    from projects.series.context import plot_context
 
     extras["context"] = plot_context(c)
     if len({r["epoch"] for r in rows}) >= 4:
-        from projects.analysis.run import analyse_campaign
-
         report(progress, 0.8, "analysing temperature, events and trend")
         try:
             extras["analysis"] = analyse_campaign(c)

@@ -9,9 +9,11 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from reportlab.platypus import PageBreak, Paragraph, Spacer
 
 from lidar.systematic.adjustment import ALTERNATIVE_BIC
 from lidar.systematic.range_walk import PLAUSIBLE_BIC, describe_basis, plausible
+from projects.outputs.field_figures import field_model_figure
 from projects.outputs.report.content import ReportContent
 from projects.outputs.report.flowables import esc, figure_flowable, num, table
 from projects.results.corrections import epoch_corrections
@@ -118,10 +120,6 @@ def _overview(content: ReportContent) -> str:
 
 def field_section(content: ReportContent, ss: Any) -> list:
     """Flowables of the field error budget (``content.extras['field']``): the main body's page, in words."""
-    from reportlab.platypus import PageBreak, Paragraph, Spacer
-
-    from projects.outputs.field_figures import field_model_figure
-
     extra = content.extras["field"]
     return [PageBreak(), Paragraph("Field error budget", ss["Heading1"]), Paragraph(esc(INTRO), ss["Small"]),
             Spacer(1, 3),
@@ -133,8 +131,6 @@ def field_section(content: ReportContent, ss: Any) -> list:
 
 def field_appendix(content: ReportContent, ss: Any) -> list:
     """The field model's tables (appendix B): the laws it weighed, each visit's corrections, the budget by visit."""
-    from reportlab.platypus import PageBreak, Paragraph
-
     out = [PageBreak(), Paragraph("Appendix B: the field model by visit", ss["Heading1"]),
            Paragraph(esc(_range_walk_text(content)), ss["Small"]),
            Paragraph("Each visit's corrections", ss["Heading2"]),

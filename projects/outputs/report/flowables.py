@@ -9,21 +9,27 @@ import io
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
+from xml.sax.saxutils import escape
 
 import numpy as np
+from matplotlib import get_data_path
+from reportlab.lib import colors
+from reportlab.lib.fonts import addMapping
+from reportlab.lib.styles import ParagraphStyle, getSampleStyleSheet
+from reportlab.lib.units import mm
+from reportlab.pdfbase import pdfmetrics
+from reportlab.pdfbase.pdfmetrics import stringWidth
+from reportlab.pdfbase.ttfonts import TTFont
+from reportlab.platypus import Paragraph, Table, TableStyle
+from svglib.svglib import svg2rlg
 
 
 def fonts() -> tuple[str, str]:
     """DejaVu Sans (shipped with matplotlib) so that σ, ±, ≤ print; registered once."""
-    from matplotlib import get_data_path
-    from reportlab.pdfbase import pdfmetrics
-    from reportlab.pdfbase.ttfonts import TTFont
-
     if "DejaVuSans" not in pdfmetrics.getRegisteredFontNames():
         ttf = Path(get_data_path()) / "fonts" / "ttf"
         pdfmetrics.registerFont(TTFont("DejaVuSans", str(ttf / "DejaVuSans.ttf")))
         pdfmetrics.registerFont(TTFont("DejaVuSans-Bold", str(ttf / "DejaVuSans-Bold.ttf")))
-        from reportlab.lib.fonts import addMapping
 
         addMapping("DejaVuSans", 0, 0, "DejaVuSans")
         addMapping("DejaVuSans", 1, 0, "DejaVuSans-Bold")
@@ -32,8 +38,6 @@ def fonts() -> tuple[str, str]:
 
 def styles() -> Any:
     """The report's paragraph styles (DejaVu Sans; ``Cell`` for table cells, ``Small``, ``Mono``...)."""
-    from reportlab.lib.styles import ParagraphStyle, getSampleStyleSheet
-
     regular, bold = fonts()
     ss = getSampleStyleSheet()
     for name in ("Normal", "BodyText", "Title", "Heading1", "Heading2", "Heading3"):
@@ -56,8 +60,6 @@ def styles() -> Any:
 
 def esc(text: Any) -> str:
     """Text escaped for a reportlab Paragraph (None as empty)."""
-    from xml.sax.saxutils import escape
-
     return escape("" if text is None else str(text))
 
 
@@ -81,10 +83,6 @@ def cell_paragraph(text: str | Sequence[str], width_pt: float, style: Any) -> An
     When the longest word does not fit the column, the cell's font shrinks until it does (down to
     :data:`MIN_CELL_FONT_PT`; only a longer unbreakable string, a checksum, may still be split).
     """
-    from reportlab.lib.styles import ParagraphStyle
-    from reportlab.pdfbase.pdfmetrics import stringWidth
-    from reportlab.platypus import Paragraph
-
     lines = [text] if isinstance(text, str) else list(text)
     avail = width_pt - 2 * CELL_PADDING_PT
     words = [w for line in lines for w in str(line).split()]
@@ -102,10 +100,6 @@ def _is_text(c: Any) -> bool:
 def table(rows: Sequence[Sequence], widths_mm: Sequence[float], ss: Any, *, header_rows: int = 1,
           cell_colours: Sequence[tuple[int, int, str]] = ()) -> Any:
     """A grid table: text cells (a str, or a list of lines) as :func:`cell_paragraph`, header rows shaded."""
-    from reportlab.lib import colors
-    from reportlab.lib.units import mm
-    from reportlab.platypus import Table, TableStyle
-
     data = [[cell_paragraph(c, widths_mm[j] * mm, ss["Cell"]) if _is_text(c) else c for j, c in enumerate(r)]
             for r in rows]
     t = Table(data, colWidths=[w * mm for w in widths_mm], repeatRows=header_rows)
@@ -128,9 +122,6 @@ def figure_flowable(fig: Any, width_mm: float) -> Any:
 
     Maps are raster images instead: see :func:`render_map_jpeg`.
     """
-    from reportlab.lib.units import mm
-    from svglib.svglib import svg2rlg
-
     buf = io.BytesIO()
     fig.savefig(buf, format="svg")
     buf.seek(0)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import io
+import multiprocessing
 import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, wait
@@ -9,16 +10,40 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from reportlab import rl_config
+from reportlab.lib.pagesizes import A4, landscape
+from reportlab.lib.units import mm
+from reportlab.platypus import (
+    BaseDocTemplate,
+    Frame,
+    Image,
+    NextPageTemplate,
+    PageBreak,
+    PageTemplate,
+    Paragraph,
+    SimpleDocTemplate,
+    Spacer,
+)
 
 from common.files import atomic_output
 from common.flags import FLAG_NO_CAMERA_DATA, REGISTRY, code, describe, first_action, severity, summary
 from common.progress import ProgressCallback, report, scaled
+from lidar.reflectance_map import reduce_map
+from lidar.setups import join_summary, join_tables
+from projects.compare.figures import span_profile_figure
+from projects.compare.whole_scan import registration_lines
+from projects.outputs.figures import displacement_history_figure
+from projects.outputs.report.action_log import action_row
 from projects.outputs.report.analysis_page import analysis_section
 from projects.outputs.report.content import EpochSection, ReportContent
 from projects.outputs.report.field_page import field_appendix, field_section
 from projects.outputs.report.flowables import esc, figure_flowable, fonts, num, styles, table
+from projects.outputs.report.plots import epoch_map_figure, history_grid_figure, layout_figure
 from projects.results.corrections import corrections_line
 from projects.series.context import WHOLE_DAY_COVERAGE
+from projects.store.previews import MapPreview
+from vision.crossval import CrossValidation
+from vision.figures import difference_figure, overlay_figure, scatter_figure
 
 PAGE_MARGIN_MM = 16
 #: The states of a visit that needs the reader's attention (its page in the main body).
@@ -33,11 +58,6 @@ _fonts, _styles, _esc, _num, _table = fonts, styles, esc, num, table
 
 def write_landscape_pdf(story: list, path: str | os.PathLike, *, title: str) -> Path:
     """A one-off landscape A4 document (field sheet, fleet summary), written through a temporary file."""
-    from reportlab.lib.pagesizes import A4, landscape
-    from reportlab.lib.units import mm
-    from reportlab.platypus import SimpleDocTemplate
-
-
     with atomic_output(path) as tmp:
         SimpleDocTemplate(str(tmp), pagesize=landscape(A4), leftMargin=10 * mm, rightMargin=10 * mm,
                           topMargin=10 * mm, bottomMargin=10 * mm, title=title).build(story)
@@ -46,11 +66,6 @@ def write_landscape_pdf(story: list, path: str | os.PathLike, *, title: str) -> 
 
 def _make_doc(path, content: ReportContent):
     """A BaseDocTemplate with header and footer, whose level-1/2 headings become PDF bookmarks."""
-    from reportlab import rl_config
-    from reportlab.lib.pagesizes import A4
-    from reportlab.lib.units import mm
-    from reportlab.platypus import BaseDocTemplate, Frame, PageTemplate
-
     rl_config.useA85 = 0  # binary streams: ASCII85 is slow in pure Python and makes files larger
     regular, _ = _fonts()
 
@@ -84,8 +99,6 @@ def _make_doc(path, content: ReportContent):
 # ----------------------------------------------------------------------------- sections
 def title_page(content: ReportContent, ss: Any) -> list:
     """Flowables of the title page."""
-    from reportlab.platypus import NextPageTemplate, PageBreak, Paragraph, Spacer
-
     p0, p1 = content.period
     rows = [["Structure", content.name], ["Report covers", content.scope_text],
             ["Period", f"{p0[:16].replace('T', ' ')}  to  {p1[:16].replace('T', ' ')}"],
@@ -105,8 +118,6 @@ def title_page(content: ReportContent, ss: Any) -> list:
 
 def summary_section(content: ReportContent, ss: Any) -> list:
     """Flowables of the summary: latest value of every target, problems, largest movement, limits."""
-    from reportlab.platypus import Paragraph, Spacer
-
     out = [Paragraph("Summary", ss["Heading1"])]
     rows = content.displacements
     latest = {}
@@ -158,8 +169,6 @@ def summary_section(content: ReportContent, ss: Any) -> list:
                 out.append(Paragraph("Targets that reached a limit during the period: " +
                                      ", ".join(f"{a} ({s})" for a, s in alarms) + ".", ss["Normal"]))
     if rows:
-        from projects.outputs.figures import displacement_history_figure
-
         fig = displacement_history_figure(content.histories, title="All measurement targets (bars ±2σ)",
                                           context=content.extras.get("context"), series=False, figsize=(7.0, 3.8))
         out += [Spacer(1, 6), figure_flowable(fig, 170)]
@@ -180,10 +189,6 @@ def summary_section(content: ReportContent, ss: Any) -> list:
 
 def layout_section(content: ReportContent, ss: Any) -> list:
     """Flowables of the layout figure and each target's state."""
-    from reportlab.platypus import PageBreak, Paragraph
-
-    from projects.outputs.report.plots import layout_figure
-
     out = [PageBreak(), Paragraph("Reflector layout and target state", ss["Heading1"]),
            figure_flowable(layout_figure(content.reflectors, content.target_states, span_m=content.span_m), 170)]
     table = [["Target", "Group", "x / y / z [m]", "In use", f"Epoch {content.epochs[-1].label}"]]
@@ -204,10 +209,6 @@ def layout_section(content: ReportContent, ss: Any) -> list:
 
 def history_section(content: ReportContent, ss: Any) -> list:
     """Flowables of the per-target history panels, six to a page."""
-    from reportlab.platypus import PageBreak, Paragraph
-
-    from projects.outputs.report.plots import history_grid_figure
-
     out = [PageBreak(), Paragraph("Displacement history", ss["Heading1"])]
     targets = sorted(content.histories)
     if not targets:
@@ -230,8 +231,6 @@ MAP_FIGSIZE = (7.0, 3.1)
 
 def render_map_jpeg(preview: Any, plan: Any, label: str) -> bytes:
     """An epoch's map figure as JPEG bytes (JPEG goes into the PDF as it is, without re-encoding)."""
-    from projects.outputs.report.plots import epoch_map_figure
-
     fig = epoch_map_figure(preview, plan, title=f"Reflectance map, epoch {label} "
                                                 "(orange rings: detections; red boxes: planned fine windows)")
     buf = io.BytesIO()
@@ -246,9 +245,6 @@ def _render_map_job(job) -> bytes | None:
 def render_maps(sections: Sequence[EpochSection], preview_of: Callable | None = None, *,
                 progress: ProgressCallback | None = None, workers: int | None = None) -> list[bytes | None]:
     """Map images of many epochs, drawn in parallel worker processes when there are enough of them."""
-    from lidar.reflectance_map import reduce_map
-    from projects.store.previews import MapPreview
-
     jobs = []
     for e in sections:
         report(progress, 0.0, f"map of {e.label}")
@@ -265,8 +261,6 @@ def render_maps(sections: Sequence[EpochSection], preview_of: Callable | None = 
             report(progress, k / max(len(todo), 1), f"map {j[2]}")
             images.append(_render_map_job(j))
     else:
-        import multiprocessing
-
         # spawn, not fork: safe inside the desktop application's threads
         pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
         try:
@@ -322,16 +316,11 @@ def epoch_section(e: EpochSection, content: ReportContent, ss: Any, *, new_page:
     ``words``: flags said in words (the main body's page of a visit that needs attention); otherwise their
     codes (the appendix, whose flag table explains them).
     """
-    from reportlab.platypus import PageBreak, Paragraph, Spacer
-
     out = [PageBreak()] if new_page else []
     out += [Paragraph(f"{'Visit' if words else 'Epoch'} {_esc(e.label)} — {e.datetime[:16].replace('T', ' ')}",
                       ss["Heading2"]),
             Paragraph(state_line(e, words=words), ss["Small"])]
     if map_jpeg is not None:
-        from reportlab.lib.units import mm
-        from reportlab.platypus import Image
-
         out.append(Image(io.BytesIO(map_jpeg), width=178 * mm, height=178 * mm * MAP_FIGSIZE[1] / MAP_FIGSIZE[0]))
     else:
         out.append(Paragraph("No coarse-scan map for this epoch.", ss["Small"]))
@@ -366,7 +355,6 @@ def epoch_section(e: EpochSection, content: ReportContent, ss: Any, *, new_page:
                           _num(None if r.max_change_m is None else r.max_change_m * 1000), verdict])
         out += [Spacer(1, 4), Paragraph("Reference group check", ss["Small"]), _table(table, (20, 45, 30, 35), ss)]
     if e.setups:  # the joint frame of a visit of several set-ups: its QA trail
-        from lidar.setups import join_summary, join_tables
 
         motions, residuals = join_tables(e.setups)
         out += [Spacer(1, 4), Paragraph(_esc("Set-ups: " + join_summary(e.setups)), ss["Small"]),
@@ -412,10 +400,6 @@ def _flags_in(content: ReportContent) -> set[str]:
 
 def log_section(content: ReportContent, ss: Any, *, max_log_rows: int = 400) -> list:
     """Flowables of the processing log: versions, parameters, file checksums, flags and the action log."""
-    from reportlab.platypus import PageBreak, Paragraph
-
-    from projects.outputs.report.action_log import action_row
-
     out = [PageBreak(), Paragraph("Appendix C: processing log", ss["Heading1"]),
            Paragraph("Everything needed to trace the numbers: software versions, processing parameters, the "
                      "checksum of every scan file used, and the campaign's action log.", ss["Small"]),
@@ -455,11 +439,6 @@ def log_section(content: ReportContent, ss: Any, *, max_log_rows: int = 400) -> 
 
 def comparison_section(content: ReportContent, ss: Any) -> list:
     """Flowables of the whole-scan comparisons and span profiles."""
-    from reportlab.platypus import PageBreak, Paragraph, Spacer
-
-    from projects.compare.figures import span_profile_figure
-    from projects.compare.whole_scan import registration_lines
-
     out = [PageBreak(), Paragraph("Epoch comparison and span profile", ss["Heading1"]),
            Paragraph("The conventional whole-scan approach, for context: both epochs registered into the campaign "
                      "frame (reference targets as tie points, then ICP on the piers and the ground around them), "
@@ -490,11 +469,6 @@ def comparison_section(content: ReportContent, ss: Any) -> list:
 
 def crossval_section(content: ReportContent, ss: Any) -> list:
     """Flowables of the dual-camera cross-checks."""
-    from reportlab.platypus import PageBreak, Paragraph, Spacer
-
-    from vision.crossval import CrossValidation
-    from vision.figures import difference_figure, overlay_figure, scatter_figure
-
     out = [PageBreak(), Paragraph("Cross-check with the dual-camera system", ss["Heading1"]),
            Paragraph("The camera series of the midspan target (its own zero, set by the alignment below) against "
                      "the LiDAR displacements: each epoch is paired with the median of the camera samples around "
@@ -535,8 +509,6 @@ def attention_section(content: ReportContent, ss: Any, maps: Sequence[bytes | No
 
     None of them: nothing (the summary says so in one line).
     """
-    from reportlab.platypus import PageBreak, Paragraph
-
     chosen = [(e, m) for e, m in zip(content.epochs, maps, strict=True) if e.state in ATTENTION_STATES]
     if not chosen:  # the summary says so in one line
         return []
@@ -550,8 +522,6 @@ def attention_section(content: ReportContent, ss: Any, maps: Sequence[bytes | No
 
 def appendix_note(content: ReportContent, ss: Any) -> list:
     """The main body's last lines when the appendix is left out: where the detail is."""
-    from reportlab.platypus import Paragraph, Spacer
-
     return [Spacer(1, 10), Paragraph("Appendix", ss["Heading1"]),
             Paragraph("Not included in this report: every visit's page (map, plan, centroids and their flags), the "
                       "field model's per-visit tables, the processing parameters, the scan files' checksums, the flag "
@@ -568,8 +538,6 @@ def build_pdf(content: ReportContent, path: str | os.PathLike, *, preview_of: Ca
     optional sections (analysis, field budget, comparisons, camera cross-checks), in words. ``detail`` adds
     the appendix: every visit's page, the field model's tables and the processing log with flag codes.
     """
-    from reportlab.platypus import PageBreak, Paragraph
-
     path = Path(path)
     ss = _styles()
     story = title_page(content, ss)

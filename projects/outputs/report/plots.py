@@ -5,9 +5,13 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 
+from lidar.figures import reflectance_map_figure
+from lidar.reflectance_map import reduce_map
 from projects.outputs.figures import LIMIT_STYLES, figure_legend, limit_of
-from projects.series.context import COLOURS, PlotContext
+from projects.series.context import COLOURS, PlotContext, draw_context
 from projects.store.history import DisplacementHistory
 from projects.store.limits import Limit
 from projects.store.records import Reflector
@@ -17,8 +21,6 @@ GROUP_STYLE = {"reference": ("s", "tab:blue"), "measurement": ("o", "tab:green")
 
 def layout_figure(reflectors: Sequence[Reflector], states: Sequence = (), *, span_m: float | None = None) -> Any:
     """Plan (x, y) and elevation (x, z) of the reflector layout, flagged targets in red; the legend above."""
-    from matplotlib.figure import Figure
-
     trouble = {s.reflector for s in states if s.remarks and not (len(s.remarks) == 1 and
                                                                   s.remarks[0].startswith("replaces"))}
     fig = Figure(figsize=(7.0, 4.6), layout="constrained")
@@ -41,8 +43,6 @@ def layout_figure(reflectors: Sequence[Reflector], states: Sequence = (), *, spa
         ax.grid(alpha=0.3)
         ax.margins(0.12)
     if trouble:
-        from matplotlib.lines import Line2D
-
         handles.append(Line2D([], [], ls="", marker="$M$", color="tab:red", label="red label: target with a remark"))
     axes[0].set_title("Plan" + (f" (span {span_m:g} m)" if span_m else ""), fontsize=9)
     axes[1].set_title("Elevation", fontsize=9)
@@ -81,9 +81,6 @@ def history_grid_figure(histories: Mapping[str, DisplacementHistory], *, targets
     their panel, outside the data. ``histories`` as :func:`projects.store.history.histories` gives them.
     Series longer than ``max_points`` are thinned for drawing only.
     """
-    from matplotlib.figure import Figure
-    from matplotlib.lines import Line2D
-
     names = list(targets) if targets is not None else sorted(histories)
     n = max(len(names), 1)
     fig = Figure(figsize=(7.0, min(1.55 * n + 1.0, 9.4)), layout="constrained")
@@ -111,8 +108,6 @@ def history_grid_figure(histories: Mapping[str, DisplacementHistory], *, targets
             ax.set_title("below the plot: " + ", ".join(off_scale), loc="right", fontsize=6, color="0.3", pad=2)
         ax.axhline(0, color="0.6", lw=0.6)
         if context is not None and pts:
-            from projects.series.context import draw_context
-
             got = draw_context(ax, context, label_events=ax is axes[0])
             extra = extra or got
         ax.set_ylabel(f"{rid}\n[mm]", fontsize=8)
@@ -135,9 +130,6 @@ def epoch_map_figure(preview: Any, plan: Any, *, title: str) -> Any:
 
     (``plan`` a :class:`lidar.plan.ScanPlan` or None).
     """
-    from lidar.figures import reflectance_map_figure
-    from lidar.reflectance_map import reduce_map
-
     rois = list(plan.rois) if plan is not None else None
     fig = reflectance_map_figure(reduce_map(preview.reflectance_map, max_cells=300_000),
                                  detections=preview.detections, identification=preview.identification, rois=rois,

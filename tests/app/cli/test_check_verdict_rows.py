@@ -7,7 +7,7 @@ import io
 
 from app.cli.main import main
 from common.flags import FLAG_RESCAN_SKIPPED, REGISTRY, WARNING, code
-from tests.projects.field.test_field_check import LABEL, short_visit  # noqa: F401  (fixture)
+from tests.projects.onsite.test_onsite_check import LABEL, short_visit  # noqa: F401  (fixture)
 
 
 def _rows(camp, capsys) -> dict[str, list[str]]:

@@ -197,3 +197,14 @@ def test_the_program_exits_with_the_commands_status(tmp_path, monkeypatch, capsy
     finally:
         gc.unfreeze()  # run() freezes the survivors for a quick exit; this process goes on
     assert stop.value.code == 1 and "no campaign here" in capsys.readouterr().err
+
+
+def test_every_command_names_a_function_of_its_group_module():
+    """Each parser's ``func`` is a function of app.cli.commands_GROUP, imported only when the command runs."""
+    import importlib
+
+    named = [(path, p.get_default("func")) for path, p in _parsers() if p.get_default("func")]
+    assert len(named) >= len(COMMAND_MODULES)
+    for path, func in named:
+        module = importlib.import_module(f"app.cli.commands_{COMMAND_MODULES[path[0]]}")
+        assert callable(getattr(module, func, None)), (path, func)

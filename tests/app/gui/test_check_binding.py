@@ -7,7 +7,7 @@ import pytest
 from projects.store.campaign import Campaign
 from tests.app.gui.conftest import wait_job
 from tests.projects.campaign_helpers import snapshot
-from tests.projects.field.test_field_check import LABEL, short_visit  # noqa: F401  (fixture)
+from tests.projects.onsite.test_onsite_check import LABEL, short_visit  # noqa: F401  (fixture)
 
 pytestmark = pytest.mark.gui
 

@@ -18,13 +18,13 @@ STEP = StrengthStepWalk(0.0015, 0.0002, 0.5)
 
 def _general(seed: int, walk=STEP):
     g, ids, groups, visits, cents, truths = campaign(walk=walk, ppm=30.0, seed=seed)
-    general = adj._Problem(visits, groups, ("1", "sat_strength"))
+    general = adj.AdjustmentProblem(visits, groups, ("1", "sat_strength"))
     adj._adjust(general)
     return general, visits, groups
 
 
 def _exact(visits, groups, general, basis):
-    p = adj._Problem(visits, groups, basis, start=general)
+    p = adj.AdjustmentProblem(visits, groups, basis, start=general)
     for _ in range(3):
         sol, _ = adj._solve_once(p)
     return sol.chi2, p.theta, np.array([v.kappa_ppm for v in p.visits])
@@ -34,7 +34,7 @@ def _exact(visits, groups, general, basis):
                                    ("1", step_name("s", 0.49)), ("1", step_name("c", 0.3))])
 def test_the_linearised_fit_is_the_full_one(basis):
     general, visits, groups = _general(3)
-    info = bias_information(adj._Problem(visits, groups, (), start=general))
+    info = bias_information(adj.AdjustmentProblem(visits, groups, (), start=general))
     d = design(basis, info.range_m, info.cos_incidence)
     chi2, theta = info.chi2(d)
     chi2_full, theta_full, kappas_full = _exact(visits, groups, general, basis)
@@ -46,7 +46,7 @@ def test_the_linearised_fit_is_the_full_one(basis):
 
 def test_every_threshold_is_screened_as_if_fitted_alone():
     general, visits, groups = _general(5)
-    info = bias_information(adj._Problem(visits, groups, (), start=general))
+    info = bias_information(adj.AdjustmentProblem(visits, groups, (), start=general))
     laws = screen_laws(info, 180)
     steps = [law for law in laws if len(law.basis) == 2 and law.basis[1].startswith("step_")]
     s = info.range_m.size

@@ -238,6 +238,7 @@ def test_thin_cross_validation_and_the_analysis_page(processed, tmp_path):
 
     from reportlab.graphics.shapes import Drawing
 
+    from common.series import Series
     from projects.outputs.report import ReportScope, gather
     from projects.outputs.report.analysis_page import analysis_section
     from projects.outputs.report.flowables import styles
@@ -246,12 +247,11 @@ def test_thin_cross_validation_and_the_analysis_page(processed, tmp_path):
     from projects.store.history import histories
     from tests.projects.analysis.test_run import _doc
     from vision.crossval import cross_validate
-    from vision.series import CameraSeries
 
     with Campaign.open(processed, writable=False) as c:
         content = gather(c, ReportScope(), with_previews=False)
         h = histories(c)["M3"]
-    one = CameraSeries(time_ns=h.time_ns[1:2] + 60 * 10**9, value_mm=np.array([2.0]))
+    one = Series(unit="mm", time_ns=h.time_ns[1:2] + 60 * 10**9, values=np.array([2.0]))
     cv = cross_validate(list(h.epochs), h.time_ns, h.displacement_mm, h.sigma_mm, one, reflector="M3", series="one")
     doc, _, _ = _doc()
     content = dataclasses.replace(content, extras={**content.extras, "crossvals": [(cv.to_json(), one)],

@@ -19,6 +19,7 @@ from lidar.angles import direction_from_angles
 from lidar.plan import PlanTarget, ScanPlan, plan_fine_scans
 from lidar.prediction import centroid_covariance
 from lidar.systematic.corrections import closure_drift
+from projects.processing.stages import run_stage1, save_stage1, stage1_job
 from projects.store.campaign import Campaign
 
 POINTS_TOLERANCE = 0.7  # fewer than 70 % of the planned points: re-scan
@@ -130,8 +131,6 @@ def check_epoch(c: Campaign, label: str, *, goal_sigma_mm: float | None = None, 
     The verdict is kept in the campaign (:meth:`Campaign.check_verdict`): a re-scan it asks for is the visit's next
     step, and processing the epoch without it needs the user's word (:func:`pending_rescans`).
     """
-    from projects.processing.stages import run_stage1, save_stage1, stage1_job
-
     job = stage1_job(c, label, setup)  # one read of the store; an unknown epoch says so
     if not job.fine_paths:
         where = f"set-up {setup} of epoch {label}" if setup != 1 else f"epoch {label}"

@@ -10,7 +10,7 @@ from app.cli.main import main
 from lidar.layout import layout_from_model
 from lidar.simulate import BridgeModel
 from lidar.stations import StationPrediction
-from projects.field.station_pairs import combine, propose_pair
+from projects.onsite.station_pairs import combine, propose_pair
 
 LAYOUT = layout_from_model(BridgeModel(spans_m=(39.9, 39.9, 39.9)), noise_m=0.0, rng=np.random.default_rng(0))
 DECK = [t for t, g in zip(LAYOUT.ids, LAYOUT.groups, strict=False) if g == "measurement"]

@@ -10,7 +10,7 @@ import pytest
 from lidar.angles import AngularWindow
 from lidar.plan import ScanPlan
 from lidar.simulate.files import simulate_fine
-from projects.field.check import check_epoch
+from projects.onsite.check import check_epoch
 from projects.processing.stages import plan_epoch
 from projects.store.campaign import Campaign
 from tests.projects.campaign_helpers import snapshot

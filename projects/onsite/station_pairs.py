@@ -2,7 +2,7 @@
 
 When one station cannot see the whole bridge well (a long bridge, a pier hiding targets), a visit takes two
 set-ups, joined through the targets both see (:mod:`lidar.setups`). Given the evaluated
-stations (:func:`projects.field.stations.advise_stations`) and the first one (by default the best), the second
+stations (:func:`projects.onsite.stations.advise_stations`) and the first one (by default the best), the second
 is the one whose predicted sigmas most improve the worst deck target: each target's sigma from the pair is
 its two stations' combined by inverse variance (one station's when only one sees it), and the pair must share
 at least three well-spread targets to be joined at all. The join's own uncertainty is not in these

@@ -11,7 +11,9 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+import matplotlib
 import numpy as np
+from matplotlib.figure import Figure
 
 from common.arrays import thin_to_voxels
 from common.errors import InputError
@@ -19,6 +21,7 @@ from common.files import write_atomic
 from common.progress import ProgressCallback, report, scaled
 from common.rigid import fit_rigid
 from lidar.stations import StationPrediction, default_area, grid_in_polygon, survey_stations
+from projects.processing.stages import baseline_epoch, layout_up, parameters, read_files
 from projects.store.campaign import Campaign
 
 STATIONS_FORMAT_VERSION = 1
@@ -117,8 +120,6 @@ def last_station(c: Campaign) -> LastStation | None:
 def seen_surfaces(c: Campaign, last: LastStation, *, voxel_m: float = 0.05,
                   progress: ProgressCallback | None = None) -> np.ndarray | None:
     """The epoch's coarse scan in the layout's frame, one point per ``voxel_m`` cube (None without one)."""
-    from projects.processing.stages import read_files
-
     if not c.files(last.label, "coarse"):
         return None
     scan = read_files(c, c.files(last.label, "coarse"), scaled(progress, 0.0, 0.8))
@@ -135,8 +136,6 @@ def advise_stations(c: Campaign, *, area_xy: np.ndarray | None = None, height_m:
     With ``use_last_scan`` the last measured epoch's coarse scan adds what it saw (vegetation, site
     huts, the deck's own edges) as obstacles to the lines of sight.
     """
-    from projects.processing.stages import baseline_epoch, layout_up, parameters
-
     if not (np.isfinite(height_m) and 0 < height_m < 50):
         raise InputError(f"the instrument height must be between 0 and 50 m, got {height_m}")
     params = parameters(c)
@@ -178,10 +177,7 @@ def _field_model(c: Campaign, params: dict):
 
 def station_map_figure(advice: StationAdvice, layout, *, title: str = ""):
     """Map of the candidate stations coloured by their worst predicted sigma, over the layout."""
-    import matplotlib
-
     matplotlib.use("Agg", force=False)
-    from matplotlib.figure import Figure
 
     fig = Figure(figsize=(9, 6.5), dpi=110)
     draw_station_map(fig.add_subplot(111), advice, layout, title=title)
