@@ -380,7 +380,8 @@ def revisions(label: str, stored: Mapping[str, tuple[float | None, float | None,
         old_d, old_s, old_f = stored[d.reflector]
         had = old_d is not None and np.isfinite(old_d)
         has_ = np.isfinite(d.displacement_m)
-        moved = had and has_ and abs(d.displacement_m - old_d) >= max(REVISION_SIGMAS * (old_s or 0.0), 1e-5)
+        moved = had and has_ and abs(d.displacement_m - float(old_d or 0.0)) >= max(REVISION_SIGMAS * (old_s or 0.0),
+                                                                                    1e-5)
         if had != has_ or moved or _loud(old_f) != _loud(d.flags):
             out.append(Revision(label, d.reflector, _said(old_d, old_s, old_f),
                                 _said(float(d.displacement_m), float(d.sigma_m), d.flags), why))
@@ -409,9 +410,9 @@ def _bases(inputs: Stage2Inputs, vs: _Visits, lab: str, first_seen: Mapping[str,
 
 def _core_digest(inputs: Stage2Inputs, vs: _Visits, lab: str, bases: Sequence[str]) -> str:
     """The digest of a visit's inputs apart from the field model (its centroids, its bases', the settings...)."""
-    key = {"v": "1", "epoch": vs.by_label[lab].stage1_digest, "params": dict(inputs.digest_params),
-           "bases": {b: vs.by_label[b].stage1_digest for b in bases}, "reflectors": list(inputs.reflectors_key),
-           "air": list(inputs.air_key)}
+    key: dict[str, Any] = {"v": "1", "epoch": vs.by_label[lab].stage1_digest, "params": dict(inputs.digest_params),
+                           "bases": {b: vs.by_label[b].stage1_digest for b in bases},
+                           "reflectors": list(inputs.reflectors_key), "air": list(inputs.air_key)}
     if vs.by_label[lab].rescan:  # only then: the digests of visits without one stay as they were
         key["rescan"] = sorted(vs.by_label[lab].rescan.items())
     return inputs_digest(key)

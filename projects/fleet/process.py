@@ -143,11 +143,11 @@ def scheduler_security(address: str, tls: TlsFiles | None = None):
         return None
     if tls is None:
         sec = Security()  # Dask's configuration (~/.config/dask/*.yaml, DASK_DISTRIBUTED__COMM__TLS__* variables)
-        if not (sec.tls_ca_file and sec.tls_client_cert):
+        ca, cert, key = (getattr(sec, name, None) for name in ("tls_ca_file", "tls_client_cert", "tls_client_key"))
+        if not (ca and cert):
             raise InputError(f"{address}: a tls:// scheduler needs the cluster's certificates: give --tls-ca-file, "
                              f"--tls-cert and --tls-key, or set {DASK_TLS_KEYS} in Dask's configuration")
-        return Security(tls_ca_file=sec.tls_ca_file, tls_client_cert=sec.tls_client_cert,
-                        tls_client_key=sec.tls_client_key, require_encryption=True)
+        return Security(tls_ca_file=ca, tls_client_cert=cert, tls_client_key=key, require_encryption=True)
     files = (("--tls-ca-file", tls.ca_file), ("--tls-cert", tls.cert), ("--tls-key", tls.key))
     for what, path in files:
         if not path:

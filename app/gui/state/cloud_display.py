@@ -13,10 +13,14 @@ at the bridge), and a scale set by them washes out a deck that moved by millimet
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from common.progress import ProgressCallback, report
+
+if TYPE_CHECKING:  # the type only: the state module stays light
+    from projects.outputs.inspection import DisplayCloud
 
 #: Points drawn when the view is still (0.15-0.3 s a frame with software OpenGL on two busy cores; 150 k points
 #: held the interface up to 0.8 s on the first frame of a cloud).
@@ -96,7 +100,7 @@ class PreparedCloud:
     ``markers`` the targets' positions less ``offset``.
     """
 
-    cloud: object
+    cloud: DisplayCloud
     xyz: np.ndarray
     values: np.ndarray
     offset: np.ndarray
