@@ -209,8 +209,10 @@ def bright_cells(img: np.ndarray, step_deg: float, *, full_circle: bool = False,
 
 def _bright_and_floor(img: np.ndarray, step_deg: float, *, full_circle: bool = False,
                       top: float | None = None) -> tuple[np.ndarray, np.ndarray, int]:
-    """:func:`bright_cells`, and on the block grid (side ``b`` cells) the level a bright cell's weight is counted
-    from (just below its bar): (mask, floor blocks, b)."""
+    """:func:`bright_cells` with its floor: (mask, floor blocks, block side ``b`` in cells).
+
+    The floor, on the block grid, is the level a bright cell's weight is counted from (just below its bar).
+    """
     a = np.asarray(img)
     if top is None:
         top = float(np.fmax.reduce(a, axis=None)) if a.size else np.nan
@@ -263,6 +265,7 @@ def detect_reflectors(rmap: ReflectanceMap, *, target_diameter_m: float = 0.05, 
     w = labels.shape[0]  # (columns, rows)
     cols, rows = np.nonzero(labels)  # the bright cells only, in the transposed view's row-major order
     lab = labels[cols, rows]
+    roots = np.arange(n + 1)
     if rmap.full_circle:
         roots, col_shift = _merge_across_seam(labels[0], labels[w - 1], n, w)
         cols = cols + col_shift[lab]  # seam-merged blobs continue past the last column
@@ -305,9 +308,46 @@ def detect_reflectors(rmap: ReflectanceMap, *, target_diameter_m: float = 0.05, 
             peak_intensity=float(peak[k]), n_cells=int(n_cells[k]), size_deg=float(size[k]),
             expected_size_deg=expected, score=float(min(1.0, peak[k]) * fit),
         )
-        (kept if size[k] <= allowed else rejected).append(det)
+        small = size[k] <= allowed
+        if small and floor is not None:  # a compact piece of a larger bright area (a clipped wall's corner)?
+            small = not _part_of_larger(img, labels, roots, k, (int(col_lo[k]), int(col_hi[k])),
+                                        (int(row_lo[k]), int(row_hi[k])), rmap.full_circle)
+        (kept if small else rejected).append(det)
     kept.sort(key=lambda d: -d.score)
     return DetectionResult(tuple(kept), tuple(rejected), thr, rmap.step_deg)
+
+
+#: A blob whose ring of cells around it is this bright (as bright as its dimmest cell) in this share or more is a
+#: piece of a larger bright area, not a target: a target is surrounded by its background.
+RING_SHARE = 0.25
+
+
+def _part_of_larger(img: np.ndarray, labels: np.ndarray, roots: np.ndarray, k: int, col_span: tuple[int, int],
+                    row_span: tuple[int, int], full_circle: bool, ring: int = 2) -> bool:
+    """Whether blob ``k`` (of the transposed view ``img``) continues into cells as bright as itself around it.
+
+    Local contrast cuts a compact piece out of a large clipped area where the background changes (its corner
+    beside darker surfaces): the cells within ``ring`` cells around such a piece are as bright as its dimmest
+    cell, while around a target they are its background.
+    """
+    w, h = labels.shape
+    cc = np.arange(col_span[0] - ring, col_span[1] + ring + 1)
+    cc = np.mod(cc, w) if full_circle else cc[(cc >= 0) & (cc < w)]
+    rr = np.arange(max(row_span[0] - ring, 0), min(row_span[1] + ring + 1, h))
+    lab = roots[labels[np.ix_(cc, rr)]]
+    vals = img[np.ix_(cc, rr)]
+    blob = lab == k
+    grown = blob.copy()
+    for dc in range(-ring, ring + 1):  # dilation by a (2 ring + 1)^2 square
+        for dr in range(-ring, ring + 1):
+            src = blob[max(-dc, 0):blob.shape[0] - max(dc, 0), max(-dr, 0):blob.shape[1] - max(dr, 0)]
+            grown[max(dc, 0):blob.shape[0] - max(-dc, 0), max(dr, 0):blob.shape[1] - max(-dr, 0)] |= src
+    around = grown & ~blob & np.isfinite(vals)
+    n_around = int(np.count_nonzero(around))
+    if n_around == 0:
+        return False
+    level = float(np.min(vals[blob]))
+    return np.count_nonzero(vals[around] >= level) >= RING_SHARE * n_around
 
 
 def _merge_across_seam(first: np.ndarray, last: np.ndarray, n: int, width: int) -> tuple[np.ndarray, np.ndarray]:

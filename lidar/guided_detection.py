@@ -32,7 +32,7 @@ MIN_CONTRAST = 0.5  # the peak must rise at least half-way from the local backgr
 MIN_MAD_FACTOR = 8.0  # and at least this many local robust standard deviations
 MIN_RISE = 0.05  # and at least this much (normalised intensity)
 #: A background this close to the map's top leaves no room for a target to stand out (the surface reads clipped).
-MIN_ROOM = 2 * MIN_RISE
+MIN_ROOM = MIN_RISE
 
 
 def map_top(rmap: ReflectanceMap) -> float:
@@ -44,11 +44,21 @@ def map_top(rmap: ReflectanceMap) -> float:
 
 def needed_rise(bg: float, mad: float, threshold: float, top: float) -> float:
     """How far above its local background ``bg`` a peak must rise to be a target (see the module text)."""
-    need = max(MIN_CONTRAST * (threshold - bg), MIN_MAD_FACTOR * mad, MIN_RISE)
-    room = top - bg
-    if room >= MIN_ROOM:  # a clipped target on a bright surface: half the room to the top is enough
-        need = min(need, max(0.5 * room, MIN_RISE))
-    return need
+    rise = MIN_CONTRAST * (threshold - bg)
+    if top - bg >= MIN_ROOM:  # a clipped target on a bright surface: half the room to the top is enough
+        rise = min(rise, 0.5 * (top - bg))
+    return max(rise, MIN_MAD_FACTOR * mad, MIN_RISE)  # never within the local noise
+
+
+def stands_out(peak: float, bg: float, mad: float, threshold: float, top: float) -> bool:
+    """Whether a peak is a target against its local background ``bg`` (robust sigma ``mad``).
+
+    It rises by :func:`needed_rise`, or it reads at the scale's top (clipped) with room (``MIN_ROOM`` and six
+    local sigma) between the top and the background.
+    """
+    if peak >= bg + needed_rise(bg, mad, threshold, top):
+        return True
+    return peak >= top - 1e-3 and top - bg >= max(MIN_ROOM, 6.0 * mad)
 
 
 def _patch(rmap: ReflectanceMap, row: float, col: float, half: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -85,7 +95,7 @@ def bright_near(rmap: ReflectanceMap, xyz_socs: np.ndarray, threshold: float, *,
         return None
     bg, mad = median_and_sigma(wide, skip_nan=True)
     a, b = (int(v) for v in np.unravel_index(int(np.nanargmax(near)), near.shape))
-    if float(near[a, b]) < bg + needed_rise(bg, mad, threshold, map_top(rmap) if top is None else top):
+    if not stands_out(float(near[a, b]), bg, mad, threshold, map_top(rmap) if top is None else top):
         return False
     cell_range = float(rmap.range_m[rows[a], cols[b]])
     return bool(np.isfinite(cell_range) and abs(cell_range - r) <= range_tolerance_m + tolerance_m)
@@ -164,7 +174,7 @@ def recover_predicted(rmap: ReflectanceMap, detections: DetectionResult, identif
         bg, mad = median_and_sigma(wide, skip_nan=True)
         a, b = (int(v) for v in np.unravel_index(int(np.nanargmax(near)), near.shape))
         peak = float(near[a, b])
-        if peak < bg + needed_rise(bg, mad, detections.threshold, top):
+        if not stands_out(peak, bg, mad, detections.threshold, top):
             continue
         rr, cc = rows[a], cols[b]
         cell_range = float(rmap.range_m[rr, cc])
@@ -251,7 +261,7 @@ def missing_reasons(rmap: ReflectanceMap, detections: DetectionResult, identific
             out[m.id] = f"the surface around it reads at the intensity ceiling ({bg:.2f} of {top:.2f}): no contrast"
             continue
         need = needed_rise(bg, mad, detections.threshold, top)
-        if peak < bg + need:
+        if not stands_out(peak, bg, mad, detections.threshold, top):
             out[m.id] = f"not brighter than its surroundings (peak {peak:.2f}, background {bg:.2f}, needs {bg + need:.2f})"
             continue
         cell_range = float(rmap.range_m[rows[a], cols[b]])
