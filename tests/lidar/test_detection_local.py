@@ -5,7 +5,10 @@ from lidar.angles import direction_from_angles, spherical_from_xyz
 from lidar.detection import DetectionResult, auto_threshold, detect_reflectors, local_background
 from lidar.guided_detection import missing_note, missing_reasons, recover_predicted
 from lidar.identification import Identification, TargetMatch
+from lidar.layout import layout_from_model
+from lidar.pipeline import analyse_coarse, plan_from_coarse
 from lidar.reflectance_map import reflectance_map
+from lidar.simulate import BridgeModel, BridgeScene, EpochConditions, ScannerSetup
 
 STEP = 0.05
 WALL_M = 6.0  # a wall this far along x: a 50 mm disc spans about 10 cells
@@ -94,3 +97,15 @@ def test_the_guided_look_takes_a_clipped_target_when_the_threshold_lies_above_th
     assert ident2.match("M2").predicted
     _, _, r = spherical_from_xyz(np.asarray(m1.xyz_socs)[None])
     assert abs(float(r[0]) - np.linalg.norm(centres["near"])) < 0.05
+
+
+def test_the_coarse_analysis_says_which_target_is_missing_and_why():
+    model = BridgeModel()
+    scene = BridgeScene(model, EpochConditions(occluded=("M2",)), ScannerSetup((20.0, -12.0, 1.5), heading_deg=30.0))
+    coarse, _ = scene.scan(scene.coarse_window(0.06), rng=np.random.default_rng(3))
+    layout = layout_from_model(model, noise_m=0.02)
+    a = analyse_coarse(coarse, layout)
+    assert a.identification.missing == ("M2",)
+    assert a.missing_why["M2"].startswith("hidden behind something")
+    assert a.missing_note.startswith("the coarse scan did not find 1 of 9 target(s)") and "M2 (hidden" in a.missing_note
+    assert a.missing_note in plan_from_coarse(a, layout).warnings
