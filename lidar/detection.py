@@ -347,7 +347,7 @@ def _part_of_larger(img: np.ndarray, labels: np.ndarray, roots: np.ndarray, k: i
     if n_around == 0:
         return False
     level = float(np.min(vals[blob]))
-    return np.count_nonzero(vals[around] >= level) >= RING_SHARE * n_around
+    return bool(np.count_nonzero(vals[around] >= level) >= RING_SHARE * n_around)
 
 
 def _merge_across_seam(first: np.ndarray, last: np.ndarray, n: int, width: int) -> tuple[np.ndarray, np.ndarray]:
