@@ -7,6 +7,13 @@ known to a few centimetres, so the map is searched only there, with a local test
 cell near the predicted direction must stand well above its own neighbourhood and lie at the
 predicted range. A cell that passes becomes a detection of that target (its window is then
 planned from the coarse scan, not from the layout).
+
+On an intensity scale whose top is a receiver's ceiling (raw amplitude, dB), a clipped target
+and its surroundings may both lie below a threshold made for the whole map, or the threshold
+above the top: the rise asked of a peak is then at most half the room between the local
+background and the map's top. A target that stays missing gets its reason
+(:func:`missing_reasons`): outside the scan, hidden behind something nearer, seen through,
+its surroundings at the ceiling, not brighter than its surroundings, or bright at another range.
 """
 from __future__ import annotations
 
@@ -23,6 +30,35 @@ from lidar.reflectance_map import ReflectanceMap
 
 MIN_CONTRAST = 0.5  # the peak must rise at least half-way from the local background to the global threshold
 MIN_MAD_FACTOR = 8.0  # and at least this many local robust standard deviations
+MIN_RISE = 0.05  # and at least this much (normalised intensity)
+#: A background this close to the map's top leaves no room for a target to stand out (the surface reads clipped).
+MIN_ROOM = MIN_RISE
+
+
+def map_top(rmap: ReflectanceMap) -> float:
+    """The map's brightest cell (the top of its intensity scale in practice: the receiver's ceiling)."""
+    a = rmap.max_intensity
+    top = float(np.fmax.reduce(a, axis=None)) if a.size else float("nan")
+    return top if np.isfinite(top) else 1.0
+
+
+def needed_rise(bg: float, mad: float, threshold: float, top: float) -> float:
+    """How far above its local background ``bg`` a peak must rise to be a target (see the module text)."""
+    rise = MIN_CONTRAST * (threshold - bg)
+    if top - bg >= MIN_ROOM:  # a clipped target on a bright surface: half the room to the top is enough
+        rise = min(rise, 0.5 * (top - bg))
+    return max(rise, MIN_MAD_FACTOR * mad, MIN_RISE)  # never within the local noise
+
+
+def stands_out(peak: float, bg: float, mad: float, threshold: float, top: float) -> bool:
+    """Whether a peak is a target against its local background ``bg`` (robust sigma ``mad``).
+
+    It rises by :func:`needed_rise`, or it reads at the scale's top (clipped) with room (``MIN_ROOM`` and six
+    local sigma) between the top and the background.
+    """
+    if peak >= bg + needed_rise(bg, mad, threshold, top):
+        return True
+    return peak >= top - 1e-3 and top - bg >= max(MIN_ROOM, 6.0 * mad)
 
 
 def _patch(rmap: ReflectanceMap, row: float, col: float, half: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -38,10 +74,11 @@ def _patch(rmap: ReflectanceMap, row: float, col: float, half: int) -> tuple[np.
 
 
 def bright_near(rmap: ReflectanceMap, xyz_socs: np.ndarray, threshold: float, *, tolerance_m: float = 0.15,
-                range_tolerance_m: float = 0.3) -> bool | None:
+                range_tolerance_m: float = 0.3, top: float | None = None) -> bool | None:
     """Whether the map shows a target where one is predicted: True (a local peak at the range), False, None.
 
-    None when the map cannot tell (the direction is outside it, or it holds no return there).
+    None when the map cannot tell (the direction is outside it, or it holds no return there). ``top``: the
+    map's top (:func:`map_top`, computed when not given).
     """
     xyz = np.asarray(xyz_socs, dtype=np.float64)
     theta, phi, rng = spherical_from_xyz(xyz[None])
@@ -58,7 +95,7 @@ def bright_near(rmap: ReflectanceMap, xyz_socs: np.ndarray, threshold: float, *,
         return None
     bg, mad = median_and_sigma(wide, skip_nan=True)
     a, b = (int(v) for v in np.unravel_index(int(np.nanargmax(near)), near.shape))
-    if float(near[a, b]) < bg + max(MIN_CONTRAST * (threshold - bg), MIN_MAD_FACTOR * mad, 0.05):
+    if not stands_out(float(near[a, b]), bg, mad, threshold, map_top(rmap) if top is None else top):
         return False
     cell_range = float(rmap.range_m[rows[a], cols[b]])
     return bool(np.isfinite(cell_range) and abs(cell_range - r) <= range_tolerance_m + tolerance_m)
@@ -119,6 +156,7 @@ def recover_predicted(rmap: ReflectanceMap, detections: DetectionResult, identif
     dets = list(detections.detections)
     matches = list(identification.matches)
     changed = False
+    top = map_top(rmap) if any(m.predicted for m in matches) else 1.0
     for i, m in enumerate(matches):
         if not m.predicted:
             continue
@@ -136,7 +174,7 @@ def recover_predicted(rmap: ReflectanceMap, detections: DetectionResult, identif
         bg, mad = median_and_sigma(wide, skip_nan=True)
         a, b = (int(v) for v in np.unravel_index(int(np.nanargmax(near)), near.shape))
         peak = float(near[a, b])
-        if peak < bg + max(MIN_CONTRAST * (detections.threshold - bg), MIN_MAD_FACTOR * mad, 0.05):
+        if not stands_out(peak, bg, mad, detections.threshold, top):
             continue
         rr, cc = rows[a], cols[b]
         cell_range = float(rmap.range_m[rr, cc])
@@ -170,3 +208,71 @@ def recover_predicted(rmap: ReflectanceMap, detections: DetectionResult, identif
     if not changed:
         return detections, identification
     return replace(detections, detections=tuple(dets)), replace(identification, matches=tuple(matches))
+
+
+def missing_reasons(rmap: ReflectanceMap, detections: DetectionResult, identification: Identification, *,
+                    tolerance_m: float = 0.15, range_tolerance_m: float = 0.3) -> dict[str, str]:
+    """Why each target the coarse scan did not find (a predicted match) stayed missing, in a few words.
+
+    Parameters
+    ----------
+    rmap, detections, identification
+        The coarse analysis after :func:`recover_predicted`.
+    tolerance_m, range_tolerance_m : float, keyword-only
+        As :func:`recover_predicted`'s. Defaults 0.15 m and 0.3 m.
+
+    Returns
+    -------
+    dict
+        Target id -> reason, for every predicted match: outside the coarse scan; hidden behind something nearer;
+        the scan saw through its place; no return there; its surroundings read at the intensity ceiling;
+        not brighter than its surroundings (the peak and the rise it needed); bright at another range.
+    """
+    out: dict[str, str] = {}
+    top = map_top(rmap) if identification.missing else 1.0
+    for m in identification.matches:
+        if not m.predicted:
+            continue
+        xyz = np.asarray(m.xyz_socs, dtype=np.float64)
+        theta, phi, rng = spherical_from_xyz(xyz[None])
+        r = float(rng[0])
+        row, col = rmap.cells_of(theta, phi)
+        inside = 0 <= row[0] < rmap.shape[0] and (rmap.full_circle or 0 <= col[0] < rmap.shape[1])
+        if not r > 0.5 or not inside:
+            out[m.id] = "outside the coarse scan"
+            continue
+        k = max(2, int(math.ceil(math.degrees(tolerance_m / r) / rmap.step_deg)) + 1)
+        centre = _patch_ranges(rmap, row[0], col[0], 1)
+        if centre.size and np.all(np.isfinite(centre)) and np.all(centre < r - range_tolerance_m - tolerance_m):
+            out[m.id] = f"hidden behind something {r - float(np.median(centre)):.1f} m in front of it"
+            continue
+        if seen_through(rmap, xyz):
+            out[m.id] = "the scan saw through its place (fallen off, or the layout is wrong there)"
+            continue
+        rows, cols, near = _patch(rmap, row[0], col[0], k)
+        if near.size == 0 or not np.any(np.isfinite(near)):
+            out[m.id] = "no return where it should be"
+            continue
+        _, _, wide = _patch(rmap, row[0], col[0], 3 * k)
+        bg, mad = median_and_sigma(wide, skip_nan=True)
+        a, b = (int(v) for v in np.unravel_index(int(np.nanargmax(near)), near.shape))
+        peak = float(near[a, b])
+        if top - bg < MIN_ROOM:
+            out[m.id] = f"the surface around it reads at the intensity ceiling ({bg:.2f} of {top:.2f}): no contrast"
+            continue
+        need = needed_rise(bg, mad, detections.threshold, top)
+        if not stands_out(peak, bg, mad, detections.threshold, top):
+            out[m.id] = f"not brighter than its surroundings (peak {peak:.2f}, background {bg:.2f}, needs {bg + need:.2f})"
+            continue
+        cell_range = float(rmap.range_m[rows[a], cols[b]])
+        out[m.id] = f"a bright spot there lies at {cell_range:.1f} m, not at the predicted {r:.1f} m"
+    return out
+
+
+def missing_note(reasons: dict[str, str], n_targets: int) -> str | None:
+    """One line naming the targets the coarse scan did not find and why (None when none is missing)."""
+    if not reasons:
+        return None
+    parts = [f"{tid} ({why})" for tid, why in reasons.items()]
+    return (f"the coarse scan did not find {len(reasons)} of {n_targets} target(s); their windows come from the "
+            f"layout: {'; '.join(parts)}")

@@ -5,7 +5,7 @@ Each step is also available on its own in its module; these functions only chain
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -15,7 +15,14 @@ from common.flags import FLAG_NOT_FOUND, FLAG_UNRESOLVED
 from common.progress import ProgressCallback, report, scaled
 from lidar.centroid import TargetCentroid, measure_windows
 from lidar.detection import DetectionResult, detect_reflectors
-from lidar.guided_detection import bright_near, recover_predicted, seen_through
+from lidar.guided_detection import (
+    bright_near,
+    map_top,
+    missing_note,
+    missing_reasons,
+    recover_predicted,
+    seen_through,
+)
 from lidar.identification import MAX_TILT_DEG, Identification, identify_reflectors
 from lidar.layout import Layout, target_normals
 from lidar.plan import PlanTarget, ScanPlan, coarse_step_needed_deg, incidence_from_map, plan_fine_scans
@@ -26,12 +33,22 @@ from lidar.scanner_profile import VZ1000, ScannerProfile
 
 @dataclass(frozen=True, eq=False)
 class CoarseAnalysis:
-    """What the coarse scan of an epoch tells: map, detections, identification, incidence per target."""
+    """What the coarse scan of an epoch tells: map, detections, identification, incidence per target.
+
+    ``missing_why`` says, for each target the scan did not find (its position predicted from the layout), why
+    (:func:`lidar.guided_detection.missing_reasons`); ``missing_note`` says it in one line.
+    """
 
     reflectance_map: ReflectanceMap
     detections: DetectionResult
     identification: Identification
     incidence_cos: Mapping[str, float | None]
+    missing_why: Mapping[str, str] = field(default_factory=dict)
+
+    @property
+    def missing_note(self) -> str | None:
+        """One line naming the targets not found in the coarse scan and why (None when all were found)."""
+        return missing_note(dict(self.missing_why), len(self.identification.matches))
 
 
 def _need_intensity(scan: Scan, what: str) -> np.ndarray:
@@ -44,11 +61,14 @@ def _need_intensity(scan: Scan, what: str) -> np.ndarray:
 
 def _map_evidence(rmap: ReflectanceMap, threshold: float, tolerance_m: float):
     """``evidence(xyz)`` for :func:`lidar.identification.identify_reflectors`, from the coarse map."""
+    top: list[float] = []  # the map's top, found once when first needed
 
     def evidence(xyz: np.ndarray) -> object:
         if seen_through(rmap, xyz):
             return "through"
-        return bright_near(rmap, xyz, threshold, tolerance_m=tolerance_m)
+        if not top:
+            top.append(map_top(rmap))
+        return bright_near(rmap, xyz, threshold, tolerance_m=tolerance_m, top=top[0])
     return evidence
 
 
@@ -80,8 +100,9 @@ def analyse_map(rmap: ReflectanceMap, layout: Layout, *, threshold: float | None
                                 station_xy=station_xy)
     det, ident = recover_predicted(rmap, det, ident, tolerance_m=tolerance_m)
     inc = {m.id: incidence_from_map(rmap, m.xyz_socs) for m in ident.matches}
+    why = missing_reasons(rmap, det, ident, tolerance_m=tolerance_m)
     report(progress, 1.0, "coarse scan analysed")
-    return CoarseAnalysis(rmap, det, ident, inc)
+    return CoarseAnalysis(rmap, det, ident, inc, why)
 
 
 def layout_incidence(identification: Identification, layout: Layout, *,
@@ -111,15 +132,17 @@ def plan_from_coarse(coarse: CoarseAnalysis, layout: Layout, *, epoch: str = "",
     Incidence comes from the layout's target normals carried into the scanner frame
     (:func:`layout_incidence`), for detected and predicted targets alike: the surface around a
     target in a coarse map is often another face (a pier corner, the deck edge). ``closure`` ends the
-    plan with the first reference target's window again (see :func:`lidar.plan.plan_fine_scans`).
+    plan with the first reference target's window again (see :func:`lidar.plan.plan_fine_scans`). The plan's
+    warnings say which targets the coarse scan did not find and why (:attr:`CoarseAnalysis.missing_note`).
     """
     inc = layout_incidence(coarse.identification, layout, up_layout=up_layout)
     targets = [PlanTarget(m.id, m.group, m.xyz_socs, float(layout.diameters_m[layout.index(m.id)]), m.predicted,
                           max(inc[m.id], 0.05)) for m in coarse.identification.matches]
     plan = plan_fine_scans(targets, epoch=epoch, profile=profile, min_points=min_points,
                            budget_seconds=budget_seconds, margin_m=margin_m, closure=closure)
-    note = _coarse_step_note(targets, plan, coarse.reflectance_map.step_deg)
-    return replace(plan, warnings=plan.warnings + (note,)) if note else plan
+    notes = tuple(n for n in (coarse.missing_note, _coarse_step_note(targets, plan, coarse.reflectance_map.step_deg))
+                  if n)
+    return replace(plan, warnings=plan.warnings + notes) if notes else plan
 
 
 def _coarse_step_note(targets, plan: ScanPlan, step_deg: float) -> str | None:

@@ -82,6 +82,11 @@ CHECKS: dict[str, tuple[float, dict[str, tuple[float | None, float | None]]]] = 
                     "registration_error_max_mm": (0.0, 5.0),
                     "m3c2_ratio": (0.0, 20.0), "c2c_ratio_to_open3d": (0.0, 20.0), "big_points": (200_000, 800_000),
                     "info_theta_step_deg": PRESENT, "truth_step_deg": PRESENT}),
+    # the 40 m bridge from 6 m and 15 m beside the deck under each intensity model: deck targets found (shares)
+    "detection_stations": (300, {**{f"{m}_{w}_guided": (0.8, 1.0) for m in ("mild", "amplitude", "db")
+                                    for w in ("close", "far")},
+                                 "amplitude_close_blind": (0.6, 1.0), "db_close_blind": (0.6, 1.0),
+                                 "amplitude_far_blind": (0.6, 1.0), "db_far_blind": (0.6, 1.0)}),
     "plan_predictions": (900, {"windows": (9, 9), "points_plan_to_scanned_median": (0.5, 2.0),
                                "sigma_predicted_to_reported_median": (0.5, 2.0), "recall_with_guided": (0.3, 1.0)}),
     # eight weekly visits with the field window at 3: the eighth recomputes at most the window's visits

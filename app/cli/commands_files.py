@@ -62,7 +62,7 @@ def cmd_detect(args) -> int:
         dump_json({"scan": str(args.scan), "threshold": det.threshold, "map_step_deg": det.map_step_deg,
                    "fit_rms_m": coarse.identification.rms_m, "targets": rows,
                    "extra_detections": [d.__dict__ for d in extras],
-                   "missing": list(coarse.identification.missing)})
+                   "missing": list(coarse.identification.missing), "missing_why": dict(coarse.missing_why)})
         return 0
     print(f"{args.scan}: {len(det.detections)} bright blobs (threshold {det.threshold:.2f}, "
           f"map cell {det.map_step_deg:.4f} deg); layout fit RMS {coarse.identification.rms_m * 1000:.0f} mm")
@@ -70,9 +70,8 @@ def cmd_detect(args) -> int:
     if extras:
         print(f"{len(extras)} bright object(s) not in the layout: " +
               "; ".join(f"theta {d.theta_deg:.3f} phi {d.phi_deg:.3f} range {d.range_m:.2f} m" for d in extras))
-    if coarse.identification.missing:
-        print("not resolved in the coarse scan (position predicted from the layout): " +
-              ", ".join(coarse.identification.missing))
+    if coarse.missing_note:
+        print(coarse.missing_note)
     return 0
 
 

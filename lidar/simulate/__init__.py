@@ -9,7 +9,8 @@ Typical use::
 
 Multi-span bridges (``BridgeModel(spans_m=...)``), deck strain, the atmosphere's range scale (changing during
 the visit too), range walk on retro-reflectors (one target's own too), clipped intensities, drift (a sudden jump
-too), point times and the instrument's axis and range zero errors are in :class:`EpochConditions` and
+too), point times, the instrument's axis and range zero errors and its intensity model (raw amplitude with a
+receiver ceiling, a dB scale) are in :class:`EpochConditions` and
 :mod:`lidar.simulate.effects`, all off by default; whole visits as files in :mod:`lidar.simulate.files`, campaigns
 of them in :mod:`lidar.simulate.campaign`.
 """
@@ -18,6 +19,7 @@ from lidar.simulate.effects import (
     AxisErrors,
     DriftModel,
     ExponentialStrengthWalk,
+    IntensityModel,
     InverseSquareWalk,
     LinearIncidenceWalk,
     LogisticStrengthWalk,
@@ -30,4 +32,4 @@ from lidar.simulate.truth import ScanTruth, TargetTruth, WindowTruth
 
 __all__ = ["BridgeModel", "Target", "BridgeScene", "EpochConditions", "ScannerSetup", "ScanTruth", "TargetTruth",
            "WindowTruth", "DriftModel", "VisitTiming", "LinearIncidenceWalk", "InverseSquareWalk", "StrengthStepWalk",
-           "LogisticStrengthWalk", "ExponentialStrengthWalk", "AxisErrors"]
+           "LogisticStrengthWalk", "ExponentialStrengthWalk", "AxisErrors", "IntensityModel"]

@@ -30,6 +30,16 @@ Drift
 Timing
     :class:`VisitTiming`: when each point of a visit is measured (the coarse
     scan, then the fine windows in order, each ``gap_s`` after the last).
+
+Intensity
+    :class:`IntensityModel`: what the instrument reports as a return's
+    intensity. ``mild`` (the default) is the simulator's first model: a
+    surface's reflectance with a weak incidence and range factor, targets near
+    the top, clipped at 1. ``amplitude`` is a receiver's raw amplitude
+    (reflectance times cos(incidence) times (r0 / range)^2, clipped at the
+    receiver's ceiling: close concrete and retro-reflectors out to tens of
+    metres both saturate); ``db`` is the same amplitude on a logarithmic scale
+    (a dB reading mapped onto [0, 1]).
 """
 from __future__ import annotations
 
@@ -43,6 +53,7 @@ from common.errors import InputError
 from common.rigid import rotate_vectors
 
 STRENGTH_REFERENCE_RANGE_M = 15.0
+INTENSITY_KINDS = ("mild", "amplitude", "db")
 ARCSEC = np.pi / (180.0 * 3600.0)  # radians in one arcsecond
 
 
@@ -474,3 +485,102 @@ class VisitTiming:
         rate = d.get("rate_hz")
         return cls(float(d.get("start_s", 0.0)), float(d.get("gap_s", 30.0)), None if rate is None else float(rate),
                    str(d.get("duration", "points")))
+
+
+@dataclass(frozen=True)
+class IntensityModel:
+    """How a return's intensity is formed and reported (see the module text).
+
+    ``mild``: ``reflectance * (0.35 + 0.65 cos)`` on surfaces, ``reflectance * (0.85 + 0.15 cos)`` on
+    retro-reflectors, times ``clip(1 - 0.004 range, 0.6, 1)``, plus additive noise (0.012), clipped to [0, 1].
+
+    ``amplitude``: ``a = reflectance * cos * (reference_range_m / range)^2 * (1 + speckle * z)`` (``z`` standard
+    normal), the sheet of a retro-reflector ``retro_gain`` times brighter than its reflectance; reported
+    ``min(a, 1)`` (1 is the receiver's ceiling). With the defaults, concrete (reflectance 0.24) seen head-on
+    saturates closer than 7.8 m (at 10 m it reads 0.6) and a head-on target closer than 77 m.
+
+    ``db``: the same amplitude as ``(10 log10 a - floor_db) / -floor_db``, clipped to [0, 1] (0 dB is the
+    ceiling): contrast is compressed, concrete at 15 m reads about 0.9 and a target 1.
+
+    Attributes
+    ----------
+    kind : {"mild", "amplitude", "db"}
+        Default "mild" (the simulator's first model: every earlier scene scans the same).
+    reference_range_m : float
+        Range at which a head-on return of reflectance 1 reaches the ceiling, metres. Default 16.
+    retro_gain : float
+        Return of a retro-reflective sheet relative to a diffuse surface of the same reflectance. Default 25.
+    speckle : float
+        Relative standard deviation of the amplitude (one draw per return). Default 0.05.
+    floor_db : float
+        Bottom of the dB scale (reported 0), below the ceiling. Default -30 dB.
+    """
+
+    kind: str = "mild"
+    reference_range_m: float = 16.0
+    retro_gain: float = 25.0
+    speckle: float = 0.05
+    floor_db: float = -30.0
+
+    def __post_init__(self) -> None:
+        if self.kind not in INTENSITY_KINDS:
+            raise InputError(f"intensity model kind must be one of {', '.join(INTENSITY_KINDS)}, not {self.kind!r}")
+        _positive("intensity reference range", self.reference_range_m, zero_ok=False)
+        _positive("retro-reflector gain", self.retro_gain, zero_ok=False)
+        _positive("intensity speckle", self.speckle)
+        if not (np.isfinite(self.floor_db) and self.floor_db < 0):
+            raise InputError(f"the dB scale's floor must be negative (below the ceiling), got {self.floor_db}")
+
+    @property
+    def mild(self) -> bool:
+        return self.kind == "mild"
+
+    def surface(self, reflectance: ArrayLike, cos_incidence: ArrayLike) -> np.ndarray:
+        """(N,) a diffuse surface's return before the range factor."""
+        refl = np.asarray(reflectance, dtype=np.float64)
+        c = np.abs(np.asarray(cos_incidence, dtype=np.float64))
+        return refl * (0.35 + 0.65 * c) if self.mild else refl * c
+
+    def retro(self, reflectance: ArrayLike, cos_incidence: ArrayLike) -> np.ndarray:
+        """(N,) a retro-reflective sheet's return (full cover) before the range factor."""
+        refl = np.asarray(reflectance, dtype=np.float64)
+        c = np.abs(np.asarray(cos_incidence, dtype=np.float64))
+        return refl * (0.85 + 0.15 * c) if self.mild else refl * self.retro_gain * c
+
+    def amplitude(self, value: ArrayLike, range_m: ArrayLike, z: ArrayLike | None = None) -> np.ndarray:
+        """(N,) the receiver's amplitude (1 = the ceiling, not clipped) of returns of ``value`` at ``range_m``.
+
+        ``z`` (standard normal draws, one per return) adds the speckle. Not defined for the mild model.
+        """
+        r = np.maximum(np.asarray(range_m, dtype=np.float64), 1e-3)
+        a = np.asarray(value, dtype=np.float64) * (self.reference_range_m / r) ** 2
+        if z is not None:
+            a = a * np.maximum(1.0 + self.speckle * np.asarray(z, dtype=np.float64), 0.0)
+        return a
+
+    def report(self, value: ArrayLike, range_m: ArrayLike, z: ArrayLike) -> np.ndarray:
+        """(N,) reported intensities in [0, 1] of returns of ``value`` (surface or retro) at ``range_m``.
+
+        ``z``: one standard normal draw per return (the mild model's additive noise is 0.012 z).
+        """
+        v = np.asarray(value, dtype=np.float64)
+        if self.mild:
+            r = np.asarray(range_m, dtype=np.float64)
+            out = v * np.clip(1.0 - 0.004 * r, 0.6, 1.0) + 0.012 * np.asarray(z, dtype=np.float64)
+            return np.clip(out, 0.0, 1.0)
+        a = self.amplitude(v, range_m, z)
+        if self.kind == "amplitude":
+            return np.minimum(a, 1.0)
+        with np.errstate(divide="ignore"):
+            db = 10.0 * np.log10(np.maximum(a, 1e-12))
+        return np.clip((db - self.floor_db) / -self.floor_db, 0.0, 1.0)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict | None) -> IntensityModel | None:
+        if d is None:
+            return None
+        return cls(str(d.get("kind", "mild")), **{f.name: float(d[f.name]) for f in fields(cls)
+                                                  if f.name != "kind" and f.name in d})

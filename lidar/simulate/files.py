@@ -22,7 +22,15 @@ from common.errors import InputError
 from lidar.io.las import write_las
 from lidar.scan import Scan
 from lidar.simulate.bridge import BridgeModel, model_from_dict, model_to_dict
-from lidar.simulate.effects import AxisErrors, DeckTransient, DriftModel, VisitTiming, walk_from_dict, walk_to_dict
+from lidar.simulate.effects import (
+    AxisErrors,
+    DeckTransient,
+    DriftModel,
+    IntensityModel,
+    VisitTiming,
+    walk_from_dict,
+    walk_to_dict,
+)
 from lidar.simulate.scene import BridgeScene, EpochConditions
 from lidar.simulate.setup import ScannerSetup
 from lidar.simulate.truth import ScanTruth, WindowTruth
@@ -51,6 +59,7 @@ def conditions_to_dict(c: EpochConditions) -> dict:
         "axis_errors": None if c.axis_errors is None else c.axis_errors.to_dict(),
         "walk_factors": dict(c.walk_factors),
         "transient": None if c.transient is None else c.transient.to_dict(),
+        "intensity_model": None if c.intensity_model is None else c.intensity_model.to_dict(),
     }
     d.update({k: v for k, v in extra.items() if v not in (None, 0.0, [], {})})
     return d
@@ -66,7 +75,8 @@ def conditions_from_dict(c: dict) -> EpochConditions:
         range_scale_rate_ppm_h=float(c.get("range_scale_rate_ppm_h", 0.0)), range_walk=walk_from_dict(c.get("range_walk")),
         clipped_fraction=float(c.get("clipped_fraction", 0.0)), drift=DriftModel.from_dict(c.get("drift")),
         timing=VisitTiming.from_dict(c.get("timing")), axis_errors=AxisErrors.from_dict(c.get("axis_errors")),
-        walk_factors=dict(c.get("walk_factors") or {}), transient=DeckTransient.from_dict(c.get("transient")))
+        walk_factors=dict(c.get("walk_factors") or {}), transient=DeckTransient.from_dict(c.get("transient")),
+        intensity_model=IntensityModel.from_dict(c.get("intensity_model")))
 
 
 def save_scene(folder: Path, setup: ScannerSetup, conditions: EpochConditions, seed: int,

@@ -25,6 +25,7 @@ from lidar.simulate.effects import (
     AxisErrors,
     DeckTransient,
     DriftModel,
+    IntensityModel,
     RangeWalk,
     VisitTiming,
     return_strength,
@@ -99,6 +100,10 @@ class EpochConditions:
     walk_factors : mapping of target id to float, optional
         The range walk of a target's returns times this factor (a weathered or a newer sheet of the same kind
         walks more or less). Default 1 for every target.
+    intensity_model : IntensityModel, optional
+        How return intensities are formed and reported (a raw amplitude falling as 1/range^2 with a receiver
+        ceiling, or on a dB scale). Default none: the mild model (:class:`~lidar.simulate.effects.IntensityModel`
+        ``"mild"``).
     """
 
     midspan_displacement_m: float = 0.0
@@ -119,6 +124,7 @@ class EpochConditions:
     axis_errors: AxisErrors | None = None
     walk_factors: Mapping[str, float] = field(default_factory=dict)
     transient: DeckTransient | None = None
+    intensity_model: IntensityModel | None = None
 
     def __post_init__(self) -> None:
         if not np.isfinite(self.midspan_displacement_m):
@@ -156,6 +162,11 @@ class EpochConditions:
         return self.range_scale_ppm + self.range_scale_rate_ppm_h * (np.asarray(time_s) - self.visit_timing.start_s) / 3600.0
 
     @property
+    def intensity(self) -> IntensityModel:
+        """The intensity model (the mild one when none is given)."""
+        return self.intensity_model or _MILD
+
+    @property
     def visit_timing(self) -> VisitTiming:
         return self.timing or VisitTiming()
 
@@ -172,6 +183,9 @@ class EpochConditions:
             raise InputError(f"epoch conditions give {len(self.span_displacements_m)} span displacements for a "
                              f"bridge of {n_spans} spans")
         return self.span_displacements_m
+
+
+_MILD = IntensityModel()
 
 
 @dataclass(frozen=True)
@@ -359,9 +373,12 @@ class BridgeScene:
 
         if c.transient is not None and times is not None:
             self._move_deck(c.transient, origin, d_world, t, hit, normals, moves, times)
-        intensity *= np.clip(1.0 - 0.004 * np.where(hit, t, 0.0), 0.6, 1.0)  # mild range attenuation
-        intensity += rng.normal(0.0, INTENSITY_NOISE, len(t))
-        np.clip(intensity, 0.0, 1.0, out=intensity)
+        if c.intensity.mild:
+            intensity *= np.clip(1.0 - 0.004 * np.where(hit, t, 0.0), 0.6, 1.0)  # mild range attenuation
+            intensity += rng.normal(0.0, INTENSITY_NOISE, len(t))
+            np.clip(intensity, 0.0, 1.0, out=intensity)
+        else:
+            intensity = c.intensity.report(intensity, np.where(hit, t, np.inf), rng.standard_normal(len(t)))
         if c.saturated:
             intensity[on_target >= 0] = 1.0
         rng_noisy = t + rng.normal(0.0, sigma, len(t))
@@ -429,7 +446,7 @@ class BridgeScene:
             sel = gid == g
             refl[sel] = REFLECTANCE[kind]
             deck |= sel & (kind == "deck")
-        return t, hit, refl * (0.35 + 0.65 * cos_inc), normals, deck
+        return t, hit, self.conditions.intensity.surface(refl, cos_inc), normals, deck
 
     def _walk_and_clip(self, returns: tuple[np.ndarray, ...], on_target: np.ndarray, range_m: np.ndarray,
                        intensity: np.ndarray) -> None:
@@ -482,7 +499,7 @@ class BridgeScene:
         cover[~visible] = 0.0
         sel = cover > 0
         idx = cand[sel]
-        i_target = TARGET_REFLECTANCE * (0.85 + 0.15 * cos_inc[sel])
+        i_target = self.conditions.intensity.retro(TARGET_REFLECTANCE, cos_inc[sel])
         intensity[idx] = cover[sel] * i_target + (1 - cover[sel]) * intensity[idx]
         t[idx] = t_d[sel]
         hit[idx] = True
@@ -509,7 +526,9 @@ class BridgeScene:
         cover[~visible] = 0.0
         sel = cover > 0
         idx = cand[sel]
-        intensity[idx] = np.maximum(intensity[idx], cover[sel] * CABLE_TIE_REFLECTANCE)
+        model = self.conditions.intensity
+        tie = CABLE_TIE_REFLECTANCE if model.mild else model.retro(CABLE_TIE_REFLECTANCE, cos_inc[sel])
+        intensity[idx] = np.maximum(intensity[idx], cover[sel] * tie)
         t[idx] = t_d[sel]
         hit[idx] = True
         if returns is not None:

@@ -340,6 +340,7 @@ def run_stage1(job: Stage1Job, *, progress: ProgressCallback | None = None) -> S
         if job.setup != 1:
             new_plan["setup"] = job.setup
         new_plan["identification"] = {"missing": list(analysis.identification.missing),
+                                      "missing_why": dict(analysis.missing_why),
                                       "extra_detections": len(analysis.identification.extra_detections),
                                       "fit_rms_m": analysis.identification.rms_m,
                                       "detections": len(analysis.detections.detections)}

@@ -11,6 +11,7 @@ from lidar.simulate.effects import (
     AxisErrors,
     DriftModel,
     ExponentialStrengthWalk,
+    IntensityModel,
     InverseSquareWalk,
     LinearIncidenceWalk,
     LogisticStrengthWalk,
@@ -315,3 +316,59 @@ def test_a_drift_can_jump_once_during_the_visit():
     assert steady.to_dict()["jump_after_s"] is None and DriftModel.from_dict(steady.to_dict()) == steady
     with pytest.raises(InputError):
         DriftModel(jump_after_s=float("nan"))
+
+
+def test_intensity_models_follow_their_formulas():
+    value, rng_m, z = np.array([0.24, 0.24, 0.24, 23.0]), np.array([8.0, 16.0, 32.0, 40.0]), np.zeros(4)
+    mild = IntensityModel().report(value, rng_m, z)
+    np.testing.assert_allclose(mild, np.clip(value * np.clip(1 - 0.004 * rng_m, 0.6, 1.0), 0.0, 1.0))
+    amp = IntensityModel("amplitude", reference_range_m=16.0)
+    a = amp.report(value, rng_m, z)
+    np.testing.assert_allclose(a[1:3], [0.24, 0.06])  # 1/r^2: twice as far, a quarter
+    assert a[0] == pytest.approx(0.96) and a[3] == 1.0  # close concrete near the ceiling, the target at it
+    db = IntensityModel("db", reference_range_m=16.0, floor_db=-30.0).report(value, rng_m, z)
+    np.testing.assert_allclose(db[1:3], (10 * np.log10([0.24, 0.06]) + 30) / 30)
+    assert db[3] == 1.0
+    speckled = amp.amplitude(value, rng_m, np.full(4, 2.0))
+    np.testing.assert_allclose(speckled, amp.amplitude(value, rng_m) * (1 + 2 * amp.speckle))
+    np.testing.assert_allclose(amp.surface(0.2, [1.0, 0.5]), [0.2, 0.1])  # Lambert: cos(incidence)
+    np.testing.assert_allclose(amp.retro(0.9, 0.5), 0.9 * amp.retro_gain * 0.5)
+    with pytest.raises(InputError):
+        IntensityModel("linear")
+    with pytest.raises(InputError):
+        IntensityModel("db", floor_db=3.0)
+    assert IntensityModel.from_dict(IntensityModel("db", retro_gain=9.0).to_dict()) == IntensityModel("db", retro_gain=9.0)
+
+
+def test_the_mild_model_given_scans_as_none_and_every_model_draws_two_numbers_per_direction():
+    a, _, b, _ = scan_pair(EpochConditions(intensity_model=IntensityModel()), target="M3")
+    np.testing.assert_array_equal(a.intensity_raw, b.intensity_raw)
+    np.testing.assert_array_equal(a.xyz_socs, b.xyz_socs)
+    for kind in ("amplitude", "db"):
+        r1, r2 = np.random.default_rng(4), np.random.default_rng(4)
+        scene = BridgeScene(MODEL, EpochConditions(intensity_model=IntensityModel(kind)), SETUP)
+        w = window_on(scene.truth().target("M3"))
+        scene.scan(w, rng=r1)
+        r2.normal(size=w.n_directions)
+        r2.normal(size=w.n_directions)
+        assert r1.bit_generator.state == r2.bit_generator.state
+
+
+def test_amplitude_clips_targets_and_its_db_scale_is_the_log_of_the_same_returns():
+    """Under the amplitude model a target reads the ceiling; the dB model reports the same returns' logarithm."""
+    scans = {}
+    for kind in ("amplitude", "db"):
+        scene = BridgeScene(MODEL, EpochConditions(intensity_model=IntensityModel(kind)), SETUP)
+        truth = scene.truth()
+        w = window_on(truth.target("M3"), half=0.6, step=0.02)
+        scans[kind], _ = scene.scan(w, rng=np.random.default_rng(8))
+    amp, db = scans["amplitude"], scans["db"]
+    np.testing.assert_array_equal(amp.xyz_socs, db.xyz_socs)  # the same rays and ranges
+    centre = np.asarray(truth.target("M3").centre_socs_m)
+    on_disc = np.linalg.norm(amp.xyz_socs - centre, axis=1) < 0.015
+    assert on_disc.sum() > 5 and np.all(amp.intensity[on_disc] == 1.0) and np.all(db.intensity[on_disc] == 1.0)
+    surface = (amp.intensity > 0.02) & (amp.intensity < 0.99)
+    assert surface.sum() > 1000
+    np.testing.assert_allclose(db.intensity[surface], (10 * np.log10(amp.intensity[surface]) + 30) / 30, atol=2e-3)
+    # the deck around the target: well below the ceiling, and its amplitude falls with range as 1/r^2 x cos
+    assert np.median(amp.intensity[surface]) < 0.5

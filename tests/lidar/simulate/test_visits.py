@@ -17,6 +17,7 @@ from lidar.simulate import (
     ScannerSetup,
     VisitTiming,
 )
+from lidar.simulate.effects import IntensityModel
 from lidar.simulate.files import load_scene, load_scene_model, save_scene, scan_order, simulate_coarse
 from lidar.simulate.visits import (
     export_registered,
@@ -52,7 +53,7 @@ def test_scene_spec_round_trips_the_model_and_every_effect(tmp_path):
                                                                    jump_after_s=600.0),
                            timing=VisitTiming(start_s=345_600.0, gap_s=12.0, rate_hz=50_000.0, duration="lines"),
                            axis_errors=AxisErrors(collimation_arcsec=9.0, range_offset_m=0.002),
-                           walk_factors={"M3": 1.6})
+                           walk_factors={"M3": 1.6}, intensity_model=IntensityModel("db", floor_db=-25.0))
     save_scene(tmp_path, SETUP, cond, 9, 0.05, model=model)
     setup, back, seed, step = load_scene(tmp_path)
     assert (setup, back, seed, step) == (SETUP, cond, 9, 0.05)
