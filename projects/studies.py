@@ -181,7 +181,7 @@ def run_study(root: Path, model: BridgeModel, visits: Sequence[EpochConditions],
     if compare_without:
         other = root / "campaign-uncorrected"
         shutil.rmtree(other, ignore_errors=True)
-        shutil.copytree(camp, other, ignore=shutil.ignore_patterns(".lock"))
+        shutil.copytree(camp, other, symlinks=True, ignore=shutil.ignore_patterns(".lock"))
         with Campaign.open(other) as c:
             set_parameter(c, "field_model", "false")
             process(c)

@@ -82,7 +82,8 @@ def visit_link_name(role: str, setup: int, original_name: str) -> str:
 def link_by_visit(folder: Path, rel: str, epoch: str, name: str) -> Path | None:
     """Link the stored scan ``folder/rel`` as ``scans/by-visit/<epoch>/<name>`` (a relative symbolic link).
 
-    A name already taken by another file gets ``-2``, ``-3``…; an existing link to the same file is kept. Where the
+    A name already taken by another file gets ``-2``, ``-3``…; an existing link to the same file is kept, and so
+    is a plain file of the same size (the campaign copied by a tool that follows links). Where the
     file system has no symbolic links the log says so and None is returned: the link is a convenience, the
     import stands without it.
     """
@@ -97,6 +98,8 @@ def link_by_visit(folder: Path, rel: str, epoch: str, name: str) -> Path | None:
                 if Path(os.readlink(link)) == target:
                     return link
                 continue
+            if link.is_file() and link.stat().st_size == (folder / rel).stat().st_size:
+                return link  # the campaign was copied by a tool that follows links: the copy stands for the link
             if not link.exists():
                 link.symlink_to(target)
                 return link

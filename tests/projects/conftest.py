@@ -47,5 +47,5 @@ def processed(field, tmp_path_factory) -> Path:
 @pytest.fixture
 def processed_copy(processed, tmp_path) -> Path:
     dst = tmp_path / "camp"
-    shutil.copytree(processed, dst, ignore=shutil.ignore_patterns(".lock"))
+    shutil.copytree(processed, dst, symlinks=True, ignore=shutil.ignore_patterns(".lock"))
     return dst

@@ -40,3 +40,11 @@ def test_each_visits_scans_are_linked_under_their_own_names(field_copy, tmp_path
     assert "2 scan(s) linked" in out, out
     assert sorted(os.listdir(moved / "scans" / "by-visit" / label)) == links
     assert main(["verify", str(moved)]) == 0
+    # copied by a tool that follows links (the links become plain copies): verify is content, repair adds nothing
+    copied = tmp_path / "copied"
+    shutil.copytree(moved, copied, ignore=shutil.ignore_patterns(".lock"))
+    assert not (copied / "scans" / "by-visit" / label / "coarse-coarse.laz").is_symlink()
+    capsys.readouterr()
+    assert main(["repair", str(copied)]) == 0
+    assert "linked" not in capsys.readouterr().out
+    assert sorted(os.listdir(copied / "scans" / "by-visit" / label)) == links

@@ -75,7 +75,7 @@ def _visit(camp: Path, field: Path, k: int, capsys, *, keep_second: int = 0) -> 
 @pytest.fixture
 def stations(two_setups, tmp_path) -> Path:
     dst = tmp_path / "stations"
-    shutil.copytree(two_setups, dst)
+    shutil.copytree(two_setups, dst, symlinks=True)
     return dst
 
 

@@ -320,8 +320,8 @@ def test_fleet_page_lists_the_bridges_and_opens_one(window, processed_copy, tmp_
 
     root = tmp_path / "fleet"
     root.mkdir()
-    shutil.copytree(processed_copy, root / "bridge-a", ignore=shutil.ignore_patterns(".lock"))
-    shutil.copytree(processed_copy, root / "bridge-b", ignore=shutil.ignore_patterns(".lock"))
+    shutil.copytree(processed_copy, root / "bridge-a", symlinks=True, ignore=shutil.ignore_patterns(".lock"))
+    shutil.copytree(processed_copy, root / "bridge-b", symlinks=True, ignore=shutil.ignore_patterns(".lock"))
     window.commands.open_fleet(str(root))
     wait_job(qtbot, window)
     view = window.commands.fleet_view

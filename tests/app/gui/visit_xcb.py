@@ -277,6 +277,11 @@ def _reports_and_files(v: Visit, camp, tmp_path, monkeypatch) -> None:
     v.qtbot.wait(200)
     assert v.status == f"report written to {report}"  # not overwritten
     assert v.files.opened_in[-1][1] == str(tmp_path / "report.pdf")  # where the exports went, the report goes
+    detailed = tmp_path / "report-detail.pdf"
+    v.files.will_choose(detailed)
+    v.do("Reports", "Write report with the appendix (PDF)…")
+    assert v.status == f"report written to {detailed}"
+    assert detailed.stat().st_size > report.stat().st_size  # the appendix adds pages
     for dock in (win.tree_dock, win.details_dock):  # hide the dock and show it again (View menu)
         dock.toggleViewAction().trigger()
         assert not dock.isVisible()

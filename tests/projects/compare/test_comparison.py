@@ -27,7 +27,7 @@ def compared(processed, field, tmp_path_factory):
     import shutil
 
     camp = tmp_path_factory.mktemp("cmp") / "camp"
-    shutil.copytree(processed, camp, ignore=shutil.ignore_patterns(".lock"))
+    shutil.copytree(processed, camp, symlinks=True, ignore=shutil.ignore_patterns(".lock"))
     out = camp.parent / "out"
     assert main(["compare", str(camp), "--from", "2026-03-02", "--to", "2026-03-16", "--out", str(out)]) == 0
     return camp, out

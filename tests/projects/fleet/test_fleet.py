@@ -26,7 +26,7 @@ def _cli(*args, timeout=600):
 
 def _stale_copy(processed, dst: Path) -> Path:
     """A copy of the processed campaign whose three epochs need stage 1 again (identical plans)."""
-    shutil.copytree(processed, dst, ignore=shutil.ignore_patterns(".lock"))
+    shutil.copytree(processed, dst, symlinks=True, ignore=shutil.ignore_patterns(".lock"))
     with Campaign.open(dst) as c:
         set_parameter(c, "identification_tolerance_m", "0.16")
     return dst
@@ -71,7 +71,7 @@ def test_find_campaigns_in_folders_and_fleet_files(fleet, tmp_path):
 def test_fleet_status_follows_a_linked_campaign_once(processed, tmp_path):
     """A bridge's folder kept on another disk and linked into the fleet folder is a bridge (issue 41 item 7)."""
     elsewhere = tmp_path / "other-disk" / "bridge-c"
-    shutil.copytree(processed, elsewhere, ignore=shutil.ignore_patterns(".lock"))
+    shutil.copytree(processed, elsewhere, symlinks=True, ignore=shutil.ignore_patterns(".lock"))
     root = tmp_path / "fleet"
     root.mkdir()
     (root / "bridge-c").symlink_to(elsewhere, target_is_directory=True)

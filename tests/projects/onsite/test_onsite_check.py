@@ -206,7 +206,7 @@ def test_the_check_is_binding(short_visit, field_copy, tmp_path):
 
     # the re-scan comes in: the old verdict no longer holds, and processing goes ahead without a word
     rescan = tmp_path / "rescan"
-    shutil.copytree(camp, rescan, ignore=shutil.ignore_patterns(".lock"))
+    shutil.copytree(camp, rescan, symlinks=True, ignore=shutil.ignore_patterns(".lock"))
     with Campaign.open(rescan) as c:
         plan = check_epoch(c, LABEL).rescan
         fine, _ = simulate_fine(field_copy / "v0", list(plan.rois), model=MODEL, name="fine-rescan.laz")

@@ -333,7 +333,7 @@ def _fill(disk: Path, leave: int = 0) -> Path:
 
 def test_a_real_full_disk(processed, small_disk, tmp_path, capsys):
     camp = small_disk / "camp"
-    shutil.copytree(processed, camp, ignore=shutil.ignore_patterns(".lock"))
+    shutil.copytree(processed, camp, symlinks=True, ignore=shutil.ignore_patterns(".lock"))
     label = make_stale(camp)
     coarse, fine = stored_scans(camp, "2026-03-02")
     new_coarse = variant(coarse, tmp_path / "c.laz")  # on another disk
@@ -394,7 +394,7 @@ def test_a_real_full_disk(processed, small_disk, tmp_path, capsys):
 
 def test_a_campaign_on_a_read_only_medium_is_read_and_writers_get_one_line(processed, small_disk, capsys):
     camp = small_disk / "camp"
-    shutil.copytree(processed, camp, ignore=shutil.ignore_patterns(".lock"))
+    shutil.copytree(processed, camp, symlinks=True, ignore=shutil.ignore_patterns(".lock"))
     r = subprocess.run(["mount", "-o", "remount,ro", str(small_disk)], capture_output=True)
     if r.returncode != 0:
         pytest.skip("cannot remount read-only here")
