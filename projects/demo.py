@@ -133,6 +133,7 @@ def build_demo(folder: str | os.PathLike, *, weeks: int = 52, seed: int = 2026,
         c.set_limit("*", "kr-rail:0-200")
     with c:
         start = _start_of(c, weeks)
+        add_demo_temperature(c, folder, weeks=weeks, seed=seed, start=start)
         field_dir = folder / "field"
         done = {e.label for e in c.epochs()}
         for w in range(weeks):
@@ -204,24 +205,35 @@ def demo_temperature(t_ns: np.ndarray, start: dt.datetime) -> np.ndarray:
     return 12.0 + 10.0 * np.sin(2 * np.pi * (w - 16) / 52.0) + 3.0 * np.sin(2 * np.pi * (hour - 9) / 24.0)
 
 
-def add_demo_story(c: Campaign, folder: Path, *, weeks: int, seed: int, start: dt.datetime) -> list[str]:
-    """The field story told by the demo's imports and analysis.
+def add_demo_temperature(c: Campaign, folder: Path, *, weeks: int, seed: int, start: dt.datetime) -> None:
+    """The air temperature logged on site (hourly), imported before the visits are processed.
 
-    An hourly temperature series, the two dead-load events, the design prediction (no temperature,
-    offset by 21.59 mm) aligned at week 8, and the analysis in ``analysis/``.
+    As a surveyor who imports the logger's file with every visit: each visit is processed once with its air
+    reading, and the finished demo has nothing stale (imported afterwards, it would make every visit stale).
     """
+    if any(r.name == "air-temperature" for r in env_records(c)):
+        return
     field = folder / "field"
     field.mkdir(exist_ok=True)
     t0 = _ns(start)
     hour = 3600 * 10 ** 9
-    if not any(r.name == "air-temperature" for r in env_records(c)):
-        t = np.arange(t0 - 7 * 24 * hour, _not_after_now(t0 + (weeks + 1) * 7 * 24 * hour), hour)
-        temp = demo_temperature(t, start) + np.random.default_rng(seed + 11).normal(0, 0.3, t.size)
-        lines = ["time,temperature_degC"] + [
-            f"{np.datetime_as_string(np.datetime64(int(a), 'ns'), unit='m')}Z,{b:.2f}"
-            for a, b in zip(t, temp, strict=False)]
-        (field / "temperature.csv").write_text("\n".join(lines) + "\n")
-        import_env(c, field / "temperature.csv", kind="temperature", name="air-temperature")
+    t = np.arange(t0 - 7 * 24 * hour, _not_after_now(t0 + (weeks + 1) * 7 * 24 * hour), hour)
+    temp = demo_temperature(t, start) + np.random.default_rng(seed + 11).normal(0, 0.3, t.size)
+    lines = ["time,temperature_degC"] + [
+        f"{np.datetime_as_string(np.datetime64(int(a), 'ns'), unit='m')}Z,{b:.2f}"
+        for a, b in zip(t, temp, strict=False)]
+    (field / "temperature.csv").write_text("\n".join(lines) + "\n")
+    import_env(c, field / "temperature.csv", kind="temperature", name="air-temperature")
+
+
+def add_demo_story(c: Campaign, folder: Path, *, weeks: int, seed: int, start: dt.datetime) -> list[str]:
+    """The field story told by the demo's imports and analysis.
+
+    The two dead-load events, the design prediction (no temperature,
+    offset by 21.59 mm) aligned at week 8, and the analysis in ``analysis/``.
+    """
+    field = folder / "field"
+    field.mkdir(exist_ok=True)
     if not events(c):
         for w, label, _ in DEAD_LOAD_WEEKS:
             if w < weeks - 2:

@@ -7,6 +7,8 @@ import json
 from pathlib import Path
 
 from app.cli.main import main
+from projects.results.status import campaign_status
+from projects.store.campaign import Campaign
 
 
 def test_fleet_status_lists_a_missing_folder_of_a_fleet_file_as_unreadable(processed_copy, tmp_path, capsys):
@@ -44,3 +46,6 @@ def test_the_demo_says_how_to_open_its_folder(tmp_path, capsys):
     last = capsys.readouterr().out.strip().splitlines()[-1]
     assert last == (f"open it in the application: ./run gui '{folder}' (from the source folder; installed: "
                     f"bridgesurvey-gui '{folder}'); on the command line: bridgesurvey status '{folder}'")
+    # the finished demo is up to date: its air series was imported before its visits were processed
+    with Campaign.open(folder, writable=False) as c:
+        assert [e["stale"] for e in campaign_status(c)["epochs"]] == ["", ""]
