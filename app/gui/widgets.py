@@ -44,3 +44,4 @@ class ElidedLabel(QLabel):
         text = self.fontMetrics().elidedText(self._full, Qt.ElideRight, r.width())
         p.setPen(self.palette().color(self.foregroundRole()))
         p.drawText(r, int(self.alignment() | Qt.AlignVCenter), text)
+        p.end()  # not left to the garbage collector: Qt warned "endPaint() called with active painter"

@@ -20,7 +20,7 @@ from projects.processing.stages import analyse_epoch_coarse, parameters
 from projects.store.campaign import Campaign
 from projects.store.previews import decode_preview, encode_preview
 
-__all__ = ["ReportContent", "ReportScope", "gather", "write_report"]
+__all__ = ["ReportContent", "ReportScope", "gather", "write_folder_report", "write_report"]
 
 
 def _check_output(path: Path) -> None:
@@ -67,3 +67,14 @@ def write_report(c: Campaign, path: str | os.PathLike, scope: ReportScope = Repo
     content = gather(c, scope, author=author, progress=scaled(progress, 0.0, 0.3))
     return build_pdf(content, path, preview_of=_preview_from_scan(c), progress=scaled(progress, 0.3, 1.0),
                      detail=detail)
+
+
+def write_folder_report(folder: str | os.PathLike, path: str | os.PathLike, *, detail: bool = False,
+                        progress: ProgressCallback | None = None) -> Path:
+    """:func:`write_report` of the whole campaign in ``folder``, opened read-only for the time it takes.
+
+    A function of paths only, so that it can run in a process of its own
+    (:func:`common.processes.run_in_process`: the desktop application's *Write report*).
+    """
+    with Campaign.open(folder, writable=False) as c:
+        return write_report(c, path, progress=progress, detail=detail)
