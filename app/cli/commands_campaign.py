@@ -311,10 +311,22 @@ def cmd_status(args) -> int:
         print(f"ALARM: {', '.join(alarms)}")
     for w in data["warnings"]:
         print(f"warning: {w}")
+    print(storage_line(data["storage"]))
     if data["unlisted_files"]:
         print(f"warning: {len(data['unlisted_files'])} file(s) in the campaign folder that the database does not list "
               f"(kept; 'bridgesurvey repair {args.dir}' registers them again): {', '.join(data['unlisted_files'])}")
     return 0
+
+
+def storage_line(storage: dict) -> str:
+    """``storage: 885 MB on disk; 120 scans here, 60 archived in /mnt/archive`` (see ``archive``).
+
+    >>> storage_line({"size_bytes": 885_000_000, "scans_here": 3, "scans_archived": {"/mnt/a": 2}})
+    'storage: 885.0 MB on disk; 3 scan(s) in the campaign folder, 2 archived in /mnt/a'
+    """
+    where = ", ".join(f"{n} archived in {folder}" for folder, n in storage["scans_archived"].items())
+    return (f"storage: {storage['size_bytes'] / 1e6:.1f} MB on disk; {storage['scans_here']} scan(s) in the campaign "
+            f"folder" + (f", {where}" if where else ""))
 
 
 #: Revisions ``status`` lists without --verbose.

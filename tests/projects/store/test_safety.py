@@ -13,9 +13,9 @@ import pytest
 
 from app.cli.main import main
 from projects.store import journal
-from projects.store.imports import BY_VISIT
 from projects.store.campaign import DB_NAME, Campaign
 from projects.store.errors import CampaignError, CampaignLockedError
+from projects.store.imports import BY_VISIT
 
 CLI = [sys.executable, "-c", "import sys; from app.cli.main import main; sys.exit(main())"]
 
