@@ -99,11 +99,15 @@ def is_here(c: Campaign, f: ScanFile) -> bool:
 
 
 def away(c: Campaign, files: Sequence[ScanFile]) -> list[ArchivedScan]:
-    """Those of ``files`` that are archived and no longer in the campaign folder."""
-    if not files:
+    """Those of ``files`` that are archived and no longer in the campaign folder.
+
+    The database is asked only when a file is missing (a stage-1 job reads the store once, in one snapshot).
+    """
+    missing = [f for f in files if not is_here(c, f)]
+    if not missing:
         return []
-    recorded = {a.file.sha256: a for a in archived_scans(c, {f.epoch for f in files})}
-    return [recorded[f.sha256] for f in files if f.sha256 in recorded and not is_here(c, f)]
+    recorded = {a.file.sha256: a for a in archived_scans(c, {f.epoch for f in missing})}
+    return [recorded[f.sha256] for f in missing if f.sha256 in recorded]
 
 
 def archived_line(folder: Path, gone: Sequence[ArchivedScan], what: str) -> str:
