@@ -6,6 +6,7 @@ from pathlib import Path
 
 from app.cli.output import dump_json
 from app.cli.progress import progress_bar
+from common import files
 from common.errors import InputError
 from projects.results.integrity import repair_folder, verify_campaign
 from projects.results.storage import archivable_epochs
@@ -111,8 +112,11 @@ def _said(args, run: StorageRun, action: str, left: dict[str, str], *, size: int
     n, visits = len(run.moved), len(run.epochs)
     if action == "archive":
         if run.dry_run:
+            free = files.free_bytes(args.to)
+            room = "" if free is None else (f"; {args.to} has {_mb(free)} free" + (
+                "" if free >= run.bytes else f": not enough, free {_mb(run.bytes - free)} more first"))
             print(f"dry run: would move {n} scan(s) of {visits} visit(s), freeing {_mb(run.bytes)} of the campaign's "
-                  f"{_mb(size)}; nothing was changed")
+                  f"{_mb(size)}{room}; nothing was changed")
         else:
             print(f"archived {n} scan(s) of {visits} visit(s): {_mb(size - after)} freed, the campaign folder now "
                   f"holds {_mb(after)}" + ("" if n else " (nothing to archive)"))

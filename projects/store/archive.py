@@ -33,7 +33,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from common.files import MB, disk_full_error, ensure_free, free_bytes, is_disk_full, sha256_of
+from common.files import MB, disk_full_error, ensure_free, is_disk_full, sha256_of
 from common.progress import ProgressCallback, report
 from projects.store import journal
 from projects.store.campaign import Campaign
@@ -402,10 +402,4 @@ def repair_archived(c: Campaign) -> list[str]:
         reach = "" if Path(place).is_file() else " (not reachable now)"
         out.append(f"{f.stored_path}: recorded again as archived to {place}{reach}, as the journal of imports has it")
     return out
-
-
-def free_text(path: Path) -> str:
-    """The free space on ``path``'s disk in words ("12.3 GB free"), or "" when not known."""
-    free = free_bytes(path)
-    return "" if free is None else f"{free / 1e9:.1f} GB free"
 

@@ -173,6 +173,8 @@ def test_an_unwritable_destination_is_one_line_and_changes_nothing(processed_cop
 def test_a_full_destination_is_one_line_and_changes_nothing(processed_copy, disk, capsys, monkeypatch):
     monkeypatch.setattr("common.files.free_bytes", lambda p: 4096)
     before = snapshot(processed_copy)
+    rc, out, _ = run(capsys, "archive", processed_copy, "--to", disk, "--dry-run")
+    assert rc == 0 and f"{disk} has 0.0 MB free: not enough" in out and "nothing was changed" in out
     rc, out, err = run(capsys, "archive", processed_copy, "--to", disk)
     assert rc == 1 and out == ""
     one_line(err, "no space left on the device holding", str(disk))
