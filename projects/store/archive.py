@@ -328,7 +328,8 @@ def restore_scans(c: Campaign, epochs: Sequence[str] | None = None, *, dry_run: 
     """Bring the archived scans of ``epochs`` (default all) back into the campaign folder, checked (module notes).
 
     Every copy must be reachable and the campaign's disk must hold them all, else one line before anything moves.
-    The archived copy is removed once the scan is back and recorded so (a copy that cannot be removed is kept).
+    The archived copy is removed once the scan is back and recorded so (a copy that cannot be removed is kept;
+    one that a stopped restore left is removed by the next).
     """
     scans = archived_scans(c, epochs)
     run = StorageRun(dry_run=dry_run)
@@ -341,6 +342,7 @@ def restore_scans(c: Campaign, epochs: Sequence[str] | None = None, *, dry_run: 
     run.moved = [(a.file.stored_path, a.file.epoch, a.file.size, a.place) for a in scans]
     if dry_run:
         return run
+    _remove_restored_copies(c)
     scans_dir = c.folder / SCANS_DIR
     ensure_free(scans_dir, sum(a.file.size for a in scans if not is_here(c, a.file)) + ARCHIVE_MARGIN_BYTES)
     for k, a in enumerate(scans):
@@ -372,14 +374,36 @@ def _restore_one(c: Campaign, a: ArchivedScan) -> None:
 
 
 # ---------------------------------------------------------------------------------------------- repair
-def archived_from_journal(c: Campaign) -> list[tuple[str, str, str]]:
-    """(sha256, place, time) of each scan the journal last saw archived (a later restore undoes it), in order."""
+def _last_moves(c: Campaign) -> dict[str, dict]:
+    """The journal's last archive or restore entry of each scan, by checksum."""
     last: dict[str, dict] = {}
     for e in journal.entries(c.folder):
-        if e.get("kind") in ("archive", "restore") and isinstance(e.get("sha256"), str):
+        if e.get("kind") in ("archive", "restore") and isinstance(e.get("sha256"), str) and e.get("place"):
             last[e["sha256"]] = e
-    return [(sha, str(e.get("place", "")), str(e.get("time", ""))) for sha, e in last.items()
-            if e["kind"] == "archive" and e.get("place")]
+    return last
+
+
+def archived_from_journal(c: Campaign) -> list[tuple[str, str, str]]:
+    """(sha256, place, time) of each scan the journal last saw archived (a later restore undoes it), in order."""
+    return [(sha, str(e["place"]), str(e.get("time", ""))) for sha, e in _last_moves(c).items()
+            if e["kind"] == "archive"]
+
+
+def _remove_restored_copies(c: Campaign) -> None:
+    """Remove the archived copies of scans restored by a run stopped before it removed them.
+
+    Only a copy the journal last saw restored, whose scan is back in the folder and no longer recorded as
+    archived, with the scan's checksum: never a copy the campaign still counts on.
+    """
+    recorded = {a.file.sha256 for a in archived_scans(c)}
+    for sha, e in _last_moves(c).items():
+        place = Path(e["place"])
+        if e["kind"] != "restore" or sha in recorded or not place.is_file():
+            continue
+        here = c.folder / str(e.get("scan", ""))
+        with contextlib.suppress(OSError):
+            if here.is_file() and sha256_of(here) == sha and sha256_of(place) == sha:
+                place.unlink()
 
 
 def repair_archived(c: Campaign) -> list[str]:

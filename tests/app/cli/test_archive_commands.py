@@ -329,6 +329,46 @@ def test_an_archive_run_stopped_at_any_step_leaves_a_whole_campaign_archived_aga
     assert len({e["sha256"] for e in archived}) == 6
 
 
+RESTORE_STOPS = {
+    "the first scan copied back, not journaled": (archive, "_copy_checked", lambda disk, camp, a: True, 1),
+    "the second journaled, still recorded as archived": (journal, "append", lambda disk, camp, a: True, 2),
+    "the third's transaction": (Campaign, "log_action", lambda disk, camp, a: a[2] == "restore", 3),
+    "the fourth back and recorded, its archived copy not yet removed":
+        (Path, "unlink", lambda disk, camp, a: a[0].parent == disk, 4),
+}
+
+
+@pytest.mark.parametrize("where", list(RESTORE_STOPS))
+def test_a_restore_stopped_at_any_step_leaves_a_whole_campaign_restored_again(processed_copy, disk, capsys,
+                                                                              monkeypatch, where):
+    from app.cli.main import main
+
+    assert run(capsys, "archive", processed_copy, "--to", disk)[0] == 0
+    owner, name, counted, nth = RESTORE_STOPS[where]
+    real = getattr(owner, name)
+    calls = {"n": 0}
+
+    def stopping(*a, **kw):
+        if counted(disk, processed_copy, a):
+            calls["n"] += 1
+            if calls["n"] == nth:
+                raise Stop(where)
+        return real(*a, **kw)
+
+    monkeypatch.setattr(owner, name, stopping)
+    with pytest.raises(Stop):
+        main(["archive", str(processed_copy), "--restore"])
+    monkeypatch.undo()
+    whole(processed_copy, capsys)
+    rc, out, _ = run(capsys, "archive", processed_copy, "--restore")
+    assert rc == 0 and len(scans_here(processed_copy)) == 6 and len(links(processed_copy)) == 6
+    assert list(disk.iterdir()) == [] and not [p for p in (processed_copy / "scans").iterdir()
+                                                if p.name.startswith(".")]
+    whole(processed_copy, capsys)
+    with Campaign.open(processed_copy, writable=False) as c:
+        assert archived_scans(c) == []
+
+
 #: A child process that runs the command and kills itself (SIGKILL) at the nth call of one function, before or
 #: after it: a kill -9 at a known point of the run, whatever the machine's speed.
 KILLER = """
