@@ -138,6 +138,22 @@ def test_compare_and_the_3d_view_need_the_scans_back(processed_copy, disk, capsy
         epoch_cloud(c, FIRST)
 
 
+def test_archive_for_scripts_and_options_that_do_not_go_together(processed_copy, disk, capsys):
+    import json
+
+    rc, out, _ = run(capsys, "archive", processed_copy, "--to", disk, "--dry-run", "--json")
+    doc = json.loads(out)
+    assert rc == 0 and doc["dry_run"] and len(doc["scans"]) == 6 and doc["not_archived"] == []
+    assert doc["bytes"] == sum(s["size"] for s in doc["scans"]) > 0 and list(disk.iterdir()) == []
+    before = snapshot(processed_copy)
+    for argv, words in ((["--restore", "--to", disk], "takes no --to"), (["--to", disk, "--epoch", FIRST], "--restore"),
+                        ([], "--to DEST")):
+        rc, _, err = run(capsys, "archive", processed_copy, *argv)
+        assert rc == 1
+        one_line(err, words)
+    assert snapshot(processed_copy) == before
+
+
 # ---------------------------------------------------------------------------------------------- bad destinations
 def refused(capsys, camp: Path, dest, *words: str) -> None:
     before = snapshot(camp)
