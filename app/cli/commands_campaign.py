@@ -259,7 +259,7 @@ def cmd_displacements(args) -> int:
 
 def cmd_status(args) -> int:
     # local: the processing (the pipeline, scikit-image) costs init, reflector, limit, displacements 0.18 s (measured)
-    from projects.results.status import campaign_status
+    from projects.results.status import campaign_status, storage_line
     with open_campaign(args.dir, writable=False) as c:
         data = campaign_status(c)
         left = [p.name for p in stale_temp_files(c.folder)]
@@ -316,17 +316,6 @@ def cmd_status(args) -> int:
         print(f"warning: {len(data['unlisted_files'])} file(s) in the campaign folder that the database does not list "
               f"(kept; 'bridgesurvey repair {args.dir}' registers them again): {', '.join(data['unlisted_files'])}")
     return 0
-
-
-def storage_line(storage: dict) -> str:
-    """``storage: 885 MB on disk; 120 scans here, 60 archived in /mnt/archive`` (see ``archive``).
-
-    >>> storage_line({"size_bytes": 885_000_000, "scans_here": 3, "scans_archived": {"/mnt/a": 2}})
-    'storage: 885.0 MB on disk; 3 scan(s) in the campaign folder, 2 archived in /mnt/a'
-    """
-    where = ", ".join(f"{n} archived in {folder}" for folder, n in storage["scans_archived"].items())
-    return (f"storage: {storage['size_bytes'] / 1e6:.1f} MB on disk; {storage['scans_here']} scan(s) in the campaign "
-            f"folder" + (f", {where}" if where else ""))
 
 
 #: Revisions ``status`` lists without --verbose.

@@ -67,3 +67,16 @@ def campaign_status(c: Campaign) -> dict:
             "instrument": None if fitted is None else instrument_summary(fitted[0]),
             "targets": list(latest.values()), "warnings": c.layout_warnings() + damaged,
             "unlisted_files": c.unlisted_files(), "revisions": revised, "storage": storage_summary(c)}
+
+
+def storage_line(storage: dict) -> str:
+    """The campaign's size on disk and where its scans are, in one line (:func:`campaign_status`'s ``storage``).
+
+    What ``bridgesurvey status`` prints and the application's campaign page shows.
+
+    >>> storage_line({"size_bytes": 885_000_000, "scans_here": 3, "scans_archived": {"/mnt/a": 2}})
+    'storage: 885.0 MB on disk; 3 scan(s) in the campaign folder, 2 archived in /mnt/a'
+    """
+    where = ", ".join(f"{n} archived in {folder}" for folder, n in storage["scans_archived"].items())
+    return (f"storage: {storage['size_bytes'] / 1e6:.1f} MB on disk; {storage['scans_here']} scan(s) in the campaign "
+            f"folder" + (f", {where}" if where else ""))
