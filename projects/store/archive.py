@@ -8,7 +8,8 @@ the inspection of a target; stage 2 and the reports work from the stored centroi
 Archiving one scan (:func:`archive_scans`) goes in an order a kill -9 cannot break:
 
 1. it is copied to ``DEST/<its stored name>`` under a temporary name (``.archive-<hex>``), flushed to disk,
-   read back and checked against the SHA-256 recorded at its import, renamed, made read-only;
+   read back (from the disk: its pages are dropped from memory first) and checked against the SHA-256
+   recorded at its import, renamed, made read-only;
 2. the move is appended to the journal of imports (kind ``archive``), so a database restored from an older
    backup still knows where the scan went (``bridgesurvey repair``);
 3. the copy's place is recorded in ``archived_files`` (one transaction, logged);
@@ -222,6 +223,8 @@ def _copy_checked(src: Path, target: Path, sha256: str, temp_prefix: str, *, wha
                 fout.write(block)
             fout.flush()
             os.fsync(fout.fileno())
+            if hasattr(os, "posix_fadvise"):  # the check below reads the copy from the disk, not from memory
+                os.posix_fadvise(fout.fileno(), 0, 0, os.POSIX_FADV_DONTNEED)
         if sha256_of(tmp) != sha256:
             why = ("the scan changed since its import: 'bridgesurvey verify' says what to do"
                    if sha256_of(src) != sha256 else f"the copy was damaged on its way: check the disk of {target.parent}")
