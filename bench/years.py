@@ -62,7 +62,8 @@ def _timed(fn):
 
 
 def _size_mb(folder: Path) -> float:
-    return sum(p.stat().st_size for p in folder.rglob("*") if p.is_file()) / 1e6
+    """The folder's size on disk: its files, links not followed (a scan's link under scans/by-visit/ costs nothing)."""
+    return sum(p.lstat().st_size for p in folder.rglob("*") if p.is_file() and not p.is_symlink()) / 1e6
 
 
 def run(root: Path, visits: int, checkpoints: list[int], window: int, seed: int = 44) -> list[dict]:

@@ -5,7 +5,7 @@ import importlib
 import pytest
 
 MODULES = ["common.validation", "common.files", "common.rigid", "projects.store.history", "app.gui.state.plan_edit", "common.flags", "lidar.identification", "lidar.io.names", "lidar.io.intensity",
-           "app.gui.state.map_geometry"]
+           "app.gui.state.map_geometry", "projects.results.status"]
 
 
 @pytest.mark.parametrize("name", MODULES)

@@ -259,7 +259,7 @@ def cmd_displacements(args) -> int:
 
 def cmd_status(args) -> int:
     # local: the processing (the pipeline, scikit-image) costs init, reflector, limit, displacements 0.18 s (measured)
-    from projects.results.status import campaign_status
+    from projects.results.status import campaign_status, storage_line
     with open_campaign(args.dir, writable=False) as c:
         data = campaign_status(c)
         left = [p.name for p in stale_temp_files(c.folder)]
@@ -311,6 +311,7 @@ def cmd_status(args) -> int:
         print(f"ALARM: {', '.join(alarms)}")
     for w in data["warnings"]:
         print(f"warning: {w}")
+    print(storage_line(data["storage"]))
     if data["unlisted_files"]:
         print(f"warning: {len(data['unlisted_files'])} file(s) in the campaign folder that the database does not list "
               f"(kept; 'bridgesurvey repair {args.dir}' registers them again): {', '.join(data['unlisted_files'])}")

@@ -43,7 +43,7 @@ COMMAND_GROUPS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("set-up, once per bridge", ("init", "reflector", "limit", "settings", "demo")),
     ("each visit, in this order", ("add-epoch", "add-setup", "plan", "field-sheet", "add-fine", "check", "process")),
     ("results", ("status", "displacements", "report", "export")),
-    ("when something goes wrong", ("verify", "repair")),
+    ("the campaign's files: when something goes wrong, and old scans", ("verify", "repair", "archive")),
     ("analysis and cross-checks", ("compare", "env", "event", "prediction", "analyse", "camera", "crossval")),
     ("in the field: the instrument and where to stand", ("scanners", "stations")),
     ("scan and image files, outside a campaign", ("info", "convert", "detect", "plan-file", "centroids", "simulate",
@@ -68,7 +68,7 @@ COMMAND_MODULES: dict[str, str] = {
     **dict.fromkeys(("detect", "plan-file", "centroids", "simulate"), "files"),
     "dualcam": "dualcam",
     "fleet": "fleet",
-    **dict.fromkeys(("verify", "repair"), "store"),
+    **dict.fromkeys(("verify", "repair", "archive"), "store"),
 }
 
 #: The commands over scan and image files: their work is the product's own loops (compiled, on two threads) and

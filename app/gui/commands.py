@@ -499,7 +499,8 @@ class Commands:
             text = "\n".join(in_app_words(f.line()) for f in findings) or \
                 "The database, every imported file and every stored result are as they were stored."
             QMessageBox.information(self.parent, "Verify campaign", text)
-            self.state.status.result("verify: " + (f"{len(findings)} thing(s) to do" if findings else "no problem"))
+            problems = [f for f in findings if not f.is_note]  # an archived scan not reachable is only named
+            self.state.status.result("verify: " + (f"{len(problems)} thing(s) to do" if problems else "no problem"))
 
         self._job("Verifying the campaign", lambda p: actions.verify(self.state.access, p), done)
 

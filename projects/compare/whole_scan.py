@@ -137,14 +137,15 @@ def bring_to_campaign_frame(c: Campaign, label: str, base: str, *, refinement: s
         raise InputError(f"unknown registration refinement {refinement!r}; use {', '.join(REFINEMENTS)}")
     refine = refinement != "targets"
     if base_xyz is None and (label == base or refine):
-        base_xyz = read_files(c, c.files(base, "coarse")).xyz_socs
+        base_xyz = read_files(c, c.files(base, "coarse"), what="the whole-scan comparison").xyz_socs
     if label == base:
         return EpochInFrame(label, None, None, Transform.identity("campaign"), base_xyz)
     if not c.centroids(label) or not c.centroids(base):
         raise CampaignError(f"epochs {label} and {base} need measured targets for the registration; "
                             "add their fine scans and run 'bridgesurvey process'")
     report(progress, 0.0, f"reading {label}")
-    scan = read_files(c, c.files(label, "coarse"), scaled(progress, 0.0, 0.3))
+    scan = read_files(c, c.files(label, "coarse"), scaled(progress, 0.0, 0.3),
+                      what="the whole-scan comparison")
     layout = c.layout()
     refs = layout.ids_in("reference")
     src, s1 = _centroid_arrays(c, label, refs)
@@ -200,7 +201,7 @@ def compare_epochs(c: Campaign, from_label: str, to_label: str, *, method: str =
     if method == "m3c2":
         _prefetch()
     report(progress, 0.0, f"reading {base}")
-    base_xyz = read_files(c, c.files(base, "coarse")).xyz_socs  # once, for both epochs
+    base_xyz = read_files(c, c.files(base, "coarse"), what="the whole-scan comparison").xyz_socs  # once, for both epochs
     ea = bring_to_campaign_frame(c, from_label, base, refinement=refinement, base_xyz=base_xyz,
                                  progress=scaled(progress, 0.05, 0.35))
     eb = bring_to_campaign_frame(c, to_label, base, refinement=refinement, base_xyz=base_xyz,

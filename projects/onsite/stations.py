@@ -122,7 +122,8 @@ def seen_surfaces(c: Campaign, last: LastStation, *, voxel_m: float = 0.05,
     """The epoch's coarse scan in the layout's frame, one point per ``voxel_m`` cube (None without one)."""
     if not c.files(last.label, "coarse"):
         return None
-    scan = read_files(c, c.files(last.label, "coarse"), scaled(progress, 0.0, 0.8))
+    scan = read_files(c, c.files(last.label, "coarse"), scaled(progress, 0.0, 0.8),
+                      what="the station advisor")
     report(progress, 0.8, "the scan's surfaces as obstacles")  # (a cancel stops here, before the voxels)
     xyz = (scan.xyz_socs - last.translation) @ last.rotation  # R^T (x - t), row-wise
     return thin_to_voxels(xyz, voxel_m).astype(np.float32)

@@ -56,7 +56,7 @@ def inspect_target(c: Campaign, label: str, reflector: str, *,
     files = c.files(label, "fine")
     if not files:
         raise ProcessingError(f"epoch {label} has no fine scans yet; add them first")
-    scan = read_files(c, files, scaled(progress, 0.0, 0.8))
+    scan = read_files(c, files, scaled(progress, 0.0, 0.8), what="the inspection of a target")
     if scan.intensity is None:
         raise ProcessingError(f"the fine scans of {label} carry no intensity: the target cannot be told apart")
     theta, phi, _ = spherical_from_xyz(scan.xyz_socs)
@@ -115,7 +115,7 @@ def epoch_cloud(c: Campaign, label: str, *, max_points: int = 1_500_000, margin_
     files = c.files(label, "coarse")
     if not files:
         raise InputError(f"epoch {label} has no coarse scan")
-    scan = read_files(c, files, scaled(progress, 0.0, 0.9))
+    scan = read_files(c, files, scaled(progress, 0.0, 0.9), what="the 3-D view")
     if scan.intensity is None:
         raise InputError(f"the coarse scan of {label} carries no intensity to colour it by")
     ids, xyz = _targets_of(c, label)

@@ -46,6 +46,7 @@ from lidar.stage2 import (
 FIELD_REFIT = "the field model was re-fitted with the newer visits"
 from lidar.systematic.campaign_fit import air_near
 from projects.processing.parameters import DEFAULTS, parameter, stage1_params, stage2_params
+from projects.store.archive import check_present
 from projects.store.campaign import Campaign, parse_datetime, sha256_of
 from projects.store.previews import encode_preview
 from projects.store.records import EpochInputs, ScanFile
@@ -184,8 +185,13 @@ def read_paths(paths, progress: ProgressCallback | None = None, frames: Sequence
     return scans[0] if len(scans) == 1 else Scan.concatenate(scans)
 
 
-def read_files(c: Campaign, files: Sequence[ScanFile], progress=None, *, setup: int = 1) -> Scan:
-    """The stored scan files ``files`` (from ``Campaign.files``) of one set-up as one scan, in its scanner frame."""
+def read_files(c: Campaign, files: Sequence[ScanFile], progress=None, *, setup: int = 1, what: str = "this") -> Scan:
+    """The stored scan files ``files`` (from ``Campaign.files``) of one set-up as one scan, in its scanner frame.
+
+    Scans archived out of the campaign folder stop it in one line naming them, where they are and the remedy
+    (:func:`projects.store.archive.check_present`; ``what`` says what needs them).
+    """
+    check_present(c, files, what)
     return read_paths([c.path_of(f) for f in files], progress, [f.frame_for(setup) for f in files],
                       [f.sha256 for f in files])
 
@@ -247,7 +253,8 @@ def _station_hint(setup: int, params: dict) -> tuple[float, float] | None:
 def analyse_epoch_coarse(c: Campaign, label: str, layout, params: dict, *, setup: int = 1,
                          progress: ProgressCallback | None = None):
     """Reflectance map, detections and identification of an epoch's (set-up's) coarse scan with the parameters."""
-    coarse = read_files(c, c.files(label, "coarse", setup=setup), scaled(progress, 0.0, 0.5), setup=setup)
+    coarse = read_files(c, c.files(label, "coarse", setup=setup), scaled(progress, 0.0, 0.5), setup=setup,
+                        what="the reflectance map")
     return _analyse(coarse, layout, params, c.profile_for(label, setup), scaled(progress, 0.5, 1.0),
                     station_xy=_station_hint(setup, params))
 
@@ -300,8 +307,12 @@ class Stage1Result:
     time_source: str = "none"
 
 
-def stage1_job(c: Campaign, label: str, setup: int = 1) -> Stage1Job:
-    """An epoch's (set-up's) stage-1 job as plain values (its stored plan reused when its inputs are unchanged)."""
+def stage1_job(c: Campaign, label: str, setup: int = 1, *, fine: bool = True) -> Stage1Job:
+    """An epoch's (set-up's) stage-1 job as plain values (its stored plan reused when its inputs are unchanged).
+
+    The scans the job will read (the coarse ones unless the plan is reused, the fine ones unless ``fine`` is
+    False) must be in the campaign folder: archived ones stop it in one line (:func:`check_present`).
+    """
     inp = c.epoch_inputs(label, setup=setup)  # one read: epoch, files, plan, layout, scanner, settings
     if setup not in inp.setups:
         c.check_setup(label, setup)
@@ -309,6 +320,8 @@ def stage1_job(c: Campaign, label: str, setup: int = 1) -> Stage1Job:
     h = _plan_hash(inp, params)
     sp = inp.plan
     stored = sp.plan_json if sp is not None and sp.inputs_hash == h else None
+    check_present(c, (inp.coarse if stored is None else ()) + (inp.fine if fine else ()),
+                  "processing it again (stage 1: planning and centroids from its scans)")
     return Stage1Job(str(c.folder), label, tuple(str(c.path_of(r)) for r in inp.coarse),
                      tuple(str(c.path_of(r)) for r in inp.fine), inp.layout, params, inp.profile, h, stored,
                      _measure_hash(inp, h) if inp.fine else None, setup,
@@ -368,7 +381,7 @@ def save_stage1(c: Campaign, result: Stage1Result) -> None:
 
 def plan_epoch(c: Campaign, label: str, *, setup: int = 1, progress: ProgressCallback | None = None) -> ScanPlan:
     """The fine-scan plan of an epoch's set-up, from its coarse scan (reused when its inputs are unchanged)."""
-    job = stage1_job(c, label, setup)
+    job = stage1_job(c, label, setup, fine=False)
     if job.stored_plan is not None:
         return ScanPlan.from_json(job.stored_plan)
     result = run_stage1(replace(job, fine_paths=(), measure_hash=None), progress=progress)

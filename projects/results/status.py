@@ -12,6 +12,7 @@ from projects.processing.stages import baseline_epoch, stale_displacements, stal
 from projects.results.corrections import epoch_corrections, instrument_summary
 from projects.results.state import epoch_states
 from projects.results.table import displacement_table
+from projects.store.archive import storage_summary
 from projects.store.campaign import Campaign
 from projects.store.verify import REMEDY, describe_group
 
@@ -31,6 +32,8 @@ def campaign_status(c: Campaign) -> dict:
     ``warnings`` are the layout's (targets no station could reach) and the stored results that fail their
     checksum (not shown, recomputed by ``process``); ``unlisted_files`` the files of the
     import folders the database does not list (never deleted: ``bridgesurvey repair`` registers them).
+    ``storage`` is the folder's size on disk and where its scans are
+    (:func:`projects.store.archive.storage_summary`).
     """
     stale = stale_epochs(c)
     for label, why in stale_displacements(c).items():  # what processing will recompute, known before it runs
@@ -63,4 +66,17 @@ def campaign_status(c: Campaign) -> dict:
     return {"name": c.name, "span_m": c.span_m, "timezone": c.timezone, "baseline": baseline_epoch(c), "epochs": epochs,
             "instrument": None if fitted is None else instrument_summary(fitted[0]),
             "targets": list(latest.values()), "warnings": c.layout_warnings() + damaged,
-            "unlisted_files": c.unlisted_files(), "revisions": revised}
+            "unlisted_files": c.unlisted_files(), "revisions": revised, "storage": storage_summary(c)}
+
+
+def storage_line(storage: dict) -> str:
+    """The campaign's size on disk and where its scans are, in one line (:func:`campaign_status`'s ``storage``).
+
+    What ``bridgesurvey status`` prints and the application's campaign page shows.
+
+    >>> storage_line({"size_bytes": 885_000_000, "scans_here": 3, "scans_archived": {"/mnt/a": 2}})
+    'storage: 885.0 MB on disk; 3 scan(s) in the campaign folder, 2 archived in /mnt/a'
+    """
+    where = ", ".join(f"{n} archived in {folder}" for folder, n in storage["scans_archived"].items())
+    return (f"storage: {storage['size_bytes'] / 1e6:.1f} MB on disk; {storage['scans_here']} scan(s) in the campaign "
+            f"folder" + (f", {where}" if where else ""))

@@ -10,8 +10,13 @@ class CampaignLockedError(CampaignError):
     """Another process is working on the campaign."""
 
 
+class ScansArchivedError(CampaignError):
+    """A command needs scans that were archived out of the campaign folder (``bridgesurvey archive --restore``)."""
+
+
 class DuplicateImportError(InputError):
     """The same scan file (same checksum) is already in the campaign."""
 
 
-__all__ = ["CampaignError", "CampaignLockedError", "DuplicateImportError", "InputError", "SurveyError"]
+__all__ = ["CampaignError", "CampaignLockedError", "DuplicateImportError", "InputError", "ScansArchivedError",
+           "SurveyError"]

@@ -10,8 +10,10 @@
   epoch is created again with its recorded date and notes when the database lost it too); a camera
   or environment series or a prediction is read again from its file with the options it was
   imported with, by the ``reimporters`` the caller passes (reading them is the series layer's job).
-  Series whose stored arrays fail their digest are read again the same way. Damaged results are
-  left to ``process``, which recomputes them.
+  Series whose stored arrays fail their digest are read again the same way. Scans the journal has
+  archived out of the folder (:mod:`projects.store.archive`) and the database does not record so are
+  recorded again where the journal says (never taken for lost). Damaged results are left to ``process``,
+  which recomputes them.
 
 Each step is its own transaction and is logged; what could not be done is said with the reason.
 """
@@ -27,6 +29,7 @@ from common.errors import SurveyError
 from common.files import sha256_of
 from lidar.scanner_profile import ScannerProfile
 from projects.store import digests, journal, schema, wal
+from projects.store.archive import repair_archived
 from projects.store.campaign import DB_NAME, Campaign, damaged_input_line, describe_input
 from projects.store.connection import connect
 from projects.store.errors import CampaignError
@@ -53,7 +56,7 @@ RECOMPUTED = frozenset({
     "displacement_sets", "displacements", "reference_checks", "displacement_extras", "displacement_set_extras",
     "field_models", "setup_plans", "setup_previews", "setup_results", "comparisons", "crossvals"})
 #: Tables whose rows the journal of imports holds: made again empty, then filled by :func:`repair_campaign`.
-FROM_JOURNAL = frozenset({"epochs", "files", "camera_series", "env_series", "predictions"})
+FROM_JOURNAL = frozenset({"epochs", "files", "camera_series", "env_series", "predictions", "archived_files"})
 #: The campaign's log: made again empty (its history is lost, nothing computed depends on it).
 LOG = frozenset({"log"})
 #: Tables whose rows the campaign's log holds: made again from the last rule set for each target.
@@ -332,6 +335,7 @@ def repair_campaign(c: Campaign, reimporters: Mapping[str, Reimporter] | None = 
         except SurveyError as exc:  # e.g. a series its reader refuses now: say so, keep going
             out.left.append(f"{rel}: not registered again ({exc})")
     _replay_epoch_scanners(c, {e.label for e in c.epochs()} - before, out)
+    out.done += repair_archived(c)  # scans the journal has archived: not lost, where it says
     _damaged_series(c, entries, reimporters, out)
     _visit_links(c, out)
     return out
@@ -350,6 +354,8 @@ def _visit_links(c: Campaign, out: RepairReport) -> None:
     n = count()
     for e in c.epochs():
         for f in c.files(e.label, setup=None):
+            if not (c.folder / f.stored_path).is_file():
+                continue  # archived out of the folder (or lost): no link to nothing
             link_by_visit(c.folder, f.stored_path, e.label, visit_link_name(f.role, f.setup, Path(f.original_path).name))
     made = count() - n
     if made:

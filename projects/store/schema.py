@@ -17,7 +17,7 @@ from projects.store.errors import CampaignError
 from projects.store.field_tables import SCHEMA as FIELD_SCHEMA
 from projects.store.setup_tables import SCHEMA as SETUP_SCHEMA
 
-SCHEMA_VERSION = 12
+SCHEMA_VERSION = 13
 
 SCHEMA_V1 = """
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -221,6 +221,15 @@ MIGRATIONS: dict[int, Migration] = {
     #     and settings in meta, the field model) carries the digest of its values (projects.store.digests.INPUTS),
     #     so a changed alarm limit or epoch date is named, never served.
     12: _add_row_digests,
+    # 13: scans moved out of the campaign folder once their visit was processed (projects.store.archive): where
+    #     each copy went, checked against the scan's checksum at its import. The files row stays as it was.
+    13: """
+    CREATE TABLE archived_files (
+        sha256 TEXT PRIMARY KEY REFERENCES files(sha256) ON DELETE CASCADE,
+        place TEXT NOT NULL,                        -- absolute path of the checked copy outside the campaign
+        archived TEXT NOT NULL                      -- when the copy was checked and recorded (ISO 8601 UTC)
+    );
+    """,
 }
 
 #: What each migration leaves that can be seen in the tables: version -> (table, column or None).
@@ -229,6 +238,7 @@ MARKS: dict[int, tuple[str, str | None]] = {
     1: ("displacements", None), 2: ("map_previews", None), 3: ("comparisons", None), 4: ("camera_series", None),
     5: ("reflectors", "nx"), 6: ("env_series", None), 7: ("predictions", None), 9: ("field_models", None),
     10: ("plans", "digest"), 11: ("setup_plans", None), 12: ("limits", "digest"),
+    13: ("archived_files", None),
 }
 
 

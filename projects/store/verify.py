@@ -5,7 +5,9 @@ each a line saying what is wrong and what to do:
 
 * the database: ``PRAGMA integrity_check`` and ``foreign_key_check``;
 * every imported file (scans, camera and environment series, predictions) against the checksum
-  recorded at its import: missing or changed files are to be imported again;
+  recorded at its import: missing or changed files are to be imported again; a scan archived out of the
+  folder (:mod:`projects.store.archive`) is checked at its place when that is reachable, and named as
+  archived and not checked when it is not (a note, kind ``archived``: not a problem);
 * files in the import folders that the database does not list (an older database restored over a
   newer folder): ``bridgesurvey repair`` registers them again;
 * every stored result against the digest stored with it (:mod:`projects.store.digests`): damaged
@@ -21,6 +23,7 @@ from dataclasses import dataclass
 from common.files import sha256_of, stale_temp_files
 from common.progress import ProgressCallback, report
 from projects.store import digests, journal
+from projects.store.archive import archived_from_journal, archived_scans, copy_state
 from projects.store.campaign import DB_NAME, INPUT_REMEDY, Campaign, describe_input
 
 #: What to do about a damaged result, by the table it is kept in.
@@ -44,7 +47,7 @@ REMEDY = {
 class Finding:
     """One problem found: what it concerns, what is wrong, what to do."""
 
-    kind: str  # database, absent, changed, unlisted, damaged, stale
+    kind: str  # database, absent, changed, unlisted, damaged, stale; archived (a note, see NOTES)
     subject: str
     problem: str
     action: str
@@ -52,6 +55,15 @@ class Finding:
     def line(self) -> str:
         """The finding as one line for the user."""
         return f"{self.subject}: {self.problem}; {self.action}"
+
+    @property
+    def is_note(self) -> bool:
+        """Whether it only informs (an archived scan not reachable now), rather than asks for a remedy."""
+        return self.kind in NOTES
+
+
+#: Kinds of findings that are notes, not problems: ``verify`` names them and still passes.
+NOTES = frozenset({"archived"})
 
 
 def _database(c: Campaign) -> list[Finding]:
@@ -79,10 +91,31 @@ def imported_files(c: Campaign) -> list[tuple[str, str, str]]:
 def _files(c: Campaign, progress: ProgressCallback | None) -> list[Finding]:
     out = []
     files = imported_files(c)
+    archived = {a.file.stored_path: a for a in archived_scans(c)}
+    journaled: dict[str, str] | None = None  # read when a file is missing
     for k, (rel, sha, original) in enumerate(files):
         report(progress, 0.1 + 0.8 * k / max(len(files), 1), f"checking {rel}")
         path = c.folder / rel
+        a = archived.get(rel)
+        if a is not None and not path.is_file():  # archived: checked where it is
+            state = copy_state(a)
+            if state == "changed":
+                out.append(Finding("changed", rel, f"its archived copy {a.place} changed since its import (its "
+                                   "checksum differs)", f"restore that copy from a backup, or import it again from "
+                                   f"{original}"))
+            elif state == "unreachable":
+                out.append(Finding("archived", rel, f"archived to {a.place}, which is not reachable now: not checked",
+                                   "connect the archive disk to check it ('bridgesurvey archive DIR --restore' "
+                                   "brings it back)"))
+            continue
         if not path.is_file():
+            if journaled is None:
+                journaled = {sha: place for sha, place, _ in archived_from_journal(c)}
+            if sha in journaled:  # a database older than the archive run: the scan is not lost
+                out.append(Finding("absent", rel, f"missing from the campaign folder, and the journal of imports has "
+                                   f"it archived to {journaled[sha]}", "run 'bridgesurvey repair' to record it as "
+                                   "archived again"))
+                continue
             out.append(Finding("absent", rel, "missing from the campaign folder",
                                f"import it again from {original} (or restore it from a backup)"))
         elif sha256_of(path) != sha:

@@ -1,11 +1,13 @@
-"""The parsers of store commands: verify a campaign end to end, and repair what a restore or damage left.
+"""The parsers of store commands: verify a campaign end to end, repair what a restore or damage left, archive scans.
 
 They name each command's function in app.cli.commands_store (``func``), which the program imports when the command
 runs: building them imports nothing else.
 """
 from __future__ import annotations
 
-from app.cli.args import add_dir, add_json
+from pathlib import Path
+
+from app.cli.args import add_dir, add_epoch, add_json
 
 
 def register(sub) -> None:
@@ -28,3 +30,28 @@ def register(sub) -> None:
     add_dir(p)
     add_json(p)
     p.set_defaults(func="cmd_repair")
+
+    p = sub.add_parser("archive", help="move the scans of processed visits to another disk, or bring them back",
+                       description="Moves the scans of every fully processed visit (each set-up measured with the "
+                                   "current parameters, displacements up to date) out of the campaign folder into "
+                                   "DEST (e.g. another disk): each is copied, flushed to disk, checked against the "
+                                   "checksum taken at its import, recorded in the campaign with its new place, then "
+                                   "removed with its link under scans/by-visit/. Prints what it moved and the space "
+                                   "freed. Stage 2, status, displacements and the reports keep working without the "
+                                   "scans; processing a visit again after a stage-1 parameter changed, compare, the "
+                                   "3-D view and inspect need them back: they stop that visit in one line naming the "
+                                   "scans and where they are. 'archive DIR --restore' brings them back, checked. Run "
+                                   "it again after an interruption: it finishes what was begun.")
+    add_dir(p)
+    p.add_argument("--to", type=Path, metavar="DEST", dest="to",
+                   help="the folder to move the scans into: it must exist, be writable, be outside the campaign "
+                        "folder and have room for them")
+    p.add_argument("--before", metavar="DATE",
+                   help="only visits dated before this date (ISO 8601, e.g. 2026-01-01)")
+    p.add_argument("--restore", action="store_true",
+                   help="bring archived scans back into the campaign folder (all, or those of --epoch), checked "
+                        "against their checksums; the archived copies are then removed")
+    add_epoch(p, required=False, help="with --restore: only this epoch's scans (its label)")
+    p.add_argument("--dry-run", action="store_true", help="only say what would be moved, and the space it frees")
+    add_json(p)
+    p.set_defaults(func="cmd_archive")

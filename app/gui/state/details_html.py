@@ -11,6 +11,7 @@ from lidar.setups import join_summary, join_tables
 from projects.processing.stages import baseline_epoch
 from projects.results.corrections import corrections_line, instrument_line
 from projects.results.state import epoch_state
+from projects.results.status import storage_line
 from projects.store.history import histories
 
 
@@ -27,6 +28,8 @@ def campaign_html(c, status: dict) -> str:
             ("Reflectors", len(c.reflectors()))]
     if status.get("instrument"):  # what the field model found of the instrument, as `status` says it
         rows.append(("Instrument", instrument_line(status["instrument"])))
+    if status.get("storage"):  # the folder's size and where its scans are ('bridgesurvey archive')
+        rows.append(("Storage", storage_line(status["storage"]).removeprefix("storage: ")))
     return f"<h3>{html.escape(c.name)}</h3>" + _rows(rows)
 
 

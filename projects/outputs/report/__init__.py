@@ -17,6 +17,7 @@ from common.progress import ProgressCallback, report, scaled
 from projects.outputs.report.content import ReportContent, ReportScope, gather
 from projects.outputs.report.pdf import build_pdf
 from projects.processing.stages import analyse_epoch_coarse, parameters
+from projects.store.archive import away
 from projects.store.campaign import Campaign
 from projects.store.previews import decode_preview, encode_preview
 
@@ -33,9 +34,13 @@ def _check_output(path: Path) -> None:
 
 
 def _preview_from_scan(c: Campaign):
-    """For epochs planned before previews were stored: analyse the coarse scan again (slow, not saved)."""
+    """For epochs planned before previews were stored: analyse the coarse scan again (slow, not saved).
+
+    An epoch whose coarse scan is archived (:mod:`projects.store.archive`) has no map in the report.
+    """
     def preview_of(label: str):
-        if not c.files(label, "coarse"):
+        coarse = c.files(label, "coarse")
+        if not coarse or away(c, coarse):
             return None
         analysis = analyse_epoch_coarse(c, label, c.layout(c.epoch(label).datetime), parameters(c))
         return decode_preview(*encode_preview(analysis))

@@ -124,7 +124,7 @@ def test_the_input_digest_migration_seals_an_older_campaign(processed_copy):
     conn.commit()
     conn.close()
     with Campaign.open(processed_copy) as c:
-        assert schema.version_of(c.conn) == schema.SCHEMA_VERSION == 12
+        assert schema.version_of(c.conn) == schema.SCHEMA_VERSION == 13
         assert c.damaged_inputs() == [] and c.limits() and len(c.epochs()) == 3
         assert all(r["digest"] for r in c.conn.execute("SELECT digest FROM limits"))
 

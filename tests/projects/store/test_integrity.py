@@ -124,8 +124,15 @@ def test_a_failing_migration_leaves_the_campaign_at_its_version(camp, monkeypatc
     assert snapshot(camp) == before
 
 
+def back_to_version_12(conn: sqlite3.Connection) -> None:
+    """Undo migration 13 (where archived scans went) of a current campaign."""
+    conn.execute("DROP TABLE archived_files")
+    conn.execute("UPDATE meta SET value = '12' WHERE key = 'schema_version'")
+
+
 def back_to_version_11(conn: sqlite3.Connection) -> None:
-    """Undo migration 12 (the digests of input rows) of a current campaign."""
+    """Undo migrations 13 and 12 (the digests of input rows) of a current campaign."""
+    back_to_version_12(conn)
     for g in digests.INPUTS.values():
         conn.execute(f"ALTER TABLE {g.table} DROP COLUMN {g.column}")
     conn.execute("UPDATE meta SET value = '11' WHERE key = 'schema_version'")

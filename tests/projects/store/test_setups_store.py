@@ -130,10 +130,11 @@ def test_a_campaign_of_version_10_reads_its_files_as_set_up_1(camp):
         conn.execute(f"ALTER TABLE files DROP COLUMN {column}")
     for g in digests.INPUTS.values():  # and what version 12 added
         conn.execute(f"ALTER TABLE {g.table} DROP COLUMN {g.column}")
+    conn.execute("DROP TABLE archived_files")  # and version 13
     conn.execute("UPDATE meta SET value = '10' WHERE key = 'schema_version'")
     conn.commit()
     conn.close()
     with Campaign.open(camp) as c:
-        assert schema.version_of(c.conn) == schema.SCHEMA_VERSION == 12
+        assert schema.version_of(c.conn) == schema.SCHEMA_VERSION == 13
         (f,) = c.files("e1", setup=None)
         assert f.setup == 1 and f.frame is None and c.setups("e1") == [1] and c.damaged_results() == []
