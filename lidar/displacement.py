@@ -418,6 +418,10 @@ def _bend(base: Mapping[str, Observation], ep: Mapping[str, Observation], meas: 
     return _Bend(ids, r0, weight, g, e_xyz, float(r0 @ weight @ r0), dof)
 
 
+#: Relative singular value below which a bending shape's amplitude counts as undetermined (:func:`bending_tilt`).
+BENDING_RCOND = 1e-2
+
+
 def bending_tilt(base: Mapping[str, Observation], ep: Mapping[str, Observation], meas: Sequence[str],
                  refs: Sequence[str]) -> np.ndarray | None:
     """The tilt (a 3-vector across the deck's normal, rad) the deck's own bending gives its fitted plane.
@@ -449,7 +453,9 @@ def bending_tilt(base: Mapping[str, Observation], ep: Mapping[str, Observation],
     left = shapes - plane @ (to_plane @ shapes)  # what the rigid fit leaves of each shape
     vals, vecs = np.linalg.eigh(bend.weight)
     root = vecs * np.sqrt(np.clip(vals, 0.0, None))
-    amp, *_ = np.linalg.lstsq(root.T @ left, root.T @ bend.residual, rcond=None)
+    # an amplitude the bending fixes a hundred times less well than the best one is left at 0 (least norm): two
+    # targets of a line at nearly one place along the span would otherwise turn noise into metres of departure
+    amp, *_ = np.linalg.lstsq(root.T @ left, root.T @ bend.residual, rcond=BENDING_RCOND)
     slope = (to_plane @ (shapes @ amp))[1:]
     return -(slope[0] * e[0] + slope[1] * e[1])  # the plane's slopes turn its normal the other way
 
