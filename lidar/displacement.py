@@ -297,8 +297,9 @@ def normal_gain(normals: Callable[[np.ndarray], Any], x0: np.ndarray, cov: np.nd
     station advisor): no test, and ``d d^T`` replaced by its expectation under
     noise alone, the sum of the two normals' covariances.
 
-    ``bending_tilt`` (:func:`bending_tilt`): the tilt the deck's own bending gives the epoch fit. Where it
-    exceeds the two normals' noise (a chi-square of 1), the carried normal is kept alone: the difference
+    ``bending_tilt`` (:func:`bending_tilt`): the tilt the deck's own bending gives the epoch fit. Where the
+    combination's noise and that tilt's share in it would err more than the carried normal alone (their mean
+    squares), the carried normal is kept alone: the difference
     test cannot see such a tilt when noise happens to cancel part of it (the lab desk under its first
     load: a 0.36 mrad tilt across the desk seen as 0.13, 0.27 mm on the targets at 2.4 sigma).
 
@@ -330,10 +331,6 @@ def normal_gain(normals: Callable[[np.ndarray], Any], x0: np.ndarray, cov: np.nd
     d = e @ (g_ep - g_ref)
     reg = 1e-18 * np.eye(2)
     chi2 = float(d @ np.linalg.solve(cr + ce + reg, d))
-    if bending_tilt is not None and not expected:
-        t = e @ np.asarray(bending_tilt, dtype=np.float64)
-        if float(t @ np.linalg.solve(cr + ce + reg, t)) > 1.0:  # the deck's bending tilts the epoch fit
-            return np.zeros((3, 3)), np.zeros((3, 3)), 0.0
     if chi2 > CHI2_2DOF_95 and not expected:
         # The two normals disagree beyond their noise: the deck's own deformation tilts the epoch fit.
         # Keep the carried normal, and let the sigmas carry what its own noise may still hide.
@@ -341,6 +338,11 @@ def normal_gain(normals: Callable[[np.ndarray], Any], x0: np.ndarray, cov: np.nd
     wr = np.linalg.inv(cr + reg)
     we = np.linalg.inv(ce + reg)
     k2 = np.linalg.solve(wr + we, we)
+    if bending_tilt is not None and not expected:
+        t = k2 @ e @ np.asarray(bending_tilt, dtype=np.float64)  # what the bending would tilt the combination by
+        rest = np.eye(2) - k2
+        if np.trace(rest @ cr @ rest.T + k2 @ ce @ k2.T) + t @ t > np.trace(cr):
+            return np.zeros((3, 3)), np.zeros((3, 3)), 0.0  # the carried normal alone is the better one
     gain = e.T @ k2 @ e
     # a deformation too small to be detected may still be there: at most the test's threshold
     bias = cr + ce if expected else np.outer(d, d)
@@ -426,13 +428,13 @@ def bending_tilt(base: Mapping[str, Observation], ep: Mapping[str, Observation],
                  refs: Sequence[str]) -> np.ndarray | None:
     """The tilt (a 3-vector across the deck's normal, rad) the deck's own bending gives its fitted plane.
 
-    None when the deck did not bend beyond its noise (95 %) or its shape cannot be placed
-    between piers. A sag is smooth and zero at the piers: each girder line's bending is taken as the
+    None when the deck did not bend beyond its noise (95 %), when the tilt is not beyond its own noise (95 %,
+    propagated from the bending's), or when the bending's shape cannot be placed between piers. A sag is smooth and zero at the piers: each girder line's bending is taken as the
     supported span's first shape (``sin(pi xi)``, ``xi`` from pier to pier, :func:`lidar.pier_moves.span_coordinates`),
     one amplitude for the deck and each girder line's departure from it fitted (least norm) to the bending a
-    rigid fit of the deck targets leaves, and the tilt is the plane those shapes give at the targets. On a symmetric layout a sag tilts nothing; where the girder lines'
-    targets sit at different places along the span (the dissertation's lab desk) the same sag tilts the
-    plane across the span.
+    rigid fit of the deck targets leaves, and the tilt is the plane those shapes give at the targets. On a
+    symmetric layout a sag tilts nothing; where the girder lines' targets sit at different places along the
+    span (the dissertation's lab desk) the same sag tilts the plane across the span.
     """
     bend = _bend(base, ep, meas)
     if bend is None or bend.chi2 <= chi2_95(bend.dof):
@@ -452,12 +454,18 @@ def bending_tilt(base: Mapping[str, Observation], ep: Mapping[str, Observation],
     to_plane = np.linalg.pinv(plane)
     left = shapes - plane @ (to_plane @ shapes)  # what the rigid fit leaves of each shape
     vals, vecs = np.linalg.eigh(bend.weight)
-    root = vecs * np.sqrt(np.clip(vals, 0.0, None))
+    root = (vecs * np.sqrt(np.clip(vals, 0.0, None))).T
     # an amplitude the bending fixes a hundred times less well than the best one is left at 0 (least norm): two
     # targets of a line at nearly one place along the span would otherwise turn noise into metres of departure
-    amp, *_ = np.linalg.lstsq(root.T @ left, root.T @ bend.residual, rcond=BENDING_RCOND)
-    slope = (to_plane @ (shapes @ amp))[1:]
-    return -(slope[0] * e[0] + slope[1] * e[1])  # the plane's slopes turn its normal the other way
+    to_amp = np.linalg.pinv(root @ left, rcond=BENDING_RCOND) @ root
+    to_tilt = -e.T @ (to_plane @ shapes)[1:] @ to_amp  # (3, n); the plane's slopes turn its normal the other way
+    tilt = to_tilt @ bend.residual
+    # the tilt against its own noise (the bending's, through the same map), in the plane across the normal
+    t = e @ tilt
+    lam, axes = np.linalg.eigh(e @ to_tilt @ np.linalg.pinv(bend.weight, hermitian=True) @ to_tilt.T @ e.T)
+    keep = lam > 1e-9 * max(float(lam[-1]), 1e-30)
+    chi2 = float(np.sum((axes[:, keep].T @ t) ** 2 / lam[keep]))
+    return tilt if keep.any() and chi2 > chi2_95(int(np.count_nonzero(keep))) else None
 
 
 def reference_weights(base: Mapping[str, Observation], ep: Mapping[str, Observation], refs: Sequence[str],

@@ -195,7 +195,7 @@ def test_the_bending_tilt_is_the_layouts_not_the_sags():
     sagged = {i: Observation(p + [0.0, 0.0, z], np.eye(3) * 1e-10) for i, p, z in zip(tid, txyz, sag, strict=True)}
     twin = bending_tilt(flat, sagged, [i for i in tid if tgroups[i] == "measurement"],
                         [i for i in tid if tgroups[i] == "reference"])
-    assert twin is not None and np.linalg.norm(twin) < 1e-6
+    assert twin is None  # bent by 10 mm, tilted by nothing beyond the noise
 
 
 @pytest.mark.parametrize("dof", [1, 2, 3, 5, 10, 11, 20, 60])
