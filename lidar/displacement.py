@@ -52,7 +52,7 @@ from common.flags import (
 )
 from common.rigid import fit_rigid
 from lidar.displacement_result import Displacement, EpochDisplacements, Observation, ReferenceCheck, Sensitivity
-from lidar.pier_moves import resolve_ambiguous_move, verify_single_move
+from lidar.pier_moves import resolve_ambiguous_move, span_coordinates, verify_single_move
 from lidar.reference_motion import across_axis, fit_reference_motion, rotation_covariance
 
 #: 95 % quantile of chi-square with 2 degrees of freedom: the two deck normals agree within their noise.
@@ -280,7 +280,7 @@ def _tangent_basis(g: np.ndarray) -> np.ndarray:
 
 
 def normal_gain(normals: Callable[[np.ndarray], Any], x0: np.ndarray, cov: np.ndarray, step: float = 1e-6, *,
-                expected: bool = False
+                expected: bool = False, bending_tilt: np.ndarray | None = None
                 ) -> tuple[np.ndarray | None, np.ndarray, float]:
     """How far to move from the carried normal toward the epoch's own fit, by their uncertainties.
 
@@ -296,6 +296,12 @@ def normal_gain(normals: Callable[[np.ndarray], Any], x0: np.ndarray, cov: np.nd
     ``expected=True`` gives the sigmas expected before the epoch is measured (the
     station advisor): no test, and ``d d^T`` replaced by its expectation under
     noise alone, the sum of the two normals' covariances.
+
+    ``bending_tilt`` (:func:`bending_tilt`): the tilt the deck's own bending gives the epoch fit. Where the
+    combination's noise and that tilt's share in it would err more than the carried normal alone (their mean
+    squares), the carried normal is kept alone: the difference
+    test cannot see such a tilt when noise happens to cancel part of it (the lab desk under its first
+    load: a 0.36 mrad tilt across the desk seen as 0.13, 0.27 mm on the targets at 2.4 sigma).
 
     Returns
     -------
@@ -332,11 +338,134 @@ def normal_gain(normals: Callable[[np.ndarray], Any], x0: np.ndarray, cov: np.nd
     wr = np.linalg.inv(cr + reg)
     we = np.linalg.inv(ce + reg)
     k2 = np.linalg.solve(wr + we, we)
+    if bending_tilt is not None and not expected:
+        t = k2 @ e @ np.asarray(bending_tilt, dtype=np.float64)  # what the bending would tilt the combination by
+        rest = np.eye(2) - k2
+        if np.trace(rest @ cr @ rest.T + k2 @ ce @ k2.T) + t @ t > np.trace(cr):
+            return np.zeros((3, 3)), np.zeros((3, 3)), 0.0  # the carried normal alone is the better one
     gain = e.T @ k2 @ e
     # a deformation too small to be detected may still be there: at most the test's threshold
     bias = cr + ce if expected else np.outer(d, d)
     bias_cov = e.T @ (k2 @ bias @ k2.T) @ e
     return gain, bias_cov, float(np.trace(k2) / 2.0)
+
+
+def chi2_95(dof: int) -> float:
+    """The chi-square distribution's 95 % quantile for ``dof`` degrees of freedom.
+
+    Exact (to three decimals) up to 10; beyond, the Wilson-Hilferty cube, within 0.2 % there (scipy.stats
+    is not imported for it: it costs every campaign command start-up time).
+    """
+    if dof < 1:
+        raise InputError(f"a chi-square quantile needs at least one degree of freedom, not {dof}")
+    if dof <= len(_CHI2_95):
+        return _CHI2_95[dof - 1]
+    a = 2.0 / (9.0 * dof)
+    return float(dof * (1.0 - a + 1.6448536 * np.sqrt(a)) ** 3)
+
+
+_CHI2_95 = (3.841, 5.991, 7.815, 9.488, 11.070, 12.592, 14.067, 15.507, 16.919, 18.307)
+
+
+@dataclass(frozen=True)
+class _Bend:
+    ids: list
+    residual: np.ndarray  # (n,) along the epoch's deck normal, m
+    weight: np.ndarray  # (n, n) pseudo-inverse of its covariance (rank n - 3)
+    normal: np.ndarray  # the epoch's deck normal
+    epoch_xyz: np.ndarray  # (n, 3)
+    chi2: float
+    dof: int
+
+
+def _bend(base: Mapping[str, Observation], ep: Mapping[str, Observation], meas: Sequence[str],
+          step: float = 1e-7) -> _Bend | None:
+    """The deck targets' bending between the baseline and the epoch, with its chi-square against its noise.
+
+    The deck targets of the epoch against those of the baseline carried onto them by their own best rigid
+    motion: what is left along the deck's normal is the part of the deck's vertical movement that no plane
+    describes (a sag, a twist), free of the frame's motion, which a rigid fit takes whole. Its noise is
+    propagated from the centroids' covariances (numerical Jacobian); a tilt and a height of the deck's
+    plane are absorbed by the fit, so it has ``n - 3`` degrees of freedom. None with fewer than four targets.
+    """
+    ids = [m for m in meas if m in base and m in ep]
+    n = len(ids)
+    if n < 4:
+        return None
+    x0 = np.concatenate([base[m].xyz for m in ids] + [ep[m].xyz for m in ids])
+    cov = np.zeros((6 * n, 6 * n))
+    for i, m in enumerate(ids):
+        cov[3 * i:3 * i + 3, 3 * i:3 * i + 3] = base[m].cov
+        cov[3 * (n + i):3 * (n + i) + 3, 3 * (n + i):3 * (n + i) + 3] = ep[m].cov
+    e_xyz = x0[3 * n:].reshape(n, 3)
+    g = deck_normal(e_xyz)
+
+    def residual(x: np.ndarray) -> np.ndarray:
+        b, e = x[:3 * n].reshape(n, 3), x[3 * n:].reshape(n, 3)
+        return (e - fit_rigid(b, e).apply(b)) @ g
+
+    r0 = residual(x0)
+    jac = np.empty((n, x0.size))
+    for j in range(x0.size):
+        xp, xm = x0.copy(), x0.copy()
+        xp[j] += step
+        xm[j] -= step
+        jac[:, j] = (residual(xp) - residual(xm)) / (2 * step)
+    vals, vecs = np.linalg.eigh(jac @ cov @ jac.T)
+    dof = n - 3
+    vals, vecs = vals[-dof:], vecs[:, -dof:]  # the three smallest belong to the plane the fit absorbs
+    if vals[0] <= 0.0:
+        return None
+    weight = (vecs / vals) @ vecs.T
+    return _Bend(ids, r0, weight, g, e_xyz, float(r0 @ weight @ r0), dof)
+
+
+#: Relative singular value below which a bending shape's amplitude counts as undetermined (:func:`bending_tilt`).
+BENDING_RCOND = 1e-2
+
+
+def bending_tilt(base: Mapping[str, Observation], ep: Mapping[str, Observation], meas: Sequence[str],
+                 refs: Sequence[str]) -> np.ndarray | None:
+    """The tilt (a 3-vector across the deck's normal, rad) the deck's own bending gives its fitted plane.
+
+    None when the deck did not bend beyond its noise (95 %), when the tilt is not beyond its own noise (95 %,
+    propagated from the bending's), or when the bending's shape cannot be placed between piers. A sag is smooth and zero at the piers: each girder line's bending is taken as the
+    supported span's first shape (``sin(pi xi)``, ``xi`` from pier to pier, :func:`lidar.pier_moves.span_coordinates`),
+    one amplitude for the deck and each girder line's departure from it fitted (least norm) to the bending a
+    rigid fit of the deck targets leaves, and the tilt is the plane those shapes give at the targets. On a
+    symmetric layout a sag tilts nothing; where the girder lines' targets sit at different places along the
+    span (the dissertation's lab desk) the same sag tilts the plane across the span.
+    """
+    bend = _bend(base, ep, meas)
+    if bend is None or bend.chi2 <= chi2_95(bend.dof):
+        return None
+    geo = span_coordinates(base, {**{r: "reference" for r in refs}, **{m: "measurement" for m in bend.ids}},
+                           bend.ids)
+    if geo is None:
+        return None
+    xi, lines = geo
+    sag = np.sin(np.pi * xi)
+    # one sag for the deck, and each further line's own departure from it (0 where no bending tells it: a line
+    # whose targets all sit alike along the span shows a departure only as a plane, which the fit absorbs)
+    shapes = np.column_stack([sag] + [np.where(lines == k, sag, 0.0) for k in range(1, int(lines.max()) + 1)])
+    e = _tangent_basis(bend.normal)
+    c = bend.epoch_xyz - bend.epoch_xyz.mean(axis=0)
+    plane = np.column_stack([np.ones(len(c)), c @ e[0], c @ e[1]])
+    to_plane = np.linalg.pinv(plane)
+    left = shapes - plane @ (to_plane @ shapes)  # what the rigid fit leaves of each shape
+    vals, vecs = np.linalg.eigh(bend.weight)
+    root = (vecs * np.sqrt(np.clip(vals, 0.0, None))).T
+    # an amplitude the bending fixes a hundred times less well than the best one is left at 0 (least norm): two
+    # targets of a line at nearly one place along the span would otherwise turn noise into metres of departure
+    to_amp = np.linalg.pinv(root @ left, rcond=BENDING_RCOND) @ root
+    to_tilt = -e.T @ (to_plane @ shapes)[1:] @ to_amp  # (3, n); the plane's slopes turn its normal the other way
+    tilt = to_tilt @ bend.residual
+    # the tilt against its own noise (the bending's, through the same map), in the plane across the normal
+    t = e @ tilt
+    lam, axes = np.linalg.eigh(e @ to_tilt @ np.linalg.pinv(bend.weight, hermitian=True) @ to_tilt.T @ e.T)
+    keep = lam > 1e-9 * max(float(lam[-1]), 1e-30)
+    chi2 = float(np.sum((axes[:, keep].T @ t) ** 2 / lam[keep]))
+    return tilt if keep.any() and chi2 > chi2_95(int(np.count_nonzero(keep))) else None
 
 
 def reference_weights(base: Mapping[str, Observation], ep: Mapping[str, Observation], refs: Sequence[str],
@@ -473,8 +602,9 @@ def _solve(base: dict, ep: dict, meas_ids: list, stable: list, checks, flags: li
         cov[3 * j:3 * j + 3, 3 * j:3 * j + 3] = ep[k].cov
     gain, bias_cov, weight_epoch = None, np.zeros((3, 3)), 0.0
     if mode == "auto":
+        tilt = None if expected_sigmas else bending_tilt(base, ep, meas, stable)
         gain, bias_cov, weight_epoch = normal_gain(lambda x: _normals(*split(x), stable, meas_base, meas, mw)[1:3],  # type: ignore[call-arg]
-                                                   x0, cov, expected=expected_sigmas)
+                                                   x0, cov, expected=expected_sigmas, bending_tilt=tilt)
         if weight_epoch > 0.5:
             flags.append(FLAG_NORMAL_FROM_EPOCH)
 

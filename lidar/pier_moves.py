@@ -44,7 +44,7 @@ def _chi2_99(dof: float) -> float:
 
     return float(chi2.ppf(0.99, dof))
 
-def _span_coordinates(base: Mapping, groups: Mapping[str, str], meas: list[str]):
+def span_coordinates(base: Mapping, groups: Mapping[str, str], meas: list[str]):
     """Xi in [0, 1] of each deck target between the piers, and its girder line, from the baseline geometry."""
     refs = [r for r, g in groups.items() if g == "reference" and r in base]
     deck = np.array([base[m].xyz for m in meas])
@@ -72,7 +72,7 @@ def deck_shape_chi2(result: EpochDisplacements, base: Mapping, groups: Mapping[s
     ds = [d for d in result.displacements if np.isfinite(d.displacement_m) and d.sigma_m > 0 and d.reflector in base]
     if len(ds) < 3:
         return None
-    geo = _span_coordinates(base, groups, [d.reflector for d in ds])
+    geo = span_coordinates(base, groups, [d.reflector for d in ds])
     if geo is None:
         return None
     xi, lines = geo
