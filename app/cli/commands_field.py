@@ -15,7 +15,8 @@ from projects.onsite.check import check_epoch
 from projects.onsite.station_pairs import propose_pair
 from projects.onsite.stations import advise_stations, read_area_csv, station_map_figure
 from projects.outputs.field_sheet import write_field_sheet
-from projects.processing.stages import plan_epoch
+from projects.outputs.visit_overview import visit_overview
+from projects.processing.stages import plan_epoch, plan_visit_epoch
 
 
 def cmd_field_sheet(args) -> int:
@@ -23,10 +24,14 @@ def cmd_field_sheet(args) -> int:
         c.epoch(args.epoch)
         setup = setup_of(c, args)
         with progress_bar("planning") as cb:
-            plan = plan_epoch(c, args.epoch, setup=setup, progress=cb)
+            if len(c.setups(args.epoch)) > 1:  # the whole visit, set-up by set-up, heads the sheet
+                plans, summaries = plan_visit_epoch(c, args.epoch, progress=cb)
+                plan = plans[setup] if setup in plans else plan_epoch(c, args.epoch, setup=setup, progress=cb)
+            else:
+                plan, plans, summaries = plan_epoch(c, args.epoch, setup=setup, progress=cb), {}, {}
         preview = c.map_preview(args.epoch, setup)
         path = write_field_sheet(plan, args.out, campaign_name=c.name, preview=preview,
-                                 epoch_date=setup_date(c, args.epoch, setup))
+                                 epoch_date=setup_date(c, args.epoch, setup), visit=visit_overview(plans, summaries))
     print(f"wrote {path}: {len(plan.rois)} windows, {plan.total_seconds / 60:.1f} min "
           f"(budget {plan.budget_seconds / 60:.0f} min) on a {plan.profile.name}")
     return 0

@@ -484,6 +484,18 @@ def plan_epoch(c: Campaign, label: str, *, setup: int = 1, progress: ProgressCal
     return result.plan
 
 
+def plan_visit_epoch(c: Campaign, label: str, *, progress: ProgressCallback | None = None
+                     ) -> tuple[dict[int, ScanPlan], dict[int, dict]]:
+    """Every set-up's plan of a visit (planned when needed) and each one's summary of the visit (empty when alone)."""
+    setups = [k for k in c.setups(label) if c.files(label, "coarse", setup=k)]
+    plans, summaries = {}, {}
+    for n, k in enumerate(setups):
+        plans[k] = plan_epoch(c, label, setup=k, progress=scaled(progress, n / len(setups), (n + 1) / len(setups)))
+        stored = c.stored_plan(label, k)
+        summaries[k] = dict(stored.plan_json.get("visit") or {}) if stored is not None else {}
+    return plans, summaries
+
+
 def measure_inputs(c: Campaign, label: str, params: dict, plan_hash: str | None = None, setup: int = 1) -> str:
     """Stage 1's input hash of an epoch (set-up) with fine scans (``plan_hash`` when already computed)."""
     inp = c.epoch_inputs(label, plan=False, setup=setup)

@@ -194,3 +194,39 @@ def test_a_project_frame_scan_without_a_pose_is_refused_in_one_line(processed_co
                  "--origin", origin]) == 0
     assert main(["info", str(out["coarse.laz"])]) == 0
     assert "project frame" in capsys.readouterr().out
+
+
+def test_plan_shows_the_visit_planned_together_and_each_set_up_keeps_its_share(stations, tmp_path, capsys):
+    """Issue 40: 'plan --setup K' writes set-up K's plan within the visit's; 'plan' shows the whole visit in order."""
+    field = stations
+    camp = _init(tmp_path / "camp", field, capsys)
+    v = field / "v0"
+    assert main(["add-epoch", str(camp), "--date", DATES[0], "--coarse", str(v / "setup1" / "coarse.laz")]) == 0
+    assert main(["plan", str(camp), "--epoch", DATES[0][:10], "--out", str(tmp_path / "alone.json")]) == 0
+    alone = json.loads((tmp_path / "alone.json").read_text())
+    assert "visit" not in alone and "setup" not in alone  # one set-up: as before
+    assert main(["add-setup", str(camp), "--epoch", DATES[0][:10], "--coarse", str(v / "setup2" / "coarse.laz")]) == 0
+    capsys.readouterr()
+    docs = {}
+    for s in (1, 2):
+        out = tmp_path / f"p{s}.json"
+        assert main(["plan", str(camp), "--epoch", DATES[0][:10], "--setup", str(s), "--out", str(out)]) == 0
+        text = capsys.readouterr().out
+        assert "set-ups, planned together" in text and "1. set-up 1:" in text and "2. set-up 2:" in text
+        docs[s] = json.loads(out.read_text())
+        assert docs[s]["setup"] == s and docs[s]["visit"]["setups"] == [1, 2]
+        ScanPlan.from_json(docs[s])  # the plan JSON contract
+    assert docs[2]["visit"]["ties"]  # set-up 2 keeps the targets that join it to set-up 1
+    windows = {s: {r["reflector"] for r in d["rois"] if not r.get("closure")} for s, d in docs.items()}
+    assert all(any(r.get("closure") for r in d["rois"]) for d in docs.values())
+    deck = {r["reflector"] for d in docs.values() for r in d["rois"] if r["group"] == "measurement"}
+    twice = {t for t in deck if t in windows[1] and t in windows[2]}
+    assert twice <= set(docs[2]["visit"]["ties"])  # a deck target is scanned twice only to join the set-ups
+    budget = docs[1]["visit"]["visit_budget_seconds"]
+    assert docs[1]["budget_seconds"] + docs[2]["budget_seconds"] == pytest.approx(budget, rel=1e-3)
+    # planned alone again, from the same scans
+    assert main(["settings", str(camp), "plan_together", "false"]) == 0
+    capsys.readouterr()
+    assert main(["plan", str(camp), "--epoch", DATES[0][:10], "--setup", "2", "--out", str(tmp_path / "a2.json")]) == 0
+    assert "each planned as if it were alone" in capsys.readouterr().out
+    assert "visit" not in json.loads((tmp_path / "a2.json").read_text())
