@@ -11,7 +11,7 @@ from app.cli.progress import progress_bar
 from common.errors import InputError
 from common.files import write_atomic
 from lidar.figures import save_figure
-from projects.onsite.check import check_epoch
+from projects.onsite.check import check_epoch, check_visit
 from projects.onsite.station_pairs import propose_pair
 from projects.onsite.stations import advise_stations, read_area_csv, station_map_figure
 from projects.outputs.field_sheet import write_field_sheet
@@ -53,14 +53,26 @@ def _pair(advice, layout, asked: bool):
     return pair
 
 
+def _whole_visit(c, label: str) -> bool:
+    """Whether the visit has several set-ups and every one of them its fine scans (its check is then the visit's)."""
+    setups = [k for k in c.setups(label) if c.files(label, "coarse", setup=k)]
+    return len(setups) > 1 and all(c.files(label, "fine", setup=k) for k in setups)
+
+
 def cmd_check(args) -> int:
     with open_campaign(args.dir) as c:
         c.epoch(args.epoch)
         setup = setup_of(c, args)
         with progress_bar("measuring the fine scans") as cb:
-            result = check_epoch(c, args.epoch, goal_sigma_mm=args.goal_mm, setup=setup, progress=cb)
+            if _whole_visit(c, args.epoch):
+                visit = check_visit(c, args.epoch, goal_sigma_mm=args.goal_mm, progress=cb)
+                result = visit.setups[setup]
+            else:
+                visit, result = None, check_epoch(c, args.epoch, goal_sigma_mm=args.goal_mm, setup=setup, progress=cb)
     if args.out is not None and result.rescan is not None:
         result.rescan.save(args.out)
+    if visit is not None:
+        return _visit_check_out(args, visit, setup)
     if args.json:
         dump_json(result.to_json())
     else:
@@ -83,6 +95,38 @@ def cmd_check(args) -> int:
                   f"({result.rescan.total_seconds / 60:.1f} min); {where}")
     drifted = result.closure is not None and result.closure.status == "drifted"
     return 0 if not result.short and not drifted else EXIT_SHORT
+
+
+def _visit_check_out(args, visit, setup: int) -> int:
+    """The check of a whole visit: set-up ``setup``'s rows, then the visit's one verdict (exit 3 when it asks)."""
+    result = visit.setups[setup]
+    if args.json:
+        dump_json({**result.to_json(), "setup": setup, "visit": visit.to_json()})
+        return 0 if visit.ok else EXIT_SHORT
+    table([t.to_json() for t in result.targets],
+          ["reflector", "group", "status", "points", "planned_points", "points_ratio", "sigma_mm", "goal_sigma_mm",
+           "note"])
+    for t, k in sorted(visit.covered.items()):
+        print(f"{t}: short from set-up {next(j for j, ch in visit.setups.items() if t in {x.reflector for x in ch.short})}"
+              f", measured well by set-up {k}: no re-scan")
+    for k in visit.drifted:
+        cl = visit.setups[k].closure
+        print(f"set-up {k}: closure ({cl.reflector}) turned {cl.angle_arcsec:.1f}\" in {cl.minutes:.0f} min; {cl.note}")
+    setups = ", ".join(map(str, sorted(visit.setups)))
+    if visit.ok:
+        print(f"epoch {args.epoch} (set-ups {setups}): every target is measured well by one set-up or another; "
+              "the visit is complete")
+        return 0
+    for k, why in sorted(visit.rescan.items()):
+        if not why:
+            continue
+        plan = visit.setups[k].rescan
+        where = (f"wrote the re-scan plan {args.out}" if args.out and k == setup else
+                 f"'bridgesurvey check {args.dir} --epoch {args.epoch} --setup {k} --out FILE' writes its plan")
+        minutes = f" ({plan.total_seconds / 60:.1f} min)" if plan is not None else ""
+        print(f"epoch {args.epoch}: re-scan from set-up {k}: " + "; ".join(f"{t} ({w})" for t, w in sorted(why.items()))
+              + f"{minutes}; {where}")
+    return EXIT_SHORT
 
 
 def cmd_stations(args) -> int:

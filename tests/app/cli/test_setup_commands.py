@@ -104,8 +104,10 @@ def test_two_set_ups_a_visit_are_planned_measured_and_joined(stations, tmp_path,
     assert main(["process", str(camp), "--json"]) == 0  # nothing to do the second time
     assert all(e["action"] == "up-to-date" for e in json.loads(capsys.readouterr().out)["epochs"])
     # the check and the field sheet of a set-up
-    assert main(["check", str(camp), "--epoch", DATES[1][:10], "--setup", "2", "--json"]) in (0, 3)
-    assert json.loads(capsys.readouterr().out)["targets"]
+    code_ = main(["check", str(camp), "--epoch", DATES[1][:10], "--setup", "2", "--json"])
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["targets"] and doc["visit"]["setups"] == [1, 2]  # after the last set-up: the visit's one verdict
+    assert code_ == (0 if doc["visit"]["ok"] else 3)
     assert main(["field-sheet", str(camp), "--epoch", DATES[1][:10], "--out", str(tmp_path / "s2.pdf")]) == 0
     assert (tmp_path / "s2.pdf").stat().st_size > 1000
     assert main(["check", str(camp), "--epoch", DATES[1][:10], "--setup", "3"]) == 1
