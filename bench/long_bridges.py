@@ -79,7 +79,8 @@ def _stations(model: BridgeModel, fractions: tuple, rng: np.random.Generator) ->
 
 
 def scenario(root: Path, spans: tuple, fractions: tuple, *, visits: int, seed: int,
-             coarse_step_deg: float = 0.05, together: bool | None = None) -> StudyScore:
+             coarse_step_deg: float = 0.05, together: bool | None = None,
+             budget_min: float | None = None) -> StudyScore:
     """One bridge and station plan: simulate, import, process, score.
 
     ``together`` None: each set-up planned and fine-scanned before the next one's coarse scan (as before issue
@@ -93,6 +94,8 @@ def scenario(root: Path, spans: tuple, fractions: tuple, *, visits: int, seed: i
     # the surveyor says roughly where set-up 1 stands (a symmetric bridge is otherwise refused as ambiguous)
     hint = f"{fractions[0] * model.length_m:.1f},{-(model.deck_width_m / 2 + 8.0):.1f}"
     settings = {"station_xy": hint} if together is None else {"station_xy": hint, "plan_together": together}
+    if budget_min is not None:
+        settings["budget_min"] = budget_min
     return run_study(root, model, conditions, stations=stations, seed=seed, settings=settings,
                      coarse_step_deg=coarse_step_deg, coarse_first=together is not None)["corrected"]
 
@@ -134,6 +137,8 @@ def main() -> None:
     ap.add_argument("--together", action="store_true",
                     help="the two-set-up stations, their set-ups planned alone and together (issue 40)")
     ap.add_argument("--bridges", default="", help="the bridges by their number of spans, e.g. 2,3 (default all)")
+    ap.add_argument("--budget-min", type=float, default=None,
+                    help="the visit's fine-scan budget, minutes (default the campaign's, 60)")
     args = ap.parse_args()
     if args.together or args.small:
         together(args)
@@ -190,15 +195,16 @@ def together(args) -> None:
                 t0 = time.perf_counter()
                 root = OUT / ("long_bridges_small" if args.small else "long_bridges_together") / f"b{n}s{m}{how[0]}"
                 s = scenario(root, spans, fractions, visits=visits, seed=args.seed + 10 * n + m,
-                             coarse_step_deg=0.1 if args.small else 0.05, together=flag)
+                             coarse_step_deg=0.1 if args.small else 0.05, together=flag, budget_min=args.budget_min)
                 rows[(bridge, name, how)] = (s, planned_minutes(root))
                 print(f"{bridge}, {name}, planned {how}: {s.row()} ({time.perf_counter() - t0:.0f} s)", flush=True)
     print()
     print(together_table(rows))
     if not args.small:
-        (OUT / "long_bridges_together.json").write_text(json.dumps(
+        (OUT / f"long_bridges_together{'' if args.budget_min is None else int(args.budget_min)}.json").write_text(json.dumps(
             {f"{b} | {s} | {h}": dict(v.row(), minutes=mins) for (b, s, h), (v, mins) in rows.items()}, indent=1))
-        write_figure("long_bridges_together", together_table(rows))
+        budget = "" if args.budget_min is None else f"_{args.budget_min:g}min"
+        write_figure(f"long_bridges_together{budget}", together_table(rows))
     scores = [s for s, _ in rows.values()]
     silent = max((s.silent_beyond_3sigma for s in scores if s.errors_mm), default=0.0)
     alone = [s for (_, _, h), (s, _) in rows.items() if h == "alone"]

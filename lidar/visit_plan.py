@@ -11,6 +11,8 @@ together (:func:`plan_visit`):
 * each further set-up keeps *tie targets*: shared with the set-ups before it, seen well (not weak) from both,
   at least :data:`TIES` of them and chosen to spread as far off a line as the candidates allow, because the
   join (:func:`lidar.setups.join_setups`) needs three well-spread ones and leaves a misfit out;
+* the time the visit's budget leaves then goes to second sightings of deck targets from another set-up that sees
+  them well (largest gain in their height sigma first; the join combines the two);
 * the visit's budget is shared among the set-ups in proportion to the time each one's windows need, and each
   set-up is planned in its share (:func:`lidar.plan.plan_fine_scans`, its closure window included);
 * a target no set-up can resolve is left to the set-up that comes closest, whose plan says why it is not
@@ -202,6 +204,8 @@ def plan_visit(setups: Sequence[SetupTargets], *, epoch: str = "", min_points: i
                          order)
     chosen, assignment, elsewhere = _assign(by_setup, order, sigma)
     ties, warnings = _ties(by_setup, order, sigma, chosen)
+    _second_sightings(by_setup, order, sigma, chosen, budget_seconds, kw)
+    elsewhere = {k: {t: j for t, j in elsewhere[k].items() if t not in chosen[k]} for k in order}
     plans = _share_budget(by_setup, order, chosen, budget_seconds, kw)
     return VisitPlan(epoch, plans, assignment, ties, sigma, float(budget_seconds), order, tuple(warnings), elsewhere)
 
@@ -271,6 +275,41 @@ def _ties(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], sigma: M
                             f"joined ({MIN_SHARED} targets spread {MIN_SPREAD_M:g} m off a line are needed); "
                             "move it where it sees more of their targets")
     return ties, warnings
+
+
+def _second_sightings(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...],
+                      sigma: Mapping[int, Mapping[str, float]], chosen: dict[int, set[str]], budget_seconds: float,
+                      kw: dict) -> None:
+    """Spend the time the visit's budget leaves on second sightings of deck targets (added to ``chosen``).
+
+    A target seen well (not weak) from another set-up too is scanned from there as well when time is left: the
+    join combines the two sightings by their covariances. The largest gains in the target's height sigma come first;
+    a weak sighting is never added (the join leaves it out beside a sharp one).
+    """
+    need = sum(plan_fine_scans([t for t in by_setup[k].targets if t.id in chosen[k]], profile=by_setup[k].profile,
+                               budget_seconds=1e9, **kw).total_seconds for k in order if chosen[k])
+    spare = budget_seconds - need
+    if spare <= 0:
+        return
+    best = {}
+    for k in order:
+        for t in chosen[k]:
+            best[t] = min(best.get(t, math.inf), sigma[k][t])
+    offers = []
+    for k in order:
+        for t in by_setup[k].targets:
+            s_k, s_0 = sigma[k][t.id], best.get(t.id, math.inf)
+            if t.id in chosen[k] or t.group != "measurement" or not math.isfinite(s_k) or not math.isfinite(s_0) \
+                    or _weak(t, by_setup[k].profile):
+                continue
+            gain = s_0 - 1.0 / math.sqrt(1.0 / s_0 ** 2 + 1.0 / s_k ** 2)
+            seconds = plan_roi(t, n_points=kw["min_points"], profile=by_setup[k].profile,
+                               margin_m=kw["margin_m"]).expected_seconds
+            offers.append((-gain, k, t.id, seconds))
+    for _, k, tid, seconds in sorted(offers):
+        if seconds <= spare:
+            chosen[k].add(tid)
+            spare -= seconds
 
 
 def _spread_of(targets: Mapping[str, PlanTarget]):
