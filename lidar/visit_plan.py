@@ -72,6 +72,10 @@ class VisitPlan:
         The order in which to work the set-ups.
     warnings : tuple of str
         What the surveyor must act on for the visit as a whole (a set-up that cannot be joined).
+    elsewhere : mapping set-up -> mapping id -> set-up
+        The targets a set-up sees but leaves to another set-up.
+    second : mapping set-up -> tuple of str
+        Deck targets a set-up scans as a second sighting, in the time the budget leaves.
     """
 
     epoch: str
@@ -83,6 +87,7 @@ class VisitPlan:
     order: tuple[int, ...]
     warnings: tuple[str, ...] = ()
     elsewhere: Mapping[int, Mapping[str, int]] = field(default_factory=dict)
+    second: Mapping[int, tuple[str, ...]] = field(default_factory=dict)
 
     @property
     def total_seconds(self) -> float:
@@ -102,7 +107,7 @@ class VisitPlan:
                 "visit_budget_seconds": round(self.budget_seconds, 2),
                 "visit_total_seconds": round(self.total_seconds, 2),
                 "budget_share_seconds": round(plan.budget_seconds, 2),
-                "ties": list(self.ties.get(setup, ())),
+                "ties": list(self.ties.get(setup, ())), "second_sightings": list(self.second.get(setup, ())),
                 "measured_elsewhere": {k: v for k, v in sorted(self.elsewhere.get(setup, {}).items())},
                 "warnings": list(self.warnings)}
 
@@ -204,10 +209,11 @@ def plan_visit(setups: Sequence[SetupTargets], *, epoch: str = "", min_points: i
                          order)
     chosen, assignment, elsewhere = _assign(by_setup, order, sigma)
     ties, warnings = _ties(by_setup, order, sigma, chosen)
-    _second_sightings(by_setup, order, sigma, chosen, budget_seconds, kw)
+    seconds = _second_sightings(by_setup, order, sigma, chosen, budget_seconds, kw)
     elsewhere = {k: {t: j for t, j in elsewhere[k].items() if t not in chosen[k]} for k in order}
     plans = _share_budget(by_setup, order, chosen, budget_seconds, kw)
-    return VisitPlan(epoch, plans, assignment, ties, sigma, float(budget_seconds), order, tuple(warnings), elsewhere)
+    return VisitPlan(epoch, plans, assignment, ties, sigma, float(budget_seconds), order, tuple(warnings), elsewhere,
+                     seconds)
 
 
 def _assign(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], sigma: Mapping[int, Mapping[str, float]]
@@ -279,8 +285,8 @@ def _ties(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], sigma: M
 
 def _second_sightings(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...],
                       sigma: Mapping[int, Mapping[str, float]], chosen: dict[int, set[str]], budget_seconds: float,
-                      kw: dict) -> None:
-    """Spend the time the visit's budget leaves on second sightings of deck targets (added to ``chosen``).
+                      kw: dict) -> dict[int, tuple[str, ...]]:
+    """Spend the time the visit's budget leaves on second sightings of deck targets (added to ``chosen``; returned).
 
     A target seen well (not weak) from another set-up too is scanned from there as well when time is left: the
     join combines the two sightings by their covariances. The largest gains in the target's height sigma come first;
@@ -289,8 +295,9 @@ def _second_sightings(by_setup: Mapping[int, SetupTargets], order: tuple[int, ..
     need = sum(plan_fine_scans([t for t in by_setup[k].targets if t.id in chosen[k]], profile=by_setup[k].profile,
                                budget_seconds=1e9, **kw).total_seconds for k in order if chosen[k])
     spare = budget_seconds - need
+    added: dict[int, list[str]] = {k: [] for k in order}
     if spare <= 0:
-        return
+        return {}
     best = {}
     for k in order:
         for t in chosen[k]:
@@ -309,7 +316,9 @@ def _second_sightings(by_setup: Mapping[int, SetupTargets], order: tuple[int, ..
     for _, k, tid, seconds in sorted(offers):
         if seconds <= spare:
             chosen[k].add(tid)
+            added[k].append(tid)
             spare -= seconds
+    return {k: tuple(sorted(v)) for k, v in added.items() if v}
 
 
 def _spread_of(targets: Mapping[str, PlanTarget]):

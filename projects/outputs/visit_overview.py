@@ -54,6 +54,8 @@ def visit_overview(plans: Mapping[int, ScanPlan], summaries: Mapping[int, Mappin
                  f"{plan.total_seconds / 60:.1f} min" + (f" of its share {plan.budget_seconds / 60:.1f} min"
                                                          if together else ""),
                  f"deck targets {_ids(deck) or 'none'}"]
+        if doc.get("second_sightings"):
+            parts.append(f"in the time left, a second sighting of {_ids(doc['second_sightings'])}")
         if doc.get("ties"):
             parts.append(f"joined to the set-ups before it by {_ids(doc['ties'])}")
         elsewhere: dict[int, list[str]] = {}

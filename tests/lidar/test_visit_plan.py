@@ -48,10 +48,22 @@ def test_two_stations_near_the_ends_plan_every_deck_target_once_from_its_best_st
         best = min((1, 2), key=lambda k: visit.predicted_sigma_mm[k].get(tid, math.inf))
         assert tid in planned[best]
         other = 3 - best
-        assert tid not in planned[other] or tid in visit.ties[2]
+        assert tid not in planned[other] or tid in visit.ties[2] or tid in visit.second.get(other, ())
     assert all(visit.plan(k).rois[-1].closure for k in (1, 2))  # a closure window for each set-up
     assert visit.total_seconds <= 3600.0 * 1.001  # the budget is the visit's
     assert not visit.warnings
+
+
+def test_time_left_goes_to_second_sightings_and_a_tight_budget_has_none():
+    model, setups = _visit((40.0, 40.0), (0.28, 0.72))
+    roomy = plan_visit(setups, budget_seconds=3600.0, closure=True)
+    tight = plan_visit(setups, budget_seconds=900.0, closure=True)
+    assert roomy.second and not tight.second
+    for k, ids in roomy.second.items():  # a second sighting: a deck target the other set-up measures better
+        assert all(roomy.assignment[t] != k and t in _planned(roomy.plan(k)) for t in ids)
+    deck = {t.id for t in model.targets if t.group == "measurement"}
+    for tid in deck:  # tight: each deck target from its best set-up, twice only to join the set-ups
+        assert sum(tid in _planned(tight.plan(k)) for k in (1, 2)) == 1 or tid in tight.ties[2]
 
 
 def test_alone_each_station_spends_time_on_targets_the_other_sees_better():
