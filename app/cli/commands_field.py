@@ -12,7 +12,7 @@ from common.errors import InputError
 from common.files import write_atomic
 from lidar.figures import save_figure
 from projects.onsite.check import check_epoch, check_visit
-from projects.onsite.station_pairs import propose_pair
+from projects.onsite.station_pairs import above, propose_pair, short_of
 from projects.onsite.stations import advise_stations, read_area_csv, station_map_figure
 from projects.outputs.field_sheet import write_field_sheet
 from projects.outputs.visit_overview import visit_overview
@@ -40,13 +40,13 @@ def cmd_field_sheet(args) -> int:
 EXIT_SHORT = 3
 
 
-def _pair(advice, layout, asked: bool):
-    """The proposed pair of set-ups, when asked or when the best single station hides a deck target."""
+def _pair(advice, layout, asked: bool, sigma_mm: float | None = None):
+    """The proposed pair of set-ups, when asked or when the best single station cannot measure a deck target (hidden,
+    weak, or above the sigma asked)."""
     best = next((s for s in advice.stations if s.predicted_sigma_mm), None)
-    deck = {t for t, g in zip(layout.ids, layout.groups, strict=False) if g == "measurement"}
-    if not asked and (best is None or not deck & (set(best.hidden) | set(best.weak))):
+    if not asked and (best is None or not short_of(best, layout, sigma_mm)):
         return None
-    pair = propose_pair(advice.stations, layout)
+    pair = propose_pair(advice.stations, layout, sigma_mm=sigma_mm)
     if pair is None and asked:
         print("no second station shares three well-spread targets with the best one: no pair to propose",
               file=sys.stderr)
@@ -138,18 +138,34 @@ def cmd_stations(args) -> int:
             advice = advise_stations(c, area_xy=area, height_m=args.height_m, grid_m=args.grid_m,
                                      ground_z=args.ground_z, progress=cb)
         layout = c.layout()
-    pair = _pair(advice, layout, args.pair)
-    if pair is None:
+    if args.sigma_mm is not None and not (math.isfinite(args.sigma_mm) and args.sigma_mm > 0):
+        raise InputError(f"--sigma-mm must be a positive number of millimetres, got {args.sigma_mm}")
+    pair = _pair(advice, layout, args.pair, args.sigma_mm)
+    best = next((s for s in advice.stations if s.predicted_sigma_mm), None)
+    short = short_of(best, layout, args.sigma_mm) if best is not None else {}
+    extra = {"sigma_asked_mm": args.sigma_mm, "best_cannot": short} if short or args.sigma_mm is not None else {}
+    if pair is None and not extra:
         advice.save(args.out)
     else:
-
-        write_atomic(args.out, json.dumps({**advice.to_json(), "pair": pair.to_json()}, indent=1))
+        pair_doc = {} if pair is None else {"pair": dict(pair.to_json(), still_short=list(above(pair, args.sigma_mm)))}
+        write_atomic(args.out, json.dumps({**advice.to_json(), **extra, **pair_doc}, indent=1))
     if args.png is not None:
         save_figure(station_map_figure(advice, layout), args.png)
     rows = [{"x": s.xyz_layout[0], "y": s.xyz_layout[1], "z": s.xyz_layout[2], "minutes": s.seconds / 60,
              "worst_sigma_mm": s.worst_sigma_mm, "coarse_step_deg": s.coarse_step_deg, "hidden": list(s.hidden),
              "weak": list(s.weak)} for s in advice.stations[:args.top]]
     table(rows, ["x", "y", "z", "minutes", "worst_sigma_mm", "coarse_step_deg", "hidden", "weak"])
+    if best is not None and short:
+        asked = f" to {args.sigma_mm:g} mm" if args.sigma_mm is not None else ""
+        print(f"from the best single station ({best.xyz_layout[0]:.1f}, {best.xyz_layout[1]:.1f}) "
+              f"{len(short)} deck target(s) cannot be measured{asked}: "
+              + "; ".join(f"{t} ({why})" for t, why in short.items()))
+    if pair is not None and short:
+        b = pair.second.xyz_layout
+        left = above(pair, args.sigma_mm)
+        print(f"a second set-up at ({b[0]:.1f}, {b[1]:.1f}) measures "
+              + (f"all of them{' to ' + format(args.sigma_mm, 'g') + ' mm' if args.sigma_mm else ''}" if not left else
+                 f"all but {', '.join(left)}"))
     if pair is not None:
         a, b = pair.first.xyz_layout, pair.second.xyz_layout
         worst = "-" if math.isinf(pair.worst_sigma_mm) else f"{pair.worst_sigma_mm:.3f}"
