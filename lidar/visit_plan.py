@@ -5,7 +5,8 @@ measures better, while the targets both see only weakly get no time from either 
 together (:func:`plan_visit`):
 
 * every target's height sigma is predicted from every set-up's coarse scan (range, incidence and share of
-  the beam: :func:`predicted_sigma_mm`); a deck target is planned in the set-up with the smallest one;
+  the beam: :func:`predicted_sigma_mm`); a deck target is planned in the set-up with the smallest one (a set-up whose
+  coarse scan did not find it counts :data:`PREDICTED_PENALTY` times its sigma);
 * a reference (pier) target is planned in every set-up that sees it well (not weak): it fixes each set-up's
   own scale and drift, and it joins the set-ups;
 * each further set-up keeps *tie targets*: shared with the set-ups before it, seen well (not weak) from both,
@@ -40,6 +41,10 @@ from lidar.setups import MIN_SHARED, MIN_SPREAD_M, spread_m
 TIES = MIN_SHARED + 1
 #: The spread (m, RMS off their line) the ties are chosen to reach: twice what the join refuses below.
 TIE_SPREAD_M = 2.0 * MIN_SPREAD_M
+#: A target the coarse scan did not find (its position predicted from the layout) goes to that set-up only when it
+#: measures it this much better than one that found it: its window is 2.5 times as wide (it costs several times the
+#: time) and may miss the target.
+PREDICTED_PENALTY = 1.25
 
 
 @dataclass(frozen=True)
@@ -224,7 +229,8 @@ def _assign(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], sigma:
     assignment: dict[str, int] = {}
     for tid in ids:
         seen = [k for k in order if tid in sigma[k]]
-        best = min(seen, key=lambda k: (sigma[k][tid], order.index(k)))
+        best = min(seen, key=lambda k: (sigma[k][tid] * (PREDICTED_PENALTY if _target(by_setup[k], tid).predicted
+                                                         else 1.0), order.index(k)))
         if not math.isfinite(sigma[best][tid]):  # nobody resolves it: the closest says why in its plan
             best = max(seen, key=lambda k: (_share(by_setup[k], tid), -order.index(k)))
         assignment[tid] = best
@@ -237,8 +243,12 @@ def _assign(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], sigma:
     return chosen, assignment, elsewhere
 
 
+def _target(s: SetupTargets, tid: str) -> PlanTarget:
+    return next(t for t in s.targets if t.id == tid)
+
+
 def _share(s: SetupTargets, tid: str) -> float:
-    t = next(t for t in s.targets if t.id == tid)
+    t = _target(s, tid)
     cos = float(t.incidence_cos if t.incidence_cos is not None else DEFAULT_INCIDENCE_COS)
     return resolvability(t.diameter_m, cos, float(np.linalg.norm(t.xyz_socs)), s.profile)
 

@@ -169,11 +169,13 @@ class ProductPlanner:
         label = self.labels[Path(folders[0])]
         with Campaign.open(self.dir) as c:
             for folder in folders:
+                k = _setup_number(Path(folder))
                 try:
-                    plan: ScanPlan = plan_epoch(c, label, setup=_setup_number(Path(folder)))
-                except SurveyError as exc:
-                    self.refused[label] = str(exc).splitlines()[0]
-                    return [[] for _ in folders]
+                    plan: ScanPlan = plan_epoch(c, label, setup=k)
+                except SurveyError as exc:  # that set-up gets no fine scans; the others keep theirs
+                    self.refused[label if k == 1 else f"{label} set-up {k}"] = str(exc).splitlines()[0]
+                    out.append([])
+                    continue
                 out.append(list(plan.rois))
         return out
 

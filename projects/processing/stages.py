@@ -445,19 +445,25 @@ def _plan_together(job: Stage1Job, analysis, progress: ProgressCallback | None) 
     up = layout_up(job.params)
     mine = tuple(plan_targets(analysis, job.layout, up_layout=up))
     setups = [SetupTargets(job.setup, mine, job.profile)]
+    left_out = []
     for n, o in enumerate(job.others):
         cands = o.candidates
         if cands is None:
             sub = scaled(progress, 0.25 + 0.15 * n / len(job.others), 0.25 + 0.15 * (n + 1) / len(job.others))
-            coarse = read_paths(o.coarse_paths, sub, o.coarse_frames, o.coarse_sha256)
-            other = _analyse(coarse, job.layout, job.params, o.profile, station_xy=o.station_xy)
+            try:
+                coarse = read_paths(o.coarse_paths, sub, o.coarse_frames, o.coarse_sha256)
+                other = _analyse(coarse, job.layout, job.params, o.profile, station_xy=o.station_xy)
+            except SurveyError as exc:  # its own plan says why; this one is made without it
+                left_out.append(f"set-up {o.setup} is left out of this set-up's plan: its coarse scan cannot be "
+                                f"planned ({str(exc).splitlines()[0]})")
+                continue
             cands = tuple(plan_targets(other, job.layout, up_layout=up))
         setups.append(SetupTargets(o.setup, cands, o.profile))
     visit: VisitPlan = plan_visit(setups, epoch=job.label, min_points=int(job.params["min_points"]),
                                   budget_seconds=float(job.params["budget_min"]) * 60.0,
                                   closure=bool(job.params["closure"]))
     plan = visit.plan(job.setup)
-    notes = coarse_notes(analysis, mine, plan) + visit.warnings
+    notes = coarse_notes(analysis, mine, plan) + visit.warnings + tuple(left_out)
     if notes:
         plan = replace(plan, warnings=plan.warnings + notes)
     return plan, {"candidates": _candidates_to_json(mine), "own_inputs": job.own_hash,
