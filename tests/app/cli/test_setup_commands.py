@@ -17,6 +17,9 @@ from lidar.plan import ScanPlan
 from lidar.simulate import BridgeModel, EpochConditions, ScannerSetup
 from lidar.simulate.files import simulate_coarse, simulate_fine
 from lidar.simulate.visits import export_registered, project_transform
+from projects.outputs.report import ReportScope, gather
+from projects.outputs.report.flowables import styles
+from projects.outputs.report.pdf import plan_table
 from projects.store.campaign import Campaign
 from tests.projects.campaign_helpers import snapshot
 
@@ -112,6 +115,16 @@ def test_two_set_ups_a_visit_are_planned_measured_and_joined(stations, tmp_path,
     assert (tmp_path / "s2.pdf").stat().st_size > 1000
     assert main(["check", str(camp), "--epoch", DATES[1][:10], "--setup", "3"]) == 1
     assert "no set-up 3; its set-ups are 1, 2" in capsys.readouterr().err
+    # the report's plan tables: each set-up's windows, its closure marked
+    with Campaign.open(camp, writable=False) as c:
+        content = gather(c, ReportScope(), with_previews=False)
+    e = content.epochs[-1]
+    assert set(e.setup_plans) == {2}
+    story = plan_table(e.setup_plans[2][0], e.setup_plans[2][1], styles(), setup=2)
+    head = story[0].getPlainText()
+    assert head.startswith("Set-up 2 (2. of the visit's 2, planned together)") and "closure:" in head
+    rows = story[-1]._cellvalues
+    assert rows[-1][0].getPlainText().endswith("(closure)")
 
 
 def test_a_set_up_sharing_too_few_targets_is_a_problem_not_a_traceback(stations, tmp_path, capsys):
