@@ -820,6 +820,7 @@ def save_edited_plan(c: Campaign, label: str, plan: ScanPlan) -> None:
     d = plan.to_json()
     d["epoch"] = label
     d["edited"] = True
-    if "identification" in old:
-        d["identification"] = old["identification"]
+    for key in ("identification", "candidates", "own_inputs", "visit"):  # what the coarse scan and the visit said
+        if key in old:
+            d[key] = old[key]
     c.save_plan(label, d, stored.inputs_hash)
