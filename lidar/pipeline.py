@@ -126,7 +126,7 @@ def layout_incidence(identification: Identification, layout: Layout, *,
     for m in identification.matches:
         xyz = np.asarray(m.xyz_socs, dtype=np.float64)
         view = -xyz / np.linalg.norm(xyz)
-        out[m.id] = float(max(0.0, normals[m.id] @ view))
+        out[m.id] = max(0.0, float(normals[m.id] @ view))
     return out
 
 

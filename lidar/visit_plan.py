@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -204,7 +205,7 @@ def plan_visit(setups: Sequence[SetupTargets], *, epoch: str = "", min_points: i
         raise InputError("the time budget must be positive")
     order = tuple(sorted(numbers))
     by_setup = {s.setup: s for s in setups}
-    kw = {"epoch": epoch, "min_points": min_points, "margin_m": margin_m, "closure": closure}
+    kw: dict[str, Any] = {"epoch": epoch, "min_points": min_points, "margin_m": margin_m, "closure": closure}
     sigma = {k: {t.id: predicted_sigma_mm(t, profile=by_setup[k].profile, min_points=min_points)
                  for t in by_setup[k].targets} for k in order}
     if len(order) == 1:
@@ -308,10 +309,10 @@ def _second_sightings(by_setup: Mapping[int, SetupTargets], order: tuple[int, ..
     added: dict[int, list[str]] = {k: [] for k in order}
     if spare <= 0:
         return {}
-    best = {}
+    best: dict[str, float] = {}
     for k in order:
-        for t in chosen[k]:
-            best[t] = min(best.get(t, math.inf), sigma[k][t])
+        for tid in chosen[k]:
+            best[tid] = min(best.get(tid, math.inf), sigma[k][tid])
     offers = []
     for k in order:
         for t in by_setup[k].targets:

@@ -91,8 +91,8 @@ def cmd_check(args) -> int:
         else:
             names = ", ".join(t.reflector for t in result.short)
             where = f"wrote the re-scan plan {args.out}" if args.out else "give --out FILE for a re-scan plan"
-            print(f"epoch {args.epoch}: re-scan {names} before leaving "
-                  f"({result.rescan.total_seconds / 60:.1f} min); {where}")
+            minutes = f" ({result.rescan.total_seconds / 60:.1f} min)" if result.rescan is not None else ""
+            print(f"epoch {args.epoch}: re-scan {names or 'the drifted set-up'} before leaving{minutes}; {where}")
     drifted = result.closure is not None and result.closure.status == "drifted"
     return 0 if not result.short and not drifted else EXIT_SHORT
 

@@ -287,14 +287,14 @@ def visit_verdict(label: str, checks: Mapping[int, EpochCheck]) -> VisitCheck:
             rescan[where][t] = why
     covered: dict[str, int] = {}
     for k in order:
-        for t in checks[k].short:
-            if t.reflector in rescan[k]:
+        for row in checks[k].short:
+            if row.reflector in rescan[k]:
                 continue
-            other = next((j for j in order if j != k and t.reflector in good[j]), None)
+            other = next((j for j in order if j != k and row.reflector in good[j]), None)
             if other is not None:
-                covered[t.reflector] = other
+                covered[row.reflector] = other
             else:
-                rescan[k][t.reflector] = t.status if not t.found else t.note or t.status
+                rescan[k][row.reflector] = row.status if not row.found else row.note or row.status
     cut = {}
     for k in order:
         ch = checks[k]

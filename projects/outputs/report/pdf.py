@@ -366,11 +366,11 @@ def epoch_section(e: EpochSection, content: ReportContent, ss: Any, *, new_page:
             out += plan_table(stored, cents, ss, words=words, setup=setup if len(plans) > 1 else None)
     if e.reference_checks:
         table = [["Reference", "Median distance change [mm]", "Max change [mm]", "Verdict"]]
-        for r in e.reference_checks:
-            verdict = "not found" if r.missing else ("MOVED, left out" if r.moved else
-                                                    ("suspect" if r.suspect else "stable"))
-            table.append([r.reflector, _num(None if r.median_change_m is None else r.median_change_m * 1000),
-                          _num(None if r.max_change_m is None else r.max_change_m * 1000), verdict])
+        for rc in e.reference_checks:
+            verdict = "not found" if rc.missing else ("MOVED, left out" if rc.moved else
+                                                     ("suspect" if rc.suspect else "stable"))
+            table.append([rc.reflector, _num(None if rc.median_change_m is None else rc.median_change_m * 1000),
+                          _num(None if rc.max_change_m is None else rc.max_change_m * 1000), verdict])
         out += [Spacer(1, 4), Paragraph("Reference group check", ss["Small"]), _table(table, (20, 45, 30, 35), ss)]
     if e.setups:  # the joint frame of a visit of several set-ups: its QA trail
 
