@@ -46,6 +46,8 @@ TIE_SPREAD_M = 2.0 * MIN_SPREAD_M
 #: measures it this much better than one that found it: its window is 2.5 times as wide (it costs several times the
 #: time) and may miss the target.
 PREDICTED_PENALTY = 1.25
+#: The fewest points per target the shares of a visit's budget are made for (the planner's own floor is 50).
+MIN_SHARED_POINTS = 100
 
 
 @dataclass(frozen=True)
@@ -341,17 +343,33 @@ def _spread_of(targets: Mapping[str, PlanTarget]):
 
 def _share_budget(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], chosen: Mapping[int, set[str]],
                   budget_seconds: float, kw: dict) -> dict[int, ScanPlan]:
-    """Each set-up planned in its share of the visit's budget: in proportion to what its windows need."""
+    """Each set-up planned in its share of the visit's budget.
+
+    The shares give every set-up's targets the same points: the most points per target (up to ``min_points``) whose
+    windows all fit the visit's budget, found by bisection (:data:`MIN_SHARED_POINTS` at the least); each share is
+    its set-up's time at those points, and time left over is shared in proportion.
+    """
     targets = {k: [t for t in by_setup[k].targets if t.id in chosen[k]] for k in order}
-    need = {}
     for k in order:
         if not targets[k]:
             raise InputError(f"set-up {k} has nothing to measure that another set-up does not measure better, "
                              "and nothing to join it: leave it out of the visit")
-        full = plan_fine_scans(targets[k], profile=by_setup[k].profile, budget_seconds=1e9, **kw)
-        need[k] = max(full.total_seconds, 1e-6)
+
+    def times(points: float) -> dict[int, float]:
+        args = dict(kw, min_points=max(int(points), 10))
+        return {k: max(plan_fine_scans(targets[k], profile=by_setup[k].profile, budget_seconds=1e9,
+                                       **args).total_seconds, 1e-6) for k in order}
+
+    need = times(kw["min_points"])
+    if sum(need.values()) > budget_seconds:
+        lo, hi = float(MIN_SHARED_POINTS), float(kw["min_points"])
+        if sum(times(lo).values()) <= budget_seconds:
+            for _ in range(12):
+                mid = 0.5 * (lo + hi)
+                lo, hi = (mid, hi) if sum(times(mid).values()) <= budget_seconds else (lo, mid)
+        need = times(lo)
     total = sum(need.values())
-    spare = max(budget_seconds - total, 0.0)
     scale = min(1.0, budget_seconds / total)
+    spare = max(budget_seconds - total, 0.0)
     share = {k: need[k] * scale + spare * need[k] / total for k in order}
     return {k: plan_fine_scans(targets[k], profile=by_setup[k].profile, budget_seconds=share[k], **kw) for k in order}
