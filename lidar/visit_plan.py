@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -346,8 +346,9 @@ def _share_budget(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], 
     """Each set-up planned in its share of the visit's budget.
 
     The shares give every set-up's targets the same points: the most points per target (up to ``min_points``) whose
-    windows all fit the visit's budget, found by bisection (:data:`MIN_SHARED_POINTS` at the least); each share is
-    its set-up's time at those points, and time left over is shared in proportion.
+    windows all fit the visit's budget, found by bisection; each share is its set-up's time at those points, and
+    time left over is shared in proportion. When even :data:`MIN_SHARED_POINTS` do not fit, each set-up gets its time
+    at those points and every plan says the visit is over its budget.
     """
     targets = {k: [t for t in by_setup[k].targets if t.id in chosen[k]] for k in order}
     for k in order:
@@ -361,6 +362,7 @@ def _share_budget(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], 
                                        **args).total_seconds, 1e-6) for k in order}
 
     need = times(kw["min_points"])
+    over = ""
     if sum(need.values()) > budget_seconds:
         lo, hi = float(MIN_SHARED_POINTS), float(kw["min_points"])
         if sum(times(lo).values()) <= budget_seconds:
@@ -368,8 +370,15 @@ def _share_budget(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], 
                 mid = 0.5 * (lo + hi)
                 lo, hi = (mid, hi) if sum(times(mid).values()) <= budget_seconds else (lo, mid)
         need = times(lo)
+        if sum(need.values()) > budget_seconds * 1.0001:  # each set-up its time at the floor: the visit goes over
+            over = (f"the visit's windows take {sum(need.values()) / 60:.0f} min even at {MIN_SHARED_POINTS} points a "
+                    f"target, over its budget of {budget_seconds / 60:.0f} min: each set-up is planned at those "
+                    "points; give budget_min the visit's whole time (both set-ups), or leave a set-up out")
     total = sum(need.values())
-    scale = min(1.0, budget_seconds / total)
     spare = max(budget_seconds - total, 0.0)
-    share = {k: need[k] * scale + spare * need[k] / total for k in order}
-    return {k: plan_fine_scans(targets[k], profile=by_setup[k].profile, budget_seconds=share[k], **kw) for k in order}
+    share = {k: need[k] + spare * need[k] / total for k in order}
+    plans = {k: plan_fine_scans(targets[k], profile=by_setup[k].profile, budget_seconds=share[k], **kw)
+             for k in order}
+    if over:
+        plans = {k: replace(p, warnings=p.warnings + (over,)) for k, p in plans.items()}
+    return plans
