@@ -22,9 +22,16 @@ max, mm), the share of errors within 2 sigma, the share beyond 3 sigma WITHOUT a
 their own row (must be 0), the same for the along-span movements (must be 0), and the deck targets measured /
 expected.
 
-Usage: ``./run bench long_bridges [--visits N] [--quick] [--seed S]`` (about 1 min a set-up visit of a long bridge
+``--together`` (issue 40): the two-set-up stations only, each visit's coarse scans taken first and its set-ups
+planned alone (each as if it were the visit's only one, ``plan_together false``, as before) and together (each
+target from the set-up that measures it best, tie targets, the visit's budget shared), from the same scans; the
+table goes to ``docs/figures/long_bridges_together.md``. Its columns add the share beyond 3 sigma without a flag
+and the mean planned fine-scan minutes a visit; ``--equal-time`` adds the set-ups planned together in the minutes
+they took planned alone (planned alone, each set-up takes the visit's whole budget).
+
+Usage: ``./run bench long_bridges [--visits N] [--quick] [--seed S] [--together] [--bridges 2,3]`` (about 1 min a set-up visit of a long bridge
 on a loaded two-core machine; ``--quick``: the three-span bridge only; ``--small``: a short two-span bridge, two
-set-ups a visit, 2 visits, coarse scans at 0.1 degrees, in about a minute).
+set-ups a visit planned alone and together, 2 visits, coarse scans at 0.1 degrees, in about two minutes).
 """
 from __future__ import annotations
 
@@ -39,6 +46,7 @@ from _harness import SMALL, figures, write_figure
 from lidar.simulate.bridge import BridgeModel
 from lidar.simulate.scene import EpochConditions
 from lidar.simulate.setup import ScannerSetup
+from projects.store.campaign import Campaign
 from projects.studies import StudyScore, run_study
 
 BRIDGES = {
@@ -72,8 +80,13 @@ def _stations(model: BridgeModel, fractions: tuple, rng: np.random.Generator) ->
 
 
 def scenario(root: Path, spans: tuple, fractions: tuple, *, visits: int, seed: int,
-             coarse_step_deg: float = 0.05) -> StudyScore:
-    """One bridge and station plan: simulate, import, process, score."""
+             coarse_step_deg: float = 0.05, together: bool | None = None,
+             budget_min: float | None = None) -> StudyScore:
+    """One bridge and station plan: simulate, import, process, score.
+
+    ``together`` None: each set-up planned and fine-scanned before the next one's coarse scan (as before issue
+    40); True / False: every coarse scan of a visit first, then its set-ups planned together / alone.
+    """
     model = _multi(spans)
     rng = np.random.default_rng(seed)
     conditions = [EpochConditions()] + [EpochConditions(span_displacements_m=tuple(
@@ -81,8 +94,29 @@ def scenario(root: Path, spans: tuple, fractions: tuple, *, visits: int, seed: i
     stations = [_stations(model, fractions, rng) for _ in conditions]
     # the surveyor says roughly where set-up 1 stands (a symmetric bridge is otherwise refused as ambiguous)
     hint = f"{fractions[0] * model.length_m:.1f},{-(model.deck_width_m / 2 + 8.0):.1f}"
-    return run_study(root, model, conditions, stations=stations, seed=seed, settings={"station_xy": hint},
-                     coarse_step_deg=coarse_step_deg)["corrected"]
+    settings = {"station_xy": hint} if together is None else {"station_xy": hint, "plan_together": together}
+    if budget_min is not None:
+        settings["budget_min"] = budget_min
+    return run_study(root, model, conditions, stations=stations, seed=seed, settings=settings,
+                     coarse_step_deg=coarse_step_deg, coarse_first=together is not None)["corrected"]
+
+
+def planned_minutes(root: Path) -> float:
+    """Mean planned fine-scan minutes a visit (every set-up's plan) of a scenario's campaign."""
+    with Campaign.open(root / "campaign", writable=False) as c:
+        totals = [sum(p.total_seconds for p in (c.plan(e.label, k) for k in c.setups(e.label)) if p is not None)
+                  for e in c.epochs()]
+    return float(np.mean(totals)) / 60.0 if totals else float("nan")
+
+
+def together_table(rows: dict) -> str:
+    lines = ["| bridge | stations | set-ups planned | deck targets measured | RMS mm | max mm | beyond 3σ without a flag "
+             "| fine scans min a visit |", "|---|---|---|---|---|---|---|---|"]
+    for (bridge, stations, how), (s, minutes) in rows.items():
+        r = s.row()
+        lines.append(f"| {bridge} | {stations} | {how} | {r['measured']} | {r['rms_mm']:.3f} | {r['max_mm']:.3f} | "
+                     f"{r['silent_beyond_3sigma']:.1%} | {minutes:.0f} |")
+    return "\n".join(lines)
 
 
 def table(rows: dict) -> str:
@@ -101,7 +135,17 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=28)
     ap.add_argument("--quick", action="store_true", help="the three-span bridge only")
     ap.add_argument(SMALL, action="store_true", help="a short two-span bridge, two set-ups, 2 visits (seconds)")
+    ap.add_argument("--together", action="store_true",
+                    help="the two-set-up stations, their set-ups planned alone and together (issue 40)")
+    ap.add_argument("--bridges", default="", help="the bridges by their number of spans, e.g. 2,3 (default all)")
+    ap.add_argument("--equal-time", action="store_true",
+                    help="also plan together in the minutes the set-ups planned alone took (a visit's mean)")
+    ap.add_argument("--budget-min", type=float, default=None,
+                    help="the visit's fine-scan budget, minutes (default the campaign's, 60)")
     args = ap.parse_args()
+    if args.together or args.small:
+        together(args)
+        return
     print(__doc__.split("Usage")[0].strip() + "\n")
     OUT.mkdir(exist_ok=True)
     bridges = {k: v for k, v in BRIDGES.items() if not args.quick or k.startswith("3")}
@@ -133,6 +177,50 @@ def main() -> None:
     figures(scenarios=len(rows), visits=args.visits, displacements=sum(len(s.errors_mm) for s in scores),
             missing=sum(s.missing for s in scores), expected=sum(s.expected for s in scores),
             rms_mm_max=float(np.nanmax([s.rms_mm for s in scores])), silent_beyond_3sigma_max=silent)
+
+
+def together(args) -> None:
+    """The two-set-up stations with their set-ups planned alone and together, from the same scans (issue 40)."""
+    print(__doc__.split("Usage")[0].strip() + "\n")
+    OUT.mkdir(exist_ok=True)
+    wanted = {int(v) for v in args.bridges.split(",") if v.strip()}
+    bridges = SMALL_BRIDGES if args.small else {k: v for k, v in BRIDGES.items() if not wanted or len(v) in wanted}
+    stations = SMALL_STATIONS if args.small else {k: v for k, v in STATIONS.items() if len(v) == 2}
+    visits = min(args.visits, 2) if args.small else args.visits
+    rows: dict = {}
+    for n, (bridge, spans) in enumerate(BRIDGES.items() if not args.small else bridges.items()):
+        if bridge not in bridges:
+            continue
+        for m, (name, fractions) in enumerate(STATIONS.items() if not args.small else stations.items()):
+            if name not in stations:
+                continue
+            modes = [("alone", False, None), ("together", True, None)]
+            if args.equal_time:
+                modes.append(("together, in the time alone took", True, "alone"))
+            for how, flag, budget_from in modes:
+                t0 = time.perf_counter()
+                root = OUT / ("long_bridges_small" if args.small else "long_bridges_together") / \
+                    f"b{n}s{m}{how[0]}{'e' if budget_from else ''}"
+                budget = args.budget_min if budget_from is None else rows[(bridge, name, budget_from)][1]
+                s = scenario(root, spans, fractions, visits=visits, seed=args.seed + 10 * n + m,
+                             coarse_step_deg=0.1 if args.small else 0.05, together=flag, budget_min=budget)
+                rows[(bridge, name, how)] = (s, planned_minutes(root))
+                print(f"{bridge}, {name}, planned {how}: {s.row()} ({time.perf_counter() - t0:.0f} s)", flush=True)
+    print()
+    print(together_table(rows))
+    if not args.small:
+        (OUT / f"long_bridges_together{'' if args.budget_min is None else int(args.budget_min)}.json").write_text(json.dumps(
+            {f"{b} | {s} | {h}": dict(v.row(), minutes=mins) for (b, s, h), (v, mins) in rows.items()}, indent=1))
+        if args.budget_min is None:  # the documentation's table is the campaign's default budget
+            write_figure("long_bridges_together", together_table(rows))
+    scores = [s for s, _ in rows.values()]
+    silent = max((s.silent_beyond_3sigma for s in scores if s.errors_mm), default=0.0)
+    alone = [s for (_, _, h), (s, _) in rows.items() if h == "alone"]
+    joint = [s for (_, _, h), (s, _) in rows.items() if h == "together"]
+    figures(scenarios=len(alone), visits=visits, displacements=sum(len(s.errors_mm) for s in scores),
+            missing=sum(s.missing for s in scores), expected=sum(s.expected for s in scores),
+            rms_mm_max=float(np.nanmax([s.rms_mm for s in scores])), silent_beyond_3sigma_max=silent,
+            missing_alone=sum(s.missing for s in alone), missing_together=sum(s.missing for s in joint))
 
 
 if __name__ == "__main__":

@@ -4,7 +4,7 @@ Each step is also available on its own in its module; these functions only chain
 """
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -105,43 +105,65 @@ def analyse_map(rmap: ReflectanceMap, layout: Layout, *, threshold: float | None
     return CoarseAnalysis(rmap, det, ident, inc, why)
 
 
+def layout_normals_socs(identification: Identification, layout: Layout, *,
+                        up_layout: ArrayLike = (0.0, 0.0, 1.0)) -> dict[str, np.ndarray]:
+    """Every identified target's normal (the layout's ``nx,ny,nz`` or its default) in the scanner frame."""
+    normals = target_normals(layout, up=up_layout)
+    return {m.id: identification.rotation @ normals[layout.index(m.id)] for m in identification.matches}
+
+
 def layout_incidence(identification: Identification, layout: Layout, *,
                      up_layout: ArrayLike = (0.0, 0.0, 1.0)) -> dict[str, float]:
     """|cos| of the incidence angle at every identified target, from the layout's normals.
 
     The normals (``nx,ny,nz`` or the defaults of :func:`lidar.layout.target_normals`) are carried
-    into the scanner frame by the rotation fitted to the detected targets; the viewing direction
-    is the target's position (detected, or predicted from the layout). A target facing away from
-    the scanner gets 0.
+    into the scanner frame by the rotation fitted to the detected targets (:func:`layout_normals_socs`); the
+    viewing direction is the target's position (detected, or predicted from the layout). A target facing away
+    from the scanner gets 0.
     """
-    normals = target_normals(layout, up=up_layout)
+    normals = layout_normals_socs(identification, layout, up_layout=up_layout)
     out = {}
     for m in identification.matches:
-        n_socs = identification.rotation @ normals[layout.index(m.id)]
         xyz = np.asarray(m.xyz_socs, dtype=np.float64)
         view = -xyz / np.linalg.norm(xyz)
-        out[m.id] = float(max(0.0, n_socs @ view))
+        out[m.id] = max(0.0, float(normals[m.id] @ view))
     return out
+
+
+def plan_targets(coarse: CoarseAnalysis, layout: Layout, *,
+                 up_layout: ArrayLike = (0.0, 0.0, 1.0)) -> list[PlanTarget]:
+    """What the planner needs of every layout reflector the coarse scan identified (detected or predicted).
+
+    Incidence comes from the layout's target normals carried into the scanner frame
+    (:func:`layout_incidence`), for detected and predicted targets alike: the surface around a
+    target in a coarse map is often another face (a pier corner, the deck edge).
+    """
+    normals = layout_normals_socs(coarse.identification, layout, up_layout=up_layout)
+    inc = layout_incidence(coarse.identification, layout, up_layout=up_layout)
+    return [PlanTarget(m.id, m.group, tuple(float(v) for v in m.xyz_socs),
+                       float(layout.diameters_m[layout.index(m.id)]), m.predicted, max(inc[m.id], 0.05),
+                       tuple(float(v) for v in normals[m.id])) for m in coarse.identification.matches]
+
+
+def coarse_notes(coarse: CoarseAnalysis, targets: Sequence[PlanTarget], plan: ScanPlan) -> tuple[str, ...]:
+    """What a plan's warnings add from its coarse scan: the targets it did not find and why, the step they need."""
+    return tuple(n for n in (coarse.missing_note, _coarse_step_note(targets, plan, coarse.reflectance_map.step_deg))
+                 if n)
 
 
 def plan_from_coarse(coarse: CoarseAnalysis, layout: Layout, *, epoch: str = "", profile: ScannerProfile = VZ1000,
                      min_points: int = 1000, budget_seconds: float = 3600.0, margin_m: float = 0.10,
                      up_layout: ArrayLike = (0.0, 0.0, 1.0), closure: bool = False) -> ScanPlan:
-    """Fine-scan plan for every layout reflector (detected or predicted).
+    """Fine-scan plan for every layout reflector (detected or predicted; :func:`plan_targets`).
 
-    Incidence comes from the layout's target normals carried into the scanner frame
-    (:func:`layout_incidence`), for detected and predicted targets alike: the surface around a
-    target in a coarse map is often another face (a pier corner, the deck edge). ``closure`` ends the
-    plan with the first reference target's window again (see :func:`lidar.plan.plan_fine_scans`). The plan's
-    warnings say which targets the coarse scan did not find and why (:attr:`CoarseAnalysis.missing_note`).
+    ``closure`` ends the plan with the first reference target's window again (see
+    :func:`lidar.plan.plan_fine_scans`). The plan's warnings say which targets the coarse scan did not find
+    and why (:attr:`CoarseAnalysis.missing_note`).
     """
-    inc = layout_incidence(coarse.identification, layout, up_layout=up_layout)
-    targets = [PlanTarget(m.id, m.group, m.xyz_socs, float(layout.diameters_m[layout.index(m.id)]), m.predicted,
-                          max(inc[m.id], 0.05)) for m in coarse.identification.matches]
+    targets = plan_targets(coarse, layout, up_layout=up_layout)
     plan = plan_fine_scans(targets, epoch=epoch, profile=profile, min_points=min_points,
                            budget_seconds=budget_seconds, margin_m=margin_m, closure=closure)
-    notes = tuple(n for n in (coarse.missing_note, _coarse_step_note(targets, plan, coarse.reflectance_map.step_deg))
-                  if n)
+    notes = coarse_notes(coarse, targets, plan)
     return replace(plan, warnings=plan.warnings + notes) if notes else plan
 
 

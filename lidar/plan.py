@@ -41,6 +41,7 @@ class PlanTarget:
     diameter_m: float = 0.05
     predicted: bool = False
     incidence_cos: float | None = None
+    normal_socs: tuple[float, ...] | None = None  # the layout's normal carried into the scanner frame, when known
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,8 @@ own row.
 
 A visit of several set-ups (``stations`` with two or more per visit) is imported as a surveyor would:
 ``add-epoch`` with the first set-up's coarse scan, ``add-setup`` with each further one's, each set-up
-planned on its own and its fine scans added to it.
+planned and its fine scans added to it; with ``coarse_first`` every coarse scan of the visit is imported before
+the set-ups are planned (together, unless the settings say ``plan_together false``).
 """
 from __future__ import annotations
 
@@ -123,8 +124,8 @@ class ProductPlanner:
         self.labels: dict[Path, str] = {}
         self.refused: dict[str, str] = {}  # epoch -> the line planning refused it with
 
-    def __call__(self, folder: Path, coarse: Path) -> list:
-
+    def _import(self, folder: Path, coarse: Path) -> tuple[str, int]:
+        """A set-up's coarse scan imported as a surveyor would: (epoch, set-up)."""
         if not (self.dir / "campaign.sqlite").exists():
             with Campaign.create(self.dir, name="study", layout=read_layout_csv(self.layout_csv),
                                  span_m=self.span_m) as c:
@@ -132,7 +133,7 @@ class ProductPlanner:
                     set_parameter(c, k, str(v))
         setup = _setup_number(Path(folder))
         with Campaign.open(self.dir) as c:
-            if setup > 1:  # another station of the visit just planned: add it to that epoch
+            if setup > 1:  # another station of the visit: add it to that epoch
                 label = self.labels[Path(folder).parent / "setup1"]
                 self.labels[Path(folder)] = label
                 (setup,) = c.add_setup(label, coarse)
@@ -142,12 +143,41 @@ class ProductPlanner:
                 self.count += 1
                 self.labels[Path(folder)] = label
                 c.add_epoch(label, when.isoformat(), coarse)
+        return label, setup
+
+    def __call__(self, folder: Path, coarse: Path) -> list:
+
+        label, setup = self._import(Path(folder), Path(coarse))
+        with Campaign.open(self.dir) as c:
             try:
                 plan: ScanPlan = plan_epoch(c, label, setup=setup)
             except SurveyError as exc:
                 self.refused[label] = str(exc).splitlines()[0]
                 return []
         return list(plan.rois)
+
+
+    def plan_visit(self, folders: Sequence[Path], coarse: Sequence[Path]) -> list[list]:
+        """The ``plan_visit`` callback: a visit's coarse scans imported, then each set-up planned.
+
+        Imported as a surveyor would (``add-epoch``, ``add-setup``); planned together unless the settings say
+        ``plan_together false``.
+        """
+        out: list[list] = []
+        for folder, path in zip(folders, coarse, strict=True):
+            self._import(Path(folder), Path(path))
+        label = self.labels[Path(folders[0])]
+        with Campaign.open(self.dir) as c:
+            for folder in folders:
+                k = _setup_number(Path(folder))
+                try:
+                    plan: ScanPlan = plan_epoch(c, label, setup=k)
+                except SurveyError as exc:  # that set-up gets no fine scans; the others keep theirs
+                    self.refused[label if k == 1 else f"{label} set-up {k}"] = str(exc).splitlines()[0]
+                    out.append([])
+                    continue
+                out.append(list(plan.rois))
+        return out
 
 
 def _setup_number(folder: Path) -> int:
@@ -158,8 +188,13 @@ def _setup_number(folder: Path) -> int:
 
 def run_study(root: Path, model: BridgeModel, visits: Sequence[EpochConditions], *, seed: int = 0,
               stations: Sequence[Sequence[ScannerSetup]] | None = None, coarse_step_deg: float = 0.05,
-              settings: dict | None = None, compare_without: bool = False) -> dict[str, StudyScore]:
+              settings: dict | None = None, compare_without: bool = False,
+              coarse_first: bool = False) -> dict[str, StudyScore]:
     """Simulate, plan, import and process a campaign; score it (and, optionally, the same without corrections).
+
+    ``coarse_first``: every set-up's coarse scan of a visit is taken and imported before any is planned, so that
+    the product plans them together (with ``plan_together`` false in ``settings``: each alone, but from the same
+    scans). Default: each set-up planned and fine-scanned before the next one's coarse scan, as before.
 
     Returns ``{"corrected": score}`` (and ``"uncorrected"``: the same scans with ``field_model false``).
     """
@@ -169,7 +204,7 @@ def run_study(root: Path, model: BridgeModel, visits: Sequence[EpochConditions],
         shutil.rmtree(p, ignore_errors=True)
     planner = ProductPlanner(camp, field_dir / "layout.csv", span_m=model.span_m, settings=settings)
     write_campaign(field_dir, model, visits, plan_for=planner, stations=stations, seed=seed,
-                   coarse_step_deg=coarse_step_deg)
+                   coarse_step_deg=coarse_step_deg, plan_visit=planner.plan_visit if coarse_first else None)
     with Campaign.open(camp) as c:
         for folder, label in planner.labels.items():
             fine = folder / "fine.laz"

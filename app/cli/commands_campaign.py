@@ -21,6 +21,7 @@ from lidar.layout import read_layout_csv
 from lidar.plan import without_closure
 from lidar.scanner_catalogue import DEFAULT_SCANNER, get_scanner
 from projects.outputs.exports import export
+from projects.outputs.visit_overview import visit_overview
 from projects.processing.parameters import DEFAULTS
 from projects.results.corrections import instrument_line
 from projects.results.state import epoch_states
@@ -123,12 +124,18 @@ def cmd_add_fine(args) -> int:
 
 def cmd_plan(args) -> int:
     # local: the processing (the pipeline, scikit-image) costs init, reflector, limit, displacements 0.18 s (measured)
-    from projects.processing.stages import plan_epoch
+    from projects.processing.stages import plan_epoch, plan_visit_epoch
     with open_campaign(args.dir) as c:
         c.epoch(args.epoch)
         setup = setup_of(c, args)
+        several = len(c.setups(args.epoch)) > 1
         with progress_bar("planning") as cb:
-            plan = plan_epoch(c, args.epoch, setup=setup, progress=cb)
+            if several:  # the visit's set-ups are planned together: the whole visit is shown
+                plans, summaries = plan_visit_epoch(c, args.epoch, progress=cb)
+                plan = plans[setup] if setup in plans else plan_epoch(c, args.epoch, setup=setup, progress=cb)
+            else:
+                plan, plans, summaries = plan_epoch(c, args.epoch, setup=setup, progress=cb), {}, {}
+        overview = visit_overview(plans, summaries)
         if args.no_closure:
             plan = without_closure(plan)
         if args.sheet is not None:
@@ -136,12 +143,16 @@ def cmd_plan(args) -> int:
             from projects.outputs.field_sheet import write_field_sheet
 
             write_field_sheet(plan, args.sheet, campaign_name=c.name, preview=c.map_preview(args.epoch, setup),
-                              epoch_date=setup_date(c, args.epoch, setup))
+                              epoch_date=setup_date(c, args.epoch, setup), visit=overview)
         warnings = c.layout_warnings(args.epoch)
-        several = len(c.setups(args.epoch)) > 1
-    plan.save(args.out)
+    doc = plan.to_json()
+    if several:
+        doc.update(setup=setup, **({"visit": summaries[setup]} if summaries.get(setup) else {}))
+    write_atomic(args.out, json.dumps(doc, indent=2))
     print(f"wrote {args.out}: {len(plan.rois)} windows, {plan.total_seconds / 60:.1f} min"
           + (f" (set-up {setup})" if several else "") + (f"; field sheet {args.sheet}" if args.sheet else ""))
+    for line in overview:
+        print(line)
     for w in [*plan.warnings, *warnings]:
         print(f"warning: {w}")
     return 0

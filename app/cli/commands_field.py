@@ -11,11 +11,12 @@ from app.cli.progress import progress_bar
 from common.errors import InputError
 from common.files import write_atomic
 from lidar.figures import save_figure
-from projects.onsite.check import check_epoch
-from projects.onsite.station_pairs import propose_pair
+from projects.onsite.check import check_epoch, check_visit
+from projects.onsite.station_pairs import above, propose_pair, short_of
 from projects.onsite.stations import advise_stations, read_area_csv, station_map_figure
 from projects.outputs.field_sheet import write_field_sheet
-from projects.processing.stages import plan_epoch
+from projects.outputs.visit_overview import visit_overview
+from projects.processing.stages import plan_epoch, plan_visit_epoch
 
 
 def cmd_field_sheet(args) -> int:
@@ -23,10 +24,14 @@ def cmd_field_sheet(args) -> int:
         c.epoch(args.epoch)
         setup = setup_of(c, args)
         with progress_bar("planning") as cb:
-            plan = plan_epoch(c, args.epoch, setup=setup, progress=cb)
+            if len(c.setups(args.epoch)) > 1:  # the whole visit, set-up by set-up, heads the sheet
+                plans, summaries = plan_visit_epoch(c, args.epoch, progress=cb)
+                plan = plans[setup] if setup in plans else plan_epoch(c, args.epoch, setup=setup, progress=cb)
+            else:
+                plan, plans, summaries = plan_epoch(c, args.epoch, setup=setup, progress=cb), {}, {}
         preview = c.map_preview(args.epoch, setup)
         path = write_field_sheet(plan, args.out, campaign_name=c.name, preview=preview,
-                                 epoch_date=setup_date(c, args.epoch, setup))
+                                 epoch_date=setup_date(c, args.epoch, setup), visit=visit_overview(plans, summaries))
     print(f"wrote {path}: {len(plan.rois)} windows, {plan.total_seconds / 60:.1f} min "
           f"(budget {plan.budget_seconds / 60:.0f} min) on a {plan.profile.name}")
     return 0
@@ -35,17 +40,23 @@ def cmd_field_sheet(args) -> int:
 EXIT_SHORT = 3
 
 
-def _pair(advice, layout, asked: bool):
-    """The proposed pair of set-ups, when asked or when the best single station hides a deck target."""
+def _pair(advice, layout, asked: bool, sigma_mm: float | None = None):
+    """The proposed pair of set-ups, when asked or when the best single station cannot measure a deck target (hidden,
+    weak, or above the sigma asked)."""
     best = next((s for s in advice.stations if s.predicted_sigma_mm), None)
-    deck = {t for t, g in zip(layout.ids, layout.groups, strict=False) if g == "measurement"}
-    if not asked and (best is None or not deck & (set(best.hidden) | set(best.weak))):
+    if not asked and (best is None or not short_of(best, layout, sigma_mm)):
         return None
-    pair = propose_pair(advice.stations, layout)
+    pair = propose_pair(advice.stations, layout, sigma_mm=sigma_mm)
     if pair is None and asked:
         print("no second station shares three well-spread targets with the best one: no pair to propose",
               file=sys.stderr)
     return pair
+
+
+def _whole_visit(c, label: str) -> bool:
+    """Whether the visit has several set-ups and every one of them its fine scans (its check is then the visit's)."""
+    setups = [k for k in c.setups(label) if c.files(label, "coarse", setup=k)]
+    return len(setups) > 1 and all(c.files(label, "fine", setup=k) for k in setups)
 
 
 def cmd_check(args) -> int:
@@ -53,9 +64,15 @@ def cmd_check(args) -> int:
         c.epoch(args.epoch)
         setup = setup_of(c, args)
         with progress_bar("measuring the fine scans") as cb:
-            result = check_epoch(c, args.epoch, goal_sigma_mm=args.goal_mm, setup=setup, progress=cb)
+            if _whole_visit(c, args.epoch):
+                visit = check_visit(c, args.epoch, goal_sigma_mm=args.goal_mm, progress=cb)
+                result = visit.setups[setup]
+            else:
+                visit, result = None, check_epoch(c, args.epoch, goal_sigma_mm=args.goal_mm, setup=setup, progress=cb)
     if args.out is not None and result.rescan is not None:
         result.rescan.save(args.out)
+    if visit is not None:
+        return _visit_check_out(args, visit, setup)
     if args.json:
         dump_json(result.to_json())
     else:
@@ -74,10 +91,42 @@ def cmd_check(args) -> int:
         else:
             names = ", ".join(t.reflector for t in result.short)
             where = f"wrote the re-scan plan {args.out}" if args.out else "give --out FILE for a re-scan plan"
-            print(f"epoch {args.epoch}: re-scan {names} before leaving "
-                  f"({result.rescan.total_seconds / 60:.1f} min); {where}")
+            minutes = f" ({result.rescan.total_seconds / 60:.1f} min)" if result.rescan is not None else ""
+            print(f"epoch {args.epoch}: re-scan {names or 'the drifted set-up'} before leaving{minutes}; {where}")
     drifted = result.closure is not None and result.closure.status == "drifted"
     return 0 if not result.short and not drifted else EXIT_SHORT
+
+
+def _visit_check_out(args, visit, setup: int) -> int:
+    """The check of a whole visit: set-up ``setup``'s rows, then the visit's one verdict (exit 3 when it asks)."""
+    result = visit.setups[setup]
+    if args.json:
+        dump_json({**result.to_json(), "setup": setup, "visit": visit.to_json()})
+        return 0 if visit.ok else EXIT_SHORT
+    table([t.to_json() for t in result.targets],
+          ["reflector", "group", "status", "points", "planned_points", "points_ratio", "sigma_mm", "goal_sigma_mm",
+           "note"])
+    for t, k in sorted(visit.covered.items()):
+        print(f"{t}: short from set-up {next(j for j, ch in visit.setups.items() if t in {x.reflector for x in ch.short})}"
+              f", measured well by set-up {k}: no re-scan")
+    for k in visit.drifted:
+        cl = visit.setups[k].closure
+        print(f"set-up {k}: closure ({cl.reflector}) turned {cl.angle_arcsec:.1f}\" in {cl.minutes:.0f} min; {cl.note}")
+    setups = ", ".join(map(str, sorted(visit.setups)))
+    if visit.ok:
+        print(f"epoch {args.epoch} (set-ups {setups}): every target is measured well by one set-up or another; "
+              "the visit is complete")
+        return 0
+    for k, why in sorted(visit.rescan.items()):
+        if not why:
+            continue
+        plan = visit.setups[k].rescan
+        where = (f"wrote the re-scan plan {args.out}" if args.out and k == setup else
+                 f"'bridgesurvey check {args.dir} --epoch {args.epoch} --setup {k} --out FILE' writes its plan")
+        minutes = f" ({plan.total_seconds / 60:.1f} min)" if plan is not None else ""
+        print(f"epoch {args.epoch}: re-scan from set-up {k}: " + "; ".join(f"{t} ({w})" for t, w in sorted(why.items()))
+              + f"{minutes}; {where}")
+    return EXIT_SHORT
 
 
 def cmd_stations(args) -> int:
@@ -89,18 +138,34 @@ def cmd_stations(args) -> int:
             advice = advise_stations(c, area_xy=area, height_m=args.height_m, grid_m=args.grid_m,
                                      ground_z=args.ground_z, progress=cb)
         layout = c.layout()
-    pair = _pair(advice, layout, args.pair)
-    if pair is None:
+    if args.sigma_mm is not None and not (math.isfinite(args.sigma_mm) and args.sigma_mm > 0):
+        raise InputError(f"--sigma-mm must be a positive number of millimetres, got {args.sigma_mm}")
+    pair = _pair(advice, layout, args.pair, args.sigma_mm)
+    best = next((s for s in advice.stations if s.predicted_sigma_mm), None)
+    short = short_of(best, layout, args.sigma_mm) if best is not None else {}
+    extra = {"sigma_asked_mm": args.sigma_mm, "best_cannot": short} if short or args.sigma_mm is not None else {}
+    if pair is None and not extra:
         advice.save(args.out)
     else:
-
-        write_atomic(args.out, json.dumps({**advice.to_json(), "pair": pair.to_json()}, indent=1))
+        pair_doc = {} if pair is None else {"pair": dict(pair.to_json(), still_short=list(above(pair, args.sigma_mm)))}
+        write_atomic(args.out, json.dumps({**advice.to_json(), **extra, **pair_doc}, indent=1))
     if args.png is not None:
         save_figure(station_map_figure(advice, layout), args.png)
     rows = [{"x": s.xyz_layout[0], "y": s.xyz_layout[1], "z": s.xyz_layout[2], "minutes": s.seconds / 60,
              "worst_sigma_mm": s.worst_sigma_mm, "coarse_step_deg": s.coarse_step_deg, "hidden": list(s.hidden),
              "weak": list(s.weak)} for s in advice.stations[:args.top]]
     table(rows, ["x", "y", "z", "minutes", "worst_sigma_mm", "coarse_step_deg", "hidden", "weak"])
+    if best is not None and short:
+        asked = f" to {args.sigma_mm:g} mm" if args.sigma_mm is not None else ""
+        print(f"from the best single station ({best.xyz_layout[0]:.1f}, {best.xyz_layout[1]:.1f}) "
+              f"{len(short)} deck target(s) cannot be measured{asked}: "
+              + "; ".join(f"{t} ({why})" for t, why in short.items()))
+    if pair is not None and short:
+        b = pair.second.xyz_layout
+        left = above(pair, args.sigma_mm)
+        print(f"a second set-up at ({b[0]:.1f}, {b[1]:.1f}) measures "
+              + (f"all of them{' to ' + format(args.sigma_mm, 'g') + ' mm' if args.sigma_mm else ''}" if not left else
+                 f"all but {', '.join(left)}"))
     if pair is not None:
         a, b = pair.first.xyz_layout, pair.second.xyz_layout
         worst = "-" if math.isinf(pair.worst_sigma_mm) else f"{pair.worst_sigma_mm:.3f}"

@@ -37,7 +37,7 @@ from lidar.simulate.effects import (
 from lidar.simulate.files import conditions_to_dict
 from lidar.simulate.scene import EpochConditions
 from lidar.simulate.setup import ScannerSetup
-from lidar.simulate.visits import PlanFor, simulate_setups, simulate_visit
+from lidar.simulate.visits import PlanFor, PlanVisit, simulate_setups, simulate_visit
 
 CAMPAIGN_FORMAT_VERSION = 1
 
@@ -159,7 +159,7 @@ def write_campaign(root: str | os.PathLike, model: BridgeModel, visits: Sequence
                    plan_for: PlanFor, stations: Sequence[Sequence[ScannerSetup]] | None = None,
                    setups_per_visit: int = 1, seed: int = 0, coarse_step_deg: float = 0.04,
                    start: dt.datetime | None = None, interval_days: float = 7.0, layout_noise_m: float = 0.03,
-                   with_normals: bool = False) -> list[CampaignVisit]:
+                   with_normals: bool = False, plan_visit: PlanVisit | None = None) -> list[CampaignVisit]:
     """Write a simulated campaign under ``root`` (see the module text for the files).
 
     Parameters
@@ -186,6 +186,10 @@ def write_campaign(root: str | os.PathLike, model: BridgeModel, visits: Sequence
         Error of the layout's coordinates, per axis, metres. Default 0.03.
     with_normals : bool, keyword-only
         Whether the layout gives the targets' normals. Default False.
+    plan_visit : callable, optional, keyword-only
+        ``plan_visit(setup_folders, coarse_paths) -> windows of each set-up``: a visit of several set-ups is
+        planned together, once all its coarse scans are taken (:func:`lidar.simulate.visits.simulate_setups`).
+        Default: each set-up planned by ``plan_for`` in turn.
 
     Returns
     -------
@@ -208,7 +212,7 @@ def write_campaign(root: str | os.PathLike, model: BridgeModel, visits: Sequence
                            seed=seed * 1000 + k, coarse_step_deg=coarse_step_deg)
         else:
             simulate_setups(root / folder, setups, cond, plan_for=plan_for, model=model, seed=seed * 1000 + k,
-                            coarse_step_deg=coarse_step_deg)
+                            coarse_step_deg=coarse_step_deg, plan_visit=plan_visit)
         date = (start + dt.timedelta(days=interval_days * k)).isoformat()
         out.append(CampaignVisit(folder, date, setups, cond))
     _write_index(root, model, out)

@@ -34,6 +34,8 @@ from lidar.simulate.setup import ScannerSetup
 from lidar.simulate.truth import ScanTruth
 
 PlanFor = Callable[[Path, Path], Sequence[RoiPlan]]
+#: ``plan_visit(setup_folders, coarse_paths) -> windows of each set-up``: a visit's set-ups planned together.
+PlanVisit = Callable[[Sequence[Path], Sequence[Path]], Sequence[Sequence[RoiPlan]]]
 
 
 @dataclass(frozen=True)
@@ -119,15 +121,24 @@ def visit_end_s(truth: ScanTruth) -> float:
 
 def simulate_setups(folder: str | os.PathLike, setups: Sequence[ScannerSetup], conditions: EpochConditions, *,
                     plan_for: PlanFor, model: BridgeModel | None = None, seed: int = 0,
-                    coarse_step_deg: float = 0.04, move_s: float = 600.0) -> list[VisitFiles]:
+                    coarse_step_deg: float = 0.04, move_s: float = 600.0,
+                    plan_visit: PlanVisit | None = None) -> list[VisitFiles]:
     """Several set-ups in one visit: ``folder/setup1``, ``folder/setup2``... each with its own station's scans.
 
     The bridge is in the same state for all of them. When the conditions are timed, set-up k+1 starts
     ``move_s`` seconds after set-up k's last scan and its drift starts afresh (the instrument is levelled
     again); each set-up draws its own noise (seed + k).
+
+    ``plan_visit`` plans the set-ups together: every set-up's coarse scan first, then the windows of all of them
+    from ``plan_visit(folders, coarse_paths)``, then each set-up's fine scans (``plan_for`` is then not called).
+    With two instruments, or coarse scans kept from the visit before, that is the order of the work; the
+    conditions must then be untimed (one instrument's drift and timing follow the order of its scans).
     """
     if not setups:
         raise InputError("no set-ups to simulate")
+    if plan_visit is not None:
+        return _simulate_together(Path(folder), setups, conditions, plan_visit=plan_visit, model=model, seed=seed,
+                                  coarse_step_deg=coarse_step_deg)
     out: list[VisitFiles] = []
     cond = conditions
     for k, setup in enumerate(setups):
@@ -136,6 +147,30 @@ def simulate_setups(folder: str | os.PathLike, setups: Sequence[ScannerSetup], c
         out.append(v)
         if cond.timed:
             cond = replace(cond, timing=replace(cond.visit_timing, start_s=visit_end_s(v.truth) + move_s))
+    return out
+
+
+def _simulate_together(folder: Path, setups: Sequence[ScannerSetup], conditions: EpochConditions, *,
+                       plan_visit: PlanVisit, model: BridgeModel | None, seed: int, coarse_step_deg: float
+                       ) -> list[VisitFiles]:
+    """:func:`simulate_setups` with the set-ups planned together (every coarse scan before any plan)."""
+    if conditions.timed:
+        raise InputError("set-ups planned together are simulated with untimed conditions only (the timing of one "
+                         "instrument's scans follows the order of its set-ups)")
+    folders = [folder / f"setup{k + 1}" for k in range(len(setups))]
+    coarse = [simulate_coarse(f, setup=s, conditions=conditions, model=model, seed=seed + k,
+                              coarse_step_deg=coarse_step_deg) for k, (f, s) in enumerate(zip(folders, setups,
+                                                                                              strict=True))]
+    windows = list(plan_visit(folders, [c for c, _ in coarse]))
+    if len(windows) != len(setups):
+        raise InputError(f"the visit's plan has windows for {len(windows)} set-ups, not {len(setups)}")
+    out = []
+    for f, (c, truth), rois in zip(folders, coarse, windows, strict=True):
+        if rois:
+            fine, truth = simulate_fine(f, list(rois), model=model, truth_name="truth.json")
+            out.append(VisitFiles(f, c, fine, truth))
+        else:
+            out.append(VisitFiles(f, c, None, truth))
     return out
 
 

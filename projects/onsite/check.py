@@ -4,20 +4,26 @@ For each planned target: found or not, points on the target against the plan, an
 centroid sigma against the goal (the sigma the plan's points promise, with 30 % tolerance, or the
 campaign's ``sigma_goal_mm``). Targets that fall short get a re-scan plan in the plan JSON contract,
 with steps scaled by what the scan actually delivered.
+
+A visit of several set-ups gets one verdict once every set-up has its fine scans (:func:`check_visit`): a target
+one set-up missed or measured short is no re-scan when another set-up measured it well, unless the join needs it
+(a set-up must keep :data:`lidar.setups.MIN_SHARED` targets measured in common with the set-ups before it).
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from common.errors import ProcessingError
 from common.flags import FLAG_MOVED_DURING_SCAN, FLAG_TRANSIENT_REMOVED, code
-from common.progress import ProgressCallback
+from common.progress import ProgressCallback, scaled
 from lidar.angles import direction_from_angles
 from lidar.plan import PlanTarget, ScanPlan, plan_fine_scans
 from lidar.prediction import centroid_covariance
+from lidar.setups import MIN_SHARED
 from lidar.systematic.corrections import closure_drift
 from projects.processing.stages import run_stage1, save_stage1, stage1_job
 from projects.store.campaign import Campaign
@@ -224,4 +230,98 @@ def _rescan_plan(plan: ScanPlan, retry, diam: dict) -> ScanPlan:
             targets.append(PlanTarget(roi.reflector, roi.group, xyz, diam.get(roi.reflector, 0.05), True, cos_planned))
     out = plan_fine_scans(targets, epoch=plan.epoch, profile=plan.profile, min_points=plan.min_points,
                           budget_seconds=plan.budget_seconds)
+    return out
+
+
+@dataclass(frozen=True)
+class VisitCheck:
+    """One verdict for a visit of several set-ups.
+
+    Attributes
+    ----------
+    epoch : str
+    setups : mapping set-up -> EpochCheck
+        Each set-up's own check (its re-scan plan cut to what the visit needs).
+    rescan : mapping set-up -> mapping id -> str
+        What each set-up must re-scan, and why (empty: the visit is complete).
+    covered : mapping id -> int
+        Targets a set-up fell short on that another set-up measured well (that set-up): no re-scan.
+    """
+
+    epoch: str
+    setups: Mapping[int, EpochCheck]
+    rescan: Mapping[int, Mapping[str, str]]
+    covered: Mapping[str, int]
+
+    @property
+    def drifted(self) -> tuple[int, ...]:
+        """The set-ups whose closure says they turned beyond the instrument's tolerance."""
+        return tuple(k for k, ch in self.setups.items() if ch.closure is not None and ch.closure.status == "drifted")
+
+    @property
+    def ok(self) -> bool:
+        return not any(self.rescan.values()) and not self.drifted
+
+    def to_json(self) -> dict:
+        return {"epoch": self.epoch, "ok": self.ok, "setups": sorted(self.setups),
+                "rescan": {str(k): dict(v) for k, v in sorted(self.rescan.items()) if v},
+                "covered": {t: k for t, k in sorted(self.covered.items())}, "drifted": list(self.drifted)}
+
+
+def visit_verdict(label: str, checks: Mapping[int, EpochCheck]) -> VisitCheck:
+    """The visit's verdict from each set-up's check (pure; see the module notes)."""
+    order = sorted(checks)
+    planned = {k: {t.reflector for t in checks[k].targets} for k in order}
+    found = {k: {t.reflector for t in checks[k].targets if t.found} for k in order}
+    good = {k: {t.reflector for t in checks[k].targets if t.status == "ok"} for k in order}
+    rescan: dict[int, dict[str, str]] = {k: {} for k in order}
+    for pos, k in enumerate(order[1:], start=1):  # the join: each set-up keeps MIN_SHARED found in common
+        earlier = order[:pos]
+        shared_found = found[k] & set().union(*(found[j] for j in earlier))
+        if len(shared_found) >= MIN_SHARED:
+            continue
+        why = (f"the join needs it: set-up {k} has {len(shared_found)} target(s) measured in common with the set-ups "
+               f"before it, {MIN_SHARED} are needed")
+        for t in sorted(planned[k] & set().union(*(planned[j] for j in earlier)) - shared_found):
+            where = k if t not in found[k] else next(j for j in earlier if t in planned[j] and t not in found[j])
+            rescan[where][t] = why
+    covered: dict[str, int] = {}
+    for k in order:
+        for row in checks[k].short:
+            if row.reflector in rescan[k]:
+                continue
+            other = next((j for j in order if j != k and row.reflector in good[j]), None)
+            if other is not None:
+                covered[row.reflector] = other
+            else:
+                rescan[k][row.reflector] = row.status if not row.found else row.note or row.status
+    cut = {}
+    for k in order:
+        ch = checks[k]
+        keep = set(rescan[k])
+        plan = None if ch.rescan is None or not keep else replace(
+            ch.rescan, rois=tuple(r for r in ch.rescan.rois if r.reflector in keep))
+        cut[k] = replace(ch, rescan=plan)
+    return VisitCheck(label, cut, rescan, covered)
+
+
+def check_visit(c: Campaign, label: str, *, goal_sigma_mm: float | None = None,
+                progress: ProgressCallback | None = None) -> VisitCheck:
+    """Check every set-up of a visit and give one verdict (each set-up's kept verdict holds only what the visit needs).
+
+    Every set-up with a coarse scan must have its fine scans (the check of the whole visit comes after the last).
+    """
+    setups = [k for k in c.setups(label) if c.files(label, "coarse", setup=k)]
+    waiting = [k for k in setups if not c.files(label, "fine", setup=k)]
+    if waiting:
+        raise ProcessingError(f"set-up(s) {', '.join(map(str, waiting))} of epoch {label} have no fine scans yet: the "
+                              "visit's verdict comes after the last set-up ('check --setup K' checks one)")
+    checks = {}
+    for n, k in enumerate(setups):
+        checks[k] = check_epoch(c, label, goal_sigma_mm=goal_sigma_mm, setup=k,
+                                progress=scaled(progress, n / len(setups), (n + 1) / len(setups)))
+    out = visit_verdict(label, checks)
+    for k, ch in out.setups.items():  # what binds the visit's next step: only the re-scans it needs
+        c.save_check_verdict(label, setup=k, rescan=dict(out.rescan[k]),
+                             drifted=ch.closure is not None and ch.closure.status == "drifted")
     return out

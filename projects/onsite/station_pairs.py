@@ -62,12 +62,37 @@ def combine(first: StationPrediction, second: StationPrediction, layout: Layout)
     return StationPair(first, second, sig, hidden, tuple(shared))
 
 
+def short_of(station: StationPrediction, layout: Layout, sigma_mm: float | None = None) -> dict[str, str]:
+    """The deck targets a station cannot measure to the sigma asked, each with why (hidden, weak, or its sigma).
+
+    Without ``sigma_mm`` only the hidden and the weak ones (seen at grazing incidence, with a widened sigma).
+    """
+    out = {}
+    for t, g in zip(layout.ids, layout.groups, strict=False):
+        if g != "measurement":
+            continue
+        if t not in station.predicted_sigma_mm:
+            out[t] = station.reasons.get(t, "hidden")
+        elif t in station.weak:
+            out[t] = f"weak from here (sigma {station.predicted_sigma_mm[t]:.3f} mm)"
+        elif sigma_mm is not None and station.predicted_sigma_mm[t] > sigma_mm:
+            out[t] = f"sigma {station.predicted_sigma_mm[t]:.3f} mm"
+    return out
+
+
+def above(pair: StationPair, sigma_mm: float | None) -> tuple[str, ...]:
+    """The deck targets a pair still cannot measure to the sigma asked (hidden from both, or above it)."""
+    if sigma_mm is None:
+        return pair.hidden
+    return pair.hidden + tuple(t for t, s in pair.predicted_sigma_mm.items() if s > sigma_mm)
+
+
 def propose_pair(stations: Sequence[StationPrediction], layout: Layout, *,
-                 first: StationPrediction | None = None) -> StationPair | None:
+                 first: StationPrediction | None = None, sigma_mm: float | None = None) -> StationPair | None:
     """The best second set-up given the first (default: the best single station), or None when no pair joins.
 
-    The second is the station whose pair with the first has the smallest worst-target sigma (fewest
-    targets hidden from both first, then the shortest total time).
+    The second is the station whose pair with the first leaves the fewest deck targets hidden from both (and, with
+    ``sigma_mm``, above the sigma asked), then has the smallest worst-target sigma, then the shortest total time.
     """
     usable = [s for s in stations if s.predicted_sigma_mm]
     if not usable:
@@ -76,5 +101,5 @@ def propose_pair(stations: Sequence[StationPrediction], layout: Layout, *,
     pairs = [p for s in usable if s is not first and (p := combine(first, s, layout)) is not None]
     if not pairs:
         return None
-    return min(pairs, key=lambda p: (len(p.hidden), p.worst_sigma_mm, p.first.seconds + p.second.seconds,
-                                     p.second.xyz_layout))
+    return min(pairs, key=lambda p: (len(above(p, sigma_mm)), len(p.hidden), p.worst_sigma_mm,
+                                     p.first.seconds + p.second.seconds, p.second.xyz_layout))

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import io
 import os
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -55,8 +56,12 @@ def _thumbnail_png(preview, roi) -> bytes | None:
 
 
 def write_field_sheet(plan: ScanPlan, path: str | os.PathLike, *, campaign_name: str = "", preview: Any = None,
-                      epoch_date: str = "") -> Path:
-    """Write the field sheet of ``plan`` to a PDF (``preview``: the epoch's stored map, for thumbnails)."""
+                      epoch_date: str = "", visit: Sequence[str] = ()) -> Path:
+    """Write the field sheet of ``plan`` to a PDF (``preview``: the epoch's stored map, for thumbnails).
+
+    ``visit``: the lines of :func:`projects.outputs.visit_overview.visit_overview` (the visit's set-ups in the order
+    to work them), printed under the title when the visit has several set-ups.
+    """
     ss = styles()
     p = plan.profile
     when = f" ({epoch_date})" if epoch_date and epoch_date != plan.epoch else ""
@@ -64,6 +69,8 @@ def write_field_sheet(plan: ScanPlan, path: str | os.PathLike, *, campaign_name:
                        ss["Heading1"]),
              Paragraph(esc(f"Scanner: {p.name}. Angles as the instrument shows them: {p.angle_convention()}. "
                             f"Resolution: {p.resolution_label}."), ss["Normal"])]
+    for line in visit:
+        story.append(Paragraph(esc(line), ss["Small"]))
     total, budget = plan.total_seconds, plan.budget_seconds
     over = total > budget * 1.0001
     story.append(Paragraph(esc(

@@ -142,6 +142,10 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("closure", True, _boolean, "plan",
               "end every plan with the first reference target's window again, to measure the set-up's drift",
               "true | false", added_later=True),
+    Parameter("plan_together", True, _boolean, "plan",
+              "plan a visit's set-ups together: each target from the set-up that measures it best, tie targets "
+              "to join them, the visit's budget shared (false: each set-up planned as if it were alone)",
+              "true | false", added_later=True),
     Parameter("field_model", True, _boolean, "displacements",
               "correct the atmosphere's scale, the retro-reflector range walk and the set-up's drift, estimated "
               "from the campaign's own targets (false: rigid motion only, as before)", "true | false"),

@@ -28,8 +28,8 @@ from lidar.identification import MAX_TILT_DEG
 from lidar.io import read_scan
 from lidar.io.poses import read_in_scanner_frame
 from lidar.layout import Layout
-from lidar.pipeline import analyse_coarse, measure_fine, plan_from_coarse
-from lidar.plan import ScanPlan
+from lidar.pipeline import analyse_coarse, coarse_notes, measure_fine, plan_from_coarse, plan_targets
+from lidar.plan import PlanTarget, ScanPlan
 from lidar.scan import Scan
 from lidar.scanner_profile import ScannerProfile
 from lidar.stage2 import (
@@ -45,6 +45,7 @@ from lidar.stage2 import (
 #: Why a stored visit was recomputed when only the campaign's field model changed (a newer visit re-fitted it).
 FIELD_REFIT = "the field model was re-fitted with the newer visits"
 from lidar.systematic.campaign_fit import air_near
+from lidar.visit_plan import SetupTargets, VisitPlan, plan_visit
 from projects.processing.parameters import DEFAULTS, parameter, stage1_params, stage2_params
 from projects.store.archive import check_present
 from projects.store.campaign import Campaign, parse_datetime, sha256_of
@@ -196,10 +197,80 @@ def read_files(c: Campaign, files: Sequence[ScanFile], progress=None, *, setup: 
                       [f.sha256 for f in files])
 
 
-def plan_inputs(c: Campaign, label: str, params: dict) -> tuple[str, object]:
-    """(hash of the inputs, layout) of an epoch's plan: coarse scans, layout at its date, parameters, scanner."""
-    inp = c.epoch_inputs(label, plan=False)
-    return _plan_hash(inp, params), inp.layout
+def plan_inputs(c: Campaign, label: str, params: dict, setup: int = 1) -> tuple[str, object]:
+    """(hash of the inputs, layout) of an epoch's (set-up's) plan.
+
+    Its coarse scans, the layout at its date, the parameters, the scanner, and the other set-ups' coarse scans
+    when the visit's set-ups are planned together.
+    """
+    inp = c.epoch_inputs(label, plan=False, setup=setup)
+    return _visit_hash(_plan_hash(inp, params), _others(c, label, setup, params)), inp.layout
+
+
+@dataclass(frozen=True, eq=False)
+class OtherSetup:
+    """Another set-up of the visit, as a set-up planned together with it needs it (plain, picklable values).
+
+    ``candidates`` are its plan's targets when its stored plan was made from its present coarse scans (then they
+    are not analysed again); otherwise its coarse files are read and analysed by the job.
+    """
+
+    setup: int
+    own_hash: str
+    profile: ScannerProfile
+    candidates: tuple[PlanTarget, ...] | None
+    coarse_paths: tuple[str, ...] = ()
+    coarse_frames: tuple = ()
+    coarse_sha256: tuple[str, ...] = ()
+    station_xy: tuple[float, float] | None = None
+
+
+def _others(c: Campaign, label: str, setup: int, params: dict) -> tuple[OtherSetup, ...]:
+    """The other set-ups of a visit planned together with ``setup`` (none: one set-up, or planned alone)."""
+    if not params.get("plan_together", True):
+        return ()
+    setups = c.epoch_inputs(label, plan=False, setup=setup).setups
+    out = []
+    for k in setups:
+        if k == setup:
+            continue
+        inp = c.epoch_inputs(label, setup=k)
+        if not inp.coarse:
+            continue
+        own = _plan_hash(inp, params)
+        doc = inp.plan.plan_json if inp.plan is not None else {}
+        cands = _candidates_from_json(doc.get("candidates")) if doc.get("own_inputs") == own else None
+        out.append(OtherSetup(k, own, inp.profile, cands, tuple(str(c.path_of(r)) for r in inp.coarse),
+                              tuple(r.frame_for(k) for r in inp.coarse), tuple(r.sha256 for r in inp.coarse),
+                              _station_hint(k, params)))
+    return tuple(out)
+
+
+def _visit_hash(own: str, others: Sequence[OtherSetup]) -> str:
+    """A set-up's plan hash: its own inputs', and with others planned together theirs too."""
+    if not others:
+        return own
+    return _hash({"own": own, "visit": [[o.setup, o.own_hash] for o in sorted(others, key=lambda o: o.setup)]})
+
+
+def _candidates_to_json(targets: Sequence[PlanTarget]) -> list[dict]:
+    return [{"id": t.id, "group": t.group, "xyz": [float(v) for v in t.xyz_socs], "diameter_m": t.diameter_m,
+             "predicted": t.predicted, "incidence_cos": t.incidence_cos,
+             "normal": None if t.normal_socs is None else [float(v) for v in t.normal_socs]} for t in targets]
+
+
+def _candidates_from_json(rows) -> tuple[PlanTarget, ...] | None:
+    """A stored plan's candidates (None when it has none or they are malformed: then they are analysed again)."""
+    if not isinstance(rows, list):
+        return None
+    try:
+        return tuple(PlanTarget(str(r["id"]), str(r["group"]), tuple(float(v) for v in r["xyz"]),
+                                float(r["diameter_m"]), bool(r["predicted"]),
+                                None if r["incidence_cos"] is None else float(r["incidence_cos"]),
+                                None if r["normal"] is None else tuple(float(v) for v in r["normal"]))
+                     for r in rows)
+    except (KeyError, TypeError, ValueError):
+        return None
 
 
 def _file_key(f: ScanFile, setup: int):
@@ -289,6 +360,8 @@ class Stage1Job:
     station_xy: tuple[float, float] | None = None  # the hint for a symmetric layout (see _station_hint)
     coarse_sha256: tuple[str, ...] = ()  # each file's checksum at its import, checked before it is read
     fine_sha256: tuple[str, ...] = ()
+    own_hash: str = ""  # the hash of this set-up's own plan inputs (``plan_hash`` adds the others' when planned together)
+    others: tuple[OtherSetup, ...] = ()  # the visit's other set-ups when its set-ups are planned together
 
 
 @dataclass(frozen=True, eq=False)
@@ -317,7 +390,9 @@ def stage1_job(c: Campaign, label: str, setup: int = 1, *, fine: bool = True) ->
     if setup not in inp.setups:
         c.check_setup(label, setup)
     params = _parameters_of(inp.settings)
-    h = _plan_hash(inp, params)
+    own = _plan_hash(inp, params)
+    others = _others(c, label, setup, params) if len(inp.setups) > 1 else ()
+    h = _visit_hash(own, others)
     sp = inp.plan
     stored = sp.plan_json if sp is not None and sp.inputs_hash == h else None
     check_present(c, (inp.coarse if stored is None else ()) + (inp.fine if fine else ()),
@@ -327,7 +402,7 @@ def stage1_job(c: Campaign, label: str, setup: int = 1, *, fine: bool = True) ->
                      _measure_hash(inp, h) if inp.fine else None, setup,
                      tuple(r.frame_for(setup) for r in inp.coarse), tuple(r.frame_for(setup) for r in inp.fine),
                      _station_hint(setup, params), tuple(r.sha256 for r in inp.coarse),
-                     tuple(r.sha256 for r in inp.fine))
+                     tuple(r.sha256 for r in inp.fine), own, others)
 
 
 def stage1_jobs(c: Campaign, label: str) -> list[Stage1Job]:
@@ -345,11 +420,15 @@ def run_stage1(job: Stage1Job, *, progress: ProgressCallback | None = None) -> S
         analysis = _analyse(coarse, job.layout, job.params, job.profile, scaled(progress, 0.25, 0.4),
                             station_xy=job.station_xy)
         del coarse
-        plan = plan_from_coarse(analysis, job.layout, epoch=job.label, profile=job.profile,
-                                min_points=int(job.params["min_points"]),
-                                budget_seconds=float(job.params["budget_min"]) * 60.0, up_layout=layout_up(job.params),
-                                closure=bool(job.params["closure"]))
-        new_plan = plan.to_json()
+        if job.others:
+            plan, visit_doc = _plan_together(job, analysis, progress)
+        else:
+            plan = plan_from_coarse(analysis, job.layout, epoch=job.label, profile=job.profile,
+                                    min_points=int(job.params["min_points"]),
+                                    budget_seconds=float(job.params["budget_min"]) * 60.0,
+                                    up_layout=layout_up(job.params), closure=bool(job.params["closure"]))
+            visit_doc = {}
+        new_plan = {**plan.to_json(), **visit_doc}
         if job.setup != 1:
             new_plan["setup"] = job.setup
         new_plan["identification"] = {"missing": list(analysis.identification.missing),
@@ -367,6 +446,41 @@ def run_stage1(job: Stage1Job, *, progress: ProgressCallback | None = None) -> S
         return Stage1Result(job, plan, new_plan, preview, None)
     return Stage1Result(job, plan, new_plan, preview, dict(measured.centroids), dict(measured.closures),
                         measured.time_source)
+
+
+def _plan_together(job: Stage1Job, analysis, progress: ProgressCallback | None) -> tuple[ScanPlan, dict]:
+    """A set-up's plan within its visit's, planned together (:func:`lidar.visit_plan.plan_visit`).
+
+    The other set-ups' targets come from their stored plans when those were made from their present coarse
+    scans, else from their coarse scans, analysed here. Returns the plan and what its JSON adds: this set-up's
+    candidates (so that the others need not analyse its coarse scan again) and the visit's summary.
+    """
+    up = layout_up(job.params)
+    mine = tuple(plan_targets(analysis, job.layout, up_layout=up))
+    setups = [SetupTargets(job.setup, mine, job.profile)]
+    left_out = []
+    for n, o in enumerate(job.others):
+        cands = o.candidates
+        if cands is None:
+            sub = scaled(progress, 0.25 + 0.15 * n / len(job.others), 0.25 + 0.15 * (n + 1) / len(job.others))
+            try:
+                coarse = read_paths(o.coarse_paths, sub, o.coarse_frames, o.coarse_sha256)
+                other = _analyse(coarse, job.layout, job.params, o.profile, station_xy=o.station_xy)
+            except SurveyError as exc:  # its own plan says why; this one is made without it
+                left_out.append(f"set-up {o.setup} is left out of this set-up's plan: its coarse scan cannot be "
+                                f"planned ({str(exc).splitlines()[0]})")
+                continue
+            cands = tuple(plan_targets(other, job.layout, up_layout=up))
+        setups.append(SetupTargets(o.setup, cands, o.profile))
+    visit: VisitPlan = plan_visit(setups, epoch=job.label, min_points=int(job.params["min_points"]),
+                                  budget_seconds=float(job.params["budget_min"]) * 60.0,
+                                  closure=bool(job.params["closure"]))
+    plan = visit.plan(job.setup)
+    notes = coarse_notes(analysis, mine, plan) + visit.warnings + tuple(left_out)
+    if notes:
+        plan = replace(plan, warnings=plan.warnings + notes)
+    return plan, {"candidates": _candidates_to_json(mine), "own_inputs": job.own_hash,
+                  "visit": visit.summary(job.setup)}
 
 
 def save_stage1(c: Campaign, result: Stage1Result) -> None:
@@ -389,10 +503,25 @@ def plan_epoch(c: Campaign, label: str, *, setup: int = 1, progress: ProgressCal
     return result.plan
 
 
+def plan_visit_epoch(c: Campaign, label: str, *, progress: ProgressCallback | None = None
+                     ) -> tuple[dict[int, ScanPlan], dict[int, dict]]:
+    """Every set-up's plan of a visit (planned when needed) and each one's summary of the visit (empty when alone)."""
+    setups = [k for k in c.setups(label) if c.files(label, "coarse", setup=k)]
+    plans, summaries = {}, {}
+    for n, k in enumerate(setups):
+        plans[k] = plan_epoch(c, label, setup=k, progress=scaled(progress, n / len(setups), (n + 1) / len(setups)))
+        stored = c.stored_plan(label, k)
+        summaries[k] = dict(stored.plan_json.get("visit") or {}) if stored is not None else {}
+    return plans, summaries
+
+
 def measure_inputs(c: Campaign, label: str, params: dict, plan_hash: str | None = None, setup: int = 1) -> str:
     """Stage 1's input hash of an epoch (set-up) with fine scans (``plan_hash`` when already computed)."""
     inp = c.epoch_inputs(label, plan=False, setup=setup)
-    return _measure_hash(inp, plan_hash if plan_hash is not None else _plan_hash(inp, params))
+    if plan_hash is None:
+        plan_hash = _visit_hash(_plan_hash(inp, params), _others(c, label, setup, params) if len(inp.setups) > 1
+                                else ())
+    return _measure_hash(inp, plan_hash)
 
 
 def measure_epoch(c: Campaign, label: str, *, setup: int = 1, progress: ProgressCallback | None = None) -> dict:
@@ -406,13 +535,12 @@ def measure_epoch(c: Campaign, label: str, *, setup: int = 1, progress: Progress
     return result.centroids or {}
 
 
-def _stale_reason(inp: EpochInputs, params: dict) -> str | None:
+def _stale_reason(inp: EpochInputs, params: dict, plan_hash: str) -> str | None:
     """Why one set-up's stored stage-1 result no longer matches its inputs (None: up to date)."""
     res = inp.result
     if not inp.coarse:
         return None
     if inp.fine:
-        plan_hash = _plan_hash(inp, params)
         want = _measure_hash(inp, plan_hash)
         if res is None or res.stage != "measured":
             return "not measured yet"
@@ -421,7 +549,7 @@ def _stale_reason(inp: EpochInputs, params: dict) -> str | None:
                 return "centroid estimate updated"
             return "inputs or parameters changed"
         return None
-    want = _plan_hash(inp, params)
+    want = plan_hash
     if res is None:
         return "not planned yet"
     if res.inputs_hash != want and res.stage == "planned":
@@ -432,10 +560,15 @@ def _stale_reason(inp: EpochInputs, params: dict) -> str | None:
 def _stale_setups(c: Campaign, label: str, params: dict) -> dict[int, str]:
     """The set-ups of an epoch whose stage-1 results are stale: set-up -> reason."""
     first = c.epoch_inputs(label, plan=False)  # one read an epoch (more for further set-ups)
+    inputs = {k: first if k == 1 else c.epoch_inputs(label, plan=False, setup=k) for k in first.setups}
+    own = {k: _plan_hash(inp, params) for k, inp in inputs.items() if inp.coarse}
+    together = len(own) > 1 and params.get("plan_together", True)
     out = {}
-    for k in first.setups:
-        inp = first if k == 1 else c.epoch_inputs(label, plan=False, setup=k)
-        why = _stale_reason(inp, params)
+    for k, inp in inputs.items():
+        if not inp.coarse:
+            continue
+        h = _hash({"own": own[k], "visit": [[j, own[j]] for j in sorted(own) if j != k]}) if together else own[k]
+        why = _stale_reason(inp, params, h)
         if why is not None:
             out[k] = why
     return out
@@ -700,6 +833,7 @@ def save_edited_plan(c: Campaign, label: str, plan: ScanPlan) -> None:
     d = plan.to_json()
     d["epoch"] = label
     d["edited"] = True
-    if "identification" in old:
-        d["identification"] = old["identification"]
+    for key in ("identification", "candidates", "own_inputs", "visit"):  # what the coarse scan and the visit said
+        if key in old:
+            d[key] = old[key]
     c.save_plan(label, d, stored.inputs_hash)

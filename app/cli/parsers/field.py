@@ -47,6 +47,9 @@ def register(sub) -> None:
                    help="ground height in the layout frame (default: from the last measured station)")
     output_file(p, "--png", default=None, help="also draw the station map (PNG)")
     p.add_argument("--top", type=int, default=5, help="stations to print (5)")
+    p.add_argument("--sigma-mm", type=float, default=None,
+                   help="the sigma asked of every deck target's displacement, mm: the best single station's targets "
+                        "above it are named, and the second station that measures them is proposed")
     p.add_argument("--pair", action="store_true",
                    help="also propose two set-ups for one visit: the best station and the second that most improves "
                         "the worst target (proposed anyway when the best station hides a deck target)")

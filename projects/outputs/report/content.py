@@ -92,6 +92,7 @@ class EpochSection:
     systematics: dict = field(default_factory=dict)  # what its displacements were corrected for (scale, drift)
     setups: dict = field(default_factory=dict)  # how its set-ups were joined (lidar.setups), if several
     damaged: str = ""  # the line saying its stored displacements are damaged and left out (empty: they are not)
+    setup_plans: dict = field(default_factory=dict)  # set-up k > 1 -> (its StoredPlan or None, its centroids)
 
 
 @dataclass(frozen=True, eq=False)
@@ -214,7 +215,8 @@ def gather(c: Campaign, scope: ReportScope = ReportScope(), *, author: str | Non
             c.stored_plan(lab), c.map_preview(lab) if with_previews else None,
             c.centroids(lab), tuple(c.reference_checks(lab)), c.displacement_set(lab), tuple(c.files(lab, setup=None)),
             state, tuple(state_flags), c.systematics(lab), c.systematics(lab).get("setups") or {},
-            damaged_line(c, [lab]) or ""))
+            damaged_line(c, [lab]) or "",
+            {k: (c.stored_plan(lab, k), c.centroids(lab, k)) for k in c.setups(lab) if k != 1}))
     last_time = chosen[-1].datetime
     first_time = chosen[0].datetime
     # A visit report shows the history up to the visit; a period report the period itself.

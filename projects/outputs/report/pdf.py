@@ -309,6 +309,42 @@ def state_line(e: EpochSection, *, words: bool = False) -> str:
     return text + (f" {_esc(e.notes)}" if e.notes else "")
 
 
+def plan_table(stored: Any, centroids: dict, ss: Any, *, words: bool = False, setup: int | None = None) -> list:
+    """The plan of an epoch (or of its set-up ``setup``) and what each window delivered; closure windows marked."""
+    ident = stored.identification
+    plan = stored.plan
+    visit = stored.plan_json.get("visit") or {}
+    who = f"Set-up {setup} (" + (f"{visit['position_in_order']}. of the visit's {len(visit['setups'])}, planned "
+                                 "together" if visit else "planned alone") + "): " if setup is not None else "Plan: "
+    closing = [r.reflector for r in plan.rois if r.closure]
+    out = [Paragraph(_esc(f"{who}{len(plan.rois)} windows"
+                          + (f" ({len(closing)} closure: {', '.join(closing)} again at the end)" if closing else "")
+                          + f", {plan.total_seconds / 60:.1f} min planned; {ident.get('detections', '?')} detections, "
+                          f"layout fit RMS {_num((ident.get('fit_rms_m') or float('nan')) * 100, '{:.1f}')} cm, "
+                          f"predicted (not seen): {', '.join(ident.get('missing', [])) or 'none'}"
+                          + (f"; joined by {', '.join(visit['ties'])}" if visit.get("ties") else "") + "."),
+                     ss["Small"])]
+    table = [["Target", "Steps φ×θ [°]", "Planned time [s]", "Planned pts on target", "Points in window",
+              "Points on target", "σx / σy / σz [mm]", "Remarks" if words else "Flags"]]
+    colours = []
+    for k, r in enumerate(plan.rois, start=1):
+        t = centroids.get(r.reflector)
+        sig = "–" if t is None or not t.found else " / ".join(f"{v * 1000:.2f}" for v in t.sigma_m)
+        flags = "not scanned yet" if t is None else (flags_text(t.flags, words=words) or "–")
+        n_on = "–" if t is None else str(t.n_points)
+        name = f"{k}. {r.reflector}" + (" (closure)" if r.closure else "")
+        if r.closure:  # its points and sigma are the first window's; the closure itself gives the set-up's drift
+            sig, flags, n_on = "–", "closure: the set-up's drift", "–"
+        table.append([name, f"{r.window.phi_step_deg:.4f}×{r.window.theta_step_deg:.4f}",
+                      f"{r.expected_seconds:.0f}", str(r.expected_target_points or "–"),
+                      "–" if t is None or t.n_window < 0 or r.closure else str(t.n_window), n_on, sig, flags])
+        if r.closure:
+            colours.append((k, 0, "#e8f0fe"))
+        elif t is not None and (t.flags or (r.expected_target_points and t.n_points < 0.5 * r.expected_target_points)):
+            colours.append((k, 7, "#fff3e0"))
+    return out + [Spacer(1, 3), _table(table, (18, 26, 16, 22, 20, 18, 30, 28), ss, cell_colours=colours)]
+
+
 def epoch_section(e: EpochSection, content: ReportContent, ss: Any, *, new_page: bool = True,
                   map_jpeg: bytes | None = None, words: bool = False) -> list:
     """Flowables of one epoch; ``map_jpeg`` from :func:`render_maps` (None: the epoch has no map).
@@ -324,35 +360,17 @@ def epoch_section(e: EpochSection, content: ReportContent, ss: Any, *, new_page:
         out.append(Image(io.BytesIO(map_jpeg), width=178 * mm, height=178 * mm * MAP_FIGSIZE[1] / MAP_FIGSIZE[0]))
     else:
         out.append(Paragraph("No coarse-scan map for this epoch.", ss["Small"]))
-    if e.plan:
-        ident = e.plan.identification
-        plan = e.plan.plan
-        out.append(Paragraph(f"Plan: {len(plan.rois)} windows, {plan.total_seconds / 60:.1f} min planned; "
-                             f"{ident.get('detections', '?')} detections, layout fit RMS "
-                             f"{_num((ident.get('fit_rms_m') or float('nan')) * 100, '{:.1f}')} cm, "
-                             f"predicted (not seen): {', '.join(ident.get('missing', [])) or 'none'}.", ss["Small"]))
-        table = [["Target", "Steps φ×θ [°]", "Planned time [s]", "Planned pts on target", "Points in window",
-                  "Points on target", "σx / σy / σz [mm]", "Remarks" if words else "Flags"]]
-        colours = []
-        for k, r in enumerate(plan.rois, start=1):
-            t = e.centroids.get(r.reflector)
-            sig = "–" if t is None or not t.found else " / ".join(f"{v * 1000:.2f}" for v in t.sigma_m)
-            flags = "not scanned yet" if t is None else (flags_text(t.flags, words=words) or "–")
-            n_on = "–" if t is None else str(t.n_points)
-            table.append([r.reflector, f"{r.window.phi_step_deg:.4f}×{r.window.theta_step_deg:.4f}",
-                          f"{r.expected_seconds:.0f}", str(r.expected_target_points or "–"),
-                          "–" if t is None or t.n_window < 0 else str(t.n_window), n_on, sig, flags])
-            if t is not None and (t.flags or (r.expected_target_points and
-                                              t.n_points < 0.5 * r.expected_target_points)):
-                colours.append((k, 7, "#fff3e0"))
-        out += [Spacer(1, 3), _table(table, (14, 26, 16, 22, 20, 18, 30, 32), ss, cell_colours=colours)]
+    plans = [(1, e.plan, e.centroids)] + [(k, sp, cents) for k, (sp, cents) in sorted(e.setup_plans.items())]
+    for setup, stored, cents in plans:
+        if stored:
+            out += plan_table(stored, cents, ss, words=words, setup=setup if len(plans) > 1 else None)
     if e.reference_checks:
         table = [["Reference", "Median distance change [mm]", "Max change [mm]", "Verdict"]]
-        for r in e.reference_checks:
-            verdict = "not found" if r.missing else ("MOVED, left out" if r.moved else
-                                                    ("suspect" if r.suspect else "stable"))
-            table.append([r.reflector, _num(None if r.median_change_m is None else r.median_change_m * 1000),
-                          _num(None if r.max_change_m is None else r.max_change_m * 1000), verdict])
+        for rc in e.reference_checks:
+            verdict = "not found" if rc.missing else ("MOVED, left out" if rc.moved else
+                                                     ("suspect" if rc.suspect else "stable"))
+            table.append([rc.reflector, _num(None if rc.median_change_m is None else rc.median_change_m * 1000),
+                          _num(None if rc.max_change_m is None else rc.max_change_m * 1000), verdict])
         out += [Spacer(1, 4), Paragraph("Reference group check", ss["Small"]), _table(table, (20, 45, 30, 35), ss)]
     if e.setups:  # the joint frame of a visit of several set-ups: its QA trail
 

@@ -17,6 +17,9 @@ from lidar.plan import ScanPlan
 from lidar.simulate import BridgeModel, EpochConditions, ScannerSetup
 from lidar.simulate.files import simulate_coarse, simulate_fine
 from lidar.simulate.visits import export_registered, project_transform
+from projects.outputs.report import ReportScope, gather
+from projects.outputs.report.flowables import styles
+from projects.outputs.report.pdf import plan_table
 from projects.store.campaign import Campaign
 from tests.projects.campaign_helpers import snapshot
 
@@ -104,12 +107,24 @@ def test_two_set_ups_a_visit_are_planned_measured_and_joined(stations, tmp_path,
     assert main(["process", str(camp), "--json"]) == 0  # nothing to do the second time
     assert all(e["action"] == "up-to-date" for e in json.loads(capsys.readouterr().out)["epochs"])
     # the check and the field sheet of a set-up
-    assert main(["check", str(camp), "--epoch", DATES[1][:10], "--setup", "2", "--json"]) in (0, 3)
-    assert json.loads(capsys.readouterr().out)["targets"]
+    code_ = main(["check", str(camp), "--epoch", DATES[1][:10], "--setup", "2", "--json"])
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["targets"] and doc["visit"]["setups"] == [1, 2]  # after the last set-up: the visit's one verdict
+    assert code_ == (0 if doc["visit"]["ok"] else 3)
     assert main(["field-sheet", str(camp), "--epoch", DATES[1][:10], "--out", str(tmp_path / "s2.pdf")]) == 0
     assert (tmp_path / "s2.pdf").stat().st_size > 1000
     assert main(["check", str(camp), "--epoch", DATES[1][:10], "--setup", "3"]) == 1
     assert "no set-up 3; its set-ups are 1, 2" in capsys.readouterr().err
+    # the report's plan tables: each set-up's windows, its closure marked
+    with Campaign.open(camp, writable=False) as c:
+        content = gather(c, ReportScope(), with_previews=False)
+    e = content.epochs[-1]
+    assert set(e.setup_plans) == {2}
+    story = plan_table(e.setup_plans[2][0], e.setup_plans[2][1], styles(), setup=2)
+    head = story[0].getPlainText()
+    assert head.startswith("Set-up 2 (2. of the visit's 2, planned together)") and "closure:" in head
+    rows = story[-1]._cellvalues
+    assert rows[-1][0].getPlainText().endswith("(closure)")
 
 
 def test_a_set_up_sharing_too_few_targets_is_a_problem_not_a_traceback(stations, tmp_path, capsys):
@@ -194,3 +209,40 @@ def test_a_project_frame_scan_without_a_pose_is_refused_in_one_line(processed_co
                  "--origin", origin]) == 0
     assert main(["info", str(out["coarse.laz"])]) == 0
     assert "project frame" in capsys.readouterr().out
+
+
+def test_plan_shows_the_visit_planned_together_and_each_set_up_keeps_its_share(stations, tmp_path, capsys):
+    """Issue 40: 'plan --setup K' writes set-up K's plan within the visit's; 'plan' shows the whole visit in order."""
+    field = stations
+    camp = _init(tmp_path / "camp", field, capsys)
+    v = field / "v0"
+    assert main(["add-epoch", str(camp), "--date", DATES[0], "--coarse", str(v / "setup1" / "coarse.laz")]) == 0
+    assert main(["plan", str(camp), "--epoch", DATES[0][:10], "--out", str(tmp_path / "alone.json")]) == 0
+    alone = json.loads((tmp_path / "alone.json").read_text())
+    assert "visit" not in alone and "setup" not in alone  # one set-up: as before
+    assert main(["add-setup", str(camp), "--epoch", DATES[0][:10], "--coarse", str(v / "setup2" / "coarse.laz")]) == 0
+    capsys.readouterr()
+    docs = {}
+    for s in (1, 2):
+        out = tmp_path / f"p{s}.json"
+        assert main(["plan", str(camp), "--epoch", DATES[0][:10], "--setup", str(s), "--out", str(out)]) == 0
+        text = capsys.readouterr().out
+        assert "set-ups, planned together" in text and "1. set-up 1:" in text and "2. set-up 2:" in text
+        docs[s] = json.loads(out.read_text())
+        assert docs[s]["setup"] == s and docs[s]["visit"]["setups"] == [1, 2]
+        ScanPlan.from_json(docs[s])  # the plan JSON contract
+    assert docs[2]["visit"]["ties"]  # set-up 2 keeps the targets that join it to set-up 1
+    windows = {s: {r["reflector"] for r in d["rois"] if not r.get("closure")} for s, d in docs.items()}
+    assert all(any(r.get("closure") for r in d["rois"]) for d in docs.values())
+    deck = {r["reflector"] for d in docs.values() for r in d["rois"] if r["group"] == "measurement"}
+    twice = {t for t in deck if t in windows[1] and t in windows[2]}
+    extra = set(docs[2]["visit"]["ties"]) | {t for d in docs.values() for t in d["visit"]["second_sightings"]}
+    assert twice <= extra  # a deck target is scanned twice to join the set-ups, or in the time left
+    budget = docs[1]["visit"]["visit_budget_seconds"]
+    assert docs[1]["budget_seconds"] + docs[2]["budget_seconds"] == pytest.approx(budget, rel=1e-3)
+    # planned alone again, from the same scans
+    assert main(["settings", str(camp), "plan_together", "false"]) == 0
+    capsys.readouterr()
+    assert main(["plan", str(camp), "--epoch", DATES[0][:10], "--setup", "2", "--out", str(tmp_path / "a2.json")]) == 0
+    assert "each planned as if it were alone" in capsys.readouterr().out
+    assert "visit" not in json.loads((tmp_path / "a2.json").read_text())

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -10,7 +11,8 @@ from app.cli.main import main
 from lidar.layout import layout_from_model
 from lidar.simulate import BridgeModel
 from lidar.stations import StationPrediction
-from projects.onsite.station_pairs import combine, propose_pair
+from projects.onsite.station_pairs import above, combine, propose_pair, short_of
+from projects.store.campaign import Campaign
 
 LAYOUT = layout_from_model(BridgeModel(spans_m=(39.9, 39.9, 39.9)), noise_m=0.0, rng=np.random.default_rng(0))
 DECK = [t for t, g in zip(LAYOUT.ids, LAYOUT.groups, strict=False) if g == "measurement"]
@@ -52,14 +54,36 @@ def test_the_second_set_up_is_the_one_that_improves_the_worst_target_most():
     assert propose_pair([first], LAYOUT) is None
 
 
+def _deck_of(folder) -> set:
+    with Campaign.open(folder, writable=False) as c:
+        lay = c.layout()
+    return {t for t, g in zip(lay.ids, lay.groups, strict=False) if g == "measurement"}
+
+
 def test_the_stations_command_proposes_a_pair(processed_copy, tmp_path, capsys):
     area = tmp_path / "area.csv"
     area.write_text("x,y\n2,-20\n38,-20\n38,-8\n2,-8\n")
     out = tmp_path / "stations.json"
     assert main(["stations", str(processed_copy), "--out", str(out), "--area", str(area), "--grid-m", "6",
-                 "--pair"]) == 0
+                 "--pair", "--sigma-mm", "0.01"]) == 0
     d = json.loads(out.read_text())
-    assert "two set-ups:" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "two set-ups:" in text
+    # nothing reaches 0.01 mm: the best station names every deck target it cannot measure to it
+    assert "cannot be measured to 0.01 mm" in text and d["sigma_asked_mm"] == 0.01
+    assert set(d["best_cannot"]) == _deck_of(processed_copy)
     pair = d["pair"]
     assert pair["first"]["x"] == d["stations"][0]["x"] and len(pair["shared"]) >= 3
     assert pair["worst_sigma_mm"] <= d["stations"][0]["worst_sigma_mm"]
+
+
+def test_the_best_station_names_what_it_cannot_measure_to_the_sigma_asked_and_the_pair_that_would():
+    first = replace(_station(30, END1), weak=(DECK[11],))  # sigma 0.13 mm on what it sees
+    why = short_of(first, LAYOUT, 0.12)
+    assert set(why) == set(DECK)  # hidden (spans 3), weak (one) or above 0.12 mm (the rest)
+    assert why[DECK[0]] == "sigma 0.130 mm" and why[DECK[11]].startswith("weak") and why[DECK[-1]] == "hidden"
+    assert set(short_of(first, LAYOUT)) == set(DECK[11:])  # without a sigma asked: the hidden and the weak
+    stations = [first, _station(90, END2), _station(60, REFS + DECK, sigma=0.1)]
+    pair = propose_pair(stations, LAYOUT, sigma_mm=0.12)
+    assert pair is not None and pair.second is stations[2] and above(pair, 0.12) == ()
+    assert above(combine(first, stations[1], LAYOUT), 0.12)  # the far end alone leaves span 1 above it

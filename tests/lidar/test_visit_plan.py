@@ -1,0 +1,130 @@
+"""A visit's set-ups planned together: each target from its best set-up, ties that join them, one budget."""
+import math
+
+import numpy as np
+import pytest
+
+from common.errors import InputError
+from lidar.plan import PlanTarget, plan_fine_scans
+from lidar.setups import MIN_SHARED, MIN_SPREAD_M, spread_m
+from lidar.simulate.bridge import BridgeModel
+from lidar.simulate.scene import BridgeScene, EpochConditions
+from lidar.simulate.setup import ScannerSetup
+from lidar.visit_plan import TIES, SetupTargets, plan_visit, predicted_sigma_mm
+
+
+def _setup(model: BridgeModel, k: int, station, heading: float) -> SetupTargets:
+    """What a coarse scan from ``station`` would give the planner (from the simulator's truth)."""
+    truth = BridgeScene(model, EpochConditions(), ScannerSetup(station, heading_deg=heading)).truth()
+    targets = []
+    for t in truth.targets:
+        c = np.asarray(t.centre_socs_m)
+        n = np.asarray(t.normal_socs)
+        facing = -float(n @ (c / np.linalg.norm(c)))
+        if facing > 0.05:
+            targets.append(PlanTarget(t.id, t.group, tuple(c), 0.05, False, facing, tuple(n)))
+    return SetupTargets(k, tuple(targets))
+
+
+def _visit(spans, fractions, *, seed=0):
+    model = BridgeModel(spans_m=spans, deck_fractions=(0.4, 0.5, 0.6))
+    rng = np.random.default_rng(seed)
+    return model, [_setup(model, k + 1, (f * model.length_m, -(model.deck_width_m / 2 + 8.0), 1.5),
+                          float(rng.uniform(0, 360))) for k, f in enumerate(fractions)]
+
+
+def _planned(plan):
+    return {r.reflector for r in plan.rois if not r.closure}
+
+
+@pytest.mark.parametrize("spans", [(39.9, 39.9, 39.9), (20.0, 30.0, 30.0, 20.0), (40.0, 40.0)])
+def test_two_stations_near_the_ends_plan_every_deck_target_once_from_its_best_station(spans):
+    model, setups = _visit(spans, (0.28, 0.72))
+    visit = plan_visit(setups, budget_seconds=3600.0, closure=True)
+    deck = {t.id for t in model.targets if t.group == "measurement"}
+    planned = {k: _planned(visit.plan(k)) for k in (1, 2)}
+    assert deck <= planned[1] | planned[2]  # every deck target is planned by one set-up or the other
+    for tid in deck:  # ... by the one that measures it best (and by the other only as a tie)
+        best = min((1, 2), key=lambda k: visit.predicted_sigma_mm[k].get(tid, math.inf))
+        assert tid in planned[best]
+        other = 3 - best
+        assert tid not in planned[other] or tid in visit.ties[2] or tid in visit.second.get(other, ())
+    assert all(visit.plan(k).rois[-1].closure for k in (1, 2))  # a closure window for each set-up
+    assert visit.total_seconds <= 3600.0 * 1.001  # the budget is the visit's
+    assert not visit.warnings
+
+
+def test_time_left_goes_to_second_sightings_and_a_tight_budget_has_none():
+    model, setups = _visit((40.0, 40.0), (0.28, 0.72))
+    roomy = plan_visit(setups, budget_seconds=3600.0, closure=True)
+    tight = plan_visit(setups, budget_seconds=900.0, closure=True)
+    assert roomy.second and not tight.second
+    for k, ids in roomy.second.items():  # a second sighting: a deck target the other set-up measures better
+        assert all(roomy.assignment[t] != k and t in _planned(roomy.plan(k)) for t in ids)
+    deck = {t.id for t in model.targets if t.group == "measurement"}
+    for tid in deck:  # tight: each deck target from its best set-up, twice only to join the set-ups
+        assert sum(tid in _planned(tight.plan(k)) for k in (1, 2)) == 1 or tid in tight.ties[2]
+
+
+def test_alone_each_station_spends_time_on_targets_the_other_sees_better():
+    """The case of issue 40: planned alone, each station's budget goes to the whole bridge."""
+    model, setups = _visit((39.9, 39.9, 39.9), (0.28, 0.72))
+    visit = plan_visit(setups, budget_seconds=1800.0, closure=True)
+    alone = [plan_fine_scans(s.targets, budget_seconds=1800.0, closure=True) for s in setups]
+    together_windows = sum(len(_planned(visit.plan(k))) for k in (1, 2))
+    alone_windows = sum(len(_planned(p)) for p in alone)
+    assert together_windows < alone_windows
+    worst_together = max(visit.predicted_sigma_mm[visit.assignment[t]][t] for t in visit.assignment
+                         if t.startswith("M") and math.isfinite(visit.predicted_sigma_mm[visit.assignment[t]][t]))
+    assert worst_together < 1.0
+
+
+def test_the_ties_join_the_second_set_up_with_enough_spread():
+    model, setups = _visit((39.9, 39.9, 39.9), (0.28, 0.72), seed=3)
+    visit = plan_visit(setups, budget_seconds=3600.0)
+    ties = visit.ties[2]
+    assert len(ties) >= TIES >= MIN_SHARED
+    assert set(ties) <= _planned(visit.plan(1)) & _planned(visit.plan(2))
+    xyz = {t.id: t.xyz_socs for t in setups[1].targets}
+    assert spread_m(np.array([xyz[t] for t in ties])) >= MIN_SPREAD_M
+
+
+def test_one_set_up_is_planned_as_before():
+    _, setups = _visit((39.9, 39.9, 39.9), (0.1,))
+    visit = plan_visit(setups, budget_seconds=1200.0, closure=True)
+    alone = plan_fine_scans(setups[0].targets, budget_seconds=1200.0, closure=True)
+    assert visit.plan(1).to_json() == alone.to_json()
+    assert visit.order == (1,)
+
+
+def test_a_set_up_that_cannot_be_joined_is_said_before_the_visit():
+    """Set-up 2 sees only two of set-up 1's targets well: the join needs three; the plan says so."""
+    near = [PlanTarget(f"R{i}", "reference", (float(x), 10.0, z), 0.05, incidence_cos=0.9)
+            for i, (x, z) in enumerate([(-2.0, 0.0), (2.0, 0.0), (-2.0, 3.0), (2.0, 3.0)], start=1)]
+    first = SetupTargets(1, (*near, PlanTarget("M1", "measurement", (0.0, 12.0, 6.0), 0.05, incidence_cos=0.45)))
+    second = SetupTargets(2, (PlanTarget("R1", "reference", (-2.0, 15.0, 0.0), 0.05, incidence_cos=0.9),
+                              PlanTarget("R2", "reference", (2.0, 15.0, 0.0), 0.05, incidence_cos=0.9),
+                              PlanTarget("R3", "reference", (0.0, 90.0, 3.0), 0.05, incidence_cos=0.05),
+                              PlanTarget("M2", "measurement", (0.0, 12.0, 6.0), 0.05, incidence_cos=0.45)))
+    visit = plan_visit([first, second], budget_seconds=1800.0)
+    assert visit.ties[2] == ("R1", "R2")
+    assert len(visit.warnings) == 1 and visit.warnings[0].startswith("set-up 2 sees only 2 target(s) well")
+    assert _planned(visit.plan(2)) == {"R1", "R2", "M2"}  # R3 is beyond its beam: not planned from it
+
+
+def test_predicted_sigma_grows_with_range_and_grazing_and_is_inf_beyond_the_beam():
+    near = PlanTarget("M1", "measurement", (0.0, 12.0, 6.0), 0.05, incidence_cos=0.45)
+    far = PlanTarget("M1", "measurement", (0.0, 45.0, 6.0), 0.05, incidence_cos=0.13)
+    lost = PlanTarget("M1", "measurement", (0.0, 90.0, 6.0), 0.05, incidence_cos=0.06)
+    assert predicted_sigma_mm(near) < predicted_sigma_mm(far) < math.inf
+    assert predicted_sigma_mm(lost) == math.inf
+
+
+def test_bad_visits_are_refused_in_one_line():
+    _, setups = _visit((40.0, 40.0), (0.28, 0.72))
+    with pytest.raises(InputError, match="no set-up"):
+        plan_visit([])
+    with pytest.raises(InputError, match="distinct"):
+        plan_visit([setups[0], setups[0]])
+    with pytest.raises(InputError, match="budget"):
+        plan_visit(setups, budget_seconds=0.0)
