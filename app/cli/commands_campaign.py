@@ -181,8 +181,19 @@ def cmd_process(args) -> int:
             table(done, ["epoch", "action", "state", "note"])
         print(_process_summary(rows, summary.baseline))
     if summary.failed:
-        print(f"bridgesurvey: error: {len(summary.failed)} epoch(s) failed: " +
-              "; ".join(f"{o.epoch}: {o.message}" for o in summary.failed), file=sys.stderr)
+        archived = [o.epoch for o in summary.failed if o.archived]
+        other = [o for o in summary.failed if not o.archived]
+        if len(archived) > 1:  # one line for them all, not one near-identical sentence per visit
+            span = f"{archived[0]} … {archived[-1]}" if len(archived) > 2 else " and ".join(archived)
+            print(f"bridgesurvey: error: {len(archived)} epoch(s) ({span}) need scans archived out of the campaign "
+                  f"folder to be processed again; bring them back with 'bridgesurvey archive {args.dir} --restore' "
+                  "(--epoch LABEL for one) and run the command again; the results stored so far are kept",
+                  file=sys.stderr)
+        else:
+            other = summary.failed
+        if other:
+            print(f"bridgesurvey: error: {len(other)} epoch(s) failed: " +
+                  "; ".join(f"{o.epoch}: {o.message}" for o in other), file=sys.stderr)
         return 1
     if summary.problems:
         print(f"bridgesurvey: {len(summary.problems)} epoch(s) without a trustworthy result: " +

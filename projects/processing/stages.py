@@ -49,6 +49,7 @@ from lidar.visit_plan import SetupTargets, VisitPlan, plan_visit
 from projects.processing.parameters import DEFAULTS, parameter, stage1_params, stage2_params
 from projects.store.archive import check_present
 from projects.store.campaign import Campaign, parse_datetime, sha256_of
+from projects.store.errors import ScansArchivedError
 from projects.store.previews import encode_preview
 from projects.store.records import EpochInputs, ScanFile
 
@@ -129,6 +130,7 @@ class EpochOutcome:
     epoch: str
     action: str  # planned, measured, up-to-date, failed
     message: str = ""
+    archived: bool = False  # failed only because scans it needs were archived out of the campaign folder
 
 
 @dataclass
@@ -624,7 +626,7 @@ def process(c: Campaign, labels: Sequence[str] | None = None, *,
 
 def _process_setups(c: Campaign, lab: str, setups: Sequence[int], progress) -> EpochOutcome:
     """Plan or measure the given set-ups of an epoch; one outcome for the epoch (a set-up's failure in its message)."""
-    actions, notes = [], []
+    actions, notes, archived = [], [], []
     for n, k in enumerate(setups):
         sub = scaled(progress, n / len(setups), (n + 1) / len(setups))
         where = "" if k == 1 and len(setups) == 1 else f"set-up {k}: "
@@ -644,9 +646,10 @@ def _process_setups(c: Campaign, lab: str, setups: Sequence[int], progress) -> E
             c.check_still_there()  # a folder moved while processing: one line for the run, not one per epoch
             log.warning("epoch %s%s: %s", lab, f" set-up {k}" if k != 1 else "", exc)
             actions.append("failed")
+            archived.append(isinstance(exc, ScansArchivedError))
             notes.append(f"{where}{exc}")
     action = "failed" if "failed" in actions else "measured" if "measured" in actions else "planned"
-    return EpochOutcome(lab, action, "; ".join(notes))
+    return EpochOutcome(lab, action, "; ".join(notes), archived=bool(archived) and all(archived))
 
 
 def finish_displacements(c: Campaign, summary: ProcessSummary, labels: Sequence[str]) -> None:

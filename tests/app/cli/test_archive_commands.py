@@ -88,10 +88,14 @@ def test_archive_status_verify_process_restore_as_a_surveyor_runs_them(processed
     assert run(capsys, "settings", camp, "min_points", "1200")[0] == 0
     rc, out, err = run(capsys, "process", camp)
     assert rc == 1
-    for label in (FIRST, SECOND, LAST):
-        assert f"epoch {label}: processing it again (stage 1" in err
-    assert f"archived to {disk}" in err and f"'bridgesurvey archive {camp} --restore --epoch {FIRST}'" in err
-    assert all(name in err for name in stored)
+    for label in (FIRST, SECOND, LAST):  # each visit's row says which scans, where, and the command
+        assert f"epoch {label}: processing it again (stage 1" in out
+    assert f"archived to {disk}" in out and f"'bridgesurvey archive {camp} --restore --epoch {FIRST}'" in out
+    assert all(name in out for name in stored)
+    # and the error is one line for them all
+    assert err.count("\n") == 1 and err.startswith(f"bridgesurvey: error: 3 epoch(s) ({FIRST} … {LAST}) need scans "
+                                                    "archived out of the campaign folder"), err
+    assert f"'bridgesurvey archive {camp} --restore'" in err
     assert displacements_csv(capsys, camp) == before_csv  # the stored values stay, served
 
     rc, out, _ = run(capsys, "archive", camp, "--restore", "--epoch", FIRST)
