@@ -10,7 +10,7 @@ own row.
 A visit of several set-ups (``stations`` with two or more per visit) is imported as a surveyor would:
 ``add-epoch`` with the first set-up's coarse scan, ``add-setup`` with each further one's, each set-up
 planned and its fine scans added to it; with ``coarse_first`` every coarse scan of the visit is imported before
-the set-ups are planned (together, unless the settings say ``plan_together false``).
+the set-ups are planned (together when the settings say ``plan_together true``).
 """
 from __future__ import annotations
 
@@ -160,8 +160,8 @@ class ProductPlanner:
     def plan_visit(self, folders: Sequence[Path], coarse: Sequence[Path]) -> list[list]:
         """The ``plan_visit`` callback: a visit's coarse scans imported, then each set-up planned.
 
-        Imported as a surveyor would (``add-epoch``, ``add-setup``); planned together unless the settings say
-        ``plan_together false``.
+        Imported as a surveyor would (``add-epoch``, ``add-setup``); planned together when the settings say
+        ``plan_together true``.
         """
         out: list[list] = []
         for folder, path in zip(folders, coarse, strict=True):
@@ -193,8 +193,8 @@ def run_study(root: Path, model: BridgeModel, visits: Sequence[EpochConditions],
     """Simulate, plan, import and process a campaign; score it (and, optionally, the same without corrections).
 
     ``coarse_first``: every set-up's coarse scan of a visit is taken and imported before any is planned, so that
-    the product plans them together (with ``plan_together`` false in ``settings``: each alone, but from the same
-    scans). Default: each set-up planned and fine-scanned before the next one's coarse scan, as before.
+    the product can plan them together (``plan_together`` true in ``settings``; false: each alone, but from the
+    same scans). Default: each set-up planned and fine-scanned before the next one's coarse scan, as before.
 
     Returns ``{"corrected": score}`` (and ``"uncorrected"``: the same scans with ``field_model false``).
     """

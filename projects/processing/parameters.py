@@ -142,9 +142,11 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("closure", True, _boolean, "plan",
               "end every plan with the first reference target's window again, to measure the set-up's drift",
               "true | false", added_later=True),
-    Parameter("plan_together", True, _boolean, "plan",
+    Parameter("plan_together", False, _boolean, "plan",
               "plan a visit's set-ups together: each target from the set-up that measures it best, tie targets "
-              "to join them, the visit's budget shared (false: each set-up planned as if it were alone)",
+              "to join them, the visit's budget shared; only when every set-up's coarse scan is taken before any "
+              "fine scan (a set-up added after another's fine scans would re-plan windows already scanned). "
+              "Default false: each set-up planned as if it were alone",
               "true | false", added_later=True),
     Parameter("field_model", True, _boolean, "displacements",
               "correct the atmosphere's scale, the retro-reflector range walk and the set-up's drift, estimated "

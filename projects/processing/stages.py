@@ -229,7 +229,7 @@ class OtherSetup:
 
 def _others(c: Campaign, label: str, setup: int, params: dict) -> tuple[OtherSetup, ...]:
     """The other set-ups of a visit planned together with ``setup`` (none: one set-up, or planned alone)."""
-    if not params.get("plan_together", True):
+    if not params.get("plan_together", False):
         return ()
     setups = c.epoch_inputs(label, plan=False, setup=setup).setups
     out = []
@@ -564,7 +564,7 @@ def _stale_setups(c: Campaign, label: str, params: dict) -> dict[int, str]:
     first = c.epoch_inputs(label, plan=False)  # one read an epoch (more for further set-ups)
     inputs = {k: first if k == 1 else c.epoch_inputs(label, plan=False, setup=k) for k in first.setups}
     own = {k: _plan_hash(inp, params) for k, inp in inputs.items() if inp.coarse}
-    together = len(own) > 1 and params.get("plan_together", True)
+    together = len(own) > 1 and params.get("plan_together", False)
     out = {}
     for k, inp in inputs.items():
         if not inp.coarse:

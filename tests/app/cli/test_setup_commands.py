@@ -85,6 +85,8 @@ def stations(two_setups, tmp_path) -> Path:
 def test_two_set_ups_a_visit_are_planned_measured_and_joined(stations, tmp_path, capsys):
     field = stations
     camp = _init(tmp_path / "camp", field, capsys)
+    # both coarse scans first, then the fine scans: the visit can be planned as a whole
+    assert main(["settings", str(camp), "plan_together", "true"]) == 0
     for k in range(2):
         _visit(camp, field, k, capsys)
     assert main(["process", str(camp)]) == 0
@@ -215,6 +217,7 @@ def test_plan_shows_the_visit_planned_together_and_each_set_up_keeps_its_share(s
     """Issue 40: 'plan --setup K' writes set-up K's plan within the visit's; 'plan' shows the whole visit in order."""
     field = stations
     camp = _init(tmp_path / "camp", field, capsys)
+    assert main(["settings", str(camp), "plan_together", "true"]) == 0  # off by default (docs/long-bridges.md)
     v = field / "v0"
     assert main(["add-epoch", str(camp), "--date", DATES[0], "--coarse", str(v / "setup1" / "coarse.laz")]) == 0
     assert main(["plan", str(camp), "--epoch", DATES[0][:10], "--out", str(tmp_path / "alone.json")]) == 0
@@ -246,3 +249,24 @@ def test_plan_shows_the_visit_planned_together_and_each_set_up_keeps_its_share(s
     assert main(["plan", str(camp), "--epoch", DATES[0][:10], "--setup", "2", "--out", str(tmp_path / "a2.json")]) == 0
     assert "each planned as if it were alone" in capsys.readouterr().out
     assert "visit" not in json.loads((tmp_path / "a2.json").read_text())
+
+
+def test_a_set_up_added_after_the_first_ones_fine_scans_leaves_its_plan_alone(stations, tmp_path, capsys):
+    """By default each set-up is planned alone: the second station's coarse scan, taken after the first station's
+    fine scans (the usual order on site), must not re-plan windows already scanned (seen with plan_together on)."""
+    field = stations
+    camp = _init(tmp_path / "camp", field, capsys)
+    v, label = field / "v0", DATES[0][:10]
+    assert main(["add-epoch", str(camp), "--date", DATES[0], "--coarse", str(v / "setup1" / "coarse.laz")]) == 0
+    plan = tmp_path / "p1.json"
+    assert main(["plan", str(camp), "--epoch", label, "--out", str(plan)]) == 0
+    assert main(["add-fine", str(camp), "--epoch", label, str(_fine(v / "setup1", plan))]) == 0
+    assert main(["process", str(camp)]) == 0
+    before = plan.read_text()
+    assert main(["add-setup", str(camp), "--epoch", label, "--coarse", str(v / "setup2" / "coarse.laz")]) == 0
+    assert main(["plan", str(camp), "--epoch", label, "--setup", "1", "--out", str(tmp_path / "again.json")]) == 0
+    assert json.loads((tmp_path / "again.json").read_text())["rois"] == json.loads(before)["rois"]
+    capsys.readouterr()
+    assert main(["status", str(camp), "--json"]) == 0
+    epoch = next(e for e in json.loads(capsys.readouterr().out)["epochs"] if e["epoch"] == label)
+    assert "set-up 1" not in epoch["stale"] and not epoch["stale"].startswith("inputs"), epoch["stale"]
