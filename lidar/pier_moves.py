@@ -44,8 +44,13 @@ def _chi2_99(dof: float) -> float:
 
     return float(chi2.ppf(0.99, dof))
 
-def span_coordinates(base: Mapping, groups: Mapping[str, str], meas: list[str]):
-    """Xi in [0, 1] of each deck target between the piers, and its girder line, from the baseline geometry."""
+def span_coordinates(base: Mapping, groups: Mapping[str, str], meas: list[str]
+                     ) -> tuple[np.ndarray, np.ndarray] | None:
+    """Xi in [0, 1] of each deck target between the piers, and its girder line, from the baseline geometry.
+
+    Returns ``(xi, lines)``, each (len(meas),): the position along the span between the outermost reference
+    targets and the girder line's index (0, 1, …, across the deck); None when those references span under 1 m.
+    """
     refs = [r for r, g in groups.items() if g == "reference" and r in base]
     deck = np.array([base[m].xyz for m in meas])
     c = deck - deck.mean(axis=0)
