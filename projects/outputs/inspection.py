@@ -1,6 +1,7 @@
 """What the desktop application shows of one epoch: a target's fine-scan window and a display cloud."""
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -10,8 +11,8 @@ from common.progress import ProgressCallback, report, scaled
 from lidar.angles import direction_from_angles, spherical_from_xyz
 from lidar.centroid import TargetCentroid, target_centroid
 from lidar.plan import RoiPlan
-from projects.compare.whole_scan import compare_epochs
-from projects.processing.stages import read_files
+from projects.compare.whole_scan import compare_epochs, save_comparison
+from projects.processing.stages import baseline_epoch, read_files
 from projects.store.campaign import Campaign
 
 
@@ -137,6 +138,24 @@ def _targets_of(c: Campaign, label: str) -> tuple[tuple, np.ndarray]:
         return (), np.zeros((0, 3))
     pts = [direction_from_angles(*r.window.centre) * r.range_m for r in plan.rois]
     return tuple(r.reflector for r in plan.rois), np.array(pts).reshape(-1, 3)
+
+
+def change_against_baseline(folder: str | os.PathLike, label: str, *,
+                            progress: ProgressCallback | None = None) -> DisplayCloud:
+    """:func:`change_cloud` of ``label`` against the campaign's baseline, the comparison saved; paths in, cloud out.
+
+    A function of paths only, so that it can run in a process of its own (:func:`common.processes.run_in_process`:
+    the desktop application's 3-D change, whose search trees are built in compiled code that holds Python's lock).
+    """
+    with Campaign.open(folder, writable=True) as c:
+        base = baseline_epoch(c)
+        if base is None:
+            raise InputError("no processed epoch yet to compare against; process the campaign first")
+        if base == label:
+            raise InputError(f"{label} is the baseline epoch; select another epoch to see its change")
+        cloud, summary = change_cloud(c, base, label, progress=progress)
+        save_comparison(c, summary)
+        return cloud
 
 
 def change_cloud(c: Campaign, base: str, label: str, *, max_points: int = 1_500_000,
