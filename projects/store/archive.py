@@ -297,7 +297,7 @@ def _archive_one(c: Campaign, real: Path, f: ScanFile, recorded: ArchivedScan | 
     else:
         place = real / src.name
         _copy_checked(src, place, f.sha256, ".archive-", what="it was not archived (it stays in the campaign)")
-        mark = _journal(c, {"kind": "archive", "stored_path": "", "scan": f.stored_path, "sha256": f.sha256,
+        mark = c.append_journal({"kind": "archive", "stored_path": "", "scan": f.stored_path, "sha256": f.sha256,
                             "epoch": f.epoch, "size": f.size, "place": str(place), "time": now_iso()})
         try:
             with c.transaction() as conn:
@@ -315,15 +315,6 @@ def _archive_one(c: Campaign, real: Path, f: ScanFile, recorded: ArchivedScan | 
     except PermissionError:
         raise not_writable(src.parent) from None
     return (f.stored_path, f.epoch, f.size, str(place))
-
-
-def _journal(c: Campaign, entry: dict) -> int:
-    try:
-        return journal.append(c.folder, entry)
-    except OSError as exc:
-        if is_disk_full(exc):
-            raise disk_full_error(c.folder / journal.JOURNAL_NAME, MB) from None
-        raise
 
 
 def restore_scans(c: Campaign, epochs: Sequence[str] | None = None, *, dry_run: bool = False,
@@ -362,7 +353,7 @@ def _restore_one(c: Campaign, a: ArchivedScan) -> None:
         if dst.exists():  # a damaged file under the scan's name: the checked copy takes its place
             dst.chmod(0o644)
         _copy_checked(Path(a.place), dst, f.sha256, ".import-", what="it stays archived")
-    mark = _journal(c, {"kind": "restore", "stored_path": "", "scan": f.stored_path, "sha256": f.sha256,
+    mark = c.append_journal({"kind": "restore", "stored_path": "", "scan": f.stored_path, "sha256": f.sha256,
                         "epoch": f.epoch, "place": a.place, "time": now_iso()})
     try:
         with c.transaction() as conn:

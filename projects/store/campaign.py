@@ -367,7 +367,7 @@ class Campaign:
             self.check_setup(epoch, setup)
             s.setdefault("setup_scanners", {}).setdefault(epoch, {})[str(setup)] = profile.to_dict()
             entry["setup"] = setup
-        mark = self._journal_entry(entry)  # for 'repair'
+        mark = self.append_journal(entry)  # for 'repair'
         try:
             with self.transaction() as c:
                 c.execute("UPDATE meta SET value = ? WHERE key = 'settings'", (json.dumps(s),))
@@ -630,10 +630,15 @@ class Campaign:
 
         Returns the journal's size before the line (see :func:`projects.store.journal.truncate`).
         """
-        return self._journal_entry({**entry, "stored_path": copied.rel, "sha256": copied.sha256, "size": copied.size,
+        return self.append_journal({**entry, "stored_path": copied.rel, "sha256": copied.sha256, "size": copied.size,
                                     "original_path": str(src.resolve()), "imported": now_iso()})
 
-    def _journal_entry(self, entry: dict) -> int:
+    def append_journal(self, entry: dict) -> int:
+        """Append ``entry`` to the campaign's journal (a full disk is one line); returns the journal's size before it.
+
+        Writers call it before their transaction commits, and take the line back with
+        :func:`projects.store.journal.truncate` when the transaction fails.
+        """
         try:
             return journal.append(self.folder, entry)
         except OSError as exc:
