@@ -14,7 +14,7 @@ store and writes what the jobs computed; it computes no number itself.
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -206,7 +206,7 @@ def plan_inputs(c: Campaign, label: str, params: dict, setup: int = 1) -> tuple[
     when the visit's set-ups are planned together.
     """
     inp = c.epoch_inputs(label, plan=False, setup=setup)
-    return _visit_hash(_plan_hash(inp, params), _others(c, label, setup, params)), inp.layout
+    return _plan_hashes(c, label, setup, inp, params)[2], inp.layout
 
 
 @dataclass(frozen=True, eq=False)
@@ -227,11 +227,10 @@ class OtherSetup:
     station_xy: tuple[float, float] | None = None
 
 
-def _others(c: Campaign, label: str, setup: int, params: dict) -> tuple[OtherSetup, ...]:
-    """The other set-ups of a visit planned together with ``setup`` (none: one set-up, or planned alone)."""
-    if not params.get("plan_together", False):
+def _others(c: Campaign, label: str, setup: int, setups: Sequence[int], params: dict) -> tuple[OtherSetup, ...]:
+    """The other set-ups (of ``setups``, the visit's) planned together with ``setup`` (none: one, or planned alone)."""
+    if len(setups) < 2 or not params.get("plan_together", False):
         return ()
-    setups = c.epoch_inputs(label, plan=False, setup=setup).setups
     out = []
     for k in setups:
         if k == setup:
@@ -248,11 +247,19 @@ def _others(c: Campaign, label: str, setup: int, params: dict) -> tuple[OtherSet
     return tuple(out)
 
 
-def _visit_hash(own: str, others: Sequence[OtherSetup]) -> str:
-    """A set-up's plan hash: its own inputs', and with others planned together theirs too."""
+def _visit_hash(own: str, others: Mapping[int, str]) -> str:
+    """A set-up's plan hash: its own inputs', and with others planned together theirs too (set-up -> own hash)."""
     if not others:
         return own
-    return _hash({"own": own, "visit": [[o.setup, o.own_hash] for o in sorted(others, key=lambda o: o.setup)]})
+    return _hash({"own": own, "visit": [[k, others[k]] for k in sorted(others)]})
+
+
+def _plan_hashes(c: Campaign, label: str, setup: int, inp: EpochInputs, params: dict
+                 ) -> tuple[str, tuple[OtherSetup, ...], str]:
+    """A set-up's own plan hash, the set-ups planned together with it, and its plan hash within the visit."""
+    own = _plan_hash(inp, params)
+    others = _others(c, label, setup, inp.setups, params)
+    return own, others, _visit_hash(own, {o.setup: o.own_hash for o in others})
 
 
 def _candidates_to_json(targets: Sequence[PlanTarget]) -> list[dict]:
@@ -392,9 +399,7 @@ def stage1_job(c: Campaign, label: str, setup: int = 1, *, fine: bool = True) ->
     if setup not in inp.setups:
         c.check_setup(label, setup)
     params = _parameters_of(inp.settings)
-    own = _plan_hash(inp, params)
-    others = _others(c, label, setup, params) if len(inp.setups) > 1 else ()
-    h = _visit_hash(own, others)
+    own, others, h = _plan_hashes(c, label, setup, inp, params)
     sp = inp.plan
     stored = sp.plan_json if sp is not None and sp.inputs_hash == h else None
     check_present(c, (inp.coarse if stored is None else ()) + (inp.fine if fine else ()),
@@ -521,8 +526,7 @@ def measure_inputs(c: Campaign, label: str, params: dict, plan_hash: str | None 
     """Stage 1's input hash of an epoch (set-up) with fine scans (``plan_hash`` when already computed)."""
     inp = c.epoch_inputs(label, plan=False, setup=setup)
     if plan_hash is None:
-        plan_hash = _visit_hash(_plan_hash(inp, params), _others(c, label, setup, params) if len(inp.setups) > 1
-                                else ())
+        plan_hash = _plan_hashes(c, label, setup, inp, params)[2]
     return _measure_hash(inp, plan_hash)
 
 
@@ -569,7 +573,7 @@ def _stale_setups(c: Campaign, label: str, params: dict) -> dict[int, str]:
     for k, inp in inputs.items():
         if not inp.coarse:
             continue
-        h = _hash({"own": own[k], "visit": [[j, own[j]] for j in sorted(own) if j != k]}) if together else own[k]
+        h = _visit_hash(own[k], {j: own[j] for j in own if j != k} if together else {})
         why = _stale_reason(inp, params, h)
         if why is not None:
             out[k] = why
