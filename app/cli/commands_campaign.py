@@ -182,15 +182,15 @@ def cmd_process(args) -> int:
         print(_process_summary(rows, summary.baseline))
     if summary.failed:
         archived = [o.epoch for o in summary.failed if o.archived]
-        other = [o for o in summary.failed if not o.archived]
-        if len(archived) > 1:  # one line for them all, not one near-identical sentence per visit
+        if len(archived) < 2:  # one visit's own sentence says it best
+            archived = []
+        if archived:  # one line for them all, not one near-identical sentence per visit
             span = f"{archived[0]} … {archived[-1]}" if len(archived) > 2 else " and ".join(archived)
             print(f"bridgesurvey: error: {len(archived)} epoch(s) ({span}) need scans archived out of the campaign "
                   f"folder to be processed again; bring them back with 'bridgesurvey archive {args.dir} --restore' "
                   "(--epoch LABEL for one) and run the command again; the results stored so far are kept",
                   file=sys.stderr)
-        else:
-            other = summary.failed
+        other = [o for o in summary.failed if o.epoch not in archived]
         if other:
             print(f"bridgesurvey: error: {len(other)} epoch(s) failed: " +
                   "; ".join(f"{o.epoch}: {o.message}" for o in other), file=sys.stderr)

@@ -309,6 +309,22 @@ def whole(camp: Path, capsys) -> None:
     assert rc in (0, 3) and not problems, out
 
 
+def stop_at(monkeypatch, stop: tuple, where: str, disk: Path, camp: Path) -> None:
+    """Make the ``nth`` counted call of ``owner.name`` raise :class:`Stop` (``stop``: an entry of the tables below)."""
+    owner, name, counted, nth = stop
+    real = getattr(owner, name)
+    calls = {"n": 0}
+
+    def stopping(*a, **kw):
+        if counted(disk, camp, a):
+            calls["n"] += 1
+            if calls["n"] == nth:
+                raise Stop(where)
+        return real(*a, **kw)
+
+    monkeypatch.setattr(owner, name, stopping)
+
+
 STOPS = {  # where a run is stopped: (owner, attribute, which calls count, the how-many-th counted call)
     "the first copy written, not yet renamed": (os, "replace", lambda disk, camp, a: Path(a[1]).parent == disk, 1),
     "the second copy in place, its journal line not written": (journal, "append", lambda disk, camp, a: True, 2),
@@ -323,18 +339,7 @@ def test_an_archive_run_stopped_at_any_step_leaves_a_whole_campaign_archived_aga
                                                                                    monkeypatch, where):
     from app.cli.main import main
 
-    owner, name, counted, nth = STOPS[where]
-    real = getattr(owner, name)
-    calls = {"n": 0}
-
-    def stopping(*a, **kw):
-        if counted(disk, processed_copy, a):
-            calls["n"] += 1
-            if calls["n"] == nth:
-                raise Stop(where)
-        return real(*a, **kw)
-
-    monkeypatch.setattr(owner, name, stopping)
+    stop_at(monkeypatch, STOPS[where], where, disk, processed_copy)
     with pytest.raises(Stop):
         main(["archive", str(processed_copy), "--to", str(disk)])
     monkeypatch.undo()
@@ -364,18 +369,7 @@ def test_a_restore_stopped_at_any_step_leaves_a_whole_campaign_restored_again(pr
     from app.cli.main import main
 
     assert run(capsys, "archive", processed_copy, "--to", disk)[0] == 0
-    owner, name, counted, nth = RESTORE_STOPS[where]
-    real = getattr(owner, name)
-    calls = {"n": 0}
-
-    def stopping(*a, **kw):
-        if counted(disk, processed_copy, a):
-            calls["n"] += 1
-            if calls["n"] == nth:
-                raise Stop(where)
-        return real(*a, **kw)
-
-    monkeypatch.setattr(owner, name, stopping)
+    stop_at(monkeypatch, RESTORE_STOPS[where], where, disk, processed_copy)
     with pytest.raises(Stop):
         main(["archive", str(processed_copy), "--restore"])
     monkeypatch.undo()
