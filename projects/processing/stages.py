@@ -13,6 +13,7 @@ store and writes what the jobs computed; it computes no number itself.
 """
 from __future__ import annotations
 
+import functools
 import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -70,11 +71,13 @@ _LATER_PROFILE_FIELDS = {"max_tilt_deg": MAX_TILT_DEG, "kind": "line", "step_pre
                          "drift_tolerance_arcsec": 10.0}
 
 
-def _profile_key(profile) -> dict:
-    """The profile as it enters the input hash.
+@functools.lru_cache(maxsize=64)
+def _profile_key(profile: ScannerProfile) -> dict:
+    """The profile as it enters the input hash (one dict shared by every caller: read it, never change it).
 
     What decides the plan and the centroids (a field added
-    later only when it differs from its default; sources and notes never).
+    later only when it differs from its default; sources and notes never). Remembered by profile (a frozen
+    value): the staleness check of ``status`` needs it once a set-up of every visit.
     """
     d = profile.to_dict()
     for k, default in _LATER_PROFILE_FIELDS.items():
