@@ -566,10 +566,12 @@ def _stale_reason(inp: EpochInputs, params: dict, plan_hash: str) -> str | None:
     return None
 
 
-def _stale_setups(c: Campaign, label: str, params: dict) -> dict[int, str]:
-    """The set-ups of an epoch whose stage-1 results are stale: set-up -> reason."""
-    first = c.epoch_inputs(label, plan=False)  # one read an epoch (more for further set-ups)
-    inputs = {k: first if k == 1 else c.epoch_inputs(label, plan=False, setup=k) for k in first.setups}
+def _stale_setups(c: Campaign, label: str, params: dict, inputs: Mapping[int, EpochInputs] | None = None
+                  ) -> dict[int, str]:
+    """The set-ups of an epoch whose stage-1 results are stale: set-up -> reason (``inputs``: its set-ups' inputs)."""
+    if inputs is None:
+        first = c.epoch_inputs(label, plan=False)  # one read an epoch (more for further set-ups)
+        inputs = {k: first if k == 1 else c.epoch_inputs(label, plan=False, setup=k) for k in first.setups}
     own = {k: _plan_hash(inp, params) for k, inp in inputs.items() if inp.coarse}
     together = len(own) > 1 and params.get("plan_together", False)
     out = {}
@@ -587,10 +589,10 @@ def stale_epochs(c: Campaign) -> dict[str, str]:
     """Epochs whose stored stage-1 results (of any set-up) no longer match their inputs: label -> reason."""
     params = parameters(c)
     out = {}
-    for e in c.epochs():
-        stale = _stale_setups(c, e.label, params)
+    for label, inputs in c.visits_inputs().items():  # one read for all (the campaign's rows once)
+        stale = _stale_setups(c, label, params, inputs)
         if stale:
-            out[e.label] = "; ".join(why if k == 1 else f"set-up {k}: {why}" for k, why in sorted(stale.items()))
+            out[label] = "; ".join(why if k == 1 else f"set-up {k}: {why}" for k, why in sorted(stale.items()))
     return out
 
 

@@ -581,17 +581,42 @@ class Campaign:
         then None), for callers that only compare hashes. ``setup`` is the set-up (default 1).
         """
         with self.snapshot():
-            ep = self.epoch(label)
-            every = self.files(label, setup=None)
-            files = [f for f in every if setup in f.setups]
-            stored = self.stored_plan(label, setup) if plan else None
-            result = self.result(label, setup)
-            reflectors = self.reflectors()
-            settings = self.settings()
-            profile = _profile_of(settings, label, setup, self.profile)
+            return self._inputs_of(self.epoch(label), setup, plan, self.reflectors(), self.settings(), self.profile)
+
+    def visits_inputs(self, *, plan: bool = False) -> dict[str, dict[int, EpochInputs]]:
+        """Every epoch's :meth:`epoch_inputs`, each of its set-ups', in one read (label -> set-up -> inputs).
+
+        The campaign's reflectors, settings and scanner are read once for all of them (what ``status`` and the
+        application's opening need to tell which visits are stale: at 520 visits, once instead of 520 times).
+        The epochs share their settings dict: read it, never change it.
+        """
+        out: dict[str, dict[int, EpochInputs]] = {}
+        with self.snapshot():
+            reflectors, settings, campaign = self.reflectors(), self.settings(), self.profile
+            layouts: dict[tuple[str, ...], Layout] = {}  # one layout a set of reflectors expected, shared
+            for ep in self.epochs():
+                first = self._inputs_of(ep, 1, plan, reflectors, settings, campaign, layouts)
+                out[ep.label] = {1: first, **{k: self._inputs_of(ep, k, plan, reflectors, settings, campaign, layouts)
+                                              for k in first.setups if k != 1}}
+        return out
+
+    def _inputs_of(self, ep: Epoch, setup: int, plan: bool, reflectors: Sequence[Reflector], settings: dict,
+                   campaign: ScannerProfile, layouts: dict | None = None) -> EpochInputs:
+        """One set-up's :class:`EpochInputs`, the campaign-level rows given (inside the caller's snapshot)."""
+        every = self.files(ep.label, setup=None)
+        files = [f for f in every if setup in f.setups]
+        stored = self.stored_plan(ep.label, setup) if plan else None
+        result = self.result(ep.label, setup)
+        profile = _profile_of(settings, ep.label, setup, campaign)
         setups = tuple(sorted({k for f in every for k in f.setups})) or (1,)
+        expected = tuple(r.id for r in reflectors if r.expected_at(ep.datetime))
+        layout = None if layouts is None else layouts.get(expected)
+        if layout is None:
+            layout = _layout_of(reflectors, ep.datetime)
+            if layouts is not None:
+                layouts[expected] = layout
         return EpochInputs(ep, tuple(f for f in files if f.role == "coarse"), tuple(f for f in files if f.role == "fine"),
-                           stored, result, _layout_of(reflectors, ep.datetime), profile, settings, setup, setups)
+                           stored, result, layout, profile, settings, setup, setups)
 
     def path_of(self, file: ScanFile) -> Path:
         """Where a stored scan file is on disk."""
