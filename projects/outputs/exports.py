@@ -10,7 +10,7 @@ import numpy as np
 
 from common.errors import InputError
 from common.files import write_atomic
-from projects.results.state import epoch_state
+from projects.results.state import epoch_states
 from projects.results.table import displacement_table, to_csv
 from projects.store.campaign import Campaign
 
@@ -27,8 +27,9 @@ def tables(c: Campaign) -> dict[str, list[dict]]:
                           "sx_mm": sig[0], "sy_mm": sig[1], "sz_mm": sig[2], "n_points": t.n_points,
                           "threshold": t.threshold, "separability": t.separability, "flags": ";".join(t.flags)})
     epoch_rows = []
+    states = epoch_states(c)  # as 'status' and the campaign tree give them, read once for every epoch
     for e in epochs:
-        state, flags = epoch_state(c, e.label)  # as 'status' and the campaign tree give it
+        state, flags = states[e.label].state, states[e.label].flags
         epoch_rows.append({"epoch": e.label, "datetime": e.datetime, "notes": e.notes,
                            "coarse_files": len(c.files(e.label, "coarse")), "fine_files": len(c.files(e.label, "fine")),
                            "state": state, "flags": ";".join(flags)})

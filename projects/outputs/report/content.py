@@ -24,7 +24,7 @@ from lidar.systematic.corrections import cos_incidence_of
 from projects.analysis.run import analyse_campaign
 from projects.compare.whole_scan import comparisons
 from projects.processing.stages import PIPELINE_VERSION, baseline_epoch, parameters
-from projects.results.state import epoch_state
+from projects.results.state import epoch_states
 from projects.results.table import damaged_line, displacement_table
 from projects.series.camera import crossval_summaries, load_series
 from projects.series.context import plot_context
@@ -87,7 +87,7 @@ class EpochSection:
     reference_checks: tuple[ReferenceCheck, ...]
     displacement_set: DisplacementSet | None
     files: tuple[ScanFile, ...]
-    state: str = "imported"  # as ``status`` gives it (projects.results.state.epoch_state)
+    state: str = "imported"  # as ``status`` gives it (projects.results.state.epoch_states)
     state_flags: tuple[str, ...] = ()
     systematics: dict = field(default_factory=dict)  # what its displacements were corrected for (scale, drift)
     setups: dict = field(default_factory=dict)  # how its set-ups were joined (lidar.setups), if several
@@ -205,11 +205,12 @@ def gather(c: Campaign, scope: ReportScope = ReportScope(), *, author: str | Non
     """Collect the report's facts for ``scope`` from an open campaign (``progress``: per epoch, then per part)."""
     chosen = select_epochs(c, scope)
     sections = []
+    states = epoch_states(c, [e.label for e in chosen])  # once: each reads every displacement of the campaign
     for k, e in enumerate(chosen):
         lab = e.label
         report(progress, 0.6 * k / len(chosen), f"reading epoch {lab}")
         res = c.result(lab)
-        state, state_flags = epoch_state(c, lab)
+        state, state_flags = states[lab].state, states[lab].flags
         sections.append(EpochSection(
             lab, e.datetime, e.notes, res.stage if res else "imported",
             c.stored_plan(lab), c.map_preview(lab) if with_previews else None,
