@@ -60,6 +60,7 @@ def conditions_to_dict(c: EpochConditions) -> dict:
         "walk_factors": dict(c.walk_factors),
         "transient": None if c.transient is None else c.transient.to_dict(),
         "intensity_model": None if c.intensity_model is None else c.intensity_model.to_dict(),
+        "pier_shifts": {str(k): list(v) for k, v in c.pier_shifts.items()},
     }
     d.update({k: v for k, v in extra.items() if v not in (None, 0.0, [], {})})
     return d
@@ -76,7 +77,8 @@ def conditions_from_dict(c: dict) -> EpochConditions:
         clipped_fraction=float(c.get("clipped_fraction", 0.0)), drift=DriftModel.from_dict(c.get("drift")),
         timing=VisitTiming.from_dict(c.get("timing")), axis_errors=AxisErrors.from_dict(c.get("axis_errors")),
         walk_factors=dict(c.get("walk_factors") or {}), transient=DeckTransient.from_dict(c.get("transient")),
-        intensity_model=IntensityModel.from_dict(c.get("intensity_model")))
+        intensity_model=IntensityModel.from_dict(c.get("intensity_model")),
+        pier_shifts={int(k): tuple(v) for k, v in (c.get("pier_shifts") or {}).items()})
 
 
 def save_scene(folder: Path, setup: ScannerSetup, conditions: EpochConditions, seed: int,
