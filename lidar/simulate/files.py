@@ -51,7 +51,8 @@ def conditions_to_dict(c: EpochConditions) -> dict:
     }
     extra = {
         "span_displacements_m": list(c.span_displacements_m), "deck_strain": c.deck_strain,
-        "fixed_bearing_x_m": c.fixed_bearing_x_m, "range_scale_ppm": c.range_scale_ppm,
+        "fixed_bearing_x_m": c.fixed_bearing_x_m, "deck_strain_across": c.deck_strain_across,
+        "range_scale_ppm": c.range_scale_ppm,
         "range_scale_rate_ppm_h": c.range_scale_rate_ppm_h,
         "range_walk": walk_to_dict(c.range_walk), "clipped_fraction": c.clipped_fraction,
         "drift": None if c.drift is None else c.drift.to_dict(),
@@ -72,6 +73,7 @@ def conditions_from_dict(c: dict) -> EpochConditions:
         c["midspan_displacement_m"], c["moved_targets"], tuple(c["occluded"]), tuple(c["cable_ties"]),
         tuple(c["removed"]), bool(c["saturated"]), span_displacements_m=tuple(c.get("span_displacements_m", ())),
         deck_strain=float(c.get("deck_strain", 0.0)), fixed_bearing_x_m=c.get("fixed_bearing_x_m"),
+        deck_strain_across=float(c.get("deck_strain_across", 0.0)),
         range_scale_ppm=float(c.get("range_scale_ppm", 0.0)),
         range_scale_rate_ppm_h=float(c.get("range_scale_rate_ppm_h", 0.0)), range_walk=walk_from_dict(c.get("range_walk")),
         clipped_fraction=float(c.get("clipped_fraction", 0.0)), drift=DriftModel.from_dict(c.get("drift")),

@@ -75,6 +75,10 @@ class EpochConditions:
         bearing)``; piers and their targets do not. Default 0.
     fixed_bearing_x_m : float, optional
         x of the fixed bearing. Default None: the first pier (x = 0).
+    deck_strain_across : float
+        Deck strain across the span (its width expanding with the temperature too, dW / W): the deck's mesh and the
+        measurement targets under it move sideways by this times their distance from the deck's centreline
+        (y = 0). Default 0 (the deck keeps its width).
     range_scale_ppm : float
         Atmosphere: every measured range is multiplied by ``1 + ppm * 1e-6``. Default 0.
     range_scale_rate_ppm_h : float
@@ -119,6 +123,7 @@ class EpochConditions:
     span_displacements_m: tuple[float, ...] = ()
     deck_strain: float = 0.0
     fixed_bearing_x_m: float | None = None
+    deck_strain_across: float = 0.0
     range_scale_ppm: float = 0.0
     range_scale_rate_ppm_h: float = 0.0
     range_walk: RangeWalk | None = None
@@ -147,12 +152,12 @@ class EpochConditions:
         for name in ("occluded", "cable_ties", "removed"):
             object.__setattr__(self, name, tuple(getattr(self, name)))
         object.__setattr__(self, "span_displacements_m", tuple(float(v) for v in self.span_displacements_m))
-        scalars = (self.deck_strain, self.range_scale_ppm, self.range_scale_rate_ppm_h, *self.span_displacements_m,
+        scalars = (self.deck_strain, self.deck_strain_across, self.range_scale_ppm, self.range_scale_rate_ppm_h, *self.span_displacements_m,
                    0.0 if self.fixed_bearing_x_m is None else self.fixed_bearing_x_m)
         if not all(np.isfinite(scalars)):
             raise InputError("epoch conditions: strain, range scale (and its rate), span displacements and bearing "
                              "must be finite")
-        if abs(self.deck_strain) > 0.01 or abs(self.range_scale_ppm) > 10_000 or abs(self.range_scale_rate_ppm_h) > 1000:
+        if max(abs(self.deck_strain), abs(self.deck_strain_across)) > 0.01 or abs(self.range_scale_ppm) > 10_000 or abs(self.range_scale_rate_ppm_h) > 1000:
             raise InputError("epoch conditions: deck strain beyond 1 %, a range scale beyond 10,000 ppm or changing "
                              "faster than 1,000 ppm an hour")
         if not 0.0 <= self.clipped_fraction <= 1.0:
@@ -272,6 +277,7 @@ class BridgeScene:
         for k, (verts, tris) in enumerate(pier_meshes(model)):
             self._add("pier", verts + np.asarray(conditions.pier_shifts.get(k, (0.0, 0.0, 0.0))), tris)
         self._add("deck", *deck_mesh(model, self.amplitudes, strain=conditions.deck_strain,
+                                     strain_across=conditions.deck_strain_across,
                                      fixed_x_m=conditions.fixed_x_m))
         origin = np.asarray(setup.position_m)
         for d in self.discs:
@@ -302,6 +308,7 @@ class BridgeScene:
                 disp[2] = float(self.model.deflection_m(c0[0], self.amplitudes))
                 if c.deck_strain:
                     disp[0] = c.deck_strain * (c0[0] - c.fixed_x_m)
+                disp[1] = c.deck_strain_across * c0[1]
             else:
                 disp += self._pier_shift(c0)
             disp += np.asarray(c.moved_targets.get(t.id, (0.0, 0.0, 0.0)))
