@@ -2,18 +2,15 @@
 
 Every visit re-measures, from a new station, what does not move: the reference targets' mutual geometry
 and the deck targets' across-span coordinates (a deck sags and slides along the span with temperature,
-and widens with it, but does not move sideways). Each centroid ``y`` (the visit's scanner frame) of target
-``i`` in visit ``k`` is modelled as::
+but not sideways). Each centroid ``y`` (the visit's scanner frame) of target ``i`` in visit ``k`` is
+modelled as::
 
     R(omega_k (t - t_k)) (y + b(r, c) u)  =  (1 + kappa_k) (Q_k X_i + d_k)        (reference targets)
-    across . Q_k^T (R(omega_k (t - t_k)) (y + b u) / (1 + kappa_k) - d_k)  =  a_i + eta_k (a_i - a_0)
-                                                                                   (deck targets)
+    across . Q_k^T (R(omega_k (t - t_k)) (y + b u) / (1 + kappa_k) - d_k)  =  a_i    (deck targets)
 
 with, per visit, a similarity (rotation ``Q_k``, translation ``d_k`` and the atmosphere's scale
-``kappa_k``; the baseline's is the identity), the deck's width strain ``eta_k`` about the deck targets'
-middle ``a_0`` (so that a deck widening in the warmth is not read as the air's scale: two girder lines
-2 m either side of the middle move 0.36 mm apart over 15 degC) and the set-up's drift ``omega_k`` (rotation
-rates about the scanner's axes, linear in time); shared by all visits, the reference targets' positions ``X_i`` and
+``kappa_k``; the baseline's is the identity) and the set-up's drift ``omega_k`` (rotation rates about
+the scanner's axes, linear in time); shared by all visits, the reference targets' positions ``X_i`` and
 the deck targets' across-span coordinates ``a_i`` in the baseline's frame, and the range walk ``b``
 (:mod:`lidar.systematic.range_walk`; ``u`` the line of sight, ``r`` the range, ``c`` the cosine of the
 incidence).
@@ -47,8 +44,6 @@ from lidar.systematic.walk_screen import bias_information, screen_laws
 
 #: Prior standard deviations: scale (ppm), drift (arcsec per hour); the range walk's is range_walk.PRIOR_BIAS_MM.
 PRIOR_SCALE_PPM = 300.0
-#: Prior standard deviation of a visit's deck width strain against the baseline (ppm): 12 ppm/degC over 40 degC.
-PRIOR_DECK_WIDTH_PPM = 500.0
 PRIOR_DRIFT_ARCSEC_H = 30.0
 #: Added to every centroid covariance: what a centroid's own covariance leaves out (m^2 per axis).
 MODEL_FLOOR_M2 = (2e-5) ** 2
@@ -215,7 +210,6 @@ class _Visit:
     shift_rows: np.ndarray = field(default_factory=lambda: np.zeros(0, int))  # refs (rows of refs) that shifted
     shift_axis: np.ndarray = field(default_factory=lambda: np.zeros(3))  # unit, baseline frame
     shift_mm: float = 0.0
-    width_ppm: float = 0.0  # the deck's width strain against the baseline (it widens with the temperature)
     scale_prior: tuple[float, float] | None = None  # (ppm, sigma ppm); None: the weak default
     shift_alternatives: tuple[str, ...] = ()
 
@@ -224,22 +218,8 @@ class _Visit:
         return bool(self.shift_rows.size) and not self.is_base
 
     @property
-    def widens(self) -> bool:
-        """Whether the visit fits its deck's width strain (any visit but the baseline with deck targets)."""
-        return bool(self.decks) and not self.is_base
-
-    @property
     def n_local(self) -> int:
-        return (0 if self.is_base else 7) + (3 if self.timed else 0) + (1 if self.shifts else 0) + \
-            (1 if self.widens else 0)
-
-    @property
-    def shift_column(self) -> int:
-        return (0 if self.is_base else 7) + (3 if self.timed else 0)
-
-    @property
-    def width_column(self) -> int:
-        return self.shift_column + (1 if self.shifts else 0)
+        return (0 if self.is_base else 7) + (3 if self.timed else 0) + (1 if self.shifts else 0)
 
     is_base: bool = False
 
@@ -282,17 +262,13 @@ class AdjustmentProblem:
         self.visits = [self._visit(v, k == 0, groups) for k, v in enumerate(visits)]
         if start is None:
             self._initialise()
-            # each deck target's distance across from the targets' middle (what a deck widens about), fixed at the
-            # start values (millimetres from the final ones: the width strain stays linear in the unknowns)
-            self.a_centred = self.a_deck - (float(np.mean(self.a_deck)) if self.a_deck.size else 0.0)
         else:  # the poses, targets and down-weighting of a solved problem on the same visits
-            self.x_ref, self.a_deck, self.a_centred = start.x_ref.copy(), start.a_deck.copy(), start.a_centred
+            self.x_ref, self.a_deck = start.x_ref.copy(), start.a_deck.copy()
             self.alpha = np.array([start.alpha[start.axes.index(k)] if k in start.axes else 0.0 for k in self.axes])
             for mine, theirs in zip(self.visits, start.visits, strict=False):
                 mine.q, mine.d, mine.kappa_ppm = theirs.q.copy(), theirs.d.copy(), theirs.kappa_ppm
                 if mine.shifts and theirs.shifts:
                     mine.shift_mm = theirs.shift_mm
-                mine.width_ppm = theirs.width_ppm
                 mine.omega = theirs.omega.copy() if mine.timed else np.zeros(3)
                 mine.weights = dict(theirs.weights)
 
@@ -395,7 +371,7 @@ class AdjustmentProblem:
         if v.timed:
             al[:, :, off_w:off_w + 3] = dom[:nr]
         if v.shifts:
-            al[v.shift_rows, :, v.shift_column] = -sc * (v.q @ v.shift_axis) * 1e-3
+            al[v.shift_rows, :, nl - 1] = -sc * (v.q @ v.shift_axis) * 1e-3
         ash = np.zeros((nr, 3, ns))
         for j, i in enumerate(a["ref_idx"]):
             ash[j, :, 3 * i:3 * i + 3] = -sc * v.q
@@ -410,9 +386,7 @@ class AdjustmentProblem:
         if nd:
             zz = z[nr:]
             vv = zz / sc - v.d
-            # a deck widens with the temperature: its targets' across coordinates about its middle
-            centred = self.a_centred[a["deck_idx"]]
-            ed = vv @ qa - self.a_deck[a["deck_idx"]] - 1e-6 * v.width_ppm * centred
+            ed = vv @ qa - self.a_deck[a["deck_idx"]]
             ald = np.zeros((nd, nl))
             if not v.is_base:
                 ald[:, 0:3] = np.cross(qa[None, :], vv) * 1e-3
@@ -420,8 +394,6 @@ class AdjustmentProblem:
                 ald[:, 6] = -(zz @ qa) / sc ** 2 * 1e-6
             if v.timed:
                 ald[:, off_w:off_w + 3] = np.einsum("i,nij->nj", qa, dom[nr:]) / sc
-            if v.widens:
-                ald[:, v.width_column] = -1e-6 * centred
             asd = np.zeros((nd, ns))
             asd[np.arange(nd), 3 * len(self.ref_ids) + a["deck_idx"]] = -1.0
             if nb:
@@ -445,12 +417,6 @@ class AdjustmentProblem:
             jl.append(rows)
             js.append(np.zeros((3, ns)))
             res.append(v.omega / PRIOR_DRIFT_ARCSEC_H)
-        if v.widens:
-            row = np.zeros((1, nl))
-            row[0, v.width_column] = 1.0 / PRIOR_DECK_WIDTH_PPM
-            jl.append(row)
-            js.append(np.zeros((1, ns)))
-            res.append(np.array([v.width_ppm / PRIOR_DECK_WIDTH_PPM]))
         return np.vstack(jl), np.vstack(js), np.concatenate(res), blocks
 
     @property
@@ -490,9 +456,7 @@ class AdjustmentProblem:
             off = 0 if v.is_base else 7
             v.omega = v.omega + dx_local[off:off + 3]
         if v.shifts:
-            v.shift_mm += float(dx_local[v.shift_column])
-        if v.widens:
-            v.width_ppm += float(dx_local[v.width_column])
+            v.shift_mm += float(dx_local[-1])
 
     def apply_shared(self, dx: np.ndarray) -> None:
         nr = 3 * len(self.ref_ids)
@@ -732,7 +696,7 @@ def _model(p: AdjustmentProblem, sol: _Solution, left_out: list, baseline: str, 
         shift: dict = {}
         if v.shifts:
             shift = dict(shifted=tuple(sorted({v.refs[j][0].target for j in v.shift_rows})),
-                         shift_m=1e-3 * v.shift_mm, shift_sigma_m=1e-3 * float(math.sqrt(max(cl[v.shift_column, v.shift_column], 0.0))),
+                         shift_m=1e-3 * v.shift_mm, shift_sigma_m=1e-3 * float(math.sqrt(max(cl[-1, -1], 0.0))),
                          shift_socs=v.q @ v.shift_axis, shift_alternatives=v.shift_alternatives)
         out[v.label] = VisitSystematics(v.label, kappa, s_ppm,
                                         v.omega.copy() if v.timed else np.zeros(3), dcov, v.t_ref, v.timed,
