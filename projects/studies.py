@@ -59,6 +59,7 @@ class StudyScore:
     errors_mm: list = field(default_factory=list)
     sigmas_mm: list = field(default_factory=list)
     warned: list = field(default_factory=list)  # the row itself carries a warning or a problem flag
+    visit_numbers: list = field(default_factory=list)  # each error's visit, counted from 1 (the baseline) in date order
     along_errors_mm: list = field(default_factory=list)
     along_sigmas_mm: list = field(default_factory=list)
     along_warned: list = field(default_factory=list)  # the along-span movement's row carries a warning or problem
@@ -82,6 +83,12 @@ class StudyScore:
     @property
     def within_2sigma(self) -> float:
         return _within(self.errors_mm, self.sigmas_mm, 2.0)
+
+    def first_visits(self, n: int) -> StudyScore:
+        """The displacements of the campaign's first ``n`` visits only (the baseline one of them)."""
+        keep = [k for k, v in enumerate(self.visit_numbers) if v <= n]
+        return StudyScore([self.errors_mm[k] for k in keep], [self.sigmas_mm[k] for k in keep],
+                          [self.warned[k] for k in keep], [self.visit_numbers[k] for k in keep])
 
     @property
     def silent_beyond_3sigma(self) -> float:
@@ -272,6 +279,7 @@ def score_campaign(camp: Path, field_dir: Path, labels: dict) -> StudyScore:
         lay = c.layout()
         deck = {t for t, g in zip(lay.ids, lay.groups, strict=False) if g == "measurement"}
         later = [e.label for e in c.epochs() if e.label != base and e.label in by_label]
+        number = {e.label: k + 1 for k, e in enumerate(c.epochs())}
         sc.expected = len(deck) * len(later)  # every deck target of the layout in every later visit
         sc.missing = sc.expected
         for r in c.displacements():
@@ -285,6 +293,7 @@ def score_campaign(camp: Path, field_dir: Path, labels: dict) -> StudyScore:
             sc.errors_mm.append((r.displacement_m - true) * 1e3)
             sc.sigmas_mm.append(r.sigma_m * 1e3)
             sc.warned.append(any(severity(f) in (WARNING, PROBLEM) for f in r.flags))
+            sc.visit_numbers.append(number.get(r.epoch, 0))
             along_t = getattr(t.target(r.reflector), "along_span_m", None)
             if r.along_m is not None and along_t is not None:
                 sc.along_errors_mm.append((r.along_m - (along_t - tb.target(r.reflector).along_span_m)) * 1e3)
