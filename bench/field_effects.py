@@ -6,14 +6,21 @@ plan with its closure window, point times), processes it with the field model an
 and max, the share within 2 sigma, the share beyond 3 sigma without a warning on its row (must be 0),
 the same two shares for the along-span movements, the largest scale error and the reference flags raised.
 
+Three scenarios log the air's temperature at every visit and import it (as the demo does): the scanner keeps a
+standard atmosphere, so its ranges scale as that air says (:func:`lidar.systematic.atmosphere.range_scale_ppm`)
+and the deck expands with it, in length and in width; the scale measured on the piers is then checked against the air, and the
+scale flags raised (``scale_disagrees_with_atmosphere``, ``pier_moved_along_span``) are counted. One of them has a
+pier slide 3 mm along the span in one visit.
+
 Usage: ``./run bench field_effects [VISITS] [--quick]`` (default 8 visits a scenario; ``--quick``: 5 visits
-and three scenarios; ``--small``: 3 visits of the all-together scenario, coarse scans at 0.1 degrees).
+and five scenarios; ``--small``: 3 visits of the all-together scenario, coarse scans at 0.1 degrees).
 """
 from __future__ import annotations
 
 import sys
 import tempfile
 import time
+from collections import Counter
 from dataclasses import replace
 from pathlib import Path
 
@@ -23,10 +30,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from _harness import figures, small_mode, write_figure  # noqa: E402
 
+from common.flags import code  # noqa: E402
 from lidar.simulate.bridge import BridgeModel  # noqa: E402
 from lidar.simulate.campaign import random_conditions  # noqa: E402
 from lidar.simulate.effects import (  # noqa: E402
     AxisErrors,
+    DeckTransient,
     DriftModel,
     InverseSquareWalk,
     LinearIncidenceWalk,
@@ -34,6 +43,7 @@ from lidar.simulate.effects import (  # noqa: E402
     VisitTiming,
 )
 from lidar.simulate.setup import ScannerSetup  # noqa: E402
+from lidar.systematic.atmosphere import range_scale_ppm  # noqa: E402
 from projects.studies import print_table, run_study, save_scores  # noqa: E402
 
 WALKS = {"linear in cos(incidence), 1.5 mm head-on, clipped intensities": LinearIncidenceWalk(0.0015),
@@ -46,21 +56,38 @@ AXES = AxisErrors(collimation_arcsec=20.0, trunnion_arcsec=20.0, vertical_index_
 
 
 def scenario(model: BridgeModel, n: int, seed: int, *, ppm: bool, walk, clip: bool, strain: bool,
-             drift: float, axes: bool = False, knocked: bool = False, scale_rate: float = 0.0) -> list:
-    """The visits' conditions: each effect on or off (one range-walk form, one instrument for the whole campaign).
+             drift: float, axes: bool = False, knocked: bool = False, scale_rate: float = 0.0, air: bool = False,
+             trains: bool = False, slide: bool = False) -> tuple[list, list | None]:
+    """The visits' conditions (each effect on or off, one range-walk form, one instrument for the whole campaign)
+    and the air's temperature at each visit (None when the air is not logged).
 
     ``knocked``: in visits 3, 5 and 7 the set-up turns suddenly by 30 arcsec (a random axis) 15 minutes in.
     ``scale_rate``: the atmosphere's scale changes during each visit by 0.5 to 1 times this many ppm an hour,
-    up or down.
+    up or down. ``air``: the air's temperature (-5 to 30 degC) is logged; the ranges scale as it says (``ppm``
+    ignored) and the deck expands with it in length and in width (``strain``). ``trains``: in visits 2, 4 and 6,
+    three crossings of 8-12 s, 2-4 mm down, while windows are scanned. ``slide``: in visit 3 the second pier slides 3 mm along the span.
     """
     rng = np.random.default_rng(seed)
     out = []
-    for _ in range(n):
-        c = random_conditions(model, rng, ppm=(-30, 30) if ppm else (0, 0), max_walk_m=None,
+    temps = rng.uniform(-5.0, 30.0, n) if air else None
+    for k in range(n):
+        c = random_conditions(model, rng, ppm=(-30, 30) if ppm and not air else (0, 0), max_walk_m=None,
                               clipped_fraction=(0.1, 0.3) if clip else (0, 0),
-                              temperature_c=(-15, 15) if strain else (0, 0), drift_arcsec_per_h=drift)
-        out.append(replace(c, range_walk=walk, timing=VisitTiming(start_s=0.0, gap_s=30.0, duration="lines"),
-                           axis_errors=AXES if axes else None))
+                              temperature_c=(-15, 15) if strain and not air else (0, 0), drift_arcsec_per_h=drift)
+        c = replace(c, range_walk=walk, timing=VisitTiming(start_s=0.0, gap_s=30.0, duration="lines"),
+                    axis_errors=AXES if axes else None)
+        if temps is not None:
+            strain_k = 12e-6 * float(temps[k] - temps[0]) if strain else 0.0  # in length and in width
+            c = replace(c, range_scale_ppm=range_scale_ppm(float(temps[k])), deck_strain=strain_k,
+                        deck_strain_across=strain_k)
+        if trains and k in (1, 3, 5):
+            c = replace(c, transient=DeckTransient(
+                start_s=tuple(float(s) for s in rng.uniform(60.0, 1500.0, 3)),
+                duration_s=tuple(float(d) for d in rng.uniform(8.0, 12.0, 3)),
+                amplitude_m=tuple(float(a) for a in rng.uniform(-0.004, -0.002, 3)), wobble=0.1))
+        if slide and k == 2:
+            c = replace(c, pier_shifts={1: (0.003, 0.0, 0.0)})
+        out.append(c)
     if scale_rate:
         rates = rng.choice([-1.0, 1.0], n) * rng.uniform(0.5, 1.0, n) * scale_rate
         out = [replace(c, range_scale_rate_ppm_h=float(r)) for c, r in zip(out, rates, strict=False)]
@@ -70,7 +97,7 @@ def scenario(model: BridgeModel, n: int, seed: int, *, ppm: bool, walk, clip: bo
             turn *= 30.0 / np.linalg.norm(turn)
             out[i] = replace(out[i], drift=DriftModel(jump_x_arcsec=float(turn[0]), jump_y_arcsec=float(turn[1]),
                                                       jump_z_arcsec=float(turn[2]), jump_after_s=900.0))
-    return out
+    return out, None if temps is None else [float(t) for t in temps]
 
 
 def stations(model: BridgeModel, n: int, seed: int) -> list:
@@ -80,15 +107,27 @@ def stations(model: BridgeModel, n: int, seed: int) -> list:
 
 def markdown(rows: dict) -> str:
     """The documentation's table: each scenario corrected and without the corrections, side by side."""
-    lines = ["| effect in the scans | corrected: RMS / max | within 2σ | silent | along-span: within 2σ / silent | "
-             "without corrections: RMS / max | silent | along-span silent |", "|---|---|---|---|---|---|---|---|"]
+    lines = ["| effect in the scans | corrected: RMS / max | within 2σ | silent | first six visits: RMS / max, within 2σ | "
+             "along-span: within 2σ / silent | scale within 2σ | scale and pier flags | without corrections: RMS / max "
+             "| silent | along-span silent |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     for name, scores in rows.items():
-        c, u = scores["corrected"].row(), scores["uncorrected"].row()
+        s = scores["corrected"]
+        c, u = s.row(), scores["uncorrected"].row()
+        flags = "–" if name not in AIR_LOGGED else ", ".join(
+            f"{n} × {f}" for f, n in sorted(Counter(code(f) for _, f in s.scale_flags).items())) or "none"
+        six = s.first_visits(6)
         lines.append(f"| {name} | {c['rms_mm']:.3f} / {c['max_mm']:.2f} mm | {c['within_2sigma']:.0%} | "
-                     f"{c['silent_beyond_3sigma']:.0%} | {c['along_within_2sigma']:.0%} / "
-                     f"{c['along_silent_beyond_3sigma']:.0%} | {u['rms_mm']:.3f} / {u['max_mm']:.2f} mm | "
+                     f"{c['silent_beyond_3sigma']:.0%} | {six.rms_mm:.3f} / {six.max_mm:.2f} mm, "
+                     f"{six.within_2sigma:.0%} | {c['along_within_2sigma']:.0%} / "
+                     f"{c['along_silent_beyond_3sigma']:.0%} | {c['scale_within_2sigma']:.0%} | {flags} | "
+                     f"{u['rms_mm']:.3f} / {u['max_mm']:.2f} mm | "
                      f"{u['silent_beyond_3sigma']:.1%} | {u['along_silent_beyond_3sigma']:.1%} |")
     return "\n".join(lines)
+
+
+#: The scenarios whose air is logged and imported (their scale flags are counted).
+AIR_LOGGED = ("all together, the air logged and imported", "a pier slides 3 mm along the span in one visit, "
+              "the air logged and imported")
 
 
 def main(argv: list[str]) -> int:
@@ -112,17 +151,25 @@ def main(argv: list[str]) -> int:
     plans.append(("the air warming or cooling during the visit: the scale changing by 7.5–15 ppm an hour, up or down, "
                   "on top of −30…+30 ppm",
                   dict(ppm=True, walk=None, clip=False, strain=False, drift=0.0, scale_rate=15.0)))
+    plans.append(("trains: three crossings of 8–12 s, 2–4 mm down, in visits 2, 4 and 6",
+                  dict(ppm=False, walk=None, clip=False, strain=False, drift=0.0, trains=True)))
+    together = dict(ppm=True, walk=WALKS["saturating in 1/range², 3 mm"], clip=True, strain=True, drift=20.0)
+    plans.append((AIR_LOGGED[0], dict(together, air=True)))
+    plans.append((AIR_LOGGED[1], dict(together, air=True, slide=True)))
+    named = dict(plans)
     if quick:
-        plans = [plans[0], plans[3], plans[-4]]
+        plans = [(k, named[k]) for k in ("none", "range walk saturating in 1/range², 3 mm", "all together",
+                                         *AIR_LOGGED)]
     elif small:
-        plans = [plans[-4]]
+        plans = [("all together", named["all together"])]
     rows = {}
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         for k, (name, kw) in enumerate(plans):
-            visits = scenario(model, n, 7 + k, **kw)
-            rows[name] = run_study(Path(tmp) / f"s{k}", model, visits, seed=3 + k, stations=stations(model, n, k),
-                                   compare_without=True, coarse_step_deg=0.1 if small else 0.05)
+            visits, temps = scenario(model, n, 7 + k, **kw)
+            rows[name] = run_study(Path(tmp) / f"s{k}", model, visits, seed=3 + k,
+                                   stations=stations(model, n, k), compare_without=True,
+                                   coarse_step_deg=0.1 if small else 0.05, air_temperatures_c=temps)
             print(f"  {name}: {time.perf_counter() - t0:.0f} s", flush=True)
     print(print_table(rows))
     out = Path(__file__).resolve().parent / "out"

@@ -206,6 +206,13 @@ FLAG_ATMOSPHERE_DISAGREES = _flag("scale_disagrees_with_atmosphere", WARNING, "t
                                   action="check the air readings' times and the instrument's atmosphere setting; a "
                                   "pier that moved along the span also shows as a scale",
                                   words="range scale disagrees with the air")
+FLAG_PIER_MOVED = _flag("pier_moved_along_span", WARNING, "the range scale measured on the piers disagrees with "
+                        "the air, and one pier's targets moving along the span against the others' explains it: "
+                        "that shift was fitted and taken out, and the visit's scale is the air's",
+                        "lidar.systematic.pier_slide",
+                        action="inspect the pier named (its bearings, its foundation) and its targets; the deck's "
+                        "heights stand, its movements along the span are against the other piers",
+                        words="a pier moved along the span")
 
 # ---- an epoch with no result, or a history (lidar.stage2, lidar.setups)
 FLAG_DECK_NOT_MEASURED = _flag("deck_not_measured", PROBLEM, "too few deck targets measured for a "

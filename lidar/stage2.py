@@ -39,6 +39,7 @@ from common.flags import (
     FLAG_MISSING,
     FLAG_NO_DISPLACEMENT,
     FLAG_NOT_FOUND,
+    FLAG_PIER_MOVED,
     FLAG_PIERS_NOT_MEASURED,
     FLAG_RESCAN_SKIPPED,
     FLAG_SETUP_NOT_MEASURED,
@@ -57,7 +58,15 @@ from lidar.displacement_result import Displacement, EpochDisplacements
 from lidar.setups import CorrectedVisit, corrected_side, joined_displacements, visit_label, without_weak_duplicates
 from lidar.systematic.adjustment import FieldModel
 from lidar.systematic.budget import corrected_displacements
-from lidar.systematic.campaign_fit import Air, atmosphere_flags, epoch_flags, refit, systematics_json, visit_digest
+from lidar.systematic.campaign_fit import (
+    Air,
+    air_scale_ppm,
+    atmosphere_flags,
+    epoch_flags,
+    refit,
+    systematics_json,
+    visit_digest,
+)
 
 log = logging.getLogger(__name__)
 
@@ -454,8 +463,14 @@ def fit_model(inputs: Stage2Inputs, *, leave_out: set[str] | None = None) -> Fie
     vs = _Visits(inputs)
     groups = dict(inputs.groups)
     fitted = [sv for sv, (lab, _) in vs.setup_visits.items() if lab not in leave_out]
+    base_air = vs.by_label[inputs.baseline].air if inputs.baseline in vs.by_label else None
+    air = {}
+    for sv in fitted:
+        v = vs.by_label[vs.setup_visits[sv][0]]
+        if v.air is not None and base_air is not None:
+            air[sv] = air_scale_ppm(v.air, base_air, wavelength_nm=v.wavelength_nm)
     return refit(inputs.stored_model, inputs.baseline, fitted, groups, vs.found_setup_visit,
-                 vs.closures_setup_visit, enabled=bool(inputs.params.get("field_model", True)))
+                 vs.closures_setup_visit, enabled=bool(inputs.params.get("field_model", True)), air_scale=air)
 
 
 def run_stage2(inputs: Stage2Inputs, *, model: FieldModel | None = None) -> Stage2Result:
@@ -508,6 +523,10 @@ def run_stage2(inputs: Stage2Inputs, *, model: FieldModel | None = None) -> Stag
         systematics["inputs"] = input_parts(inputs, v.stage1_digest, vs.by_label[baseline].stage1_digest)
         air = atmosphere_flags(model, lab, v.air, vs.by_label[baseline].air, wavelength_nm=v.wavelength_nm)
         result = replace(result, flags=tuple(result.flags) + tuple(flags) + tuple(air))
+        moved = tuple(f for f in air if f.startswith(FLAG_PIER_MOVED + ":"))
+        if moved:  # every value of the visit is against a pier that moved: its rows say so too
+            result = replace(result, displacements=tuple(replace(d, flags=tuple(d.flags) + moved)
+                                                         for d in result.displacements))
         if v.rescan:
             result = _with_rescan_skipped(result, v.rescan, dict(inputs.groups))
         out.append(EpochDisplacementResult(lab, result, systematics, h, reason))

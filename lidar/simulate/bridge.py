@@ -300,7 +300,8 @@ def box_mesh(lo: Sequence[float], hi: Sequence[float]) -> tuple[np.ndarray, np.n
 
 
 def deck_mesh(model: BridgeModel, midspan_m: float | Sequence[float], stations: int | None = None, *,
-              strain: float = 0.0, fixed_x_m: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+              strain: float = 0.0, fixed_x_m: float = 0.0, strain_across: float = 0.0
+              ) -> tuple[np.ndarray, np.ndarray]:
     """The deck as a prism with ``stations`` cross-sections along x, deflected vertically.
 
     Parameters
@@ -315,6 +316,8 @@ def deck_mesh(model: BridgeModel, midspan_m: float | Sequence[float], stations: 
         Default 0.
     fixed_x_m : float, keyword-only
         x of the fixed bearing (the point of the deck that does not move along x). Default 0 (the first pier).
+    strain_across : float, keyword-only
+        Deck strain across (dW / W): the section's width times ``1 + strain_across`` about y = 0. Default 0.
 
     Returns
     -------
@@ -325,7 +328,7 @@ def deck_mesh(model: BridgeModel, midspan_m: float | Sequence[float], stations: 
     w = model.deflection_m(x, midspan_m)
     if strain:
         x = x + strain * (x - fixed_x_m)
-    hw = model.deck_width_m / 2
+    hw = model.deck_width_m / 2 * (1.0 + strain_across)
     zb, zt = model.deck_bottom_m, model.deck_bottom_m + model.deck_depth_m
     corners = np.array([[-hw, zb], [hw, zb], [hw, zt], [-hw, zt]])  # (y, z) around the section
     v = np.empty((stations, 4, 3))

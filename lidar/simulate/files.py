@@ -51,7 +51,8 @@ def conditions_to_dict(c: EpochConditions) -> dict:
     }
     extra = {
         "span_displacements_m": list(c.span_displacements_m), "deck_strain": c.deck_strain,
-        "fixed_bearing_x_m": c.fixed_bearing_x_m, "range_scale_ppm": c.range_scale_ppm,
+        "fixed_bearing_x_m": c.fixed_bearing_x_m, "deck_strain_across": c.deck_strain_across,
+        "range_scale_ppm": c.range_scale_ppm,
         "range_scale_rate_ppm_h": c.range_scale_rate_ppm_h,
         "range_walk": walk_to_dict(c.range_walk), "clipped_fraction": c.clipped_fraction,
         "drift": None if c.drift is None else c.drift.to_dict(),
@@ -60,6 +61,7 @@ def conditions_to_dict(c: EpochConditions) -> dict:
         "walk_factors": dict(c.walk_factors),
         "transient": None if c.transient is None else c.transient.to_dict(),
         "intensity_model": None if c.intensity_model is None else c.intensity_model.to_dict(),
+        "pier_shifts": {str(k): list(v) for k, v in c.pier_shifts.items()},
     }
     d.update({k: v for k, v in extra.items() if v not in (None, 0.0, [], {})})
     return d
@@ -71,12 +73,14 @@ def conditions_from_dict(c: dict) -> EpochConditions:
         c["midspan_displacement_m"], c["moved_targets"], tuple(c["occluded"]), tuple(c["cable_ties"]),
         tuple(c["removed"]), bool(c["saturated"]), span_displacements_m=tuple(c.get("span_displacements_m", ())),
         deck_strain=float(c.get("deck_strain", 0.0)), fixed_bearing_x_m=c.get("fixed_bearing_x_m"),
+        deck_strain_across=float(c.get("deck_strain_across", 0.0)),
         range_scale_ppm=float(c.get("range_scale_ppm", 0.0)),
         range_scale_rate_ppm_h=float(c.get("range_scale_rate_ppm_h", 0.0)), range_walk=walk_from_dict(c.get("range_walk")),
         clipped_fraction=float(c.get("clipped_fraction", 0.0)), drift=DriftModel.from_dict(c.get("drift")),
         timing=VisitTiming.from_dict(c.get("timing")), axis_errors=AxisErrors.from_dict(c.get("axis_errors")),
         walk_factors=dict(c.get("walk_factors") or {}), transient=DeckTransient.from_dict(c.get("transient")),
-        intensity_model=IntensityModel.from_dict(c.get("intensity_model")))
+        intensity_model=IntensityModel.from_dict(c.get("intensity_model")),
+        pier_shifts={int(k): tuple(v) for k, v in (c.get("pier_shifts") or {}).items()})
 
 
 def save_scene(folder: Path, setup: ScannerSetup, conditions: EpochConditions, seed: int,

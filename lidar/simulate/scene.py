@@ -75,6 +75,10 @@ class EpochConditions:
         bearing)``; piers and their targets do not. Default 0.
     fixed_bearing_x_m : float, optional
         x of the fixed bearing. Default None: the first pier (x = 0).
+    deck_strain_across : float
+        Deck strain across the span (its width expanding with the temperature too, dW / W): the deck's mesh and the
+        measurement targets under it move sideways by this times their distance from the deck's centreline
+        (y = 0). Default 0 (the deck keeps its width).
     range_scale_ppm : float
         Atmosphere: every measured range is multiplied by ``1 + ppm * 1e-6``. Default 0.
     range_scale_rate_ppm_h : float
@@ -104,6 +108,10 @@ class EpochConditions:
         How return intensities are formed and reported (a raw amplitude falling as 1/range^2 with a receiver
         ceiling, or on a dB scale). Default none: the mild model (:class:`~lidar.simulate.effects.IntensityModel`
         ``"mild"``).
+    pier_shifts : mapping pier index -> (3,) offset in metres, optional
+        Piers that moved since the baseline (a pier sliding along the span on its foundation): the pier's box
+        and every reference target glued to it move by the offset; the deck, on its bearings, does not. The
+        index counts the supports from the first pier (0), as :attr:`BridgeModel.support_x_m`. Default none.
     """
 
     midspan_displacement_m: float = 0.0
@@ -115,6 +123,7 @@ class EpochConditions:
     span_displacements_m: tuple[float, ...] = ()
     deck_strain: float = 0.0
     fixed_bearing_x_m: float | None = None
+    deck_strain_across: float = 0.0
     range_scale_ppm: float = 0.0
     range_scale_rate_ppm_h: float = 0.0
     range_walk: RangeWalk | None = None
@@ -125,6 +134,7 @@ class EpochConditions:
     walk_factors: Mapping[str, float] = field(default_factory=dict)
     transient: DeckTransient | None = None
     intensity_model: IntensityModel | None = None
+    pier_shifts: Mapping[int, tuple[float, ...]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not np.isfinite(self.midspan_displacement_m):
@@ -135,15 +145,19 @@ class EpochConditions:
             raise InputError("walk factors must be finite and not negative")
         object.__setattr__(self, "moved_targets", MappingProxyType(
             {k: tuple(float(x) for x in v) for k, v in dict(self.moved_targets).items()}))
+        shifts = {int(k): tuple(float(x) for x in v) for k, v in dict(self.pier_shifts).items()}
+        if not all(len(v) == 3 and np.all(np.isfinite(v)) and max(map(abs, v)) <= 1.0 for v in shifts.values()):
+            raise InputError("epoch conditions: a pier shift must be three finite offsets of at most 1 m")
+        object.__setattr__(self, "pier_shifts", MappingProxyType(shifts))
         for name in ("occluded", "cable_ties", "removed"):
             object.__setattr__(self, name, tuple(getattr(self, name)))
         object.__setattr__(self, "span_displacements_m", tuple(float(v) for v in self.span_displacements_m))
-        scalars = (self.deck_strain, self.range_scale_ppm, self.range_scale_rate_ppm_h, *self.span_displacements_m,
+        scalars = (self.deck_strain, self.deck_strain_across, self.range_scale_ppm, self.range_scale_rate_ppm_h, *self.span_displacements_m,
                    0.0 if self.fixed_bearing_x_m is None else self.fixed_bearing_x_m)
         if not all(np.isfinite(scalars)):
             raise InputError("epoch conditions: strain, range scale (and its rate), span displacements and bearing "
                              "must be finite")
-        if abs(self.deck_strain) > 0.01 or abs(self.range_scale_ppm) > 10_000 or abs(self.range_scale_rate_ppm_h) > 1000:
+        if max(abs(self.deck_strain), abs(self.deck_strain_across)) > 0.01 or abs(self.range_scale_ppm) > 10_000 or abs(self.range_scale_rate_ppm_h) > 1000:
             raise InputError("epoch conditions: deck strain beyond 1 %, a range scale beyond 10,000 ppm or changing "
                              "faster than 1,000 ppm an hour")
         if not 0.0 <= self.clipped_fraction <= 1.0:
@@ -252,14 +266,18 @@ class BridgeScene:
             unknown = set(ids) - known
             if unknown:
                 raise InputError(f"epoch conditions name unknown targets: {sorted(unknown)}")
+        bad = [k for k in conditions.pier_shifts if not 0 <= k < len(model.support_x_m)]
+        if bad:
+            raise InputError(f"epoch conditions shift piers {bad}; the bridge has piers 0..{len(model.support_x_m) - 1}")
         self.amplitudes = conditions.amplitudes(model.n_spans)
         self.discs = self._discs()
         self._scene = o3d.t.geometry.RaycastingScene()
         self._kind: dict[int, str] = {}
         self._add("ground", *ground_mesh(model))
-        for mesh in pier_meshes(model):
-            self._add("pier", *mesh)
+        for k, (verts, tris) in enumerate(pier_meshes(model)):
+            self._add("pier", verts + np.asarray(conditions.pier_shifts.get(k, (0.0, 0.0, 0.0))), tris)
         self._add("deck", *deck_mesh(model, self.amplitudes, strain=conditions.deck_strain,
+                                     strain_across=conditions.deck_strain_across,
                                      fixed_x_m=conditions.fixed_x_m))
         origin = np.asarray(setup.position_m)
         for d in self.discs:
@@ -290,9 +308,23 @@ class BridgeScene:
                 disp[2] = float(self.model.deflection_m(c0[0], self.amplitudes))
                 if c.deck_strain:
                     disp[0] = c.deck_strain * (c0[0] - c.fixed_x_m)
+                disp[1] = c.deck_strain_across * c0[1]
+            else:
+                disp += self._pier_shift(c0)
             disp += np.asarray(c.moved_targets.get(t.id, (0.0, 0.0, 0.0)))
             out.append(_Disc(t, c0 + disp, np.asarray(t.normal), t.diameter_m / 2, disp))
         return out
+
+    def _pier_shift(self, centre: np.ndarray) -> np.ndarray:
+        """The shift of the pier a reference target at ``centre`` is glued to (zero when that pier did not move)."""
+        shifts = self.conditions.pier_shifts
+        if not shifts:
+            return np.zeros(3)
+        supports = np.asarray(self.model.support_x_m)
+        k = int(np.argmin(np.abs(supports - centre[0])))
+        if abs(supports[k] - centre[0]) > self.model.pier_length_m / 2 + 0.05:
+            return np.zeros(3)
+        return np.asarray(shifts.get(k, (0.0, 0.0, 0.0)), dtype=np.float64)
 
     # ------------------------------------------------------------------ timing
     @property

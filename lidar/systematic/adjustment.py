@@ -86,10 +86,21 @@ class Sighting:
 
 @dataclass(frozen=True, eq=False)
 class VisitSightings:
-    """Every centroid of one visit (a target may be sighted twice: the plan's closure window)."""
+    """Every centroid of one visit (a target may be sighted twice: the plan's closure window).
+
+    ``shifted``, ``shift_axis`` and ``scale_prior_ppm`` state a hypothesis about the visit (a pier that moved
+    along the span, :mod:`lidar.systematic.pier_slide`): the reference targets named in ``shifted`` are fitted
+    with one shift of their own along ``shift_axis`` (unit, the baseline's frame), and the visit's scale gets the
+    prior ``(value, sigma)`` in ppm (the air's) instead of the weak default; ``shift_alternatives`` names the
+    targets of other piers that explain the visit about as well (carried into :class:`VisitSystematics`).
+    """
 
     label: str
     sightings: tuple[Sighting, ...]
+    shifted: tuple[str, ...] = ()
+    shift_axis: np.ndarray | None = None
+    scale_prior_ppm: tuple[float, float] | None = None
+    shift_alternatives: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -112,18 +123,28 @@ class VisitSystematics:
     left_out: tuple[str, ...] = ()
     alternative_scale_ppm: tuple[float, ...] = ()  # the visit's scale under each of the range walk's alternatives
     misfit: float = 1.0  # RMS normalised residual of the visit's centroids in the adjustment (1: as their sigmas say)
+    shifted: tuple[str, ...] = ()  # pier targets fitted with a shift of their own (a pier that moved along the span)
+    shift_m: float = 0.0  # that shift, metres along shift_socs
+    shift_sigma_m: float = 0.0
+    shift_socs: np.ndarray = field(default_factory=lambda: np.zeros(3))  # its unit direction in the visit's frame
+    shift_alternatives: tuple[str, ...] = ()  # other piers' targets whose shift explains the visit about as well
 
     @property
     def drift_sigma_arcsec_h(self) -> np.ndarray:
         return np.sqrt(np.maximum(np.diag(self.drift_cov), 0.0))
 
     def to_json(self) -> dict:
-        """The visit's scale and drift as JSON (part of :meth:`FieldModel.to_json`)."""
-        return {"label": self.label, "scale_ppm": self.scale_ppm, "scale_sigma_ppm": self.scale_sigma_ppm,
-                "drift_arcsec_h": np.asarray(self.drift_arcsec_h).tolist(),
-                "drift_cov": np.asarray(self.drift_cov).tolist(), "time_ref_s": self.time_ref_s, "timed": self.timed,
-                "scale_determined": self.scale_determined, "left_out": list(self.left_out),
-                "alternative_scale_ppm": list(self.alternative_scale_ppm), "misfit": self.misfit}
+        """The visit's scale and drift as JSON (part of :meth:`FieldModel.to_json`); a pier's shift when fitted."""
+        out = {"label": self.label, "scale_ppm": self.scale_ppm, "scale_sigma_ppm": self.scale_sigma_ppm,
+               "drift_arcsec_h": np.asarray(self.drift_arcsec_h).tolist(),
+               "drift_cov": np.asarray(self.drift_cov).tolist(), "time_ref_s": self.time_ref_s, "timed": self.timed,
+               "scale_determined": self.scale_determined, "left_out": list(self.left_out),
+               "alternative_scale_ppm": list(self.alternative_scale_ppm), "misfit": self.misfit}
+        if self.shifted:  # only then: the JSON (and digests) of every other visit stay as they were
+            out.update(shifted=list(self.shifted), shift_m=self.shift_m, shift_sigma_m=self.shift_sigma_m,
+                       shift_socs=np.asarray(self.shift_socs).tolist(),
+                       shift_alternatives=list(self.shift_alternatives))
+        return out
 
     @classmethod
     def from_json(cls, d: Mapping) -> VisitSystematics:
@@ -131,7 +152,10 @@ class VisitSystematics:
         return cls(d["label"], float(d["scale_ppm"]), float(d["scale_sigma_ppm"]),
                    np.asarray(d["drift_arcsec_h"], dtype=float), np.asarray(d["drift_cov"], dtype=float),
                    float(d["time_ref_s"]), bool(d["timed"]), bool(d["scale_determined"]), tuple(d.get("left_out", ())),
-                   tuple(float(x) for x in d.get("alternative_scale_ppm", ())), float(d.get("misfit", 1.0)))
+                   tuple(float(x) for x in d.get("alternative_scale_ppm", ())), float(d.get("misfit", 1.0)),
+                   tuple(d.get("shifted", ())), float(d.get("shift_m", 0.0)), float(d.get("shift_sigma_m", 0.0)),
+                   np.asarray(d.get("shift_socs", (0.0, 0.0, 0.0)), dtype=float),
+                   tuple(d.get("shift_alternatives", ())))
 
 
 @dataclass(frozen=True, eq=False)
@@ -183,10 +207,19 @@ class _Visit:
     omega: np.ndarray = field(default_factory=lambda: np.zeros(3))  # arcsec per hour
     weights: dict = field(default_factory=dict)  # (kind, j) -> IRLS weight
     arrays: dict = field(default_factory=dict)  # what does not change between iterations
+    shift_rows: np.ndarray = field(default_factory=lambda: np.zeros(0, int))  # refs (rows of refs) that shifted
+    shift_axis: np.ndarray = field(default_factory=lambda: np.zeros(3))  # unit, baseline frame
+    shift_mm: float = 0.0
+    scale_prior: tuple[float, float] | None = None  # (ppm, sigma ppm); None: the weak default
+    shift_alternatives: tuple[str, ...] = ()
+
+    @property
+    def shifts(self) -> bool:
+        return bool(self.shift_rows.size) and not self.is_base
 
     @property
     def n_local(self) -> int:
-        return (0 if self.is_base else 7) + (3 if self.timed else 0)
+        return (0 if self.is_base else 7) + (3 if self.timed else 0) + (1 if self.shifts else 0)
 
     is_base: bool = False
 
@@ -234,6 +267,8 @@ class AdjustmentProblem:
             self.alpha = np.array([start.alpha[start.axes.index(k)] if k in start.axes else 0.0 for k in self.axes])
             for mine, theirs in zip(self.visits, start.visits, strict=False):
                 mine.q, mine.d, mine.kappa_ppm = theirs.q.copy(), theirs.d.copy(), theirs.kappa_ppm
+                if mine.shifts and theirs.shifts:
+                    mine.shift_mm = theirs.shift_mm
                 mine.omega = theirs.omega.copy() if mine.timed else np.zeros(3)
                 mine.weights = dict(theirs.weights)
 
@@ -242,7 +277,13 @@ class AdjustmentProblem:
         timed = bool(self.drift and np.all(np.isfinite(times)) and times.size and np.ptp(times) > 1.0)
         refs = [(s, self.ref_ids.index(s.target)) for s in v.sightings if s.target in self.ref_ids]
         decks = [(s, self.deck_ids.index(s.target)) for s in v.sightings if s.target in self.deck_ids]
-        return _Visit(v.label, refs, decks, timed, float(np.median(times)) if timed else 0.0, is_base=is_base)
+        out = _Visit(v.label, refs, decks, timed, float(np.median(times)) if timed else 0.0, is_base=is_base,
+                     scale_prior=None if is_base else v.scale_prior_ppm)
+        if v.shifted and v.shift_axis is not None and not is_base:
+            out.shift_rows = np.array([j for j, (s, _) in enumerate(refs) if s.target in v.shifted], dtype=int)
+            out.shift_axis = np.asarray(v.shift_axis, dtype=np.float64) / np.linalg.norm(v.shift_axis)
+            out.shift_alternatives = tuple(v.shift_alternatives)
+        return out
 
     def _initialise(self) -> None:
         base = self.visits[0]
@@ -315,8 +356,12 @@ class AdjustmentProblem:
         z, dth, dom, dal = self._corrected(v)
         blocks = [("r", j, 3) for j in range(nr)] + [("d", j, 1) for j in range(nd)]
         lw, qa, wt = self.row_weights(v)
-        # reference targets: 3 rows each
-        qx = self.x_ref[a["ref_idx"]] @ v.q.T
+        # reference targets: 3 rows each (a shifted pier's at their positions moved along its axis)
+        x = self.x_ref[a["ref_idx"]]
+        if v.shifts:
+            x = x.copy()
+            x[v.shift_rows] += 1e-3 * v.shift_mm * v.shift_axis
+        qx = x @ v.q.T
         e = z[:nr] - sc * (qx + v.d)
         al = np.zeros((nr, 3, nl))
         if not v.is_base:
@@ -325,6 +370,8 @@ class AdjustmentProblem:
             al[:, :, 6] = -(qx + v.d) * 1e-6
         if v.timed:
             al[:, :, off_w:off_w + 3] = dom[:nr]
+        if v.shifts:
+            al[v.shift_rows, :, nl - 1] = -sc * (v.q @ v.shift_axis) * 1e-3
         ash = np.zeros((nr, 3, ns))
         for j, i in enumerate(a["ref_idx"]):
             ash[j, :, 3 * i:3 * i + 3] = -sc * v.q
@@ -358,11 +405,12 @@ class AdjustmentProblem:
             res.append(ed * wt)
         # priors on the visit's scale (ppm) and drift (arcsec/h)
         if not v.is_base:
+            centre, sd = v.scale_prior if v.scale_prior is not None else (0.0, PRIOR_SCALE_PPM)
             row = np.zeros((1, nl))
-            row[0, 6] = 1.0 / PRIOR_SCALE_PPM
+            row[0, 6] = 1.0 / sd
             jl.append(row)
             js.append(np.zeros((1, ns)))
-            res.append(np.array([v.kappa_ppm / PRIOR_SCALE_PPM]))
+            res.append(np.array([(v.kappa_ppm - centre) / sd]))
         if v.timed:
             rows = np.zeros((3, nl))
             rows[:, off_w:off_w + 3] = np.eye(3) / PRIOR_DRIFT_ARCSEC_H
@@ -407,6 +455,8 @@ class AdjustmentProblem:
         if v.timed:
             off = 0 if v.is_base else 7
             v.omega = v.omega + dx_local[off:off + 3]
+        if v.shifts:
+            v.shift_mm += float(dx_local[-1])
 
     def apply_shared(self, dx: np.ndarray) -> None:
         nr = 3 * len(self.ref_ids)
@@ -517,7 +567,7 @@ def _bic(sol: _Solution) -> float:
 
 
 def fit_field_model(visits: Sequence[VisitSightings], groups: Mapping[str, str], *,
-                    select_range_walk: bool = True) -> FieldModel:
+                    select_range_walk: bool = True, basis: tuple[str, ...] | None = None) -> FieldModel:
     """The campaign's range walk and every visit's scale and drift, from every visit's centroids.
 
     The range walk's family is chosen by BIC among the smooth families of
@@ -533,6 +583,8 @@ def fit_field_model(visits: Sequence[VisitSightings], groups: Mapping[str, str],
     groups : mapping target id -> "reference" | "measurement"
     select_range_walk : bool, keyword-only
         Choose the range walk's family (default True); False fits none.
+    basis : tuple of str, optional, keyword-only
+        Fit this range-walk family without choosing one (quicker: to compare hypotheses about a visit).
 
     Returns
     -------
@@ -540,8 +592,8 @@ def fit_field_model(visits: Sequence[VisitSightings], groups: Mapping[str, str],
     """
     if not visits:
         raise InputError("the field model needs at least one visit")
-    if not select_range_walk or len(visits) < 3:
-        p, sol, left = _final_fit(visits, groups, (), None)
+    if basis is not None or not select_range_walk or len(visits) < 3:
+        p, sol, left = _final_fit(visits, groups, tuple(basis or ()) if select_range_walk else (), None)
         return _model(p, sol, left, visits[0].label)
     general = AdjustmentProblem(visits, groups, ("1", "sat_strength"), axes=(0, 1, 2))
     general_sol, _ = _adjust(general)
@@ -641,8 +693,13 @@ def _model(p: AdjustmentProblem, sol: _Solution, left_out: list, baseline: str, 
             ks = np.asarray(alternative_kappas[k], dtype=np.float64)
             kappa = float(w @ ks / w.sum())
             s_ppm = float(math.sqrt(s_ppm ** 2 + w @ (ks - kappa) ** 2 / w.sum()))
+        shift: dict = {}
+        if v.shifts:
+            shift = dict(shifted=tuple(sorted({v.refs[j][0].target for j in v.shift_rows})),
+                         shift_m=1e-3 * v.shift_mm, shift_sigma_m=1e-3 * float(math.sqrt(max(cl[-1, -1], 0.0))),
+                         shift_socs=v.q @ v.shift_axis, shift_alternatives=v.shift_alternatives)
         out[v.label] = VisitSystematics(v.label, kappa, s_ppm,
                                         v.omega.copy() if v.timed else np.zeros(3), dcov, v.t_ref, v.timed,
                                         v.is_base or s_ppm < SCALE_DETERMINED_PPM, left,
-                                        tuple(alternative_kappas[k]) if alternative_kappas else (), misfit)
+                                        tuple(alternative_kappas[k]) if alternative_kappas else (), misfit, **shift)
     return FieldModel(baseline, rw, out, s0, sol.n_rows, tuple(notes), axes)

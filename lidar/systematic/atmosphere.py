@@ -59,3 +59,22 @@ def range_scale_ppm(temperature_c: float, pressure_hpa: float = STANDARD_PRESSUR
     assumed = refractivity_ppm(assumed_temperature_c, assumed_pressure_hpa, relative_humidity=assumed_humidity,
                                wavelength_nm=wavelength_nm)
     return actual - assumed
+
+
+#: How well the air's readings predict a visit's scale against the baseline's (ppm, one sigma): a temperature logged
+#: near the site to about 2 degC (2 ppm) and the pressure, often not logged and taken as standard, to about 8 hPa
+#: (2.3 ppm) in each of the two visits' air.
+AIR_SCALE_SIGMA_PPM = 3.0
+
+
+def air_agreement(scale_ppm: float, sigma_ppm: float, predicted_ppm: float) -> tuple[bool, bool]:
+    """Whether a measured scale agrees with the air's prediction, and whether it agrees with none at all.
+
+    Both within 3 sigma, the measured scale's sigma and :data:`AIR_SCALE_SIGMA_PPM` together (an instrument that
+    corrected for the atmosphere itself leaves none).
+
+    >>> air_agreement(12.0, 4.0, 5.0), air_agreement(1.0, 4.0, 30.0), air_agreement(79.0, 5.0, -5.0)
+    ((True, True), (False, True), (False, False))
+    """
+    s = 3.0 * math.hypot(max(sigma_ppm, 1e-6), AIR_SCALE_SIGMA_PPM)
+    return abs(scale_ppm - predicted_ppm) <= s, abs(scale_ppm) <= s

@@ -40,6 +40,10 @@ def corrected_observations(centroids: Mapping[str, Sighted], model: FieldModel, 
     pos, jac = correct_visit(centroids, range_walk=model.range_walk, visit=vis, axes=model.axes)
     obs = {k: Observation(pos[k], inflate * np.asarray(c.cov, dtype=np.float64))
            for k, c in centroids.items()}
+    for k in vis.shifted:  # a moved pier's targets moved back: their position carries that shift's sigma
+        if k in obs:
+            u = np.asarray(vis.shift_socs, dtype=np.float64)
+            obs[k] = Observation(obs[k].xyz, obs[k].cov + vis.shift_sigma_m ** 2 * np.outer(u, u))
     return obs, jac
 
 

@@ -24,14 +24,16 @@ from common.flags import (
     FLAG_ATMOSPHERE_DISAGREES,
     FLAG_ATMOSPHERE_UNCORRECTED,
     FLAG_DRIFT_FROM_PLAN,
+    FLAG_PIER_MOVED,
     FLAG_RANGE_WALK_UNDETERMINED,
     FLAG_SCALE_UNDETERMINED,
     FLAG_TRANSIENTS_UNCHECKED,
 )
 from lidar.centroid import TargetCentroid, is_weak
 from lidar.systematic.adjustment import FieldModel, Sighting, VisitSightings, VisitSystematics, fit_field_model
-from lidar.systematic.atmosphere import range_scale_ppm
+from lidar.systematic.atmosphere import air_agreement, range_scale_ppm
 from lidar.systematic.corrections import cos_incidence_of
+from lidar.systematic.pier_slide import explain_scales
 from lidar.systematic.range_walk import RangeWalkModel
 
 MATERIAL_BIAS_M = 1e-5
@@ -83,6 +85,8 @@ def _material(new: FieldModel, old: FieldModel, visits: Sequence[VisitSightings]
         v_new = new.visits.get(label)
         if v_new is None:
             continue
+        if v_new.shifted != v_old.shifted or abs(v_new.shift_m - v_old.shift_m) > MATERIAL_BIAS_M:
+            return True
         if abs(v_new.scale_ppm - v_old.scale_ppm) > MATERIAL_SCALE_PPM or \
                 np.max(np.abs(v_new.drift_arcsec_h - v_old.drift_arcsec_h)) > MATERIAL_DRIFT_ARCSEC_H:
             return True
@@ -107,21 +111,27 @@ def visit_digest(model: FieldModel, baseline: str, label: str) -> str:
 
 
 def _visit_key(v: VisitSystematics) -> dict:
-    return {"scale": round(v.scale_ppm, 4), "scale_sigma": round(v.scale_sigma_ppm, 4),
-            "drift": np.round(v.drift_arcsec_h, 4).tolist(), "drift_cov": np.round(v.drift_cov, 4).tolist(),
-            "t": round(v.time_ref_s, 3), "timed": v.timed}
+    out = {"scale": round(v.scale_ppm, 4), "scale_sigma": round(v.scale_sigma_ppm, 4),
+           "drift": np.round(v.drift_arcsec_h, 4).tolist(), "drift_cov": np.round(v.drift_cov, 4).tolist(),
+           "t": round(v.time_ref_s, 3), "timed": v.timed}
+    if v.shifted:  # only then: the digests of every other visit stay as they were
+        out["shift"] = [list(v.shifted), round(v.shift_m * 1e6, 1), round(v.shift_sigma_m * 1e6, 1)]
+    return out
 
 
 def refit(stored: FieldModel | None, baseline: str, labels: Sequence[str], groups: Mapping[str, str],
           found: Callable[[str], Mapping[str, TargetCentroid]],
-          closures: Callable[[str], Mapping[str, TargetCentroid]], *, enabled: bool = True) -> FieldModel:
+          closures: Callable[[str], Mapping[str, TargetCentroid]], *, enabled: bool = True,
+          air_scale: Mapping[str, float] | None = None) -> FieldModel:
     """Fit the campaign's field model over ``labels`` (the baseline's first) and keep ``stored`` while it holds.
 
     Visits with fewer than three reference targets found cannot be placed and are left out; a baseline
     without three, or ``enabled=False``, gives a model that corrects nothing. ``labels`` are the model's
     visits (epochs, or the set-ups of epochs: ``L#2``); ``found(label)`` gives a visit's found centroids and
     ``closures(label)`` its closure centroids. The returned model is ``stored`` with the new visits' terms
-    added when the new fit does not differ from it materially, else the new fit.
+    added when the new fit does not differ from it materially, else the new fit. ``air_scale`` holds the scale
+    the air predicts for each visit against the baseline (ppm; visits without air left out): a scale it does not
+    explain is put down to a pier that moved along the span where one does (:mod:`lidar.systematic.pier_slide`).
     """
     if not enabled or not usable(found(baseline), groups):
         return identity_model(baseline)
@@ -129,6 +139,8 @@ def refit(stored: FieldModel | None, baseline: str, labels: Sequence[str], group
     visits = [VisitSightings(lab, sightings(found(lab), {k: v for k, v in closures(lab).items()
                                                           if k in found(lab)})) for lab in order]
     new = fit_field_model(visits, groups)
+    if air_scale:
+        new, visits = explain_scales(new, visits, groups, air_scale)
     if stored is not None and not _material(new, stored, visits):
         return _merged(stored, new)
     return new
@@ -167,6 +179,12 @@ def air_near(series: Sequence[tuple[str, np.ndarray, np.ndarray]], t_ns: int) ->
     return temp, 1013.25 if pres is None else pres, 0.6 if hum is None else hum / 100.0
 
 
+def air_scale_ppm(here: Air, base: Air, *, wavelength_nm: float) -> float:
+    """The range scale (ppm) the air around a visit predicts against the baseline's air."""
+    return range_scale_ppm(*here[:2], relative_humidity=here[2], wavelength_nm=wavelength_nm) - \
+        range_scale_ppm(*base[:2], relative_humidity=base[2], wavelength_nm=wavelength_nm)
+
+
 def atmosphere_flags(model: FieldModel, label: str, here: Air | None, base: Air | None, *,
                      wavelength_nm: float) -> list[str]:
     """What the air's temperature (and pressure) around a visit and the baseline say of its estimated scale.
@@ -181,10 +199,15 @@ def atmosphere_flags(model: FieldModel, label: str, here: Air | None, base: Air 
         return []
     if here is None or base is None:
         return []
-    predicted = range_scale_ppm(*here[:2], relative_humidity=here[2], wavelength_nm=wavelength_nm) - \
-        range_scale_ppm(*base[:2], relative_humidity=base[2], wavelength_nm=wavelength_nm)
+    predicted = air_scale_ppm(here, base, wavelength_nm=wavelength_nm)
     s = max(v.scale_sigma_ppm, 1e-6)
-    agrees, corrected = abs(v.scale_ppm - predicted) <= 3 * s, abs(v.scale_ppm) <= 3 * s
+    if v.shifted:
+        against = ", ".join(v.shift_alternatives) if v.shift_alternatives else "the other pier targets"
+        either = " (or those against these: the targets cannot tell which pier)" if v.shift_alternatives else ""
+        return [f"{FLAG_PIER_MOVED}: {', '.join(v.shifted)} moved {v.shift_m * 1e3:+.1f} +- "
+                f"{v.shift_sigma_m * 1e3:.1f} mm along the span against {against}{either}; scale from the air "
+                f"{v.scale_ppm:+.1f} +- {s:.1f} ppm (predicted {predicted:+.1f})"]
+    agrees, corrected = air_agreement(v.scale_ppm, s, predicted)
     if agrees and not corrected:
         return [f"{FLAG_ATMOSPHERE_UNCORRECTED}: measured {v.scale_ppm:+.1f} +- {s:.1f} ppm, the air predicts "
                 f"{predicted:+.1f} ppm"]

@@ -69,12 +69,18 @@ def cos_incidence_of(centroid: object) -> float:
 
 def correct_visit(centroids: Mapping[str, Sighted], *, range_walk: RangeWalkModel, visit: VisitSystematics,
                   axes: AxisModel = AxisModel()) -> tuple[dict[str, np.ndarray], dict[str, CorrectionJacobian]]:
-    """Corrected positions and Jacobians of a visit's centroids (``xyz_socs``, ``cos_incidence``, ``time_s``)."""
+    """Corrected positions and Jacobians of a visit's centroids (``xyz_socs``, ``cos_incidence``, ``time_s``).
+
+    The targets of a pier the model found moved along the span in this visit (``visit.shifted``) are moved back
+    by its shift, so that they stand where the baseline saw them (:mod:`lidar.systematic.pier_slide`).
+    """
     out, jacs = {}, {}
     for k, c in centroids.items():
         z, j = correct_centroid(np.asarray(c.xyz_socs), cos_incidence_of(c),
                                 float(getattr(c, "time_s", float("nan"))), range_walk=range_walk, visit=visit,
                                 axes=axes)
+        if k in visit.shifted:
+            z = z - visit.shift_m * np.asarray(visit.shift_socs)
         out[k], jacs[k] = z, j
     return out, jacs
 

@@ -88,3 +88,18 @@ def test_moved_target_truth_and_validation():
     assert scene.truth().target("R4").vertical_displacement_m == pytest.approx(0.005)
     with pytest.raises(InputError, match="unknown targets"):
         BridgeScene(BridgeModel(), EpochConditions(occluded=("Q9",)), SETUP)
+
+
+def test_a_pier_shift_moves_that_pier_and_its_targets_not_the_deck():
+    from lidar.simulate.files import conditions_from_dict, conditions_to_dict
+
+    cond = EpochConditions(pier_shifts={1: (0.003, 0.0, 0.0)})
+    scene = BridgeScene(BridgeModel(), cond, SETUP)
+    moved = {d.target.id: d.displacement for d in scene.discs}
+    assert np.allclose(moved["R3"], (0.003, 0, 0)) and np.allclose(moved["R4"], (0.003, 0, 0))
+    assert np.allclose(moved["R1"], 0) and np.allclose(moved["M3"], 0)
+    r3 = scene.truth().target("R3")
+    assert r3.centre_bridge_m[0] == pytest.approx(BridgeModel().targets[2].centre_m[0] + 0.003)
+    assert conditions_from_dict(conditions_to_dict(cond)).pier_shifts == {1: (0.003, 0.0, 0.0)}
+    with pytest.raises(InputError, match="piers"):
+        BridgeScene(BridgeModel(), EpochConditions(pier_shifts={5: (0.003, 0.0, 0.0)}), SETUP)
