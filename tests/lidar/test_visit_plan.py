@@ -1,5 +1,6 @@
 """A visit's set-ups planned together: each target from its best set-up, ties that join them, one budget."""
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -10,7 +11,7 @@ from lidar.setups import MIN_SHARED, MIN_SPREAD_M, spread_m
 from lidar.simulate.bridge import BridgeModel
 from lidar.simulate.scene import BridgeScene, EpochConditions
 from lidar.simulate.setup import ScannerSetup
-from lidar.visit_plan import TIES, SetupTargets, plan_visit, predicted_sigma_mm
+from lidar.visit_plan import TIES, SetupTargets, _weak, plan_visit, predicted_sigma_mm
 
 
 def _setup(model: BridgeModel, k: int, station, heading: float) -> SetupTargets:
@@ -128,3 +129,36 @@ def test_bad_visits_are_refused_in_one_line():
         plan_visit([setups[0], setups[0]])
     with pytest.raises(InputError, match="budget"):
         plan_visit(setups, budget_seconds=0.0)
+
+
+@pytest.mark.parametrize("spans", [(39.9, 39.9, 39.9), (40.0, 40.0)])
+def test_a_set_up_whose_fine_scans_are_in_keeps_its_plan_and_the_next_one_plans_around_it(spans):
+    """On site set-up 2's coarse scan comes after set-up 1's fine scans: set-up 1's plan (made alone) is frozen."""
+    model, setups = _visit(spans, (0.28, 0.72))
+    first = plan_fine_scans(setups[0].targets, budget_seconds=1800.0, closure=True)
+    frozen = replace(setups[0], frozen=first)
+    visit = plan_visit([setups[1], frozen], budget_seconds=3600.0, closure=True)
+    assert visit.plan(1) is first and visit.order == (1, 2)  # as scanned, and worked first
+    held, second = _planned(first), _planned(visit.plan(2))
+    sharp = {t.id for t in setups[0].targets if t.id in held and not _weak(t, setups[0].profile)
+             and math.isfinite(visit.predicted_sigma_mm[1][t.id])}
+    deck = {t.id for t in model.targets if t.group == "measurement"}
+    for tid in deck & sharp:  # measured well already: set-up 2 scans it only to join or in the time left
+        assert visit.assignment[tid] == 1
+        assert tid not in second or tid in visit.ties[2] or tid in visit.second.get(2, ())
+    for tid in deck - held:  # what set-up 1 could not plan goes to set-up 2 when it sees it
+        if math.isfinite(visit.predicted_sigma_mm[2].get(tid, math.inf)):
+            assert visit.assignment[tid] == 2 and tid in second
+    assert len(visit.ties[2]) >= MIN_SHARED and set(visit.ties[2]) <= held & second  # joined on what 1 scanned
+    assert not visit.warnings
+    # set-up 2 gets what set-up 1 left of the visit's budget
+    assert visit.plan(2).budget_seconds == pytest.approx(3600.0 - first.total_seconds, rel=1e-6)
+    assert visit.total_seconds <= 3600.0 * 1.001
+
+
+def test_a_frozen_set_up_that_used_the_whole_budget_leaves_the_next_one_over_it_with_a_warning():
+    _, setups = _visit((39.9, 39.9, 39.9), (0.28, 0.72))
+    first = plan_fine_scans(setups[0].targets, budget_seconds=3600.0, closure=True)
+    visit = plan_visit([replace(setups[0], frozen=first), setups[1]], budget_seconds=first.total_seconds)
+    assert visit.plan(1) is first
+    assert any("already scanned" in w for w in visit.plan(2).warnings)
