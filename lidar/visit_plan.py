@@ -26,7 +26,8 @@ made with). On site the second station's coarse scan usually comes after the fir
 together then plans only the set-ups still to come and takes the frozen plans as given. A target a frozen set-up
 planned and sees well is not assigned again; one it planned weakly goes to a set-up to come that measures it better;
 the ties of a set-up to come are drawn from what the frozen set-ups' windows hold; the budget the set-ups to come
-share is what the frozen ones left of the visit's. The frozen set-ups come first in the order of work.
+share is what the frozen ones left of the visit's (a frozen set-up planned as if it were alone had the whole budget
+to itself: the set-ups after it share a budget of their own). The frozen set-ups come first in the order of work.
 """
 from __future__ import annotations
 
@@ -66,6 +67,9 @@ class SetupTargets:
     profile: ScannerProfile = VZ1000
     #: The plan its fine scans were made with, when they are imported: it is taken as given, not planned again.
     frozen: ScanPlan | None = None
+    #: A frozen plan made as if the set-up were the visit's only one: it had the whole budget to itself, so its time
+    #: does not come out of the budget the set-ups to come share.
+    frozen_alone: bool = False
 
 
 @dataclass(frozen=True)
@@ -227,7 +231,8 @@ def plan_visit(setups: Sequence[SetupTargets], *, epoch: str = "", min_points: i
                          order)
     chosen, assignment, elsewhere = _assign(by_setup, order, sigma)
     ties, warnings = _ties(by_setup, order, sigma, chosen)
-    spent = sum(by_setup[k].frozen.total_seconds for k in frozen)  # type: ignore[union-attr]
+    spent = sum(by_setup[k].frozen.total_seconds for k in frozen  # type: ignore[union-attr]
+                if not by_setup[k].frozen_alone)
     seconds = _second_sightings(by_setup, order, sigma, chosen, budget_seconds - spent, kw)
     elsewhere = {k: {t: j for t, j in elsewhere[k].items() if t not in chosen[k]} for k in order}
     plans = {k: by_setup[k].frozen for k in frozen}
@@ -297,8 +302,10 @@ def _ties(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], sigma: M
     """Add each further set-up's tie targets to ``chosen`` (both sides); returns the ties and what cannot be joined.
 
     Candidates are seen well (resolved, not weak) from the set-up and from one before it (from a frozen one: in a
-    window of its plan). They are added one at a time, each the one that spreads the shared targets furthest off
-    their line (in the set-up's frame), until :data:`TIES` are shared and they spread :data:`TIE_SPREAD_M`. A frozen
+    window of its plan). They are added one at a time, those both coarse scans found before those predicted from the
+    layout (a predicted window may miss its target), each the one that spreads the shared targets furthest off
+    their line (in the set-up's frame), until :data:`TIES` are shared and they spread :data:`TIE_SPREAD_M`, and
+    :data:`TIES` of them were found by both coarse scans when the candidates allow. A frozen
     set-up gets no ties: its windows are scanned.
     """
     ties: dict[int, tuple[str, ...]] = {}
@@ -317,8 +324,12 @@ def _ties(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], sigma: M
                                                                for j in before))
         pool = sorted(tid for tid in good - set(shared) if any(tid in sharp_before[j] for j in before))
         spread = _spread_of(mine)
-        while pool and (len(shared) < TIES or spread(shared) < TIE_SPREAD_M):
-            best = max(pool, key=lambda tid: (round(spread([*shared, tid]), 3),
+        # found by the coarse scans of the set-up and of one before it that sees it well
+        found = {tid for tid in good if not mine[tid].predicted and any(
+            tid in sharp_before[j] and not _target(by_setup[j], tid).predicted for j in before)}
+        while pool and (len(shared) < TIES or spread(shared) < TIE_SPREAD_M
+                        or (len(found.intersection(shared)) < TIES and not found.isdisjoint(pool))):
+            best = max(pool, key=lambda tid: (tid in found, round(spread([*shared, tid]), 3),
                                               -max(sigma[k][tid], min(sigma[j][tid] for j in before
                                                                       if tid in sharp_before[j])), tid))
             pool.remove(best)

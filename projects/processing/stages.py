@@ -509,7 +509,8 @@ def _plan_together(job: Stage1Job, analysis, progress: ProgressCallback | None) 
                                 f"planned ({str(exc).splitlines()[0]})")
                 continue
             cands = tuple(plan_targets(other, job.layout, up_layout=up))
-        setups.append(SetupTargets(o.setup, cands, o.profile, frozen))
+        setups.append(SetupTargets(o.setup, cands, o.profile, frozen,
+                                   frozen_alone=o.frozen_plan is not None and "visit" not in o.frozen_plan))
     visit: VisitPlan = plan_visit(setups, epoch=job.label, min_points=int(job.params["min_points"]),
                                   budget_seconds=float(job.params["budget_min"]) * 60.0,
                                   closure=bool(job.params["closure"]))

@@ -151,9 +151,12 @@ def test_a_set_up_whose_fine_scans_are_in_keeps_its_plan_and_the_next_one_plans_
             assert visit.assignment[tid] == 2 and tid in second
     assert len(visit.ties[2]) >= MIN_SHARED and set(visit.ties[2]) <= held & second  # joined on what 1 scanned
     assert not visit.warnings
-    # set-up 2 gets what set-up 1 left of the visit's budget
+    # set-up 1 planned within the visit's budget: set-up 2 gets what set-up 1 left of it
     assert visit.plan(2).budget_seconds == pytest.approx(3600.0 - first.total_seconds, rel=1e-6)
     assert visit.total_seconds <= 3600.0 * 1.001
+    # set-up 1 planned as if it were alone had the whole budget to itself: set-up 2 gets one of its own
+    own = plan_visit([setups[1], replace(frozen, frozen_alone=True)], budget_seconds=3600.0, closure=True)
+    assert own.plan(1) is first and own.plan(2).budget_seconds == pytest.approx(3600.0, rel=1e-6)
 
 
 def test_a_frozen_set_up_that_used_the_whole_budget_leaves_the_next_one_over_it_with_a_warning():
@@ -162,3 +165,13 @@ def test_a_frozen_set_up_that_used_the_whole_budget_leaves_the_next_one_over_it_
     visit = plan_visit([replace(setups[0], frozen=first), setups[1]], budget_seconds=first.total_seconds)
     assert visit.plan(1) is first
     assert any("already scanned" in w for w in visit.plan(2).warnings)
+
+
+def test_ties_found_by_both_coarse_scans_come_before_those_predicted_from_the_layout():
+    _, setups = _visit((39.9, 39.9, 39.9), (0.28, 0.72), seed=3)
+    ties = plan_visit(setups, budget_seconds=900.0).ties[2]
+    guess = set(ties[:2])  # set-up 2's coarse scan did not find them: their windows would come from the layout
+    second = replace(setups[1], targets=tuple(replace(t, predicted=t.id in guess) for t in setups[1].targets))
+    again = plan_visit([setups[0], second], budget_seconds=900.0).ties[2]
+    assert guess <= set(again)  # still shared (pier targets join every set-up that sees them well) ...
+    assert len(set(again) - guess) >= TIES  # ... but TIES that both coarse scans found join it as well
