@@ -144,9 +144,10 @@ PARAMETERS: tuple[Parameter, ...] = (
               "true | false", added_later=True),
     Parameter("plan_together", False, _boolean, "plan",
               "plan a visit's set-ups together: each target from the set-up that measures it best, tie targets "
-              "to join them, the visit's budget shared; only when every set-up's coarse scan is taken before any "
-              "fine scan (a set-up added after another's fine scans would re-plan windows already scanned). "
-              "Default false: each set-up planned as if it were alone",
+              "to join them, the visit's budget shared. A set-up whose fine scans are imported keeps its plan "
+              "(frozen) and the set-ups added after it are planned around it, with a budget of their own when it "
+              "was planned alone. Default false: each set-up planned as if it were alone (on the warnings bench "
+              "as good, not better)",
               "true | false", added_later=True),
     Parameter("field_model", True, _boolean, "displacements",
               "correct the atmosphere's scale, the retro-reflector range walk and the set-up's drift, estimated "
