@@ -69,11 +69,13 @@ UNLIKE = {
     "4 x 35 m, steel: deck 1.2 m deep, 10 m wide, girder lines ±3.5 m": (
         (35.0,) * 4, {"deck_depth_m": 1.2, "deck_width_m": 10.0, "girder_lines_m": (-3.5, 3.5)}),
 }
-#: ``--unlike``'s station plans: near the ends, and beside the first and the last inner pier (``None``: from the
-#: spans).
+#: ``--unlike``'s station plans: near the ends, beside the first and the last inner pier (``None``: from the
+#: spans), and three set-ups (near the ends and beside the middle; not at it: a station that sees the symmetric
+#: layout symmetrically is refused as ambiguous unless the surveyor says where it stands).
 UNLIKE_STATIONS = {
     "two, near the ends": (0.1, 0.9),
     "two, beside the first and last inner piers": None,
+    "three, near the ends and beside the middle": (0.1, 0.45, 0.9),
 }
 #: The small mode's bridge and stations: the multi-span layout and two set-ups a visit, on a short bridge.
 SMALL_BRIDGES = {"2 x 15 m": (15.0, 15.0)}

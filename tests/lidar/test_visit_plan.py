@@ -7,6 +7,7 @@ import pytest
 
 from common.errors import InputError
 from lidar.plan import PlanTarget, plan_fine_scans
+from lidar.scanner_catalogue import get_scanner
 from lidar.setups import MIN_SHARED, MIN_SPREAD_M, spread_m
 from lidar.simulate.bridge import BridgeModel
 from lidar.simulate.scene import BridgeScene, EpochConditions
@@ -175,3 +176,20 @@ def test_ties_found_by_both_coarse_scans_come_before_those_predicted_from_the_la
     again = plan_visit([setups[0], second], budget_seconds=900.0).ties[2]
     assert guess <= set(again)  # still shared (pier targets join every set-up that sees them well) ...
     assert len(set(again) - guess) >= TIES  # ... but TIES that both coarse scans found join it as well
+
+
+def test_a_second_instrument_is_planned_with_its_own_profile():
+    """Two instruments a visit (set-up 2 a Leica P50: 1 M pts/s, 0.5 mm range noise): each set-up's windows and times
+    come from its own profile, and its predicted sigmas too."""
+    model, setups = _visit((39.9, 39.9, 39.9), (0.28, 0.72))
+    p50 = get_scanner("Leica ScanStation P50")
+    mixed = [setups[0], replace(setups[1], profile=p50)]
+    visit = plan_visit(mixed, budget_seconds=3600.0, closure=True)
+    same = plan_visit(setups, budget_seconds=3600.0, closure=True)
+    assert visit.plan(2).profile.name == p50.name and visit.plan(1).profile.name == same.plan(1).profile.name
+    deck_seen = [t for t in visit.predicted_sigma_mm[2] if t.startswith("M")
+                 and math.isfinite(same.predicted_sigma_mm[2][t]) and math.isfinite(visit.predicted_sigma_mm[2][t])]
+    # the deck targets set-up 2 resolves either way: 0.5 mm range noise against 5 mm
+    assert deck_seen and all(visit.predicted_sigma_mm[2][t] < same.predicted_sigma_mm[2][t] for t in deck_seen)
+    deck = {t.id for t in model.targets if t.group == "measurement"}
+    assert deck <= _planned(visit.plan(1)) | _planned(visit.plan(2)) and not visit.warnings
