@@ -250,7 +250,7 @@ def _frozen_hash(c: Campaign, label: str, inp: EpochInputs, own: str) -> str | N
 
 def _others(c: Campaign, label: str, setup: int, setups: Sequence[int], params: dict) -> tuple[OtherSetup, ...]:
     """The other set-ups (of ``setups``, the visit's) planned together with ``setup`` (none: one, or planned alone)."""
-    if len(setups) < 2 or not params.get("plan_together", False):
+    if len(setups) < 2 or not params.get("plan_together", True):
         return ()
     out = []
     for k in setups:
@@ -281,12 +281,12 @@ def _plan_hashes(c: Campaign, label: str, setup: int, inp: EpochInputs, params: 
     """A set-up's own plan hash, the set-ups planned together with it, and its plan hash within the visit.
 
     A frozen set-up (:func:`_frozen_hash`) keeps its stored plan's hash: set-ups added after its fine scans do not
-    make it stale. The others' own hashes enter a set-up's hash whether they are frozen or not, so that a set-up
+    make it stale, nor does turning ``plan_together`` on or off. The others' own hashes enter a set-up's hash whether they are frozen or not, so that a set-up
     planned together with another one is not planned again when that one's fine scans come in.
     """
     own = _plan_hash(inp, params)
     others = _others(c, label, setup, inp.setups, params)
-    frozen = _frozen_hash(c, label, inp, own) if others else None
+    frozen = _frozen_hash(c, label, inp, own) if len(inp.setups) > 1 else None  # alone or together
     return own, others, frozen or _visit_hash(own, {o.setup: o.own_hash for o in others})
 
 
@@ -600,12 +600,12 @@ def _stale_setups(c: Campaign, label: str, params: dict) -> dict[int, str]:
     first = c.epoch_inputs(label, plan=False)  # one read an epoch (more for further set-ups)
     inputs = {k: first if k == 1 else c.epoch_inputs(label, plan=False, setup=k) for k in first.setups}
     own = {k: _plan_hash(inp, params) for k, inp in inputs.items() if inp.coarse}
-    together = len(own) > 1 and params.get("plan_together", False)
+    together = len(own) > 1 and params.get("plan_together", True)
     out = {}
     for k, inp in inputs.items():
         if not inp.coarse:
             continue
-        frozen = _frozen_hash(c, label, inp, own[k]) if together else None
+        frozen = _frozen_hash(c, label, inp, own[k]) if len(own) > 1 else None  # alone or together
         h = frozen or _visit_hash(own[k], {j: own[j] for j in own if j != k} if together else {})
         why = _stale_reason(inp, params, h)
         if why is not None:

@@ -217,7 +217,7 @@ def test_plan_shows_the_visit_planned_together_and_each_set_up_keeps_its_share(s
     """Issue 40: 'plan --setup K' writes set-up K's plan within the visit's; 'plan' shows the whole visit in order."""
     field = stations
     camp = _init(tmp_path / "camp", field, capsys)
-    assert main(["settings", str(camp), "plan_together", "true"]) == 0  # off by default (docs/long-bridges.md)
+    assert main(["settings", str(camp), "plan_together", "true"]) == 0  # the default, said
     v = field / "v0"
     assert main(["add-epoch", str(camp), "--date", DATES[0], "--coarse", str(v / "setup1" / "coarse.laz")]) == 0
     assert main(["plan", str(camp), "--epoch", DATES[0][:10], "--out", str(tmp_path / "alone.json")]) == 0
@@ -290,3 +290,8 @@ def test_a_set_up_added_after_the_first_ones_fine_scans_leaves_its_plan_alone(st
     with Campaign.open(camp, writable=False) as c:
         assert c.plan(label, 1).to_json()["rois"] == json.loads(before)["rois"]
         assert c.systematics(label)["setups"]["joined"] == [1, 2]
+    # the other way of planning, now that both set-ups are scanned: nothing is planned again
+    assert main(["settings", str(camp), "plan_together", str(not together).lower()]) == 0
+    capsys.readouterr()
+    assert main(["process", str(camp), "--json"]) == 0
+    assert all(e["action"] == "up-to-date" for e in json.loads(capsys.readouterr().out)["epochs"])
