@@ -105,8 +105,10 @@ def scenario(root: Path, spans: tuple, fractions: tuple, *, visits: int, seed: i
              budget_min: float | None = None, model_kw: dict | None = None) -> StudyScore:
     """One bridge and station plan: simulate, import, process, score.
 
-    ``together`` None: each set-up planned and fine-scanned before the next one's coarse scan (as before issue
-    40); True / False: every coarse scan of a visit first, then its set-ups planned together / alone.
+    ``together`` None: each set-up planned and fine-scanned before the next one's coarse scan, as on site, with the
+    campaign's default planning (together since issue 40: a set-up's plan frozen once its fine scans are in; the
+    table in docs/figures/long_bridges.md was measured before, each set-up alone); True / False: every coarse scan
+    of a visit first, then its set-ups planned together / alone.
     """
     model = _multi(spans, **(model_kw or {}))
     rng = np.random.default_rng(seed)
