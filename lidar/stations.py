@@ -223,7 +223,7 @@ def _typical_visit(field: FieldModel, label: str) -> VisitSystematics:
                             0.0, bool(timed), True, (), alternative, float(np.median([v.misfit for v in others])))
 
 
-def station_targets(layout: Layout, station_layout: Sequence[float], *, profile: ScannerProfile,
+def station_targets(layout: Layout, station_layout: ArrayLike, *, profile: ScannerProfile,
                     up: ArrayLike = (0.0, 0.0, 1.0), normals: np.ndarray | None = None, piers: _Piers | None = None,
                     obstacles: Obstacles | None = None
                     ) -> tuple[list[PlanTarget], dict[str, str], dict[str, np.ndarray]]:

@@ -231,11 +231,11 @@ def plan_visit(setups: Sequence[SetupTargets], *, epoch: str = "", min_points: i
                          order)
     chosen, assignment, elsewhere = _assign(by_setup, order, sigma)
     ties, warnings = _ties(by_setup, order, sigma, chosen)
-    spent = sum(by_setup[k].frozen.total_seconds for k in frozen  # type: ignore[union-attr]
-                if not by_setup[k].frozen_alone)
+    given: dict[int, ScanPlan] = {k: p for k in frozen if (p := by_setup[k].frozen) is not None}
+    spent = float(sum(p.total_seconds for k, p in given.items() if not by_setup[k].frozen_alone))
     seconds = _second_sightings(by_setup, order, sigma, chosen, budget_seconds - spent, kw)
     elsewhere = {k: {t: j for t, j in elsewhere[k].items() if t not in chosen[k]} for k in order}
-    plans = {k: by_setup[k].frozen for k in frozen}
+    plans = dict(given)
     plans.update(_share_budget(by_setup, tuple(k for k in order if k not in frozen), chosen, budget_seconds - spent,
                                kw, spent=spent))
     return VisitPlan(epoch, plans, assignment, ties, sigma, float(budget_seconds), order, tuple(warnings), elsewhere,
