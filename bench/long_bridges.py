@@ -62,15 +62,36 @@ STATIONS = {
     "two, ends": (0.28, 0.72),
     "two, end + middle": (0.1, 0.5),
 }
+#: ``--unlike``: bridges further from the demo (five spans; a shallow, wide deck on two girder lines as a steel
+#: plate-girder deck has, its targets on both girder lines), each with extra BridgeModel settings.
+UNLIKE = {
+    "5 x 30 m, concrete box": ((30.0,) * 5, {}),
+    "4 x 35 m, steel: deck 1.2 m deep, 10 m wide, girder lines ±3.5 m": (
+        (35.0,) * 4, {"deck_depth_m": 1.2, "deck_width_m": 10.0, "girder_lines_m": (-3.5, 3.5)}),
+}
+#: ``--unlike``'s station plans: near the ends, beside the first and the last inner pier (``None``: from the
+#: spans), and three set-ups (near the ends and beside the middle; not at it: a station that sees the symmetric
+#: layout symmetrically is refused as ambiguous unless the surveyor says where it stands).
+UNLIKE_STATIONS = {
+    "two, near the ends": (0.1, 0.9),
+    "two, beside the first and last inner piers": None,
+    "three, near the ends and beside the middle": (0.1, 0.45, 0.9),
+}
 #: The small mode's bridge and stations: the multi-span layout and two set-ups a visit, on a short bridge.
 SMALL_BRIDGES = {"2 x 15 m": (15.0, 15.0)}
 SMALL_STATIONS = {"two, ends": (0.28, 0.72)}
 OUT = Path(__file__).resolve().parent / "out"
 
 
-def _multi(spans: tuple) -> BridgeModel:
+def _multi(spans: tuple, **model_kw) -> BridgeModel:
     """The multi-span layout for every bridge (also one span: six deck targets on two girder lines)."""
-    return BridgeModel(spans_m=spans, deck_fractions=(0.4, 0.5, 0.6))
+    return BridgeModel(spans_m=spans, deck_fractions=(0.4, 0.5, 0.6), **model_kw)
+
+
+def inner_pier_fractions(spans: tuple) -> tuple[float, float]:
+    """The first and the last inner pier, as fractions of the bridge's length."""
+    edges = np.cumsum(spans) / sum(spans)
+    return (float(edges[0]), float(edges[-2]))
 
 
 def _stations(model: BridgeModel, fractions: tuple, rng: np.random.Generator) -> list[ScannerSetup]:
@@ -81,13 +102,15 @@ def _stations(model: BridgeModel, fractions: tuple, rng: np.random.Generator) ->
 
 def scenario(root: Path, spans: tuple, fractions: tuple, *, visits: int, seed: int,
              coarse_step_deg: float = 0.05, together: bool | None = None,
-             budget_min: float | None = None) -> StudyScore:
+             budget_min: float | None = None, model_kw: dict | None = None) -> StudyScore:
     """One bridge and station plan: simulate, import, process, score.
 
-    ``together`` None: each set-up planned and fine-scanned before the next one's coarse scan (as before issue
-    40); True / False: every coarse scan of a visit first, then its set-ups planned together / alone.
+    ``together`` None: each set-up planned and fine-scanned before the next one's coarse scan, as on site, with the
+    campaign's default planning (together since issue 40: a set-up's plan frozen once its fine scans are in; the
+    table in docs/figures/long_bridges.md was measured before, each set-up alone); True / False: every coarse scan
+    of a visit first, then its set-ups planned together / alone.
     """
-    model = _multi(spans)
+    model = _multi(spans, **(model_kw or {}))
     rng = np.random.default_rng(seed)
     conditions = [EpochConditions()] + [EpochConditions(span_displacements_m=tuple(
         float(v) for v in rng.uniform(-0.008, 0.0, model.n_spans))) for _ in range(visits - 1)]
@@ -142,7 +165,13 @@ def main() -> None:
                     help="also plan together in the minutes the set-ups planned alone took (a visit's mean)")
     ap.add_argument("--budget-min", type=float, default=None,
                     help="the visit's fine-scan budget, minutes (default the campaign's, 60)")
+    ap.add_argument("--unlike", action="store_true",
+                    help="bridges unlike the demo (five spans; a steel deck on girder lines), two set-ups near the "
+                         "ends and beside the inner piers, planned alone and together")
     args = ap.parse_args()
+    if args.unlike and not args.small:
+        unlike(args)
+        return
     if args.together or args.small:
         together(args)
         return
@@ -221,6 +250,34 @@ def together(args) -> None:
             missing=sum(s.missing for s in scores), expected=sum(s.expected for s in scores),
             rms_mm_max=float(np.nanmax([s.rms_mm for s in scores])), silent_beyond_3sigma_max=silent,
             missing_alone=sum(s.missing for s in alone), missing_together=sum(s.missing for s in joint))
+
+
+def unlike(args) -> None:
+    """Bridges unlike the demo, two set-ups a visit, planned alone and together from the same scans (issue 40)."""
+    print(__doc__.split("Usage")[0].strip() + "\n")
+    OUT.mkdir(exist_ok=True)
+    rows: dict = {}
+    for n, (bridge, (spans, kw)) in enumerate(UNLIKE.items()):
+        for m, (name, fractions) in enumerate(UNLIKE_STATIONS.items()):
+            fr = fractions if fractions is not None else inner_pier_fractions(spans)
+            for how, flag in (("alone", False), ("together", True)):
+                t0 = time.perf_counter()
+                root = OUT / "long_bridges_unlike" / f"b{n}s{m}{how[0]}"
+                s = scenario(root, spans, fr, visits=args.visits, seed=args.seed + 100 + 10 * n + m,
+                             together=flag, budget_min=args.budget_min, model_kw=kw)
+                rows[(bridge, f"{name} ({', '.join(f'{f * sum(spans):.0f}' for f in fr)} m)", how)] = (
+                    s, planned_minutes(root))
+                print(f"{bridge}, {name}, planned {how}: {s.row()} ({time.perf_counter() - t0:.0f} s)", flush=True)
+    print()
+    print(together_table(rows))
+    (OUT / "long_bridges_unlike.json").write_text(json.dumps(
+        {f"{b} | {s} | {h}": dict(v.row(), minutes=mins) for (b, s, h), (v, mins) in rows.items()}, indent=1))
+    write_figure("long_bridges_unlike", together_table(rows))
+    scores = [s for s, _ in rows.values()]
+    figures(scenarios=len(rows), visits=args.visits, displacements=sum(len(s.errors_mm) for s in scores),
+            missing=sum(s.missing for s in scores), expected=sum(s.expected for s in scores),
+            rms_mm_max=float(np.nanmax([s.rms_mm for s in scores])),
+            silent_beyond_3sigma_max=max((s.silent_beyond_3sigma for s in scores if s.errors_mm), default=0.0))
 
 
 if __name__ == "__main__":

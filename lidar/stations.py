@@ -41,6 +41,7 @@ from lidar.scanner_profile import ScannerProfile
 from lidar.systematic.adjustment import FieldModel, VisitSystematics
 from lidar.systematic.budget import corrected_displacements
 from lidar.systematic.range_walk import RangeWalkModel
+from lidar.visit_plan import SetupTargets, VisitPlan, plan_visit
 
 log = logging.getLogger(__name__)
 MIN_INCIDENCE_COS = 0.1  # beyond about 84 deg a retro-reflective disc returns too few points to use
@@ -222,6 +223,77 @@ def _typical_visit(field: FieldModel, label: str) -> VisitSystematics:
                             0.0, bool(timed), True, (), alternative, float(np.median([v.misfit for v in others])))
 
 
+def station_targets(layout: Layout, station_layout: ArrayLike, *, profile: ScannerProfile,
+                    up: ArrayLike = (0.0, 0.0, 1.0), normals: np.ndarray | None = None, piers: _Piers | None = None,
+                    obstacles: Obstacles | None = None
+                    ) -> tuple[list[PlanTarget], dict[str, str], dict[str, np.ndarray]]:
+    """The targets a levelled scanner at ``station_layout`` would plan, in its frame (x along the layout's x).
+
+    Returns the plan targets (the hidden ones left out), why each hidden target is hidden (facing away, grazing,
+    outside the field of view, beyond the range, behind a pier or something the last scan saw), and each plan
+    target's normal in the scanner frame. The heading is the layout's: the windows' azimuths differ on site, their
+    ranges, incidences, points and times do not.
+    """
+    u = np.asarray(up, dtype=np.float64)
+    u = u / np.linalg.norm(u)
+    s = np.asarray(station_layout, dtype=np.float64)
+    if s.shape != (3,) or not np.all(np.isfinite(s)):
+        raise InputError(f"a station must be three finite coordinates, got {station_layout!r}")
+    rot = _level_rotation(u)
+    normals = target_normals(layout, up=u) if normals is None else normals
+    piers = piers or _Piers.from_layout(layout, u)
+    lo, hi = profile.theta_fov_deg
+    reasons: dict[str, str] = {}
+    targets: list[PlanTarget] = []
+    normal_socs: dict[str, np.ndarray] = {}
+    for k, tid in enumerate(layout.ids):
+        x = rot @ (layout.xyz[k] - s)
+        r = float(np.linalg.norm(x))
+        n_s = rot @ normals[k]
+        cos_inc = float(n_s @ (-x / r))
+        theta = math.degrees(math.acos(np.clip(x[2] / r, -1.0, 1.0)))
+        why = None
+        if cos_inc < MIN_INCIDENCE_COS:
+            why = "faces away" if cos_inc <= 0 else f"grazing ({math.degrees(math.acos(cos_inc)):.0f} deg incidence)"
+        elif not lo <= theta <= hi:
+            why = f"outside the vertical field of view (zenith {theta:.0f} deg)"
+        elif r > profile.max_range_m:
+            why = f"beyond the range ({r:.0f} m)"
+        elif piers.blocks(s, layout.xyz[k]):
+            why = "behind a pier"
+        elif obstacles is not None and obstacles.blocks(s, layout.xyz[k]):
+            why = "behind something the last scan saw"
+        if why:
+            reasons[tid] = why
+            continue
+        targets.append(PlanTarget(tid, layout.groups[k], tuple(x), float(layout.diameters_m[k]), False, cos_inc))
+        normal_socs[tid] = n_s
+    return targets, reasons, normal_socs
+
+
+def plan_visit_from_positions(layout: Layout, positions_layout: Sequence[Sequence[float]], *,
+                              profile: ScannerProfile, min_points: int = 1000, budget_seconds: float = 3600.0,
+                              up: ArrayLike = (0.0, 0.0, 1.0), closure: bool = False,
+                              obstacles: Obstacles | None = None) -> VisitPlan:
+    """A visit's set-ups planned together from their planned positions alone, before any coarse scan.
+
+    Each position's targets are those a levelled scanner there would plan (:func:`station_targets`, with their
+    normals); the set-ups are then planned as on site (:func:`lidar.visit_plan.plan_visit`): which set-up measures
+    which target, the ties that join them, each one's share of the visit's budget. Set-up k stands at the k-th
+    position. On site the plans are made again from the coarse scans (the heading and the exact place differ).
+    """
+    u = np.asarray(up, dtype=np.float64)
+    normals = target_normals(layout, up=u / np.linalg.norm(u))
+    piers = _Piers.from_layout(layout, u / np.linalg.norm(u))
+    setups = []
+    for k, pos in enumerate(positions_layout, start=1):
+        targets, _, n_socs = station_targets(layout, pos, profile=profile, up=u, normals=normals, piers=piers,
+                                             obstacles=obstacles)
+        setups.append(SetupTargets(k, tuple(replace(t, normal_socs=tuple(float(v) for v in n_socs[t.id]))
+                                            for t in targets), profile))
+    return plan_visit(setups, min_points=min_points, budget_seconds=budget_seconds, closure=closure)
+
+
 def predict_station(layout: Layout, station_layout: Sequence[float], *, profile: ScannerProfile,
                     min_points: int = 1000, budget_seconds: float = 3600.0, up: ArrayLike = (0.0, 0.0, 1.0),
                     baseline: Mapping[str, object] | None = None,
@@ -254,39 +326,10 @@ def predict_station(layout: Layout, station_layout: Sequence[float], *, profile:
     closure : bool, keyword-only
         Plan a closure window, as processing does (default False).
     """
-    u = np.asarray(up, dtype=np.float64)
-    u = u / np.linalg.norm(u)
     s = np.asarray(station_layout, dtype=np.float64)
-    if s.shape != (3,) or not np.all(np.isfinite(s)):
-        raise InputError(f"a station must be three finite coordinates, got {station_layout!r}")
-    rot = _level_rotation(u)
-    normals = target_normals(layout, up=u) if normals is None else normals
-    piers = piers or _Piers.from_layout(layout, u)
-    lo, hi = profile.theta_fov_deg
-    hidden, reasons, targets, normal_socs = [], {}, [], {}
-    for k, tid in enumerate(layout.ids):
-        x = rot @ (layout.xyz[k] - s)
-        r = float(np.linalg.norm(x))
-        n_s = rot @ normals[k]
-        cos_inc = float(n_s @ (-x / r))
-        theta = math.degrees(math.acos(np.clip(x[2] / r, -1.0, 1.0)))
-        why = None
-        if cos_inc < MIN_INCIDENCE_COS:
-            why = "faces away" if cos_inc <= 0 else f"grazing ({math.degrees(math.acos(cos_inc)):.0f} deg incidence)"
-        elif not lo <= theta <= hi:
-            why = f"outside the vertical field of view (zenith {theta:.0f} deg)"
-        elif r > profile.max_range_m:
-            why = f"beyond the range ({r:.0f} m)"
-        elif piers.blocks(s, layout.xyz[k]):
-            why = "behind a pier"
-        elif obstacles is not None and obstacles.blocks(s, layout.xyz[k]):
-            why = "behind something the last scan saw"
-        if why:
-            hidden.append(tid)
-            reasons[tid] = why
-            continue
-        targets.append(PlanTarget(tid, layout.groups[k], tuple(x), float(layout.diameters_m[k]), False, cos_inc))
-        normal_socs[tid] = n_s
+    targets, reasons, normal_socs = station_targets(layout, s, profile=profile, up=up, normals=normals, piers=piers,
+                                                    obstacles=obstacles)
+    hidden = list(reasons)
     if not targets:
         return StationPrediction(tuple(float(v) for v in s), 0.0, {}, tuple(hidden), {}, reasons, usable=False)
     plan = plan_fine_scans(targets, profile=profile, min_points=min_points, budget_seconds=budget_seconds,

@@ -20,6 +20,14 @@ together (:func:`plan_visit`):
   planned.
 
 The set-ups are worked in their order (set-up 1 is the frame the others are joined into).
+
+A set-up whose fine scans are already imported is *frozen* (:attr:`SetupTargets.frozen`: the plan its scans were
+made with). On site the second station's coarse scan usually comes after the first station's fine scans: planning
+together then plans only the set-ups still to come and takes the frozen plans as given. A target a frozen set-up
+planned and sees well is not assigned again; one it planned weakly goes to a set-up to come that measures it better;
+the ties of a set-up to come are drawn from what the frozen set-ups' windows hold; the budget the set-ups to come
+share is what the frozen ones left of the visit's (a frozen set-up planned as if it were alone had the whole budget
+to itself: the set-ups after it share a budget of their own). The frozen set-ups come first in the order of work.
 """
 from __future__ import annotations
 
@@ -57,6 +65,11 @@ class SetupTargets:
     setup: int
     targets: tuple[PlanTarget, ...]
     profile: ScannerProfile = VZ1000
+    #: The plan its fine scans were made with, when they are imported: it is taken as given, not planned again.
+    frozen: ScanPlan | None = None
+    #: A frozen plan made as if the set-up were the visit's only one: it had the whole budget to itself, so its time
+    #: does not come out of the budget the set-ups to come share.
+    frozen_alone: bool = False
 
 
 @dataclass(frozen=True)
@@ -205,40 +218,68 @@ def plan_visit(setups: Sequence[SetupTargets], *, epoch: str = "", min_points: i
         raise InputError("a visit's set-ups must have distinct numbers")
     if not budget_seconds > 0:
         raise InputError("the time budget must be positive")
-    order = tuple(sorted(numbers))
     by_setup = {s.setup: s for s in setups}
+    frozen = tuple(sorted(k for k in numbers if by_setup[k].frozen is not None))
+    order = frozen + tuple(sorted(k for k in numbers if k not in frozen))  # the frozen ones were worked first
     kw: dict[str, Any] = {"epoch": epoch, "min_points": min_points, "margin_m": margin_m, "closure": closure}
     sigma = {k: {t.id: predicted_sigma_mm(t, profile=by_setup[k].profile, min_points=min_points)
                  for t in by_setup[k].targets} for k in order}
-    if len(order) == 1:
+    if len(order) == 1 and not frozen:
         (k,) = order
         plan = plan_fine_scans(by_setup[k].targets, profile=by_setup[k].profile, budget_seconds=budget_seconds, **kw)
         return VisitPlan(epoch, {k: plan}, {t.id: k for t in by_setup[k].targets}, {}, sigma, float(budget_seconds),
                          order)
     chosen, assignment, elsewhere = _assign(by_setup, order, sigma)
     ties, warnings = _ties(by_setup, order, sigma, chosen)
-    seconds = _second_sightings(by_setup, order, sigma, chosen, budget_seconds, kw)
+    given: dict[int, ScanPlan] = {k: p for k in frozen if (p := by_setup[k].frozen) is not None}
+    spent = float(sum(p.total_seconds for k, p in given.items() if not by_setup[k].frozen_alone))
+    seconds = _second_sightings(by_setup, order, sigma, chosen, budget_seconds - spent, kw)
     elsewhere = {k: {t: j for t, j in elsewhere[k].items() if t not in chosen[k]} for k in order}
-    plans = _share_budget(by_setup, order, chosen, budget_seconds, kw)
+    plans = dict(given)
+    plans.update(_share_budget(by_setup, tuple(k for k in order if k not in frozen), chosen, budget_seconds - spent,
+                               kw, spent=spent))
     return VisitPlan(epoch, plans, assignment, ties, sigma, float(budget_seconds), order, tuple(warnings), elsewhere,
                      seconds)
 
 
+def _held(s: SetupTargets) -> set[str]:
+    """The targets a frozen set-up's plan has windows for (its closure window aside)."""
+    return {r.reflector for r in s.frozen.rois if not r.closure} if s.frozen is not None else set()
+
+
 def _assign(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], sigma: Mapping[int, Mapping[str, float]]
             ) -> tuple[dict[int, set[str]], dict[str, int], dict[int, dict[str, int]]]:
-    """Which targets each set-up plans (before the ties), each target's best set-up, and who measures what instead."""
+    """Which targets each set-up plans (before the ties), each target's best set-up, and who measures what instead.
+
+    A frozen set-up's targets are its plan's; a target it sees well there stays its, one it holds weakly goes to a
+    set-up to come that measures it better.
+    """
     ids = sorted({t.id for k in order for t in by_setup[k].targets})
-    chosen: dict[int, set[str]] = {k: set() for k in order}
+    chosen: dict[int, set[str]] = {k: _held(by_setup[k]) for k in order}
+    free = [k for k in order if by_setup[k].frozen is None]
     assignment: dict[str, int] = {}
+
+    def score(k: int, tid: str) -> tuple[float, int]:
+        return (sigma[k].get(tid, math.inf) * (PREDICTED_PENALTY if _target(by_setup[k], tid).predicted else 1.0),
+                order.index(k))
+
     for tid in ids:
-        seen = [k for k in order if tid in sigma[k]]
-        best = min(seen, key=lambda k: (sigma[k][tid] * (PREDICTED_PENALTY if _target(by_setup[k], tid).predicted
-                                                         else 1.0), order.index(k)))
+        held = [k for k in order if by_setup[k].frozen is not None and tid in chosen[k] and tid in sigma[k]]
+        well = [k for k in held if math.isfinite(sigma[k][tid]) and not _weak(_target(by_setup[k], tid),
+                                                                                by_setup[k].profile)]
+        if well:  # measured well already: not assigned again
+            assignment[tid] = min(well, key=lambda k: score(k, tid))
+            continue
+        seen = [k for k in free if tid in sigma[k]] + held
+        if not seen:  # only frozen set-ups see it, and none planned it: the first one's plan says why
+            assignment[tid] = next(k for k in order if tid in sigma[k])
+            continue
+        best = min(seen, key=lambda k: score(k, tid))
         if not math.isfinite(sigma[best][tid]):  # nobody resolves it: the closest says why in its plan
             best = max(seen, key=lambda k: (_share(by_setup[k], tid), -order.index(k)))
         assignment[tid] = best
         chosen[best].add(tid)
-    for k in order:  # a reference target fixes every set-up that sees it well: its scale, drift and join
+    for k in free:  # a reference target fixes every set-up that sees it well: its scale, drift and join
         for t in by_setup[k].targets:
             if t.group == "reference" and math.isfinite(sigma[k][t.id]) and not _weak(t, by_setup[k].profile):
                 chosen[k].add(t.id)
@@ -260,25 +301,35 @@ def _ties(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], sigma: M
           chosen: dict[int, set[str]]) -> tuple[dict[int, tuple[str, ...]], list[str]]:
     """Add each further set-up's tie targets to ``chosen`` (both sides); returns the ties and what cannot be joined.
 
-    Candidates are seen well (resolved, not weak) from the set-up and from one before it. They are added one at
-    a time, each the one that spreads the shared targets furthest off their line (in the set-up's frame), until
-    :data:`TIES` are shared and they spread :data:`TIE_SPREAD_M`.
+    Candidates are seen well (resolved, not weak) from the set-up and from one before it (from a frozen one: in a
+    window of its plan). They are added one at a time, those both coarse scans found before those predicted from the
+    layout (a predicted window may miss its target), each the one that spreads the shared targets furthest off
+    their line (in the set-up's frame), until :data:`TIES` are shared and they spread :data:`TIE_SPREAD_M`, and
+    :data:`TIES` of them were found by both coarse scans when the candidates allow. A frozen
+    set-up gets no ties: its windows are scanned.
     """
     ties: dict[int, tuple[str, ...]] = {}
     warnings: list[str] = []
     for pos, k in enumerate(order[1:], start=1):
+        if by_setup[k].frozen is not None:
+            continue
         before = order[:pos]
         mine = {t.id: t for t in by_setup[k].targets}
         good = {tid for tid, t in mine.items()
                 if math.isfinite(sigma[k][tid]) and not _weak(t, by_setup[k].profile)}
         sharp_before = {j: {t.id for t in by_setup[j].targets
-                            if math.isfinite(sigma[j][t.id]) and not _weak(t, by_setup[j].profile)} for j in before}
+                            if math.isfinite(sigma[j][t.id]) and not _weak(t, by_setup[j].profile)
+                            and (by_setup[j].frozen is None or t.id in chosen[j])} for j in before}
         shared = sorted(tid for tid in chosen[k] & good if any(tid in chosen[j] and tid in sharp_before[j]
                                                                for j in before))
         pool = sorted(tid for tid in good - set(shared) if any(tid in sharp_before[j] for j in before))
         spread = _spread_of(mine)
-        while pool and (len(shared) < TIES or spread(shared) < TIE_SPREAD_M):
-            best = max(pool, key=lambda tid: (round(spread([*shared, tid]), 3),
+        # found by the coarse scans of the set-up and of one before it that sees it well
+        found = {tid for tid in good if not mine[tid].predicted and any(
+            tid in sharp_before[j] and not _target(by_setup[j], tid).predicted for j in before)}
+        while pool and (len(shared) < TIES or spread(shared) < TIE_SPREAD_M
+                        or (len(found.intersection(shared)) < TIES and not found.isdisjoint(pool))):
+            best = max(pool, key=lambda tid: (tid in found, round(spread([*shared, tid]), 3),
                                               -max(sigma[k][tid], min(sigma[j][tid] for j in before
                                                                       if tid in sharp_before[j])), tid))
             pool.remove(best)
@@ -302,11 +353,13 @@ def _second_sightings(by_setup: Mapping[int, SetupTargets], order: tuple[int, ..
     """Spend the time the visit's budget leaves on second sightings of deck targets (added to ``chosen``; returned).
 
     A target seen well (not weak) from another set-up too is scanned from there as well when time is left: the
-    join combines the two sightings by their covariances. The largest gains in the target's height sigma come first;
+    join combines the two sightings by their covariances. Only set-ups still to come (not frozen) add any;
+    ``budget_seconds`` is what the frozen ones left. The largest gains in the target's height sigma come first;
     a weak sighting is never added (the join leaves it out beside a sharp one).
     """
+    free = [k for k in order if by_setup[k].frozen is None]
     need = sum(plan_fine_scans([t for t in by_setup[k].targets if t.id in chosen[k]], profile=by_setup[k].profile,
-                               budget_seconds=1e9, **kw).total_seconds for k in order if chosen[k])
+                               budget_seconds=1e9, **kw).total_seconds for k in free if chosen[k])
     spare = budget_seconds - need
     added: dict[int, list[str]] = {k: [] for k in order}
     if spare <= 0:
@@ -316,7 +369,7 @@ def _second_sightings(by_setup: Mapping[int, SetupTargets], order: tuple[int, ..
         for tid in chosen[k]:
             best[tid] = min(best.get(tid, math.inf), sigma[k][tid])
     offers = []
-    for k in order:
+    for k in free:
         for t in by_setup[k].targets:
             s_k, s_0 = sigma[k][t.id], best.get(t.id, math.inf)
             if t.id in chosen[k] or t.group != "measurement" or not math.isfinite(s_k) or not math.isfinite(s_0) \
@@ -342,14 +395,19 @@ def _spread_of(targets: Mapping[str, PlanTarget]):
 
 
 def _share_budget(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], chosen: Mapping[int, set[str]],
-                  budget_seconds: float, kw: dict) -> dict[int, ScanPlan]:
-    """Each set-up planned in its share of the visit's budget.
+                  budget_seconds: float, kw: dict, *, spent: float = 0.0) -> dict[int, ScanPlan]:
+    """Each set-up of ``order`` planned in its share of ``budget_seconds``.
+
+    ``budget_seconds`` is what the visit's budget leaves after the ``spent`` seconds of the frozen set-ups.
 
     The shares give every set-up's targets the same points: the most points per target (up to ``min_points``) whose
     windows all fit the visit's budget, found by bisection; each share is its set-up's time at those points, and
     time left over is shared in proportion. When even :data:`MIN_SHARED_POINTS` do not fit, each set-up gets its time
     at those points and every plan says the visit is over its budget.
     """
+    if not order:
+        return {}
+    budget_seconds = max(budget_seconds, 0.0)
     targets = {k: [t for t in by_setup[k].targets if t.id in chosen[k]] for k in order}
     for k in order:
         if not targets[k]:
@@ -371,9 +429,11 @@ def _share_budget(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], 
                 lo, hi = (mid, hi) if sum(times(mid).values()) <= budget_seconds else (lo, mid)
         need = times(lo)
         if sum(need.values()) > budget_seconds * 1.0001:  # each set-up its time at the floor: the visit goes over
+            left = (f"the {budget_seconds / 60:.0f} min its budget leaves after the {spent / 60:.0f} min of the "
+                    "set-ups already scanned" if spent > 0 else f"its budget of {budget_seconds / 60:.0f} min")
             over = (f"the visit's windows take {sum(need.values()) / 60:.0f} min even at {MIN_SHARED_POINTS} points a "
-                    f"target, over its budget of {budget_seconds / 60:.0f} min: each set-up is planned at those "
-                    "points; give budget_min the visit's whole time (both set-ups), or leave a set-up out")
+                    f"target, over {left}: each set-up is planned at those "
+                    "points; give budget_min the visit's whole time (every set-up), or leave a set-up out")
     total = sum(need.values())
     spare = max(budget_seconds - total, 0.0)
     share = {k: need[k] + spare * need[k] / total for k in order}

@@ -139,6 +139,7 @@ class ProductPlanner:
         self.count = 0
         self.labels: dict[Path, str] = {}
         self.refused: dict[str, str] = {}  # epoch -> the line planning refused it with
+        self.fine_imported: set[Path] = set()  # set-up folders whose fine scans are imported
 
     def _import(self, folder: Path, coarse: Path) -> tuple[str, int]:
         """A set-up's coarse scan imported as a surveyor would: (epoch, set-up)."""
@@ -152,6 +153,7 @@ class ProductPlanner:
             if setup > 1:  # another station of the visit: add it to that epoch
                 label = self.labels[Path(folder).parent / "setup1"]
                 self.labels[Path(folder)] = label
+                self.import_fine(c, [Path(folder).parent / f"setup{k}" for k in range(1, setup)])
                 (setup,) = c.add_setup(label, coarse)
             else:
                 when = START + dt.timedelta(days=7 * self.count)
@@ -160,6 +162,18 @@ class ProductPlanner:
                 self.labels[Path(folder)] = label
                 c.add_epoch(label, when.isoformat(), coarse)
         return label, setup
+
+    def import_fine(self, c: Campaign, folders) -> None:
+        """The fine scans of set-ups already worked, imported as on site.
+
+        Each set-up's before the next one's coarse scan (``add-fine`` before ``add-setup``), so that planning
+        together finds their plans frozen.
+        """
+        for f in folders:
+            fine = Path(f) / "fine.laz"
+            if f in self.labels and f not in self.fine_imported and fine.exists():
+                c.import_files(self.labels[f], [fine], "fine", setup=_setup_number(Path(f)))
+                self.fine_imported.add(Path(f))
 
     def __call__(self, folder: Path, coarse: Path) -> list:
 
@@ -225,10 +239,7 @@ def run_study(root: Path, model: BridgeModel, visits: Sequence[EpochConditions],
     write_campaign(field_dir, model, visits, plan_for=planner, stations=stations, seed=seed,
                    coarse_step_deg=coarse_step_deg, plan_visit=planner.plan_visit if coarse_first else None)
     with Campaign.open(camp) as c:
-        for folder, label in planner.labels.items():
-            fine = folder / "fine.laz"
-            if fine.exists():
-                c.import_files(label, [fine], "fine", setup=_setup_number(folder))
+        planner.import_fine(c, list(planner.labels))  # the rest (the last set-up of each visit)
         if air_temperatures_c is not None:
             _import_air(c, root / "temperature.csv", air_temperatures_c)
         process(c)

@@ -8,12 +8,18 @@ import sys
 from app.cli.campaigns import open_campaign, setup_date, setup_of
 from app.cli.output import dump_json, table
 from app.cli.progress import progress_bar
-from common.errors import InputError
+from common.errors import InputError, SurveyError
 from common.files import write_atomic
 from lidar.figures import save_figure
 from projects.onsite.check import check_epoch, check_visit
 from projects.onsite.station_pairs import above, propose_pair, short_of
-from projects.onsite.stations import advise_stations, read_area_csv, station_map_figure
+from projects.onsite.stations import (
+    advise_stations,
+    plan_from_positions,
+    positions_visit_json,
+    read_area_csv,
+    station_map_figure,
+)
 from projects.outputs.field_sheet import write_field_sheet
 from projects.outputs.visit_overview import visit_overview
 from projects.processing.stages import plan_epoch, plan_visit_epoch
@@ -40,13 +46,13 @@ def cmd_field_sheet(args) -> int:
 EXIT_SHORT = 3
 
 
-def _pair(advice, layout, asked: bool, sigma_mm: float | None = None):
-    """The proposed pair of set-ups, when asked or when the best single station cannot measure a deck target (hidden,
-    weak, or above the sigma asked)."""
-    best = next((s for s in advice.stations if s.predicted_sigma_mm), None)
+def _pair(advice, layout, asked: bool, sigma_mm: float | None = None, first=None):
+    """The proposed pair of set-ups, when asked or when the first station (default: the best single one) cannot
+    measure a deck target (hidden, weak, or above the sigma asked)."""
+    best = first or next((s for s in advice.stations if s.predicted_sigma_mm), None)
     if not asked and (best is None or not short_of(best, layout, sigma_mm)):
         return None
-    pair = propose_pair(advice.stations, layout, sigma_mm=sigma_mm)
+    pair = propose_pair(advice.stations, layout, sigma_mm=sigma_mm, first=first)
     if pair is None and asked:
         print("no second station shares three well-spread targets with the best one: no pair to propose",
               file=sys.stderr)
@@ -129,25 +135,56 @@ def _visit_check_out(args, visit, setup: int) -> int:
     return EXIT_SHORT
 
 
+def _first_xy(text: str | None) -> tuple[float, float] | None:
+    if text is None:
+        return None
+    try:
+        x, y = (float(v) for v in text.split(","))
+    except ValueError:
+        raise InputError(f"--first expects x,y in metres (layout frame), got {text!r}") from None
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise InputError(f"--first expects finite x,y in metres, got {text!r}")
+    return (x, y)
+
+
 def cmd_stations(args) -> int:
     area = read_area_csv(args.area) if args.area is not None else None
     if args.top < 0:
         raise InputError("--top must not be negative")
+    if args.sigma_mm is not None and not (math.isfinite(args.sigma_mm) and args.sigma_mm > 0):
+        raise InputError(f"--sigma-mm must be a positive number of millimetres, got {args.sigma_mm}")
+    first_xy = _first_xy(args.first)
     with open_campaign(args.dir, writable=False) as c:
         with progress_bar("evaluating stations") as cb:
             advice = advise_stations(c, area_xy=area, height_m=args.height_m, grid_m=args.grid_m,
-                                     ground_z=args.ground_z, progress=cb)
+                                     ground_z=args.ground_z, also_xy=first_xy, progress=cb)
         layout = c.layout()
-    if args.sigma_mm is not None and not (math.isfinite(args.sigma_mm) and args.sigma_mm > 0):
-        raise InputError(f"--sigma-mm must be a positive number of millimetres, got {args.sigma_mm}")
-    pair = _pair(advice, layout, args.pair, args.sigma_mm)
-    best = next((s for s in advice.stations if s.predicted_sigma_mm), None)
+        first = None
+        if first_xy is not None:
+            first = min(advice.stations, key=lambda s: math.hypot(s.xyz_layout[0] - first_xy[0],
+                                                                  s.xyz_layout[1] - first_xy[1]))
+            if not first.predicted_sigma_mm:
+                raise InputError(f"--first {args.first}: no deck target can be measured from there "
+                                 f"({', '.join(sorted(set(first.reasons.values()))) or 'nothing seen'})")
+        pair = _pair(advice, layout, args.pair, args.sigma_mm, first)
+        positions = [] if pair is None else [pair.first.xyz_layout, pair.second.xyz_layout]
+        visit = None
+        if pair is not None:  # the pair's visit planned together from the two positions
+            try:
+                visit = plan_from_positions(c, positions)
+            except SurveyError as exc:
+                print(f"the pair's visit cannot be planned together: {str(exc).splitlines()[0]}", file=sys.stderr)
+    best = first or next((s for s in advice.stations if s.predicted_sigma_mm), None)
     short = short_of(best, layout, args.sigma_mm) if best is not None else {}
     extra = {"sigma_asked_mm": args.sigma_mm, "best_cannot": short} if short or args.sigma_mm is not None else {}
+    if first is not None:
+        extra = {**extra, "first": first.to_json()}
     if pair is None and not extra:
         advice.save(args.out)
     else:
-        pair_doc = {} if pair is None else {"pair": dict(pair.to_json(), still_short=list(above(pair, args.sigma_mm)))}
+        pair_doc = {} if pair is None else {"pair": dict(pair.to_json(), still_short=list(above(pair, args.sigma_mm)),
+                                                         visit=None if visit is None else
+                                                         positions_visit_json(visit, positions))}
         write_atomic(args.out, json.dumps({**advice.to_json(), **extra, **pair_doc}, indent=1))
     if args.png is not None:
         save_figure(station_map_figure(advice, layout), args.png)
@@ -157,7 +194,8 @@ def cmd_stations(args) -> int:
     table(rows, ["x", "y", "z", "minutes", "worst_sigma_mm", "coarse_step_deg", "hidden", "weak"])
     if best is not None and short:
         asked = f" to {args.sigma_mm:g} mm" if args.sigma_mm is not None else ""
-        print(f"from the best single station ({best.xyz_layout[0]:.1f}, {best.xyz_layout[1]:.1f}) "
+        print(f"from {'the first station' if first else 'the best single station'} "
+              f"({best.xyz_layout[0]:.1f}, {best.xyz_layout[1]:.1f}) "
               f"{len(short)} deck target(s) cannot be measured{asked}: "
               + "; ".join(f"{t} ({why})" for t, why in short.items()))
     if pair is not None and short:
@@ -173,6 +211,14 @@ def cmd_stations(args) -> int:
               f"{worst} mm (one set-up: {pair.first.worst_sigma_mm:.3f} mm), "
               f"{len(pair.shared)} targets shared to join them"
               + (f"; still hidden: {', '.join(pair.hidden)}" if pair.hidden else ""))
+    if visit is not None:  # the visit planned together from the two positions, before any coarse scan
+        for row in positions_visit_json(visit, positions)["setups"]:
+            deck = row["deck_targets_assigned"]
+            print(f"  set-up {row['setup']} at ({row['x']:.1f}, {row['y']:.1f}): {len(row['targets'])} windows, "
+                  f"{row['minutes']:.0f} min; deck targets {', '.join(deck) or 'none'}"
+                  + (f"; ties {', '.join(row['ties'])}" if row["ties"] else ""))
+        for w in visit.warnings:
+            print(f"  {w}")
     print(f"wrote {args.out}: {len(advice.stations)} stations evaluated (ground z {advice.ground_z:.2f} m: "
           f"{advice.ground_source})" + (f"; map {args.png}" if args.png else ""), file=sys.stderr)
     return 0

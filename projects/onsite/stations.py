@@ -20,7 +20,8 @@ from common.errors import InputError
 from common.files import write_atomic
 from common.progress import ProgressCallback, report, scaled
 from common.rigid import fit_rigid
-from lidar.stations import StationPrediction, default_area, grid_in_polygon, survey_stations
+from lidar.stations import StationPrediction, default_area, grid_in_polygon, plan_visit_from_positions, survey_stations
+from lidar.visit_plan import VisitPlan
 from projects.processing.stages import baseline_epoch, layout_up, parameters, read_files
 from projects.store.campaign import Campaign
 
@@ -131,8 +132,11 @@ def seen_surfaces(c: Campaign, last: LastStation, *, voxel_m: float = 0.05,
 
 def advise_stations(c: Campaign, *, area_xy: np.ndarray | None = None, height_m: float = DEFAULT_INSTRUMENT_HEIGHT_M,
                     grid_m: float = 2.0, ground_z: float | None = None, use_last_scan: bool = True,
+                    also_xy: tuple[float, float] | None = None,
                     progress: ProgressCallback | None = None) -> StationAdvice:
     """Evaluate scanner positions on a grid inside the allowed area (default: both sides of the bridge).
+
+    ``also_xy`` adds one position (layout frame) to the grid, wherever it is: where set-up 1 will stand.
 
     With ``use_last_scan`` the last measured epoch's coarse scan adds what it saw (vegetation, site
     huts, the deck's own edges) as obstacles to the lines of sight.
@@ -144,6 +148,8 @@ def advise_stations(c: Campaign, *, area_xy: np.ndarray | None = None, height_m:
     layout = c.layout()
     area = default_area(layout, up=up) if area_xy is None else np.asarray(area_xy, dtype=np.float64)
     grid = grid_in_polygon(area, grid_m)
+    if also_xy is not None:
+        grid = np.vstack([grid.reshape(-1, 2), np.asarray(also_xy, dtype=np.float64).reshape(1, 2)])
     last = last_station(c)
     station = None if last is None else last.position_layout
     if ground_z is not None:
@@ -168,6 +174,43 @@ def advise_stations(c: Campaign, *, area_xy: np.ndarray | None = None, height_m:
                          base_label if baseline else None,
                          None if station is None else (float(station[0]), float(station[1]), float(station[2])),
                          seen_label)
+
+
+def plan_from_positions(c: Campaign, positions_layout) -> VisitPlan:
+    """A visit's set-ups planned together from their planned positions (layout frame), before any coarse scan.
+
+    With the campaign's scanner and planner settings (``min_points``, ``budget_min`` as the visit's, ``closure``,
+    ``layout_up``): which set-up measures which target, the ties that join them, each one's share of the time
+    (:func:`lidar.stations.plan_visit_from_positions`).
+    """
+    params = parameters(c)
+    return plan_visit_from_positions(c.layout(), positions_layout, profile=c.profile,
+                                     min_points=int(params["min_points"]),
+                                     budget_seconds=float(params["budget_min"]) * 60.0, up=layout_up(params),
+                                     closure=bool(params["closure"]))
+
+
+def positions_visit_json(visit: VisitPlan, positions_layout) -> dict:
+    """What :func:`plan_from_positions` planned, set-up by set-up.
+
+    Targets, minutes, ties; no windows: the heading on site is not known yet.
+    """
+    rows = []
+    for k in visit.order:
+        plan = visit.plan(k)
+        x, y, z = (round(float(v), 3) for v in positions_layout[k - 1])
+        rows.append({"setup": k, "x": x, "y": y, "z": z, "minutes": round(plan.total_seconds / 60.0, 2),
+                     "budget_share_minutes": round(plan.budget_seconds / 60.0, 2),
+                     "targets": sorted({r.reflector for r in plan.rois if not r.closure}),
+                     "deck_targets_assigned": sorted(t for t, j in visit.assignment.items() if j == k
+                                                     and any(r.reflector == t and r.group == "measurement"
+                                                             for r in plan.rois)),
+                     "ties": list(visit.ties.get(k, ())), "second_sightings": list(visit.second.get(k, ())),
+                     "points_per_target": plan.points_per_target, "skipped": [t for t, _ in plan.skipped],
+                     "warnings": list(plan.warnings)})
+    return {"planned_together": True, "total_minutes": round(visit.total_seconds / 60.0, 2),
+            "budget_minutes": round(visit.budget_seconds / 60.0, 2), "setups": rows,
+            "warnings": list(visit.warnings)}
 
 
 def _field_model(c: Campaign, params: dict):

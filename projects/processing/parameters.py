@@ -142,11 +142,11 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("closure", True, _boolean, "plan",
               "end every plan with the first reference target's window again, to measure the set-up's drift",
               "true | false", added_later=True),
-    Parameter("plan_together", False, _boolean, "plan",
+    Parameter("plan_together", True, _boolean, "plan",
               "plan a visit's set-ups together: each target from the set-up that measures it best, tie targets "
-              "to join them, the visit's budget shared; only when every set-up's coarse scan is taken before any "
-              "fine scan (a set-up added after another's fine scans would re-plan windows already scanned). "
-              "Default false: each set-up planned as if it were alone",
+              "to join them, the visit's budget shared. A set-up whose fine scans are imported keeps its plan "
+              "(frozen) and the set-ups added after it are planned around it, with a budget of their own when it "
+              "was planned alone. False: each set-up planned as if it were alone",
               "true | false", added_later=True),
     Parameter("field_model", True, _boolean, "displacements",
               "correct the atmosphere's scale, the retro-reflector range walk and the set-up's drift, estimated "
@@ -190,9 +190,14 @@ def parameter(name: str) -> Parameter:
 
 
 def stage1_params(params: dict) -> dict:
-    """The parameters stage 1 depends on (their hash decides whether an epoch is planned and measured again)."""
+    """The parameters stage 1 depends on (their hash decides whether an epoch is planned and measured again).
+
+    ``plan_together`` is not among them: a set-up planned together has the other set-ups' inputs in its plan hash
+    (``projects.processing.stages._visit_hash``), one alone or of a one-set-up visit is planned the same either way,
+    so turning it on or off re-plans only the visits it changes (and none whose fine scans are in: frozen).
+    """
     return {p.name: params[p.name] for p in PROCESSING
-            if p.stage == "plan" and (not p.added_later or params[p.name] != p.default)}
+            if p.stage == "plan" and p.name != "plan_together" and (not p.added_later or params[p.name] != p.default)}
 
 
 def stage2_params(params: dict) -> dict:

@@ -217,7 +217,9 @@ class OtherSetup:
     """Another set-up of the visit, as a set-up planned together with it needs it (plain, picklable values).
 
     ``candidates`` are its plan's targets when its stored plan was made from its present coarse scans (then they
-    are not analysed again); otherwise its coarse files are read and analysed by the job.
+    are not analysed again); otherwise its coarse files are read and analysed by the job. ``frozen_plan`` is its
+    stored plan JSON when its fine scans are imported and that plan was made from its present inputs
+    (:func:`_frozen_hash`): it is taken as given, not planned again.
     """
 
     setup: int
@@ -228,11 +230,30 @@ class OtherSetup:
     coarse_frames: tuple = ()
     coarse_sha256: tuple[str, ...] = ()
     station_xy: tuple[float, float] | None = None
+    frozen_plan: dict | None = None
+
+
+def _frozen_hash(c: Campaign, label: str, inp: EpochInputs, own: str) -> str | None:
+    """The stored plan hash of a set-up whose plan is frozen, else None.
+
+    A set-up's plan is frozen once its fine scans are imported, when its stored plan was made from its present
+    own inputs (its coarse scans, the layout, the parameters, the scanner; alone or together with the set-ups there
+    were then): its windows are scanned, so a set-up added later must not plan them again. On site the second
+    station's coarse scan comes after the first station's fine scans (issue 40).
+    """
+    if not inp.fine:
+        return None
+    sp = inp.plan if inp.plan is not None else c.stored_plan(label, inp.setup)
+    if sp is None:
+        return None
+    if sp.inputs_hash == own or sp.plan_json.get("own_inputs") == own:
+        return sp.inputs_hash
+    return None
 
 
 def _others(c: Campaign, label: str, setup: int, setups: Sequence[int], params: dict) -> tuple[OtherSetup, ...]:
     """The other set-ups (of ``setups``, the visit's) planned together with ``setup`` (none: one, or planned alone)."""
-    if len(setups) < 2 or not params.get("plan_together", False):
+    if len(setups) < 2 or not params.get("plan_together", True):
         return ()
     out = []
     for k in setups:
@@ -244,9 +265,10 @@ def _others(c: Campaign, label: str, setup: int, setups: Sequence[int], params: 
         own = _plan_hash(inp, params)
         doc = inp.plan.plan_json if inp.plan is not None else {}
         cands = _candidates_from_json(doc.get("candidates")) if doc.get("own_inputs") == own else None
+        frozen = doc if _frozen_hash(c, label, inp, own) is not None else None
         out.append(OtherSetup(k, own, inp.profile, cands, tuple(str(c.path_of(r)) for r in inp.coarse),
                               tuple(r.frame_for(k) for r in inp.coarse), tuple(r.sha256 for r in inp.coarse),
-                              _station_hint(k, params)))
+                              _station_hint(k, params), frozen))
     return tuple(out)
 
 
@@ -259,10 +281,16 @@ def _visit_hash(own: str, others: Mapping[int, str]) -> str:
 
 def _plan_hashes(c: Campaign, label: str, setup: int, inp: EpochInputs, params: dict
                  ) -> tuple[str, tuple[OtherSetup, ...], str]:
-    """A set-up's own plan hash, the set-ups planned together with it, and its plan hash within the visit."""
+    """A set-up's own plan hash, the set-ups planned together with it, and its plan hash within the visit.
+
+    A frozen set-up (:func:`_frozen_hash`) keeps its stored plan's hash: set-ups added after its fine scans do not
+    make it stale, nor does turning ``plan_together`` on or off. The others' own hashes enter a set-up's hash whether they are frozen or not, so that a set-up
+    planned together with another one is not planned again when that one's fine scans come in.
+    """
     own = _plan_hash(inp, params)
     others = _others(c, label, setup, inp.setups, params)
-    return own, others, _visit_hash(own, {o.setup: o.own_hash for o in others})
+    frozen = _frozen_hash(c, label, inp, own) if len(inp.setups) > 1 else None  # alone or together
+    return own, others, frozen or _visit_hash(own, {o.setup: o.own_hash for o in others})
 
 
 def _candidates_to_json(targets: Sequence[PlanTarget]) -> list[dict]:
@@ -462,8 +490,10 @@ def _plan_together(job: Stage1Job, analysis, progress: ProgressCallback | None) 
     """A set-up's plan within its visit's, planned together (:func:`lidar.visit_plan.plan_visit`).
 
     The other set-ups' targets come from their stored plans when those were made from their present coarse
-    scans, else from their coarse scans, analysed here. Returns the plan and what its JSON adds: this set-up's
-    candidates (so that the others need not analyse its coarse scan again) and the visit's summary.
+    scans, else from their coarse scans, analysed here. A set-up whose fine scans are imported keeps the plan they
+    were made with (``frozen_plan``); only the set-ups still to come are planned. Returns the plan and what its
+    JSON adds: this set-up's candidates (so that the others need not analyse its coarse scan again) and the
+    visit's summary.
     """
     up = layout_up(job.params)
     mine = tuple(plan_targets(analysis, job.layout, up_layout=up))
@@ -471,6 +501,7 @@ def _plan_together(job: Stage1Job, analysis, progress: ProgressCallback | None) 
     left_out = []
     for n, o in enumerate(job.others):
         cands = o.candidates
+        frozen = ScanPlan.from_json(o.frozen_plan) if o.frozen_plan is not None else None
         if cands is None:
             sub = scaled(progress, 0.25 + 0.15 * n / len(job.others), 0.25 + 0.15 * (n + 1) / len(job.others))
             try:
@@ -481,7 +512,8 @@ def _plan_together(job: Stage1Job, analysis, progress: ProgressCallback | None) 
                                 f"planned ({str(exc).splitlines()[0]})")
                 continue
             cands = tuple(plan_targets(other, job.layout, up_layout=up))
-        setups.append(SetupTargets(o.setup, cands, o.profile))
+        setups.append(SetupTargets(o.setup, cands, o.profile, frozen,
+                                   frozen_alone=o.frozen_plan is not None and "visit" not in o.frozen_plan))
     visit: VisitPlan = plan_visit(setups, epoch=job.label, min_points=int(job.params["min_points"]),
                                   budget_seconds=float(job.params["budget_min"]) * 60.0,
                                   closure=bool(job.params["closure"]))
@@ -573,12 +605,13 @@ def _stale_setups(c: Campaign, label: str, params: dict, inputs: Mapping[int, Ep
         first = c.epoch_inputs(label, plan=False)  # one read an epoch (more for further set-ups)
         inputs = {k: first if k == 1 else c.epoch_inputs(label, plan=False, setup=k) for k in first.setups}
     own = {k: _plan_hash(inp, params) for k, inp in inputs.items() if inp.coarse}
-    together = len(own) > 1 and params.get("plan_together", False)
+    together = len(own) > 1 and params.get("plan_together", True)
     out = {}
     for k, inp in inputs.items():
         if not inp.coarse:
             continue
-        h = _visit_hash(own[k], {j: own[j] for j in own if j != k} if together else {})
+        frozen = _frozen_hash(c, label, inp, own[k]) if len(own) > 1 else None  # alone or together
+        h = frozen or _visit_hash(own[k], {j: own[j] for j in own if j != k} if together else {})
         why = _stale_reason(inp, params, h)
         if why is not None:
             out[k] = why

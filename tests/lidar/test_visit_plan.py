@@ -1,16 +1,18 @@
 """A visit's set-ups planned together: each target from its best set-up, ties that join them, one budget."""
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from common.errors import InputError
 from lidar.plan import PlanTarget, plan_fine_scans
+from lidar.scanner_catalogue import get_scanner
 from lidar.setups import MIN_SHARED, MIN_SPREAD_M, spread_m
 from lidar.simulate.bridge import BridgeModel
 from lidar.simulate.scene import BridgeScene, EpochConditions
 from lidar.simulate.setup import ScannerSetup
-from lidar.visit_plan import TIES, SetupTargets, plan_visit, predicted_sigma_mm
+from lidar.visit_plan import TIES, SetupTargets, _weak, plan_visit, predicted_sigma_mm
 
 
 def _setup(model: BridgeModel, k: int, station, heading: float) -> SetupTargets:
@@ -128,3 +130,66 @@ def test_bad_visits_are_refused_in_one_line():
         plan_visit([setups[0], setups[0]])
     with pytest.raises(InputError, match="budget"):
         plan_visit(setups, budget_seconds=0.0)
+
+
+@pytest.mark.parametrize("spans", [(39.9, 39.9, 39.9), (40.0, 40.0)])
+def test_a_set_up_whose_fine_scans_are_in_keeps_its_plan_and_the_next_one_plans_around_it(spans):
+    """On site set-up 2's coarse scan comes after set-up 1's fine scans: set-up 1's plan (made alone) is frozen."""
+    model, setups = _visit(spans, (0.28, 0.72))
+    first = plan_fine_scans(setups[0].targets, budget_seconds=1800.0, closure=True)
+    frozen = replace(setups[0], frozen=first)
+    visit = plan_visit([setups[1], frozen], budget_seconds=3600.0, closure=True)
+    assert visit.plan(1) is first and visit.order == (1, 2)  # as scanned, and worked first
+    held, second = _planned(first), _planned(visit.plan(2))
+    sharp = {t.id for t in setups[0].targets if t.id in held and not _weak(t, setups[0].profile)
+             and math.isfinite(visit.predicted_sigma_mm[1][t.id])}
+    deck = {t.id for t in model.targets if t.group == "measurement"}
+    for tid in deck & sharp:  # measured well already: set-up 2 scans it only to join or in the time left
+        assert visit.assignment[tid] == 1
+        assert tid not in second or tid in visit.ties[2] or tid in visit.second.get(2, ())
+    for tid in deck - held:  # what set-up 1 could not plan goes to set-up 2 when it sees it
+        if math.isfinite(visit.predicted_sigma_mm[2].get(tid, math.inf)):
+            assert visit.assignment[tid] == 2 and tid in second
+    assert len(visit.ties[2]) >= MIN_SHARED and set(visit.ties[2]) <= held & second  # joined on what 1 scanned
+    assert not visit.warnings
+    # set-up 1 planned within the visit's budget: set-up 2 gets what set-up 1 left of it
+    assert visit.plan(2).budget_seconds == pytest.approx(3600.0 - first.total_seconds, rel=1e-6)
+    assert visit.total_seconds <= 3600.0 * 1.001
+    # set-up 1 planned as if it were alone had the whole budget to itself: set-up 2 gets one of its own
+    own = plan_visit([setups[1], replace(frozen, frozen_alone=True)], budget_seconds=3600.0, closure=True)
+    assert own.plan(1) is first and own.plan(2).budget_seconds == pytest.approx(3600.0, rel=1e-6)
+
+
+def test_a_frozen_set_up_that_used_the_whole_budget_leaves_the_next_one_over_it_with_a_warning():
+    _, setups = _visit((39.9, 39.9, 39.9), (0.28, 0.72))
+    first = plan_fine_scans(setups[0].targets, budget_seconds=3600.0, closure=True)
+    visit = plan_visit([replace(setups[0], frozen=first), setups[1]], budget_seconds=first.total_seconds)
+    assert visit.plan(1) is first
+    assert any("already scanned" in w for w in visit.plan(2).warnings)
+
+
+def test_ties_found_by_both_coarse_scans_come_before_those_predicted_from_the_layout():
+    _, setups = _visit((39.9, 39.9, 39.9), (0.28, 0.72), seed=3)
+    ties = plan_visit(setups, budget_seconds=900.0).ties[2]
+    guess = set(ties[:2])  # set-up 2's coarse scan did not find them: their windows would come from the layout
+    second = replace(setups[1], targets=tuple(replace(t, predicted=t.id in guess) for t in setups[1].targets))
+    again = plan_visit([setups[0], second], budget_seconds=900.0).ties[2]
+    assert guess <= set(again)  # still shared (pier targets join every set-up that sees them well) ...
+    assert len(set(again) - guess) >= TIES  # ... but TIES that both coarse scans found join it as well
+
+
+def test_a_second_instrument_is_planned_with_its_own_profile():
+    """Two instruments a visit (set-up 2 a Leica P50: 1 M pts/s, 0.5 mm range noise): each set-up's windows and times
+    come from its own profile, and its predicted sigmas too."""
+    model, setups = _visit((39.9, 39.9, 39.9), (0.28, 0.72))
+    p50 = get_scanner("Leica ScanStation P50")
+    mixed = [setups[0], replace(setups[1], profile=p50)]
+    visit = plan_visit(mixed, budget_seconds=3600.0, closure=True)
+    same = plan_visit(setups, budget_seconds=3600.0, closure=True)
+    assert visit.plan(2).profile.name == p50.name and visit.plan(1).profile.name == same.plan(1).profile.name
+    deck_seen = [t for t in visit.predicted_sigma_mm[2] if t.startswith("M")
+                 and math.isfinite(same.predicted_sigma_mm[2][t]) and math.isfinite(visit.predicted_sigma_mm[2][t])]
+    # the deck targets set-up 2 resolves either way: 0.5 mm range noise against 5 mm
+    assert deck_seen and all(visit.predicted_sigma_mm[2][t] < same.predicted_sigma_mm[2][t] for t in deck_seen)
+    deck = {t.id for t in model.targets if t.group == "measurement"}
+    assert deck <= _planned(visit.plan(1)) | _planned(visit.plan(2)) and not visit.warnings

@@ -53,4 +53,8 @@ def register(sub) -> None:
     p.add_argument("--pair", action="store_true",
                    help="also propose two set-ups for one visit: the best station and the second that most improves "
                         "the worst target (proposed anyway when the best station hides a deck target)")
+    p.add_argument("--first", default=None, metavar="X,Y",
+                   help="where set-up 1 will stand (layout frame, metres; e.g. one end of a long bridge, where the "
+                        "access is): it is evaluated, what it cannot measure is named, and the second station "
+                        "that completes it is proposed, with the visit planned together from the two positions")
     p.set_defaults(func="cmd_stations")

@@ -217,7 +217,7 @@ def test_plan_shows_the_visit_planned_together_and_each_set_up_keeps_its_share(s
     """Issue 40: 'plan --setup K' writes set-up K's plan within the visit's; 'plan' shows the whole visit in order."""
     field = stations
     camp = _init(tmp_path / "camp", field, capsys)
-    assert main(["settings", str(camp), "plan_together", "true"]) == 0  # off by default (docs/long-bridges.md)
+    assert main(["settings", str(camp), "plan_together", "true"]) == 0  # the default, said
     v = field / "v0"
     assert main(["add-epoch", str(camp), "--date", DATES[0], "--coarse", str(v / "setup1" / "coarse.laz")]) == 0
     assert main(["plan", str(camp), "--epoch", DATES[0][:10], "--out", str(tmp_path / "alone.json")]) == 0
@@ -251,11 +251,13 @@ def test_plan_shows_the_visit_planned_together_and_each_set_up_keeps_its_share(s
     assert "visit" not in json.loads((tmp_path / "a2.json").read_text())
 
 
-def test_a_set_up_added_after_the_first_ones_fine_scans_leaves_its_plan_alone(stations, tmp_path, capsys):
-    """By default each set-up is planned alone: the second station's coarse scan, taken after the first station's
-    fine scans (the usual order on site), must not re-plan windows already scanned (seen with plan_together on)."""
+@pytest.mark.parametrize("together", [True, False])
+def test_a_set_up_added_after_the_first_ones_fine_scans_leaves_its_plan_alone(stations, tmp_path, capsys, together):
+    """The second station's coarse scan, taken after the first station's fine scans (the usual order on site), must
+    not re-plan windows already scanned: planned together, set-up 1's plan is frozen and set-up 2 plans around it."""
     field = stations
     camp = _init(tmp_path / "camp", field, capsys)
+    assert main(["settings", str(camp), "plan_together", str(together).lower()]) == 0
     v, label = field / "v0", DATES[0][:10]
     assert main(["add-epoch", str(camp), "--date", DATES[0], "--coarse", str(v / "setup1" / "coarse.laz")]) == 0
     plan = tmp_path / "p1.json"
@@ -270,3 +272,26 @@ def test_a_set_up_added_after_the_first_ones_fine_scans_leaves_its_plan_alone(st
     assert main(["status", str(camp), "--json"]) == 0
     epoch = next(e for e in json.loads(capsys.readouterr().out)["epochs"] if e["epoch"] == label)
     assert "set-up 1" not in epoch["stale"] and not epoch["stale"].startswith("inputs"), epoch["stale"]
+    # set-up 2's plan: within the visit's, around set-up 1's windows (as scanned), which join it
+    p2 = tmp_path / "p2.json"
+    assert main(["plan", str(camp), "--epoch", label, "--setup", "2", "--out", str(p2)]) == 0
+    doc = json.loads(p2.read_text())
+    if together:
+        first = {r["reflector"] for r in json.loads(before)["rois"] if not r.get("closure")}
+        ties = doc["visit"]["ties"]
+        assert doc["visit"]["setups"] == [1, 2] and len(ties) >= 3 and set(ties) <= first
+        # set-up 1 was planned as if it were alone (the whole budget to itself): set-up 2 gets a budget of its own
+        assert doc["budget_seconds"] == pytest.approx(doc["visit"]["visit_budget_seconds"], rel=1e-3)
+    else:
+        assert "visit" not in doc
+    # its fine scans measured with that plan, the visit processes and joins
+    assert main(["add-fine", str(camp), "--epoch", label, str(_fine(v / "setup2", p2))]) == 0
+    assert main(["process", str(camp)]) == 0
+    with Campaign.open(camp, writable=False) as c:
+        assert c.plan(label, 1).to_json()["rois"] == json.loads(before)["rois"]
+        assert c.systematics(label)["setups"]["joined"] == [1, 2]
+    # the other way of planning, now that both set-ups are scanned: nothing is planned again
+    assert main(["settings", str(camp), "plan_together", str(not together).lower()]) == 0
+    capsys.readouterr()
+    assert main(["process", str(camp), "--json"]) == 0
+    assert all(e["action"] == "up-to-date" for e in json.loads(capsys.readouterr().out)["epochs"])

@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 
 from app.cli.main import main
-from lidar.layout import layout_from_model
+from lidar.layout import layout_from_model, write_layout_csv
 from lidar.simulate import BridgeModel
 from lidar.stations import StationPrediction
 from projects.onsite.station_pairs import above, combine, propose_pair, short_of
@@ -87,3 +87,33 @@ def test_the_best_station_names_what_it_cannot_measure_to_the_sigma_asked_and_th
     pair = propose_pair(stations, LAYOUT, sigma_mm=0.12)
     assert pair is not None and pair.second is stations[2] and above(pair, 0.12) == ()
     assert above(combine(first, stations[1], LAYOUT), 0.12)  # the far end alone leaves span 1 above it
+
+
+def test_from_one_end_of_a_long_bridge_before_any_visit_the_pair_and_its_visit_are_proposed(tmp_path, capsys):
+    """Issue 40: from the layout alone (no coarse scan yet), set-up 1 at one end of 3 x 39.9 m: the advisor names
+    what it cannot measure, the second position near the other end, and the visit planned together from both."""
+    lay = tmp_path / "layout.csv"
+    write_layout_csv(layout_from_model(BridgeModel(spans_m=(39.9, 39.9, 39.9), deck_fractions=(0.4, 0.5, 0.6)),
+                                       noise_m=0.02, rng=np.random.default_rng(1)), lay)
+    camp = tmp_path / "camp"
+    assert main(["init", str(camp), "--name", "Three spans", "--layout", str(lay), "--span-m", "39.9"]) == 0
+    area = tmp_path / "area.csv"
+    area.write_text("x,y\n-5,-18\n125,-18\n125,-9\n-5,-9\n")
+    out = tmp_path / "stations.json"
+    capsys.readouterr()
+    assert main(["stations", str(camp), "--out", str(out), "--area", str(area), "--grid-m", "10",
+                 "--first", "12,-12"]) == 0
+    text = capsys.readouterr().out
+    d = json.loads(out.read_text())
+    deck = _deck_of(camp)
+    assert d["first"]["x"] == 12.0 and set(d["best_cannot"]) >= {t for t in deck if int(t[1:]) > 12}  # the far span
+    assert "from the first station (12.0, -12.0)" in text and "a second set-up at" in text
+    pair = d["pair"]
+    assert pair["second"]["x"] > 60.0 and not pair["still_short"] and len(pair["shared"]) >= 3  # the other end
+    visit = pair["visit"]
+    assert [s["setup"] for s in visit["setups"]] == [1, 2] and len(visit["setups"][1]["ties"]) >= 3
+    assigned = {t for s in visit["setups"] for t in s["deck_targets_assigned"]}
+    assert assigned == deck and not visit["warnings"]  # every deck target from one set-up or the other, joined
+    assert "set-up 2 at (" in text and "ties" in text
+    assert main(["stations", str(camp), "--out", str(out), "--first", "12"]) == 1
+    assert "--first expects x,y" in capsys.readouterr().err
