@@ -39,7 +39,6 @@ import json
 import os
 import resource
 import shutil
-import struct
 import subprocess
 import sys
 import tempfile
@@ -52,6 +51,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from _harness import ROOT, figures, small_mode, write_figure  # noqa: E402
+from bench_campaign import variant  # noqa: E402
 
 from common.errors import SurveyError  # noqa: E402
 from lidar.layout import layout_from_model  # noqa: E402
@@ -69,8 +69,6 @@ from projects.results.table import displacement_table  # noqa: E402
 from projects.store.campaign import Campaign  # noqa: E402
 
 START = dt.datetime(2026, 1, 5, 9, 0, tzinfo=dt.UTC)
-#: Where a LAS header's project GUID lies (bytes 8-23 of every LAS 1.0-1.4 header, LAZ included: not compressed).
-GUID_OFFSET = 8
 
 
 def _peak_mb() -> float:
@@ -86,19 +84,6 @@ def _timed(fn, *args):
 def _size_mb(folder: Path) -> float:
     """The folder's size on disk: its files, links not followed (a scan's link under scans/by-visit/ costs nothing)."""
     return sum(p.lstat().st_size for p in folder.rglob("*") if p.is_file() and not p.is_symlink()) / 1e6
-
-
-def own_copy(src: Path, dst: Path, visit: int) -> Path:
-    """``src`` copied to ``dst`` with the visit's number in its LAS header's project GUID: the same points, other
-    bytes (the campaign refuses a file it holds already, by its checksum)."""
-    dst.parent.mkdir(parents=True, exist_ok=True)
-    shutil.copyfile(src, dst)
-    with open(dst, "r+b") as f:
-        if f.read(4) != b"LASF":
-            raise ValueError(f"{src}: not a LAS/LAZ file")
-        f.seek(GUID_OFFSET)
-        f.write(struct.pack("<4sI", b"yrs4", visit))
-    return dst
 
 
 @dataclass
@@ -190,6 +175,13 @@ def app_times(folder: Path, timeout_s: float = 300.0) -> dict:
     return json.loads(line[2:])
 
 
+def _drawn(app, canvas) -> None:
+    """Let the event loop run until the canvas has drawn what its view asked (its idle draw, once)."""
+    app.processEvents()
+    while getattr(canvas, "_draw_pending", False):
+        app.processEvents()
+
+
 def _app_child(folder: str) -> int:
     t0 = time.perf_counter()
     from PySide6.QtCore import QSettings
@@ -209,16 +201,14 @@ def _app_child(folder: str) -> int:
         if not win.open_campaign(folder):
             print("the window refused the campaign", file=sys.stderr)
             return 1
-        win.displacements.canvas.draw()  # every target's history, drawn now rather than when the loop idles
-        app.processEvents()
+        _drawn(app, win.displacements.canvas)  # every target's history drawn, as the window shows it
         t_open = time.perf_counter() - t1
         targets = sorted(win.displacements.histories)
         rid = targets[len(targets) // 2]
         t2 = time.perf_counter()
         win.state.select(reflector=rid)
         win.displacements.show_target(rid)
-        win.displacements.canvas.draw()
-        app.processEvents()
+        _drawn(app, win.displacements.canvas)
         t_history = time.perf_counter() - t2
         epochs = len(win.state.snapshot.epochs)
         win.close()
@@ -258,7 +248,8 @@ def run(root: Path, visits: int, checkpoints: list[int], window: int, *, distinc
             if check or len(pending) >= batch:
                 process_batch(c)
             visit = field_dir / label
-            coarse = own_copy(scenes.get(k).coarse, visit / "coarse.laz", k + 1)
+            visit.mkdir(parents=True)
+            coarse = variant(scenes.get(k).coarse, visit / "coarse.laz", k + 1)
             before = _peak_mb()
 
             def add_and_plan(c=c, label=label, k=k, coarse=coarse):
@@ -271,7 +262,7 @@ def run(root: Path, visits: int, checkpoints: list[int], window: int, *, distinc
                 refused.append(f"{label}: {str(exc).splitlines()[0][:100]}")
                 shutil.rmtree(visit)
                 continue
-            fine = own_copy(scenes.fine(k, plan), visit / "fine.laz", k + 1)
+            fine = variant(scenes.fine(k, plan), visit / "fine.laz", k + 1)
             _, t_fine = _timed(c.import_files, label, [fine], "fine")
             shutil.rmtree(visit)  # the campaign keeps its own copies
             if not check:
