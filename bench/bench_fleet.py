@@ -313,7 +313,7 @@ def main(argv: list[str]) -> int:
             per_bridge_s_2=rows[-1]["per_bridge_s"], worker_mb_max=max(r["worker_mb"] for r in rows),
             displacement_rows=extra["rows"], largest_rounding=extra["rounding"])
     if not small:
-        write_figure("fleet", text, argv=argv)
+        write_figure("bench_fleet", text, argv=argv)
     return 0
 
 
