@@ -44,9 +44,10 @@ CHECKS: dict[str, tuple[float, dict[str, tuple[float | None, float | None]]]] = 
     "bench_gui_latency": (900, {"actions": (22, 22), "errors": (0, 0), "rescans_asked": (1, None),
                                 "points_per_coarse_scan": (100_000, 1_000_000), "longest_gap_ms": (50.0, 20000.0),
                                 "over_target": PRESENT}),
-    "bench_fleet": (900, {"campaigns": (2, 2), "epochs": (4, 4), "displacement_rows": (1, None),
-                          "local_ratio": (0.0, 20.0), "external_ratio": (0.0, 20.0),
-                          "largest_rounding": (0.0, 1e-9)}),
+    # four bridges of two kinds, a baseline and a visit each, on 1 and 2 local workers and an external scheduler
+    "bench_fleet": (900, {"bridges": (4, 4), "failures": (0, 0), "displacement_rows": (1, None),
+                          "gain_1_to_2": (0.1, 10.0), "external_gain": (0.1, 10.0), "per_bridge_s_2": (0.0, 300.0),
+                          "worker_mb_max": (10.0, 4000.0), "largest_rounding": (0.0, 1e-9)}),
     "bench_ndt": (300, {"start_error_mm": (20.0, None), "icp_error_mm": (0.0, 5.0), "ndt_error_mm": PRESENT,
                         "ndt_time_ratio": PRESENT}),
     "bench_pipeline": (900, {"points": (150_000, 600_000), "coarse_time_ratio": (0.0, 100.0),
@@ -92,7 +93,9 @@ CHECKS: dict[str, tuple[float, dict[str, tuple[float | None, float | None]]]] = 
     # eight weekly visits with the field window at 3: the eighth recomputes at most the window's visits
     "years": (900, {"visits": (8, 8), "window": (3, 3), "recomputed_last": (0, 3),
                     "process_ratio_last_to_first": (0.0, 10.0), "status_s_last": (0.0, 30.0),
-                    "folder_mb_last": (1.0, None)}),
+                    "folder_mb_last": (1.0, None), "app_open_s_last": (0.0, 60.0), "history_s_last": (0.0, 60.0),
+                    "values_kept": (1, None), "beyond_sigma_since_left": (0, 0),
+                    "beyond_sigma_since_first": PRESENT}),
     # one campaign of three visits, the last with a cable tie beside M3: it must warn, and nothing be silent
     "warnings_truth": (900, {"campaigns": (1, 1), "unprocessed": (0, 0), "clean_visits": (1, 1), "trapped_visits": (1, 1),
                              "trapped_visits_quiet": (0.0, 0.0), "silent_beyond_3sigma_max": (0.0, 0.0),

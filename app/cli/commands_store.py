@@ -77,8 +77,11 @@ def cmd_archive(args) -> int:
                 c.epoch(args.epoch)
                 labels = [args.epoch]
             with progress_bar("restoring", enabled=not args.dry_run) as cb:
-                run = restore_scans(c, labels, dry_run=args.dry_run, progress=cb)
+                run = restore_scans(c, labels, dry_run=args.dry_run, progress=cb, source=args.source)
         return _said(args, run, "restore", {})
+    if args.source is not None:
+        raise InputError("--from goes with --restore: it names where the archive disk is mounted now; to archive, "
+                         "give the folder to move the scans into with --to DEST")
     if args.to is None:
         raise InputError("say where to move the scans: --to DEST (a folder on another disk), or --restore to bring "
                          "archived scans back")

@@ -8,10 +8,11 @@ raises ``SurveyError`` with a message for the user.
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from common.errors import InputError
-from common.files import write_atomic
+from common.files import free_bytes, write_atomic
 from common.processes import run_in_process
 from common.progress import scaled
 from lidar.io.poses import file_frames
@@ -32,10 +33,12 @@ from projects.processing.stages import plan_epoch, save_edited_plan
 from projects.processing.stages import process as run
 from projects.processing.stages import set_parameter as setp
 from projects.results.integrity import repair_folder, verify_campaign
+from projects.results.storage import archivable_epochs
 from projects.results.table import displacement_table, to_csv
 from projects.series.camera import crossvalidate, import_series, save_crossval
 from projects.series.environment import add_event as add
 from projects.series.environment import import_env as imp
+from projects.store.archive import StorageRun, archive_scans, archived_scans, folder_bytes, is_here, restore_scans
 from projects.store.campaign import Campaign, parse_datetime
 from projects.store.limits import set_limit_rule
 
@@ -252,6 +255,47 @@ def import_prediction(session, v: dict, progress: Callable) -> dict:
             if c.settings().get("casting_date") != before:
                 c.set_setting("casting_date", before)  # a refused import leaves the campaign as it was
             raise
+
+
+@dataclass(frozen=True)
+class StorageMove:
+    """What an archive or restore run did or, dry, would do (Campaign ▸ Archive processed scans / Restore scans).
+
+    ``left``: visits with scans that are not archived, and why; ``size``/``after``: the campaign folder's bytes
+    before and after; ``free``: the bytes free where the scans go; ``unreachable``: the recorded archive folders
+    that cannot be reached now (a restore without a folder to take the scans from).
+    """
+    run: StorageRun
+    size: int = 0
+    after: int = 0
+    free: int | None = None
+    left: dict[str, str] = field(default_factory=dict)
+    unreachable: tuple[str, ...] = ()
+
+
+def archive(session, dest: str | Path, progress: Callable, *, dry_run: bool = False) -> StorageMove:
+    """Move the scans of every fully processed visit to ``dest`` (or, ``dry_run``, only say what would move)."""
+    opened = session.read() if dry_run else session.write()
+    with opened as c:
+        labels, left = archivable_epochs(c)
+        size = folder_bytes(c.folder)
+        run = archive_scans(c, dest, labels, dry_run=dry_run, progress=progress)
+        after = size if dry_run else folder_bytes(c.folder)
+    return StorageMove(run, size, after, free_bytes(dest), left)
+
+
+def restore(session, source: str | Path | None, progress: Callable, *, dry_run: bool = False) -> StorageMove:
+    """Bring every archived scan back, checked, from its recorded place or from ``source`` (the folder the archive
+    disk is mounted at now). Dry without ``source``: the recorded places out of reach are named, not raised."""
+    opened = session.read() if dry_run else session.write()
+    with opened as c:
+        if dry_run and source is None:
+            gone = [a for a in archived_scans(c) if not is_here(c, a.file) and not Path(a.place).is_file()]
+            if gone:
+                places = tuple(dict.fromkeys(str(Path(a.place).parent) for a in gone))
+                return StorageMove(StorageRun(dry_run=True), unreachable=places)
+        run = restore_scans(c, None, dry_run=dry_run, progress=progress, source=source)
+        return StorageMove(run, free=free_bytes(c.folder))
 
 
 def verify(session, progress: Callable) -> list:

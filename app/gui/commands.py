@@ -11,6 +11,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Protocol
 
+from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import QInputDialog, QMessageBox
 
 from app.gui import actions
@@ -30,7 +31,7 @@ from app.gui.dialogs import (
 from app.gui.state.app_state import AppState
 from app.gui.state.cloud_display import prepare_cloud
 from app.gui.state.folders import LastFolders
-from app.gui.state.words import in_app_words, windows_text
+from app.gui.state.words import archive_question, in_app_words, nothing_to_archive, restore_question, windows_text
 from app.gui.views.fine_figure import draw_inspection
 from app.gui.views.fleet_view import FleetView
 from common.errors import SurveyError
@@ -514,6 +515,71 @@ class Commands:
             return len(done)
 
         self._quick("Repair campaign", fn, lambda n: f"repair: {n} repair(s); nothing was deleted")
+
+    # ------------------------------------------------------------------ scans out of the campaign and back
+    def _then(self, title: str, fn: Callable, on_done: Callable | None = None) -> None:
+        """Start a job once the one calling this has finished (its end resets the progress bar)."""
+        QTimer.singleShot(0, lambda: self._job(title, fn, on_done))
+
+    def archive_scans(self) -> None:
+        """Campaign ▸ Archive processed scans…: a folder (another disk), what would move, then the move."""
+        dest = ask_folder(self.parent, "Archive processed scans to (a folder on another disk)", self.host.folders,
+                          "archives")
+        if not dest:
+            return
+
+        def ask(move) -> None:
+            if not move.run.moved:
+                QMessageBox.information(self.parent, "Archive processed scans", nothing_to_archive(move))
+                self.state.status.result("archive: nothing to move")
+                return
+            if QMessageBox.question(self.parent, "Archive processed scans", archive_question(move, dest),
+                                    QMessageBox.Yes | QMessageBox.No, QMessageBox.No) != QMessageBox.Yes:
+                self.state.status.result("archive: nothing was moved")
+                return
+            self._then("Archiving scans", lambda p: actions.archive(self.state.access, dest, p), done)
+
+        def done(move) -> None:
+            self.state.refresh()
+            self.state.status.result(f"archived {len(move.run.moved)} scan(s) of {len(move.run.epochs)} visit(s) to "
+                                     f"{dest}: {(move.size - move.after) / 1e6:.1f} MB freed")
+
+        self._job("Looking at what to archive", lambda p: actions.archive(self.state.access, dest, p, dry_run=True),
+                  ask)
+
+    def restore_scans(self, source: str | None = None) -> None:
+        """Campaign ▸ Restore scans…: what would come back from where, then the copies, each checked. When the
+        recorded archive folder is out of reach, a folder picker asks where the archive disk is mounted now."""
+        def ask(move) -> None:
+            if move.unreachable:
+                where = " and ".join(move.unreachable)
+                if QMessageBox.question(
+                        self.parent, "Restore scans", f"The archived scans are not at {where} (the archive disk is not "
+                        "connected, or mounted somewhere else). Choose the folder they are in now?",
+                        QMessageBox.Yes | QMessageBox.No, QMessageBox.Yes) != QMessageBox.Yes:
+                    self.state.status.result("restore: nothing was brought back")
+                    return
+                folder = ask_folder(self.parent, "The folder of the archived scans", self.host.folders, "archives")
+                if folder:
+                    QTimer.singleShot(0, lambda: self.restore_scans(folder))
+                return
+            if not move.run.moved:
+                QMessageBox.information(self.parent, "Restore scans", "Nothing to restore: no scan is archived.")
+                self.state.status.result("restore: nothing archived")
+                return
+            if QMessageBox.question(self.parent, "Restore scans", restore_question(move),
+                                    QMessageBox.Yes | QMessageBox.No, QMessageBox.Yes) != QMessageBox.Yes:
+                self.state.status.result("restore: nothing was brought back")
+                return
+            self._then("Restoring scans", lambda p: actions.restore(self.state.access, source, p), done)
+
+        def done(move) -> None:
+            self.state.refresh()
+            self.state.status.result(f"brought back {len(move.run.moved)} scan(s) of {len(move.run.epochs)} visit(s), "
+                                     "each checked against its checksum")
+
+        self._job("Looking at what to restore",
+                  lambda p: actions.restore(self.state.access, source, p, dry_run=True), ask)
 
     def write_report(self, *, detail: bool = False) -> None:
         """The owner's report (main body); ``detail``: with the appendix (every visit's page, the action log)."""

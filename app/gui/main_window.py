@@ -214,6 +214,11 @@ class MainWindow(QMainWindow):
         m.addSeparator()
         self._action(m, "&Verify campaign", cmd.verify_campaign)
         self._action(m, "Re&pair campaign", cmd.repair_campaign)
+        m.addSeparator()
+        self._action(m, "&Archive processed scans…", cmd.archive_scans,
+                     tip="Move the scans of fully processed visits to another disk, each checked; the results stay")
+        self._action(m, "Restore s&cans…", cmd.restore_scans,
+                     tip="Bring archived scans back into the campaign folder, each checked against its checksum")
         m = mb.addMenu("&Epoch")
         self.act_add_epoch = self._action(m, "&Add epoch…", cmd.add_epoch, "Ctrl+E",
                                           tip="Import the coarse scan of a visit (and its fine scans, if any)")

@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from common.files import MB, disk_full_error, ensure_free, is_disk_full, sha256_of
-from common.progress import ProgressCallback, report
+from common.progress import ProgressCallback, report, scaled
 from projects.store import journal
 from projects.store.campaign import Campaign
 from projects.store.errors import CampaignError, ScansArchivedError
@@ -318,21 +318,29 @@ def _archive_one(c: Campaign, real: Path, f: ScanFile, recorded: ArchivedScan | 
 
 
 def restore_scans(c: Campaign, epochs: Sequence[str] | None = None, *, dry_run: bool = False,
-                  progress: ProgressCallback | None = None) -> StorageRun:
+                  progress: ProgressCallback | None = None, source: str | os.PathLike | None = None) -> StorageRun:
     """Bring the archived scans of ``epochs`` (default all) back into the campaign folder, checked (module notes).
 
     Every copy must be reachable and the campaign's disk must hold them all, else one line before anything moves.
+    ``source``: the folder the archive disk is mounted at now, when the recorded place cannot be reached (another
+    computer, another mount point): the copies not at their recorded place are taken from there, each checked
+    against the checksum of its import and its new place recorded (:func:`relocate_archived`) before it is copied.
     The archived copy is removed once the scan is back and recorded so (a copy that cannot be removed is kept;
     one that a stopped restore left is removed by the next).
     """
     scans = archived_scans(c, epochs)
+    if source is not None:
+        scans = relocate_archived(c, scans, source, dry_run=dry_run, progress=scaled(progress, 0.0, 0.5))
+        progress = scaled(progress, 0.5, 1.0)
     run = StorageRun(dry_run=dry_run)
     unreachable = [a for a in scans if not is_here(c, a.file) and not Path(a.place).is_file()]
     if unreachable:
         places = list(dict.fromkeys(str(Path(a.place).parent) for a in unreachable))
-        raise CampaignError(f"{' and '.join(places)}: the archived copies of {len(unreachable)} scan(s) are not there "
-                            f"(first {unreachable[0].name} of epoch {unreachable[0].file.epoch}); connect the archive "
-                            "disk and run the command again; nothing was changed")
+        also = "" if source is None else f" nor in {source}"
+        raise CampaignError(f"{' and '.join(places)}: the archived copies of {len(unreachable)} scan(s) are not there"
+                            f"{also} (first {unreachable[0].name} of epoch {unreachable[0].file.epoch}); connect the "
+                            "archive disk and run the command again, or name the folder it is mounted at now "
+                            "(--from FOLDER); nothing was changed")
     run.moved = [(a.file.stored_path, a.file.epoch, a.file.size, a.place) for a in scans]
     if dry_run:
         return run
@@ -344,6 +352,60 @@ def restore_scans(c: Campaign, epochs: Sequence[str] | None = None, *, dry_run: 
         _restore_one(c, a)
     report(progress, 1.0, "restored")
     return run
+
+
+def relocate_archived(c: Campaign, scans: Sequence[ArchivedScan], source: str | os.PathLike, *,
+                      dry_run: bool = False, progress: ProgressCallback | None = None) -> list[ArchivedScan]:
+    """``scans``, those not at their recorded place found in ``source`` (an archive disk mounted elsewhere) instead.
+
+    Each copy found there under its stored name is checked against the checksum recorded at its import, then its
+    new place is recorded (journal, ``archived_files``, the log) unless ``dry_run``.
+
+    A copy in ``source`` with another checksum, or a ``source`` that is no folder, is one line before anything is
+    recorded. Scans found neither place keep their recorded place (the caller says they cannot be reached).
+    """
+    src = Path(source)
+    if not src.is_dir():
+        raise CampaignError(f"{source}: no such folder (is the archive disk connected and mounted?); give the folder "
+                            "the archived scans are in; nothing was changed")
+    found: dict[str, Path] = {}
+    away_now = [a for a in scans if not is_here(c, a.file) and not Path(a.place).is_file()]
+    for k, a in enumerate(away_now):
+        cand = src / a.name
+        if not cand.is_file():
+            continue
+        report(progress, k / max(len(away_now), 1), f"checking {cand.name}")
+        try:
+            same = sha256_of(cand) == a.file.sha256
+        except OSError as exc:
+            raise CampaignError(f"{cand}: cannot be read ({exc.strerror or exc}); nothing was changed") from None
+        if not same:
+            raise CampaignError(f"{cand}: does not match the checksum recorded at its import (epoch {a.file.epoch}): "
+                                "it is not the archived scan, or it was damaged; it stays where it is; nothing was "
+                                "changed")
+        found[a.file.sha256] = cand.resolve()
+    report(progress, 1.0, f"{len(found)} archived scan(s) found in {source}")
+    if dry_run or not found:
+        return [ArchivedScan(a.file, str(found.get(a.file.sha256, a.place)), a.archived) for a in scans]
+    out = []
+    for a in scans:
+        place = found.get(a.file.sha256)
+        if place is None:
+            out.append(a)
+            continue
+        mark = c.append_journal({"kind": "archive", "stored_path": "", "scan": a.file.stored_path,
+                                 "sha256": a.file.sha256, "epoch": a.file.epoch, "size": a.file.size,
+                                 "place": str(place), "time": now_iso()})
+        try:
+            with c.transaction() as conn:
+                conn.execute("UPDATE archived_files SET place = ? WHERE sha256 = ?", (str(place), a.file.sha256))
+                c.log_action(conn, "relocate", a.file.epoch, {"scan": a.file.stored_path, "from": a.place,
+                                                              "place": str(place)})
+        except BaseException:
+            journal.truncate(c.folder, mark)
+            raise
+        out.append(ArchivedScan(a.file, str(place), a.archived))
+    return out
 
 
 def _restore_one(c: Campaign, a: ArchivedScan) -> None:

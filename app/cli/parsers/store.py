@@ -40,7 +40,8 @@ def register(sub) -> None:
                                    "freed. Stage 2, status, displacements and the reports keep working without the "
                                    "scans; processing a visit again after a stage-1 parameter changed, compare, the "
                                    "3-D view and inspect need them back: they stop that visit in one line naming the "
-                                   "scans and where they are. 'archive DIR --restore' brings them back, checked. Run "
+                                   "scans and where they are. 'archive DIR --restore' brings them back, checked ('--from "
+                                   "FOLDER' when the archive disk is mounted somewhere else now). Run "
                                    "it again after an interruption: it finishes what was begun.")
     add_dir(p)
     p.add_argument("--to", type=Path, metavar="DEST", dest="to",
@@ -51,6 +52,11 @@ def register(sub) -> None:
     p.add_argument("--restore", action="store_true",
                    help="bring archived scans back into the campaign folder (all, or those of --epoch), checked "
                         "against their checksums; the archived copies are then removed")
+    p.add_argument("--from", type=Path, metavar="FOLDER", dest="source",
+                   help="with --restore: the folder the archive disk is mounted at now, when the place the campaign "
+                        "recorded cannot be reached (another computer, another mount point); each scan found there "
+                        "is checked against the checksum taken at its import and its new place recorded before it "
+                        "is copied back")
     add_epoch(p, required=False, help="with --restore: only this epoch's scans (its label)")
     p.add_argument("--dry-run", action="store_true", help="only say what would be moved, and the space it frees")
     add_json(p)

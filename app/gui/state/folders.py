@@ -16,7 +16,7 @@ from collections.abc import MutableMapping
 from pathlib import Path
 
 #: The kinds of files the dialogs ask for, each remembered on its own.
-KINDS = ("campaigns", "layouts", "scans", "series", "outputs")
+KINDS = ("campaigns", "layouts", "scans", "series", "outputs", "archives")
 
 
 class LastFolders:

@@ -13,6 +13,7 @@ message once, where the application shows it.
 from __future__ import annotations
 
 import re
+from pathlib import PurePath
 
 #: Command-line commands -> the menu entry doing the same.
 MENUS = {
@@ -37,6 +38,7 @@ MENUS = {
     "field-sheet": "Epoch ▸ Field sheet of the selected epoch (PDF)…",
     "verify": "Campaign ▸ Verify campaign",
     "repair": "Campaign ▸ Repair campaign",
+    "archive": "Campaign ▸ Restore scans…",
 }
 #: Command-line options -> the dialog field (or setting) holding the same value.
 FIELDS = {
@@ -46,6 +48,7 @@ FIELDS = {
     "rule": "Limit rule", "scanner": "Scanner (Campaign ▸ Scanner…)", "series": "Series",
     "align-at": "Align at", "workers": "Workers", "epoch": "the selected epoch",
     "setup": "the set-up added last", "pose": "Pose file", "origin": "Scanner position",
+    "to": "the folder picker", "from": "Campaign ▸ Restore scans…, its folder",
 }
 _COMMANDS = "|".join(sorted((re.escape(k) for k in MENUS), key=len, reverse=True))
 _RUN = r"(?P<run>run\s+)?"
@@ -89,3 +92,61 @@ def windows_text(rois) -> str:
     n = sum(not r.closure for r in rois)
     text = f"{n} window{'' if n == 1 else 's'}"
     return text + (" + the closure window" if any(r.closure for r in rois) else "")
+
+
+def _mb(n: int) -> str:
+    return f"{n / 1e6:.1f} MB"
+
+
+def archive_question(move, dest) -> str:
+    """The question before archiving: what would move where, what it frees, the room there, what stays and why.
+
+    ``move`` an :class:`app.gui.actions.StorageMove` of a dry run.
+
+    >>> from types import SimpleNamespace as S
+    >>> run = S(moved=[("scans/a.laz", "w1", 4_000_000, "/d/a.laz"), ("scans/b.laz", "w1", 1_000_000, "/d/b.laz")],
+    ...         bytes=5_000_000, epochs=["w1"])
+    >>> print(archive_question(S(run=run, size=9_000_000, free=100_000_000, left={"w2": "not measured yet"}), "/d"))
+    Move 2 scan(s) of 1 visit(s) (5.0 MB) to /d? The campaign folder holds 9.0 MB; /d has 100.0 MB free.
+    <BLANKLINE>
+    Each scan is checked against its import checksum before it leaves the campaign; Campaign ▸ Restore scans… brings them back.
+    <BLANKLINE>
+    Not archived: w2: not measured yet
+    """
+    run = move.run
+    room = "" if move.free is None else f"; {dest} has {_mb(move.free)} free" + (
+        "" if move.free >= run.bytes else f": not enough, free {_mb(run.bytes - move.free)} more first")
+    text = (f"Move {len(run.moved)} scan(s) of {len(run.epochs)} visit(s) ({_mb(run.bytes)}) to {dest}? The campaign "
+            f"folder holds {_mb(move.size)}{room}.\n\nEach scan is checked against its import checksum before it "
+            "leaves the campaign; Campaign ▸ Restore scans… brings them back.")
+    return text + _left(move.left)
+
+
+def _left(left: dict) -> str:
+    if not left:
+        return ""
+    lines = [f"{label}: {in_app_words(why)}" for label, why in list(left.items())[:5]]
+    more = f"\n… and {len(left) - 5} more" if len(left) > 5 else ""
+    return "\n\nNot archived: " + "\n".join(lines) + more
+
+
+def nothing_to_archive(move) -> str:
+    """Why an archive run would move nothing."""
+    return "Nothing to archive: every processed visit's scans are archived already." if not move.left else \
+        "Nothing to archive." + _left(move.left)
+
+
+def restore_question(move) -> str:
+    """The question before bringing archived scans back (``move`` a dry run's :class:`app.gui.actions.StorageMove`).
+
+    >>> from types import SimpleNamespace as S
+    >>> run = S(moved=[("scans/a.laz", "w1", 4_000_000, "/d/a.laz")], bytes=4_000_000, epochs=["w1"])
+    >>> print(restore_question(S(run=run, free=None)))
+    Bring back 1 scan(s) of 1 visit(s) (4.0 MB) from /d into the campaign folder? Each is checked against its import checksum.
+    """
+    run = move.run
+    places = ", ".join(dict.fromkeys(str(PurePath(m[3]).parent) for m in run.moved))
+    room = "" if move.free is None or move.free >= run.bytes else \
+        f" The campaign's disk has {_mb(move.free)} free: not enough, free {_mb(run.bytes - move.free)} more first."
+    return (f"Bring back {len(run.moved)} scan(s) of {len(run.epochs)} visit(s) ({_mb(run.bytes)}) from {places} into "
+            f"the campaign folder? Each is checked against its import checksum.{room}")

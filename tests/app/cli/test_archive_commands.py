@@ -261,6 +261,90 @@ def test_a_changed_archived_copy_is_found_by_verify_and_never_restored(processed
     assert snapshot(processed_copy) == before
 
 
+
+# ---------------------------------------------------------------------------------------------- restore from elsewhere
+@pytest.fixture
+def moved_disk(processed_copy, disk, capsys) -> Path:
+    """Every visit archived to ``disk``, then the disk mounted somewhere else (the recorded place gone)."""
+    assert run(capsys, "archive", processed_copy, "--to", disk)[0] == 0
+    elsewhere = disk.with_name("mounted-elsewhere")
+    disk.rename(elsewhere)
+    return elsewhere
+
+
+def places(camp: Path) -> dict[str, str]:
+    with Campaign.open(camp, writable=False) as c:
+        return {a.file.epoch + "/" + a.name: str(Path(a.place).parent) for a in archived_scans(c)}
+
+
+def test_restore_from_where_the_archive_disk_is_mounted_now(processed_copy, disk, moved_disk, capsys):
+    camp = processed_copy
+    before = snapshot(camp)
+    rc, out, _ = run(capsys, "archive", camp, "--restore", "--from", moved_disk, "--dry-run")
+    assert rc == 0 and "would bring back 6 scan(s) of 3 visit(s)" in out and f"from {moved_disk}" in out
+    assert snapshot(camp) == before and len(list(moved_disk.iterdir())) == 6  # a dry run records nothing
+
+    rc, out, _ = run(capsys, "archive", camp, "--restore", "--epoch", FIRST, "--from", moved_disk)
+    assert rc == 0 and f"{FIRST}: brought back 2 scan(s)" in out and f"from {moved_disk}" in out
+    assert len(scans_here(camp)) == 2 and len(links(camp)) == 2 and len(list(moved_disk.iterdir())) == 4
+    # the other visits' scans were not asked for: their recorded place is untouched
+    assert set(places(camp).values()) == {str(disk)}
+    rc, out, _ = run(capsys, "archive", camp, "--restore", "--from", moved_disk)
+    assert rc == 0 and "brought back 4 scan(s) of 2 visit(s)" in out
+    assert len(scans_here(camp)) == 6 and list(moved_disk.iterdir()) == []
+    rc, out, _ = run(capsys, "verify", camp)
+    assert rc == 0 and "no problem found" in out
+    with Campaign.open(camp, writable=False) as c:
+        assert archived_scans(c) == []
+        relocated = [e for e in c.log() if e.action == "relocate"]
+    assert len(relocated) == 6
+
+
+def test_the_new_place_is_recorded_before_the_copy_so_a_stopped_restore_needs_no_from(processed_copy, moved_disk,
+                                                                                      capsys, monkeypatch):
+    camp = processed_copy
+
+    def stop(*a, **k):
+        raise archive.CampaignError("the copy was stopped here")
+    monkeypatch.setattr(archive, "_copy_checked", stop)
+    rc, _, err = run(capsys, "archive", camp, "--restore", "--from", moved_disk)
+    assert rc == 1
+    one_line(err, "the copy was stopped here")
+    assert set(places(camp).values()) == {str(moved_disk.resolve())}  # every scan's new place, checked, recorded
+    with Campaign.open(camp, writable=False) as c:
+        assert {Path(place).parent for _sha, place, _t in archive.archived_from_journal(c)} == {moved_disk.resolve()}
+    monkeypatch.undo()
+    rc, out, _ = run(capsys, "archive", camp, "--restore")  # the recorded place is the new one now
+    assert rc == 0 and "brought back 6 scan(s) of 3 visit(s)" in out
+    rc, out, _ = run(capsys, "verify", camp)
+    assert rc == 0 and "no problem found" in out
+
+
+def test_restore_from_a_wrong_folder_or_a_changed_copy_is_one_line_and_changes_nothing(processed_copy, moved_disk,
+                                                                                       tmp_path, capsys):
+    camp = processed_copy
+    before = snapshot(camp)
+    rc, _, err = run(capsys, "archive", camp, "--restore", "--from", tmp_path / "nowhere")
+    assert rc == 1
+    one_line(err, str(tmp_path / "nowhere"), "no such folder", "nothing was changed")
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    rc, _, err = run(capsys, "archive", camp, "--restore", "--from", empty)
+    assert rc == 1
+    one_line(err, "not there nor in", str(empty), "--from FOLDER", "nothing was changed")
+    victim = sorted(moved_disk.iterdir())[-1]
+    victim.chmod(0o644)
+    data = bytearray(victim.read_bytes())
+    data[-1] ^= 0xFF
+    victim.write_bytes(bytes(data))
+    rc, _, err = run(capsys, "archive", camp, "--restore", "--from", moved_disk)
+    assert rc == 1
+    one_line(err, str(victim), "does not match the checksum recorded at its import", "nothing was changed")
+    rc, _, err = run(capsys, "archive", camp, "--to", tmp_path, "--from", moved_disk)
+    assert rc == 1
+    one_line(err, "--from goes with --restore")
+    assert snapshot(camp) == before and len(list(moved_disk.iterdir())) == 6
+
 # ---------------------------------------------------------------------------------------------- repair, schema
 def test_a_database_older_than_the_archive_run_is_repaired_not_taken_for_lost(processed_copy, disk, capsys):
     old_db = processed_copy.parent / "backup.sqlite"

@@ -54,6 +54,19 @@ def test_displacement_view_hover_values_and_click_selects_the_epoch(window, proc
     assert window.state.selection.epoch == epoch
 
 
+def test_the_legend_goes_to_a_corner_when_many_points_are_drawn(window, processed_copy, monkeypatch):
+    import app.gui.views.displacement_view as dv
+
+    window.open_campaign(processed_copy)
+    v = window.displacements
+    v.redraw()
+    assert 0 < len(v._points) <= dv.BEST_LEGEND_POINTS
+    assert v.canvas.figure.axes[0].get_legend()._loc == 0  # 'best': the least crowded place
+    monkeypatch.setattr(dv, "BEST_LEGEND_POINTS", len(v._points) - 1)  # ten years of visits, say
+    v.redraw()
+    assert v.canvas.figure.axes[0].get_legend()._loc == 2  # 'upper left', without trying every place
+
+
 def test_roi_move_resize_delete_add_and_save_then_process(window, processed_copy, qtbot, monkeypatch):
     window.open_campaign(processed_copy)
     window.tree.select_key("epoch", "2026-03-09")

@@ -230,6 +230,9 @@ def _campaign_entries(v: Visit, camp, tmp_path, monkeypatch) -> None:
     assert v.status.startswith("verify: ") and shown
     v.do("Campaign", "Repair campaign")  # a whole campaign: nothing to repair, nothing deleted
     assert v.status.startswith("repair: ") and "nothing was deleted" in v.status
+    v.do("Campaign", "Archive processed scans…")  # the folder picker cancelled: nothing asked, nothing moved
+    v.do("Campaign", "Restore scans…")  # nothing archived: said so
+    assert v.status == "restore: nothing archived" and shown[-1] == "Nothing to restore: no scan is archived."
 
 
 def _reflector_entries(v: Visit) -> None:
