@@ -194,18 +194,18 @@ def epoch_states(c: Campaign, labels: Sequence[str] | None = None, *,
     for lab in wanted:
         ds = c.displacement_set(lab)
         targets = per_target[lab]
-        sightings: dict[str, list] = {}
+        sightings: dict[str, list[tuple[str, ...]]] = {}  # each set-up's centroid flags (found unless not_found)
         for k in c.setups(lab):  # every set-up's: a target one could not see and another measured is measured
-            for rid, cent in c.centroids(lab, k).items():
-                sightings.setdefault(rid, []).append(cent)
+            for rid, cflags in c.centroid_flags(lab, k).items():
+                sightings.setdefault(rid, []).append(cflags)
         for rid, seen in sightings.items():
-            found = [t for t in seen if t.found]
+            found = [fl for fl in seen if FLAG_NOT_FOUND not in fl]
             if found or (lab, rid) in with_rows:  # its row says a missing target's reason ('missing' flag)
-                for t in found:
-                    targets.setdefault(rid, []).extend(f for f in t.flags if f not in targets.get(rid, ()))
+                for fl in found:
+                    targets.setdefault(rid, []).extend(f for f in fl if f not in targets.get(rid, ()))
                 continue
-            for t in seen:
-                targets.setdefault(rid, []).extend(f for f in _one_name(t.flags) if f not in targets[rid])
+            for fl in seen:
+                targets.setdefault(rid, []).extend(f for f in _one_name(fl) if f not in targets[rid])
         flags = (_own_flags(c, lab, ds.flags) if ds is not None else []) + target_flags(targets)
         out[lab] = EpochState(lab, decide_state(_stage(c, lab, ds is not None), flags), tuple(flags))
     return out

@@ -1006,6 +1006,19 @@ class Campaign:
             out[r["reflector"]] = field_tables.with_extra(out[r["reflector"]], extras.get(r["reflector"]))
         return out
 
+    def centroid_flags(self, epoch: str, setup: int = 1) -> dict[str, tuple[str, ...]]:
+        """An epoch's (set-up's) stored centroids' flags by target, as :meth:`centroids` gives them (its flags only).
+
+        What an epoch's state needs (a centroid is found unless flagged ``not_found``), without reading each
+        centroid's covariance and extras: ``status`` and the application's tree ask it for every visit.
+        """
+        if setup != 1:
+            return {rid: t.flags for rid, t in self.centroids(epoch, setup).items()}
+        if self._exists("epoch_results", epoch) and not self.is_sound("epoch_results", (epoch,)):
+            return {}
+        return {r["reflector"]: tuple(json.loads(r["flags"])) for r in
+                self.conn.execute("SELECT reflector, flags FROM centroids WHERE epoch = ? ORDER BY reflector", (epoch,))}
+
     def closure_centroids(self, epoch: str, setup: int = 1) -> dict[str, TargetCentroid]:
         """The epoch's (set-up's) closure centroids: targets its plan scanned again at the end of the visit."""
         if setup != 1:
