@@ -164,6 +164,17 @@ class Drift:
                 "left_window": n_left, "beyond_sigma_since_left": over_left, "worst_sigmas_since_left": worst_left}
 
 
+def status_command_s(folder: Path, timeout_s: float = 300.0) -> float:
+    """``bridgesurvey status`` on ``folder`` as a surveyor runs it: a process of its own, start-up included (s)."""
+    t0 = time.perf_counter()
+    res = subprocess.run([sys.executable, "-m", "app.cli.main", "status", str(folder)], cwd=ROOT,
+                         capture_output=True, text=True, timeout=timeout_s)
+    took = time.perf_counter() - t0
+    if res.returncode != 0:
+        raise RuntimeError(f"status failed on the campaign: {res.stderr[-1500:]}")
+    return took
+
+
 def app_times(folder: Path, timeout_s: float = 300.0) -> dict:
     """The application opening ``folder`` in a process of its own (offscreen): start, open, one target's history."""
     env = {**os.environ, "QT_QPA_PLATFORM": "offscreen", "MPLBACKEND": "Agg"}
@@ -282,12 +293,14 @@ def run(root: Path, visits: int, checkpoints: list[int], window: int, *, distinc
             _, t_report = _timed(write_report, c, root / "report.pdf", scope)
             _, t_export = _timed(export, c, root / "campaign.xlsx")
             gui = {"open_s": None, "history_s": None, "start_s": None}
-            if app:  # the writer's lock let go while the application reads, as a surveyor's process would
-                c.close()
+            c.close()  # the writer's lock let go while the command and the application read, as a surveyor's would
+            t_status_cmd = status_command_s(camp)
+            if app:
                 gui = app_times(camp)
-                c = Campaign.open(camp)
+            c = Campaign.open(camp)
             rows.append({"visits": k + 1, "add_plan_fine_s": t_add + t_fine, "process_s": t_proc,
-                         "recomputed": len(recomputed), "status_s": t_status, "displacements_s": t_table,
+                         "recomputed": len(recomputed), "status_s": t_status, "status_cmd_s": t_status_cmd,
+                         "displacements_s": t_table,
                          "analyse_s": t_analyse, "report_last_year_s": t_report, "export_s": t_export,
                          "app_open_s": gui["open_s"], "app_history_s": gui["history_s"],
                          "app_start_s": gui["start_s"], "peak_mb": peak, "folder_mb": _size_mb(camp),
@@ -297,7 +310,8 @@ def run(root: Path, visits: int, checkpoints: list[int], window: int, *, distinc
             app_text = "" if r["app_open_s"] is None else \
                 f", app opens {r['app_open_s']:.2f} s, history {r['app_history_s']:.2f} s"
             print(f"  {r['visits']:4d} visits: add+plan+fine {r['add_plan_fine_s']:.1f} s, process {r['process_s']:.1f} s "
-                  f"({r['recomputed']} earlier visits recomputed), status {r['status_s']:.2f} s, displacements "
+                  f"({r['recomputed']} earlier visits recomputed), status {r['status_s']:.2f} s (the command "
+                  f"{r['status_cmd_s']:.2f} s), displacements "
                   f"{r['displacements_s']:.2f} s, analyse {r['analyse_s']:.1f} s, report {r['report_last_year_s']:.1f} s, "
                   f"export {r['export_s']:.1f} s{app_text}, folder {r['folder_mb']:.0f} MB, "
                   f"{r['refused']} visits refused at planning so far, load {r['load'][0]:.1f}/{r['load'][1]:.1f}, "
@@ -317,12 +331,12 @@ def _opt(v, fmt: str) -> str:
 
 def table(rows: list[dict], window: int) -> str:
     lines = [f"| visits | add-epoch + plan + fine import s | process s | earlier visits recomputed (window {window}) "
-             "| status s | displacements s | analyse s | report of the last year s | export s | application opens s "
+             "| status s (in this process) | `bridgesurvey status` s (the command) | displacements s | analyse s | report of the last year s | export s | application opens s "
              "| history plot s | peak memory so far MB | folder MB | visits refused at planning | load (1 min / 5 min) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['visits']} | {r['add_plan_fine_s']:.1f} | {r['process_s']:.1f} | {r['recomputed']} | "
-                     f"{r['status_s']:.2f} | {r['displacements_s']:.2f} | {r['analyse_s']:.1f} | "
+                     f"{r['status_s']:.2f} | {r['status_cmd_s']:.2f} | {r['displacements_s']:.2f} | {r['analyse_s']:.1f} | "
                      f"{r['report_last_year_s']:.1f} | {r['export_s']:.1f} | {_opt(r['app_open_s'], '.2f')} | "
                      f"{_opt(r['app_history_s'], '.2f')} | {r['peak_mb']:.0f} | {r['folder_mb']:.0f} | "
                      f"{r['refused']} | {r['load'][0]:.1f} / {r['load'][1]:.1f} |")
@@ -361,7 +375,8 @@ def main(argv: list[str]) -> int:
     first, last = rows[0], rows[-1]
     figures(visits=last["visits"], window=args.window, recomputed_last=last["recomputed"],
             process_ratio_last_to_first=last["process_s"] / max(first["process_s"], 1e-9),
-            status_s_last=last["status_s"], folder_mb_last=last["folder_mb"], app_open_s_last=last["app_open_s"],
+            status_s_last=last["status_s"], status_cmd_s_last=last["status_cmd_s"], folder_mb_last=last["folder_mb"],
+            app_open_s_last=last["app_open_s"],
             history_s_last=last["app_history_s"], values_kept=kept["values"],
             beyond_sigma_since_left=kept["beyond_sigma_since_left"],
             beyond_sigma_since_first=kept["beyond_sigma_since_first"])
