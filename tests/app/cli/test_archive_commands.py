@@ -36,13 +36,6 @@ def displacements_csv(capsys, camp: Path) -> str:
     return out
 
 
-@pytest.fixture
-def disk(tmp_path) -> Path:
-    d = tmp_path / "archive-disk"
-    d.mkdir()
-    return d
-
-
 def test_archive_status_verify_process_restore_as_a_surveyor_runs_them(processed_copy, disk, capsys):
     camp = processed_copy
     stored = scans_here(camp)

@@ -41,13 +41,6 @@ def asked(monkeypatch):
     return questions
 
 
-@pytest.fixture
-def disk(tmp_path) -> Path:
-    d = tmp_path / "archive-disk"
-    d.mkdir()
-    return d
-
-
 def settle(qtbot, window, until) -> None:
     """Wait for the chained jobs (the dry run, then the move) to end."""
     qtbot.waitUntil(lambda: until() and not window.jobs.busy, timeout=180_000)
