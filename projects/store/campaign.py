@@ -992,7 +992,7 @@ class Campaign:
         if setup != 1:
             row = self._setup_result_row(epoch, setup)
             return setup_tables.centroids_of(row) if row is not None and row["stage"] == "measured" else {}
-        if self._exists("epoch_results", epoch) and not self.is_sound("epoch_results", (epoch,)):
+        if not self._centroids_sound(epoch):
             return {}
         extras = field_tables.read_centroid_extras(self.conn, epoch)
         out = {}
@@ -1006,6 +1006,10 @@ class Campaign:
             out[r["reflector"]] = field_tables.with_extra(out[r["reflector"]], extras.get(r["reflector"]))
         return out
 
+    def _centroids_sound(self, epoch: str) -> bool:
+        """Set-up 1's stored centroids of an epoch match their digest (or there are none to check)."""
+        return not self._exists("epoch_results", epoch) or self.is_sound("epoch_results", (epoch,))
+
     def centroid_flags(self, epoch: str, setup: int = 1) -> dict[str, tuple[str, ...]]:
         """An epoch's (set-up's) stored centroids' flags by target, as :meth:`centroids` gives them (its flags only).
 
@@ -1014,7 +1018,7 @@ class Campaign:
         """
         if setup != 1:
             return {rid: t.flags for rid, t in self.centroids(epoch, setup).items()}
-        if self._exists("epoch_results", epoch) and not self.is_sound("epoch_results", (epoch,)):
+        if not self._centroids_sound(epoch):
             return {}
         return {r["reflector"]: tuple(json.loads(r["flags"])) for r in
                 self.conn.execute("SELECT reflector, flags FROM centroids WHERE epoch = ? ORDER BY reflector", (epoch,))}
