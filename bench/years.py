@@ -29,7 +29,7 @@ counts the target values that moved more than one σ). A visit planning refuses 
 seen) is counted and left imported, as a surveyor would scan again.
 
 Usage: ``./run bench years [--visits N] [--checkpoints 52,156,520] [--window W] [--distinct D] [--batch B]
-[--no-app] [--small]`` (``--small``: 8 visits, window 3, 4 distinct scenes, batches of 2, checkpoints 4 and 8).
+[--no-app] [--keep DIR] [--small]`` (``--small``: 8 visits, window 3, 4 distinct scenes, batches of 2, checkpoints 4 and 8).
 """
 from __future__ import annotations
 
@@ -362,13 +362,18 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--distinct", type=int, default=4 if small else 52)
     ap.add_argument("--batch", type=int, default=2 if small else 26)
     ap.add_argument("--no-app", action="store_true", help="leave out the application's open and history plot")
+    ap.add_argument("--keep", metavar="DIR", help="keep the campaign in DIR (an empty or new folder) to look at it "
+                    "afterwards, e.g. to profile a command on a long campaign")
     args = ap.parse_args(argv)
     if args.window and args.batch > args.window:
         ap.error(f"--batch {args.batch} is larger than --window {args.window}: a batch's first visits would never "
                  "be fitted among the window's newest")
     checkpoints = [int(x) for x in args.checkpoints.split(",") if int(x) <= args.visits]
+    if args.keep and Path(args.keep).exists() and any(Path(args.keep).iterdir()):
+        ap.error(f"--keep {args.keep}: the folder is not empty")
     with tempfile.TemporaryDirectory() as tmp:
-        rows, kept = run(Path(tmp), args.visits, checkpoints, args.window, distinct=args.distinct,
+        root = Path(args.keep) if args.keep else Path(tmp)
+        rows, kept = run(root, args.visits, checkpoints, args.window, distinct=args.distinct,
                          batch=max(1, args.batch), app=not args.no_app)
     text = table(rows, args.window) + "\n\n" + kept_text(kept, args.window)
     print(text)
