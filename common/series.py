@@ -141,6 +141,14 @@ class Series:
                 "notes": list(self.notes)}
 
 
+def _pandas():
+    """The pandas module, imported at its first use."""
+    # local: pandas costs status and the other campaign commands 0.15-0.18 s of start-up (measured)
+    import pandas
+
+    return pandas
+
+
 def series_npz_bytes(time_ns: np.ndarray, values: np.ndarray) -> bytes:
     """The stored form of a series' arrays (compressed npz with its format version)."""
     buf = io.BytesIO()
@@ -169,9 +177,7 @@ def zone_of(name: str) -> Any:
 
 def check_zone(name: str) -> str:
     """``name`` stripped when it is a time zone (IANA name or ``+hh:mm``); an :class:`InputError` when not."""
-    # local: pandas costs status and the other campaign commands 0.15-0.18 s of start-up (measured)
-    import pandas as pd
-
+    pd = _pandas()
     try:
         pd.Timestamp("2026-01-01").tz_localize(zone_of(name))
     except Exception:  # pytz/zoneinfo raise several types for unknown zones
@@ -290,9 +296,7 @@ def sniff_separator(lines: list[str]) -> str | None:
 
 def _read_table(path: Path) -> _Table:
     """The header and the rows of a series file; rows with the wrong field count are listed as bad."""
-    # local: pandas costs status and the other campaign commands 0.15-0.18 s of start-up (measured)
-    import pandas as pd
-
+    pd = _pandas()
     try:
         text = path.read_bytes().decode("utf-8-sig")
     except UnicodeDecodeError:
@@ -375,9 +379,7 @@ def _find_columns(path: Path, header: list[str], column: str | None, quantity: Q
 
 def _read_times(tab: _Table, cols: _Columns, timezone: str) -> tuple[np.ndarray, np.ndarray, str]:
     """(UTC nanoseconds, readable mask, how they were read) of every row; unreadable times are listed as bad rows."""
-    # local: pandas costs status and the other campaign commands 0.15-0.18 s of start-up (measured)
-    import pandas as pd
-
+    pd = _pandas()
     df = tab.df
     if cols.unix is not None:
         secs = pd.to_numeric(df[cols.unix].str.strip(), errors="coerce").to_numpy(float)
@@ -408,9 +410,7 @@ def _read_values(path: Path, tab: _Table, cols: _Columns, t_ok: np.ndarray, unit
     Values and units that cannot be read are listed as bad rows; a decimal comma is read as a point unless the
     file is separated by commas.
     """
-    # local: pandas costs status and the other campaign commands 0.15-0.18 s of start-up (measured)
-    import pandas as pd
-
+    pd = _pandas()
     df = tab.df
     vraw = df[cols.value].str.strip()
     missing = vraw.str.lower().isin(NAN_TOKENS).to_numpy()
@@ -486,9 +486,7 @@ def _parse_times(raw, timezone: str) -> tuple[np.ndarray, np.ndarray, int]:
 
     Returns the times, which were readable, and how many were taken as naive.
     """
-    # local: pandas costs status and the other campaign commands 0.15-0.18 s of start-up (measured)
-    import pandas as pd
-
+    pd = _pandas()
     pattern = r"(?:Z|[+-]\d\d:?\d\d)$"
     head = raw.iloc[:200].str.contains(pattern, regex=True)
     if head.all() or not head.any():  # consistent files: decide once, rows that differ end up bad

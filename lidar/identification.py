@@ -22,6 +22,7 @@ from common.arrays import unique_sorted
 from common.errors import InputError, ProcessingError
 from common.rigid import Transform, fit_rigid, pairwise_distances
 from lidar.layout import Layout, target_normals
+from lidar.scanner_profile import MAX_TILT_DEG
 
 
 @dataclass(frozen=True)
@@ -178,9 +179,6 @@ def _assign_scipy(d: np.ndarray, tol: float) -> list[tuple[int, int, float]]:
     return [(int(r), int(c), float(d[r, c])) for r, c in zip(rows, cols, strict=False) if d[r, c] <= tol]
 
 
-#: Default largest scanner tilt a solution may imply and still count as levelled (degrees). Compensators
-#: hold a levelled scanner to hundredths of a degree; the rest is the layout's few centimetres of error.
-MAX_TILT_DEG = 2.0
 
 
 #: Seeds tried after a perfect levelled solution, to find an equally good rival.

@@ -23,12 +23,12 @@ from lidar.guided_detection import (
     recover_predicted,
     seen_through,
 )
-from lidar.identification import MAX_TILT_DEG, Identification, identify_reflectors
+from lidar.identification import Identification, identify_reflectors
 from lidar.layout import Layout, target_normals
 from lidar.plan import PlanTarget, ScanPlan, coarse_step_needed_deg, incidence_from_map, plan_fine_scans
 from lidar.reflectance_map import ReflectanceMap, reflectance_map
 from lidar.scan import Scan
-from lidar.scanner_profile import VZ1000, ScannerProfile
+from lidar.scanner_profile import MAX_TILT_DEG, VZ1000, ScannerProfile
 
 
 @dataclass(frozen=True, eq=False)

@@ -15,7 +15,10 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from common.errors import InputError
-from lidar.identification import MAX_TILT_DEG
+
+#: Default largest scanner tilt a solution may imply and still count as levelled (degrees). Compensators
+#: hold a levelled scanner to hundredths of a degree; the rest is the layout's few centimetres of error.
+MAX_TILT_DEG = 2.0
 
 
 @dataclass(frozen=True)

@@ -25,14 +25,12 @@ from common.errors import CancelledError, InputError, ProcessingError, SurveyErr
 from common.flags import PROBLEM, severity
 from common.progress import ProgressCallback, report, scaled
 from common.series import series_arrays_from_npz
-from lidar.identification import MAX_TILT_DEG
 from lidar.io import read_scan
 from lidar.io.poses import read_in_scanner_frame
 from lidar.layout import Layout
-from lidar.pipeline import analyse_coarse, coarse_notes, measure_fine, plan_from_coarse, plan_targets
 from lidar.plan import PlanTarget, ScanPlan
 from lidar.scan import Scan
-from lidar.scanner_profile import ScannerProfile
+from lidar.scanner_profile import MAX_TILT_DEG, ScannerProfile
 from lidar.stage2 import (
     Stage2Inputs,
     StoredDisplacement,
@@ -51,7 +49,6 @@ from projects.processing.parameters import DEFAULTS, parameter, stage1_params, s
 from projects.store.archive import check_present
 from projects.store.campaign import Campaign, parse_datetime, sha256_of
 from projects.store.errors import ScansArchivedError
-from projects.store.previews import encode_preview
 from projects.store.records import EpochInputs, ScanFile
 
 log = logging.getLogger(__name__)
@@ -86,6 +83,14 @@ def _profile_key(profile: ScannerProfile) -> dict:
     for k in ("sources", "notes"):
         d.pop(k, None)
     return d
+
+
+def _pipeline():
+    """:mod:`lidar.pipeline`, imported when stage 1 first computes."""
+    # local: its scikit-image and SciPy: 0.3-0.6 s of the start-up of status and every read-only command (measured)
+    from lidar import pipeline
+
+    return pipeline
 
 
 def max_tilt(c: Campaign, params: dict, label: str | None = None) -> float | None:
@@ -342,7 +347,7 @@ def _tilt_limit(params: dict, profile) -> float | None:
 
 def _analyse(coarse: Scan, layout, params: dict, profile, progress: ProgressCallback | None = None, *,
              station_xy: tuple[float, float] | None = None):
-    return analyse_coarse(coarse, layout, step_deg=params["map_step_deg"], threshold=params["detection_threshold"],
+    return _pipeline().analyse_coarse(coarse, layout, step_deg=params["map_step_deg"], threshold=params["detection_threshold"],
                           tolerance_m=params["identification_tolerance_m"],
                           max_tilt_deg=_tilt_limit(params, profile), up_layout=layout_up(params),
                           station_xy=station_xy, progress=progress)
@@ -450,6 +455,10 @@ def stage1_jobs(c: Campaign, label: str) -> list[Stage1Job]:
 
 def run_stage1(job: Stage1Job, *, progress: ProgressCallback | None = None) -> Stage1Result:
     """Plan (unless reused) and centroids of one epoch: pure computation on its files."""
+    pipeline = _pipeline()
+    # local: the preview's lidar.detection (scikit-image), as _pipeline's
+    from projects.store.previews import encode_preview
+
     new_plan, preview = None, None
     if job.stored_plan is not None:
         plan = ScanPlan.from_json(job.stored_plan)
@@ -461,7 +470,7 @@ def run_stage1(job: Stage1Job, *, progress: ProgressCallback | None = None) -> S
         if job.others:
             plan, visit_doc = _plan_together(job, analysis, progress)
         else:
-            plan = plan_from_coarse(analysis, job.layout, epoch=job.label, profile=job.profile,
+            plan = pipeline.plan_from_coarse(analysis, job.layout, epoch=job.label, profile=job.profile,
                                     min_points=int(job.params["min_points"]),
                                     budget_seconds=float(job.params["budget_min"]) * 60.0,
                                     up_layout=layout_up(job.params), closure=bool(job.params["closure"]))
@@ -478,7 +487,7 @@ def run_stage1(job: Stage1Job, *, progress: ProgressCallback | None = None) -> S
     measured = None
     if job.fine_paths:
         fine = read_paths(job.fine_paths, scaled(progress, 0.4, 0.8), job.fine_frames, job.fine_sha256)
-        measured = measure_fine(fine, plan, job.layout, profile=plan.profile)
+        measured = pipeline.measure_fine(fine, plan, job.layout, profile=plan.profile)
     report(progress, 1.0, "measured" if measured is not None else "planned")
     if measured is None:
         return Stage1Result(job, plan, new_plan, preview, None)
@@ -495,8 +504,9 @@ def _plan_together(job: Stage1Job, analysis, progress: ProgressCallback | None) 
     JSON adds: this set-up's candidates (so that the others need not analyse its coarse scan again) and the
     visit's summary.
     """
+    pipeline = _pipeline()
     up = layout_up(job.params)
-    mine = tuple(plan_targets(analysis, job.layout, up_layout=up))
+    mine = tuple(pipeline.plan_targets(analysis, job.layout, up_layout=up))
     setups = [SetupTargets(job.setup, mine, job.profile)]
     left_out = []
     for n, o in enumerate(job.others):
@@ -511,14 +521,14 @@ def _plan_together(job: Stage1Job, analysis, progress: ProgressCallback | None) 
                 left_out.append(f"set-up {o.setup} is left out of this set-up's plan: its coarse scan cannot be "
                                 f"planned ({str(exc).splitlines()[0]})")
                 continue
-            cands = tuple(plan_targets(other, job.layout, up_layout=up))
+            cands = tuple(pipeline.plan_targets(other, job.layout, up_layout=up))
         setups.append(SetupTargets(o.setup, cands, o.profile, frozen,
                                    frozen_alone=o.frozen_plan is not None and "visit" not in o.frozen_plan))
     visit: VisitPlan = plan_visit(setups, epoch=job.label, min_points=int(job.params["min_points"]),
                                   budget_seconds=float(job.params["budget_min"]) * 60.0,
                                   closure=bool(job.params["closure"]))
     plan = visit.plan(job.setup)
-    notes = coarse_notes(analysis, mine, plan) + visit.warnings + tuple(left_out)
+    notes = pipeline.coarse_notes(analysis, mine, plan) + visit.warnings + tuple(left_out)
     if notes:
         plan = replace(plan, warnings=plan.warnings + notes)
     return plan, {"candidates": _candidates_to_json(mine), "own_inputs": job.own_hash,

@@ -131,6 +131,13 @@ def test_help_and_a_refused_command_import_nothing_heavy(tmp_path):
     assert "does not exist" in r["stderr"] and len(r["stderr"].strip().splitlines()) == 1
 
 
+def test_status_of_a_processed_campaign_leaves_the_coarse_analysis_unloaded(processed):
+    """`status` reads the campaign: the coarse analysis's scikit-image and SciPy are 0.3-0.6 s of its start-up."""
+    r = _modules_after(f"from app.cli.main import main\nrc = main(['status', {str(processed)!r}])\nassert rc == 0, rc")
+    assert "projects.store.campaign" in r["loaded"], r  # the probe saw the campaign read
+    assert [m for m in _heavy(r["loaded"]) if m.split(".")[0] in ("scipy", "skimage", "pandas")] == [], r
+
+
 def test_no_help_breaks_a_word_at_its_hyphen(monkeypatch):
     import re
 
