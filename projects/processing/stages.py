@@ -41,6 +41,8 @@ from lidar.stage2 import (
     stale_parts,
 )
 
+#: Why an epoch whose plan and results are sound is planned again.
+PREVIEW_DAMAGED = "its map preview is damaged (fails its checksum): planned again to remake it"
 #: Why a stored visit was recomputed when only the campaign's field model changed (a newer visit re-fitted it).
 FIELD_REFIT = "the field model was re-fitted with the newer visits"
 from lidar.systematic.campaign_fit import air_near
@@ -437,7 +439,7 @@ def stage1_job(c: Campaign, label: str, setup: int = 1, *, fine: bool = True) ->
     params = _parameters_of(inp.settings)
     own, others, h = _plan_hashes(c, label, setup, inp, params)
     sp = inp.plan
-    stored = sp.plan_json if sp is not None and sp.inputs_hash == h else None
+    stored = sp.plan_json if sp is not None and sp.inputs_hash == h and not inp.preview_to_remake else None
     check_present(c, (inp.coarse if stored is None else ()) + (inp.fine if fine else ()),
                   "processing it again (stage 1: planning and centroids from its scans)")
     return Stage1Job(str(c.folder), label, tuple(str(c.path_of(r)) for r in inp.coarse),
@@ -608,9 +610,13 @@ def _stale_reason(inp: EpochInputs, params: dict, plan_hash: str) -> str | None:
     return None
 
 
-def _stale_setups(c: Campaign, label: str, params: dict, inputs: Mapping[int, EpochInputs] | None = None
-                  ) -> dict[int, str]:
-    """The set-ups of an epoch whose stage-1 results are stale: set-up -> reason (``inputs``: its set-ups' inputs)."""
+def _stale_setups(c: Campaign, label: str, params: dict, inputs: Mapping[int, EpochInputs] | None = None, *,
+                  previews: bool = True) -> dict[int, str]:
+    """The set-ups of an epoch whose stage-1 results are stale: set-up -> reason (``inputs``: its set-ups' inputs).
+
+    With ``previews`` a set-up whose map preview is damaged is stale too (planned again, which remakes it:
+    :meth:`~projects.store.campaign.Campaign.preview_to_remake`); the quick looks leave previews unread.
+    """
     if inputs is None:
         first = c.epoch_inputs(label, plan=False)  # one read an epoch (more for further set-ups)
         inputs = {k: first if k == 1 else c.epoch_inputs(label, plan=False, setup=k) for k in first.setups}
@@ -623,17 +629,23 @@ def _stale_setups(c: Campaign, label: str, params: dict, inputs: Mapping[int, Ep
         frozen = _frozen_hash(c, label, inp, own[k]) if len(own) > 1 else None  # alone or together
         h = frozen or _visit_hash(own[k], {j: own[j] for j in own if j != k} if together else {})
         why = _stale_reason(inp, params, h)
+        if why is None and previews and c.preview_to_remake(label, k):
+            why = PREVIEW_DAMAGED
         if why is not None:
             out[k] = why
     return out
 
 
 def stale_epochs(c: Campaign) -> dict[str, str]:
-    """Epochs whose stored stage-1 results (of any set-up) no longer match their inputs: label -> reason."""
+    """Epochs whose stored stage-1 results (of any set-up) no longer match their inputs: label -> reason.
+
+    The quick look of ``status`` and the application: the map previews are not read (``process`` also plans
+    again an epoch whose preview is damaged, and says so; ``verify`` names it).
+    """
     params = parameters(c)
     out = {}
     for label, inputs in c.visits_inputs().items():  # one read for all (the campaign's rows once)
-        stale = _stale_setups(c, label, params, inputs)
+        stale = _stale_setups(c, label, params, inputs, previews=False)
         if stale:
             out[label] = "; ".join(why if k == 1 else f"set-up {k}: {why}" for k, why in sorted(stale.items()))
     return out

@@ -30,7 +30,8 @@ def campaign_status(c: Campaign) -> dict:
     revision's epoch, target, old, new and why; :class:`lidar.stage2.Revision`), None when none ever did.
 
     ``warnings`` are the layout's (targets no station could reach) and the stored results that fail their
-    checksum (not shown, recomputed by ``process``); ``unlisted_files`` the files of the
+    checksum (not shown, recomputed by ``process``), the map previews left out (pictures, nine tenths of a long
+    campaign's bytes: ``verify`` and ``process`` read them); ``unlisted_files`` the files of the
     import folders the database does not list (never deleted: ``bridgesurvey repair`` registers them).
     ``storage`` is the folder's size on disk and where its scans are
     (:func:`projects.store.archive.storage_summary`).
@@ -55,7 +56,7 @@ def campaign_status(c: Campaign) -> dict:
                        "drift_arcsec_h": None if corr is None or not corr.timed
                        else round(math.hypot(corr.tilt_arcsec_h, corr.twist_arcsec_h), 1) + 0.0})
     damaged = [f"stored {describe_group(t, k)}: damaged (fails its checksum), not shown; {REMEDY[t]}"
-               for t, k in c.damaged_results()]
+               for t, k in c.damaged_results(pictures=False)]  # previews: verify and process read them
     latest = {}
     for r in displacement_table(c, states=states):
         if r["displacement_mm"] is not None or r["reflector"] not in latest:  # keep the last good value

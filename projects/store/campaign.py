@@ -616,7 +616,8 @@ class Campaign:
             if layouts is not None:
                 layouts[expected] = layout
         return EpochInputs(ep, tuple(f for f in files if f.role == "coarse"), tuple(f for f in files if f.role == "fine"),
-                           stored, result, layout, profile, settings, setup, setups)
+                           stored, result, layout, profile, settings, setup, setups,
+                           plan and self.preview_to_remake(ep.label, setup))
 
     def path_of(self, file: ScanFile) -> Path:
         """Where a stored scan file is on disk."""
@@ -854,7 +855,7 @@ class Campaign:
         else:
             row = self.conn.execute("SELECT json, inputs_hash, created FROM plans WHERE epoch = ?", (epoch,)).fetchone()
         if row is None or (setup == 1 and not self._plan_sound(epoch)):
-            return None  # a damaged plan (or the preview of an unedited one) is stale: planned again
+            return None  # a damaged plan is stale: planned again
         doc = json.loads(row["json"])
         return StoredPlan(epoch, ScanPlan.from_json(doc), doc, row["inputs_hash"], row["created"])
 
@@ -870,41 +871,48 @@ class Campaign:
             self._sound[k] = digests.is_sound(self.conn, table, key)
         return self._sound[k]
 
-    def damaged_results(self) -> list[tuple[str, tuple]]:
-        """(table, key) of every stored result group that fails its digest (see :mod:`projects.store.digests`)."""
-        return [(table, key) for table in digests.GROUPS for key in digests.keys_of(self.conn, table)
-                if not self.is_sound(table, key)]
+    def damaged_results(self, *, pictures: bool = True) -> list[tuple[str, tuple]]:
+        """(table, key) of every stored result group that fails its digest (see :mod:`projects.store.digests`).
+
+        ``pictures=False`` leaves out the map previews (:data:`digests.PICTURES`): pictures of a few hundred kB a
+        visit, nine tenths of a long campaign's stored bytes, which no number is computed from. Each is checked
+        where it is shown (:meth:`map_preview`), by ``verify`` and by ``process`` (:meth:`preview_to_remake`).
+        """
+        return [(table, key) for table in digests.GROUPS if pictures or table not in digests.PICTURES
+                for key in digests.keys_of(self.conn, table) if not self.is_sound(table, key)]
 
     def _exists(self, table: str, epoch: str) -> bool:
         return self.conn.execute(f"SELECT 1 FROM {table} WHERE epoch = ?", (epoch,)).fetchone() is not None
 
     def _plan_sound(self, epoch: str) -> bool:
-        """The plan matches its digest, and so does its map preview unless the plan was edited by hand.
-
-        An unedited plan with a damaged preview is planned again (which remakes the preview); an
-        edited one is kept (planning again would lose the edits) and its preview is not shown.
-        """
-        if self._exists("plans", epoch) and not self.is_sound("plans", (epoch,)):
-            return False
-        if not self._exists("map_previews", epoch) or self.is_sound("map_previews", (epoch,)):
-            return True
-        row = self.conn.execute("SELECT json FROM plans WHERE epoch = ?", (epoch,)).fetchone()
-        return row is not None and bool(json.loads(row[0]).get("edited"))
+        """The plan matches its digest (its map preview, a picture, does not decide: :meth:`preview_to_remake`)."""
+        return not self._exists("plans", epoch) or self.is_sound("plans", (epoch,))
 
     def _stage1_sound(self, epoch: str) -> bool:
         return self.is_sound("epoch_results", (epoch,)) and self._plan_sound(epoch)
 
     def _setup_plan_sound(self, epoch: str, setup: int) -> bool:
-        """A further set-up's plan and preview match their digests (as :meth:`_plan_sound` for set-up 1)."""
+        """A further set-up's plan matches its digest (as :meth:`_plan_sound` for set-up 1)."""
         key = (epoch, setup)
-        row = self.conn.execute("SELECT json FROM setup_plans WHERE epoch = ? AND setup = ?", key).fetchone()
-        if row is not None and not self.is_sound("setup_plans", key):
+        present = self.conn.execute("SELECT 1 FROM setup_plans WHERE epoch = ? AND setup = ?", key).fetchone()
+        return present is None or self.is_sound("setup_plans", key)
+
+    def preview_to_remake(self, epoch: str, setup: int = 1) -> bool:
+        """Whether an epoch's (set-up's) stored map preview fails its digest and planning again would remake it.
+
+        A damaged preview is never shown (:meth:`map_preview`). ``process`` plans an unedited plan again, which
+        remakes its preview from the coarse scan; an edited plan is kept (planning again would lose the edits),
+        and its preview stays unshown. Reading a preview costs a few hundred kB a visit: the quick looks
+        (``status``, the application's tree) leave them to ``verify`` and ``process``.
+        """
+        key: tuple = (epoch,) if setup == 1 else (epoch, setup)
+        table, plans = ("map_previews", "plans") if setup == 1 else ("setup_previews", "setup_plans")
+        where = " AND ".join(f"{k} = ?" for k in ("epoch", "setup")[:len(key)])
+        if self.conn.execute(f"SELECT 1 FROM {table} WHERE {where}", key).fetchone() is None \
+                or self.is_sound(table, key):
             return False
-        has_preview = self.conn.execute("SELECT 1 FROM setup_previews WHERE epoch = ? AND setup = ?",
-                                        key).fetchone() is not None
-        if not has_preview or self.is_sound("setup_previews", key):
-            return True
-        return row is not None and bool(json.loads(row[0]).get("edited"))
+        row = self.conn.execute(f"SELECT json FROM {plans} WHERE {where}", key).fetchone()
+        return row is not None and not json.loads(row[0]).get("edited")
 
     def _setup_result_row(self, epoch: str, setup: int):
         """A further set-up's sound result row, or None (absent, or failing its digest or its plan's)."""

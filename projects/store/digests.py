@@ -76,6 +76,9 @@ GROUPS: dict[str, Group] = {g.table: g for g in (
     *(Group(name, table, ("epoch", "setup"), queries) for name, table, queries in setup_tables.GROUPS),
 )}
 #: The tables whose digests schema 10 introduced (the set-up tables came with schema 11, digests included).
+#: The groups that are pictures (the map previews): no number is computed from them. The quick looks leave them out
+#: (:meth:`projects.store.campaign.Campaign.damaged_results`); ``verify`` and ``process`` check them.
+PICTURES = ("map_previews", "setup_previews")
 V10_TABLES = ("plans", "map_previews", "epoch_results", "displacement_sets", "camera_series", "env_series",
               "predictions", "crossvals", "comparisons")
 

@@ -412,6 +412,9 @@ class EpochInputs:
         Which set-up of the visit these are (1-based).
     setups : tuple of int
         Every set-up the visit has.
+    preview_to_remake : bool
+        Its stored map preview is damaged and planning again would remake it (read with the plan only:
+        :meth:`projects.store.campaign.Campaign.preview_to_remake`).
     """
 
     epoch: Epoch
@@ -424,6 +427,7 @@ class EpochInputs:
     settings: dict
     setup: int = 1
     setups: tuple[int, ...] = (1,)
+    preview_to_remake: bool = False
 
     @property
     def label(self) -> str:

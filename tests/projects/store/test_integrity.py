@@ -15,6 +15,7 @@ import pytest
 from app.cli.main import main
 from common.files import DiskFullError, atomic_output, sha256_of, write_atomic
 from lidar.layout import read_layout_csv
+from projects.processing.stages import stage1_jobs, stale_epochs
 from projects.store import digests, journal, lock, schema
 from projects.store.campaign import DB_NAME, Campaign
 from projects.store.errors import CampaignError, CampaignLockedError
@@ -178,7 +179,13 @@ def test_every_stored_result_is_sealed_and_a_damaged_one_is_stale(processed_copy
         assert c.displacement_set(labels[-1]) is None and c.reference_checks(labels[-1]) == []
         assert {d.epoch for d in c.displacements()} == set(labels[:-1]) and len(c.displacements()) < n_before
         assert c.map_preview(labels[0]) is None
-        assert c.result(labels[0]) is None and c.stored_plan(labels[0]) is None  # replanned by 'process'
+        assert set(c.damaged_results(pictures=False)) == {("displacement_sets", (labels[-1],))}
+        # a picture decides no number: the plan and the centroids stand, 'process' plans again to remake it
+        assert c.result(labels[0]) is not None and c.stored_plan(labels[0]) is not None
+        assert c.preview_to_remake(labels[0]) and not c.preview_to_remake(labels[1])
+        assert labels[0] not in stale_epochs(c)  # the quick look (status) does not read the previews
+        jobs = stage1_jobs(c, labels[0])  # what 'process' runs: planned again from the coarse scan, not reused
+        assert [(j.setup, j.stored_plan) for j in jobs] == [(1, None)]
 
 
 # ---------------------------------------------------------------------------------------------- nothing deleted
