@@ -122,6 +122,12 @@ def markdown(rows: dict) -> str:
                      f"{c['along_silent_beyond_3sigma']:.0%} | {c['scale_within_2sigma']:.0%} | {flags} | "
                      f"{u['rms_mm']:.3f} / {u['max_mm']:.2f} mm | "
                      f"{u['silent_beyond_3sigma']:.1%} | {u['along_silent_beyond_3sigma']:.1%} |")
+    errs = np.concatenate([np.asarray(s["corrected"].scale_errors_ppm, dtype=float) for s in rows.values()])
+    sigs = np.concatenate([np.asarray(s["corrected"].scale_sigmas_ppm, dtype=float) for s in rows.values()])
+    if errs.size:  # a campaign's visits share its baseline's scale error: the share pooled over the campaigns too
+        ok = int(np.sum(np.abs(errs) <= 2 * sigs))
+        lines += ["", f"Scale within 2σ of the truth over every scenario's visits: {ok} of {errs.size} "
+                  f"({ok / errs.size:.0%})."]
     return "\n".join(lines)
 
 

@@ -316,7 +316,8 @@ def score_campaign(camp: Path, field_dir: Path, labels: dict) -> StudyScore:
             ds = c.displacement_set(e.label)
             sysm = c.systematics(e.label)
             if "scale_ppm" in sysm and sysm.get("scale_determined", True):
-                truth_ppm = getattr(by_label[e.label], "range_scale_ppm", 0.0) - getattr(tb, "range_scale_ppm", 0.0)
+                # the scale during each visit's scans of targets (what one scale a visit measures), not at its start
+                truth_ppm = by_label[e.label].range_scale_during_ppm() - tb.range_scale_during_ppm()
                 sc.scale_errors_ppm.append(float(sysm["scale_ppm"]) - truth_ppm)
                 sc.scale_sigmas_ppm.append(float(sysm.get("scale_sigma_ppm", float("nan"))))
             if ds is not None:

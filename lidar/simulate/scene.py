@@ -625,6 +625,7 @@ class BridgeScene:
             drift=None if c.drift is None else c.drift.to_dict(),
             timing=c.visit_timing.to_dict() if c.timed else None, windows=windows,
             axis_errors=None if c.axis_errors is None else c.axis_errors.to_dict(),
+            range_scale_rate_ppm_h=c.range_scale_rate_ppm_h,
         )
 
     def coarse_window(self, step_deg: float = 0.05, margin_deg: float = 3.0) -> AngularWindow:

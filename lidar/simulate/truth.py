@@ -98,7 +98,9 @@ class ScanTruth:
         Deck strain along x (dL / L).
     fixed_bearing_x_m : float
     range_scale_ppm : float
-        Every range was multiplied by ``1 + ppm * 1e-6``.
+        Every range was multiplied by ``1 + ppm * 1e-6`` (at the visit's start when it changes during the visit).
+    range_scale_rate_ppm_h : float
+        How fast that scale changed during the visit (ppm an hour, from the start of ``timing``); 0: constant.
     range_walk : dict or None
         ``{"form": name, **parameters}`` of the range walk on retro-reflector returns.
     clipped_fraction : float
@@ -129,6 +131,7 @@ class ScanTruth:
     timing: dict | None = None
     windows: tuple[WindowTruth, ...] = ()
     axis_errors: dict | None = None
+    range_scale_rate_ppm_h: float = 0.0
 
     def target(self, target_id: str) -> TargetTruth:
         return next(t for t in self.targets if t.id == target_id)
@@ -160,7 +163,21 @@ class ScanTruth:
                    range_walk=d.get("range_walk"), clipped_fraction=float(d.get("clipped_fraction", 0.0)),
                    drift=d.get("drift"), timing=d.get("timing"),
                    windows=tuple(WindowTruth(**w) for w in d.get("windows", ())),
-                   axis_errors=d.get("axis_errors"))
+                   axis_errors=d.get("axis_errors"),
+                   range_scale_rate_ppm_h=float(d.get("range_scale_rate_ppm_h", 0.0)))
+
+    def range_scale_during_ppm(self) -> float:
+        """The atmosphere's scale over the visit's scans of targets (ppm): what one scale fitted to the visit measures.
+
+        A scale changing during the visit (``range_scale_rate_ppm_h``) is taken at the mean of the middles of the
+        target windows (the coarse scan left out; the scale is linear in time, so this is its mean over them);
+        ``range_scale_ppm`` when it does not change or no window was recorded.
+        """
+        mids = [0.5 * (w.start_s + w.end_s) for w in self.windows if w.name != "coarse"]
+        if not self.range_scale_rate_ppm_h or not mids:
+            return self.range_scale_ppm
+        start = float((self.timing or {}).get("start_s", 0.0))
+        return self.range_scale_ppm + self.range_scale_rate_ppm_h * (float(np.mean(mids)) - start) / 3600.0
 
     def save(self, path: str | os.PathLike) -> Path:
         p = Path(path)

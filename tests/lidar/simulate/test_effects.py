@@ -1,4 +1,6 @@
 """Each systematic effect of the simulator against its definition (and off, it draws no random numbers)."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -21,7 +23,7 @@ from lidar.simulate.effects import (
     walk_from_dict,
     walk_to_dict,
 )
-from lidar.simulate.truth import ScanTruth
+from lidar.simulate.truth import ScanTruth, WindowTruth
 
 SETUP = ScannerSetup((20.0, -12.0, 1.5), heading_deg=30.0, pitch_deg=0.03, roll_deg=-0.02)
 MODEL = BridgeModel()
@@ -277,6 +279,25 @@ def test_a_scale_changing_during_the_visit_scales_each_point_by_its_own_time():
     assert EpochConditions(range_scale_rate_ppm_h=1.0).timed
     with pytest.raises(InputError):
         EpochConditions(range_scale_rate_ppm_h=float("nan"))
+
+
+def test_the_truth_of_a_scale_changing_during_the_visit_is_its_value_over_the_target_windows(tmp_path):
+    """What one scale fitted to a visit measures: the scale over its target scans, not at the visit's start."""
+    timing = VisitTiming(start_s=500.0)
+    scene = BridgeScene(MODEL, EpochConditions(range_scale_ppm=10.0, range_scale_rate_ppm_h=-36.0, timing=timing),
+                        SETUP)
+    _, truth = scene.scan(window_on(scene.truth().target("R2")), rng=np.random.default_rng(0), start_s=2300.0)
+    (w,) = truth.windows
+    assert truth.range_scale_rate_ppm_h == -36.0
+    # -0.01 ppm a second from 500 s: at the window's middle, 1800 s and more later, -8 ppm and less
+    assert truth.range_scale_during_ppm() == pytest.approx(10.0 - 0.01 * (0.5 * (w.start_s + w.end_s) - 500.0))
+    back = ScanTruth.load(truth.save(tmp_path / "t.json"))
+    assert back.range_scale_during_ppm() == truth.range_scale_during_ppm() < -8.0
+    coarse = replace(truth, windows=(WindowTruth("coarse", 500.0, 560.0), w))  # the coarse scan is no target's
+    assert coarse.range_scale_during_ppm() == truth.range_scale_during_ppm()
+    steady = BridgeScene(MODEL, EpochConditions(range_scale_ppm=10.0, timing=timing), SETUP)
+    assert steady.scan(window_on(steady.truth().target("R2")), rng=np.random.default_rng(0),
+                       start_s=2300.0)[1].range_scale_during_ppm() == 10.0
 
 
 def test_a_scan_with_axis_errors_reports_the_target_where_the_truth_says():

@@ -157,3 +157,32 @@ def test_the_families_spread_widens_sigma_but_never_moves_a_value():
         for da, db in zip(a.displacements, b.displacements, strict=False):
             assert da.displacement_m == pytest.approx(db.displacement_m, abs=1e-12)
             assert da.sigma_m >= db.sigma_m - 1e-15 and da.budget["noise"] == pytest.approx(db.budget["noise"])
+
+
+def test_every_visits_scale_sigma_carries_the_baselines_own_scale_error():
+    """A visit's scale is against the baseline's: the baseline's centroid noise is in every visit's scale σ.
+
+    With the baseline's centroids four times noisier (covariance x16), each visit's scale σ grows by the
+    baseline's share; over campaigns drawn again, the visits' scale errors share the baseline's (they correlate)
+    and stay within their σ as often as a calibrated σ says.
+    """
+    from dataclasses import replace
+
+    g, ids, groups, visits, cents, truths = campaign(n=4, seed=6, strain=False)
+    sigma = {k: fit_field_model(visits, groups, select_range_walk=False).visit(str(k)).scale_sigma_ppm
+             for k in (1, 2, 3)}
+    noisy = [replace(visits[0], sightings=tuple(replace(s, cov=16.0 * s.cov) for s in visits[0].sightings)),
+             *visits[1:]]
+    wide = fit_field_model(noisy, groups, select_range_walk=False)
+    for k in (1, 2, 3):
+        # the baseline's share (about half a visit's variance with equal noise) grows 16-fold
+        assert wide.visit(str(k)).scale_sigma_ppm ** 2 > sigma[k] ** 2 + 4.0 * (0.5 * sigma[k] ** 2), (k, sigma[k])
+    z = []
+    for seed in range(30):
+        g, ids, groups, visits, cents, truths = campaign(n=4, seed=100 + seed, ppm=30.0, strain=False)
+        m = fit_field_model(visits, groups, select_range_walk=False)
+        z.append([(m.visit(str(k)).scale_ppm - campaign.ppm[k]) / m.visit(str(k)).scale_sigma_ppm for k in (1, 2, 3)])
+    z = np.asarray(z)
+    shared = np.mean([np.corrcoef(z[:, a], z[:, b])[0, 1] for a, b in ((0, 1), (0, 2), (1, 2))])
+    assert shared > 0.2, shared  # the baseline's error is in every visit's scale ...
+    assert 0.7 < np.std(z) < 1.3 and np.mean(np.abs(z) <= 2.0) >= 0.9, (np.std(z), np.mean(np.abs(z) <= 2.0))
