@@ -16,6 +16,7 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -24,8 +25,10 @@ from common.errors import InputError
 from common.files import write_atomic
 from lidar.angles import AngularWindow, direction_from_angles, spherical_from_xyz, window_around
 from lidar.centroid import UNRESOLVED_RATIO, WEAK_RATIO, resolvability
-from lidar.reflectance_map import ReflectanceMap
 from lidar.scanner_profile import VZ1000, ScannerProfile
+
+if TYPE_CHECKING:  # a type only: the map's readers (lidar.io: pye57, laspy) are not a plan's start-up
+    from lidar.reflectance_map import ReflectanceMap
 
 PLAN_FORMAT_VERSION = 1
 DEFAULT_INCIDENCE_COS = 0.6  # used when the surface around a target cannot be measured
