@@ -93,7 +93,7 @@ CHECKS: dict[str, tuple[float, dict[str, tuple[float | None, float | None]]]] = 
     # eight weekly visits with the field window at 3: the eighth recomputes at most the window's visits
     "years": (900, {"visits": (8, 8), "window": (3, 3), "recomputed_last": (0, 3),
                     "process_ratio_last_to_first": (0.0, 10.0), "status_s_last": (0.0, 30.0),
-                    "status_cmd_s_last": (0.0, 60.0), "folder_mb_last": (1.0, None), "app_open_s_last": (0.0, 60.0),
+                    "status_cmd_s_last": (0.0, 60.0), "status_cmd_cpu_s_last": (0.0, 60.0), "folder_mb_last": (1.0, None), "app_open_s_last": (0.0, 60.0),
                     "history_s_last": (0.0, 60.0),
                     "values_kept": (1, None), "beyond_sigma_since_left": (0, 0),
                     "beyond_sigma_since_first": PRESENT}),

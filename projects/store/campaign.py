@@ -19,7 +19,7 @@ import json
 import os
 import sqlite3
 import uuid
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -132,6 +132,7 @@ class Campaign:
         self.writable = writable
         self._sound: dict[tuple, bool] = {}
         self._sound_at = -1
+        self._records: tuple[tuple, list[DisplacementRecord]] | None = None  # displacements(), and when read
         self.series = SeriesRepository(self)
         self.events = EventRepository(self)
         self.predictions = PredictionRepository(self)
@@ -1111,8 +1112,15 @@ class Campaign:
                                r["normal_mode"], tuple(json.loads(r["flags"])), r["processed"])
 
     def displacements(self) -> list[DisplacementRecord]:
-        """Every stored displacement, by epoch date then target (see :func:`projects.history.histories`)."""
-        return self._displacement_records()
+        """Every stored displacement, by epoch date then target (see :func:`projects.history.histories`).
+
+        Read once until the campaign changes (any connection's write): ``status`` needs them for the epochs'
+        states and for the table of values, the report and the application more often.
+        """
+        when = (self.conn.total_changes, self.conn.execute("PRAGMA data_version").fetchone()[0])
+        if self._records is None or self._records[0] != when:
+            self._records = (when, self._displacement_records())
+        return list(self._records[1])
 
     def _displacement_records(self, where: str = "", args: tuple = (), *, newest_first: bool = False,
                               limit: int | None = None) -> list[DisplacementRecord]:
@@ -1131,16 +1139,24 @@ class Campaign:
                ORDER BY e.datetime {order}, e.label {order}, d.reflector"""
         sound: dict[str, bool] = {}
         out = []
+        flag_lists: dict[str, tuple[str, ...]] = {}  # a flags text decoded once (most are "[]", or their epoch's)
+        epoch_extra: dict[str, Mapping] = {}  # the epoch's systematics, decoded once and shared by its records
+
+        def flags(text: str) -> tuple[str, ...]:
+            if text not in flag_lists:
+                flag_lists[text] = tuple(json.loads(text))
+            return flag_lists[text]
+
         self.epochs()  # their dates are served with the values: a damaged epoch row is named, never served
         for r in self.conn.execute(q, args).fetchall():
             ep = r["epoch"]
             if ep not in sound:
                 sound[ep] = self._displacements_sound(ep)
+                epoch_extra[ep] = json.loads(r["set_extra"]) if r["set_extra"] else {}
             if sound[ep]:  # a damaged epoch's values are never served
                 out.append(DisplacementRecord(ep, r["datetime"], r["reflector"], r["displacement_m"], r["sigma_m"],
-                                              tuple(json.loads(r["flags"])), tuple(json.loads(r["epoch_flags"])),
-                                              r["baseline"], json.loads(r["extra"]) if r["extra"] else {},
-                                              json.loads(r["set_extra"]) if r["set_extra"] else {}))
+                                              flags(r["flags"]), flags(r["epoch_flags"]), r["baseline"],
+                                              json.loads(r["extra"]) if r["extra"] else {}, epoch_extra[ep]))
                 if limit and len(out) >= limit:
                     break
         return out
