@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -98,7 +98,8 @@ class VisitPlan:
     order : tuple of int
         The order in which to work the set-ups.
     warnings : tuple of str
-        What the surveyor must act on for the visit as a whole (a set-up that cannot be joined).
+        What the surveyor must act on for the visit as a whole (a set-up that cannot be joined, a visit too short
+        for the points asked).
     elsewhere : mapping set-up -> mapping id -> set-up
         The targets a set-up sees but leaves to another set-up.
     second : mapping set-up -> tuple of str
@@ -243,8 +244,10 @@ def plan_visit(setups: Sequence[SetupTargets], *, epoch: str = "", min_points: i
     seconds = _second_sightings(by_setup, order, sigma, chosen, budget_seconds - spent, kw)
     elsewhere = {k: {t: j for t, j in elsewhere[k].items() if t not in chosen[k]} for k in order}
     plans = dict(given)
-    plans.update(_share_budget(by_setup, tuple(k for k in order if k not in frozen), chosen, budget_seconds - spent,
-                               kw, spent=spent))
+    shared, short = _share_budget(by_setup, tuple(k for k in order if k not in frozen), chosen,
+                                  budget_seconds - spent, kw, spent=spent)
+    plans.update(shared)
+    warnings += [short] if short else []
     return VisitPlan(epoch, plans, assignment, ties, sigma, float(budget_seconds), order, tuple(warnings), elsewhere,
                      seconds)
 
@@ -350,7 +353,8 @@ def _ties(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], sigma: M
             warnings.append(f"set-up {k} sees only {len(shared)} target(s) well that the set-ups before it also see "
                             f"({', '.join(sorted(shared)) or 'none'}, spread {spread(shared):.2f} m): it cannot be "
                             f"joined ({MIN_SHARED} targets spread {MIN_SPREAD_M:g} m off a line are needed); "
-                            "move it where it sees more of their targets")
+                            "move it where it sees more of their targets, or add a set-up between them (stations --first proposes "
+                            "three set-ups when no pair joins)")
     return ties, warnings
 
 
@@ -402,7 +406,7 @@ def _spread_of(targets: Mapping[str, PlanTarget]):
 
 
 def _share_budget(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], chosen: Mapping[int, set[str]],
-                  budget_seconds: float, kw: dict, *, spent: float = 0.0) -> dict[int, ScanPlan]:
+                  budget_seconds: float, kw: dict, *, spent: float = 0.0) -> tuple[dict[int, ScanPlan], str]:
     """Each set-up of ``order`` planned in its share of ``budget_seconds``.
 
     ``budget_seconds`` is what the visit's budget leaves after the ``spent`` seconds of the frozen set-ups.
@@ -411,11 +415,11 @@ def _share_budget(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], 
     windows all fit the visit's budget, found by bisection; each share is its set-up's time at those points, and
     time left over is shared in proportion. When even :data:`MIN_SHARED_POINTS` do not fit, each set-up gets its time
     at those points and every plan says the visit is over its budget. When the budget gives targets fewer points
-    than ``min_points``, every plan says so in one line (:func:`_short_line`): which targets, and the visit's time
-    that would give them their points.
+    than ``min_points``, the visit says so in one line (:func:`_short_line`, returned beside the plans; empty when
+    it gives every target its points): which targets, and the visit's time that would give them their points.
     """
     if not order:
-        return {}
+        return {}, ""
     budget_seconds = max(budget_seconds, 0.0)
     targets = {k: [t for t in by_setup[k].targets if t.id in chosen[k]] for k in order}
     for k in order:
@@ -442,10 +446,7 @@ def _share_budget(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], 
     share = {k: need[k] + spare * need[k] / total for k in order}
     plans = {k: plan_fine_scans(targets[k], profile=by_setup[k].profile, budget_seconds=share[k], **kw)
              for k in order}
-    short = _short_line(by_setup, order, targets, plans, full, budget_seconds, spent, kw)
-    if short:
-        plans = {k: replace(p, warnings=p.warnings + (short,)) for k, p in plans.items()}
-    return plans
+    return plans, _short_line(by_setup, order, targets, plans, full, budget_seconds, spent, kw)
 
 
 def _short_line(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], targets: Mapping[int, list],

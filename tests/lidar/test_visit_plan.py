@@ -170,7 +170,7 @@ def test_a_frozen_set_up_that_used_the_whole_budget_leaves_the_next_one_over_it_
     first = plan_fine_scans(setups[0].targets, budget_seconds=3600.0, closure=True)
     visit = plan_visit([replace(setups[0], frozen=first), setups[1]], budget_seconds=first.total_seconds)
     assert visit.plan(1) is first
-    assert any("already scanned" in w for w in visit.plan(2).warnings)
+    assert any("already scanned" in w for w in visit.warnings)
 
 
 def test_ties_found_by_both_coarse_scans_come_before_those_predicted_from_the_layout():
@@ -200,8 +200,8 @@ def test_a_second_instrument_is_planned_with_its_own_profile():
     assert deck <= _planned(visit.plan(1)) | _planned(visit.plan(2)) and not visit.warnings
 
 
-def _short(visit, k):
-    return [w for w in visit.plan(k).warnings if "too short" in w]
+def _short(visit):
+    return [w for w in visit.warnings if "too short" in w]
 
 
 def test_a_visit_too_short_for_the_points_asked_says_so_before_it_which_targets_and_the_time_that_would_do():
@@ -212,12 +212,12 @@ def test_a_visit_too_short_for_the_points_asked_says_so_before_it_which_targets_
     _, setups = _visit((39.9, 39.9, 39.9), (0.28, 0.72))
     setups = [replace(s, profile=vz) for s in setups]
     tight = plan_visit(setups, budget_seconds=3600.0, closure=True)
-    line = _short(tight, 1)
-    assert len(line) == 1 and _short(tight, 2) == line  # one line, the same in every set-up's plan
+    line = _short(tight)
+    assert len(line) == 1  # one line for the visit (processing adds it to every set-up's plan)
     need = int(re.search(r"set visit_budget_min to (\d+)", line[0]).group(1))
     assert need > 60
     roomy = plan_visit(setups, budget_seconds=need * 60.0, closure=True)
-    assert not _short(roomy, 1) and not _short(roomy, 2)
+    assert not _short(roomy)
     named = line[0].split(": ", 1)[1].split(" get fewer")[0]
     for k in (1, 2):  # every target the tight visit gives fewer points than the roomy one is named
         full = {r.reflector: r.expected_target_points for r in roomy.plan(k).rois}
