@@ -476,7 +476,7 @@ def _short_line(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], ta
     have = budget_seconds + spent
     scanned = f" ({spent / 60:.0f} of them already scanned)" if spent > 0 else ""
     return (f"the visit's {have / 60:.0f} min{scanned} are too short for {kw['min_points']} points a target: "
-            f"{named} get fewer (down to {min(n for _, n in short)}; its {windows} windows spend "
+            f"{named} would get fewer (down to {min(n for _, n in short)}; its {windows} windows spend "
             f"{overhead / 60:.0f} min turning and starting whatever their points); about {math.ceil(need / 60)} min "
             f"({math.ceil((need - have) / 60)} more) would give every target its points: set visit_budget_min to "
             f"{math.ceil(need / 60)}, or leave a set-up out")

@@ -146,9 +146,11 @@ PARAMETERS: tuple[Parameter, ...] = (
               "true | false", added_later=True),
     Parameter("plan_together", True, _boolean, "plan",
               "plan a visit's set-ups together: each target from the set-up that measures it best, tie targets "
-              "to join them, the visit's budget shared. A set-up whose fine scans are imported keeps its plan "
-              "(frozen) and the set-ups added after it are planned around it, with a budget of their own when it "
-              "was planned alone. False: each set-up planned as if it were alone",
+              "to join them, the visit's budget (visit_budget_min: budget_min a set-up) shared. In the same total "
+              "time it measures as well as or better than each set-up alone (the long-bridges bench). A set-up "
+              "whose fine scans are imported keeps its plan (frozen) and the set-ups added after it are planned "
+              "around it, in the time it left of the visit's. False: each set-up planned as if it were alone, "
+              "with budget_min each",
               "true | false", added_later=True),
     Parameter("visit_budget_min", None, _optional_positive, "plan",
               "the whole fine-scan time of a visit of several set-ups planned together, minutes, shared among them "
