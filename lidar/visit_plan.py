@@ -353,8 +353,8 @@ def _ties(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], sigma: M
             warnings.append(f"set-up {k} sees only {len(shared)} target(s) well that the set-ups before it also see "
                             f"({', '.join(sorted(shared)) or 'none'}, spread {spread(shared):.2f} m): it cannot be "
                             f"joined ({MIN_SHARED} targets spread {MIN_SPREAD_M:g} m off a line are needed); "
-                            "move it where it sees more of their targets, or add a set-up between them (stations --first proposes "
-                            "three set-ups when no pair joins)")
+                            "move it where it sees more of their targets, or add a set-up between them "
+                            "(stations --first proposes three set-ups when no pair joins)")
     return ties, warnings
 
 

@@ -235,9 +235,9 @@ def cmd_stations(args) -> int:
         where = ", ".join(f"({s.xyz_layout[0]:.1f}, {s.xyz_layout[1]:.1f})" for s in three.stations)
         left = above(three, args.sigma_mm)
         worst = "-" if math.isinf(three.worst_sigma_mm) else f"{three.worst_sigma_mm:.3f}"
-        print(f"{'no second set-up measures every deck target' if pair else 'no second set-up can be joined to the first one'}"
-              f" (a pair must share three targets seen well from both, spread off a line): three set-ups at {where}, "
-              f"each joined to those before it by "
+        why = "measures every deck target" if pair else "can be joined to the first one"
+        print(f"no second set-up {why} (a pair must share three targets seen well from both, spread off a line): "
+              f"three set-ups at {where}, each joined to those before it by "
               f"{', '.join(str(len(s)) for s in three.shared)} targets, measure "
               + ("every deck target" if not left else f"all but {', '.join(left)}")
               + f"; worst target's sigma {worst} mm")
