@@ -418,8 +418,10 @@ def weak_joins(join: SetupJoin, kept: Mapping[int, Mapping[str, Any]]) -> SetupJ
 
     ``kept``: each set-up's centroids as joined (:func:`without_weak_duplicates`: a shared target is there sharp from
     both sides or weak from both). A set-up sharing fewer than :data:`MIN_SHARED` sharp targets with those before it
-    rests on weak ones, each millimetres off along its line of sight: the join's rotation is loose (issue 40: the
-    four-span steel-like deck from beside its inner piers, 0.6-0.8 mm RMS, every value within its sigma).
+    rests on weak ones, each millimetres off along its line of sight: the join's rotation is loose, and every value
+    of that set-up carries it in its sigma (issue 40). A join through sharp targets that lie nearly on a line, far from
+    the set-up (the long-bridges bench's 0.6 mm rows: pier targets 35-120 m away, spread 1.3-2 m, rotation sigma
+    20-60 arcsec), is loose too; it is not flagged here: its sigma says it (``sigma_frame_mm``).
     """
     weak = {}
     for k, m in join.motions.items():
