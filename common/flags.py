@@ -232,6 +232,12 @@ FLAG_SETUP_JOIN_MISFIT = _flag("setup_join_misfit", WARNING, "a target seen from
                                "sigmas and was measured from one of them only", "lidar.setups",
                                action="inspect the target named (moved between the set-ups? a cable tie?)",
                                words="set-ups disagreed on a target")
+FLAG_SETUP_JOIN_WEAK = _flag("setup_join_weak", INFO, "a set-up was joined through targets seen only weakly (a "
+                             "disc narrower than the beam, at grazing incidence) from it and from the set-ups before "
+                             "it: the join's own error is large, and in the sigma of every value from that set-up "
+                             "(sigma_frame_mm); a station that sees at least three of the others' targets well, or a "
+                             "set-up between them, joins it better ('bridgesurvey stations --first')", "lidar.setups",
+                             words="a set-up joined through weak sightings")
 FLAG_SETUP_NOT_MEASURED = _flag("setup_not_measured", WARNING, "a set-up of the visit has no fine scans (or they "
                                 "failed): the targets only it sees are missing", "lidar.stage2",
                                 action="import its fine scans ('bridgesurvey add-fine --setup K') and process",

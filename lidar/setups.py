@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from common.errors import ProcessingError
-from common.flags import FLAG_SETUP_JOIN_MISFIT, FLAG_SETUP_NOT_JOINED
+from common.flags import FLAG_SETUP_JOIN_MISFIT, FLAG_SETUP_JOIN_WEAK, FLAG_SETUP_NOT_JOINED
 from common.rigid import fit_rigid, rotation_from_rotvec, skew
 from lidar.centroid import is_weak
 from lidar.displacement import compute_displacements
@@ -115,6 +115,9 @@ class SetupJoin:
         Shared sightings left out of the motions (their sightings disagreed), with the target kept from the other.
     sigma0 : float
         RMS normalised residual of the join (1: the centroids agree as their covariances say).
+    weak : mapping set-up -> tuple of str
+        The further set-ups joined through fewer than :data:`MIN_SHARED` targets seen well from both sides, with the
+        weak ones they were joined through (:func:`corrected_side` sets it from the centroids' flags).
     """
 
     label: str
@@ -130,6 +133,7 @@ class SetupJoin:
     residuals: tuple[dict, ...] = ()
     left_out: tuple[tuple[int, str], ...] = ()
     sigma0: float = 1.0
+    weak: Mapping[int, tuple[str, ...]] = field(default_factory=dict)
 
     def observations(self) -> dict[str, Observation]:
         """The joined targets as observations (position, its 3x3 block of the covariance)."""
@@ -143,7 +147,16 @@ class SetupJoin:
             names = ", ".join(f"{t} from set-up {k}" for k, t in self.left_out)
             out.append(f"{FLAG_SETUP_JOIN_MISFIT}: {names} left out of the join (its sightings disagreed beyond "
                        f"{OUTLIER_SIGMA:g} sigma)")
+        for k, ids in sorted(self.weak.items()):
+            out.append(f"{FLAG_SETUP_JOIN_WEAK}: set-up {k} joined through {', '.join(ids)}, seen only weakly from "
+                       f"both sides (rotation sigma {self._rotation_sigma_arcsec(k):.0f}\")")
         return out
+
+    def _rotation_sigma_arcsec(self, k: int) -> float:
+        m = self.motions.get(k)
+        if m is None:
+            return float("nan")
+        return float(np.linalg.norm(np.sqrt(np.maximum(np.diag(m["cov"])[:3], 0.0)))) / ARCSEC
 
     def to_json(self) -> dict:
         """The joint frame's QA trail: what was joined or refused, each motion's sigma, the residuals."""
@@ -159,7 +172,8 @@ class SetupJoin:
         return {"setups": sorted(set(self.joined) | set(self.refused)), "joined": list(self.joined),
                 "refused": {str(k): v for k, v in sorted(self.refused.items())}, "sigma0": round(self.sigma0, 3),
                 "motions": motions, "residuals": [dict(r) for r in self.residuals],
-                "left_out": [{"setup": k, "reflector": t} for k, t in self.left_out]}
+                "left_out": [{"setup": k, "reflector": t} for k, t in self.left_out],
+                **({"weak": {str(k): list(v) for k, v in sorted(self.weak.items())}} if self.weak else {})}
 
 
 def _place(sides: Mapping[int, Mapping[str, Observation]], order: Sequence[int]
@@ -388,14 +402,36 @@ def corrected_side(label: str, setups: Mapping[int, Mapping[str, object]], model
     ``flags``); a weak sighting of a target another set-up sees better is left out (:func:`without_weak_duplicates`).
     """
     obs, jac, devs, visits = {}, {}, {}, {}
-    for k, cents in without_weak_duplicates(setups).items():
+    kept = without_weak_duplicates(setups)
+    for k, cents in kept.items():
         v = visits[k] = visit_label(label, k)
         o, jc = corrected_observations(cents, model, v)
         obs[k] = o
         dv = family_deviations(cents, model, v, {t: x.xyz for t, x in o.items()})
         for t in cents:
             jac[(k, t)], devs[(k, t)] = jc[t], dv[t]
-    return CorrectedVisit(join_setups(label, obs), jac, devs, visits)
+    return CorrectedVisit(weak_joins(join_setups(label, obs), kept), jac, devs, visits)
+
+
+def weak_joins(join: SetupJoin, kept: Mapping[int, Mapping[str, Any]]) -> SetupJoin:
+    """The join with the set-ups it joined through weak sightings named (:attr:`SetupJoin.weak`).
+
+    ``kept``: each set-up's centroids as joined (:func:`without_weak_duplicates`: a shared target is there sharp from
+    both sides or weak from both). A set-up sharing fewer than :data:`MIN_SHARED` sharp targets with those before it
+    rests on weak ones, each millimetres off along its line of sight: the join's rotation is loose, and every value
+    of that set-up carries it in its sigma (issue 40). A join through sharp targets that lie nearly on a line, far from
+    the set-up (the long-bridges bench's 0.6 mm rows: pier targets 35-120 m away, spread 1.3-2 m, rotation sigma
+    20-60 arcsec), is loose too; it is not flagged here: its sigma says it (``sigma_frame_mm``).
+    """
+    weak = {}
+    for k, m in join.motions.items():
+        shared = list(m.get("shared", ()))
+        if not shared:
+            continue
+        poor = tuple(t for t in shared if t in kept.get(k, {}) and is_weak(getattr(kept[k][t], "flags", ())))
+        if len(shared) - len(poor) < MIN_SHARED:
+            weak[k] = poor
+    return replace(join, weak=weak) if weak else join
 
 
 def joined_displacements(baseline: CorrectedVisit, epoch: CorrectedVisit, groups: Mapping[str, str], *, model: FieldModel,

@@ -26,14 +26,20 @@ made with). On site the second station's coarse scan usually comes after the fir
 together then plans only the set-ups still to come and takes the frozen plans as given. A target a frozen set-up
 planned and sees well is not assigned again; one it planned weakly goes to a set-up to come that measures it better;
 the ties of a set-up to come are drawn from what the frozen set-ups' windows hold; the budget the set-ups to come
-share is what the frozen ones left of the visit's (a frozen set-up planned as if it were alone had the whole budget
-to itself: the set-ups after it share a budget of their own). The frozen set-ups come first in the order of work.
+share is what the frozen ones left of the visit's (a frozen set-up planned as if it were alone is charged at most
+the budget its plan had). The frozen set-ups come first in the order of work.
+
+The visit's budget is the caller's: the campaign gives a visit planned together ``budget_min`` a set-up unless
+``visit_budget_min`` says otherwise (:func:`projects.processing.parameters.visit_budget_seconds`), the same total
+time its set-ups would have planned alone. The VZ-1000 spends about two minutes a window turning the head and
+starting, so a window costs nearly the same at 100 points as at 1000: a visit short of time cannot buy much by
+spreading fewer points, and its plans say so in one line (:func:`_short_line`) before the visit.
 """
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -67,8 +73,8 @@ class SetupTargets:
     profile: ScannerProfile = VZ1000
     #: The plan its fine scans were made with, when they are imported: it is taken as given, not planned again.
     frozen: ScanPlan | None = None
-    #: A frozen plan made as if the set-up were the visit's only one: it had the whole budget to itself, so its time
-    #: does not come out of the budget the set-ups to come share.
+    #: A frozen plan made as if the set-up were the visit's only one: it had a budget of its own (its plan's
+    #: ``budget_seconds``), and is charged at most that of the visit's budget the set-ups to come share.
     frozen_alone: bool = False
 
 
@@ -92,7 +98,8 @@ class VisitPlan:
     order : tuple of int
         The order in which to work the set-ups.
     warnings : tuple of str
-        What the surveyor must act on for the visit as a whole (a set-up that cannot be joined).
+        What the surveyor must act on for the visit as a whole (a set-up that cannot be joined, a visit too short
+        for the points asked).
     elsewhere : mapping set-up -> mapping id -> set-up
         The targets a set-up sees but leaves to another set-up.
     second : mapping set-up -> tuple of str
@@ -232,12 +239,15 @@ def plan_visit(setups: Sequence[SetupTargets], *, epoch: str = "", min_points: i
     chosen, assignment, elsewhere = _assign(by_setup, order, sigma)
     ties, warnings = _ties(by_setup, order, sigma, chosen)
     given: dict[int, ScanPlan] = {k: p for k in frozen if (p := by_setup[k].frozen) is not None}
-    spent = float(sum(p.total_seconds for k, p in given.items() if not by_setup[k].frozen_alone))
+    spent = float(sum(min(p.total_seconds, p.budget_seconds) if by_setup[k].frozen_alone else p.total_seconds
+                      for k, p in given.items()))
     seconds = _second_sightings(by_setup, order, sigma, chosen, budget_seconds - spent, kw)
     elsewhere = {k: {t: j for t, j in elsewhere[k].items() if t not in chosen[k]} for k in order}
     plans = dict(given)
-    plans.update(_share_budget(by_setup, tuple(k for k in order if k not in frozen), chosen, budget_seconds - spent,
-                               kw, spent=spent))
+    shared, short = _share_budget(by_setup, tuple(k for k in order if k not in frozen), chosen,
+                                  budget_seconds - spent, kw, spent=spent)
+    plans.update(shared)
+    warnings += [short] if short else []
     return VisitPlan(epoch, plans, assignment, ties, sigma, float(budget_seconds), order, tuple(warnings), elsewhere,
                      seconds)
 
@@ -343,7 +353,8 @@ def _ties(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], sigma: M
             warnings.append(f"set-up {k} sees only {len(shared)} target(s) well that the set-ups before it also see "
                             f"({', '.join(sorted(shared)) or 'none'}, spread {spread(shared):.2f} m): it cannot be "
                             f"joined ({MIN_SHARED} targets spread {MIN_SPREAD_M:g} m off a line are needed); "
-                            "move it where it sees more of their targets")
+                            "move it where it sees more of their targets, or add a set-up between them "
+                            "(stations --first proposes three set-ups when no pair joins)")
     return ties, warnings
 
 
@@ -395,7 +406,7 @@ def _spread_of(targets: Mapping[str, PlanTarget]):
 
 
 def _share_budget(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], chosen: Mapping[int, set[str]],
-                  budget_seconds: float, kw: dict, *, spent: float = 0.0) -> dict[int, ScanPlan]:
+                  budget_seconds: float, kw: dict, *, spent: float = 0.0) -> tuple[dict[int, ScanPlan], str]:
     """Each set-up of ``order`` planned in its share of ``budget_seconds``.
 
     ``budget_seconds`` is what the visit's budget leaves after the ``spent`` seconds of the frozen set-ups.
@@ -403,10 +414,12 @@ def _share_budget(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], 
     The shares give every set-up's targets the same points: the most points per target (up to ``min_points``) whose
     windows all fit the visit's budget, found by bisection; each share is its set-up's time at those points, and
     time left over is shared in proportion. When even :data:`MIN_SHARED_POINTS` do not fit, each set-up gets its time
-    at those points and every plan says the visit is over its budget.
+    at those points and every plan says the visit is over its budget. When the budget gives targets fewer points
+    than ``min_points``, the visit says so in one line (:func:`_short_line`, returned beside the plans; empty when
+    it gives every target its points): which targets, and the visit's time that would give them their points.
     """
     if not order:
-        return {}
+        return {}, ""
     budget_seconds = max(budget_seconds, 0.0)
     targets = {k: [t for t in by_setup[k].targets if t.id in chosen[k]] for k in order}
     for k in order:
@@ -419,8 +432,8 @@ def _share_budget(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], 
         return {k: max(plan_fine_scans(targets[k], profile=by_setup[k].profile, budget_seconds=1e9,
                                        **args).total_seconds, 1e-6) for k in order}
 
-    need = times(kw["min_points"])
-    over = ""
+    full = times(kw["min_points"])
+    need = dict(full)
     if sum(need.values()) > budget_seconds:
         lo, hi = float(MIN_SHARED_POINTS), float(kw["min_points"])
         if sum(times(lo).values()) <= budget_seconds:
@@ -428,17 +441,42 @@ def _share_budget(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], 
                 mid = 0.5 * (lo + hi)
                 lo, hi = (mid, hi) if sum(times(mid).values()) <= budget_seconds else (lo, mid)
         need = times(lo)
-        if sum(need.values()) > budget_seconds * 1.0001:  # each set-up its time at the floor: the visit goes over
-            left = (f"the {budget_seconds / 60:.0f} min its budget leaves after the {spent / 60:.0f} min of the "
-                    "set-ups already scanned" if spent > 0 else f"its budget of {budget_seconds / 60:.0f} min")
-            over = (f"the visit's windows take {sum(need.values()) / 60:.0f} min even at {MIN_SHARED_POINTS} points a "
-                    f"target, over {left}: each set-up is planned at those "
-                    "points; give budget_min the visit's whole time (every set-up), or leave a set-up out")
     total = sum(need.values())
     spare = max(budget_seconds - total, 0.0)
     share = {k: need[k] + spare * need[k] / total for k in order}
     plans = {k: plan_fine_scans(targets[k], profile=by_setup[k].profile, budget_seconds=share[k], **kw)
              for k in order}
-    if over:
-        plans = {k: replace(p, warnings=p.warnings + (over,)) for k, p in plans.items()}
-    return plans
+    return plans, _short_line(by_setup, order, targets, plans, full, budget_seconds, spent, kw)
+
+
+def _short_line(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], targets: Mapping[int, list],
+                plans: Mapping[int, ScanPlan], full: Mapping[int, float], budget_seconds: float, spent: float,
+                kw: dict) -> str:
+    """One line, before the visit, when its budget gives targets fewer points than asked: which, and the time needed.
+
+    A target is short when its window in the plan gets fewer points than the same window planned without a time
+    limit (points the instrument's finest steps cannot give are no shortage of time). ``full``: each set-up's time
+    with every target at ``min_points``. Empty when the budget gives every target its points.
+    """
+    short: list[tuple[str, int]] = []
+    for k in order:
+        roomy = {r.reflector: r.expected_target_points
+                 for r in plan_fine_scans(targets[k], profile=by_setup[k].profile, budget_seconds=1e9, **kw).rois
+                 if not r.closure}
+        planned = {r.reflector: r.expected_target_points for r in plans[k].rois if not r.closure}
+        short.extend((tid, planned.get(tid, 0)) for tid, n in roomy.items() if planned.get(tid, 0) < 0.95 * n)
+    if not short:
+        return ""
+    need = sum(full.values()) + spent
+    ids = sorted({tid for tid, _ in short}, key=lambda t: (len(t), t))
+    every = {t.id for k in order for t in targets[k]}
+    named = f"every target ({len(ids)})" if set(ids) == every else ", ".join(ids)
+    windows = sum(len(p.rois) for p in plans.values())
+    overhead = sum(by_setup[k].profile.window_overhead_s * len(plans[k].rois) for k in order)
+    have = budget_seconds + spent
+    scanned = f" ({spent / 60:.0f} of them already scanned)" if spent > 0 else ""
+    return (f"the visit's {have / 60:.0f} min{scanned} are too short for {kw['min_points']} points a target: "
+            f"{named} would get fewer (down to {min(n for _, n in short)}; its {windows} windows spend "
+            f"{overhead / 60:.0f} min turning and starting whatever their points); about {math.ceil(need / 60)} min "
+            f"({math.ceil((need - have) / 60)} more) would give every target its points: set visit_budget_min to "
+            f"{math.ceil(need / 60)}, or leave a set-up out")

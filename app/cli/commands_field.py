@@ -12,7 +12,7 @@ from common.errors import InputError, SurveyError
 from common.files import write_atomic
 from lidar.figures import save_figure
 from projects.onsite.check import check_epoch, check_visit
-from projects.onsite.station_pairs import above, propose_pair, short_of
+from projects.onsite.station_pairs import above, propose_pair, propose_three, short_of
 from projects.onsite.stations import (
     advise_stations,
     plan_from_positions,
@@ -52,11 +52,24 @@ def _pair(advice, layout, asked: bool, sigma_mm: float | None = None, first=None
     best = first or next((s for s in advice.stations if s.predicted_sigma_mm), None)
     if not asked and (best is None or not short_of(best, layout, sigma_mm)):
         return None
-    pair = propose_pair(advice.stations, layout, sigma_mm=sigma_mm, first=first)
-    if pair is None and asked:
-        print("no second station shares three well-spread targets with the best one: no pair to propose",
-              file=sys.stderr)
-    return pair
+    return propose_pair(advice.stations, layout, sigma_mm=sigma_mm, first=first)
+
+
+def _three(advice, layout, asked: bool, sigma_mm: float | None, first, pair):
+    """Three set-ups, when a second one was asked or needed and no pair measures every deck target (to the sigma
+    asked): kept only when they leave fewer deck targets short than the best pair."""
+    best = first or next((s for s in advice.stations if s.predicted_sigma_mm), None)
+    if not asked and (best is None or not short_of(best, layout, sigma_mm)):
+        return None
+    if pair is not None and not above(pair, sigma_mm):
+        return None
+    three = propose_three(advice.stations, layout, first=first, sigma_mm=sigma_mm)
+    if three is not None and pair is not None and len(above(three, sigma_mm)) >= len(above(pair, sigma_mm)):
+        three = None
+    if three is None and pair is None and asked:
+        print("no second station shares three targets seen well from both with the first one, and no third station "
+              "joins them: no pair or three to propose", file=sys.stderr)
+    return three
 
 
 def _whole_visit(c, label: str) -> bool:
@@ -167,24 +180,31 @@ def cmd_stations(args) -> int:
                 raise InputError(f"--first {args.first}: no deck target can be measured from there "
                                  f"({', '.join(sorted(set(first.reasons.values()))) or 'nothing seen'})")
         pair = _pair(advice, layout, args.pair, args.sigma_mm, first)
+        three = _three(advice, layout, args.pair, args.sigma_mm, first, pair)
         positions = [] if pair is None else [pair.first.xyz_layout, pair.second.xyz_layout]
+        if three is not None:  # three set-ups do better than any pair: the visit is theirs
+            positions = [s.xyz_layout for s in three.stations]
         visit = None
-        if pair is not None:  # the pair's visit planned together from the two positions
+        if positions:  # the visit planned together from the two (three) positions
             try:
                 visit = plan_from_positions(c, positions)
             except SurveyError as exc:
-                print(f"the pair's visit cannot be planned together: {str(exc).splitlines()[0]}", file=sys.stderr)
+                print(f"the {'three set-ups' if three else 'pair'}'s visit cannot be planned together: "
+                      f"{str(exc).splitlines()[0]}", file=sys.stderr)
     best = first or next((s for s in advice.stations if s.predicted_sigma_mm), None)
     short = short_of(best, layout, args.sigma_mm) if best is not None else {}
     extra = {"sigma_asked_mm": args.sigma_mm, "best_cannot": short} if short or args.sigma_mm is not None else {}
     if first is not None:
         extra = {**extra, "first": first.to_json()}
-    if pair is None and not extra:
+    if pair is None and three is None and not extra:
         advice.save(args.out)
     else:
-        pair_doc = {} if pair is None else {"pair": dict(pair.to_json(), still_short=list(above(pair, args.sigma_mm)),
-                                                         visit=None if visit is None else
-                                                         positions_visit_json(visit, positions))}
+        pair_doc = {}
+        for key, got in (("pair", pair), ("three", three)):
+            if got is not None:  # the visit planned from the positions goes with the one proposed
+                mine = visit if (key == "three") == (three is not None) else None
+                pair_doc[key] = dict(got.to_json(), still_short=list(above(got, args.sigma_mm)),
+                                     visit=None if mine is None else positions_visit_json(mine, positions))
         write_atomic(args.out, json.dumps({**advice.to_json(), **extra, **pair_doc}, indent=1))
     if args.png is not None:
         save_figure(station_map_figure(advice, layout), args.png)
@@ -211,6 +231,16 @@ def cmd_stations(args) -> int:
               f"{worst} mm (one set-up: {pair.first.worst_sigma_mm:.3f} mm), "
               f"{len(pair.shared)} targets shared to join them"
               + (f"; still hidden: {', '.join(pair.hidden)}" if pair.hidden else ""))
+    if three is not None:
+        where = ", ".join(f"({s.xyz_layout[0]:.1f}, {s.xyz_layout[1]:.1f})" for s in three.stations)
+        left = above(three, args.sigma_mm)
+        worst = "-" if math.isinf(three.worst_sigma_mm) else f"{three.worst_sigma_mm:.3f}"
+        why = "measures every deck target" if pair else "can be joined to the first one"
+        print(f"no second set-up {why} (a pair must share three targets seen well from both, spread off a line): "
+              f"three set-ups at {where}, each joined to those before it by "
+              f"{', '.join(str(len(s)) for s in three.shared)} targets, measure "
+              + ("every deck target" if not left else f"all but {', '.join(left)}")
+              + f"; worst target's sigma {worst} mm")
     if visit is not None:  # the visit planned together from the two positions, before any coarse scan
         for row in positions_visit_json(visit, positions)["setups"]:
             deck = row["deck_targets_assigned"]

@@ -22,6 +22,7 @@ from common.progress import ProgressCallback, report, scaled
 from common.rigid import fit_rigid
 from lidar.stations import StationPrediction, default_area, grid_in_polygon, plan_visit_from_positions, survey_stations
 from lidar.visit_plan import VisitPlan
+from projects.processing.parameters import visit_budget_seconds
 from projects.processing.stages import baseline_epoch, layout_up, parameters, read_files
 from projects.store.campaign import Campaign
 
@@ -179,14 +180,15 @@ def advise_stations(c: Campaign, *, area_xy: np.ndarray | None = None, height_m:
 def plan_from_positions(c: Campaign, positions_layout) -> VisitPlan:
     """A visit's set-ups planned together from their planned positions (layout frame), before any coarse scan.
 
-    With the campaign's scanner and planner settings (``min_points``, ``budget_min`` as the visit's, ``closure``,
-    ``layout_up``): which set-up measures which target, the ties that join them, each one's share of the time
+    With the campaign's scanner and planner settings (``min_points``, the visit's budget: ``visit_budget_min`` or
+    ``budget_min`` a set-up, ``closure``, ``layout_up``): which set-up measures which target, the ties that join them, each one's share of the time
     (:func:`lidar.stations.plan_visit_from_positions`).
     """
     params = parameters(c)
     return plan_visit_from_positions(c.layout(), positions_layout, profile=c.profile,
                                      min_points=int(params["min_points"]),
-                                     budget_seconds=float(params["budget_min"]) * 60.0, up=layout_up(params),
+                                     budget_seconds=visit_budget_seconds(params, len(positions_layout)),
+                                     up=layout_up(params),
                                      closure=bool(params["closure"]))
 
 

@@ -120,7 +120,9 @@ class Parameter:
 
 PARAMETERS: tuple[Parameter, ...] = (
     Parameter("min_points", 1000, _min_points, "plan", "points to plan on every target", "a whole number >= 10"),
-    Parameter("budget_min", 60.0, _positive_float, "plan", "time budget of the fine scans of one visit, minutes",
+    Parameter("budget_min", 60.0, _positive_float, "plan",
+              "time budget of the fine scans of one set-up, minutes (a visit of one set-up: the visit's; a visit of "
+              "several set-ups planned together shares budget_min a set-up unless visit_budget_min is given)",
               "a number > 0"),
     Parameter("map_step_deg", None, _optional_positive, "plan",
               "cell size of the coarse scan's reflectance map, degrees (auto: from the scan)", "auto | a number > 0"),
@@ -144,10 +146,18 @@ PARAMETERS: tuple[Parameter, ...] = (
               "true | false", added_later=True),
     Parameter("plan_together", True, _boolean, "plan",
               "plan a visit's set-ups together: each target from the set-up that measures it best, tie targets "
-              "to join them, the visit's budget shared. A set-up whose fine scans are imported keeps its plan "
-              "(frozen) and the set-ups added after it are planned around it, with a budget of their own when it "
-              "was planned alone. False: each set-up planned as if it were alone",
+              "to join them, the visit's budget (visit_budget_min: budget_min a set-up) shared. In the same total "
+              "time it measures as well as or better than each set-up alone (the long-bridges bench). A set-up "
+              "whose fine scans are imported keeps its plan (frozen) and the set-ups added after it are planned "
+              "around it, in the time it left of the visit's. False: each set-up planned as if it were alone, "
+              "with budget_min each",
               "true | false", added_later=True),
+    Parameter("visit_budget_min", None, _optional_positive, "plan",
+              "the whole fine-scan time of a visit of several set-ups planned together, minutes, shared among them "
+              "(auto: budget_min a set-up, as much as each would have planned alone; the VZ-1000 spends about 2 "
+              "minutes a window turning and starting, so a window costs about the same at 100 points as at 1000). "
+              "When it is too short for min_points on every target the plan names the targets and the time that "
+              "would do, before the visit", "auto | a number > 0", added_later=True),
     Parameter("field_model", True, _boolean, "displacements",
               "correct the atmosphere's scale, the retro-reflector range walk and the set-up's drift, estimated "
               "from the campaign's own targets (false: rigid motion only, as before)", "true | false"),
@@ -174,6 +184,8 @@ BY_NAME: dict[str, Parameter] = {p.name: p for p in PARAMETERS}
 PROCESSING = tuple(p for p in PARAMETERS if p.stage in ("plan", "displacements"))
 DEFAULTS: dict[str, Any] = {p.name: p.default for p in PROCESSING}
 STAGE1_KEYS = tuple(p.name for p in PROCESSING if p.stage == "plan")
+#: Stage-1 parameters only a visit planned together reads: in its visit hash, not in each set-up's own.
+VISIT_KEYS = ("plan_together", "visit_budget_min")
 STAGE2_KEYS = tuple(p.name for p in PROCESSING if p.stage == "displacements")
 #: Names ``settings`` takes besides the parameters: the scanner and the campaign's time zone
 #: (:attr:`projects.store.campaign.Campaign.timezone`), each handled on its own.
@@ -192,12 +204,31 @@ def parameter(name: str) -> Parameter:
 def stage1_params(params: dict) -> dict:
     """The parameters stage 1 depends on (their hash decides whether an epoch is planned and measured again).
 
-    ``plan_together`` is not among them: a set-up planned together has the other set-ups' inputs in its plan hash
-    (``projects.processing.stages._visit_hash``), one alone or of a one-set-up visit is planned the same either way,
-    so turning it on or off re-plans only the visits it changes (and none whose fine scans are in: frozen).
+    ``plan_together`` and ``visit_budget_min`` (:data:`VISIT_KEYS`) are not among them: a set-up planned together
+    has the other set-ups' inputs and the visit's budget in its plan hash (``projects.processing.stages._visit_hash``),
+    one alone or of a one-set-up visit is planned the same either way, so changing them re-plans only the visits they
+    change (and none whose fine scans are in: frozen).
     """
     return {p.name: params[p.name] for p in PROCESSING
-            if p.stage == "plan" and p.name != "plan_together" and (not p.added_later or params[p.name] != p.default)}
+            if p.stage == "plan" and p.name not in VISIT_KEYS and (not p.added_later or params[p.name] != p.default)}
+
+
+def visit_budget_seconds(params: dict, setups: int) -> float:
+    """The fine-scan time of a visit of ``setups`` set-ups planned together, seconds (shared among them).
+
+    ``visit_budget_min`` when given, else ``budget_min`` a set-up: the same total time as the set-ups planned
+    alone, each with ``budget_min`` (issue 40: planned together in one set-up's time, every window got too few
+    points, and planning together looked worse than alone when it only had half the time).
+
+    Examples
+    --------
+    >>> visit_budget_seconds({"budget_min": 60.0, "visit_budget_min": None}, 2)
+    7200.0
+    >>> visit_budget_seconds({"budget_min": 60.0, "visit_budget_min": 90.0}, 2)
+    5400.0
+    """
+    given = params.get("visit_budget_min")
+    return float(given) * 60.0 if given is not None else float(params["budget_min"]) * 60.0 * max(int(setups), 1)
 
 
 def stage2_params(params: dict) -> dict:

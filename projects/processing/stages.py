@@ -47,7 +47,7 @@ PREVIEW_DAMAGED = "its map preview is damaged (fails its checksum): planned agai
 FIELD_REFIT = "the field model was re-fitted with the newer visits"
 from lidar.systematic.campaign_fit import air_near
 from lidar.visit_plan import SetupTargets, VisitPlan, plan_visit
-from projects.processing.parameters import DEFAULTS, parameter, stage1_params, stage2_params
+from projects.processing.parameters import DEFAULTS, parameter, stage1_params, stage2_params, visit_budget_seconds
 from projects.store.archive import check_present
 from projects.store.campaign import Campaign, parse_datetime, sha256_of
 from projects.store.errors import ScansArchivedError
@@ -279,11 +279,15 @@ def _others(c: Campaign, label: str, setup: int, setups: Sequence[int], params: 
     return tuple(out)
 
 
-def _visit_hash(own: str, others: Mapping[int, str]) -> str:
-    """A set-up's plan hash: its own inputs', and with others planned together theirs too (set-up -> own hash)."""
+def _visit_hash(own: str, others: Mapping[int, str], params: dict) -> str:
+    """A set-up's plan hash: its own inputs', and with others planned together theirs and the visit's budget.
+
+    ``others``: set-up -> own hash; the budget is :func:`projects.processing.parameters.visit_budget_seconds`'s.
+    """
     if not others:
         return own
-    return _hash({"own": own, "visit": [[k, others[k]] for k in sorted(others)]})
+    return _hash({"own": own, "visit": [[k, others[k]] for k in sorted(others)],
+                  "visit_budget_s": visit_budget_seconds(params, len(others) + 1)})
 
 
 def _plan_hashes(c: Campaign, label: str, setup: int, inp: EpochInputs, params: dict
@@ -297,7 +301,7 @@ def _plan_hashes(c: Campaign, label: str, setup: int, inp: EpochInputs, params: 
     own = _plan_hash(inp, params)
     others = _others(c, label, setup, inp.setups, params)
     frozen = _frozen_hash(c, label, inp, own) if len(inp.setups) > 1 else None  # alone or together
-    return own, others, frozen or _visit_hash(own, {o.setup: o.own_hash for o in others})
+    return own, others, frozen or _visit_hash(own, {o.setup: o.own_hash for o in others}, params)
 
 
 def _candidates_to_json(targets: Sequence[PlanTarget]) -> list[dict]:
@@ -527,7 +531,7 @@ def _plan_together(job: Stage1Job, analysis, progress: ProgressCallback | None) 
         setups.append(SetupTargets(o.setup, cands, o.profile, frozen,
                                    frozen_alone=o.frozen_plan is not None and "visit" not in o.frozen_plan))
     visit: VisitPlan = plan_visit(setups, epoch=job.label, min_points=int(job.params["min_points"]),
-                                  budget_seconds=float(job.params["budget_min"]) * 60.0,
+                                  budget_seconds=visit_budget_seconds(job.params, len(job.others) + 1),
                                   closure=bool(job.params["closure"]))
     plan = visit.plan(job.setup)
     notes = pipeline.coarse_notes(analysis, mine, plan) + visit.warnings + tuple(left_out)
@@ -627,7 +631,7 @@ def _stale_setups(c: Campaign, label: str, params: dict, inputs: Mapping[int, Ep
         if not inp.coarse:
             continue
         frozen = _frozen_hash(c, label, inp, own[k]) if len(own) > 1 else None  # alone or together
-        h = frozen or _visit_hash(own[k], {j: own[j] for j in own if j != k} if together else {})
+        h = frozen or _visit_hash(own[k], {j: own[j] for j in own if j != k} if together else {}, params)
         why = _stale_reason(inp, params, h)
         if why is None and previews and c.preview_to_remake(label, k):
             why = PREVIEW_DAMAGED

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from common.flags import FLAG_SETUP_JOIN_MISFIT, FLAG_SETUP_NOT_JOINED, code
+from common.flags import FLAG_SETUP_JOIN_MISFIT, FLAG_SETUP_JOIN_WEAK, FLAG_SETUP_NOT_JOINED, code
 from lidar.displacement_result import Observation
 from lidar.setups import (
     CorrectedVisit,
@@ -214,3 +214,37 @@ def test_a_weak_sighting_is_left_out_where_another_set_up_sees_the_target_better
     kept = without_weak_duplicates({1: {"M7": weak, "M13": weak, "M1": sharp},
                                     2: {"M7": grazing, "M1": weak, "M14": weak}})
     assert kept == {1: {"M13": weak, "M1": sharp}, 2: {"M7": grazing, "M14": weak}}  # weak alone: still measured
+
+
+def test_a_set_up_joined_through_weak_sightings_is_flagged_with_them():
+    """Issue 40: beside the inner piers of the four-span steel-like deck the set-ups shared only targets both saw
+    at grazing incidence; the join rested on them, every value of set-up 2 was 0.6-0.8 mm off (within its sigma)
+    and nothing on the visit said why. Fewer than three targets seen well from both sides: flagged, naming them."""
+    from dataclasses import replace
+
+    ep, _, _, _ = fine_epoch(EpochConditions(), LAB_POSITIONS[0], seed=4)
+    rot, tr = MOTION
+    moved = {k: replace(v, xyz_socs=rot.T @ (np.asarray(v.xyz_socs) - tr), cov=rot.T @ v.cov @ rot,
+                        normal_socs=rot.T @ np.asarray(v.normal_socs)) for k, v in ep.items()}
+    first = {k: v for k, v in ep.items() if k in ("R1", "R2", "M1", "M2", "M3")}
+    second = {k: v for k, v in moved.items() if k != "M1"}
+    model = FieldModel("b", RangeWalkModel(), {})
+    grazing = ("grazing: the disc is 24 % of the beam's width",)
+
+    def weak(side, ids):
+        return {k: replace(v, flags=grazing) if k in ids else v for k, v in side.items()}
+
+    sharp = corrected_side("e", {1: first, 2: second}, model).join
+    assert sharp.joined == (1, 2) and not sharp.weak and not any(code(f) == FLAG_SETUP_JOIN_WEAK for f in sharp.flags())
+    shared = sharp.motions[2]["shared"]
+    assert len(shared) >= 4
+    poor = shared[:len(shared) - 2]  # two left seen well from both sides: too few to carry the join
+    join = corrected_side("e", {1: weak(first, poor), 2: weak(second, poor)}, model).join
+    assert join.joined == (1, 2) and set(join.weak[2]) == set(poor)
+    line = next(f for f in join.flags() if code(f) == FLAG_SETUP_JOIN_WEAK)
+    assert "set-up 2" in line and all(t in line for t in poor)
+    assert join.to_json()["weak"] == {"2": list(join.weak[2])}
+    # three seen well from both: no flag
+    ok = corrected_side("e", {1: weak(first, shared[:len(shared) - 3]), 2: weak(second, shared[:len(shared) - 3])},
+                        model).join
+    assert not ok.weak

@@ -242,7 +242,13 @@ def test_plan_shows_the_visit_planned_together_and_each_set_up_keeps_its_share(s
     extra = set(docs[2]["visit"]["ties"]) | {t for d in docs.values() for t in d["visit"]["second_sightings"]}
     assert twice <= extra  # a deck target is scanned twice to join the set-ups, or in the time left
     budget = docs[1]["visit"]["visit_budget_seconds"]
+    assert budget == pytest.approx(2 * 3600.0)  # budget_min (60) a set-up: the time the two would have alone
     assert docs[1]["budget_seconds"] + docs[2]["budget_seconds"] == pytest.approx(budget, rel=1e-3)
+    # the visit's own time, when the surveyor gives it: the set-ups are planned again within it
+    assert main(["settings", str(camp), "visit_budget_min", "45"]) == 0
+    assert main(["plan", str(camp), "--epoch", DATES[0][:10], "--setup", "2", "--out", str(tmp_path / "v.json")]) == 0
+    assert json.loads((tmp_path / "v.json").read_text())["visit"]["visit_budget_seconds"] == pytest.approx(2700.0)
+    assert main(["settings", str(camp), "visit_budget_min", "auto"]) == 0
     # planned alone again, from the same scans
     assert main(["settings", str(camp), "plan_together", "false"]) == 0
     capsys.readouterr()
@@ -280,8 +286,11 @@ def test_a_set_up_added_after_the_first_ones_fine_scans_leaves_its_plan_alone(st
         first = {r["reflector"] for r in json.loads(before)["rois"] if not r.get("closure")}
         ties = doc["visit"]["ties"]
         assert doc["visit"]["setups"] == [1, 2] and len(ties) >= 3 and set(ties) <= first
-        # set-up 1 was planned as if it were alone (the whole budget to itself): set-up 2 gets a budget of its own
-        assert doc["budget_seconds"] == pytest.approx(doc["visit"]["visit_budget_seconds"], rel=1e-3)
+        # set-up 1 was planned as if it were alone (a budget of its own): set-up 2 gets what it left of the visit's
+        # (budget_min a set-up)
+        spent = min(ScanPlan.from_json(json.loads(before)).total_seconds, 3600.0)
+        assert doc["visit"]["visit_budget_seconds"] == pytest.approx(7200.0)
+        assert doc["budget_seconds"] == pytest.approx(7200.0 - spent, rel=1e-3)
     else:
         assert "visit" not in doc
     # its fine scans measured with that plan, the visit processes and joins

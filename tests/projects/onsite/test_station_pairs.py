@@ -11,7 +11,7 @@ from app.cli.main import main
 from lidar.layout import layout_from_model, write_layout_csv
 from lidar.simulate import BridgeModel
 from lidar.stations import StationPrediction
-from projects.onsite.station_pairs import above, combine, propose_pair, short_of
+from projects.onsite.station_pairs import above, chain, combine, propose_pair, propose_three, short_of
 from projects.store.campaign import Campaign
 
 LAYOUT = layout_from_model(BridgeModel(spans_m=(39.9, 39.9, 39.9)), noise_m=0.0, rng=np.random.default_rng(0))
@@ -44,6 +44,32 @@ def test_a_pair_combines_the_sigmas_of_the_targets_both_see():
 
 def test_stations_that_share_too_little_are_no_pair():
     assert combine(_station(10, REFS[:2] + DECK[:6]), _station(110, REFS[6:] + DECK[12:]), LAYOUT) is None
+
+
+def test_targets_seen_weakly_by_one_station_join_nothing():
+    """Issue 40: the planner ties set-ups only by targets both see well; a pair that shared only weak sightings was
+    proposed before the visit and then refused on site (setup_not_joined)."""
+    a, b = _station(30, END1), _station(90, END2)
+    both = REFS[2:4] + DECK[6:12]
+    keep = [REFS[2], REFS[3], DECK[6]]  # three, spread off a line
+    assert combine(a, replace(b, weak=tuple(t for t in both if t not in keep)), LAYOUT).shared == tuple(keep)
+    assert combine(a, replace(b, weak=tuple(t for t in both if t not in keep[:2])), LAYOUT) is None  # two: too few
+
+
+def test_when_no_second_station_joins_the_first_three_set_ups_are_proposed():
+    """Issue 40: from one end of a long bridge the other end shares nothing with it; a set-up between them joins
+    both, and the three measure every deck target."""
+    a = _station(10, REFS[:4] + DECK[:6])
+    b = _station(60, REFS[2:6] + DECK[4:14])
+    c = _station(110, REFS[4:] + DECK[12:])
+    assert combine(a, c, LAYOUT) is None and chain((a, c, b), LAYOUT) is None  # c joins nothing before it
+    pair = propose_pair([a, b, c], LAYOUT, first=a)
+    assert pair is not None and pair.second is b and set(pair.hidden) == set(DECK[14:])
+    three = propose_three([a, b, c], LAYOUT, first=a)
+    assert three is not None and three.stations == (a, b, c) and not three.hidden and not above(three, None)
+    assert set(three.shared[0]) == set(REFS[2:4] + DECK[4:6]) and set(three.shared[1]) >= set(REFS[4:6])
+    assert three.to_json()["seconds"] == 1800.0
+    assert propose_three([a, c], LAYOUT, first=a) is None
 
 
 def test_the_second_set_up_is_the_one_that_improves_the_worst_target_most():
@@ -117,3 +143,31 @@ def test_from_one_end_of_a_long_bridge_before_any_visit_the_pair_and_its_visit_a
     assert "set-up 2 at (" in text and "ties" in text
     assert main(["stations", str(camp), "--out", str(out), "--first", "12"]) == 1
     assert "--first expects x,y" in capsys.readouterr().err
+
+
+def test_from_one_end_of_a_150_m_bridge_the_stations_command_proposes_three_set_ups(tmp_path, capsys):
+    """Issue 40: 5 x 30 m from x = 15 m: no second position joins the first and measures every deck target (near the
+    other end it shares only the end piers' targets: not joined on site); three set-ups do, and their visit is
+    planned together, joined, in the visit's time (budget_min a set-up)."""
+    lay = tmp_path / "layout.csv"
+    write_layout_csv(layout_from_model(BridgeModel(spans_m=(30.0,) * 5, deck_fractions=(0.4, 0.5, 0.6)),
+                                       noise_m=0.02, rng=np.random.default_rng(1)), lay)
+    camp = tmp_path / "camp"
+    assert main(["init", str(camp), "--name", "Five spans", "--layout", str(lay), "--span-m", "30"]) == 0
+    area = tmp_path / "area.csv"
+    area.write_text("x,y\n-5,-18\n155,-18\n155,-9\n-5,-9\n")
+    out = tmp_path / "stations.json"
+    capsys.readouterr()
+    assert main(["stations", str(camp), "--out", str(out), "--area", str(area), "--grid-m", "10",
+                 "--first", "15,-12"]) == 0
+    text = capsys.readouterr().out
+    d = json.loads(out.read_text())
+    assert d["pair"]["still_short"]  # the best pair leaves a deck target out
+    three = d["three"]
+    assert [s["x"] for s in three["stations"]][0] == 15.0 and not three["still_short"]
+    assert all(len(s) >= 3 for s in three["shared"])
+    assert "three set-ups at (15.0, -12.0)" in text and "measure every deck target" in text
+    visit = three["visit"]
+    assert [s["setup"] for s in visit["setups"]] == [1, 2, 3] and not visit["warnings"]  # joined, time enough
+    assert {t for s in visit["setups"] for t in s["deck_targets_assigned"]} == _deck_of(camp)
+    assert visit["budget_minutes"] == 180.0
