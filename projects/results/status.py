@@ -36,6 +36,8 @@ def campaign_status(c: Campaign) -> dict:
     ``storage`` is the folder's size on disk and where its scans are
     (:func:`projects.store.archive.storage_summary`).
     """
+    damaged = [f"stored {describe_group(t, k)}: damaged (fails its checksum), not shown; {REMEDY[t]}"
+               for t, k in c.damaged_results(pictures=False)]  # first, a table at a time; previews: verify, process
     stale = stale_epochs(c)
     for label, why in stale_displacements(c).items():  # what processing will recompute, known before it runs
         stale.setdefault(label, why)
@@ -55,8 +57,6 @@ def campaign_status(c: Campaign) -> dict:
                        "scale_sigma_ppm": None if corr is None else round(corr.scale_sigma_ppm, 2) + 0.0,
                        "drift_arcsec_h": None if corr is None or not corr.timed
                        else round(math.hypot(corr.tilt_arcsec_h, corr.twist_arcsec_h), 1) + 0.0})
-    damaged = [f"stored {describe_group(t, k)}: damaged (fails its checksum), not shown; {REMEDY[t]}"
-               for t, k in c.damaged_results(pictures=False)]  # previews: verify and process read them
     latest = {}
     for r in displacement_table(c, states=states):
         if r["displacement_mm"] is not None or r["reflector"] not in latest:  # keep the last good value

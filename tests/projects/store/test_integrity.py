@@ -188,6 +188,22 @@ def test_every_stored_result_is_sealed_and_a_damaged_one_is_stale(processed_copy
         assert [(j.setup, j.stored_plan) for j in jobs] == [(1, None)]
 
 
+def test_checking_a_whole_table_at_once_agrees_with_checking_each_group(processed_copy):
+    with Campaign.open(processed_copy) as c:
+        labels = [e.label for e in c.epochs()]
+        with c.transaction() as conn:  # two values changed behind the store's back
+            conn.execute("UPDATE centroids SET x = x + 0.001 WHERE epoch = ? AND reflector = 'M1'", (labels[1],))
+            conn.execute("UPDATE displacements SET sigma_m = sigma_m * 2 WHERE epoch = ?", (labels[-1],))
+        for table in digests.GROUPS:
+            each = {k: digests.is_sound(c.conn, table, k) for k in digests.keys_of(c.conn, table)}
+            assert digests.sound_groups(c.conn, table) == each, table
+        assert not digests.sound_groups(c.conn, "epoch_results")[(labels[1],)]
+        assert not digests.sound_groups(c.conn, "displacement_sets")[(labels[-1],)]
+        assert sum(not ok for ok in digests.sound_groups(c.conn, "epoch_results").values()) == 1
+        assert set(c.damaged_results()) == {("epoch_results", (labels[1],)), ("displacement_sets", (labels[-1],))}
+        assert c.result(labels[1]) is None and c.result(labels[0]) is not None  # what the pass found, served
+
+
 # ---------------------------------------------------------------------------------------------- nothing deleted
 def test_opening_removes_temporary_files_only_never_an_imported_file(processed_copy):
     scans = processed_copy / "scans"
