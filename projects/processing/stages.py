@@ -831,6 +831,7 @@ def stage2_inputs(c: Campaign, baseline: str) -> Stage2Inputs:
         order = {e.label: n for n, e in enumerate(epochs)}
         air_records = _air_records(c)
         series = _air_series(c, air_records)
+        verdicts = c.check_verdicts()  # one read of the log, not one an epoch
         visits = []
         for e in epochs:
             digest = _stage1_hash(c, e.label)
@@ -842,7 +843,7 @@ def stage2_inputs(c: Campaign, baseline: str) -> Stage2Inputs:
                 e.label, digest, every, measured, {k: c.centroids(e.label, k) for k in every},
                 {k: c.closure_centroids(e.label, k) for k in measured},
                 {k: c.time_source(e.label, k) or "none" for k in measured}, air,
-                c.profile_for(e.label).wavelength_nm, skipped_rescans(c.check_verdict(e.label))))
+                c.profile_for(e.label).wavelength_nm, skipped_rescans(verdicts.get(e.label))))
         stored = c.field_model()
         stored_digests = {v.label: ds.inputs_hash for v in visits if (ds := c.displacement_set(v.label)) is not None}
         replaced = {r.replaces for r in refl.values() if r.replaces}

@@ -42,11 +42,12 @@ def campaign_status(c: Campaign) -> dict:
     for label, why in stale_displacements(c).items():  # what processing will recompute, known before it runs
         stale.setdefault(label, why)
     states = epoch_states(c)
+    verdicts = c.check_verdicts()
     epochs = []
     for e in c.epochs():
         s = states[e.label]
         corr = epoch_corrections(c.systematics(e.label))
-        verdict = c.check_verdict(e.label)
+        verdict = verdicts.get(e.label)
         epochs.append({"epoch": e.label, "datetime": e.datetime[:16], "state": s.state,
                        "check": None if verdict is None else verdict.line() + (" (processed as it is, by choice)"
                                                                                if verdict.accepted else ""),

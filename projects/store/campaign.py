@@ -112,6 +112,31 @@ def _nan(v) -> float:
     return float("nan") if v is None else float(v)
 
 
+#: The log's actions that make an epoch's check verdict (see :func:`_verdict_of`).
+_VERDICT_ACTIONS = "('check', 'check-accepted', 'import')"
+
+
+def _verdict_of(epoch: str, rows) -> CheckVerdict | None:
+    """The check verdict of an epoch from its log rows of :data:`_VERDICT_ACTIONS`, in order (see check_verdict)."""
+    latest: dict[int, tuple[str, dict]] = {}
+    accepted = False
+    for r in rows:
+        d = json.loads(r["details"])
+        if r["action"] == "check":
+            latest[int(d.get("setup", 1))] = (r["time"], d)
+            accepted = False
+        elif r["action"] == "check-accepted":
+            accepted = True
+        elif d.get("role") == "fine" and latest:  # fine scans added after the check: it no longer holds
+            latest.clear()
+            accepted = False
+    if not latest:
+        return None
+    reasons = {t: why for _, d in latest.values() for t, why in d.get("rescan", {}).items()}
+    return CheckVerdict(epoch, max(t for t, _ in latest.values()), tuple(reasons), reasons,
+                        any(d.get("drifted") for _, d in latest.values()), accepted)
+
+
 class Campaign:
     """An open campaign. Use :meth:`create` or :meth:`open`, preferably as a context manager.
 
@@ -427,24 +452,19 @@ class Campaign:
         With several set-ups, each set-up's latest check counts; the targets to re-scan are all of theirs.
         """
         rows = self.conn.execute("SELECT id, time, action, details FROM log WHERE epoch = ? AND action IN "
-                                 "('check', 'check-accepted', 'import') ORDER BY id", (epoch,)).fetchall()
-        latest: dict[int, tuple[str, dict]] = {}
-        accepted = False
-        for r in rows:
-            d = json.loads(r["details"])
-            if r["action"] == "check":
-                latest[int(d.get("setup", 1))] = (r["time"], d)
-                accepted = False
-            elif r["action"] == "check-accepted":
-                accepted = True
-            elif d.get("role") == "fine" and latest:  # fine scans added after the check: it no longer holds
-                latest.clear()
-                accepted = False
-        if not latest:
-            return None
-        reasons = {t: why for _, d in latest.values() for t, why in d.get("rescan", {}).items()}
-        return CheckVerdict(epoch, max(t for t, _ in latest.values()), tuple(reasons), reasons,
-                            any(d.get("drifted") for _, d in latest.values()), accepted)
+                                 f"{_VERDICT_ACTIONS} ORDER BY id", (epoch,)).fetchall()
+        return _verdict_of(epoch, rows)
+
+    def check_verdicts(self) -> dict[str, CheckVerdict]:
+        """Every epoch's :meth:`check_verdict` that is not None, from one read of the log (label -> verdict).
+
+        The campaign's log grows with every action; asking it one epoch at a time reads all of it each time.
+        """
+        by_epoch: dict[str, list] = {}
+        for r in self.conn.execute("SELECT epoch, id, time, action, details FROM log WHERE action IN "
+                                   f"{_VERDICT_ACTIONS} AND epoch IS NOT NULL ORDER BY id"):
+            by_epoch.setdefault(r["epoch"], []).append(r)
+        return {ep: v for ep, rows in by_epoch.items() if (v := _verdict_of(ep, rows)) is not None}
 
     def log(self) -> list[LogEntry]:
         """The campaign's log, oldest first."""

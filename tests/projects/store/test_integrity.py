@@ -204,6 +204,19 @@ def test_checking_a_whole_table_at_once_agrees_with_checking_each_group(processe
         assert c.result(labels[1]) is None and c.result(labels[0]) is not None  # what the pass found, served
 
 
+def test_every_epochs_check_verdict_read_at_once_is_each_ones(processed_copy):
+    with Campaign.open(processed_copy) as c:
+        labels = [e.label for e in c.epochs()]
+        c.save_check_verdict(labels[0], setup=1, rescan={"M1": "few points"}, drifted=False)
+        c.save_check_verdict(labels[1], setup=1, rescan={"M2": "not found"}, drifted=True)
+        c.accept_check(labels[1])
+        c.save_check_verdict(labels[2], setup=1, rescan={}, drifted=False)
+        c.save_check_verdict(labels[2], setup=2, rescan={"R1": "grazing"}, drifted=False)
+        each = {lab: v for lab in labels if (v := c.check_verdict(lab)) is not None}
+        assert c.check_verdicts() == each and set(each) == set(labels[:3])
+        assert each[labels[1]].accepted and each[labels[2]].rescan == ("R1",)
+
+
 # ---------------------------------------------------------------------------------------------- nothing deleted
 def test_opening_removes_temporary_files_only_never_an_imported_file(processed_copy):
     scans = processed_copy / "scans"
