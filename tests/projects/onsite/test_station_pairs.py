@@ -115,22 +115,29 @@ def test_the_best_station_names_what_it_cannot_measure_to_the_sigma_asked_and_th
     assert above(combine(first, stations[1], LAYOUT), 0.12)  # the far end alone leaves span 1 above it
 
 
-def test_from_one_end_of_a_long_bridge_before_any_visit_the_pair_and_its_visit_are_proposed(tmp_path, capsys):
-    """Issue 40: from the layout alone (no coarse scan yet), set-up 1 at one end of 3 x 39.9 m: the advisor names
-    what it cannot measure, the second position near the other end, and the visit planned together from both."""
+def _stations_from_one_end(tmp_path, capsys, spans_m: tuple[float, ...], first: str):
+    """A campaign of ``spans_m`` (its layout only) and ``stations --first`` on it over the whole length beside the deck:
+    (campaign folder, stations JSON path, its document, what the command printed)."""
     lay = tmp_path / "layout.csv"
-    write_layout_csv(layout_from_model(BridgeModel(spans_m=(39.9, 39.9, 39.9), deck_fractions=(0.4, 0.5, 0.6)),
+    write_layout_csv(layout_from_model(BridgeModel(spans_m=spans_m, deck_fractions=(0.4, 0.5, 0.6)),
                                        noise_m=0.02, rng=np.random.default_rng(1)), lay)
     camp = tmp_path / "camp"
-    assert main(["init", str(camp), "--name", "Three spans", "--layout", str(lay), "--span-m", "39.9"]) == 0
+    assert main(["init", str(camp), "--name", f"{len(spans_m)} spans", "--layout", str(lay),
+                 "--span-m", str(spans_m[0])]) == 0
+    far = round(sum(spans_m)) + 5
     area = tmp_path / "area.csv"
-    area.write_text("x,y\n-5,-18\n125,-18\n125,-9\n-5,-9\n")
+    area.write_text(f"x,y\n-5,-18\n{far:g},-18\n{far:g},-9\n-5,-9\n")
     out = tmp_path / "stations.json"
     capsys.readouterr()
     assert main(["stations", str(camp), "--out", str(out), "--area", str(area), "--grid-m", "10",
-                 "--first", "12,-12"]) == 0
-    text = capsys.readouterr().out
-    d = json.loads(out.read_text())
+                 "--first", first]) == 0
+    return camp, out, json.loads(out.read_text()), capsys.readouterr().out
+
+
+def test_from_one_end_of_a_long_bridge_before_any_visit_the_pair_and_its_visit_are_proposed(tmp_path, capsys):
+    """Issue 40: from the layout alone (no coarse scan yet), set-up 1 at one end of 3 x 39.9 m: the advisor names
+    what it cannot measure, the second position near the other end, and the visit planned together from both."""
+    camp, out, d, text = _stations_from_one_end(tmp_path, capsys, (39.9,) * 3, "12,-12")
     deck = _deck_of(camp)
     assert d["first"]["x"] == 12.0 and set(d["best_cannot"]) >= {t for t in deck if int(t[1:]) > 12}  # the far span
     assert "from the first station (12.0, -12.0)" in text and "a second set-up at" in text
@@ -149,19 +156,7 @@ def test_from_one_end_of_a_150_m_bridge_the_stations_command_proposes_three_set_
     """Issue 40: 5 x 30 m from x = 15 m: no second position joins the first and measures every deck target (near the
     other end it shares only the end piers' targets: not joined on site); three set-ups do, and their visit is
     planned together, joined, in the visit's time (budget_min a set-up)."""
-    lay = tmp_path / "layout.csv"
-    write_layout_csv(layout_from_model(BridgeModel(spans_m=(30.0,) * 5, deck_fractions=(0.4, 0.5, 0.6)),
-                                       noise_m=0.02, rng=np.random.default_rng(1)), lay)
-    camp = tmp_path / "camp"
-    assert main(["init", str(camp), "--name", "Five spans", "--layout", str(lay), "--span-m", "30"]) == 0
-    area = tmp_path / "area.csv"
-    area.write_text("x,y\n-5,-18\n155,-18\n155,-9\n-5,-9\n")
-    out = tmp_path / "stations.json"
-    capsys.readouterr()
-    assert main(["stations", str(camp), "--out", str(out), "--area", str(area), "--grid-m", "10",
-                 "--first", "15,-12"]) == 0
-    text = capsys.readouterr().out
-    d = json.loads(out.read_text())
+    camp, _, d, text = _stations_from_one_end(tmp_path, capsys, (30.0,) * 5, "15,-12")
     assert d["pair"]["still_short"]  # the best pair leaves a deck target out
     three = d["three"]
     assert [s["x"] for s in three["stations"]][0] == 15.0 and not three["still_short"]
