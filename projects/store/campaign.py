@@ -897,28 +897,24 @@ class Campaign:
             self._sound_at = changes
         return self._sound
 
-    def check_groups(self, tables: Iterable[str]) -> None:
-        """Check every stored group of ``tables`` against its digest in one pass a table (:func:`digests.sound_groups`).
-
-        What :meth:`is_sound` then answers from its cache: the quick looks ask for every visit's groups, a few queries
-        a group one at a time (at 520 visits thousands of queries), a few queries a table this way.
-        """
-        cache = self._sound_cache()
-        for table in tables:
-            for key, ok in digests.sound_groups(self.conn, table).items():
-                cache[(table, key)] = ok
-
     def damaged_results(self, *, pictures: bool = True) -> list[tuple[str, tuple]]:
         """(table, key) of every stored result group that fails its digest (see :mod:`projects.store.digests`).
 
+        Each table is checked in one pass a query (:func:`digests.sound_groups`; one group at a time that is a few
+        queries a visit, thousands at 520 visits), and what it found is what :meth:`is_sound` then answers.
         ``pictures=False`` leaves out the map previews (:data:`digests.PICTURES`): pictures of a few hundred kB a
         visit, nine tenths of a long campaign's stored bytes, which no number is computed from. Each is checked
         where it is shown (:meth:`map_preview`), by ``verify`` and by ``process`` (:meth:`preview_to_remake`).
         """
-        tables = [t for t in digests.GROUPS if pictures or t not in digests.PICTURES]
-        self.check_groups(tables)
-        return [(table, key) for table in tables for key in digests.keys_of(self.conn, table)
-                if not self.is_sound(table, key)]
+        cache = self._sound_cache()
+        out = []
+        for table in digests.GROUPS:
+            if pictures or table not in digests.PICTURES:
+                for key, ok in digests.sound_groups(self.conn, table).items():
+                    cache[(table, key)] = ok
+                    if not ok:
+                        out.append((table, key))
+        return out
 
     def _exists(self, table: str, epoch: str) -> bool:
         return self.conn.execute(f"SELECT 1 FROM {table} WHERE epoch = ?", (epoch,)).fetchone() is not None

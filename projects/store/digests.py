@@ -19,7 +19,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from projects.store import setup_tables
-from projects.store.checksums import value_digest
+from projects.store.checksums import digest_of, encode_row, value_digest
 
 
 @dataclass(frozen=True)
@@ -75,10 +75,10 @@ GROUPS: dict[str, Group] = {g.table: g for g in (
         "WHERE from_epoch = ? AND to_epoch = ? AND method = ?",)),
     *(Group(name, table, ("epoch", "setup"), queries) for name, table, queries in setup_tables.GROUPS),
 )}
-#: The tables whose digests schema 10 introduced (the set-up tables came with schema 11, digests included).
 #: The groups that are pictures (the map previews): no number is computed from them. The quick looks leave them out
 #: (:meth:`projects.store.campaign.Campaign.damaged_results`); ``verify`` and ``process`` check them.
 PICTURES = ("map_previews", "setup_previews")
+#: The tables whose digests schema 10 introduced (the set-up tables came with schema 11, digests included).
 V10_TABLES = ("plans", "map_previews", "epoch_results", "displacement_sets", "camera_series", "env_series",
               "predictions", "crossvals", "comparisons")
 
@@ -119,18 +119,19 @@ def sound_groups(conn: sqlite3.Connection, table: str) -> dict[tuple, bool]:
     """
     g = GROUPS[table]
     n = len(g.key)
-    parts: dict[tuple, list[Sequence]] = {k: [] for k in keys_of(conn, table)}
+    # each group's rows as they enter its digest: encoded as read, so a blob is kept as its length and CRC only
+    parts: dict[tuple, list[bytes]] = {k: [] for k in keys_of(conn, table)}
     for q in g.queries:
         for k in parts:
-            parts[k].append((q,))
+            encode_row((q,), parts[k].append)
         for r in conn.execute(_whole_table(g, q)):
             row = tuple(r)
-            rows = parts.get(row[:n])
-            if rows is not None:  # a row of no group (an orphan) is in no group's digest either
-                rows.append(row)
+            got = parts.get(row[:n])
+            if got is not None:  # a row of no group (an orphan) is in no group's digest either
+                encode_row(row, got.append)
     stored = {row[:n]: row[n] for row in map(tuple, conn.execute(f"SELECT {', '.join(g.key)}, digest FROM {table}"))}
-    return {k: (stored.get(k) is not None and stored[k] == value_digest(rows)) or is_sound(conn, table, k)
-            for k, rows in parts.items()}
+    return {k: (stored.get(k) is not None and stored[k] == digest_of(got)) or is_sound(conn, table, k)
+            for k, got in parts.items()}
 
 
 def seal(conn: sqlite3.Connection, table: str, key: Sequence) -> None:
