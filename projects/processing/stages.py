@@ -40,11 +40,6 @@ from lidar.stage2 import (
     run_stage2,
     stale_parts,
 )
-
-#: Why an epoch whose plan and results are sound is planned again.
-PREVIEW_DAMAGED = "its map preview is damaged (fails its checksum): planned again to remake it"
-#: Why a stored visit was recomputed when only the campaign's field model changed (a newer visit re-fitted it).
-FIELD_REFIT = "the field model was re-fitted with the newer visits"
 from lidar.systematic.campaign_fit import air_near
 from lidar.visit_plan import SetupTargets, VisitPlan, plan_visit
 from projects.processing.parameters import DEFAULTS, parameter, stage1_params, stage2_params, visit_budget_seconds
@@ -54,6 +49,11 @@ from projects.store.errors import ScansArchivedError
 from projects.store.records import EpochInputs, ScanFile
 
 log = logging.getLogger(__name__)
+
+#: Why an epoch whose plan and results are sound is planned again.
+PREVIEW_DAMAGED = "its map preview is damaged (fails its checksum): planned again to remake it"
+#: Why a stored visit was recomputed when only the campaign's field model changed (a newer visit re-fitted it).
+FIELD_REFIT = "the field model was re-fitted with the newer visits"
 
 PIPELINE_VERSION = "1"
 #: Version of the centroid estimate, in every stage-1 result's inputs: a change re-measures stored epochs from
@@ -353,10 +353,11 @@ def _tilt_limit(params: dict, profile) -> float | None:
 
 def _analyse(coarse: Scan, layout, params: dict, profile, progress: ProgressCallback | None = None, *,
              station_xy: tuple[float, float] | None = None):
-    return _pipeline().analyse_coarse(coarse, layout, step_deg=params["map_step_deg"], threshold=params["detection_threshold"],
-                          tolerance_m=params["identification_tolerance_m"],
-                          max_tilt_deg=_tilt_limit(params, profile), up_layout=layout_up(params),
-                          station_xy=station_xy, progress=progress)
+    return _pipeline().analyse_coarse(coarse, layout, step_deg=params["map_step_deg"],
+                                      threshold=params["detection_threshold"],
+                                      tolerance_m=params["identification_tolerance_m"],
+                                      max_tilt_deg=_tilt_limit(params, profile), up_layout=layout_up(params),
+                                      station_xy=station_xy, progress=progress)
 
 
 def _station_hint(setup: int, params: dict) -> tuple[float, float] | None:
@@ -477,9 +478,9 @@ def run_stage1(job: Stage1Job, *, progress: ProgressCallback | None = None) -> S
             plan, visit_doc = _plan_together(job, analysis, progress)
         else:
             plan = pipeline.plan_from_coarse(analysis, job.layout, epoch=job.label, profile=job.profile,
-                                    min_points=int(job.params["min_points"]),
-                                    budget_seconds=float(job.params["budget_min"]) * 60.0,
-                                    up_layout=layout_up(job.params), closure=bool(job.params["closure"]))
+                                             min_points=int(job.params["min_points"]),
+                                             budget_seconds=float(job.params["budget_min"]) * 60.0,
+                                             up_layout=layout_up(job.params), closure=bool(job.params["closure"]))
             visit_doc = {}
         new_plan = {**plan.to_json(), **visit_doc}
         if job.setup != 1:
