@@ -156,17 +156,11 @@ def propose_three(stations: Sequence[StationPrediction], layout: Layout, *, firs
             c = chain((first, m, t), layout)
             if c is None:
                 continue
-            key = (len(_above(c, sigma_mm)), len(c.hidden), c.worst_sigma_mm,
+            key = (len(above(c, sigma_mm)), len(c.hidden), c.worst_sigma_mm,
                    sum(s.seconds for s in c.stations), m.xyz_layout, t.xyz_layout)
             if best_key is None or key < best_key:
                 best, best_key = c, key
     return best
-
-
-def _above(got: StationPair | StationChain, sigma_mm: float | None) -> tuple[str, ...]:
-    if sigma_mm is None:
-        return got.hidden
-    return got.hidden + tuple(t for t, s in got.predicted_sigma_mm.items() if s > sigma_mm)
 
 
 def short_of(station: StationPrediction, layout: Layout, sigma_mm: float | None = None) -> dict[str, str]:
@@ -189,7 +183,9 @@ def short_of(station: StationPrediction, layout: Layout, sigma_mm: float | None 
 
 def above(pair: StationPair | StationChain, sigma_mm: float | None) -> tuple[str, ...]:
     """The deck targets a pair (or chain) still cannot measure to the sigma asked (hidden from all, or above it)."""
-    return _above(pair, sigma_mm)
+    if sigma_mm is None:
+        return pair.hidden
+    return pair.hidden + tuple(t for t, s in pair.predicted_sigma_mm.items() if s > sigma_mm)
 
 
 def propose_pair(stations: Sequence[StationPrediction], layout: Layout, *,
