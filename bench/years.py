@@ -380,8 +380,11 @@ def main(argv: list[str]) -> int:
                     "afterwards, e.g. to profile a command on a long campaign")
     args = ap.parse_args(argv)
     if args.status_of:
-        with Campaign.open(args.status_of, writable=False) as c:
-            n = len(c.epochs())
+        try:
+            with Campaign.open(args.status_of, writable=False) as c:
+                n = len(c.epochs())
+        except SurveyError as exc:
+            ap.error(f"--status-of: {exc}")
         wall, cpu = status_command_s(Path(args.status_of))
         load = os.getloadavg()
         print(f"status of {args.status_of} ({n} visits): {wall:.2f} s ({cpu:.2f} s of CPU), the fastest of 3; "
