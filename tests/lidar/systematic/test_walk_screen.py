@@ -8,7 +8,7 @@ from lidar.simulate.effects import InverseSquareWalk, StrengthStepWalk
 from lidar.systematic import adjustment as adj
 from lidar.systematic.budget import corrected_displacements
 from lidar.systematic.range_walk import PLAUSIBLE_BIC, design, family_spread2, step_name
-from lidar.systematic.walk_screen import bias_information, screen_laws
+from lidar.systematic.walk_screen import BiasInformation, bias_information, screen_laws, threshold_penalty
 from tests.lidar.systematic.test_field_model import campaign
 
 #: A step of 1.3 mm at strength 0.5: on this campaign the step the old sparse search found was at 0.15 and a
@@ -53,9 +53,11 @@ def test_every_threshold_is_screened_as_if_fitted_alone():
     for proxy in ("s", "c", "q"):  # one step at every midpoint that leaves 3 sightings on each side
         mine = [law for law in steps if law.basis[1].startswith(f"step_{proxy}@")]
         assert 0.5 * s < len(mine) <= s - 5
-    for law in steps[::17]:  # the suffix sums give what the law's own design gives
+    per_proxy = {p: sum(1 for law in steps if law.basis[1].startswith(f"step_{p}@")) for p in ("s", "c", "q")}
+    for law in steps[::17]:  # the suffix sums give what the law's own design gives; the threshold is counted
         chi2, theta = info.chi2(design(law.basis, info.range_m, info.cos_incidence))
-        assert law.bic == pytest.approx(chi2 + 2 * np.log(180), rel=1e-9, abs=1e-9)
+        assert law.bic == pytest.approx(chi2 + 2 * np.log(180) + 2 * np.log(per_proxy[law.basis[1][5]]),
+                                        rel=1e-9, abs=1e-9)
         np.testing.assert_allclose(law.theta_mm, theta, atol=1e-9)
     with pytest.raises(ValueError):
         bias_information(general)  # needs the problem without a walk
@@ -86,3 +88,39 @@ def test_the_families_spread_is_the_largest_departure_among_the_plausible():
     np.testing.assert_allclose(family_spread2(departures, weights), [0.25, 0.04])  # the last is not plausible
     np.testing.assert_allclose(family_spread2(departures[:1], weights[:1]), [0.0, 0.0])
     assert family_spread2(np.zeros((0, 3)), np.zeros(0)).shape == (3,)
+
+
+def _independent_biases(rng: np.random.Generator, step_mm: float, n: int = 150) -> BiasInformation:
+    """Every sighting's range bias measured on its own to 0.1 mm (``M = 100 I``), a step at strength 0.5 or none."""
+    r = rng.uniform(8.0, 40.0, n)
+    c = rng.uniform(0.3, 1.0, n)
+    truth = step_mm * (design((step_name("s", 0.5),), r, c)[:, 0])
+    info = 100.0 * np.eye(n)
+    z = rng.normal(0.0, 1.0, n)  # whitened noise
+    gradient = info @ truth + 10.0 * z  # g = J^T e: the bias per mm, sigma 0.1 mm a sighting
+    chi2_without = float(np.sum((10.0 * truth + z) ** 2))
+    return BiasInformation(info, gradient, chi2_without, r, c, np.zeros(1), np.zeros((1, n)),
+                           (np.zeros((0, 0)), np.zeros((0, n)), np.zeros(0)))
+
+
+def test_a_step_is_not_chosen_from_noise_but_a_real_one_is():
+    """The best of some 450 thresholds fits noise: a step's BIC counts the choice of its threshold (2 ln N)."""
+    assert threshold_penalty(150) == pytest.approx(2 * np.log(150))
+    rng = np.random.default_rng(11)
+    from_noise = found = 0
+    worst_mm = 0.0
+    for _ in range(20):
+        best = min(screen_laws(_independent_biases(rng, 0.0), 60), key=lambda law: law.bic)
+        from_noise += any(b.startswith("step_") for b in best.basis)
+        info = _independent_biases(rng, 0.3)
+        best = min(screen_laws(info, 60), key=lambda law: law.bic)
+        found += any(b.startswith("step_s@") for b in best.basis)
+        info = _independent_biases(rng, 0.15)  # a small step: a step or a smooth law that stands for it
+        best = min(screen_laws(info, 60), key=lambda law: law.bic)
+        truth = 0.15 * design((step_name("s", 0.5),), info.range_m, info.cos_incidence)[:, 0]
+        fitted = design(best.basis, info.range_m, info.cos_incidence) @ best.theta_mm
+        worst_mm = max(worst_mm, float(np.sqrt(np.mean((fitted - truth) ** 2))))
+    # without the threshold counted: 6 of these 20 noise campaigns get a step
+    assert from_noise <= 1, from_noise
+    assert found >= 18, found
+    assert worst_mm < 0.05, worst_mm
