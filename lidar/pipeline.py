@@ -153,16 +153,18 @@ def coarse_notes(coarse: CoarseAnalysis, targets: Sequence[PlanTarget], plan: Sc
 
 def plan_from_coarse(coarse: CoarseAnalysis, layout: Layout, *, epoch: str = "", profile: ScannerProfile = VZ1000,
                      min_points: int = 1000, budget_seconds: float = 3600.0, margin_m: float = 0.10,
-                     up_layout: ArrayLike = (0.0, 0.0, 1.0), closure: bool = False) -> ScanPlan:
+                     up_layout: ArrayLike = (0.0, 0.0, 1.0), closure: bool = False,
+                     reference_factor: float = 1.0) -> ScanPlan:
     """Fine-scan plan for every layout reflector (detected or predicted; :func:`plan_targets`).
 
-    ``closure`` ends the plan with the first reference target's window again (see
-    :func:`lidar.plan.plan_fine_scans`). The plan's warnings say which targets the coarse scan did not find
+    ``closure`` ends the plan with the first reference target's window again, and ``reference_factor`` gives the
+    reference targets that many times the points where the time allows (see :func:`lidar.plan.plan_fine_scans`). The plan's warnings say which targets the coarse scan did not find
     and why (:attr:`CoarseAnalysis.missing_note`).
     """
     targets = plan_targets(coarse, layout, up_layout=up_layout)
     plan = plan_fine_scans(targets, epoch=epoch, profile=profile, min_points=min_points,
-                           budget_seconds=budget_seconds, margin_m=margin_m, closure=closure)
+                           budget_seconds=budget_seconds, margin_m=margin_m, closure=closure,
+                           reference_factor=reference_factor)
     notes = coarse_notes(coarse, targets, plan)
     return replace(plan, warnings=plan.warnings + notes) if notes else plan
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -287,7 +287,8 @@ def plan_roi(target: PlanTarget, *, n_points: float, profile: ScannerProfile = V
 
 def plan_fine_scans(targets: Sequence[PlanTarget], *, epoch: str = "", profile: ScannerProfile = VZ1000,
                     closure: bool = False,
-                    min_points: int = 1000, budget_seconds: float = 3600.0, margin_m: float = 0.10) -> ScanPlan:
+                    min_points: int = 1000, budget_seconds: float = 3600.0, margin_m: float = 0.10,
+                    reference_factor: float = 1.0) -> ScanPlan:
     """Plan the fine scans of an epoch.
 
     Parameters
@@ -309,6 +310,11 @@ def plan_fine_scans(targets: Sequence[PlanTarget], *, epoch: str = "", profile: 
     closure : bool, keyword-only
         End the plan with a closure window: the first reference target's window again, so that the
         set-up's drift during the visit can be measured (:mod:`lidar.systematic`). Default False.
+    reference_factor : float, keyword-only
+        The reference targets' windows are planned for this many times the points of the others (as many as the
+        instrument's finest steps give, and cut with the others when over the budget). Every displacement of a
+        visit is referred to them, so their centroids' noise is in every value. Default 1 (the product plans 4,
+        its ``reference_points_factor``).
 
     Returns
     -------
@@ -316,6 +322,8 @@ def plan_fine_scans(targets: Sequence[PlanTarget], *, epoch: str = "", profile: 
     """
     if min_points < 10:
         raise InputError(f"min_points must be at least 10, got {min_points}")
+    if not (math.isfinite(reference_factor) and reference_factor >= 1.0):
+        raise InputError(f"the reference targets' factor of points must be a number >= 1, got {reference_factor}")
     if not budget_seconds > 0:
         raise InputError("the time budget must be positive")
     if not targets:
@@ -333,9 +341,15 @@ def plan_fine_scans(targets: Sequence[PlanTarget], *, epoch: str = "", profile: 
         targets, weak = [t for t, _ in weak], []
     n = float(min_points)
     warnings: list[str] = []
+
+    def windows(points: float, factor: float) -> tuple[list[RoiPlan], float]:
+        out = [plan_roi(t, n_points=points * (factor if t.group == "reference" else 1.0), profile=profile,
+                        margin_m=margin_m) for t in targets]
+        return out, sum(r.expected_seconds for r in out)
+
+    factor = _reference_factor(windows, n, reference_factor, budget_seconds)
     for _ in range(30):
-        rois = [plan_roi(t, n_points=n, profile=profile, margin_m=margin_m) for t in targets]
-        total = sum(r.expected_seconds for r in rois)
+        rois, total = windows(n, factor)
         if total <= budget_seconds * 1.0001:
             break
         overhead = profile.window_overhead_s * len(rois)
@@ -434,6 +448,24 @@ def _weak_windows(rois: list, weak: Sequence[tuple[PlanTarget, str]], *, n_point
         else:
             late.append((t.id, f"{why}: weak, and no time is left in the budget for it"))
     return out, total, late
+
+
+def _reference_factor(windows: Callable[[float, float], tuple[list, float]], n: float, wanted: float,
+                      budget_seconds: float) -> float:
+    """The reference targets' factor of points that fits the budget.
+
+    ``wanted`` if it fits; else the most that fits with every other target at ``n`` points (bisection); 1 when
+    not even that does (the time goes to every target's points first).
+    """
+    if wanted <= 1.0 or windows(n, wanted)[1] <= budget_seconds * 1.0001:
+        return wanted
+    if windows(n, 1.0)[1] > budget_seconds * 1.0001:
+        return 1.0
+    lo, hi = 1.0, wanted
+    for _ in range(12):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if windows(n, mid)[1] <= budget_seconds * 1.0001 else (lo, mid)
+    return lo
 
 
 def _interleave_references(rois: list) -> list:

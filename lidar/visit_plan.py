@@ -195,7 +195,8 @@ def _weak(t: PlanTarget, profile: ScannerProfile) -> bool:
 
 
 def plan_visit(setups: Sequence[SetupTargets], *, epoch: str = "", min_points: int = 1000,
-               budget_seconds: float = 3600.0, margin_m: float = 0.10, closure: bool = False) -> VisitPlan:
+               budget_seconds: float = 3600.0, margin_m: float = 0.10, closure: bool = False,
+               reference_factor: float = 1.0) -> VisitPlan:
     """Plan the fine scans of a visit's set-ups together (see the module's description).
 
     Parameters
@@ -212,6 +213,9 @@ def plan_visit(setups: Sequence[SetupTargets], *, epoch: str = "", min_points: i
         Background around each target inside its window, metres. Default 0.10.
     closure : bool, keyword-only
         End each set-up's plan with its closure window (:func:`lidar.plan.plan_fine_scans`). Default False.
+    reference_factor : float, keyword-only
+        More points on the reference targets, from the time every target's points leave
+        (:func:`lidar.plan.plan_fine_scans`). Default 1.
 
     Returns
     -------
@@ -228,7 +232,8 @@ def plan_visit(setups: Sequence[SetupTargets], *, epoch: str = "", min_points: i
     by_setup = {s.setup: s for s in setups}
     frozen = tuple(sorted(k for k in numbers if by_setup[k].frozen is not None))
     order = frozen + tuple(sorted(k for k in numbers if k not in frozen))  # the frozen ones were worked first
-    kw: dict[str, Any] = {"epoch": epoch, "min_points": min_points, "margin_m": margin_m, "closure": closure}
+    kw: dict[str, Any] = {"epoch": epoch, "min_points": min_points, "margin_m": margin_m, "closure": closure,
+                          "reference_factor": reference_factor}
     sigma = {k: {t.id: predicted_sigma_mm(t, profile=by_setup[k].profile, min_points=min_points)
                  for t in by_setup[k].targets} for k in order}
     if len(order) == 1 and not frozen:
@@ -370,7 +375,8 @@ def _second_sightings(by_setup: Mapping[int, SetupTargets], order: tuple[int, ..
     """
     free = [k for k in order if by_setup[k].frozen is None]
     need = sum(plan_fine_scans([t for t in by_setup[k].targets if t.id in chosen[k]], profile=by_setup[k].profile,
-                               budget_seconds=1e9, **kw).total_seconds for k in free if chosen[k])
+                               budget_seconds=1e9, **dict(kw, reference_factor=1.0)).total_seconds
+               for k in free if chosen[k])  # the reference targets' extra points come after the second sightings
     spare = budget_seconds - need
     added: dict[int, list[str]] = {k: [] for k in order}
     if spare <= 0:
@@ -427,8 +433,8 @@ def _share_budget(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], 
             raise InputError(f"set-up {k} has nothing to measure that another set-up does not measure better, "
                              "and nothing to join it: leave it out of the visit")
 
-    def times(points: float) -> dict[int, float]:
-        args = dict(kw, min_points=max(int(points), 10))
+    def times(points: float) -> dict[int, float]:  # the reference targets' extra points come from what is left
+        args = dict(kw, min_points=max(int(points), 10), reference_factor=1.0)
         return {k: max(plan_fine_scans(targets[k], profile=by_setup[k].profile, budget_seconds=1e9,
                                        **args).total_seconds, 1e-6) for k in order}
 
@@ -460,8 +466,9 @@ def _short_line(by_setup: Mapping[int, SetupTargets], order: tuple[int, ...], ta
     """
     short: list[tuple[str, int]] = []
     for k in order:
-        roomy = {r.reflector: r.expected_target_points
-                 for r in plan_fine_scans(targets[k], profile=by_setup[k].profile, budget_seconds=1e9, **kw).rois
+        roomy = {r.reflector: r.expected_target_points  # (the reference targets' extra points are no shortage)
+                 for r in plan_fine_scans(targets[k], profile=by_setup[k].profile, budget_seconds=1e9,
+                                          **dict(kw, reference_factor=1.0)).rois
                  if not r.closure}
         planned = {r.reflector: r.expected_target_points for r in plans[k].rois if not r.closure}
         short.extend((tid, planned.get(tid, 0)) for tid, n in roomy.items() if planned.get(tid, 0) < 0.95 * n)

@@ -45,6 +45,13 @@ def _boolean(text: str) -> bool:
     return {"true": True, "1": True, "yes": True, "false": False, "0": False, "no": False}[text.strip().lower()]
 
 
+def _factor(text: str) -> float:
+    v = float(text)
+    if not (math.isfinite(v) and v >= 1.0):
+        raise ValueError(text)
+    return v
+
+
 def _min_points(text: str) -> int:
     v = int(text)
     if v < 10:
@@ -158,6 +165,11 @@ PARAMETERS: tuple[Parameter, ...] = (
               "minutes a window turning and starting, so a window costs about the same at 100 points as at 1000). "
               "When it is too short for min_points on every target the plan names the targets and the time that "
               "would do, before the visit", "auto | a number > 0", added_later=True),
+    Parameter("reference_points_factor", 4.0, _factor, "plan",
+              "the reference targets' windows get this many times min_points, from the time the other targets' "
+              "points leave in the budget (as many as the instrument's finest steps give): every displacement of a "
+              "visit is referred to them, so their centroids' noise is in every value (1: the same as the others)",
+              "a number >= 1", added_later=True),
     Parameter("field_model", True, _boolean, "displacements",
               "correct the atmosphere's scale, the retro-reflector range walk and the set-up's drift, estimated "
               "from the campaign's own targets (false: rigid motion only, as before)", "true | false"),

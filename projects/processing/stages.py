@@ -480,7 +480,8 @@ def run_stage1(job: Stage1Job, *, progress: ProgressCallback | None = None) -> S
             plan = pipeline.plan_from_coarse(analysis, job.layout, epoch=job.label, profile=job.profile,
                                              min_points=int(job.params["min_points"]),
                                              budget_seconds=float(job.params["budget_min"]) * 60.0,
-                                             up_layout=layout_up(job.params), closure=bool(job.params["closure"]))
+                                             up_layout=layout_up(job.params), closure=bool(job.params["closure"]),
+                                             reference_factor=float(job.params["reference_points_factor"]))
             visit_doc = {}
         new_plan = {**plan.to_json(), **visit_doc}
         if job.setup != 1:
@@ -533,7 +534,8 @@ def _plan_together(job: Stage1Job, analysis, progress: ProgressCallback | None) 
                                    frozen_alone=o.frozen_plan is not None and "visit" not in o.frozen_plan))
     visit: VisitPlan = plan_visit(setups, epoch=job.label, min_points=int(job.params["min_points"]),
                                   budget_seconds=visit_budget_seconds(job.params, len(job.others) + 1),
-                                  closure=bool(job.params["closure"]))
+                                  closure=bool(job.params["closure"]),
+                                  reference_factor=float(job.params["reference_points_factor"]))
     plan = visit.plan(job.setup)
     notes = pipeline.coarse_notes(analysis, mine, plan) + visit.warnings + tuple(left_out)
     if notes:

@@ -134,3 +134,30 @@ def test_only_weak_targets_are_still_planned():
     plan = plan_fine_scans([target(r=50.0, id="W", cos=_cos_for(0.3, 50.0))])
     assert [r.reflector for r in plan.rois] == ["W"]
     assert any(n.startswith("weak:") for n in plan.rois[0].notes)
+
+
+def test_reference_targets_get_more_points_from_the_time_the_others_leave():
+    """Every value of a visit is referred to its reference targets: they get reference_factor times the points
+    where the budget allows, never at the deck targets' expense."""
+    refs = [target(phi=5 * k, r=10.0, id=f"R{k}", group="reference") for k in range(4)]
+    deck = [target(phi=3 + 5 * k, r=15.0, id=f"M{k}") for k in range(5)]
+    plain = plan_fine_scans(refs + deck, budget_seconds=1e6)
+    more = plan_fine_scans(refs + deck, budget_seconds=1e6, reference_factor=4.0)
+    pts = {r.reflector: r.expected_target_points for r in plain.rois}
+    got = {r.reflector: r.expected_target_points for r in more.rois}
+    assert all(got[f"R{k}"] >= 3.5 * pts[f"R{k}"] for k in range(4)), (pts, got)
+    assert all(got[f"M{k}"] == pts[f"M{k}"] for k in range(5))
+    assert more.total_seconds > plain.total_seconds and not more.warnings
+    # a budget between the two: the deck keeps its points, the reference targets get what is left
+    mid = plan_fine_scans(refs + deck, budget_seconds=0.5 * (plain.total_seconds + more.total_seconds),
+                          reference_factor=4.0)
+    got = {r.reflector: r.expected_target_points for r in mid.rois}
+    assert all(got[f"M{k}"] == pts[f"M{k}"] for k in range(5))
+    assert all(pts[f"R{k}"] < got[f"R{k}"] < 4 * pts[f"R{k}"] for k in range(4)) and not mid.warnings
+    assert mid.total_seconds <= 0.5 * (plain.total_seconds + more.total_seconds) + 1e-6
+    # too short even for min_points: the same plan as without the factor
+    tight = plan_fine_scans(refs + deck, budget_seconds=plain.total_seconds / 2, reference_factor=4.0)
+    assert [r.expected_target_points for r in tight.rois] == \
+        [r.expected_target_points for r in plan_fine_scans(refs + deck, budget_seconds=plain.total_seconds / 2).rois]
+    with pytest.raises(InputError, match="factor"):
+        plan_fine_scans(refs + deck, reference_factor=0.5)
