@@ -274,7 +274,7 @@ def station_targets(layout: Layout, station_layout: ArrayLike, *, profile: Scann
 def plan_visit_from_positions(layout: Layout, positions_layout: Sequence[Sequence[float]], *,
                               profile: ScannerProfile, min_points: int = 1000, budget_seconds: float = 3600.0,
                               up: ArrayLike = (0.0, 0.0, 1.0), closure: bool = False,
-                              obstacles: Obstacles | None = None) -> VisitPlan:
+                              obstacles: Obstacles | None = None, reference_factor: float = 1.0) -> VisitPlan:
     """A visit's set-ups planned together from their planned positions alone, before any coarse scan.
 
     Each position's targets are those a levelled scanner there would plan (:func:`station_targets`, with their
@@ -291,7 +291,8 @@ def plan_visit_from_positions(layout: Layout, positions_layout: Sequence[Sequenc
                                              obstacles=obstacles)
         setups.append(SetupTargets(k, tuple(replace(t, normal_socs=tuple(float(v) for v in n_socs[t.id]))
                                             for t in targets), profile))
-    return plan_visit(setups, min_points=min_points, budget_seconds=budget_seconds, closure=closure)
+    return plan_visit(setups, min_points=min_points, budget_seconds=budget_seconds, closure=closure,
+                      reference_factor=reference_factor)
 
 
 def predict_station(layout: Layout, station_layout: Sequence[float], *, profile: ScannerProfile,
@@ -299,7 +300,7 @@ def predict_station(layout: Layout, station_layout: Sequence[float], *, profile:
                     baseline: Mapping[str, object] | None = None,
                     normals: np.ndarray | None = None, piers: _Piers | None = None,
                     obstacles: Obstacles | None = None, field_model: FieldModel | None = None,
-                    closure: bool = False) -> StationPrediction:
+                    closure: bool = False, reference_factor: float = 1.0) -> StationPrediction:
     """Predicted plan time, points and displacement sigma of every target from one station.
 
     Parameters
@@ -325,6 +326,9 @@ def predict_station(layout: Layout, station_layout: Sequence[float], *, profile:
         drift over this plan's duration and misfit), so a station that leaves them large ranks lower.
     closure : bool, keyword-only
         Plan a closure window, as processing does (default False).
+    reference_factor : float, keyword-only
+        The reference targets' factor of points, as processing plans it (the campaign's ``reference_points_factor``;
+        default 1).
     """
     s = np.asarray(station_layout, dtype=np.float64)
     targets, reasons, normal_socs = station_targets(layout, s, profile=profile, up=up, normals=normals, piers=piers,
@@ -333,7 +337,7 @@ def predict_station(layout: Layout, station_layout: Sequence[float], *, profile:
     if not targets:
         return StationPrediction(tuple(float(v) for v in s), 0.0, {}, tuple(hidden), {}, reasons, usable=False)
     plan = plan_fine_scans(targets, profile=profile, min_points=min_points, budget_seconds=budget_seconds,
-                           closure=closure)
+                           closure=closure, reference_factor=reference_factor)
     times = plan_times(plan)
     for tid, why in plan.skipped:  # narrower than the beam, or weak with no time left: not measured from here
         hidden.append(tid)
@@ -451,7 +455,7 @@ def survey_stations(layout: Layout, positions_layout: np.ndarray, *, profile: Sc
                     min_points: int = 1000, budget_seconds: float = 3600.0, up: ArrayLike = (0.0, 0.0, 1.0),
                     baseline: Mapping[str, object] | None = None, workers: int | None = None,
                     obstacles_xyz: np.ndarray | None = None, field_model: FieldModel | None = None,
-                    closure: bool = False,
+                    closure: bool = False, reference_factor: float = 1.0,
                     progress: ProgressCallback | None = None) -> tuple[StationPrediction, ...]:
     """:func:`predict_station` at every position of an (M, 3) array, best first.
 
@@ -466,7 +470,7 @@ def survey_stations(layout: Layout, positions_layout: np.ndarray, *, profile: Sc
     u = np.asarray(up, dtype=np.float64)
     u = u / np.linalg.norm(u)
     kwargs = dict(profile=profile, min_points=min_points, budget_seconds=budget_seconds, up=u, baseline=baseline,
-                  field_model=field_model, closure=closure)
+                  field_model=field_model, closure=closure, reference_factor=reference_factor)
     if obstacles_xyz is not None:
         kwargs["obstacles_xyz"] = np.asarray(obstacles_xyz, dtype=np.float32).reshape(-1, 3)
     n_workers = min(4, os.cpu_count() or 1) if workers is None else max(1, int(workers))

@@ -170,7 +170,9 @@ def advise_stations(c: Campaign, *, area_xy: np.ndarray | None = None, height_m:
     stations = survey_stations(layout, positions, profile=c.profile, min_points=int(params["min_points"]),
                                budget_seconds=float(params["budget_min"]) * 60.0, up=up, baseline=baseline,
                                obstacles_xyz=seen, field_model=_field_model(c, params),
-                               closure=bool(params["closure"]), progress=scaled(progress, 0.2, 1.0))
+                               closure=bool(params["closure"]),
+                               reference_factor=float(params["reference_points_factor"]),
+                               progress=scaled(progress, 0.2, 1.0))
     return StationAdvice(stations, area, gz, source, float(height_m), float(grid_m), c.profile.name,
                          base_label if baseline else None,
                          None if station is None else (float(station[0]), float(station[1]), float(station[2])),
@@ -189,7 +191,8 @@ def plan_from_positions(c: Campaign, positions_layout) -> VisitPlan:
                                      min_points=int(params["min_points"]),
                                      budget_seconds=visit_budget_seconds(params, len(positions_layout)),
                                      up=layout_up(params),
-                                     closure=bool(params["closure"]))
+                                     closure=bool(params["closure"]),
+                                     reference_factor=float(params["reference_points_factor"]))
 
 
 def positions_visit_json(visit: VisitPlan, positions_layout) -> dict:
