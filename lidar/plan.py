@@ -313,8 +313,8 @@ def plan_fine_scans(targets: Sequence[PlanTarget], *, epoch: str = "", profile: 
     reference_factor : float, keyword-only
         The reference targets' windows are planned for this many times the points of the others (as many as the
         instrument's finest steps give, and cut with the others when over the budget). Every displacement of a
-        visit is referred to them, so their centroids' noise is in every value. Default 1 (the product plans 4,
-        its ``reference_points_factor``).
+        visit is referred to them, so their centroids' noise is in every value. Default 1 (the product's
+        ``reference_points_factor``).
 
     Returns
     -------

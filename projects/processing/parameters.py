@@ -165,11 +165,12 @@ PARAMETERS: tuple[Parameter, ...] = (
               "minutes a window turning and starting, so a window costs about the same at 100 points as at 1000). "
               "When it is too short for min_points on every target the plan names the targets and the time that "
               "would do, before the visit", "auto | a number > 0", added_later=True),
-    Parameter("reference_points_factor", 4.0, _factor, "plan",
+    Parameter("reference_points_factor", 1.0, _factor, "plan",
               "the reference targets' windows get this many times min_points, from the time the other targets' "
               "points leave in the budget (as many as the instrument's finest steps give): every displacement of a "
-              "visit is referred to them, so their centroids' noise is in every value (1: the same as the others)",
-              "a number >= 1", added_later=True),
+              "visit is referred to them, so their centroids' noise is in every value. The finest steps cap a far "
+              "pier target (4 gave the bench's reference targets about 25 % more points, 4 minutes more a visit, "
+              "an effect within one campaign's spread)", "a number >= 1", added_later=True),
     Parameter("field_model", True, _boolean, "displacements",
               "correct the atmosphere's scale, the retro-reflector range walk and the set-up's drift, estimated "
               "from the campaign's own targets (false: rigid motion only, as before)", "true | false"),
