@@ -179,8 +179,6 @@ def _assign_scipy(d: np.ndarray, tol: float) -> list[tuple[int, int, float]]:
     return [(int(r), int(c), float(d[r, c])) for r, c in zip(rows, cols, strict=False) if d[r, c] <= tol]
 
 
-
-
 #: Seeds tried after a perfect levelled solution, to find an equally good rival.
 TIE_SEEDS = 6
 

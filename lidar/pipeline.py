@@ -158,8 +158,8 @@ def plan_from_coarse(coarse: CoarseAnalysis, layout: Layout, *, epoch: str = "",
     """Fine-scan plan for every layout reflector (detected or predicted; :func:`plan_targets`).
 
     ``closure`` ends the plan with the first reference target's window again, and ``reference_factor`` gives the
-    reference targets that many times the points where the time allows (see :func:`lidar.plan.plan_fine_scans`). The plan's warnings say which targets the coarse scan did not find
-    and why (:attr:`CoarseAnalysis.missing_note`).
+    reference targets that many times the points where the time allows (see :func:`lidar.plan.plan_fine_scans`).
+    The plan's warnings say which targets the coarse scan did not find and why (:attr:`CoarseAnalysis.missing_note`).
     """
     targets = plan_targets(coarse, layout, up_layout=up_layout)
     plan = plan_fine_scans(targets, epoch=epoch, profile=profile, min_points=min_points,

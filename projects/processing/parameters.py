@@ -46,9 +46,9 @@ def _boolean(text: str) -> bool:
 
 
 def _factor(text: str) -> float:
-    v = float(text)
-    if not (math.isfinite(v) and v >= 1.0):
-        raise ValueError(text)
+    v = _positive_float(text)
+    if v < 1.0:
+        raise ValueError
     return v
 
 
