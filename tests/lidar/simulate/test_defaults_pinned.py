@@ -8,10 +8,12 @@ projections go through BLAS and numpy's SIMD loops, whose last bits differ betwe
 observation differs in its last bits between OpenBLAS's Haswell and Sandybridge kernels on one machine), so a
 digest pinned on one machine fails on another. A fingerprint holds what a changed default would move: the
 point counts (exact), the mean and spread of the coordinates, ranges and intensities of all points and of the
-bright (reflector) points, and the truths' target centres, to 10 nm. The simulator is not chaotic: moving the
-scanner by 1e-12 m moves every fingerprint value by about 1e-12 m, so last-bit differences stay far inside
-the tolerance, and a LAS coordinate rounded the other way (10 um) moves a mean by 1e-11 m. Another random
-stream, or any effect turned on, moves the values by micrometres or more (tested below).
+bright (reflector) points, and the truths' target centres, to 1 um. The simulator is not chaotic: moving the
+scanner by 1e-12 m moves every fingerprint value by about 1e-12 m, and a LAS coordinate rounded the other way
+(10 um) moves a mean by 1e-11 m; but Open3D casts its rays in single precision, whose SIMD paths differ between
+CPUs by a few micrometres a point at 20 m, and a mean over a scan moved by 3-7e-8 m between two machines of
+ours (the tolerance was 10 nm then). Another random stream, or any effect turned on, moves the values by
+tens of micrometres or more (tested below).
 
 Regenerate the pins (only when a default is meant to change, saying why in the commit):
 ``python -m tests.lidar.simulate.test_defaults_pinned``.
@@ -37,7 +39,7 @@ CONDITIONS = {
                              cable_ties=("R1", "M4"), removed=("R3",), saturated=True),
 }
 #: Absolute tolerance of a fingerprint's float (metres; intensities in [0, 1]); counts are exact.
-TOL_M = 1e-8
+TOL_M = 1e-6
 
 
 def points_fingerprint(xyz: np.ndarray, intensity: np.ndarray) -> dict:
