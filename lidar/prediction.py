@@ -3,7 +3,11 @@
 The model is the one the centroid estimator reports (:func:`lidar.centroid.target_centroid`):
 range noise along the viewing direction divided by the number of disc points, plus the rim
 term in the disc plane (about ``2 pi R / spacing`` rim points each in or out, moving the
-centroid by ``R / n``). Used by the station advisor and the on-site check.
+centroid by ``R / n``). That rim term is what a thresholded disc gives and what a target that
+saturates the receiver keeps; where the rim's mixed returns are graded, the centroid weighs them
+(:func:`lidar.centroid.weighted_centre`) and does 2-4 times better across the line of sight, which
+the scan shows and the plan cannot know. The prediction is therefore an upper bound in the disc's
+plane. Used by the station advisor and the on-site check.
 """
 from __future__ import annotations
 

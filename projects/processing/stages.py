@@ -61,8 +61,9 @@ PIPELINE_VERSION = "1"
 #: 20-35 % of the beam's width, measured with a widened sigma instead of refused, see lidar.centroid.WEAK_RATIO;
 #: 4: the disc's outline overrules a predicted grazing view, and a surface that moved during the window is
 #: corrected from the points' times, see lidar.centroid.apparent_cos and lidar.transients; 5: stray bright returns
-#: beside a grazing disc are no second object below lidar.centroid.SECOND_OBJECT_SHARE_GRAZING).
-CENTROID_VERSION = "5"
+#: beside a grazing disc are no second object below lidar.centroid.SECOND_OBJECT_SHARE_GRAZING; 6: the disc's
+#: centre in its plane weighted by every return's intensity, see lidar.centroid.weighted_centre).
+CENTROID_VERSION = "6"
 #: Profile fields added later: they enter the input hash only when they differ from their default.
 _LATER_PROFILE_FIELDS = {"max_tilt_deg": MAX_TILT_DEG, "kind": "line", "step_presets": [], "windowed": True,
                          "horizontal_direction": "ccw", "horizontal_zero_deg": 0.0, "vertical_reference": "zenith",

@@ -10,8 +10,10 @@ from lidar.centroid import (
     FLAG_SECOND_OBJECT,
     otsu_threshold,
     target_centroid,
+    weighted_centre,
 )
 from lidar.simulate import BridgeScene, EpochConditions
+from lidar.simulate.effects import IntensityModel
 from tests.lidar.sim_helpers import LAB_POSITIONS, MODEL, plan_from_truth
 
 SETUP = LAB_POSITIONS[0]
@@ -54,6 +56,77 @@ def test_cable_tie_next_to_a_reference_target_does_not_move_the_centroid():
     thr, _ = otsu_threshold(scan.intensity)
     plain = scan.xyz_socs[scan.intensity > thr].mean(axis=0)
     assert np.linalg.norm(plain - true) > 0.001  # the plain Otsu centroid is off by millimetres
+
+
+def _across(c, true):
+    """In-plane error (across the line of sight) per axis, metres."""
+    u = true / np.linalg.norm(true)
+    p = np.eye(3) - np.outer(u, u)
+    return np.linalg.norm(p @ (c - true)) / np.sqrt(2)
+
+
+@pytest.mark.parametrize("model, clipped", [("mild", 0.0), ("mild", 0.25), ("amplitude", 0.0)])
+def test_mixed_returns_place_a_disc_finer_than_a_threshold_and_sigma_says_how_fine(model, clipped):
+    """The rim's mixed returns say how much of each beam saw the disc: weighted by that, the centre is free of the
+    grid's aliasing on the rim (the thresholded disc's 0.05-0.1 mm). Where the target saturates the receiver
+    (the amplitude model: a mixed return at the ceiling from a few per cent of cover) the weights are nearly
+    in or out again, and sigma says so."""
+    weighted, thresholded, z = [], [], []
+    for rid in ("R1", "R3", "M2", "M4"):
+        for seed in range(3):
+            cond = EpochConditions(intensity_model=IntensityModel(model), clipped_fraction=clipped)
+            scan, truth, roi, w = window_scan(cond, rid, seed=seed)
+            true = np.asarray(truth.target(rid).centre_socs_m)
+            c, tr = target_centroid(scan.xyz_socs, scan.intensity, expected_xyz=true, window=w, trace=True)
+            u = true / np.linalg.norm(true)
+            p = np.eye(3) - np.outer(u, u)
+            weighted.append(_across(c.xyz_socs, true))
+            thresholded.append(_across(scan.xyz_socs[tr.disc].mean(axis=0), true))
+            z.append(weighted[-1] / np.sqrt(np.trace(p @ c.cov @ p) / 2))
+    rms = [float(np.sqrt(np.mean(np.square(v)))) for v in (weighted, thresholded, z)]
+    if model == "mild":
+        assert rms[0] < 0.035e-3 and rms[0] < 0.6 * rms[1]
+    else:
+        assert rms[0] <= rms[1]
+    assert 0.6 < rms[2] < 1.6
+
+
+def _grid_disc(centre_mm, *, gradient=0.0, plateau=False, seed=0, half_mm=80.0):
+    """Returns of a 50 mm disc (blurred by a 15 mm beam) on a plane 10 m ahead, on a 1.3 mm grid."""
+    rng = np.random.default_rng(seed)
+    g = np.arange(-half_mm, half_mm, 1.3) * 1e-3
+    x, y = (a.ravel() for a in np.meshgrid(g, g))
+    xyz = np.column_stack([x, y, np.full(x.size, 10.0)])
+    r = np.hypot(x - centre_mm[0] * 1e-3, y - centre_mm[1] * 1e-3)
+    cover = np.clip((0.025 + 0.0075 - r) / 0.015, 0.0, 1.0)
+    inten = 0.15 + gradient * x + 0.6 * cover + rng.normal(0.0, 0.01, x.size)
+    if plateau:  # the strongest returns, on one side of the disc, clipped at the ceiling
+        inten[(cover >= 1.0) & (x < centre_mm[0] * 1e-3 - 0.005)] = 1.0
+    return xyz, inten
+
+
+def _weigh(xyz, inten, start_mm=(0.0, 0.0)):
+    return weighted_centre(xyz, inten, start_socs=np.array([start_mm[0] * 1e-3, start_mm[1] * 1e-3, 10.0]),
+                           plane_point=np.array([0.0, 0.0, 10.0]), normal=np.array([0.0, 0.0, -1.0]),
+                           axes=np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]), radius_m=0.025, blur_m=0.015)
+
+
+@pytest.mark.parametrize("gradient, plateau", [(0.0, False), (0.5, False), (0.0, True), (0.5, True)])
+def test_an_uneven_background_or_a_clipped_plateau_does_not_pull_the_weighted_centre(gradient, plateau):
+    true = (0.37, -0.52)  # mm, off the grid's nodes
+    xyz, inten = _grid_disc(true, gradient=gradient, plateau=plateau)
+    wc = _weigh(xyz, inten, start_mm=(1.0, 1.0))
+    err = np.hypot(wc.xyz_socs[0] * 1e3 - true[0], wc.xyz_socs[1] * 1e3 - true[1])
+    sigma = np.sqrt(np.trace(wc.cov_plane) / 2) * 1e3
+    assert sigma < 0.04 and err < 3 * sigma
+    assert wc.xyz_socs[2] == pytest.approx(10.0)  # on the disc's plane
+
+
+def test_no_weighted_centre_without_a_ring_of_background_all_round():
+    xyz, inten = _grid_disc((0.0, 0.0))
+    assert _weigh(xyz, inten) is not None
+    edge = xyz[:, 0] < 0.034  # the window ends just beyond the blur (32.5 mm) on one side
+    assert _weigh(xyz[edge], inten[edge]) is None
 
 
 def test_saturated_returns_are_flagged_but_measured():
