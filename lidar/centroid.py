@@ -527,6 +527,9 @@ def rim_variance(radius_m: float, n_points: float, spacing_m: float) -> float:
     return (radius_m / n_points) ** 2 * n_rim / 6.0
 
 
+#: The background beyond the blur's half width may pull the weighted centre by this many of its noise sigmas at
+#: most; more, it is uneven on one side (a bracket's arm, a stain) and the thresholded centre is kept.
+UNEVEN_PULL = 4.0
 #: The weighted centre is kept when it lies within this many of the thresholded centre's in-plane sigmas of it;
 #: farther, something else bright or uneven near the disc (a cable tie's rim, a stain) weighs in, and the
 #: thresholded centre, whose sigma carries its rim, is kept.
@@ -595,7 +598,8 @@ def weighted_centre(xyz_socs: np.ndarray, intensity: np.ndarray, *, start_socs: 
     Returns
     -------
     WeightedCentre, or None where the disc's core or the ring around it holds too few returns or too little
-    contrast (the window's edge, a grazing view).
+    contrast (the window's edge, a grazing view), or where the background beyond the blur's half width pulls the
+    centre to one side by more than :data:`UNEVEN_PULL` of its noise sigmas (a bracket's arm, a stain).
     """
     xyz = np.asarray(xyz_socs, dtype=np.float64)
     inten = np.asarray(intensity, dtype=np.float64)
@@ -627,6 +631,13 @@ def weighted_centre(xyz_socs: np.ndarray, intensity: np.ndarray, *, start_socs: 
         c2 = (w @ rel[sel]) / total
     scatter = float(np.std(inten[ring] - design @ coef, ddof=3)) / contrast
     d = rel[sel] - c2
+    # Beyond the blur's half width a beam sees no disc: what weighs there is the background's unevenness (a bracket,
+    # a stain), which pulls the centre to one side. Its pull against the weights' noise there: too strong, no centre.
+    outer = np.hypot(d[:, 0], d[:, 1]) > radius_m + blur_m / 2
+    pull = (w[outer] @ d[outer]) / total
+    pull_sigma = scatter * math.sqrt(float(np.sum(d[outer] ** 2)) / 2) / total
+    if np.any(outer) and float(np.hypot(*pull)) > UNEVEN_PULL * pull_sigma:
+        return None
     free = w < 1.0  # a weight at its cap does not move with the noise
     cov2 = scatter ** 2 * (d[free].T @ d[free]) / total ** 2
     edge = np.abs(np.hypot(d[:, 0], d[:, 1]) - radius_m) <= blur_m / 2

@@ -122,6 +122,17 @@ def test_an_uneven_background_or_a_clipped_plateau_does_not_pull_the_weighted_ce
     assert wc.xyz_socs[2] == pytest.approx(10.0)  # on the disc's plane
 
 
+def test_a_background_uneven_on_one_side_gives_no_weighted_centre():
+    """A bracket's arm below the disc, 5 % of the contrast darker than the wall, from 30 mm out: it weighs on one
+    side and would pull the centre by 0.1 mm (sigma 0.02 mm); the pull is seen beyond the blur, and the thresholded
+    centre is kept."""
+    xyz, inten = _grid_disc((0.37, -0.52))
+    assert _weigh(xyz, inten) is not None
+    arm = (np.abs(xyz[:, 0]) < 0.01) & (xyz[:, 1] < -0.030)
+    inten[arm] -= 0.03
+    assert _weigh(xyz, inten) is None
+
+
 def test_no_weighted_centre_without_a_ring_of_background_all_round():
     xyz, inten = _grid_disc((0.0, 0.0))
     assert _weigh(xyz, inten) is not None
