@@ -70,8 +70,9 @@ from lidar.systematic.campaign_fit import (
 
 log = logging.getLogger(__name__)
 
-#: Version of stage 2's computation, in every visit's inputs digest.
-STAGE2_VERSION = "1"
+#: Version of stage 2's computation, in every visit's inputs digest (2: a disc straddling a strength step of the
+#: range walk carries the step it may straddle in its covariance, lidar.systematic.range_walk.RangeWalkModel.smear_m).
+STAGE2_VERSION = "2"
 
 
 def inputs_digest(obj: Any) -> str:

@@ -33,13 +33,19 @@ def corrected_observations(centroids: Mapping[str, Sighted], model: FieldModel, 
     range walk's families is left out of the observations' covariances: it is one error common to every
     target (a family moves all of them at once), which an observation's own covariance cannot hold without
     re-weighting the reference fit against it; it enters the budget through each family's deviations
-    (:func:`family_deviations`) instead.
+    (:func:`family_deviations`) instead. The walk a strength step leaves uncertain at a disc whose rim returns
+    straddle its threshold is the sighting's own (:meth:`~lidar.systematic.range_walk.RangeWalkModel.smear_m`):
+    it widens that centroid's covariance along its line of sight.
     """
     vis = model.visit(label)
     inflate = max(1.0, vis.misfit) ** 2
     pos, jac = correct_visit(centroids, range_walk=model.range_walk, visit=vis, axes=model.axes)
-    obs = {k: Observation(pos[k], inflate * np.asarray(c.cov, dtype=np.float64))
-           for k, c in centroids.items()}
+    obs = {}
+    for k, c in centroids.items():
+        y = np.asarray(c.xyz_socs, dtype=np.float64)
+        u = y / np.linalg.norm(y)
+        smear = float(model.range_walk.smear_m(float(np.linalg.norm(y)), cos_incidence_of(c))[0])
+        obs[k] = Observation(pos[k], inflate * np.asarray(c.cov, dtype=np.float64) + smear ** 2 * np.outer(u, u))
     for k in vis.shifted:  # a moved pier's targets moved back: their position carries that shift's sigma
         if k in obs:
             u = np.asarray(vis.shift_socs, dtype=np.float64)

@@ -124,3 +124,21 @@ def test_a_step_is_not_chosen_from_noise_but_a_real_one_is():
     assert from_noise <= 1, from_noise
     assert found >= 18, found
     assert worst_mm < 0.05, worst_mm
+
+
+def test_a_disc_just_above_a_strength_step_carries_the_step_it_may_straddle_in_its_sigma():
+    """A step of the return strength acts on each return: a disc whose centre is just above the threshold averages
+    its weaker rim returns from below it, and its walk lies between the two levels. Half the step at the threshold,
+    fading to nothing at four times it; nothing below it, nothing for a step of the incidence or a smooth law."""
+    from lidar.systematic.range_walk import RIM_STRENGTH_SHARE, RangeWalkModel
+
+    step = RangeWalkModel(("1", step_name("s", 0.5)), np.array([0.0002, 0.0015]), np.zeros((2, 2)))
+    s = np.array([0.3, 0.499, 0.501, 1.0, 0.5 / RIM_STRENGTH_SHARE * 1.01])
+    r = 15.0 / np.sqrt(s)  # head-on: strength (15 m / r)^2
+    got = step.smear_m(r, np.ones_like(r))
+    assert got[0] == 0.0 and got[1] == 0.0 and got[4] == 0.0
+    assert got[2] == pytest.approx(0.00075, rel=0.01)
+    assert got[3] == pytest.approx(0.00075 * (1 - np.log(2.0) / np.log(1 / RIM_STRENGTH_SHARE)), rel=1e-6)
+    for other in (RangeWalkModel(("1", step_name("c", 0.5)), np.array([0.0002, 0.0015]), np.zeros((2, 2))),
+                  RangeWalkModel(("1", "sat_strength"), np.array([0.0002, 0.0015]), np.zeros((2, 2)))):
+        assert not np.any(other.smear_m(r, np.ones_like(r)))
