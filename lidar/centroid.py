@@ -555,6 +555,9 @@ class WeightedCentre:
         Returns weighed (the disc, its rim and the background ring around it).
     weight_sigma : float
         The weights' noise (the background's intensity scatter over the disc's contrast).
+    binary_share : float
+        Share of the returns about the disc's edge whose weights are in or out (0 or capped): where the target
+        saturates the receiver the rim is sampled in or out again, and the centre keeps that share of the rim term.
     """
 
     xyz_socs: np.ndarray
