@@ -1,6 +1,7 @@
 import numpy as np
 import pytest
 
+from common.errors import InputError
 from common.flags import has
 from lidar.angles import AngularWindow
 from lidar.centroid import (
@@ -228,3 +229,10 @@ def test_the_discs_normal_is_not_tilted_by_range_noise(cos_true):
         got.append(abs(float(n @ np.array([-1.0, 0.0, 0.0]))))
         assert np.allclose(axes @ n, 0.0, atol=1e-12) and np.allclose(axes @ axes.T, np.eye(2), atol=1e-12)
     assert abs(np.mean(got) - cos_true) < 0.005, np.mean(got)
+
+
+def test_weighted_centre_refuses_malformed_input_in_one_line():
+    xyz, inten = _grid_disc((0.0, 0.0))
+    for bad in ((xyz[:, :2], inten), (xyz, inten[:-1])):
+        with pytest.raises(InputError, match="weighted_centre needs"):
+            _weigh(*bad)
