@@ -656,13 +656,11 @@ def weighted_centre(xyz_socs: np.ndarray, intensity: np.ndarray, *, start_socs: 
                           binary)
 
 
-def _covariance(disc: np.ndarray, view: np.ndarray, radius: float, spacing: float
-                ) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
+def _covariance(disc: np.ndarray, view: np.ndarray) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
     """(cov, sigma_range, disc normal, in-plane axes) of a disc's points.
 
-    Range noise along the view over n, plus the rim term in the disc plane (each of the ~2 pi R / spacing rim points
-    is in or out -- threshold noise,
-    mixed pixels -- moving the centroid by about R / n each).
+    ``cov`` is the range noise along the view over n; the caller adds the in-plane term (the thresholded rim's,
+    :func:`rim_variance`, or the weighted centre's).
     """
     n = len(disc)
     c_plane, normal2, axes2 = _plane(disc)
@@ -675,7 +673,6 @@ def _covariance(disc: np.ndarray, view: np.ndarray, radius: float, spacing: floa
     cos_a = max(abs(float(normal2 @ mean_dir)), 0.1)
     sigma_r = float(np.std(resid, ddof=3) / cos_a)
     cov = sigma_r ** 2 / n * np.outer(mean_dir, mean_dir)
-    cov += rim_variance(radius, n, spacing) * (axes2.T @ axes2)
     return cov, sigma_r, normal2, axes2
 
 
@@ -759,7 +756,7 @@ def _centroid_stages(xyz: np.ndarray, inten: np.ndarray, ok_idx: np.ndarray, tr:
     tr.disc[ok_idx[bright[best[keep]]]] = True
     if n < min_points:
         return _not_found(reflector, n_window, thr, sep)
-    cov, sigma_r, normal2, axes2 = _covariance(disc, view, radius, spacing)
+    cov, sigma_r, normal2, axes2 = _covariance(disc, view)
     weighable = np.ones(n_window, bool)
     weighable[bright] = False
     weighable[bright[best]] = True  # the disc's returns and every darker one
@@ -772,7 +769,9 @@ def _centroid_stages(xyz: np.ndarray, inten: np.ndarray, ok_idx: np.ndarray, tr:
     if weighed is not None and np.linalg.norm((weighed.xyz_socs - centre) @ axes2.T) <= WEIGHTED_AGREEMENT * \
             math.sqrt(rim):
         centre = weighed.xyz_socs
-        cov = cov - (1.0 - weighed.binary_share) * rim * (axes2.T @ axes2) + weighed.cov_plane
+        cov = cov + weighed.binary_share * rim * (axes2.T @ axes2) + weighed.cov_plane
+    else:
+        cov = cov + rim * (axes2.T @ axes2)
     graze = grazing_variance(diameter_m, cos_known, ratio)
     if graze > 0:
         cov = cov + grazing_covariance(view, normal2, diameter_m=diameter_m, cos_incidence=cos_known,

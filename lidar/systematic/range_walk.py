@@ -117,12 +117,19 @@ def step_name(proxy: str, threshold: float) -> str:
     return f"step_{proxy}@{threshold:.6g}"
 
 
+def parse_step(name: str) -> tuple[str, float] | None:
+    """``(proxy, threshold)`` of a step's basis-function name (:func:`step_name`), None for any other name."""
+    if not name.startswith("step_"):
+        return None
+    proxy, _, value = name[5:].partition("@")
+    return proxy, float(value)
+
+
 def basis_function(name: str) -> Callable:
     """The basis function called ``name`` (``step_s@S`` is a step at strength ``S``, see :func:`step_name`)."""
-    if name.startswith("step_"):
-        proxy, _, value = name[5:].partition("@")
-        if proxy in STEP_PROXIES:
-            return _step(proxy, float(value))
+    step = parse_step(name)
+    if step is not None and step[0] in STEP_PROXIES:
+        return _step(*step)
     try:
         return FUNCTIONS[name]
     except KeyError:
@@ -140,9 +147,9 @@ def describe_basis(basis: Sequence[str]) -> str:
     """``a constant + cos(incidence)``; ``a step at strength > 0.42``; ``none`` for an empty basis."""
     words = []
     for b in basis:
-        if b.startswith("step_"):
-            proxy, _, value = b[5:].partition("@")
-            words.append(f"a step at {PROXY_WORDS.get(proxy, proxy)} > {float(value):.3g}")
+        step = parse_step(b)
+        if step is not None:
+            words.append(f"a step at {PROXY_WORDS.get(step[0], step[0])} > {step[1]:.3g}")
         else:
             words.append(WORDS.get(b, b))
     return " + ".join(words) or "none"
@@ -214,10 +221,10 @@ class RangeWalkModel:
         s = np.broadcast_to(strength(r, cos_incidence), r.shape)
         out = np.zeros(r.shape)
         for name, coef in zip(self.basis, self.coefficients_m, strict=False):
-            proxy, _, value = name[5:].partition("@") if name.startswith("step_") else ("", "", "")
-            if proxy != "s":
+            step = parse_step(name)
+            if step is None or step[0] != "s":
                 continue
-            x = np.log(np.maximum(s, 1e-12) / float(value)) / np.log(1.0 / RIM_STRENGTH_SHARE)
+            x = np.log(np.maximum(s, 1e-12) / step[1]) / np.log(1.0 / RIM_STRENGTH_SHARE)
             out = np.hypot(out, 0.5 * abs(float(coef)) * np.where((x > 0) & (x < 1), 1.0 - x, 0.0))
         return out
 
