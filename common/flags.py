@@ -115,6 +115,11 @@ FLAG_INCIDENCE_FROM_SCAN = _flag("incidence_from_scan", INFO, "the disc's outlin
                                  "resolved disc where the layout's normal predicted a grazing view: the scan's "
                                  "incidence is used (the layout's normal for the target may be wrong)",
                                  "lidar.centroid", words="incidence from the scan, not the layout")
+FLAG_CENTRES_APART = _flag("centres_apart", INFO, "the disc's centre weighted by its returns' intensities and "
+                           "the thresholded disc's centre lie farther apart than the rim's sampling explains (a "
+                           "stain or damage on the sheet, something dim beside the disc): the weighted centre is "
+                           "kept with a sigma covering both", "lidar.centroid",
+                           words="centres apart (sigma widened)")
 FLAG_TRANSIENT_REMOVED = _flag("transient_corrected", INFO, "the surface around the target moved while part of its "
                                "window was scanned (a train, a lorry, wind): those points were moved back by the "
                                "surface's own departure, and the sigma widened for what that may leave",

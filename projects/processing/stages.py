@@ -62,8 +62,10 @@ PIPELINE_VERSION = "1"
 #: 4: the disc's outline overrules a predicted grazing view, and a surface that moved during the window is
 #: corrected from the points' times, see lidar.centroid.apparent_cos and lidar.transients; 5: stray bright returns
 #: beside a grazing disc are no second object below lidar.centroid.SECOND_OBJECT_SHARE_GRAZING; 6: the disc's
-#: centre in its plane weighted by every return's intensity, see lidar.centroid.weighted_centre).
-CENTROID_VERSION = "6"
+#: centre in its plane weighted by every return's intensity, see lidar.centroid.weighted_centre; 7: the weighted
+#: centre kept where it is far from the thresholded one, with a sigma covering both, see
+#: lidar.centroid.WEIGHTED_AGREEMENT).
+CENTROID_VERSION = "7"
 #: Profile fields added later: they enter the input hash only when they differ from their default.
 _LATER_PROFILE_FIELDS = {"max_tilt_deg": MAX_TILT_DEG, "kind": "line", "step_presets": [], "windowed": True,
                          "horizontal_direction": "ccw", "horizontal_zero_deg": 0.0, "vertical_reference": "zenith",
