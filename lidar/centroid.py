@@ -543,10 +543,9 @@ UNEVEN_PULL = 4.0
 #: 0.046 mm off across the line of sight (RMS), the thresholded one 0.129 mm. They were more than 3 rim sigmas
 #: apart in 8.4 % of the windows, and the weighted centre was the nearer in 46 of those 48 (the other two 0.11
 #: and 0.12 mm off where the thresholded was 0.10 and 0.05); more than 5 apart in 0.9 %, the weighted the nearer
-#: in all 5. Keeping the thresholded centre beyond
-#: 3 rim sigmas, as before, put 0.15-0.5 mm errors across the line of sight with a sigma of 0.04-0.1 mm on pier
-#: targets. What the other guards (a crowded disc, the ring's sectors, :data:`UNEVEN_PULL`) miss and pulls the
-#: weighted centre still lands inside its sigma.
+#: in all 5. Keeping the thresholded centre beyond 3 rim sigmas, as before, put 0.15-0.5 mm errors across the
+#: line of sight with a sigma of 0.04-0.1 mm on pier targets. What the other guards (a crowded disc, the ring's
+#: sectors, :data:`UNEVEN_PULL`) miss and pulls the weighted centre still lands inside its sigma.
 WEIGHTED_AGREEMENT = 5.0
 
 
