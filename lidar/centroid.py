@@ -775,14 +775,15 @@ def _centroid_stages(xyz: np.ndarray, inten: np.ndarray, ok_idx: np.ndarray, tr:
     weighed = None if crowded else weighted_centre(  # a bright object near the disc would weigh on one side
         xyz[weighable], inten[weighable], start_socs=centre, plane_point=disc.mean(axis=0), normal=normal2,
         axes=axes2, radius_m=radius, blur_m=footprint)
+    in_plane = axes2.T @ axes2
     if weighed is None:
-        cov = cov + rim * (axes2.T @ axes2)
+        cov = cov + rim * in_plane
     else:
         apart = float(np.linalg.norm((weighed.xyz_socs - centre) @ axes2.T))
         centre = weighed.xyz_socs
-        cov = cov + weighed.binary_share * rim * (axes2.T @ axes2) + weighed.cov_plane
+        cov = cov + weighed.binary_share * rim * in_plane + weighed.cov_plane
         if apart > WEIGHTED_AGREEMENT * math.sqrt(rim):  # one of the two is pulled: sigma covers either
-            cov = cov + apart ** 2 / 2 * (axes2.T @ axes2)
+            cov = cov + apart ** 2 / 2 * in_plane
             apart_note = f"{FLAG_CENTRES_APART}: {1e3 * apart:.2f} mm apart"
     graze = grazing_variance(diameter_m, cos_known, ratio)
     if graze > 0:

@@ -43,8 +43,9 @@ def corrected_observations(centroids: Mapping[str, Sighted], model: FieldModel, 
     obs = {}
     for k, c in centroids.items():
         y = np.asarray(c.xyz_socs, dtype=np.float64)
-        u = y / np.linalg.norm(y)
-        smear = float(model.range_walk.smear_m(float(np.linalg.norm(y)), cos_incidence_of(c))[0])
+        r = float(np.linalg.norm(y))
+        u = y / r
+        smear = float(model.range_walk.smear_m(r, cos_incidence_of(c))[0])
         obs[k] = Observation(pos[k], inflate * np.asarray(c.cov, dtype=np.float64) + smear ** 2 * np.outer(u, u))
     for k in vis.shifted:  # a moved pier's targets moved back: their position carries that shift's sigma
         if k in obs:
